@@ -1,0 +1,1 @@
+"""The ``potflat`` command line (installed as the package ``potflat_cli``)."""

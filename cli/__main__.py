@@ -1,0 +1,3 @@
+from potflat_cli.main import app
+
+app(prog_name="potflat")

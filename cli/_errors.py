@@ -1,0 +1,35 @@
+"""Turn user errors into one-line messages on stderr and exit code 2."""
+from __future__ import annotations
+
+import functools
+import sys
+
+import typer
+
+#: Exit codes, documented in docs/cli.md.
+EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+
+
+def fail(message: str, code: int = EXIT_USAGE) -> "typer.Exit":
+    """Print ``error: message`` to stderr and return the Exit to raise."""
+    print(f"error: {message}", file=sys.stderr)
+    return typer.Exit(code=code)
+
+
+def user_errors(func):
+    """Decorator for command functions: PotflatError and OSError become exit code 2."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        from potflat.errors import PotflatError
+
+        try:
+            return func(*args, **kwargs)
+        except PotflatError as exc:
+            raise fail(str(exc)) from None
+        except (FileNotFoundError, PermissionError, IsADirectoryError) as exc:
+            raise fail(f"{exc.filename}: {exc.strerror}") from None
+        except KeyboardInterrupt:
+            raise fail("interrupted; outputs already finished are kept, none is half-written", 130) from None
+
+    return wrapper

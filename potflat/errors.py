@@ -1,0 +1,27 @@
+"""Exceptions raised by potflat.
+
+Every error that a user can cause (bad file, bad option) is a :class:`PotflatError`
+whose message is one line saying what is wrong, which file, and what to do. The CLI
+maps these to exit code 2 and prints only the message.
+"""
+from __future__ import annotations
+
+
+class PotflatError(Exception):
+    """Base class of all user-facing potflat errors (CLI exit code 2)."""
+
+
+class InvalidInputError(PotflatError, ValueError):
+    """An input file or array cannot be used (corrupt, empty, NaN, wrong shape...)."""
+
+
+class InvalidOptionError(PotflatError, ValueError):
+    """An option has a value outside its valid range or of the wrong type."""
+
+
+class AxisNotFoundError(PotflatError):
+    """No rotation axis fits the scan well enough; give one with ``axis=``."""
+
+
+class FoldedResultError(PotflatError):
+    """A flattening result would contain flipped triangles or boundary overlap."""

@@ -1,0 +1,1 @@
+"""File input and output: scans, stage files, images, JSON sidecars."""

@@ -1,0 +1,137 @@
+"""Core data types shared by every stage.
+
+Conventions (see ``docs/formats.md``):
+
+* Lengths are in the scan's own units; :attr:`Mesh.units` names them and
+  :attr:`Mesh.mm_per_unit` converts to millimetres. Nothing is rescaled silently.
+* Faces are counter-clockwise seen from outside the vessel (outward normals).
+* Texture coordinates are per face corner, OBJ convention: ``(0, 0)`` is the bottom-left
+  of the texture image, ``v`` points up.
+* Flattened coordinates ``uv`` are in the same units as the 3D positions, ``u`` to the
+  right and ``v`` up (towards the vessel's mouth), seen from outside: a flattened face
+  keeps its counter-clockwise orientation, so a flipped triangle has negative signed area.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from potflat.errors import InvalidInputError
+
+#: Millimetres per unit for the length units potflat accepts.
+UNITS_MM: dict[str, float] = {"um": 1e-3, "mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
+
+
+def mm_per_unit(units: str) -> float:
+    """Millimetres per scan unit for ``units`` (one of :data:`UNITS_MM`)."""
+    try:
+        return UNITS_MM[units]
+    except KeyError:
+        raise InvalidInputError(
+            f"unknown length unit {units!r}; use one of {', '.join(UNITS_MM)}"
+        ) from None
+
+
+def _as_array(name: str, arr, dtype, shape_tail: tuple[int, ...]) -> np.ndarray:
+    out = np.ascontiguousarray(arr, dtype=dtype)
+    if out.ndim != 1 + len(shape_tail) or out.shape[1:] != shape_tail:
+        want = "(n" + "".join(f", {s}" for s in shape_tail) + ")"
+        raise InvalidInputError(f"{name} must have shape {want}, got {out.shape}")
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """A triangle mesh in 3D with optional texture or vertex colours.
+
+    Attributes
+    ----------
+    vertices : (n, 3) float64
+        Positions in scan units.
+    faces : (m, 3) int64
+        Vertex indices, counter-clockwise seen from outside.
+    texcoords : (m, 3, 2) float64 or None
+        Texture coordinate of each face corner (OBJ convention, v up).
+    texture_path : Path or None
+        Absolute path of the texture image that ``texcoords`` refer to.
+    vertex_colors : (n, 4) uint8 or None
+        RGBA colour per vertex, for scans without a texture.
+    units : str
+        Length unit of ``vertices`` (key of :data:`UNITS_MM`).
+    source : Path or None
+        File the mesh was read from, for messages and provenance.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    texcoords: np.ndarray | None = None
+    texture_path: Path | None = None
+    vertex_colors: np.ndarray | None = None
+    units: str = "mm"
+    source: Path | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "vertices", _as_array("vertices", self.vertices, np.float64, (3,)))
+        object.__setattr__(self, "faces", _as_array("faces", self.faces, np.int64, (3,)))
+        if self.texcoords is not None:
+            tc = _as_array("texcoords", self.texcoords, np.float64, (3, 2))
+            if len(tc) != len(self.faces):
+                raise InvalidInputError("texcoords must have one (3, 2) entry per face")
+            object.__setattr__(self, "texcoords", tc)
+        if self.vertex_colors is not None:
+            vc = np.asarray(self.vertex_colors)
+            if vc.ndim == 2 and vc.shape[1] == 3:
+                vc = np.concatenate([vc, np.full((len(vc), 1), 255, vc.dtype)], axis=1)
+            vc = _as_array("vertex_colors", vc, np.uint8, (4,))
+            if len(vc) != len(self.vertices):
+                raise InvalidInputError("vertex_colors must have one entry per vertex")
+            object.__setattr__(self, "vertex_colors", vc)
+        if self.texture_path is not None:
+            object.__setattr__(self, "texture_path", Path(self.texture_path))
+        mm_per_unit(self.units)
+
+    @property
+    def mm_per_unit(self) -> float:
+        """Millimetres per unit of :attr:`vertices`."""
+        return mm_per_unit(self.units)
+
+    def replace(self, **changes) -> "Mesh":
+        """A copy with some fields replaced (validated again)."""
+        return replace(self, **changes)
+
+
+@dataclass(frozen=True, eq=False)
+class FlatMesh:
+    """A cut (disk- or multi-disk-topology) mesh with a 2D flattening: the stage file content.
+
+    Attributes
+    ----------
+    mesh : Mesh
+        The 3D mesh; seam vertices appear once per side.
+    uv : (n, 2) float64
+        Flattened position of each vertex, in the units of ``mesh``.
+    stress : (n,) float64 or None
+        Per-vertex residual stress (the paper's Eq. 3), when known.
+    """
+
+    mesh: Mesh
+    uv: np.ndarray
+    stress: np.ndarray | None = None
+    comments: tuple[str, ...] = field(default_factory=tuple)
+
+    def __post_init__(self) -> None:
+        uv = _as_array("uv", self.uv, np.float64, (2,))
+        if len(uv) != len(self.mesh.vertices):
+            raise InvalidInputError("uv must have one row per vertex")
+        object.__setattr__(self, "uv", uv)
+        if self.stress is not None:
+            st = np.ascontiguousarray(self.stress, dtype=np.float64)
+            if st.shape != (len(uv),):
+                raise InvalidInputError("stress must have one value per vertex")
+            object.__setattr__(self, "stress", st)
+
+    def replace(self, **changes) -> "FlatMesh":
+        """A copy with some fields replaced (validated again)."""
+        return replace(self, **changes)

@@ -1,0 +1,75 @@
+import numpy as np
+import pytest
+
+from potflat.errors import InvalidInputError
+from potflat.io.stage import read_flat_ply, write_flat_ply
+from potflat.types import FlatMesh, Mesh
+
+
+def _flat(tmp_path, with_texture=True, with_colors=False, stress=False):
+    rng = np.random.default_rng(0)
+    V = rng.normal(size=(5, 3))
+    F = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4]])
+    tex = None
+    tc = None
+    if with_texture:
+        tex = tmp_path / "src" / "atlas.png"
+        tex.parent.mkdir()
+        tex.write_bytes(b"\x89PNG fake")
+        tc = rng.uniform(size=(3, 3, 2))
+    colors = rng.integers(0, 255, size=(5, 3)) if with_colors else None
+    mesh = Mesh(V, F, texcoords=tc, texture_path=tex, vertex_colors=colors, units="cm")
+    return FlatMesh(mesh, rng.normal(size=(5, 2)), stress=rng.uniform(size=5) if stress else None)
+
+
+@pytest.mark.parametrize("with_texture,with_colors,stress", [(True, False, False), (False, True, True)])
+def test_round_trip(tmp_path, with_texture, with_colors, stress):
+    flat = _flat(tmp_path, with_texture, with_colors, stress)
+    out = tmp_path / "out" / "x.rollout.ply"
+    write_flat_ply(out, flat, comments=("made by test",))
+    back = read_flat_ply(out)
+    np.testing.assert_array_equal(back.mesh.vertices, flat.mesh.vertices)
+    np.testing.assert_array_equal(back.uv, flat.uv)
+    np.testing.assert_array_equal(back.mesh.faces, flat.mesh.faces)
+    assert back.mesh.units == "cm"
+    if with_texture:
+        np.testing.assert_allclose(back.mesh.texcoords, flat.mesh.texcoords, atol=1e-7)
+        assert back.mesh.texture_path == (out.parent / "atlas.png").resolve()
+        assert back.mesh.texture_path.read_bytes() == flat.mesh.texture_path.read_bytes()
+    if with_colors:
+        np.testing.assert_array_equal(back.mesh.vertex_colors, flat.mesh.vertex_colors)
+    if stress:
+        np.testing.assert_array_equal(back.stress, flat.stress)
+    assert "made by test" in back.comments
+    assert not list(out.parent.glob("*.part"))
+
+
+def test_truncated_file_is_rejected(tmp_path):
+    out = tmp_path / "x.rollout.ply"
+    write_flat_ply(out, _flat(tmp_path))
+    out.write_bytes(out.read_bytes()[:-10])
+    with pytest.raises(InvalidInputError, match="truncated"):
+        read_flat_ply(out)
+
+
+def test_not_a_ply_is_rejected(tmp_path):
+    bad = tmp_path / "x.rollout.ply"
+    bad.write_text("hello")
+    with pytest.raises(InvalidInputError, match="not a PLY"):
+        read_flat_ply(bad)
+
+
+def test_failed_write_leaves_previous_file(tmp_path, monkeypatch):
+    out = tmp_path / "x.rollout.ply"
+    write_flat_ply(out, _flat(tmp_path))
+    before = out.read_bytes()
+    flat = _flat(tmp_path / "b" if (tmp_path / "b").mkdir() is None else tmp_path)
+
+    def boom(*a, **k):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr("os.fsync", boom)
+    with pytest.raises(RuntimeError):
+        write_flat_ply(out, flat)
+    assert out.read_bytes() == before
+    assert not list(tmp_path.glob("*.part"))
