@@ -135,3 +135,19 @@ class FlatMesh:
     def replace(self, **changes) -> "FlatMesh":
         """A copy with some fields replaced (validated again)."""
         return replace(self, **changes)
+
+
+@dataclass(frozen=True)
+class StageOutput:
+    """What a stage wrote: its files and the content of its JSON sidecar.
+
+    Attributes
+    ----------
+    paths : dict of str to Path
+        Role (``"ply"``, ``"json"``, ``"png"``, ...) to the file written.
+    summary : dict
+        The JSON sidecar's content (figures used in batch summaries).
+    """
+
+    paths: dict
+    summary: dict
