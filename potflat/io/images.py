@@ -1,0 +1,228 @@
+"""Image files of the bake stage: texture reading, streamed PNG and TIFF writing with resolution.
+
+PNGs are written by a small streaming encoder (zlib, Paeth filter, ``pHYs`` chunk in
+pixels per metre) so an image of several hundred megapixels never has to sit in memory
+twice: Pillow can only save a whole image at once. Files are read back with Pillow in the
+tests. TIFFs are written by :mod:`tifffile` from a row iterator. All writes are atomic.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import struct
+import zlib
+from pathlib import Path
+from typing import Iterable
+
+import numpy as np
+
+from potflat.errors import InvalidInputError
+from potflat.io.atomic import atomic_path
+
+#: zlib level of the PNG encoder (6 is libpng's default; 9 is much slower for ~2% less).
+PNG_COMPRESSION = 6
+
+_PNG_COLOR_TYPE = {1: 0, 2: 4, 3: 2, 4: 6}  # channels -> grey, grey+alpha, RGB, RGBA
+
+
+def read_texture(path: str | os.PathLike) -> np.ndarray:
+    """Read a texture image as RGB.
+
+    Parameters
+    ----------
+    path : path-like
+        Any image OpenCV reads (PNG, JPEG, TIFF, ...), 8 or 16 bits per channel.
+
+    Returns
+    -------
+    (h, w, 3) uint8 or uint16
+        Row 0 is the top of the image. An alpha channel is dropped; grey is expanded to RGB.
+    """
+    import cv2
+
+    path = Path(path)
+    if not path.is_file():
+        raise InvalidInputError(f"texture {path} not found; put the texture image beside the stage PLY")
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH)
+    if img is None:
+        raise InvalidInputError(f"cannot decode texture {path}; convert it to PNG or JPEG")
+    if img.dtype not in (np.uint8, np.uint16):
+        img = np.clip(img, 0.0, 1.0) * 65535.0 if img.dtype.kind == "f" else img
+        img = img.astype(np.uint16)
+    if img.ndim == 2:
+        img = cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)
+    elif img.shape[2] == 4:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
+    else:
+        img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    return np.ascontiguousarray(img)
+
+
+def _chunk(tag: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
+
+
+def _paeth_filter(rows: np.ndarray, prev: np.ndarray, bpp: int) -> np.ndarray:
+    """PNG filter type 4 (Paeth) of ``rows`` (h, rowbytes) uint8 given the row above them."""
+    up = np.concatenate([prev[None], rows[:-1]]).astype(np.int16)
+    x = rows.astype(np.int16)
+    left = np.zeros_like(x)
+    left[:, bpp:] = x[:, :-bpp]
+    upleft = np.zeros_like(x)
+    upleft[:, bpp:] = up[:, :-bpp]
+    p = left + up - upleft
+    pa, pb, pc = np.abs(p - left), np.abs(p - up), np.abs(p - upleft)
+    pred = np.where((pa <= pb) & (pa <= pc), left, np.where(pb <= pc, up, upleft))
+    out = np.empty((x.shape[0], x.shape[1] + 1), np.uint8)
+    out[:, 0] = 4
+    out[:, 1:] = (x - pred).astype(np.uint8)
+    return out
+
+
+class PngWriter:
+    """Write a PNG row strip by row strip (8 or 16 bits, 1-4 channels), atomically.
+
+    Use as a context manager; the file appears under its final name only when all rows
+    were written and the block exits without error.
+
+    Parameters
+    ----------
+    path : path-like
+    width, height : int
+    channels : int
+        1 (grey), 2 (grey + alpha), 3 (RGB) or 4 (RGBA).
+    px_per_mm : float or None
+        Resolution stored in the ``pHYs`` chunk (pixels per metre), read by GIMP,
+        Inkscape, QGIS and Pillow (as ``info["dpi"]``).
+    bits : int
+        8 or 16.
+    """
+
+    def __init__(self, path, width: int, height: int, channels: int, *, px_per_mm: float | None, bits: int = 8):
+        if channels not in _PNG_COLOR_TYPE or bits not in (8, 16):
+            raise ValueError("PNG needs 1-4 channels and 8 or 16 bits")
+        self.path = Path(path)
+        self.width, self.height, self.channels, self.bits = int(width), int(height), channels, bits
+        self.px_per_mm = px_per_mm
+        self._rows = 0
+        self._stack = contextlib.ExitStack()
+
+    def __enter__(self) -> "PngWriter":
+        tmp = self._stack.enter_context(atomic_path(self.path))
+        self._fh = self._stack.enter_context(open(tmp, "wb"))
+        self._z = zlib.compressobj(PNG_COMPRESSION)
+        self._prev = np.zeros(self.width * self.channels * self.bits // 8, np.uint8)
+        ihdr = struct.pack(">IIBBBBB", self.width, self.height, self.bits, _PNG_COLOR_TYPE[self.channels], 0, 0, 0)
+        head = b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", ihdr)
+        if self.px_per_mm:
+            ppm = int(round(self.px_per_mm * 1000.0))
+            head += _chunk(b"pHYs", struct.pack(">IIB", ppm, ppm, 1))
+        self._fh.write(head)
+        return self
+
+    def write(self, rows: np.ndarray) -> None:
+        """Append rows: ``(k, width, channels)`` (or ``(k, width)`` for grey) uint8/uint16."""
+        rows = np.asarray(rows)
+        want = np.uint16 if self.bits == 16 else np.uint8
+        if rows.dtype != want or rows.shape[1] != self.width or rows.reshape(len(rows), self.width, -1).shape[2] != self.channels:
+            raise ValueError(f"rows must be (k, {self.width}, {self.channels}) {np.dtype(want).name}")
+        if self._rows + len(rows) > self.height:
+            raise ValueError("more rows than the image height")
+        if not len(rows):
+            return
+        raw = rows.reshape(len(rows), -1)
+        if self.bits == 16:
+            raw = raw.astype(">u2").view(np.uint8).reshape(len(rows), -1)
+        filtered = _paeth_filter(raw, self._prev, self.channels * self.bits // 8)
+        self._prev = raw[-1].copy()
+        data = self._z.compress(filtered.tobytes())
+        if data:
+            self._fh.write(_chunk(b"IDAT", data))
+        self._rows += len(rows)
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        if exc_type is None:
+            try:
+                if self._rows != self.height:
+                    raise ValueError(f"PNG {self.path}: {self._rows} of {self.height} rows written")
+                self._fh.write(_chunk(b"IDAT", self._z.flush()) + _chunk(b"IEND", b""))
+                self._fh.flush()
+                os.fsync(self._fh.fileno())
+            except BaseException as err:
+                self._stack.__exit__(type(err), err, err.__traceback__)
+                raise
+        return self._stack.__exit__(exc_type, exc, tb)
+
+
+def write_png(path, image: np.ndarray, *, px_per_mm: float | None) -> Path:
+    """Write a whole image as PNG with its resolution.
+
+    Parameters
+    ----------
+    path : path-like
+    image : (h, w) or (h, w, c) uint8 or uint16
+    px_per_mm : float or None
+
+    Returns
+    -------
+    Path
+    """
+    image = np.asarray(image)
+    channels = 1 if image.ndim == 2 else image.shape[2]
+    bits = 16 if image.dtype == np.uint16 else 8
+    with PngWriter(path, image.shape[1], image.shape[0], channels, px_per_mm=px_per_mm, bits=bits) as png:
+        step = max(1, (1 << 22) // max(1, image.shape[1] * channels))
+        for r in range(0, image.shape[0], step):
+            png.write(image[r:r + step])
+    return Path(path)
+
+
+def write_tiff_rows(path, rows: Iterable[np.ndarray], *, shape: tuple[int, ...], dtype, px_per_mm: float | None,
+                    photometric: str) -> Path:
+    """Write a TIFF (zlib-compressed) from an iterator of row strips, atomically.
+
+    Parameters
+    ----------
+    path : path-like
+    rows : iterable of (k, w[, c]) arrays
+        Strips in top-to-bottom order, ``k`` rows each (any ``k``).
+    shape : tuple
+        ``(h, w)`` or ``(h, w, c)`` of the whole image.
+    dtype : numpy dtype
+    px_per_mm : float or None
+        Stored as X/Y resolution in pixels per centimetre.
+    photometric : str
+        ``"rgb"`` or ``"minisblack"``.
+
+    Returns
+    -------
+    Path
+    """
+    import tifffile
+
+    tile = 256
+
+    def tiles():
+        # tifffile wants whole tiles in row-major order: regroup the strips into bands of
+        # ``tile`` rows (incomplete edge tiles are zero-padded by tifffile)
+        pending, have, done = [], 0, 0
+        for strip in rows:
+            pending.append(np.asarray(strip, dtype=dtype))
+            have += len(pending[-1])
+            while have >= tile or (have and done + have == shape[0]):
+                band = np.concatenate(pending)
+                head, rest = band[:tile], band[tile:]
+                for c in range(0, shape[1], tile):
+                    yield head[:, c:c + tile]
+                done += len(head)
+                pending, have = [rest], len(rest)
+
+    kwargs = {}
+    if px_per_mm:
+        kwargs = {"resolution": (px_per_mm * 10.0, px_per_mm * 10.0), "resolutionunit": "CENTIMETER"}
+    extrasamples = {"extrasamples": ("unassalpha",)} if photometric == "rgb" and len(shape) == 3 and shape[2] == 4 else {}
+    with atomic_path(path) as tmp:
+        tifffile.imwrite(tmp, tiles(), shape=shape, dtype=dtype, photometric=photometric, tile=(tile, tile),
+                         compression="zlib", compressionargs={"level": 1},
+                         metadata=None, **extrasamples, **kwargs)
+    return Path(path)
