@@ -1,9 +1,115 @@
-"""`potflat batch` (placeholder until the stage lands)."""
+"""`potflat batch`: many scans from a YAML file, resumable, in parallel or on a Dask cluster."""
 from __future__ import annotations
 
-from potflat_cli._errors import fail
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from potflat_cli._errors import EXIT_USAGE, user_errors
+from potflat_cli._options import Json, OutputDir, Quiet
+
+BatchFile = Annotated[Path, typer.Argument(help="YAML batch file (schema: docs/cli.md).",
+                                           exists=True, dir_okay=False, readable=True)]
+Workers = Annotated[Optional[int], typer.Option(
+    "--workers", "-w", min=1,
+    help="Local worker processes \\[default: one per core, at most one per scan]. "
+         "Each gets cores/workers Numba threads; lower it for very large scans (memory).")]
+Scheduler = Annotated[Optional[str], typer.Option(
+    "--scheduler", metavar="ADDRESS",
+    help="Run on an existing Dask cluster (e.g. tcp://10.0.0.5:8786) instead of local "
+         "processes; needs: pip install 'dask\\[distributed]'. See docs/cluster.md.")]
+Force = Annotated[bool, typer.Option("--force", help="Redo every scan, even those already complete.")]
 
 
-def batch_command() -> None:
-    """Not available yet."""
-    raise fail("'potflat batch' is not implemented yet")
+@user_errors
+def batch_command(batch_file: BatchFile, workers: Workers = None, scheduler: Scheduler = None,
+                  output: OutputDir = None, force: Force = False, quiet: Quiet = False,
+                  json: Json = False) -> None:
+    """Run rollout, relax and bake on every scan of a YAML batch file.
+
+    The whole file is checked before any work starts. Scans whose outputs are complete and made with the same scan, options and potflat version are skipped (--force redoes them). A failing scan never stops the others. The summary is printed and written as summary.csv and summary.json in the output folder.
+
+    Exit codes: 0 all scans done or skipped; 1 some failed; 2 bad batch file or options; 130 interrupted.
+
+    Example:  potflat batch samples/batch.yaml --workers 2
+    """
+    import json as json_module
+
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from potflat.batch import BatchFileError, load_batch, run_batch
+
+    try:
+        batch = load_batch(batch_file, output=output)
+    except BatchFileError as exc:
+        for problem in exc.problems:
+            print(f"error: {problem}", file=sys.stderr)
+        raise typer.Exit(EXIT_USAGE) from None
+    err = Console(stderr=True)
+    progress = Progress(TextColumn("[bold]batch"), BarColumn(), MofNCompleteColumn(),
+                        TimeElapsedColumn(), TextColumn("{task.description}"),
+                        console=err, disable=quiet)
+    task = progress.add_task("", total=len(batch.jobs))
+
+    def on_plan(to_run: int, skipped: int) -> None:
+        if not quiet:
+            where = f"on {scheduler}" if scheduler else "locally"
+            err.print(f"{len(batch.jobs)} scans: {skipped} already complete, {to_run} to run "
+                      f"{where}; results in {batch.output}", highlight=False)
+
+    def on_result(report) -> None:
+        progress.advance(task)
+        if report.status == "failed":
+            err.print(f"[red]failed[/]  {report.name}: {report.error}", highlight=False)
+        elif not quiet:
+            style = {"done": "green", "skipped": "dim"}.get(report.status, "yellow")
+            err.print(f"[{style}]{report.status:<7}[/] {report.name} {_figures(report)}",
+                      highlight=False)
+
+    with progress:
+        summary = run_batch(batch, workers=workers, scheduler=scheduler, force=force,
+                            on_result=on_result, on_plan=on_plan)
+    if json:
+        print(json_module.dumps(summary.to_dict(), indent=2))
+    elif not quiet:
+        _print_table(summary)
+    raise typer.Exit(summary.exit_code)
+
+
+def _figures(report) -> str:
+    f = report.figures
+    parts = []
+    if report.seconds:
+        parts.append(f"{report.seconds:.1f} s")
+    if f.get("edge_rms") is not None:
+        parts.append(f"edge RMS {f['edge_rms']:.4f}")
+    if f.get("flipped") is not None:
+        parts.append(f"{f['flipped']} flipped")
+    return ", ".join(parts)
+
+
+def _print_table(summary) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"potflat batch: {summary.batch}", title_justify="left")
+    for column, justify in (("scan", "left"), ("status", "left"), ("time s", "right"),
+                            ("edge RMS", "right"), ("flipped", "right"), ("error", "left")):
+        table.add_column(column, justify=justify, overflow="fold")
+    styles = {"done": "green", "skipped": "dim", "failed": "red", "interrupted": "yellow"}
+    for r in summary.reports:
+        rms, flips = r.figures.get("edge_rms"), r.figures.get("flipped")
+        table.add_row(r.name, f"[{styles[r.status]}]{r.status}[/]",
+                      f"{r.seconds:.1f}" if r.status != "skipped" else "",
+                      "" if rms is None else f"{rms:.4f}", "" if flips is None else str(flips),
+                      r.error)
+    out = Console()
+    out.print(table)
+    c = summary.counts
+    out.print(f"{c['done']} done, {c['skipped']} skipped, {c['failed']} failed"
+              + (f", {c['interrupted']} interrupted" if c["interrupted"] else "")
+              + f" in {summary.seconds:.1f} s; summary.csv and summary.json in {summary.output}",
+              highlight=False)

@@ -1,9 +1,87 @@
-"""`potflat run` (placeholder until the stage lands)."""
+"""`potflat run`: rollout, relax and bake one scan in one go."""
 from __future__ import annotations
 
-from potflat_cli._errors import fail
+import inspect
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from potflat_cli._errors import user_errors
+from potflat_cli._options import Json, Name, OutputDir, Quiet
+
+HELP = """Run rollout, relax and bake on one scan: NAME.rollout.ply/.json, NAME.relaxed.ply/.json, NAME.png, NAME.bake.json and the distortion maps, all in OUTDIR.
+
+Every option of 'potflat rollout', 'potflat relax' and 'potflat bake' is accepted, with the same name and default. Exit codes: 0 success, 2 bad input or options (message on stderr), 130 interrupted.
+
+Example:  potflat run samples/data/amphora.obj -o out/ --proxy cone --preset preview --px-per-mm 4
+"""
+
+Scan = Annotated[Path, typer.Argument(help="Textured scan (OBJ, PLY, STL, OFF, GLB/glTF).",
+                                      exists=True, dir_okay=False, readable=True)]
 
 
-def run_command() -> None:
-    """Not available yet."""
-    raise fail("'potflat run' is not implemented yet")
+def run_command(scan: Scan, output: OutputDir = None, name: Name = None,
+                quiet: Quiet = False, json: Json = False) -> None:
+    """Run rollout, relax and bake on one scan (stage options: see 'potflat run --help')."""
+    # Only listed in 'potflat --help': invoking 'run' resolves to full_command(), which
+    # adds every stage option (built on demand so other commands stay fast to start).
+    full_command()(scan=scan, output=output, name=name, quiet=quiet, json=json)
+
+
+def full_command():
+    """``run`` with one option per stage option field (see potflat_cli._options)."""
+    from potflat.pipeline import STAGES
+    from potflat_cli._options import stage_parameters
+
+    base = list(inspect.signature(run_command).parameters.values())
+    params, seen = [], {p.name for p in base}
+    for stage in STAGES:
+        for p in stage_parameters(stage):
+            if p.name not in seen:  # an option used by two stages is given once
+                seen.add(p.name)
+                params.append(p)
+
+    @user_errors
+    def run(**values: Any) -> None:
+        _run(values)
+
+    run.__signature__ = inspect.Signature(base + params)
+    run.__annotations__ = {p.name: p.annotation for p in base + params}
+    run.__doc__ = HELP
+    return run
+
+
+def _run(values: dict[str, Any]) -> None:
+    import json as json_module
+
+    from rich.console import Console
+
+    from potflat.pipeline import STAGES, run_scan
+    from potflat_cli._options import options_from_cli
+
+    options = {stage: options_from_cli(stage, values) for stage in STAGES}
+    scan = Path(values["scan"])
+    err = Console(stderr=True, quiet=values["quiet"] or values["json"])
+    with err.status(f"{scan.name}: starting") as status:
+        def progress(stage: str) -> None:
+            status.update(f"{scan.name}: {stage}")
+        result = run_scan(scan, values["output"] or scan.parent, name=values["name"], progress=progress, **options)
+    figures = result.figures
+    if values["json"]:
+        print(json_module.dumps({
+            "name": result.name, "scan": str(result.scan), "output": str(result.out_dir),
+            "seconds": {k: round(v, 3) for k, v in result.seconds.items()},
+            "figures": figures, "paths": {k: str(v) for k, v in result.paths.items()}}, indent=2))
+        return
+    if values["quiet"]:
+        return
+    out = Console()
+    out.print(f"[bold]{result.name}[/]: done in {result.seconds['total']:.1f} s, "
+              f"outputs in {result.out_dir}")
+    shown = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
+                      for k, v in figures.items() if v is not None)
+    if shown:
+        out.print(f"  relaxed distortion: {shown}")
+    for key, path in result.paths.items():
+        out.print(f"  {key:<16} {path}", highlight=False)

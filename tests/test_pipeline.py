@@ -1,0 +1,127 @@
+"""potflat.pipeline: run_scan over the three stages, option coercion and resolution."""
+from __future__ import annotations
+
+import typing
+from pathlib import Path
+
+import pytest
+
+import test_batch_fakes as fakes
+from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.pipeline import (FIGURES, coerce_option, describe_type, distortion_figures, option_types,
+                              resolve_options, run_scan, stage_api)
+
+
+@pytest.fixture
+def fake_stages(monkeypatch):
+    fakes.install(monkeypatch)
+
+
+def test_run_scan_runs_three_stages_in_order(tmp_path, fake_stages):
+    scan = fakes.write_scan(tmp_path / "in" / "hydria.obj")
+    seen = []
+    result = run_scan(scan, tmp_path / "out", progress=seen.append,
+                      bake={"px_per_mm": 2.0, "maps": ("stress",)})
+    assert seen == ["rollout", "relax", "bake"]
+    assert result.name == "hydria"
+    names = sorted(p.name for p in (tmp_path / "out").iterdir())
+    assert names == ["hydria.bake.json", "hydria.png", "hydria.relaxed.json", "hydria.relaxed.ply",
+                     "hydria.rollout.json", "hydria.rollout.ply", "hydria.stress.png"]
+    assert set(result.paths) == {"rollout.ply", "rollout.json", "relax.ply", "relax.json",
+                                 "bake.png", "bake.stress", "bake.json"}
+    assert all(p.is_file() for p in result.paths.values())
+    assert result.figures["flipped"] == 0 and result.figures["edge_rms"] > 0
+    assert set(result.seconds) == {"rollout", "relax", "bake", "total"}
+
+
+def test_run_scan_name_and_options_objects(tmp_path, fake_stages):
+    scan = fakes.write_scan(tmp_path / "a.obj")
+    result = run_scan(scan, tmp_path / "o", name="other", relax=fakes.RelaxOptions(preset="preview"))
+    assert result.name == "other" and (tmp_path / "o" / "other.png").is_file()
+    assert result.stages["relax"].summary["provenance"]["options"]["preset"] == "preview"
+
+
+def test_run_scan_failure_keeps_finished_stages(tmp_path, fake_stages):
+    scan = fakes.write_scan(tmp_path / "a.obj")
+    fakes.SABOTAGE["a"] = ("raise", "relax")
+    with pytest.raises(RuntimeError, match="relax exploded"):
+        run_scan(scan, tmp_path / "o")
+    assert (tmp_path / "o" / "a.rollout.ply").is_file()
+    assert not (tmp_path / "o" / "a.relaxed.ply").exists()
+
+
+def test_run_scan_corrupt_scan_is_a_user_error(tmp_path, fake_stages):
+    bad = tmp_path / "bad.ply"
+    bad.write_bytes(b"\x00garbage")
+    with pytest.raises(InvalidInputError, match="bad.ply"):
+        run_scan(bad, tmp_path / "o")
+
+
+def test_resolve_options_checks_types(fake_stages):
+    opts = resolve_options(rollout={"proxy": "cone"})
+    assert opts["rollout"].proxy == "cone" and opts["relax"] == fakes.RelaxOptions()
+    with pytest.raises(InvalidOptionError, match="RelaxOptions"):
+        resolve_options(relax=fakes.BakeOptions())
+    with pytest.raises(InvalidOptionError, match="px_per_mm"):
+        resolve_options(bake={"px_per_mm": -1.0})
+
+
+def test_stage_api_unknown_stage():
+    with pytest.raises(ValueError, match="unknown stage"):
+        stage_api("paint")
+
+
+def test_option_types_from_dataclass(fake_stages):
+    types_ = option_types(fakes.RolloutOptions)
+    assert list(types_)[:3] == ["units", "proxy", "axis"]
+    assert types_["band"] == typing.Optional[tuple[float, float]]
+
+
+@pytest.mark.parametrize("tp, value, expected", [
+    (float, 4, 4.0),
+    (float, "2.5", 2.5),
+    (int, 3.0, 3),
+    (int, "7", 7),
+    (bool, True, True),
+    (str, "cone", "cone"),
+    (Path, "a/b", Path("a/b")),
+    (typing.Optional[tuple[float, float]], [0.2, 0.6], (0.2, 0.6)),
+    (typing.Optional[tuple[float, float]], "0.2, 0.6", (0.2, 0.6)),
+    (typing.Optional[tuple[float, float]], None, None),
+    (tuple[str, ...], "stress,area", ("stress", "area")),
+    (tuple[str, ...], ["stress"], ("stress",)),
+    (typing.Literal["auto", "cone"], "cone", "cone"),
+    (typing.Any, {"x": 1}, {"x": 1}),
+])
+def test_coerce_option_accepts(tp, value, expected):
+    assert coerce_option(tp, value) == expected
+
+
+@pytest.mark.parametrize("tp, value, message", [
+    (float, True, "must be a number, got True"),
+    (float, "abc", "must be a number"),
+    (int, 2.5, "must be a whole number"),
+    (bool, "yes", "must be true or false"),
+    (str, 3, "must be text"),
+    (typing.Optional[tuple[float, float]], [1.0], "a list of 2 numbers or null"),
+    (typing.Optional[tuple[float, float]], 0.5, "a list of 2 numbers"),
+    (tuple[float, float], ["a", "b"], "a list of 2 numbers"),
+    (typing.Literal["auto", "cone"], "cnoe", "did you mean cone"),
+    (float, None, "got null"),
+])
+def test_coerce_option_rejects(tp, value, message):
+    with pytest.raises(InvalidOptionError, match=message):
+        coerce_option(tp, value)
+
+
+def test_describe_type():
+    assert describe_type(tuple[str, ...]) == "a list of names"
+    assert describe_type(typing.Literal["a", "b"]) == "one of a, b"
+
+
+def test_distortion_figures_prefers_distortion_key():
+    summary = {"aaa": {"edge_rms": 9.0}, "distortion": {"edge_rms": 0.1, "flipped": 2}}
+    figures = distortion_figures(summary)
+    assert figures["edge_rms"] == 0.1 and figures["flipped"] == 2
+    assert set(figures) == set(FIGURES) and figures["anisotropy_p95"] is None
+    assert distortion_figures({}) == dict.fromkeys(FIGURES)
