@@ -1,0 +1,645 @@
+"""Bake stage: true-scale images of the painting and of the flattening's distortion.
+
+For every output pixel the flat triangle under it is found (a binned, parallel
+rasteriser, :mod:`potflat._kernels.raster`), the per-corner texture coordinates are
+interpolated barycentrically and the texture is sampled bilinearly. Anti-aliasing:
+each pixel averages ``n x n`` sub-samples (``supersample``; also anti-aliases the
+outline, alpha = covered fraction) and, where the texture is still finer than a
+sub-sample, a mip level chosen per triangle from its texture-coordinate Jacobian
+(trilinear). Sampling per face through its own texture coordinates keeps atlas chart
+borders seamless. Vertex-coloured scans bake their colours; untextured scans bake a
+shaded relief.
+
+The pixel grid: ``px_per_mm`` pixels per millimetre, row 0 at the largest ``v`` (the
+mouth up), column 0 at the smallest ``u`` (not mirrored); :attr:`BakeResult.origin`
+is the ``uv`` of the top-left pixel corner. Images are rendered in horizontal strips,
+so large outputs (hundreds of megapixels) are streamed to disk by
+:func:`run_bake_stage` with a bounded memory footprint.
+"""
+from __future__ import annotations
+
+import math
+import os
+from contextlib import ExitStack
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from potflat import distortion
+from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.types import FlatMesh, StageOutput
+
+#: Distortion maps :func:`bake` can make.
+MAP_NAMES = ("stress", "area", "anisotropy")
+#: px/mm used when neither ``px_per_mm`` nor ``dpi`` is given.
+DEFAULT_PX_PER_MM = 4.0
+#: Transparent border around the mesh, in pixels.
+PAD_PX = 1
+#: Image rows per raster block (the unit of parallel work).
+BLOCK_ROWS = 4
+#: Sub-samples rendered per strip (bounds the strip buffers to ~100 MB).
+STRIP_SAMPLES = 1 << 21
+#: Largest automatic supersampling factor (mip levels take over beyond it).
+MAX_AUTO_SUPERSAMPLE = 4
+#: Automatic supersampling stays below this many sub-samples in the whole image.
+AUTO_SUPERSAMPLE_BUDGET = 64e6
+#: Radius (mm) of the smoothed surface the shaded relief of untextured scans is lit against.
+RELIEF_RADIUS_MM = 5.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class BakeOptions:
+    """Options of the bake stage (field names are the CLI option names).
+
+    Attributes
+    ----------
+    px_per_mm : float or None
+        Output resolution in pixels per millimetre (give this or ``dpi``; default 4).
+    dpi : float or None
+        Output resolution in dots per inch (``px_per_mm = dpi / 25.4``).
+    maps : tuple of str
+        Distortion maps to write, from :data:`MAP_NAMES`; ``stress`` also writes the overlay.
+    sheet : bool
+        Write the rollout-vs-relaxed comparison sheet (needs ``NAME.rollout.ply`` beside the input).
+    position_map : bool
+        Write a float32 TIFF of the 3D point under each pixel (NaN outside).
+    grid : bool
+        Draw a labelled 10 mm grid in the scale layer.
+    tiff : bool
+        Also write the painting as a 16-bit RGBA TIFF.
+    supersample : int
+        Sub-samples per pixel side (1-8); 0 chooses from the texture density (2-4).
+    max_megapixels : float
+        Refuse images larger than this (protects laptops from a mistyped resolution).
+    """
+
+    px_per_mm: float | None = None
+    dpi: float | None = None
+    maps: tuple[str, ...] = MAP_NAMES
+    sheet: bool = False
+    position_map: bool = False
+    grid: bool = False
+    tiff: bool = False
+    supersample: int = 0
+    max_megapixels: float = 1000.0
+
+    def __post_init__(self) -> None:
+        if self.px_per_mm is not None and self.dpi is not None:
+            raise InvalidOptionError("give either px_per_mm or dpi, not both")
+        for name in ("px_per_mm", "dpi", "max_megapixels"):
+            value = getattr(self, name)
+            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))
+                                      or not math.isfinite(value) or value <= 0):
+                raise InvalidOptionError(f"{name} must be a positive number, got {value!r}")
+        maps = (self.maps,) if isinstance(self.maps, str) else tuple(self.maps)
+        unknown = [m for m in maps if m not in MAP_NAMES]
+        if unknown:
+            raise InvalidOptionError(f"unknown map {unknown[0]!r}; choose from {', '.join(MAP_NAMES)}")
+        object.__setattr__(self, "maps", tuple(dict.fromkeys(maps)))
+        if isinstance(self.supersample, bool) or not isinstance(self.supersample, int) or not 0 <= self.supersample <= 8:
+            raise InvalidOptionError(f"supersample must be an integer from 0 (automatic) to 8, got {self.supersample!r}")
+
+    @property
+    def resolution(self) -> float:
+        """The effective pixels per millimetre."""
+        if self.dpi is not None:
+            return self.dpi / 25.4
+        return float(self.px_per_mm) if self.px_per_mm is not None else DEFAULT_PX_PER_MM
+
+
+@dataclass(frozen=True, eq=False)
+class BakeResult:
+    """The baked images of one flattening (in memory).
+
+    Attributes
+    ----------
+    image : (h, w, 4) uint8
+        The painting, RGBA; alpha is the covered fraction of each pixel (0 outside and in holes).
+    maps : dict of str to (h, w) float32
+        Distortion values per pixel (NaN outside): ``stress`` in sqrt(mm) (paper Eq. 3,
+        interpolated from the vertices), ``area`` as log2(flat area / 3D area) per face,
+        ``anisotropy`` as sigma_max / sigma_min per face.
+    position : (h, w, 3) float32 or None
+        3D point (scan units) under each pixel, NaN outside.
+    px_per_mm : float
+        Resolution.
+    origin : (2,) float64
+        ``(u, v)`` of the top-left corner of pixel (0, 0), scan units; pixel ``(r, c)``
+        covers ``u`` from ``origin[0] + c / s`` and ``v`` down from ``origin[1] - r / s``
+        with ``s = px_per_mm * mm_per_unit`` pixels per unit.
+    figures : dict
+        Resolution, size, distortion figures, covered area (see :func:`run_bake_stage`).
+    """
+
+    image: np.ndarray
+    maps: dict
+    position: np.ndarray | None
+    px_per_mm: float
+    origin: np.ndarray
+    figures: dict = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------------------
+# per-mesh fields
+
+
+def _vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals, unit length. Shape (n, 3)."""
+    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    vn = np.zeros_like(V)
+    for k in range(3):
+        for j in range(3):
+            vn[:, j] += np.bincount(F[:, k], fn[:, j], len(V))
+    return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
+
+
+def _relief_light(V: np.ndarray, uv: np.ndarray, F: np.ndarray, mm_per_unit: float) -> np.ndarray:
+    """Per-vertex light direction for a shaded relief: from the image's upper left,
+    in a frame that follows the surface smoothed over :data:`RELIEF_RADIUS_MM`, so the
+    vessel's overall curvature is not shaded but its relief is. Shape (n, 3)."""
+    import scipy.sparse as sp
+
+    n = len(V)
+    normals = _vertex_normals(V, F)
+    # 3D direction of image-up (d X / d v) per face, accumulated to vertices by area
+    P1, P2 = V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]
+    Q1, Q2 = uv[F[:, 1]] - uv[F[:, 0]], uv[F[:, 2]] - uv[F[:, 0]]
+    det = Q1[:, 0] * Q2[:, 1] - Q1[:, 1] * Q2[:, 0]
+    ok = np.abs(det) > 0
+    safe = np.where(ok, det, 1.0)
+    # [P1 P2] = J [Q1 Q2]  ->  dX/dv = (-Q2_u P1 + Q1_u P2) / det
+    up_f = ((-Q2[:, 0])[:, None] * P1 + Q1[:, 0][:, None] * P2) / safe[:, None]
+    up_f[~ok] = 0.0
+    w = np.abs(det) * ok
+    up = np.stack([sum(np.bincount(F[:, k], up_f[:, j] * w, n) for k in range(3)) for j in range(3)], axis=1)
+    # smooth normals and up over the relief radius by neighbour averaging (diffusion)
+    edges = distortion.unique_edges(F)
+    adj = sp.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
+                        shape=(n, n)).tocsr()
+    deg = np.maximum(np.asarray(adj.sum(axis=1)).ravel(), 1.0)
+    mean_edge = float(np.mean(np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1))) * mm_per_unit if len(edges) else 1.0
+    steps = int(np.clip((RELIEF_RADIUS_MM / max(mean_edge, 1e-12)) ** 2, 1, 200))
+    smooth_n, smooth_up = normals.copy(), up.copy()
+    for _ in range(steps):
+        smooth_n = 0.5 * smooth_n + 0.5 * (adj @ smooth_n) / deg[:, None]
+        smooth_up = 0.5 * smooth_up + 0.5 * (adj @ smooth_up) / deg[:, None]
+    smooth_n /= np.maximum(np.linalg.norm(smooth_n, axis=1, keepdims=True), 1e-300)
+    t_v = smooth_up - np.einsum("ij,ij->i", smooth_up, smooth_n)[:, None] * smooth_n
+    t_v /= np.maximum(np.linalg.norm(t_v, axis=1, keepdims=True), 1e-300)
+    t_u = np.cross(t_v, smooth_n)  # right-handed: t_u x t_v = n (seen from outside)
+    light = -t_u + t_v + 1.5 * smooth_n
+    return light / np.maximum(np.linalg.norm(light, axis=1, keepdims=True), 1e-300)
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """Pixel grid of a flattening."""
+
+    px_per_mm: float
+    scale: float  # pixels per scan unit
+    origin: np.ndarray  # uv of the top-left pixel corner
+    width: int
+    height: int
+
+
+def _make_grid(flat: FlatMesh, px_per_mm: float, max_megapixels: float) -> _Grid:
+    used = np.unique(flat.mesh.faces)
+    if not len(used):
+        raise InvalidInputError(f"{flat.mesh.source or 'the mesh'} has no faces to bake; check the stage file")
+    uv = flat.uv[used]
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    scale = px_per_mm * flat.mesh.mm_per_unit
+    width = int(math.ceil((hi[0] - lo[0]) * scale)) + 2 * PAD_PX
+    height = int(math.ceil((hi[1] - lo[1]) * scale)) + 2 * PAD_PX
+    if width * height > max_megapixels * 1e6:
+        suggest = px_per_mm * math.sqrt(max_megapixels * 1e6 / (width * height)) * 0.99
+        raise InvalidOptionError(
+            f"{px_per_mm:g} px/mm would make a {width} x {height} image ({width * height / 1e6:.0f} megapixels, "
+            f"over the {max_megapixels:g} MP limit); use px_per_mm {suggest:.3g} or less")
+    origin = np.array([lo[0] - PAD_PX / scale, hi[1] + PAD_PX / scale])
+    return _Grid(px_per_mm, scale, origin, width, height)
+
+
+def _reduce(values: np.ndarray, covered: np.ndarray, n: int) -> np.ndarray:
+    """Mean of the covered sub-samples of each pixel; NaN where none is covered.
+
+    values : (k n, w n, c) float32 (NaN where not covered); covered : (k n, w n) bool.
+    Returns (k, w, c) float32.
+    """
+    if n == 1:
+        return values
+    kn, wn, c = values.shape
+    k, w = kn // n, wn // n
+    total = np.where(covered[..., None], values, 0.0).reshape(k, n, w, n, c).sum(axis=(1, 3), dtype=np.float32)
+    count = covered.reshape(k, n, w, n).sum(axis=(1, 3))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = total / count[..., None].astype(np.float32)
+    return out
+
+
+class _Renderer:
+    """Rasterises a flattening strip by strip and produces every bake layer."""
+
+    def __init__(self, flat: FlatMesh, px_per_mm: float, *, supersample: int = 0, max_megapixels: float = 1000.0,
+                 need_painting: bool = True):
+        from potflat._kernels import raster
+
+        self.flat = flat
+        mesh = flat.mesh
+        self.faces = mesh.faces
+        self.grid = _make_grid(flat, px_per_mm, max_megapixels)
+        g = self.grid
+        pix = np.empty_like(flat.uv)
+        pix[:, 0] = (flat.uv[:, 0] - g.origin[0]) * g.scale
+        pix[:, 1] = (g.origin[1] - flat.uv[:, 1]) * g.scale
+        self._pix_px = pix
+        self.texture = None
+        self.texels_per_pixel = None
+        if need_painting and mesh.texcoords is not None and mesh.texture_path is not None:
+            from potflat.io.images import read_texture
+
+            self.texture = read_texture(mesh.texture_path)
+            self.texels_per_pixel = self._texel_ratio(pix)
+        n = supersample
+        if n == 0:
+            ratio = float(np.median(self.texels_per_pixel)) if self.texels_per_pixel is not None else 1.0
+            n = int(np.clip(math.ceil(ratio - 0.01), 2, MAX_AUTO_SUPERSAMPLE))
+            while n > 1 and g.width * g.height * n * n > AUTO_SUPERSAMPLE_BUDGET:
+                n -= 1
+        self.n = n
+        self.levels = None
+        self.lod = None
+        if self.texture is not None:
+            self._build_mips()
+        self._pix = np.ascontiguousarray(pix * n)
+        self._block = BLOCK_ROWS * n
+        nblocks = (g.height * n + self._block - 1) // self._block
+        self._ptr, self._idx = raster.bin_triangles(self._pix, self.faces, float(self._block), nblocks)
+        self._raster_mod = raster
+        self._cache = None
+        self._face_values = {}
+        self._vertex_values = {}
+
+    # -- setup ---------------------------------------------------------------------
+    def _texel_ratio(self, pix: np.ndarray) -> np.ndarray:
+        """Texels per output pixel (largest singular value of the pixel-to-texel map) per face."""
+        F, tc = self.faces, self.flat.mesh.texcoords
+        H0, W0 = self.texture.shape[:2]
+        tx = np.stack([tc[..., 0] * W0, (1.0 - tc[..., 1]) * H0], axis=-1)  # (m, 3, 2)
+        P = np.stack([pix[F[:, 1]] - pix[F[:, 0]], pix[F[:, 2]] - pix[F[:, 0]]], axis=-1)  # (m, 2, 2) columns
+        T = np.stack([tx[:, 1] - tx[:, 0], tx[:, 2] - tx[:, 0]], axis=-1)
+        det = P[:, 0, 0] * P[:, 1, 1] - P[:, 0, 1] * P[:, 1, 0]
+        ok = np.abs(det) > 1e-12
+        inv = np.empty_like(P)
+        safe = np.where(ok, det, 1.0)
+        inv[:, 0, 0], inv[:, 1, 1] = P[:, 1, 1] / safe, P[:, 0, 0] / safe
+        inv[:, 0, 1], inv[:, 1, 0] = -P[:, 0, 1] / safe, -P[:, 1, 0] / safe
+        J = T @ inv
+        ratio = np.linalg.svd(J, compute_uv=False)[:, 0]
+        ratio[~ok] = 1.0
+        return ratio
+
+    def _build_mips(self) -> None:
+        import cv2
+        from numba.typed import List
+
+        lod = np.log2(np.maximum(self.texels_per_pixel / self.n, 1.0))
+        top = int(math.ceil(min(np.max(lod), math.log2(max(min(self.texture.shape[:2]), 1)))))
+        levels = List()
+        levels.append(self.texture)
+        cur = self.texture
+        for _ in range(top):
+            h, w = cur.shape[:2]
+            cur = cv2.resize(cur, (max(1, (w + 1) // 2), max(1, (h + 1) // 2)), interpolation=cv2.INTER_AREA)
+            if cur.ndim == 2:
+                cur = cur[..., None]
+            levels.append(np.ascontiguousarray(cur))
+        self.levels = levels
+        self.lod = np.ascontiguousarray(lod)
+
+    # -- strips --------------------------------------------------------------------
+    def strips(self) -> Iterator[tuple[int, int]]:
+        """Pixel row ranges ``(r0, r1)`` covering the image, each a whole number of blocks."""
+        g = self.grid
+        rows = max(BLOCK_ROWS, (STRIP_SAMPLES // max(1, g.width * self.n * self.n)) // BLOCK_ROWS * BLOCK_ROWS)
+        for r0 in range(0, g.height, rows):
+            yield r0, min(g.height, r0 + rows)
+
+    def _raster(self, r0: int, r1: int):
+        if self._cache is not None and self._cache[0] == (r0, r1):
+            return self._cache[1]
+        n, g = self.n, self.grid
+        face = np.full(((r1 - r0) * n, g.width * n), -1, np.int32)
+        bary = np.zeros(face.shape + (2,), np.float64)
+        self._raster_mod.rasterize_rows(self._pix, self.faces, self._ptr, self._idx, self._block, r0 * n,
+                                        face.shape[0], face.shape[1], 1e-9, face, bary)
+        self._cache = ((r0, r1), (face, bary))
+        return face, bary
+
+    def coverage(self, r0: int, r1: int) -> np.ndarray:
+        """Covered fraction of each pixel. Shape (k, w) float32."""
+        face, _ = self._raster(r0, r1)
+        n = self.n
+        cov = (face >= 0).reshape(r1 - r0, n, -1, n).mean(axis=(1, 3), dtype=np.float32)
+        return cov
+
+    def _vertex_field(self, values: np.ndarray, r0: int, r1: int) -> np.ndarray:
+        face, bary = self._raster(r0, r1)
+        attr = np.ascontiguousarray(values.reshape(len(values), -1), dtype=np.float64)
+        out = np.empty(face.shape + (attr.shape[1],), np.float32)
+        self._raster_mod.interpolate_vertex_attr(face, bary, self.faces, attr, out)
+        return out
+
+    def _face_field(self, values: np.ndarray, r0: int, r1: int) -> np.ndarray:
+        face, _ = self._raster(r0, r1)
+        vals = values.astype(np.float32)
+        out = np.where(face >= 0, vals[np.maximum(face, 0)], np.float32(np.nan))
+        return out[..., None]
+
+    def painting(self, r0: int, r1: int) -> np.ndarray:
+        """RGB in [0, 1] (NaN outside). Shape (k, w, 3) float32."""
+        face, bary = self._raster(r0, r1)
+        mesh = self.flat.mesh
+        if self.texture is not None:
+            out = np.empty(face.shape + (3,), np.float32)
+            self._raster_mod.sample_texture(face, bary, mesh.texcoords, self.lod, self.levels, out)
+            out /= np.float32(np.iinfo(self.texture.dtype).max)
+        elif mesh.vertex_colors is not None:
+            out = self._vertex_field(mesh.vertex_colors[:, :3] / 255.0, r0, r1)
+        else:
+            if "relief" not in self._vertex_values:
+                V, F = mesh.vertices, self.faces
+                self._vertex_values["relief"] = np.concatenate(
+                    [_vertex_normals(V, F), _relief_light(V, self.flat.uv, F, mesh.mm_per_unit)], axis=1)
+            nl = self._vertex_field(self._vertex_values["relief"], r0, r1)
+            nrm, light = nl[..., :3], nl[..., 3:]
+            dot = np.einsum("...i,...i->...", nrm, light) / np.maximum(
+                np.linalg.norm(nrm, axis=-1) * np.linalg.norm(light, axis=-1), 1e-30)
+            shade = 0.15 + 0.85 * np.clip(dot, 0.0, 1.0)
+            out = np.repeat(shade[..., None], 3, axis=-1).astype(np.float32)
+        return _reduce(out, face >= 0, self.n)
+
+    def scalar(self, name: str, r0: int, r1: int) -> np.ndarray:
+        """A distortion map's values (NaN outside). Shape (k, w) float32."""
+        face, _ = self._raster(r0, r1)
+        if name == "stress":
+            out = self._vertex_field(self.vertex_stress, r0, r1)
+        else:
+            out = self._face_field(self.face_values[name], r0, r1)
+        return _reduce(out, face >= 0, self.n)[..., 0]
+
+    def position(self, r0: int, r1: int) -> np.ndarray:
+        """3D point under each pixel, scan units (NaN outside). Shape (k, w, 3) float32."""
+        face, _ = self._raster(r0, r1)
+        out = self._vertex_field(self.flat.mesh.vertices, r0, r1)
+        return _reduce(out, face >= 0, self.n)
+
+    # -- distortion values ---------------------------------------------------------
+    @property
+    def vertex_stress(self) -> np.ndarray:
+        if "stress" not in self._vertex_values:
+            flat = self.flat
+            st = flat.stress if flat.stress is not None else distortion.vertex_stress(
+                flat.mesh.vertices, flat.uv, flat.mesh.faces, flat.mesh.mm_per_unit)
+            self._vertex_values["stress"] = st
+        return self._vertex_values["stress"]
+
+    @property
+    def face_values(self) -> dict:
+        if not self._face_values:
+            fd = distortion.face_distortion(self.flat.mesh.vertices, self.flat.uv, self.faces)
+            self._fd = fd
+            self._face_values = {"area": fd.log_area_ratio / math.log(2.0),
+                                 "anisotropy": np.minimum(fd.anisotropy, 1e6)}
+        return self._face_values
+
+
+# --------------------------------------------------------------------------------------
+# figures
+
+
+def _stats(values: np.ndarray, weights: np.ndarray | None = None) -> dict:
+    values = np.asarray(values, float)
+    if not len(values):
+        return {"mean": 0.0, "p95": 0.0, "max": 0.0}
+    mean = float(np.average(values, weights=weights)) if weights is not None and weights.sum() > 0 else float(values.mean())
+    return {"mean": mean, "p95": float(np.percentile(values, 95)), "max": float(values.max())}
+
+
+def _figures(r: _Renderer, covered_px: float) -> dict:
+    g, flat = r.grid, r.flat
+    mpu = flat.mesh.mm_per_unit
+    fv = r.face_values
+    fd = r._fd
+    valid = fd.valid
+    w = fd.area_3d[valid]
+    summary = distortion.summarize(flat.mesh.vertices, flat.uv, r.faces).as_dict()
+    figures = {
+        "px_per_mm": g.px_per_mm,
+        "dpi": g.px_per_mm * 25.4,
+        "units": flat.mesh.units,
+        "mm_per_unit": mpu,
+        "px_per_unit": g.scale,
+        "image_px": [g.width, g.height],
+        "image_mm": [g.width / g.px_per_mm, g.height / g.px_per_mm],
+        "origin_uv": [float(g.origin[0]), float(g.origin[1])],
+        "supersample": r.n,
+        "mip_levels": 0 if r.levels is None else len(r.levels) - 1,
+        "texture": str(flat.mesh.texture_path) if r.texture is not None else None,
+        "texture_px": list(r.texture.shape[1::-1]) if r.texture is not None else None,
+        "texels_per_pixel_median": float(np.median(r.texels_per_pixel)) if r.texels_per_pixel is not None else None,
+        "painting": "texture" if r.texture is not None else "vertex colours" if flat.mesh.vertex_colors is not None
+        else "shaded relief",
+        "stress": {**_stats(r.vertex_stress), "unit": "sqrt(mm)"},
+        "area": {**_stats(np.abs(fv["area"][valid]), w), "unit": "|log2(flat area / 3D area)|"},
+        "anisotropy": {**_stats(fv["anisotropy"][valid], w), "unit": "sigma_max / sigma_min"},
+        "distortion": summary,
+        "covered_area_mm2": covered_px / g.px_per_mm ** 2,
+        "flattened_area_mm2": float(np.abs(fd.area_2d).sum()) * mpu ** 2,
+        "surface_area_mm2": float(fd.area_3d.sum()) * mpu ** 2,
+    }
+    return figures
+
+
+# --------------------------------------------------------------------------------------
+# library entry point
+
+
+def bake(flat: FlatMesh, *, px_per_mm: float | None = None, dpi: float | None = None,
+         maps: tuple[str, ...] = MAP_NAMES, position_map: bool = False, supersample: int = 0,
+         max_megapixels: float = 1000.0) -> BakeResult:
+    """Bake a flattening into a true-scale RGBA image and distortion maps, in memory.
+
+    Parameters
+    ----------
+    flat : FlatMesh
+        The flattening (``uv`` in scan units, u right, v up).
+    px_per_mm, dpi : float, optional
+        Resolution (give at most one; default 4 px/mm).
+    maps : tuple of str
+        Distortion maps to compute, from :data:`MAP_NAMES`.
+    position_map : bool
+        Also return the 3D point under each pixel.
+    supersample : int
+        Sub-samples per pixel side (0: automatic).
+    max_megapixels : float
+        Refuse larger images.
+
+    Returns
+    -------
+    BakeResult
+
+    Notes
+    -----
+    Everything is held in memory; for very large images use :func:`run_bake_stage`,
+    which streams the same strips to disk.
+    """
+    opts = BakeOptions(px_per_mm=px_per_mm, dpi=dpi, maps=maps, position_map=position_map,
+                       supersample=supersample, max_megapixels=max_megapixels)
+    r = _Renderer(flat, opts.resolution, supersample=opts.supersample, max_megapixels=opts.max_megapixels)
+    g = r.grid
+    image = np.zeros((g.height, g.width, 4), np.uint8)
+    values = {name: np.empty((g.height, g.width), np.float32) for name in opts.maps}
+    position = np.empty((g.height, g.width, 3), np.float32) if opts.position_map else None
+    covered = 0.0
+    for r0, r1 in r.strips():
+        cov = r.coverage(r0, r1)
+        covered += float(cov.sum(dtype=np.float64))
+        image[r0:r1] = _rgba8(r.painting(r0, r1), cov)
+        for name in opts.maps:
+            values[name][r0:r1] = r.scalar(name, r0, r1)
+        if position is not None:
+            position[r0:r1] = r.position(r0, r1)
+    return BakeResult(image=image, maps=values, position=position, px_per_mm=g.px_per_mm,
+                      origin=g.origin.copy(), figures=_figures(r, covered))
+
+
+def _rgba8(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
+    """(k, w, 3) float in [0, 1] (NaN outside) and coverage -> (k, w, 4) uint8."""
+    out = np.empty(rgb.shape[:2] + (4,), np.uint8)
+    out[..., :3] = np.rint(np.clip(np.nan_to_num(rgb, nan=0.0), 0.0, 1.0) * 255.0)
+    out[..., 3] = np.rint(coverage * 255.0)
+    return out
+
+
+def _rgba16(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
+    out = np.empty(rgb.shape[:2] + (4,), np.uint16)
+    out[..., :3] = np.rint(np.clip(np.nan_to_num(rgb, nan=0.0), 0.0, 1.0) * 65535.0)
+    out[..., 3] = np.rint(coverage * 65535.0)
+    return out
+
+
+# --------------------------------------------------------------------------------------
+# stage
+
+
+def stage_name(path: Path) -> str:
+    """Output NAME for a stage file: ``X.relaxed.ply`` -> ``X``; ``X.rollout.ply`` -> ``X.rollout``."""
+    stem = path.name[: -len(path.suffix)] if path.suffix else path.name
+    return stem[: -len(".relaxed")] if stem.endswith(".relaxed") else stem
+
+
+def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, options: BakeOptions | None = None, *,
+                   name: str | None = None) -> StageOutput:
+    """Bake ``NAME.relaxed.ply`` (or a rollout) into images and ``NAME.bake.json``.
+
+    Files (in ``out_dir``): ``NAME.png`` (painting, RGBA, resolution in the file),
+    ``NAME.<map>.png`` (heat maps with a colour bar below the image),
+    ``NAME.overlay.png`` (stress over the greyscale painting), ``NAME.scale-layer.png``
+    (scale bar and optional 10 mm grid, same size as ``NAME.png``), ``NAME.scalebar.png``
+    (the bar alone, true scale), optionally ``NAME.tif`` (16-bit RGBA),
+    ``NAME.position.tif`` (float32 3D points) and ``NAME.sheet.png``; all images share
+    the pixel grid of ``NAME.png`` (maps add a legend band below it).
+
+    Parameters
+    ----------
+    flat_ply : path-like
+        A stage file from ``potflat relax`` (``NAME.relaxed.ply``) or ``potflat rollout``.
+    out_dir : path-like
+        Output folder (created).
+    options : BakeOptions, optional
+    name : str, optional
+        Output NAME; default: the input stem without ``.relaxed``.
+
+    Returns
+    -------
+    StageOutput
+        ``paths`` by role and the JSON sidecar content as ``summary``.
+    """
+    from potflat import annotate
+    from potflat.io.atomic import write_json_atomic
+    from potflat.io.images import PngWriter, write_png, write_tiff_rows
+    from potflat.io.stage import read_flat_ply
+    from potflat.provenance import provenance
+
+    options = options or BakeOptions()
+    flat_ply = Path(flat_ply)
+    out_dir = Path(out_dir)
+    name = name or stage_name(flat_ply)
+    flat = read_flat_ply(flat_ply)
+    rollout_ply = None
+    if options.sheet:
+        if not flat_ply.name.endswith(".relaxed.ply"):
+            raise InvalidOptionError(f"the sheet compares NAME.rollout.ply with NAME.relaxed.ply; bake the relaxed file, not {flat_ply.name}")
+        rollout_ply = flat_ply.with_name(flat_ply.name[: -len(".relaxed.ply")] + ".rollout.ply")
+        if not rollout_ply.is_file():
+            raise InvalidInputError(f"--sheet needs {rollout_ply.name} beside {flat_ply}; copy it there or drop --sheet")
+    ppm = options.resolution
+    r = _Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels)
+    g = r.grid
+    paths: dict[str, Path] = {"png": out_dir / f"{name}.png"}
+    scales = {m: annotate.map_scale(m, r.vertex_stress if m == "stress" else r.face_values[m]) for m in options.maps}
+    legends = {m: annotate.legend_band(scales[m], g.width) for m in options.maps}
+    if "stress" in options.maps:
+        legends["overlay"] = legends["stress"]
+    layer = annotate.ScaleLayer(g.width, g.height, ppm, grid=options.grid)
+    covered = 0.0
+    with ExitStack() as stack:
+        png = stack.enter_context(PngWriter(paths["png"], g.width, g.height, 4, px_per_mm=ppm))
+        writers = {}
+        for key, band in legends.items():
+            paths[key] = out_dir / f"{name}.{key}.png"
+            writers[key] = stack.enter_context(PngWriter(paths[key], g.width, g.height + len(band), 4, px_per_mm=ppm))
+        paths["scale_layer"] = out_dir / f"{name}.scale-layer.png"
+        layer_png = stack.enter_context(PngWriter(paths["scale_layer"], g.width, g.height, 4, px_per_mm=ppm))
+        for r0, r1 in r.strips():
+            cov = r.coverage(r0, r1)
+            covered += float(cov.sum(dtype=np.float64))
+            rgb = r.painting(r0, r1)
+            png.write(_rgba8(rgb, cov))
+            for m in options.maps:
+                values = r.scalar(m, r0, r1)
+                writers[m].write(annotate.colorize(values, scales[m], cov))
+                if m == "stress":
+                    writers["overlay"].write(annotate.overlay(rgb, values, scales[m], cov))
+            layer_png.write(layer.rows(r0, r1))
+        for key, band in legends.items():
+            writers[key].write(band)
+    paths["scalebar"] = write_png(out_dir / f"{name}.scalebar.png", layer.bar_image(), px_per_mm=ppm)
+    if options.tiff:
+        paths["tiff"] = write_tiff_rows(out_dir / f"{name}.tif",
+                                        (_rgba16(r.painting(a, b), r.coverage(a, b)) for a, b in r.strips()),
+                                        shape=(g.height, g.width, 4), dtype=np.uint16, px_per_mm=ppm, photometric="rgb")
+    if options.position_map:
+        paths["position"] = write_tiff_rows(out_dir / f"{name}.position.tif", (r.position(a, b) for a, b in r.strips()),
+                                            shape=(g.height, g.width, 3), dtype=np.float32, px_per_mm=ppm,
+                                            photometric="rgb")
+    figures = _figures(r, covered)
+    if rollout_ply is not None:
+        paths["sheet"] = annotate.comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat,
+                                                   title=name)
+    inputs = [flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else []) + ([rollout_ply] if rollout_ply else [])
+    summary = {
+        **figures,
+        "scale_bar_mm": layer.bar_mm,
+        "maps": {m: {"range": [scales[m].lo, scales[m].hi], "label": scales[m].label} for m in options.maps},
+        "files": {k: p.name for k, p in paths.items()},
+        "provenance": provenance(stage="bake", inputs=inputs,
+                                 options={**asdict(options), "px_per_mm_effective": ppm, "name": name}),
+    }
+    paths["json"] = out_dir / f"{name}.bake.json"
+    summary["files"]["json"] = paths["json"].name
+    write_json_atomic(paths["json"], summary)
+    return StageOutput(paths=paths, summary=summary)
