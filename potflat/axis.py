@@ -1,0 +1,571 @@
+"""The rotation axis of a vessel scan, found from its surface normals.
+
+On a surface of revolution every normal line meets the axis. The axis is therefore the
+line closest to all normal lines of the scan (Pottmann and Randrup's line-complex fit, in
+Pluecker coordinates, area-weighted), refined robustly by iteratively reweighted least
+squares (Huber weights on the angle between each normal and the meridian plane through its
+face), and optionally polished by making the radius constant within height slices (profile
+consistency). PCA of the surface is only a fallback.
+
+Quality figures (reported, never hidden):
+
+* ``rms_angle_deg`` / ``median_angle_deg``: area-weighted RMS / median angle between each
+  face normal and the plane that contains the axis and the face centre (0 for an exact
+  surface of revolution, whatever the scan's size);
+* ``rms_distance``: area-weighted RMS distance between each face's normal line and the axis,
+  in scan units, over the faces whose normal is at least 10 degrees away from the axis
+  direction (the distance is undefined for normals parallel to the axis).
+
+Orientation (foot to mouth): a boundary loop that winds once around the axis is an open rim.
+The mouth is the end of the vessel nearer to the longest open rim (so an open vessel's only
+rim, or the larger of two). Without any open rim (a closed scan, a sherd) the mouth is taken
+at the wider end (larger mean radius over the last 10 % of the height at each end). ``flip``
+reverses the result. The chosen rule is reported in :attr:`AxisFit.orientation`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.optimize
+import scipy.sparse
+import scipy.sparse.csgraph
+
+from potflat.errors import AxisNotFoundError, InvalidInputError, InvalidOptionError
+from potflat.types import Mesh
+
+#: Largest relative profile deviation (median |r - slice median r| / median r) of a vessel.
+MAX_PROFILE_DEVIATION = 0.05
+#: Largest median normal-to-meridian angle (degrees) of a vessel (fluted or noisy scans reach ~9).
+MAX_MEDIAN_ANGLE_DEG = 20.0
+#: Vertices used at most by the fits (an area-proportional, seeded subsample beyond this).
+MAX_FIT_POINTS = 100_000
+#: Vertices used at most by the profile polish (area-proportional, seeded subsample).
+MAX_PROFILE_POINTS = 20_000
+#: Huber constant (in robust standard deviations) of the IRLS refinement.
+HUBER_K = 1.345
+#: The axis is undetermined (a sphere: every normal passes through its centre) when the
+#: second-best axis direction fits almost perfectly too (mean squared sine-distance of the
+#: normal lines below this, in units of the scan's RMS size), or when all three directions
+#: fit equally (eigenvalues within this relative spread).
+DEGENERATE_ABS = 1e-4
+DEGENERATE_SPREAD = 0.1
+#: Fraction of the area facing the axis (an inner wall) that decides the mouth's side.
+INNER_WALL_FRACTION = 0.01
+
+
+@dataclass(frozen=True, eq=False)
+class AxisFit:
+    """A rotation axis with its fit quality.
+
+    Attributes
+    ----------
+    point : (3,) float64
+        The point of the axis at the foot: the lowest height of the mesh, so heights
+        ``(x - point) . direction`` run from 0 (foot) to :attr:`height` (mouth).
+    direction : (3,) float64
+        Unit direction, from the foot to the mouth.
+    reference : (3,) float64
+        Unit vector perpendicular to ``direction`` from which angles are measured
+        (counter-clockwise about ``direction``); a fixed function of ``direction``.
+    height : float
+        Axial extent of the mesh, scan units.
+    method : str
+        ``"normals"``, ``"normals+profile"``, ``"pca"``, ``"centre+opening"`` or ``"manual"``.
+    orientation : str
+        How the foot-to-mouth sign was chosen.
+    rms_angle_deg, median_angle_deg : float
+        Area-weighted RMS and median angle between normals and meridian planes, degrees.
+    rms_distance : float
+        Area-weighted RMS distance of normal lines to the axis, scan units.
+    profile_deviation : float
+        Median of ``|r - median r of the height slice|`` over the vertices, divided by the
+        median radius (0 for a surface of revolution; a box gives about 0.1).
+    note : str
+        Warning about the fit (e.g. undetermined axis), empty when none.
+    """
+
+    point: np.ndarray
+    direction: np.ndarray
+    reference: np.ndarray
+    height: float
+    method: str
+    orientation: str
+    rms_angle_deg: float
+    median_angle_deg: float
+    rms_distance: float
+    profile_deviation: float
+    note: str = ""
+
+    def cylindrical(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Height, radius and angle of ``points`` about the axis.
+
+        Parameters
+        ----------
+        points : (k, 3) float64
+
+        Returns
+        -------
+        h, r, theta : (k,) float64
+            Height above the foot, distance to the axis, and angle in ``[0, 2 pi)``
+            counter-clockwise about :attr:`direction` from :attr:`reference`.
+        """
+        return cylindrical(points, self.point, self.direction, self.reference)
+
+    def as_dict(self) -> dict:
+        """JSON-ready description (see ``docs/formats.md``)."""
+        return {
+            "point": [float(x) for x in self.point],
+            "direction": [float(x) for x in self.direction],
+            "reference_direction": [float(x) for x in self.reference],
+            "height": float(self.height),
+            "method": self.method,
+            "orientation": self.orientation,
+            "rms_angle_deg": float(self.rms_angle_deg),
+            "median_angle_deg": float(self.median_angle_deg),
+            "rms_distance": float(self.rms_distance),
+            "profile_deviation": float(self.profile_deviation),
+            "note": self.note,
+        }
+
+
+def reference_direction(direction: np.ndarray) -> np.ndarray:
+    """The unit vector perpendicular to ``direction`` from which angles are measured.
+
+    It is the world axis (x, then y, then z on ties) least aligned with ``direction``,
+    made perpendicular to it. Shape (3,).
+    """
+    d = np.asarray(direction, float)
+    w = np.zeros(3)
+    w[int(np.argmin(np.abs(d)))] = 1.0
+    e = w - (w @ d) * d
+    return e / np.linalg.norm(e)
+
+
+def cylindrical(points, point, direction, reference) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Height, radius and angle ``[0, 2 pi)`` of ``points`` (k, 3) about an axis (see :meth:`AxisFit.cylindrical`)."""
+    d = np.asarray(points, float) - point
+    h = d @ direction
+    radial = d - h[:, None] * direction
+    r = np.linalg.norm(radial, axis=1)
+    other = np.cross(direction, reference)
+    theta = np.arctan2(radial @ other, radial @ reference) % (2.0 * np.pi)
+    return h, r, theta
+
+
+def face_geometry(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centroids (m, 3), unit normals (m, 3) and areas (m,) of the faces (zero normal when degenerate)."""
+    V, F = mesh.vertices, mesh.faces
+    p0, p1, p2 = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    cross = np.cross(p1 - p0, p2 - p0)
+    norm = np.linalg.norm(cross, axis=1)
+    normals = np.zeros_like(cross)
+    ok = norm > 0
+    normals[ok] = cross[ok] / norm[ok, None]
+    return (p0 + p1 + p2) / 3.0, normals, 0.5 * norm
+
+
+def normal_lines(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertex normal lines of ``mesh``: points (k, 3), unit normals (k, 3), areas (k,).
+
+    Normals are area-weighted means of the adjacent face normals; the weight of a vertex is
+    a third of the area of its faces. Vertices without area are left out. On a surface of
+    revolution sampled exactly, these lines meet the axis far more closely than face normals
+    through face centroids (which are tilted by the faceting).
+    """
+    V, F = mesh.vertices, mesh.faces
+    cross = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    n = len(V)
+    acc = np.stack([np.bincount(F.ravel(), np.repeat(cross[:, k], 3), n) for k in range(3)], axis=1)
+    area = np.bincount(F.ravel(), np.repeat(np.linalg.norm(cross, axis=1) / 6.0, 3), n)
+    norm = np.linalg.norm(acc, axis=1)
+    ok = (norm > 0) & (area > 0)
+    return V[ok], acc[ok] / norm[ok, None], area[ok]
+
+
+def _check_mesh(mesh: Mesh) -> None:
+    if len(mesh.faces) == 0:
+        raise InvalidInputError(f"{mesh.source or 'mesh'} has no faces; give a triangle mesh of the vessel")
+    if not np.isfinite(mesh.vertices).all():
+        raise InvalidInputError(f"{mesh.source or 'mesh'} has NaN or infinite vertex positions; clean the scan first")
+
+
+def _sample(areas: np.ndarray, limit: int) -> np.ndarray:
+    """Indices of at most ``limit`` items with positive area; area-proportional and seeded beyond it."""
+    ok = np.flatnonzero(areas > 0)
+    if len(ok) <= limit:
+        return ok
+    rng = np.random.default_rng(0)
+    return np.sort(rng.choice(ok, size=limit, replace=False, p=areas[ok] / areas[ok].sum()))
+
+
+def _line_complex_fit(c: np.ndarray, n: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Weighted line closest to all normal lines (c_i, n_i), in Pluecker coordinates.
+
+    Minimises ``sum w_i (a . (c_i x n_i) + n_i . m)^2`` over unit ``a`` and moment ``m``.
+    Returns the direction ``a`` (3,), a point of the axis (3,), and the eigenvalues (3,) of
+    the reduced problem (ascending) that show whether the axis is determined.
+    """
+    mom = np.cross(c, n)
+    wn = n * w[:, None]
+    A = (mom * w[:, None]).T @ mom
+    B = (mom * w[:, None]).T @ n
+    N = wn.T @ n
+    N_pinv = np.linalg.pinv(N, rcond=1e-10, hermitian=True)
+    S = A - B @ N_pinv @ B.T
+    S = 0.5 * (S + S.T)
+    evals, evecs = np.linalg.eigh(S)
+    a = evecs[:, 0]
+    m = -N_pinv @ B.T @ a
+    return a, np.cross(a, m), evals
+
+
+def _meridian_residuals(c, n, point, direction):
+    """sin of the angle between each normal and its meridian plane, radius of each centre, and the triple product."""
+    d = c - point
+    axial = np.cross(direction, d)
+    r = np.linalg.norm(axial, axis=1)
+    det = np.einsum("ij,ij->i", n, axial)
+    return det, r
+
+
+def _weighted_median(x: np.ndarray, w: np.ndarray) -> float:
+    order = np.argsort(x)
+    cw = np.cumsum(w[order])
+    return float(x[order][np.searchsorted(cw, 0.5 * cw[-1])])
+
+
+def axis_residuals(mesh: Mesh, point, direction) -> tuple[float, float, float, float]:
+    """Fit-quality figures of an axis on ``mesh`` (see module docs).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    point, direction : (3,) float64
+        A point of the axis and its direction (normalised here).
+
+    Returns
+    -------
+    rms_angle_deg, median_angle_deg, rms_distance, profile_deviation : float
+    """
+    c, n, area = normal_lines(mesh)
+    direction = np.asarray(direction, float) / np.linalg.norm(direction)
+    det, r = _meridian_residuals(c, n, np.asarray(point, float), direction)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = np.where(r > 0, np.abs(det) / r, 0.0)
+    ang = np.degrees(np.arcsin(np.clip(s, 0.0, 1.0)))
+    w = area / area.sum()
+    sin_axis = np.linalg.norm(np.cross(n, direction), axis=1)
+    far = sin_axis > np.sin(np.radians(10.0))
+    if far.any():
+        dist = np.abs(det[far]) / sin_axis[far]
+        rms_dist = float(np.sqrt(np.average(dist**2, weights=area[far])))
+    else:
+        rms_dist = 0.0
+    return (float(np.sqrt(np.sum(w * ang**2))), _weighted_median(ang, w), rms_dist,
+            _profile_deviation(c, point, direction))
+
+
+def _profile_deviation(points: np.ndarray, point, direction, *, slices: int = 32) -> float:
+    h = (points - point) @ direction
+    r = np.linalg.norm(points - point - h[:, None] * direction, axis=1)
+    lo, hi = h.min(), h.max()
+    idx = np.clip(((h - lo) / max(hi - lo, 1e-300) * slices).astype(np.int64), 0, slices - 1)
+    order = np.lexsort((r, idx))
+    r_sorted, idx_sorted = r[order], idx[order]
+    starts = np.searchsorted(idx_sorted, np.arange(slices))
+    ends = np.searchsorted(idx_sorted, np.arange(slices), side="right")
+    med = np.where(ends > starts, r_sorted[(starts + np.maximum(ends - 1, starts)) // 2], 0.0)
+    scale = float(np.median(r))
+    return float(np.median(np.abs(r - med[idx])) / scale) if scale > 0 else 0.0
+
+
+def _irls(c, n, area, point, direction, *, iterations: int = 40):
+    """Huber-IRLS on the angle between normals and meridian planes, starting from an axis."""
+    scale = None
+    for _ in range(iterations):
+        det, r = _meridian_residuals(c, n, point, direction)
+        r_floor = 0.05 * np.median(r) + 1e-300
+        s = det / np.maximum(r, r_floor)
+        sigma = 1.4826 * np.median(np.abs(s))
+        scale = max(sigma, 1e-9)
+        huber = np.minimum(1.0, HUBER_K * scale / np.maximum(np.abs(s), 1e-300))
+        w = area * huber / np.maximum(r, r_floor) ** 2
+        new_dir, new_point, _ = _line_complex_fit(c, n, w / w.sum())
+        if new_dir @ direction < 0:
+            new_dir = -new_dir
+        change = np.linalg.norm(new_dir - direction) + np.linalg.norm(
+            np.cross(new_point - point, new_dir))
+        direction, point = new_dir, new_point
+        if change < 1e-12:
+            break
+    return point, direction
+
+
+def _profile_refine(vertices: np.ndarray, weights: np.ndarray, point, direction, *, slices: int = 64):
+    """Polish the axis by making the radius constant within height slices (Huber loss).
+
+    The radius of every vertex is compared with the profile (mean radius of its height
+    slice, interpolated linearly between slice centres); the four parameters are the tilt
+    of the direction and the shift of the point perpendicular to it.
+    """
+    e1 = reference_direction(direction)
+    e2 = np.cross(direction, e1)
+    h0 = (vertices - point) @ direction
+    lo, hi = h0.min(), h0.max()
+    if not hi > lo:
+        return point, direction
+    r0 = np.linalg.norm(vertices - point - h0[:, None] * direction, axis=1)
+    size = float(np.sqrt(np.average(r0**2, weights=weights))) or 1.0
+    edges = np.linspace(lo, hi, slices + 1)
+    sw = np.sqrt(weights / weights.sum() * len(weights))
+
+    def geometry(x):
+        d = direction + x[0] * e1 + x[1] * e2
+        d = d / np.linalg.norm(d)
+        p = point + size * (x[2] * e1 + x[3] * e2)
+        return p, d
+
+    def residual(x):
+        p, d = geometry(x)
+        rel = vertices - p
+        h = rel @ d
+        r = np.linalg.norm(rel - h[:, None] * d, axis=1)
+        idx = np.clip(np.searchsorted(edges, h) - 1, 0, slices - 1)
+        wsum = np.bincount(idx, weights, slices)
+        have = wsum > 0
+        mean_r = np.bincount(idx, weights * r, slices)[have] / wsum[have]
+        mean_h = np.bincount(idx, weights * h, slices)[have] / wsum[have]
+        prof = np.interp(h, mean_h, mean_r)
+        return sw * (r - prof) / size
+
+    start = residual(np.zeros(4))
+    f_scale = max(HUBER_K * 1.4826 * float(np.median(np.abs(start))), 1e-9)
+    sol = scipy.optimize.least_squares(residual, np.zeros(4), loss="huber", f_scale=f_scale,
+                                       x_scale=np.full(4, 1e-3), diff_step=1e-7, max_nfev=200)
+    return geometry(sol.x)
+
+
+def _pca_axis(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The principal direction whose variance is most isolated from the other two, through the centroid."""
+    centre = vertices.mean(axis=0)
+    evals, evecs = np.linalg.eigh(np.cov((vertices - centre).T))
+    gaps = [abs(evals[0] - evals[1]) / max(evals[2], 1e-300),
+            0.0, abs(evals[2] - evals[1]) / max(evals[2], 1e-300)]
+    k = int(np.argmax(gaps))
+    return centre, evecs[:, k]
+
+
+def _boundary_loops(mesh: Mesh) -> list[np.ndarray]:
+    """Directed boundary edges (k, 2) grouped by connected boundary component."""
+    F = mesh.faces
+    half = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    und = np.sort(half, axis=1)
+    _, inv, counts = np.unique(und, axis=0, return_inverse=True, return_counts=True)
+    bnd = half[counts[inv.ravel()] == 1]
+    if len(bnd) == 0:
+        return []
+    n = len(mesh.vertices)
+    g = scipy.sparse.coo_matrix((np.ones(len(bnd)), (bnd[:, 0], bnd[:, 1])), shape=(n, n))
+    _, labels = scipy.sparse.csgraph.connected_components(g, directed=False)
+    lab = labels[bnd[:, 0]]
+    order = np.argsort(lab, kind="stable")
+    splits = np.flatnonzero(np.diff(lab[order])) + 1
+    return [bnd[idx] for idx in np.split(order, splits)]
+
+
+def orient(mesh: Mesh, point, direction) -> tuple[np.ndarray, str]:
+    """Sign of the axis direction from foot to mouth (see module docs for the rule).
+
+    Returns
+    -------
+    direction : (3,) float64
+        ``direction`` or its opposite.
+    reason : str
+        The rule that decided.
+    """
+    direction = np.asarray(direction, float)
+    ref = reference_direction(direction)
+    h, r, theta = cylindrical(mesh.vertices, point, direction, ref)
+    used = np.zeros(len(h), bool)
+    used[mesh.faces.ravel()] = True
+    h, r = h[used], r[used]
+    theta_all = cylindrical(mesh.vertices, point, direction, ref)[2]
+    lo, hi = h.min(), h.max()
+    mid = 0.5 * (lo + hi)
+    best = None
+    for loop in _boundary_loops(mesh):
+        dth = theta_all[loop[:, 1]] - theta_all[loop[:, 0]]
+        dth = (dth + np.pi) % (2 * np.pi) - np.pi
+        if abs(round(dth.sum() / (2 * np.pi))) < 1:
+            continue
+        seg = mesh.vertices[loop[:, 1]] - mesh.vertices[loop[:, 0]]
+        length = float(np.linalg.norm(seg, axis=1).sum())
+        h_loop = float(np.mean((mesh.vertices[loop].reshape(-1, 3) - point) @ direction))
+        if best is None or length > best[0]:
+            best = (length, h_loop)
+    c, n, area = normal_lines(mesh)
+    hc = (c - point) @ direction
+    radial = c - point - hc[:, None] * direction
+    facing_axis = np.einsum("ij,ij->i", n, radial) < -0.5 * np.linalg.norm(radial, axis=1)
+    inner = area[facing_axis].sum() / area.sum()
+    if inner >= INNER_WALL_FRACTION:
+        up = np.average(hc[facing_axis], weights=area[facing_axis]) >= mid
+        reason = f"mouth on the side of the inner wall ({100 * inner:.0f} % of the area faces the axis)"
+    elif best is not None:
+        up = best[1] >= mid
+        reason = f"mouth at the longest open rim ({best[0]:.4g} units around)"
+    else:
+        band = 0.1 * (hi - lo)
+        top, bottom = r[h >= hi - band], r[h <= lo + band]
+        up = top.mean() >= bottom.mean()
+        reason = "no inner wall or open rim found: mouth assumed at the wider end; use flip to reverse"
+    return (direction if up else -direction), reason
+
+
+def _finish(mesh, point, direction, *, method, orientation, flip, note="") -> AxisFit:
+    direction = np.asarray(direction, float)
+    direction = direction / np.linalg.norm(direction)
+    if flip:
+        direction = -direction
+        orientation += "; flipped on request"
+    used = np.unique(mesh.faces)
+    h = (mesh.vertices[used] - point) @ direction
+    foot = np.asarray(point, float) + h.min() * direction
+    rms_angle, median_angle, rms_dist, prof = axis_residuals(mesh, foot, direction)
+    return AxisFit(point=foot, direction=direction, reference=reference_direction(direction),
+                   height=float(h.max() - h.min()), method=method, orientation=orientation,
+                   rms_angle_deg=rms_angle, median_angle_deg=median_angle, rms_distance=rms_dist,
+                   profile_deviation=prof, note=note)
+
+
+def manual_axis(mesh: Mesh, point, direction, *, flip: bool = False) -> AxisFit:
+    """An axis given by the user, with its fit-quality figures measured on ``mesh``.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    point : (3,) float64
+        Any point of the axis, scan coordinates.
+    direction : (3,) float64
+        Its direction, from the foot to the mouth (need not be unit length).
+    flip : bool
+        Reverse the direction.
+
+    Returns
+    -------
+    AxisFit
+        With ``method="manual"``.
+    """
+    _check_mesh(mesh)
+    point = np.asarray(point, float)
+    direction = np.asarray(direction, float)
+    if point.shape != (3,) or direction.shape != (3,) or not (
+            np.isfinite(point).all() and np.isfinite(direction).all()):
+        raise InvalidOptionError("axis needs 6 finite numbers: px,py,pz,dx,dy,dz")
+    if np.linalg.norm(direction) == 0:
+        raise InvalidOptionError("axis direction is zero; give dx,dy,dz not all 0")
+    return _finish(mesh, point, direction, method="manual", orientation="as given", flip=flip)
+
+
+def estimate_axis(mesh: Mesh, *, flip: bool = False, profile: bool = True,
+                  max_median_angle_deg: float = MAX_MEDIAN_ANGLE_DEG) -> AxisFit:
+    """Estimate the rotation axis of ``mesh`` without any prior alignment.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The scan (faces oriented consistently; a sherd or a holed scan works too).
+    flip : bool
+        Reverse the foot-to-mouth direction found.
+    profile : bool
+        Polish the normal-line fit by profile consistency (kept only when it does not
+        worsen the normal residual by more than 10 %).
+    max_median_angle_deg : float
+        Refuse axes whose median normal-to-meridian angle exceeds this.
+
+    Returns
+    -------
+    AxisFit
+
+    Raises
+    ------
+    AxisNotFoundError
+        When no axis fits (the shape is not a surface of revolution).
+    """
+    _check_mesh(mesh)
+    c, n, area = normal_lines(mesh)
+    idx = _sample(area, MAX_FIT_POINTS)
+    if len(idx) < 3:
+        raise InvalidInputError(f"{mesh.source or 'mesh'} has fewer than 3 vertices with area; give a real scan")
+    c, n, area = c[idx], n[idx], area[idx]
+    centre = np.average(c, axis=0, weights=area)
+    size = float(np.sqrt(np.average(np.sum((c - centre) ** 2, axis=1), weights=area))) or 1.0
+    cs = (c - centre) / size
+    w = area / area.sum()
+    direction, point, evals = _line_complex_fit(cs, n, w)
+    note = ""
+    method = "normals"
+    if evals[1] <= DEGENERATE_ABS or evals[2] - evals[0] <= DEGENERATE_SPREAD * evals[2]:
+        # every normal passes through (nearly) one point: a sphere. The axis through the
+        # centre and the largest opening, or PCA, is as good as any: say so.
+        centre_pt = _closest_point_to_lines(cs, n, w)
+        loops = _boundary_loops(mesh)
+        if loops:
+            longest = max(loops, key=lambda lp: np.linalg.norm(
+                mesh.vertices[lp[:, 1]] - mesh.vertices[lp[:, 0]], axis=1).sum())
+            target = (mesh.vertices[longest].reshape(-1, 3).mean(axis=0) - centre) / size
+            direction = target - centre_pt
+            method = "centre+opening"
+        else:
+            pc, direction = _pca_axis(cs)
+            method = "pca"
+        direction = direction / np.linalg.norm(direction)
+        point = centre_pt
+        note = ("axis undetermined: the normals all pass through one point (sphere-like shape); "
+                "give --axis px,py,pz,dx,dy,dz to choose it")
+    else:
+        point, direction = _irls(cs, n, area, point, direction)
+        if profile:
+            pick = _sample(area, MAX_PROFILE_POINTS)
+            p2, d2 = _profile_refine(cs[pick], area[pick] if len(pick) == len(area) else np.ones(len(pick)),
+                                     point, direction)
+            # keep the polish only when the robust figures of both criteria agree
+            med0, prof0 = _robust_figures(cs, n, area, point, direction)
+            med1, prof1 = _robust_figures(cs, n, area, p2, d2)
+            if med1 <= 1.02 * med0 + 1e-9 and prof1 <= 1.02 * prof0 + 1e-12:
+                point, direction, method = p2, d2, "normals+profile"
+    point = centre + size * point
+    rms_angle, median_angle, _, prof = axis_residuals(mesh, point, direction)
+    if _unsymmetric(median_angle, prof, max_median_angle_deg):
+        pc, pdir = _pca_axis(mesh.vertices[np.unique(mesh.faces)])
+        p_rms, p_median, _, p_prof = axis_residuals(mesh, pc, pdir)
+        if not _unsymmetric(p_median, p_prof, max_median_angle_deg):
+            point, direction, method = pc, pdir, "pca"
+        else:
+            raise AxisNotFoundError(
+                f"{mesh.source or 'the scan'} is not rotationally symmetric enough to find its axis "
+                f"(radius varies by {100 * prof:.1f} % within height slices, limit "
+                f"{100 * MAX_PROFILE_DEVIATION:g} %; median normal-to-meridian angle "
+                f"{median_angle:.1f} deg, RMS {rms_angle:.1f} deg); give --axis px,py,pz,dx,dy,dz")
+    direction, orientation = orient(mesh, point, direction)
+    return _finish(mesh, point, direction, method=method, orientation=orientation, flip=flip, note=note)
+
+
+def _unsymmetric(median_angle: float, profile_deviation: float, max_median_angle_deg: float) -> bool:
+    return profile_deviation > MAX_PROFILE_DEVIATION or median_angle > max_median_angle_deg
+
+
+def _robust_figures(c, n, area, point, direction) -> tuple[float, float]:
+    """Median normal-to-meridian sine and profile deviation of an axis (normalised coordinates)."""
+    det, r = _meridian_residuals(c, n, point, direction)
+    s = np.abs(det) / np.maximum(r, 0.05 * np.median(r) + 1e-300)
+    return _weighted_median(s, area), _profile_deviation(c, point, direction)
+
+
+def _closest_point_to_lines(c: np.ndarray, n: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Weighted least-squares point closest to the lines (c_i, n_i). Shape (3,)."""
+    P = np.eye(3)[None] - n[:, :, None] * n[:, None, :]
+    M = np.einsum("i,ijk->jk", w, P)
+    b = np.einsum("i,ijk,ik->j", w, P, c)
+    return np.linalg.lstsq(M, b, rcond=None)[0]
