@@ -87,7 +87,7 @@ class BakeOptions:
 
     def __post_init__(self) -> None:
         if self.px_per_mm is not None and self.dpi is not None:
-            raise InvalidOptionError("give either px_per_mm or dpi, not both")
+            raise InvalidOptionError("give either px_per_mm (--px-per-mm) or dpi (--dpi), not both")
         for name in ("px_per_mm", "dpi", "max_megapixels"):
             value = getattr(self, name)
             if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))

@@ -1,9 +1,83 @@
-"""`potflat bake` (placeholder until the stage lands)."""
+"""`potflat bake`: true-scale images of the painting and distortion maps from a flattening."""
 from __future__ import annotations
 
-from potflat_cli._errors import fail
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from potflat_cli._errors import user_errors
+from potflat_cli._options import Json, Name, OutputDir, Quiet
+
+HELP = """Bake a flattening (NAME.relaxed.ply, or NAME.rollout.ply to compare) into true-scale images.
+
+Writes NAME.png (the painting, RGBA, resolution stored in the file), NAME.<map>.png heat maps with colour bars, NAME.overlay.png (stress over the greyscale painting), NAME.scale-layer.png and NAME.scalebar.png, NAME.bake.json (figures and provenance); optionally NAME.tif (16-bit), NAME.position.tif (3D point per pixel) and NAME.sheet.png (rollout vs relaxed). A rollout input writes NAME.rollout.* instead. Exit codes: 0 success, 2 bad input or options.
+
+Example:  potflat bake out/amphora.relaxed.ply --dpi 600 --sheet --grid
+"""
+
+Input = Annotated[Path, typer.Argument(help="NAME.relaxed.ply (or NAME.rollout.ply) written by potflat.",
+                                       exists=True, dir_okay=False, readable=True)]
 
 
-def bake_command() -> None:
-    """Not available yet."""
-    raise fail("'potflat bake' is not implemented yet")
+@user_errors
+def bake_command(
+    flat_ply: Input,
+    output: OutputDir = None,
+    px_per_mm: Annotated[Optional[float], typer.Option(
+        "--px-per-mm", help="Resolution in pixels per millimetre \\[default: 4].")] = None,
+    dpi: Annotated[Optional[float], typer.Option(
+        "--dpi", help="Resolution in dots per inch (instead of --px-per-mm).")] = None,
+    maps: Annotated[Optional[str], typer.Option(
+        "--maps", help="Comma-separated distortion maps: stress,area,anisotropy (or 'none').")] = None,
+    sheet: Annotated[bool, typer.Option(
+        "--sheet", help="Also write NAME.sheet.png: the rollout beside the relaxed result, with stress maps.")] = False,
+    position_map: Annotated[bool, typer.Option(
+        "--position-map", help="Also write NAME.position.tif: the 3D point (scan units) under each pixel.")] = False,
+    grid: Annotated[bool, typer.Option("--grid", help="Draw a labelled 10 mm grid in the scale layer.")] = False,
+    tiff: Annotated[bool, typer.Option("--tiff", help="Also write the painting as a 16-bit RGBA TIFF.")] = False,
+    supersample: Annotated[Optional[int], typer.Option(
+        "--supersample", help="Sub-samples per pixel side, 1-8 \\[default: automatic from the texture density].")] = None,
+    max_megapixels: Annotated[Optional[float], typer.Option(
+        "--max-megapixels", help="Refuse images larger than this \\[default: 1000].")] = None,
+    name: Name = None,
+    quiet: Quiet = False,
+    json: Json = False,
+) -> None:
+    """Bake a flattening into true-scale images and distortion maps."""
+    from potflat_cli._options import options_from_cli
+
+    values = {"px_per_mm": px_per_mm, "dpi": dpi, "sheet": sheet or None, "position_map": position_map or None,
+              "grid": grid or None, "tiff": tiff or None, "supersample": supersample, "max_megapixels": max_megapixels,
+              "maps": ("" if maps.strip().lower() == "none" else maps) if maps is not None else None}
+    options = options_from_cli("bake", values)
+    _bake(flat_ply, output, options, name=name, quiet=quiet, as_json=json)
+
+
+bake_command.__doc__ = HELP
+
+
+def _bake(flat_ply: Path, output: Path | None, options, *, name: str | None, quiet: bool, as_json: bool) -> None:
+    import json as json_module
+
+    from rich.console import Console
+
+    from potflat.bake import run_bake_stage
+
+    err = Console(stderr=True, quiet=quiet or as_json)
+    with err.status(f"baking {flat_ply.name}"):
+        result = run_bake_stage(flat_ply, output or flat_ply.parent, options, name=name)
+    s = result.summary
+    if as_json:
+        print(json_module.dumps({k: v for k, v in s.items() if k != "provenance"}, indent=2))
+        return
+    if quiet:
+        return
+    out = Console(highlight=False)
+    w, h = s["image_px"]
+    out.print(f"[bold]{result.paths['png']}[/]: {w} x {h} px = {s['image_mm'][0]:.1f} x {s['image_mm'][1]:.1f} mm "
+              f"at {s['px_per_mm']:.4g} px/mm ({s['dpi']:.4g} dpi), painting from {s['painting']}")
+    out.print(f"stress mean {s['stress']['mean']:.3g} / p95 {s['stress']['p95']:.3g} / max {s['stress']['max']:.3g} sqrt(mm); "
+              f"anisotropy p95 {s['anisotropy']['p95']:.3f}; flipped {s['distortion']['flipped']}; "
+              f"covered {s['covered_area_mm2']:.0f} of {s['flattened_area_mm2']:.0f} mm2")
+    out.print("wrote " + ", ".join(sorted(p.name for p in result.paths.values())))
