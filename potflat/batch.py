@@ -831,7 +831,7 @@ def _run_dask(todo: list, address: str, record: Callable[[int, ScanReport], None
                                  key=f"potflat-{job.name}-{key[:12]}-{index}"): (index, job)
                    for index, job, key in todo}
         try:
-            for future in as_completed(futures):
+            for future in as_completed(futures, loop=client.loop):
                 index, job = futures[future]
                 try:
                     report = future.result()
