@@ -1,0 +1,791 @@
+"""Loading scans: OBJ (+MTL texture), PLY, STL, OFF, GLB/glTF -> a clean :class:`Mesh`.
+
+:func:`load_scan` reads a scan, welds vertices split at texture seams (geometry by position,
+texture coordinates kept per face corner), checks the texture image (header only, with a
+decompression-bomb limit), validates everything a user can get wrong with one-line
+:class:`~potflat.errors.InvalidInputError` messages, and cleans the mesh with
+:func:`potflat.cleaning.clean_mesh`.
+
+OBJ and PLY are read by potflat's own parsers (OBJ by a Numba tokenizer: trimesh's OBJ
+loader splits vertices at seams and is slow on multi-million-vertex scans); STL, OFF and
+GLB/glTF go through trimesh.
+
+Units: positions are never rescaled. ``units=None`` takes the unit the file declares (a PLY
+``comment units X``, an STL ``UNITS=`` header, glTF's metres) and millimetres otherwise.
+"""
+from __future__ import annotations
+
+import base64
+import hashlib
+import json
+import os
+import re
+import struct
+import tempfile
+import warnings as _warnings
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from potflat.cleaning import CleaningReport, clean_mesh, weld_vertices
+from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.types import UNITS_MM, Mesh
+
+#: File extensions :func:`load_scan` reads.
+SCAN_EXTENSIONS = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+#: Default limit on texture size in pixels (a 32k x 32k atlas).
+MAX_TEXTURE_PIXELS = 32768 * 32768
+_TEXTURE_MODES = ("use", "ignore")
+_IGNORE_HINT = "or pass texture='ignore' (CLI --no-texture) to load it untextured"
+
+
+@dataclass(frozen=True)
+class LoadedScan:
+    """A scan as loaded and cleaned.
+
+    Attributes
+    ----------
+    mesh : Mesh
+        Welded, cleaned triangle mesh in the scan's own units.
+    report : CleaningReport
+        What loading and cleaning did (``report.as_dict()`` for JSON).
+    """
+
+    mesh: Mesh
+    report: CleaningReport
+
+
+@dataclass
+class _Raw:
+    """What a format reader found (before validation and welding)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    texcoords: np.ndarray | None = None
+    texture: Path | None = None
+    colors: np.ndarray | None = None
+    units: str | None = None
+    polygons_triangulated: int = 0
+    warnings: list[str] = field(default_factory=list)
+
+
+def load_scan(path: str | os.PathLike, *, units: str | None = None, clean: bool = True,
+              texture: str = "use", min_component_fraction: float = 0.01,
+              weld_tolerance: float = 0.0, split_nonmanifold: bool = True,
+              max_texture_pixels: int = MAX_TEXTURE_PIXELS, min_faces: int = 4) -> LoadedScan:
+    """Read a scan file, weld it, check its texture and clean it.
+
+    Parameters
+    ----------
+    path : path-like
+        ``.obj`` (with ``.mtl`` and ``map_Kd`` texture), ``.ply`` (ascii or binary; per-face
+        ``texcoord`` with ``comment TextureFile``, per-vertex ``texture_u/texture_v`` or
+        ``s/t``, or vertex colours), ``.stl``, ``.off``, ``.glb`` or ``.gltf``.
+    units : str or None
+        Length unit of the file's coordinates (``mm``, ``cm``, ``m``, ``um``, ``in``).
+        ``None``: the unit the file declares, else ``mm``. Coordinates are never rescaled;
+        the unit is recorded in ``Mesh.units``.
+    clean : bool
+        Run :func:`potflat.cleaning.clean_mesh`; if False only exact welding and checks run.
+    texture : {"use", "ignore"}
+        ``"use"``: a declared texture must exist and be a readable image of sane size
+        (else an error); ``"ignore"``: load geometry (and vertex colours) only.
+    min_component_fraction : float
+        Remove components with less area than this fraction of the largest (stray fragments).
+    weld_tolerance : float
+        Weld positions closer than this fraction of the bounding-box diagonal (0: exact).
+    split_nonmanifold : bool
+        Split non-manifold vertices and edges into separate fans.
+    max_texture_pixels : int
+        Largest texture accepted (width x height, read from the header; the image is not
+        decoded here).
+    min_faces : int
+        Fewer faces than this (after cleaning) is an error.
+
+    Returns
+    -------
+    LoadedScan
+        ``mesh`` (``texture_path`` absolute) and ``report``.
+
+    Raises
+    ------
+    InvalidInputError
+        Missing, empty, truncated or corrupt file; unknown extension; faces pointing at
+        missing vertices; NaN or infinite coordinates; too few or only degenerate faces;
+        missing, corrupt or oversized texture; several texture images.
+    InvalidOptionError
+        An option out of range.
+    """
+    if units is not None and units not in UNITS_MM:
+        raise InvalidOptionError(f"unknown units {units!r}; use one of {', '.join(UNITS_MM)}")
+    if texture not in _TEXTURE_MODES:
+        raise InvalidOptionError(f"texture must be one of {', '.join(_TEXTURE_MODES)}, got {texture!r}")
+    if not (isinstance(max_texture_pixels, (int, np.integer)) and max_texture_pixels > 0):
+        raise InvalidOptionError(f"max_texture_pixels must be a positive integer, got {max_texture_pixels!r}")
+    if not (isinstance(min_faces, (int, np.integer)) and min_faces >= 1):
+        raise InvalidOptionError(f"min_faces must be a positive integer, got {min_faces!r}")
+
+    path = Path(path).expanduser()
+    ext = path.suffix.lower()
+    if not path.exists():
+        raise InvalidInputError(f"{path} does not exist; check the path")
+    if path.is_dir():
+        raise InvalidInputError(f"{path} is a directory; give a scan file ({' '.join(SCAN_EXTENSIONS)})")
+    if ext not in SCAN_EXTENSIONS:
+        raise InvalidInputError(f"{path} has an unknown extension {ext or '(none)'!r}; "
+                                f"potflat reads {' '.join(SCAN_EXTENSIONS)}: convert the scan")
+    try:
+        size = path.stat().st_size
+    except OSError as exc:
+        raise InvalidInputError(f"cannot read {path}: {exc.strerror or exc}; check permissions") from None
+    if size == 0:
+        raise InvalidInputError(f"{path} is empty (0 bytes); export or copy the scan again")
+
+    path = path.resolve()
+    reader = {".obj": _read_obj, ".ply": _read_ply, ".stl": _read_trimesh, ".off": _read_trimesh,
+              ".glb": _read_gltf, ".gltf": _read_gltf}[ext]
+    raw = reader(path, texture)
+    mesh = _validate(raw, path, units, texture, max_texture_pixels)
+    if clean:
+        mesh, report = clean_mesh(mesh, weld_tolerance=weld_tolerance,
+                                  min_component_fraction=min_component_fraction,
+                                  split_nonmanifold=split_nonmanifold, min_faces=min_faces)
+    else:
+        n0, m0 = len(mesh.vertices), len(mesh.faces)
+        mesh, merged = weld_vertices(mesh, tolerance=weld_tolerance)
+        if len(mesh.faces) < min_faces:
+            raise InvalidInputError(f"{path}: only {len(mesh.faces)} faces (at least {min_faces} "
+                                    "needed); give the whole scan")
+        report = CleaningReport(input_vertices=n0, input_faces=m0, duplicate_vertices_merged=merged,
+                                output_vertices=len(mesh.vertices), output_faces=len(mesh.faces),
+                                cleaned=False)
+    report = replace(report, polygons_triangulated=raw.polygons_triangulated,
+                     warnings=tuple(raw.warnings) + report.warnings)
+    return LoadedScan(mesh=mesh, report=report)
+
+
+# ---------------------------------------------------------------------------------------
+# shared steps
+
+
+def _validate(raw: _Raw, path: Path, units: str | None, texture: str, max_pixels: int) -> Mesh:
+    V = np.asarray(raw.vertices, dtype=np.float64)
+    F = np.asarray(raw.faces, dtype=np.int64)
+    if len(F) == 0 or len(V) == 0:
+        raise InvalidInputError(f"{path} contains no faces (a point cloud or an empty export?); "
+                                "give a triangle mesh")
+    if F.min() < 0 or F.max() >= len(V):
+        bad = int(F.max()) if F.max() >= len(V) else int(F.min())
+        raise InvalidInputError(f"{path}: faces point at missing vertices (index {bad}, the file has "
+                                f"{len(V)} vertices); the file is corrupt: export it again")
+    finite = np.isfinite(V).all(axis=1)
+    if not finite.all():
+        raise InvalidInputError(f"{path}: {int((~finite).sum())} vertices have NaN or infinite "
+                                "coordinates; repair the scan (e.g. MeshLab) or export it again")
+    tc, tex = raw.texcoords, raw.texture
+    if texture == "ignore":
+        tc, tex = None, None
+    if tc is not None and tex is None:
+        raw.warnings.append("texture coordinates without a texture image were ignored")
+        tc = None
+    if tc is not None and not np.isfinite(tc).all():
+        raise InvalidInputError(f"{path}: texture coordinates contain NaN or infinite values; "
+                                f"export the scan again {_IGNORE_HINT}")
+    if tex is not None and tc is None:
+        raw.warnings.append(f"texture {tex.name} declared but no texture coordinates; loaded untextured")
+        tex = None
+    if tex is not None:
+        tex = _check_texture(tex, path, max_pixels)
+    declared = raw.units
+    if units is None:
+        units = declared or "mm"
+    elif declared is not None and declared != units:
+        raw.warnings.append(f"the file declares units {declared!r} but units={units!r} was given; using {units!r}")
+    colors = raw.colors
+    return Mesh(V, F, texcoords=tc, texture_path=tex, vertex_colors=colors, units=units, source=path)
+
+
+def _check_texture(tex: Path, source: Path, max_pixels: int) -> Path:
+    """Check that ``tex`` is a readable image within ``max_pixels`` (header only)."""
+    from PIL import Image
+
+    tex = tex.resolve()
+    if not tex.is_file():
+        raise InvalidInputError(f"{source}: texture {tex} not found; restore the file {_IGNORE_HINT}")
+    old = Image.MAX_IMAGE_PIXELS
+    try:
+        Image.MAX_IMAGE_PIXELS = None  # our own limit below, without Pillow's lower default
+        with _warnings.catch_warnings():
+            _warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(tex) as im:
+                w, h = im.size
+                if w <= 0 or h <= 0 or w * h > max_pixels:
+                    raise InvalidInputError(
+                        f"{source}: texture {tex.name} declares {w} x {h} pixels, over the limit of "
+                        f"{max_pixels} (a corrupt file or decompression bomb); restore a sane image, "
+                        f"raise max_texture_pixels if it is genuine, {_IGNORE_HINT}")
+                if im.format == "PNG":
+                    im.verify()  # chunk CRCs, without decoding pixels
+    except InvalidInputError:
+        raise
+    except Exception as exc:  # Pillow raises many types for corrupt images
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InvalidInputError(f"{source}: texture {tex.name} is not a readable image ({msg}); "
+                                f"restore the file {_IGNORE_HINT}") from None
+    finally:
+        Image.MAX_IMAGE_PIXELS = old
+    return tex
+
+
+def _triangulate(lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """Fan-triangulate polygons given their corner counts.
+
+    Returns the corner indices (t, 3) into the flat corner arrays, the polygon of each
+    triangle, the number of polygons with more than three corners and of those with fewer
+    than three (dropped).
+    """
+    lengths = np.asarray(lengths, dtype=np.int64)
+    start = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
+    ntri = np.maximum(lengths - 2, 0)
+    poly = np.repeat(np.arange(len(lengths)), ntri)
+    first = np.cumsum(ntri) - ntri
+    j = np.arange(len(poly)) - np.repeat(first, ntri) + 1
+    c0 = start[poly]
+    corners = np.stack([c0, c0 + j, c0 + j + 1], axis=1)
+    return corners, poly, int(np.count_nonzero(lengths > 3)), int(np.count_nonzero(lengths < 3))
+
+
+def _read_bytes(path: Path) -> bytes:
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise InvalidInputError(f"cannot read {path}: {exc.strerror or exc}; check permissions") from None
+
+
+def _colors_to_u8(cols: np.ndarray) -> np.ndarray:
+    cols = np.asarray(cols, dtype=np.float64)
+    if np.issubdtype(cols.dtype, np.floating) and np.nanmax(cols, initial=0.0) <= 1.0:
+        cols = cols * 255.0
+    return np.clip(np.nan_to_num(np.rint(cols)), 0, 255).astype(np.uint8)
+
+
+def _find_file(name: str, *dirs: Path) -> Path:
+    """Resolve a file name written by another program (maybe absolute, Windows-style)."""
+    name = name.strip().strip('"')
+    cand = Path(name.replace("\\", "/"))
+    tried = [cand if cand.is_absolute() else dirs[0] / cand]
+    tried += [d / cand.name for d in dirs]
+    for p in tried:
+        if p.is_file():
+            return p
+    return tried[0]
+
+
+# ---------------------------------------------------------------------------------------
+# OBJ
+
+
+def _read_obj(path: Path, texture: str) -> _Raw:
+    from potflat._kernels.mesh import obj_count, obj_fill
+
+    data = _read_bytes(path)
+    buf = np.frombuffer(data, dtype=np.uint8)
+    counts = obj_count(buf)
+    V6, vcols, VT, cv, cvt, face_ptr, use_spans, lib_spans, bad_line = obj_fill(buf, counts)
+    if bad_line:
+        raise InvalidInputError(f"{path} line {bad_line}: not a number; repair the file or export it again")
+    if len(V6) and vcols.min() < 3:
+        line = int(np.argmax(vcols < 3)) + 1
+        raise InvalidInputError(f"{path}: vertex {line} has fewer than 3 coordinates; export the scan again")
+    raw = _Raw(vertices=V6[:, :3], faces=np.zeros((0, 3), np.int64))
+    if len(V6) and vcols.min() >= 6:
+        raw.colors = _colors_to_u8(V6[:, 3:6])
+    lengths = np.diff(face_ptr)
+    corners, poly, n_poly, n_short = _triangulate(lengths)
+    raw.polygons_triangulated = n_poly
+    if n_short:
+        raw.warnings.append(f"{n_short} faces with fewer than 3 corners were ignored")
+    nv, nvt = len(V6), len(VT)
+    bad = (cv < 0) | (cv >= nv)
+    if bad.any():
+        idx = int(np.flatnonzero(bad)[0])
+        fno = int(np.searchsorted(face_ptr, idx, side="right"))
+        raise InvalidInputError(f"{path}: face {fno} points at a vertex that does not exist (the file "
+                                f"has {nv} vertices); the file is corrupt or cut short: export it again")
+    raw.faces = cv[corners]
+    if texture == "ignore" or nvt == 0:
+        return raw
+    badt = (cvt < -1) | (cvt >= nvt)
+    if badt.any():
+        raise InvalidInputError(f"{path}: faces point at texture coordinates that do not exist (the file "
+                                f"has {nvt}); export it again {_IGNORE_HINT}")
+    tri_vt = cvt[corners]
+    has_vt = (tri_vt >= 0).all(axis=1)
+    if not has_vt.any():
+        return raw
+
+    # materials: which texture each triangle uses
+    names = [data[s:e].decode("utf-8", "replace") for s, e, _ in use_spans]
+    textures = _obj_material_textures(path, [data[s:e].decode("utf-8", "replace") for s, e in lib_spans])
+    if len(names):
+        mat_of_poly = np.searchsorted(use_spans[:, 2], np.arange(len(lengths)), side="right") - 1
+        tex_of_name = [textures.get(nm) for nm in names]
+        tex_ids = {t: k for k, t in enumerate(dict.fromkeys(t for t in tex_of_name if t is not None))}
+        code = np.array([tex_ids[t] if t is not None else -1 for t in tex_of_name] + [-1], np.int64)
+        tri_tex = code[mat_of_poly][poly]  # -1 index -> the trailing -1
+    else:
+        tex_ids, tri_tex = {}, np.full(len(poly), -1, np.int64)
+    used = np.unique(tri_tex[has_vt & (tri_tex >= 0)])
+    inv = {k: t for t, k in tex_ids.items()}
+    if len(used) > 1:
+        listed = ", ".join(inv[k].name for k in used[:4]) + (", ..." if len(used) > 4 else "")
+        raise InvalidInputError(f"{path} uses {len(used)} texture images ({listed}); potflat supports one "
+                                f"texture atlas: re-export the scan with a single texture {_IGNORE_HINT}")
+    if len(used) == 0:
+        if lib_spans.shape[0] == 0:
+            raw.warnings.append("texture coordinates but no material library (mtllib); loaded untextured")
+        else:
+            raw.warnings.append("no material with a texture image (map_Kd); loaded untextured")
+        return raw
+    raw.texture = inv[int(used[0])]
+    uv = np.zeros((len(poly), 3, 2))
+    ok = has_vt & (tri_tex == used[0])
+    uv[ok] = VT[tri_vt[ok]]
+    if not ok.all():
+        raw.warnings.append(f"{int((~ok).sum())} faces have no texture coordinates or another "
+                            "material; they get texture coordinate (0, 0)")
+    raw.texcoords = uv
+    return raw
+
+
+_MAP_OPTION_ARGS = {"-blendu": 1, "-blendv": 1, "-cc": 1, "-clamp": 1, "-texres": 1, "-imfchan": 1,
+                    "-bm": 1, "-boost": 1, "-mm": 2, "-o": 3, "-s": 3, "-t": 3, "-type": 1}
+
+
+def _map_kd_file(args: str) -> str:
+    """The file name of a ``map_Kd`` statement, skipping its options."""
+    toks = args.split()
+    i = 0
+    while i < len(toks) and toks[i].lower() in _MAP_OPTION_ARGS:
+        k = _MAP_OPTION_ARGS[toks[i].lower()]
+        i += 1
+        for _ in range(k):  # -o/-s/-t take 1 to 3 numbers
+            if i < len(toks) - 1 and re.fullmatch(r"[-+]?[\d.eE+-]+|on|off", toks[i]):
+                i += 1
+    return " ".join(toks[i:])
+
+
+def _obj_material_textures(obj: Path, libs: list[str]) -> dict[str, Path]:
+    """Material name -> texture path (``map_Kd``) from the OBJ's material libraries."""
+    out: dict[str, Path] = {}
+    for lib in libs:
+        mtl = _find_file(lib, obj.parent)
+        if not mtl.is_file() and " " in lib:
+            parts = [_find_file(p, obj.parent) for p in lib.split()]
+            if all(p.is_file() for p in parts):
+                for p in parts:
+                    out.update(_obj_material_textures(obj, [str(p)]))
+                continue
+        if not mtl.is_file():
+            raise InvalidInputError(f"{obj}: material library {lib} not found; restore it beside the "
+                                    f"OBJ {_IGNORE_HINT}")
+        current = None
+        for line in _read_bytes(mtl).decode("utf-8", "replace").splitlines():
+            parts = line.strip().split(None, 1)
+            if not parts:
+                continue
+            key = parts[0].lower()
+            if key == "newmtl":
+                current = parts[1].strip() if len(parts) > 1 else ""
+            elif key == "map_kd" and current is not None and len(parts) > 1:
+                name = _map_kd_file(parts[1])
+                if name:
+                    out[current] = _find_file(name, mtl.parent, obj.parent)
+    return out
+
+
+# ---------------------------------------------------------------------------------------
+# PLY
+
+_PLY_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}
+
+
+@dataclass
+class _PlyElement:
+    name: str
+    count: int
+    props: list  # (name, type) or (name, count_type, item_type) for lists
+    data: dict = field(default_factory=dict)  # name -> array, or (lengths, flat) for lists
+
+
+def _ply_header(data: bytes, path: Path):
+    if not data.startswith(b"ply"):
+        raise InvalidInputError(f"{path} is not a PLY file (no 'ply' header); export the scan again")
+    end = data.find(b"end_header")
+    if end < 0:
+        raise InvalidInputError(f"{path} has an incomplete PLY header (no end_header); the file is cut short: copy it again")
+    nl = data.find(b"\n", end)
+    body_start = len(data) if nl < 0 else nl + 1
+    fmt, comments, elements = None, [], []
+    for line in data[:end].decode("latin-1").splitlines():
+        parts = line.split()
+        if not parts:
+            continue
+        try:
+            if parts[0] == "format":
+                fmt = parts[1]
+            elif parts[0] in ("comment", "obj_info"):
+                comments.append(line.split(None, 1)[1] if len(parts) > 1 else "")
+            elif parts[0] == "element":
+                elements.append(_PlyElement(parts[1], int(parts[2]), []))
+            elif parts[0] == "property":
+                if parts[1] == "list":
+                    elements[-1].props.append((parts[4], _PLY_TYPES[parts[2]], _PLY_TYPES[parts[3]]))
+                else:
+                    elements[-1].props.append((parts[2], _PLY_TYPES[parts[1]]))
+        except (IndexError, KeyError, ValueError):
+            raise InvalidInputError(f"{path}: malformed PLY header line {line.strip()!r}; export the scan again") from None
+    if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
+        raise InvalidInputError(f"{path}: unknown PLY format {fmt!r}; export as ascii or binary PLY")
+    if any(e.count < 0 for e in elements):
+        raise InvalidInputError(f"{path}: negative element count in the PLY header; export the scan again")
+    return fmt, comments, elements, body_start
+
+
+def _truncated(path: Path, element: str) -> InvalidInputError:
+    return InvalidInputError(f"{path} is truncated ({element} data incomplete); "
+                             "the file is cut short: copy or export it again")
+
+
+def _ply_binary(body: memoryview, elements: list[_PlyElement], endian: str, path: Path) -> None:
+    offset = 0
+    for el in elements:
+        lists = [p for p in el.props if len(p) == 3]
+        if not lists:
+            dt = np.dtype([(p[0], endian + p[1]) for p in el.props])
+            need = dt.itemsize * el.count
+            if offset + need > len(body):
+                raise _truncated(path, el.name)
+            arr = np.frombuffer(body, dtype=dt, count=el.count, offset=offset)
+            el.data = {p[0]: arr[p[0]] for p in el.props}
+            offset += need
+            continue
+        if el.count == 0:
+            el.data = {p[0]: (np.zeros(0, np.int64), np.zeros(0)) if len(p) == 3 else np.zeros(0)
+                       for p in el.props}
+            continue
+        # try a fixed list length (all triangles, say), read from the first row
+        fields, pos = [], offset
+        try:
+            for p in el.props:
+                if len(p) == 3:
+                    cdt = np.dtype(endian + p[1])
+                    k = int(np.frombuffer(body, cdt, 1, pos)[0])
+                    fields += [(p[0] + "#n", cdt), (p[0], endian + p[2], (k,))]
+                    pos += cdt.itemsize + k * np.dtype(p[2]).itemsize
+                else:
+                    fields.append((p[0], endian + p[1]))
+                    pos += np.dtype(p[1]).itemsize
+        except ValueError:
+            raise _truncated(path, el.name) from None
+        dt = np.dtype(fields)
+        need = dt.itemsize * el.count
+        if offset + need <= len(body):
+            arr = np.frombuffer(body, dtype=dt, count=el.count, offset=offset)
+            if all((arr[p[0] + "#n"] == arr.dtype[p[0]].shape[0]).all() for p in lists):
+                el.data = {p[0]: arr[p[0]] if len(p) == 2 else
+                           (np.full(el.count, arr.dtype[p[0]].shape[0], np.int64), arr[p[0]].reshape(-1))
+                           for p in el.props}
+                offset += need
+                continue
+        offset = _ply_binary_rows(body, offset, el, endian, path)
+
+
+def _ply_binary_rows(body: memoryview, offset: int, el: _PlyElement, endian: str, path: Path) -> int:
+    """Row-by-row reading of an element with variable-length lists (slow path)."""
+    bo = "<" if endian == "<" else ">"
+    codes = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I", "f4": "f", "f8": "d"}
+    cols: dict[str, list] = {p[0]: [] for p in el.props}
+    lens: dict[str, list] = {p[0]: [] for p in el.props if len(p) == 3}
+    try:
+        for _ in range(el.count):
+            for p in el.props:
+                if len(p) == 3:
+                    (k,) = struct.unpack_from(bo + codes[p[1]], body, offset)
+                    offset += struct.calcsize(codes[p[1]])
+                    cols[p[0]].extend(struct.unpack_from(f"{bo}{k}{codes[p[2]]}", body, offset))
+                    offset += k * struct.calcsize(codes[p[2]])
+                    lens[p[0]].append(k)
+                else:
+                    cols[p[0]].append(struct.unpack_from(bo + codes[p[1]], body, offset)[0])
+                    offset += struct.calcsize(codes[p[1]])
+    except struct.error:
+        raise _truncated(path, el.name) from None
+    el.data = {p[0]: (np.array(lens[p[0]], np.int64), np.array(cols[p[0]])) if len(p) == 3
+               else np.array(cols[p[0]]) for p in el.props}
+    return offset
+
+
+def _ply_ascii(body: bytes, elements: list[_PlyElement], path: Path) -> None:
+    try:
+        tok = np.array(body.split(), dtype=np.float64) if body.strip() else np.zeros(0)
+    except ValueError:
+        raise InvalidInputError(f"{path}: the ascii PLY data contains something that is not a number; "
+                                "export the scan again") from None
+    pos = 0
+    for el in elements:
+        lists = [p for p in el.props if len(p) == 3]
+        if el.count == 0:
+            el.data = {p[0]: (np.zeros(0, np.int64), np.zeros(0)) if len(p) == 3 else np.zeros(0)
+                       for p in el.props}
+            continue
+        # width of the first row, then check that every row has it
+        widths, w, ok = [], 0, True
+        for p in el.props:
+            if len(p) == 3:
+                if pos + w >= len(tok):
+                    raise _truncated(path, el.name)
+                k = int(tok[pos + w])
+                widths.append((p[0], w, k))
+                w += 1 + k
+            else:
+                widths.append((p[0], w, None))
+                w += 1
+        if pos + w * el.count > len(tok) and not lists:
+            raise _truncated(path, el.name)
+        if pos + w * el.count <= len(tok):
+            block = tok[pos:pos + w * el.count].reshape(el.count, w)
+            ok = all((block[:, c] == k).all() for _, c, k in widths if k is not None)
+        else:
+            ok = False
+        if ok:
+            el.data = {name: block[:, c] if k is None else
+                       (np.full(el.count, k, np.int64), block[:, c + 1:c + 1 + k].reshape(-1))
+                       for name, c, k in widths}
+            pos += w * el.count
+            continue
+        cols: dict[str, list] = {p[0]: [] for p in el.props}
+        lens: dict[str, list] = {p[0]: [] for p in lists}
+        for _ in range(el.count):
+            for p in el.props:
+                if pos >= len(tok):
+                    raise _truncated(path, el.name)
+                if len(p) == 3:
+                    k = int(tok[pos])
+                    if pos + 1 + k > len(tok):
+                        raise _truncated(path, el.name)
+                    cols[p[0]].append(tok[pos + 1:pos + 1 + k])
+                    lens[p[0]].append(k)
+                    pos += 1 + k
+                else:
+                    cols[p[0]].append(tok[pos])
+                    pos += 1
+        el.data = {p[0]: (np.array(lens[p[0]], np.int64), np.concatenate(cols[p[0]]) if cols[p[0]] else np.zeros(0))
+                   if len(p) == 3 else np.array(cols[p[0]]) for p in el.props}
+
+
+def _read_ply(path: Path, texture: str) -> _Raw:
+    data = _read_bytes(path)
+    fmt, comments, elements, body_start = _ply_header(data, path)
+    if fmt == "ascii":
+        _ply_ascii(data[body_start:], elements, path)
+    else:
+        _ply_binary(memoryview(data)[body_start:], elements, "<" if fmt == "binary_little_endian" else ">", path)
+    by_name = {e.name: e for e in elements}
+    vert, face = by_name.get("vertex"), by_name.get("face")
+    if vert is None or not {"x", "y", "z"} <= set(vert.data):
+        raise InvalidInputError(f"{path} has no vertex x y z; export the scan as a mesh")
+    V = np.stack([vert.data[c] for c in "xyz"], axis=1).astype(np.float64)
+    key = None if face is None else next((k for k in ("vertex_indices", "vertex_index") if k in face.data), None)
+    if key is None or isinstance(face.data[key], np.ndarray):
+        raise InvalidInputError(f"{path} has no faces (a point cloud?); potflat needs a triangle mesh: mesh it "
+                                "first (e.g. surface reconstruction in MeshLab)")
+    lengths, flat = face.data[key]
+    corners, poly, n_poly, n_short = _triangulate(lengths)
+    flat = np.asarray(flat)
+    if flat.size and (not np.isfinite(flat).all() or (flat != np.round(flat)).any()):
+        raise InvalidInputError(f"{path}: face indices are not integers; export the scan again")
+    raw = _Raw(vertices=V, faces=flat.astype(np.int64)[corners], polygons_triangulated=n_poly)
+    if n_short:
+        raw.warnings.append(f"{n_short} faces with fewer than 3 corners were ignored")
+
+    for c in comments:
+        parts = c.split()
+        if len(parts) >= 2 and parts[0] == "units" and parts[1] in UNITS_MM:
+            raw.units = parts[1]
+    names = [c.split(None, 1)[1].strip() for c in comments
+             if c.split(None, 1)[0:1] == ["TextureFile"] and len(c.split(None, 1)) > 1]
+
+    colors = [k for k in (("red", "green", "blue"), ("r", "g", "b"),
+                          ("diffuse_red", "diffuse_green", "diffuse_blue")) if set(k) <= set(vert.data)]
+    if colors:
+        rgb = np.stack([vert.data[c] for c in colors[0]], axis=1)
+        alpha_key = {"red": "alpha", "r": "a", "diffuse_red": "diffuse_alpha"}[colors[0][0]]
+        cols = np.concatenate([rgb, vert.data[alpha_key][:, None]], axis=1) if alpha_key in vert.data else rgb
+        is_float = any(vert.props[[p[0] for p in vert.props].index(c)][1].startswith("f") for c in colors[0])
+        raw.colors = _colors_to_u8(cols) if is_float else np.clip(cols, 0, 255).astype(np.uint8)
+
+    if texture == "ignore" or not names:
+        return raw
+    tc = None
+    if "texcoord" in face.data and not isinstance(face.data["texcoord"], np.ndarray):
+        tl, tflat = face.data["texcoord"]
+        if not np.array_equal(tl, 2 * lengths):
+            raise InvalidInputError(f"{path}: face texcoord lists do not have 2 numbers per corner; "
+                                    f"export the scan again {_IGNORE_HINT}")
+        tc = np.asarray(tflat, np.float64).reshape(-1, 2)[corners]
+    else:
+        uvk = next((k for k in (("texture_u", "texture_v"), ("s", "t"), ("texture_s", "texture_t"), ("u", "v"))
+                    if set(k) <= set(vert.data)), None)
+        if uvk is not None:
+            uv = np.stack([vert.data[k] for k in uvk], axis=1).astype(np.float64)
+            tc = uv[np.clip(raw.faces, 0, len(uv) - 1)]
+    if tc is None:
+        return raw
+    if len(names) > 1:
+        tn = face.data.get("texnumber")
+        used = np.unique(np.asarray(tn)[poly]).astype(int) if isinstance(tn, np.ndarray) else np.arange(len(names))
+        if len(used) > 1:
+            raise InvalidInputError(f"{path} uses {len(used)} texture images ({', '.join(names[:4])}); potflat "
+                                    f"supports one texture atlas: re-export with a single texture {_IGNORE_HINT}")
+        names = [names[int(used[0])] if len(used) and used[0] < len(names) else names[0]]
+    raw.texture = _find_file(names[0], path.parent)
+    raw.texcoords = tc
+    return raw
+
+
+# ---------------------------------------------------------------------------------------
+# STL, OFF (trimesh) and GLB/glTF
+
+
+def _trimesh_load(path: Path, **kwargs):
+    import trimesh
+
+    try:
+        with _warnings.catch_warnings():
+            _warnings.simplefilter("ignore")
+            return trimesh.load(str(path), process=False, **kwargs)
+    except InvalidInputError:
+        raise
+    except Exception as exc:  # trimesh raises many types for corrupt files
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InvalidInputError(f"{path} cannot be read as {path.suffix[1:].upper()} ({msg[:120]}); "
+                                "export the scan again") from None
+
+
+def _read_trimesh(path: Path, texture: str) -> _Raw:
+    import trimesh
+
+    if path.suffix.lower() == ".stl":
+        _check_stl_size(path)
+    tm = _trimesh_load(path, force="mesh")
+    if not isinstance(tm, trimesh.Trimesh):
+        raise InvalidInputError(f"{path} contains no faces; give a triangle mesh")
+    raw = _Raw(vertices=np.asarray(tm.vertices, np.float64), faces=np.asarray(tm.faces, np.int64))
+    vc = getattr(tm.visual, "vertex_colors", None) if tm.visual.kind == "vertex" else None
+    if vc is not None and len(vc) == len(raw.vertices):
+        raw.colors = np.asarray(vc, np.uint8)
+    if path.suffix.lower() == ".stl":
+        head = _read_bytes(path)[:80].decode("latin-1")
+        m = re.search(r"UNITS\s*=\s*([A-Za-z]+)", head)
+        if m and m.group(1).lower() in UNITS_MM:
+            raw.units = m.group(1).lower()
+    return raw
+
+
+def _check_stl_size(path: Path) -> None:
+    """A binary STL's size must match its triangle count (trimesh may not notice)."""
+    with open(path, "rb") as fh:
+        head = fh.read(84)
+    size = path.stat().st_size
+    if head[:5].lower() == b"solid" and b"facet" in open(path, "rb").read(1024):
+        return  # ascii STL
+    if len(head) < 84:
+        raise _truncated(path, "header")
+    (count,) = struct.unpack("<I", head[80:84])
+    if size < 84 + 50 * count:
+        raise _truncated(path, "triangle")
+
+
+def _read_gltf(path: Path, texture: str) -> _Raw:
+    import trimesh
+
+    scene = _trimesh_load(path, force="scene")
+    geoms = [g for g in (scene.dump() if isinstance(scene, trimesh.Scene) else [scene])
+             if isinstance(g, trimesh.Trimesh) and len(g.faces)]
+    if not geoms:
+        raise InvalidInputError(f"{path} contains no triangle meshes; export the scan as a mesh")
+    verts, faces, uvs, offset = [], [], [], 0
+    for g in geoms:
+        verts.append(np.asarray(g.vertices, np.float64))
+        faces.append(np.asarray(g.faces, np.int64) + offset)
+        uv = getattr(g.visual, "uv", None) if g.visual.kind == "texture" else None
+        uvs.append(None if uv is None or len(uv) != len(g.vertices) else np.asarray(uv, np.float64)[g.faces])
+        offset += len(g.vertices)
+    raw = _Raw(vertices=np.concatenate(verts), faces=np.concatenate(faces), units="m")
+    if all(g.visual.kind == "vertex" for g in geoms):
+        raw.colors = np.concatenate([np.asarray(g.visual.vertex_colors, np.uint8) for g in geoms])
+    if texture == "ignore" or all(u is None for u in uvs):
+        return raw
+    images = _gltf_images(path)
+    if len(images) > 1:
+        raise InvalidInputError(f"{path} holds {len(images)} texture images; potflat supports one texture "
+                                f"atlas: re-export with a single texture {_IGNORE_HINT}")
+    if not images:
+        raw.warnings.append("texture coordinates but no texture image; loaded untextured")
+        return raw
+    if any(u is None for u in uvs):
+        raw.warnings.append("some meshes have no texture coordinates; they get texture coordinate (0, 0)")
+    raw.texcoords = np.concatenate([u if u is not None else np.zeros((len(f), 3, 2)) for u, f in zip(uvs, faces)])
+    raw.texture = images[0]
+    return raw
+
+
+def _gltf_images(path: Path) -> list[Path]:
+    """Texture images of a glTF/GLB as files: external ones as they are, embedded ones
+    extracted (content-addressed, atomically) into a ``potflat-textures`` temp folder."""
+    from potflat.io.atomic import write_bytes_atomic
+
+    data = _read_bytes(path)
+    bin_chunk = b""
+    if data[:4] == b"glTF":
+        try:
+            (jlen,) = struct.unpack_from("<I", data, 12)
+            doc = json.loads(data[20:20 + jlen])
+            if len(data) > 28 + jlen:
+                (blen,) = struct.unpack_from("<I", data, 20 + jlen)
+                bin_chunk = data[28 + jlen:28 + jlen + blen]
+        except (struct.error, ValueError):
+            raise InvalidInputError(f"{path} is not a valid GLB file; export the scan again") from None
+    else:
+        try:
+            doc = json.loads(data)
+        except ValueError:
+            raise InvalidInputError(f"{path} is not valid glTF JSON; export the scan again") from None
+    out = []
+    for img in doc.get("images", []):
+        uri = img.get("uri")
+        blob = None
+        if uri is not None and not uri.startswith("data:"):
+            out.append(_find_file(uri, path.parent))
+            continue
+        if uri is not None:
+            blob = base64.b64decode(uri.split(",", 1)[1])
+        elif "bufferView" in img:
+            bv = doc["bufferViews"][img["bufferView"]]
+            start = bv.get("byteOffset", 0)
+            blob = bin_chunk[start:start + bv["byteLength"]]
+        if blob:
+            ext = {"image/png": ".png", "image/jpeg": ".jpg"}.get(img.get("mimeType", ""), ".png")
+            target = Path(tempfile.gettempdir()) / "potflat-textures" / (hashlib.sha256(blob).hexdigest()[:32] + ext)
+            if not target.exists():
+                target.parent.mkdir(parents=True, exist_ok=True)
+                write_bytes_atomic(target, blob)
+            out.append(target)
+    return out
