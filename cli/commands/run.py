@@ -34,7 +34,7 @@ def full_command():
     from potflat.pipeline import STAGES
     from potflat_cli._options import stage_parameters
 
-    base = list(inspect.signature(run_command).parameters.values())
+    base = list(inspect.signature(run_command, eval_str=True).parameters.values())
     params, seen = [], {p.name for p in base}
     for stage in STAGES:
         for p in stage_parameters(stage):
