@@ -16,7 +16,7 @@ def random_rotation(rng) -> np.ndarray:
 
 
 def revolve(radius, height, *, n_theta=64, n_t=24, theta_range=None, seed=0, pose=True,
-            jitter=0.35, colors=False, holes=()):
+            jitter=0.2, colors=False, holes=()):
     """A surface of revolution ``r = radius(t), z = height(t)``, t in [0, 1], foot at t=0.
 
     Irregular triangles (jittered grid, random diagonals); faces CCW seen from outside;
