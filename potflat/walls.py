@@ -241,7 +241,7 @@ def _smooth(values: np.ndarray, area: np.ndarray, A: sp.csr_matrix, iterations: 
 
 
 def binned_median(h: np.ndarray, values: np.ndarray, weights: np.ndarray, edges: np.ndarray,
-                  quantiles=(0.5,)) -> tuple[np.ndarray, np.ndarray]:
+                  quantiles=(0.5,), extra: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Weighted quantiles of ``values`` in each height bin.
 
     Parameters
@@ -252,10 +252,12 @@ def binned_median(h: np.ndarray, values: np.ndarray, weights: np.ndarray, edges:
         Increasing bin edges; samples outside are ignored.
     quantiles : sequence of float
         Quantiles in [0, 1].
+    extra : (s,) float64, optional
+        A second variable whose weighted median per bin is appended as the last row.
 
     Returns
     -------
-    q : (len(quantiles), k) float64
+    q : (len(quantiles) [+ 1], k) float64
         NaN in bins without weight.
     total : (k,) float64
         Total weight per bin.
@@ -264,7 +266,14 @@ def binned_median(h: np.ndarray, values: np.ndarray, weights: np.ndarray, edges:
     b = np.searchsorted(edges, h, side="right") - 1
     b[h == edges[-1]] = k - 1
     ok = (b >= 0) & (b < k) & (weights > 0)
-    b, v, w = b[ok], values[ok], weights[ok]
+    rows = [_weighted_quantiles(b[ok], values[ok], weights[ok], k, quantiles)]
+    if extra is not None:
+        rows.append(_weighted_quantiles(b[ok], extra[ok], weights[ok], k, (0.5,)))
+    total = np.bincount(b[ok], weights=weights[ok], minlength=k)
+    return np.vstack(rows), total
+
+
+def _weighted_quantiles(b: np.ndarray, v: np.ndarray, w: np.ndarray, k: int, quantiles) -> np.ndarray:
     order = np.lexsort((v, b))
     b, v, w = b[order], v[order], w[order]
     cw = np.concatenate([[0.0], np.cumsum(w)])
@@ -278,7 +287,7 @@ def binned_median(h: np.ndarray, values: np.ndarray, weights: np.ndarray, edges:
         idx = np.searchsorted(cw, target, side="left") - 1
         idx = np.clip(idx, start, np.maximum(stop - 1, start))
         out[qi, has] = v[idx[has]]
-    return out, total
+    return out
 
 
 @dataclass(frozen=True)
