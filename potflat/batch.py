@@ -34,6 +34,7 @@ from typing import Any, Callable
 import yaml
 
 from potflat.errors import InvalidInputError, InvalidOptionError, PotflatError
+from potflat.io.scan import SCAN_EXTENSIONS
 
 #: Top-level keys of a batch file.
 TOP_KEYS = ("output", "defaults", "scans")
@@ -229,7 +230,9 @@ class _Validator:
         self.options = option_stages()
 
     def problem(self, line: int, message: str) -> None:
-        self.problems.append(f"{self.path}:{line}: {message}")
+        text = f"{self.path}:{line}: {message}"
+        if text not in self.problems:  # e.g. a bad default seen again by every scan entry
+            self.problems.append(text)
 
     def batch(self, data: Any) -> Batch:
         if not isinstance(data, _LineDict):
@@ -416,12 +419,18 @@ class _Validator:
                 self.problem(line, f"{scan} is not a file; give a scan file or a pattern like "
                              f"'{value.rstrip('/')}/*.obj'")
                 return []
+            if scan.suffix.lower() not in SCAN_EXTENSIONS:
+                self.problem(line, f"{scan} is not a scan format potflat reads "
+                             f"({' '.join(SCAN_EXTENSIONS)}); convert it or fix the path")
+                return []
             return [scan]
-        matches = sorted(Path(p).resolve() for p in glob.glob(pattern, recursive=True))
-        matches = [p for p in matches if p.is_file() and not p.is_relative_to(output)]
+        found = sorted(Path(p).resolve() for p in glob.glob(pattern, recursive=True))
+        found = [p for p in found if p.is_file() and not p.is_relative_to(output)]
+        matches = [p for p in found if p.suffix.lower() in SCAN_EXTENSIONS]
         if not matches:
-            self.problem(line, f"pattern '{value}' matches no file (looked in {self.base}); "
-                         "fix the pattern or the folder")
+            what = (f"{len(found)} files but no scan ({' '.join(SCAN_EXTENSIONS)})" if found
+                    else f"no file (looked in {self.base})")
+            self.problem(line, f"pattern '{value}' matches {what}; fix the pattern or the folder")
         return matches
 
 

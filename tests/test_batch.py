@@ -223,6 +223,8 @@ BAD = {
     "defaults not a mapping": ("output: r/\ndefaults: [1, 2]\nscans: [a.obj]\n", 2, "must be a mapping"),
     "same scan twice": ("output: r/\nscans:\n  - a.obj\n  - '*.obj'\n", 4, "already listed on line 3"),
     "same output name": ("output: r/\nscans:\n  - a.obj\n  - sub/a.obj\n", 4, "would both write"),
+    "not a scan format": ("output: r/\nscans:\n  - notes.txt\n", 3, "not a scan format"),
+    "glob matching no scan": ("output: r/\nscans:\n  - '*.txt'\n", 3, "matches 1 files but no scan"),
     "name with a glob": ("output: r/\nscans:\n  - path: '*.obj'\n    name: x\n", 4, "matches 2"),
 }
 
@@ -233,6 +235,7 @@ def test_bad_batch_file_exit_2_with_line(case, tmp_path, fake_stages):
     fakes.write_scan(tmp_path / "a.obj")
     fakes.write_scan(tmp_path / "b.obj")
     fakes.write_scan(tmp_path / "sub" / "a.obj")
+    (tmp_path / "notes.txt").write_text("not a scan")
     path = tmp_path / "batch.yaml"
     path.write_text(text)
     result = cli("batch", path)
