@@ -47,6 +47,8 @@ MAX_AUTO_SUPERSAMPLE = 4
 AUTO_SUPERSAMPLE_BUDGET = 64e6
 #: Radius (mm) of the smoothed surface the shaded relief of untextured scans is lit against.
 RELIEF_RADIUS_MM = 5.0
+#: Relief exaggeration of the shaded relief (the normals' deviation from the smoothed surface is scaled by it).
+RELIEF_EXAGGERATION = 2.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -155,10 +157,13 @@ def _vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
 
 
-def _relief_light(V: np.ndarray, uv: np.ndarray, F: np.ndarray, mm_per_unit: float) -> np.ndarray:
-    """Per-vertex light direction for a shaded relief: from the image's upper left,
-    in a frame that follows the surface smoothed over :data:`RELIEF_RADIUS_MM`, so the
-    vessel's overall curvature is not shaded but its relief is. Shape (n, 3)."""
+def _relief_normals_and_light(V: np.ndarray, uv: np.ndarray, F: np.ndarray, mm_per_unit: float) -> np.ndarray:
+    """Per-vertex normal and light direction for a shaded relief, shape (n, 6).
+
+    The light comes from the image's upper left at 45 degrees elevation, in a frame that
+    follows the surface smoothed over :data:`RELIEF_RADIUS_MM`, so the vessel's overall
+    curvature is not shaded but its relief is; the normals' deviation from the smoothed
+    surface is exaggerated by :data:`RELIEF_EXAGGERATION`."""
     import scipy.sparse as sp
 
     n = len(V)
@@ -189,8 +194,11 @@ def _relief_light(V: np.ndarray, uv: np.ndarray, F: np.ndarray, mm_per_unit: flo
     t_v = smooth_up - np.einsum("ij,ij->i", smooth_up, smooth_n)[:, None] * smooth_n
     t_v /= np.maximum(np.linalg.norm(t_v, axis=1, keepdims=True), 1e-300)
     t_u = np.cross(t_v, smooth_n)  # right-handed: t_u x t_v = n (seen from outside)
-    light = -t_u + t_v + 1.5 * smooth_n
-    return light / np.maximum(np.linalg.norm(light, axis=1, keepdims=True), 1e-300)
+    light = -t_u + t_v + math.sqrt(2.0) * smooth_n
+    light /= np.maximum(np.linalg.norm(light, axis=1, keepdims=True), 1e-300)
+    relief = smooth_n + RELIEF_EXAGGERATION * (normals - smooth_n)
+    relief /= np.maximum(np.linalg.norm(relief, axis=1, keepdims=True), 1e-300)
+    return np.concatenate([relief, light], axis=1)
 
 
 @dataclass(frozen=True)
@@ -371,8 +379,7 @@ class _Renderer:
         else:
             if "relief" not in self._vertex_values:
                 V, F = mesh.vertices, self.faces
-                self._vertex_values["relief"] = np.concatenate(
-                    [_vertex_normals(V, F), _relief_light(V, self.flat.uv, F, mesh.mm_per_unit)], axis=1)
+                self._vertex_values["relief"] = _relief_normals_and_light(V, self.flat.uv, F, mesh.mm_per_unit)
             nl = self._vertex_field(self._vertex_values["relief"], r0, r1)
             nrm, light = nl[..., :3], nl[..., 3:]
             dot = np.einsum("...i,...i->...", nrm, light) / np.maximum(
