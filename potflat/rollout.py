@@ -56,9 +56,9 @@ class RolloutOptions:
         Height band as fractions of the axial extent, 0 = foot, 1 = mouth.
     angles : (float, float) or None
         Angle range in degrees relative to the seam, e.g. ``(-60, 60)``; at most 360 wide.
-    view : (float, float, float) or None
-        For ``proxy="ortho"``: direction from the vessel to the viewer; default: from the
-        axis towards the region's centre.
+    view : tuple of 3 float or None
+        For ``proxy="ortho"``: direction from the vessel to the viewer (``x,y,z``, scan
+        coordinates); default: from the axis towards the region's centre.
     """
 
     units: str = "mm"
@@ -68,7 +68,7 @@ class RolloutOptions:
     seam: float | None = None
     band: tuple[float, float] | None = None
     angles: tuple[float, float] | None = None
-    view: tuple[float, float, float] | None = None
+    view: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         if self.units not in UNITS_MM:
@@ -507,3 +507,76 @@ def _gap_middle(covered: np.ndarray) -> float | None:
     if covered.all():
         return None
     return (_longest_min_run(covered.astype(np.float64)) + 0.5) / SEAM_BINS * TWO_PI
+
+
+def rollout_summary(result: RolloutResult) -> dict:
+    """The JSON-ready figures of a rollout (the sidecar without file and provenance fields)."""
+    mesh = result.flat.mesh
+    return {
+        "units": mesh.units,
+        "mm_per_unit": mesh.mm_per_unit,
+        "axis": result.axis.as_dict(),
+        "proxy": result.proxy.as_dict(),
+        "seam": {"angle_deg": result.seam_angle, "method": result.seam_method, "cut": result.region.cut},
+        "region": result.region.as_dict(),
+        "counts": {
+            "vertices": len(mesh.vertices), "faces": len(mesh.faces),
+            "input_faces": result.region.faces_total,
+            "input_vertices_used": int(len(result.vertex_index) - result.seam_vertices - result.split_vertices),
+            "seam_vertices_duplicated": result.seam_vertices,
+            "nonmanifold_vertices_split": result.split_vertices,
+        },
+        "distortion": result.distortion.as_dict(),
+    }
+
+
+def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None, *,
+                      name: str | None = None) -> StageOutput:
+    """Read a scan, roll it out, write ``NAME.rollout.ply`` and ``NAME.rollout.json``.
+
+    Parameters
+    ----------
+    scan_path : path-like
+        The scan (any format :func:`potflat.io.scan.load_scan` reads).
+    out_dir : path-like
+        Output folder (created if needed).
+    options : RolloutOptions, optional
+    name : str, optional
+        Output stem; default: the scan's file stem.
+
+    Returns
+    -------
+    StageOutput
+        ``paths`` with ``"ply"`` and ``"json"``; ``summary`` = the JSON content.
+
+    Raises
+    ------
+    InvalidOptionError
+        When an output would overwrite the input, or the name is not a plain file stem.
+    """
+    from potflat import __version__
+    from potflat.io.atomic import write_json_atomic
+    from potflat.io.scan import load_scan
+    from potflat.io.stage import write_flat_ply
+    from potflat.provenance import provenance
+
+    options = options or RolloutOptions()
+    scan_path, out_dir = Path(scan_path), Path(out_dir)
+    name = name or scan_path.stem
+    if not name or Path(name).name != name or name in (".", ".."):
+        raise InvalidOptionError(f"name {name!r} must be a plain file stem without folders")
+    ply_path = out_dir / f"{name}.rollout.ply"
+    json_path = out_dir / f"{name}.rollout.json"
+    for out in (ply_path, json_path):
+        if out.resolve() == scan_path.resolve():
+            raise InvalidOptionError(
+                f"output {out} would overwrite the input scan; choose another output folder or --name")
+    loaded = load_scan(scan_path, units=options.units)
+    result = rollout(loaded.mesh, options=options)
+    summary = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_summary(result),
+               "cleaning": loaded.report.as_dict(),
+               "files": {"ply": ply_path.name, "json": json_path.name}}
+    summary["provenance"] = provenance(stage="rollout", inputs=[scan_path], options=options.as_dict())
+    write_flat_ply(ply_path, result.flat, comments=(f"potflat {__version__} rollout of {scan_path.name}",))
+    write_json_atomic(json_path, summary)
+    return StageOutput({"ply": ply_path, "json": json_path}, summary)

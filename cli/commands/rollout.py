@@ -1,9 +1,99 @@
-"""`potflat rollout` (placeholder until the stage lands)."""
+"""`potflat rollout`: find the axis, cut a seam and unroll a scan onto a proxy surface."""
 from __future__ import annotations
 
-from potflat_cli._errors import fail
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from potflat_cli._errors import user_errors
+from potflat_cli._options import Json, Name, OutputDir, Quiet
+
+HELP = """Unroll a vessel scan: find its rotation axis, fit a cylinder/cone/sphere, cut a seam, develop it.
+
+Writes NAME.rollout.ply (3D positions + flattened u v, texture coordinates or colours; the input of 'potflat relax') and NAME.rollout.json (axis, proxy, seam, region, counts, cleaning report, distortion). Angles are degrees counter-clockwise about the axis (mouth up): the seam from the axis' reference direction (printed), --angles from the seam. Exit codes: 0 success, 2 bad input or options (e.g. no rotational symmetry: give --axis).
+
+Example:  potflat rollout scans/amphora.obj -o out --band 0.2 0.7 --proxy cone
+"""
+
+Scan = Annotated[Path, typer.Argument(help="The scan: OBJ (+MTL, texture), PLY, STL, OFF, GLB/glTF.",
+                                      exists=True, dir_okay=False, readable=True)]
 
 
-def rollout_command() -> None:
-    """Not available yet."""
-    raise fail("'potflat rollout' is not implemented yet")
+@user_errors
+def rollout_command(
+    scan: Scan,
+    output: OutputDir = None,
+    proxy: Annotated[Optional[str], typer.Option(
+        "--proxy", help="Proxy surface: auto (least distortion), cylinder, cone, sphere, ortho "
+                        "(orthographic view, for small cutouts) \\[default: auto].")] = None,
+    axis: Annotated[Optional[str], typer.Option(
+        "--axis", help="Manual axis px,py,pz,dx,dy,dz (a point and the direction foot to mouth, "
+                       "scan coordinates) \\[default: estimated from the normals].")] = None,
+    flip: Annotated[bool, typer.Option("--flip", help="Reverse the axis (swap mouth and foot).")] = False,
+    seam: Annotated[Optional[float], typer.Option(
+        "--seam", help="Seam angle, degrees from the reference direction \\[default: where the "
+                       "painting is least dense, or a gap].")] = None,
+    band: Annotated[Optional[tuple[float, float]], typer.Option(
+        "--band", help="Height band LO HI as fractions of the height, 0 = foot, 1 = mouth "
+                       "\\[default: 0 1].")] = None,
+    angles: Annotated[Optional[tuple[float, float]], typer.Option(
+        "--angles", help="Angle range A0 A1 in degrees from the seam, e.g. -60 60 \\[default: all "
+                         "round].")] = None,
+    view: Annotated[Optional[str], typer.Option(
+        "--view", help="With --proxy ortho: direction x,y,z from the vessel to the viewer "
+                       "\\[default: towards the region's centre].")] = None,
+    units: Annotated[Optional[str], typer.Option(
+        "--units", help="Length unit of the scan: mm, cm, m, um, in \\[default: mm].")] = None,
+    name: Name = None,
+    quiet: Quiet = False,
+    json: Json = False,
+) -> None:
+    """Unroll a vessel scan onto a proxy surface."""
+    from potflat.errors import InvalidOptionError
+    from potflat_cli._options import options_from_cli
+
+    if output is not None and output.exists() and not output.is_dir():
+        raise InvalidOptionError(f"--output {output} is a file; give a folder")
+    values = {"proxy": proxy, "axis": axis, "flip": flip or None, "seam": seam, "band": band,
+              "angles": angles, "view": view, "units": units}
+    options = options_from_cli("rollout", values)
+    _rollout(scan, output, options, name=name, quiet=quiet, as_json=json)
+
+
+rollout_command.__doc__ = HELP
+
+
+def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quiet: bool, as_json: bool) -> None:
+    import json as json_module
+
+    from rich.console import Console
+
+    from potflat.rollout import run_rollout_stage
+
+    err = Console(stderr=True, quiet=quiet or as_json)
+    with err.status(f"rolling out {scan.name}"):
+        result = run_rollout_stage(scan, output or scan.parent, options, name=name)
+    s = result.summary
+    if as_json:
+        print(json_module.dumps({k: v for k, v in s.items() if k != "provenance"}, indent=2))
+        return
+    if quiet:
+        return
+    out = Console(highlight=False)
+    ax, px, d, c, u = s["axis"], s["proxy"], s["distortion"], s["counts"], s["units"]
+    fmt = ", ".join
+    out.print(f"[bold]{result.paths['ply']}[/] and {result.paths['json'].name}")
+    out.print(f"axis ({ax['method']}): point {fmt(f'{x:.4g}' for x in ax['point'])}, direction "
+              f"{fmt(f'{x:.4f}' for x in ax['direction'])}; residual {ax['rms_angle_deg']:.2f} deg RMS "
+              f"(median {ax['median_angle_deg']:.2f}), {ax['rms_distance']:.3g} {u} RMS; {ax['orientation']}")
+    if ax["note"]:
+        out.print(f"[yellow]note:[/] {ax['note']}")
+    params = ", ".join(f"{k} {v:.4g}" for k, v in px["params"].items() if isinstance(v, float))
+    out.print(f"proxy {px['type']} ({params}): {px['reason']}")
+    out.print(f"seam {s['seam']['angle_deg']:.1f} deg ({s['seam']['method']}) from reference "
+              f"{fmt(f'{x:.4f}' for x in ax['reference_direction'])}; {c['faces']} faces, "
+              f"{c['vertices']} vertices, {c['seam_vertices_duplicated']} seam vertices duplicated")
+    flipped = f"[red]{d['flipped']} flipped[/]" if d["flipped"] else "0 flipped"
+    out.print(f"distortion: edge-length RMS {d['edge_rms']:.4f}, mean |log area| {d['area_mean_abs_log']:.4f}, "
+              f"anisotropy mean {d['anisotropy_mean']:.3f}, {flipped}")
