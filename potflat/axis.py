@@ -514,8 +514,11 @@ def estimate_axis(mesh: Mesh, *, flip: bool = False, profile: bool = True,
         if loops:
             longest = max(loops, key=lambda lp: np.linalg.norm(
                 mesh.vertices[lp[:, 1]] - mesh.vertices[lp[:, 0]], axis=1).sum())
-            target = (mesh.vertices[longest].reshape(-1, 3).mean(axis=0) - centre) / size
-            direction = target - centre_pt
+            ring = (mesh.vertices[longest].reshape(-1, 3) - centre) / size
+            ring_centre = ring.mean(axis=0)
+            direction = np.linalg.eigh(np.cov((ring - ring_centre).T))[1][:, 0]  # plane normal
+            if direction @ (ring_centre - centre_pt) < 0:
+                direction = -direction
             method = "centre+opening"
         else:
             pc, direction = _pca_axis(cs)

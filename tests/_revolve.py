@@ -16,12 +16,13 @@ def random_rotation(rng) -> np.ndarray:
 
 
 def revolve(radius, height, *, n_theta=64, n_t=24, theta_range=None, seed=0, pose=True,
-            jitter=0.2, colors=False, holes=()):
+            jitter=0.2, colors=False, holes=(), cap=False):
     """A surface of revolution ``r = radius(t), z = height(t)``, t in [0, 1], foot at t=0.
 
     Irregular triangles (jittered grid, random diagonals); faces CCW seen from outside;
     a random rigid pose unless ``pose=False``. ``theta_range`` (radians) makes a sherd.
-    ``holes`` lists (theta0, theta1, t0, t1) boxes whose faces are removed.
+    ``holes`` lists (theta0, theta1, t0, t1) boxes whose faces are removed; ``cap`` closes
+    the foot with a fan around a centre vertex on the axis.
 
     Returns
     -------
@@ -64,6 +65,10 @@ def revolve(radius, height, *, n_theta=64, n_t=24, theta_range=None, seed=0, pos
                 faces += [[a, b, c], [a, c, d]]
             else:
                 faces += [[a, b, d], [b, c, d]]
+    if cap:
+        centre = len(local)
+        local = np.vstack([local, [0.0, 0.0, float(height(np.zeros(1))[0])]])
+        faces += [[centre, idx[0, (i + 1) % cols], idx[0, i]] for i in range(quads)]
     faces = np.array(faces)
     R, shift = np.eye(3), np.zeros(3)
     if pose:

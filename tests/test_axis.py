@@ -1,0 +1,174 @@
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from _revolve import cone, cylinder, revolve, vase
+from potflat.axis import (AxisFit, axis_residuals, cylindrical, estimate_axis, manual_axis, orient,
+                          reference_direction)
+from potflat.errors import AxisNotFoundError, InvalidInputError, InvalidOptionError
+from potflat.types import Mesh
+
+REAL = Path("/work/shared/data/real")
+
+
+def _angle_deg(a, b):
+    return np.degrees(np.arccos(np.clip(abs(a @ b) / np.linalg.norm(a) / np.linalg.norm(b), -1, 1)))
+
+
+def _line_distance(point, fit: AxisFit):
+    d = point - fit.point
+    return np.linalg.norm(d - (d @ fit.direction) * fit.direction)
+
+
+@pytest.mark.parametrize("make", [cylinder, cone, vase])
+@pytest.mark.parametrize("kw", [{}, {"theta_range": (0.3, 1.8)},
+                                {"holes": [(1.0, 1.6, 0.3, 0.6), (4.0, 4.3, 0.1, 0.9)]}],
+                         ids=["full", "sherd", "holed"])
+def test_axis_recovered_on_posed_surfaces(make, kw):
+    mesh, R, shift, _ = make(seed=3, **kw)
+    fit = estimate_axis(mesh)
+    assert _angle_deg(fit.direction, R[:, 2]) < 0.2
+    assert _line_distance(shift, fit) < 0.01 * 30
+    assert fit.method in ("normals", "normals+profile")
+    assert np.isclose(np.linalg.norm(fit.direction), 1.0)
+    # heights run from the foot (0) to the mouth (height)
+    h, r, theta = fit.cylindrical(mesh.vertices)
+    assert abs(h.min()) < 1e-9 and np.isclose(h.max(), fit.height)
+    assert fit.median_angle_deg < 3 and fit.profile_deviation < 0.01
+
+
+def test_axis_sign_points_to_the_open_mouth():
+    mesh, R, _, _ = vase(seed=1, cap=True)  # closed foot, open mouth (narrower than the foot)
+    fit = estimate_axis(mesh)
+    assert fit.direction @ R[:, 2] > 0.999
+    assert "rim" in fit.orientation
+    flipped = estimate_axis(mesh, flip=True)
+    np.testing.assert_allclose(flipped.direction, -fit.direction)
+    assert "flipped" in flipped.orientation
+
+
+def test_axis_sign_from_the_inner_wall():
+    # a cup: outer wall, lip, inner wall (facing the axis), closed outer foot; the mouth is
+    # where the inner wall is, although both ends are the same width
+    t = np.linspace(0, 1, 40)
+    outer = lambda s: np.full_like(s, 30.0)
+    m_out, *_ = revolve(outer, lambda s: 60 * s, pose=False, seed=0, cap=True)
+    m_in, *_ = revolve(lambda s: np.full_like(s, 27.0), lambda s: 15 + 45 * s, pose=False, seed=1)
+    inner_faces = m_in.faces[:, ::-1] + len(m_out.vertices)
+    V = np.vstack([m_out.vertices, m_in.vertices])
+    F = np.vstack([m_out.faces, inner_faces])
+    cup = Mesh(V, F)
+    d, reason = orient(cup, np.zeros(3), np.array([0, 0, -1.0]))
+    assert d[2] > 0 and "inner wall" in reason
+    del t
+
+
+def test_wider_end_tie_break_for_a_closed_shape():
+    mesh = trimesh.creation.cone(radius=20, height=50, sections=48)  # closed: base disk + apex
+    d, reason = orient(Mesh(mesh.vertices, mesh.faces), np.zeros(3), np.array([0, 0, 1.0]))
+    assert d[2] < 0 and "wider end" in reason
+
+
+def test_box_has_no_axis():
+    box = trimesh.creation.box((30, 50, 70)).subdivide().subdivide().subdivide()
+    with pytest.raises(AxisNotFoundError, match=r"give --axis px,py,pz,dx,dy,dz") as exc:
+        estimate_axis(Mesh(box.vertices, box.faces, source=Path("box.ply")))
+    msg = str(exc.value)
+    assert "\n" not in msg and "box.ply" in msg and "%" in msg and "deg" in msg
+
+
+def test_random_blob_has_no_axis():
+    rng = np.random.default_rng(2)
+    s = trimesh.creation.icosphere(3, radius=20)
+    v = s.vertices * rng.uniform(0.5, 1.5, 3)
+    v = v * (1 + 0.2 * np.sin(v @ rng.normal(size=3) / 10))[:, None]
+    with pytest.raises(AxisNotFoundError):
+        estimate_axis(Mesh(v, s.faces))
+
+
+def test_sphere_axis_is_reported_as_undetermined():
+    s = trimesh.creation.icosphere(3, radius=20)
+    fit = estimate_axis(Mesh(s.vertices + [5, 7, 9], s.faces))
+    assert fit.method == "pca" and "undetermined" in fit.note
+    assert _line_distance(np.array([5.0, 7, 9]), fit) < 1e-6
+
+
+def test_sphere_with_an_opening_takes_the_axis_through_it():
+    s = trimesh.creation.icosphere(3, radius=20)
+    c = s.triangles_center
+    keep = c @ np.array([0.6, 0.0, 0.8]) < 15.0
+    fit = estimate_axis(Mesh(s.vertices, s.faces[keep]))
+    assert fit.method == "centre+opening"
+    assert _angle_deg(fit.direction, np.array([0.6, 0.0, 0.8])) < 1.0
+    assert fit.direction @ np.array([0.6, 0.0, 0.8]) > 0
+
+
+def test_manual_axis_and_its_residuals():
+    mesh, R, shift, _ = cylinder(seed=2)
+    fit = manual_axis(mesh, shift + 5 * R[:, 2], 3 * R[:, 2])
+    assert fit.method == "manual"
+    np.testing.assert_allclose(fit.direction, R[:, 2], atol=1e-12)
+    assert _line_distance(shift, fit) < 1e-9
+    assert fit.profile_deviation < 1e-12
+    tilted = axis_residuals(mesh, shift, R[:, 2] + 0.05 * R[:, 0])
+    assert tilted[0] > fit.rms_angle_deg and tilted[3] > 0.005
+    assert manual_axis(mesh, shift, R[:, 2], flip=True).direction @ R[:, 2] < 0
+
+
+def test_manual_axis_validation():
+    mesh, *_ = cylinder()
+    with pytest.raises(InvalidOptionError, match="zero"):
+        manual_axis(mesh, [0, 0, 0], [0, 0, 0])
+    with pytest.raises(InvalidOptionError, match="6 finite"):
+        manual_axis(mesh, [0, 0, np.nan], [0, 0, 1])
+
+
+def test_empty_and_nan_meshes_are_rejected():
+    with pytest.raises(InvalidInputError, match="no faces"):
+        estimate_axis(Mesh(np.zeros((3, 3)), np.zeros((0, 3), int)))
+    with pytest.raises(InvalidInputError, match="NaN"):
+        estimate_axis(Mesh(np.array([[0, 0, 0], [1, 0, 0], [np.nan, 1, 0]]), [[0, 1, 2]]))
+
+
+def test_reference_direction_and_cylindrical_coordinates():
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        e = reference_direction(d)
+        assert abs(e @ d) < 1e-12 and np.isclose(np.linalg.norm(e), 1)
+    # theta counter-clockwise about +z from +x
+    h, r, th = cylindrical(np.array([[1.0, 0, 2], [0, 1, 3], [-1, 0, 0]]), np.zeros(3),
+                           np.array([0, 0, 1.0]), np.array([1.0, 0, 0]))
+    np.testing.assert_allclose(h, [2, 3, 0])
+    np.testing.assert_allclose(r, 1)
+    np.testing.assert_allclose(th, [0, np.pi / 2, np.pi])
+
+
+def test_deterministic():
+    mesh, *_ = vase(seed=5)
+    a, b = estimate_axis(mesh), estimate_axis(mesh)
+    assert np.array_equal(a.point, b.point) and np.array_equal(a.direction, b.direction)
+
+
+@pytest.mark.skipif(not (REAL / "goblet.stl").exists(), reason="shared real scans absent")
+def test_real_goblet_axis():
+    from potflat.io.scan import load_scan
+
+    mesh = load_scan(REAL / "goblet.stl").mesh  # designed exact surface of revolution, upright in +z
+    fit = estimate_axis(mesh)
+    assert fit.direction[2] > np.cos(np.radians(0.5))  # mouth (cup, inner wall) up
+    assert fit.median_angle_deg < 1.0 and fit.profile_deviation < 0.03
+
+
+@pytest.mark.skipif(not (REAL / "sea-vase.ply").exists(), reason="shared real scans absent")
+@pytest.mark.parametrize("name", ["plastic-vase.ply", "sea-vase.ply"])
+def test_real_scanned_vases_axis(name):
+    from potflat.io.scan import load_scan
+
+    mesh = load_scan(REAL / name).mesh  # both stand roughly upright along +z in their files
+    fit = estimate_axis(mesh)
+    assert abs(fit.direction[2]) > np.cos(np.radians(3.0))
+    assert fit.median_angle_deg < 10 and fit.profile_deviation < 0.05
