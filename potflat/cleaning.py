@@ -22,10 +22,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy import sparse
-from scipy.sparse.csgraph import connected_components
 
-from potflat._kernels.mesh import edge_table, propagate_orientation, weld_representatives
+from potflat._kernels.mesh import edge_table, propagate_orientation, union_find, weld_representatives
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
 
@@ -172,11 +170,8 @@ def weld_vertices(mesh: Mesh, *, tolerance: float = 0.0) -> tuple[Mesh, int]:
         diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
         pairs = cKDTree(V[uniq]).query_pairs(tolerance * diag, output_type="ndarray")
         if len(pairs):
-            k = len(uniq)
-            graph = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(k, k))
-            _, label = connected_components(graph, directed=False)
-            low = np.full(label.max() + 1, k, np.int64)
-            np.minimum.at(low, label, np.arange(k))
+            label, _ = union_find(len(uniq), pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64))
+            low = np.unique(label, return_index=True)[1]
             rep = uniq[low[label]][np.searchsorted(uniq, rep)]
     merged = int(n - np.count_nonzero(rep == np.arange(n)))
     if merged == 0:
@@ -184,14 +179,23 @@ def weld_vertices(mesh: Mesh, *, tolerance: float = 0.0) -> tuple[Mesh, int]:
     return _apply_vertex_map(mesh, rep), merged
 
 
-def _face_areas2(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Cross products (m, 3) and twice the areas (m,) of the faces."""
+def _face_geometry(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cross products (m, 3), twice the areas (m,) and longest squared edge (m,) of faces."""
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    cross = np.cross(b - a, c - a)
-    return cross, np.linalg.norm(cross, axis=1)
+    e0, e1, e2 = b - a, c - b, a - c
+    cross = np.empty_like(e0)
+    cross[:, 0] = e2[:, 1] * e0[:, 2] - e2[:, 2] * e0[:, 1]
+    cross[:, 1] = e2[:, 2] * e0[:, 0] - e2[:, 0] * e0[:, 2]
+    cross[:, 2] = e2[:, 0] * e0[:, 1] - e2[:, 1] * e0[:, 0]
+    area2 = np.sqrt(np.einsum("ij,ij->i", cross, cross))
+    longest2 = np.maximum(np.maximum(np.einsum("ij,ij->i", e0, e0), np.einsum("ij,ij->i", e1, e1)),
+                          np.einsum("ij,ij->i", e2, e2))
+    return cross, area2, longest2
 
 
 def _select_faces(mesh: Mesh, keep: np.ndarray) -> Mesh:
+    if keep.all():
+        return mesh
     tc = mesh.texcoords[keep] if mesh.texcoords is not None else None
     return mesh.replace(faces=mesh.faces[keep], texcoords=tc)
 
@@ -224,83 +228,79 @@ def _drop_unreferenced(mesh: Mesh) -> tuple[Mesh, int]:
 
 @dataclass(frozen=True)
 class _Topology:
-    """Edges and manifold face adjacency of a triangle mesh."""
+    """Edges and manifold face adjacency of a triangle mesh (half-edge ``3 f + k`` runs
+    from corner ``k`` to corner ``(k + 1) % 3`` of face ``f``)."""
 
+    edge_of: np.ndarray  # (3m,) undirected edge of each half-edge
     count: np.ndarray  # (ne,) faces per edge
-    edges: np.ndarray  # (ne, 2)
-    pair_f: np.ndarray  # (k,) faces of each manifold edge ...
-    pair_g: np.ndarray  # (k,) ... and its other face
-    pair_kf: np.ndarray  # (k,) corner of the edge's first vertex in f
-    pair_kg: np.ndarray  # (k,) corner of that edge's half-edge start in g
-    pair_same: np.ndarray  # (k,) 1 when both faces run the edge the same way
+    h1: np.ndarray  # (k,) first half-edge of each manifold edge ...
+    h2: np.ndarray  # (k,) ... and the second
+    same: np.ndarray  # (k,) True when both run the edge the same way
+    nbr: np.ndarray  # (m, 3) face across each half-edge's manifold edge, or -1
+    nbr_same: np.ndarray  # (m, 3) 1 when that neighbour runs the edge the same way
 
 
 def _topology(F: np.ndarray, n: int) -> _Topology:
-    _, edges, count, halves = edge_table(F, n)
+    edge_of, _, count, halves = edge_table(F, n)
     man = count == 2
     h1, h2 = halves[man, 0], halves[man, 1]
-    f, kf = h1 // 3, h1 % 3
-    g, kg = h2 // 3, h2 % 3
-    same = (F[f, kf] == F[g, kg]).astype(np.int64)
-    return _Topology(count, edges, f, g, kf, kg, same)
+    flat = F.ravel()
+    same = flat[h1] == flat[h2]
+    nbr = np.full(3 * len(F), -1, np.int64)
+    nbr[h1], nbr[h2] = h2 // 3, h1 // 3
+    nbr_same = np.zeros(3 * len(F), np.int64)
+    nbr_same[h1] = nbr_same[h2] = same
+    return _Topology(edge_of, count, h1, h2, same, nbr.reshape(-1, 3), nbr_same.reshape(-1, 3))
 
 
-def _orientation(topo: _Topology, m: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """Consistent-orientation flips, component labels (by manifold edges), conflicts."""
-    rows = np.concatenate([topo.pair_f, topo.pair_g])
-    cols = np.concatenate([topo.pair_g, topo.pair_f])
-    same = np.concatenate([topo.pair_same, topo.pair_same])
-    order = np.lexsort((cols, rows))
-    indptr = np.zeros(m + 1, np.int64)
-    np.cumsum(np.bincount(rows, minlength=m), out=indptr[1:])
-    flip, comp, conflicts = propagate_orientation(indptr, cols[order].astype(np.int64),
-                                                  same[order].astype(np.int64))
-    return flip.astype(bool), comp, int(conflicts)
+def _corner_fans(F: np.ndarray, topo: _Topology) -> tuple[np.ndarray, int]:
+    """Fan label of each face corner (3m,): corners joined across manifold edges."""
+    h1, h2, same = topo.h1, topo.h2, topo.same
+    nxt1 = h1 - h1 % 3 + (h1 + 1) % 3  # corner at the end of half-edge h1
+    nxt2 = h2 - h2 % 3 + (h2 + 1) % 3
+    a = np.concatenate([h1, nxt1])
+    b = np.concatenate([np.where(same, h2, nxt2), np.where(same, nxt2, h2)])
+    return union_find(3 * len(F), a, b)
 
 
-def _split_nonmanifold(mesh: Mesh, topo: _Topology) -> tuple[Mesh, int, int]:
-    """Give each fan of faces around a vertex its own copy of the vertex.
+def _split_nonmanifold(mesh: Mesh, topo: _Topology, apply: bool) -> tuple[Mesh, int, int]:
+    """Give each fan of faces around a vertex its own copy of the vertex (if ``apply``).
 
     Corners are joined across manifold edges only, so vertices on edges with more than two
-    faces and bow-tie vertices are split. Returns the mesh, the number of non-manifold
-    vertices and the number of vertices added.
+    faces and bow-tie vertices are split; faces keep their order. Returns the mesh, the
+    number of non-manifold vertices and the number of vertices added.
     """
     F = mesh.faces
     m, n = len(F), len(mesh.vertices)
-    f, g, kf, kg, same = topo.pair_f, topo.pair_g, topo.pair_kf, topo.pair_kg, topo.pair_same.astype(bool)
-    kf1 = (kf + 1) % 3
-    kg1 = (kg + 1) % 3
-    # corner of g holding F[f, kf] and the one holding F[f, kf1]
-    g_a = np.where(same, kg, kg1)
-    g_b = np.where(same, kg1, kg)
-    src = np.concatenate([3 * f + kf, 3 * f + kf1])
-    dst = np.concatenate([3 * g + g_a, 3 * g + g_b])
-    graph = sparse.coo_matrix((np.ones(len(src), np.int8), (src, dst)), shape=(3 * m, 3 * m))
-    nlab, label = connected_components(graph, directed=False)
+    label, nlab = _corner_fans(F, topo)
     vertex_of_label = np.empty(nlab, np.int64)
     vertex_of_label[label] = F.ravel()
     copies = np.bincount(vertex_of_label, minlength=n)
     nonmanifold = int(np.count_nonzero(copies > 1))
-    if nonmanifold == 0:
-        return mesh, 0, 0
+    if nonmanifold == 0 or not apply:
+        return mesh, nonmanifold, 0
     order = np.lexsort((np.arange(nlab), vertex_of_label))
     new_id = np.empty(nlab, np.int64)
     new_id[order] = np.arange(nlab)
     src_vertex = vertex_of_label[order]
     colors = mesh.vertex_colors[src_vertex] if mesh.vertex_colors is not None else None
-    used = np.count_nonzero(copies)
     split = mesh.replace(vertices=mesh.vertices[src_vertex], faces=new_id[label].reshape(m, 3),
                          vertex_colors=colors)
-    return split, nonmanifold, int(nlab - used)
+    return split, nonmanifold, int(nlab - np.count_nonzero(copies))
 
 
-def _boundary_loops(topo: _Topology, n: int) -> tuple[int, int]:
-    b = topo.edges[topo.count == 1]
-    if len(b) == 0:
+def _boundary_loops(F: np.ndarray, n: int, topo: _Topology, split: bool) -> tuple[int, int]:
+    """Boundary edges and loops of ``F`` (edges with one face; also the non-manifold ones
+    when those were split apart)."""
+    count = topo.count[topo.edge_of]
+    hb = np.flatnonzero(count != 2 if split else count == 1)
+    if len(hb) == 0:
         return 0, 0
-    graph = sparse.coo_matrix((np.ones(len(b), np.int8), (b[:, 0], b[:, 1])), shape=(n, n))
-    _, label = connected_components(graph, directed=False)
-    return len(b), len(np.unique(label[b[:, 0]]))
+    flat = F.ravel()
+    a, b = flat[hb], flat[hb - hb % 3 + (hb + 1) % 3]
+    label, _ = union_find(n, a, b)
+    nb = len(hb) if split else int(np.count_nonzero(topo.count == 1))
+    return nb, len(np.unique(label[a]))
 
 
 def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fraction: float = 0.01,
@@ -346,28 +346,26 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
 
     # degenerate faces: repeated vertex or (numerically) zero area
     F = mesh.faces
-    _, area2 = _face_areas2(mesh.vertices, F)
-    V = mesh.vertices
-    longest2 = np.max([((V[F[:, i]] - V[F[:, (i + 1) % 3]]) ** 2).sum(axis=1) for i in range(3)], axis=0)
+    cross, area2, longest2 = _face_geometry(mesh.vertices, F)
     degenerate = ((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
                   | (area2 <= DEGENERATE_RELATIVE_AREA * longest2))
     n_degenerate = int(degenerate.sum())
     if n_degenerate == len(F):
         raise InvalidInputError(f"{name}: all {len(F)} faces are degenerate (zero area); "
                                 "give a scan with a real surface")
-    mesh = _select_faces(mesh, ~degenerate)
-
     # duplicate faces (same vertex set, either winding): keep the first
-    rep = _first_equal(np.sort(mesh.faces, axis=1).astype(np.float64))
+    keep = ~degenerate
+    rep = _first_equal(np.sort(F[keep], axis=1).astype(np.float64))
     dup = rep != np.arange(len(rep))
     n_dup = int(dup.sum())
-    mesh = _select_faces(mesh, ~dup)
+    keep[np.flatnonzero(keep)[dup]] = False
+    mesh = _select_faces(mesh, keep)
+    cross, area2 = cross[keep], area2[keep]
 
     # stray components, by manifold-edge connectivity
     n = len(mesh.vertices)
     topo = _topology(mesh.faces, n)
-    _, comp, _ = _orientation(topo, len(mesh.faces))
-    _, area2 = _face_areas2(mesh.vertices, mesh.faces)
+    flip, comp, conflicts = propagate_orientation(topo.nbr, topo.nbr_same)
     comp_area = np.bincount(comp, weights=area2)
     n_comp = len(comp_area)
     small = comp_area < min_component_fraction * comp_area.max()
@@ -376,45 +374,42 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
     if removed_fraction > REMOVED_AREA_WARNING:
         warnings.append(f"{small.sum()} small components hold {removed_fraction:.1%} of the area and "
                         "were removed; lower min_component_fraction to keep them")
-    mesh = _select_faces(mesh, ~drop)
-
-    # final topology on what is kept
-    topo = _topology(mesh.faces, n)
+    if drop.any():
+        mesh = _select_faces(mesh, ~drop)
+        cross, area2 = cross[~drop], area2[~drop]
+        topo = _topology(mesh.faces, n)
+        flip, comp, conflicts = propagate_orientation(topo.nbr, topo.nbr_same)
     n_nm_edges = int(np.count_nonzero(topo.count > 2))
-    flip, comp, conflicts = _orientation(topo, len(mesh.faces))
-    n_reoriented = 0
-    reversed_out = 0
-    if orient:
-        mesh = _reverse_faces(mesh, flip)
-        cross, area2 = _face_areas2(mesh.vertices, mesh.faces)
-        centroid = mesh.vertices[mesh.faces].mean(axis=1)
-        ncomp = comp.max() + 1
-        c = np.stack([np.bincount(comp, weights=area2 * centroid[:, k], minlength=ncomp) for k in range(3)], 1)
-        c /= np.maximum(np.bincount(comp, weights=area2, minlength=ncomp), np.finfo(float).tiny)[:, None]
-        flux = np.bincount(comp, weights=np.einsum("ij,ij->i", cross, centroid - c[comp]), minlength=ncomp)
-        outward_flip = flux < 0
-        reversed_out = int(outward_flip.sum())
-        mesh = _reverse_faces(mesh, outward_flip[comp])
-        n_reoriented = int(np.count_nonzero(flip ^ outward_flip[comp]))
-        if conflicts:
-            warnings.append(f"{conflicts} face pairs cannot be oriented consistently (non-orientable surface)")
-        topo = _topology(mesh.faces, n)  # half-edge directions changed
-    nm_vertices = 0
-    added = 0
-    if split_nonmanifold:
-        mesh, nm_vertices, added = _split_nonmanifold(mesh, topo)
-        if added:
-            topo = _topology(mesh.faces, len(mesh.vertices))
-    else:
-        nm_vertices = _split_nonmanifold(mesh, topo)[1]
+
+    # non-manifold vertices (split: faces keep their order, so topo's pairs stay valid)
+    mesh, nm_vertices, added = _split_nonmanifold(mesh, topo, split_nonmanifold)
     if n_nm_edges or nm_vertices:
         action = "split into separate fans" if split_nonmanifold else "left as they are"
         warnings.append(f"{n_nm_edges} non-manifold edges and {nm_vertices} non-manifold vertices, {action}")
-    b_edges, b_loops = _boundary_loops(topo, len(mesh.vertices))
+    b_edges, b_loops = _boundary_loops(mesh.faces, len(mesh.vertices), topo, split_nonmanifold)
+
+    # orientation: consistent per component, then outward
+    n_reoriented = 0
+    reversed_out = 0
+    if orient:
+        flip = flip.astype(bool)
+        ncomp = int(comp.max()) + 1
+        centroid = mesh.vertices[mesh.faces].mean(axis=1)
+        weight = np.bincount(comp, weights=area2, minlength=ncomp)
+        c = np.stack([np.bincount(comp, weights=area2 * centroid[:, k], minlength=ncomp) for k in range(3)], 1)
+        c /= np.maximum(weight, np.finfo(float).tiny)[:, None]
+        sign = np.where(flip, -1.0, 1.0)
+        flux = np.bincount(comp, weights=sign * np.einsum("ij,ij->i", cross, centroid - c[comp]), minlength=ncomp)
+        outward_flip = flux < 0
+        reversed_out = int(outward_flip.sum())
+        total_flip = flip ^ outward_flip[comp]
+        n_reoriented = int(np.count_nonzero(total_flip))
+        mesh = _reverse_faces(mesh, total_flip)
+        if conflicts:
+            warnings.append(f"{conflicts} face pairs cannot be oriented consistently (non-orientable surface)")
     mesh, unreferenced = _drop_unreferenced(mesh)
 
-    _, area2 = _face_areas2(mesh.vertices, mesh.faces)
-    kept_area = np.bincount(comp, weights=area2) if len(area2) else np.zeros(0)
+    kept_area = np.bincount(comp, weights=area2)
     kept_area = kept_area[kept_area > 0]
     fractions = tuple(float(x) for x in np.sort(kept_area / kept_area.sum())[::-1])
     if len(fractions) > 1:

@@ -309,17 +309,16 @@ def obj_fill(buf, counts):
 
 
 @leaf
-def propagate_orientation(indptr, indices, same):
+def propagate_orientation(nbr, same):
     """Make face orientations consistent by breadth-first search over face adjacency.
 
     Parameters
     ----------
-    indptr : (m + 1,) int64
-        CSR row pointers of the face adjacency (faces sharing a manifold edge).
-    indices : (k,) int64
-        Neighbouring faces.
-    same : (k,) int64
-        1 when the two faces traverse the shared edge in the same direction (inconsistent).
+    nbr : (m, 3) int64
+        Face across each edge ``(F[f, k], F[f, (k + 1) % 3])`` when that edge is manifold
+        (exactly two faces), else -1.
+    same : (m, 3) int64
+        1 when the neighbour traverses the shared edge in the same direction (inconsistent).
 
     Returns
     -------
@@ -331,7 +330,7 @@ def propagate_orientation(indptr, indices, same):
     conflicts : int
         Adjacent pairs left inconsistent (non-orientable or contradictory input).
     """
-    m = indptr.shape[0] - 1
+    m = nbr.shape[0]
     flip = np.zeros(m, np.int64)
     component = np.full(m, -1, np.int64)
     queue = np.empty(m, np.int64)
@@ -347,9 +346,11 @@ def propagate_orientation(indptr, indices, same):
         while head < tail:
             f = queue[head]
             head += 1
-            for p in range(indptr[f], indptr[f + 1]):
-                g = indices[p]
-                want = flip[f] ^ same[p]
+            for k in range(3):
+                g = nbr[f, k]
+                if g < 0:
+                    continue
+                want = flip[f] ^ same[f, k]
                 if component[g] < 0:
                     component[g] = ncomp
                     flip[g] = want
@@ -359,6 +360,51 @@ def propagate_orientation(indptr, indices, same):
                     conflicts += 1
         ncomp += 1
     return flip, component, conflicts
+
+
+@leaf
+def _find(parent, x):
+    while parent[x] != x:
+        parent[x] = parent[parent[x]]
+        x = parent[x]
+    return x
+
+
+@leaf
+def union_find(n, a, b):
+    """Connected components of a graph given as an edge list.
+
+    Parameters
+    ----------
+    n : int
+        Number of nodes.
+    a, b : (k,) int64
+        Edge end points.
+
+    Returns
+    -------
+    label : (n,) int64
+        Component of each node, numbered in order of the component's lowest node.
+    count : int
+        Number of components.
+    """
+    parent = np.arange(n)
+    for i in range(a.shape[0]):
+        x = _find(parent, a[i])
+        y = _find(parent, b[i])
+        if x < y:
+            parent[y] = x
+        elif y < x:
+            parent[x] = y
+    label = np.full(n, -1, np.int64)
+    count = 0
+    for v in range(n):
+        r = _find(parent, v)
+        if label[r] < 0:
+            label[r] = count
+            count += 1
+        label[v] = label[r]
+    return label, count
 
 
 @leaf

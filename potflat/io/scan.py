@@ -246,6 +246,9 @@ def _triangulate(lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, int]
     than three (dropped).
     """
     lengths = np.asarray(lengths, dtype=np.int64)
+    if (lengths == 3).all():
+        m = len(lengths)
+        return np.arange(3 * m).reshape(m, 3), np.arange(m), 0, 0
     start = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
     ntri = np.maximum(lengths - 2, 0)
     poly = np.repeat(np.arange(len(lengths)), ntri)
@@ -334,6 +337,8 @@ def _read_obj(path: Path, texture: str) -> _Raw:
         tex_ids = {t: k for k, t in enumerate(dict.fromkeys(t for t in tex_of_name if t is not None))}
         code = np.array([tex_ids[t] if t is not None else -1 for t in tex_of_name] + [-1], np.int64)
         tri_tex = code[mat_of_poly][poly]  # -1 index -> the trailing -1
+    elif len(set(textures.values())) == 1:  # no usemtl, a single textured material
+        tex_ids, tri_tex = {next(iter(textures.values())): 0}, np.zeros(len(poly), np.int64)
     else:
         tex_ids, tri_tex = {}, np.full(len(poly), -1, np.int64)
     used = np.unique(tri_tex[has_vt & (tri_tex >= 0)])
@@ -349,10 +354,12 @@ def _read_obj(path: Path, texture: str) -> _Raw:
             raw.warnings.append("no material with a texture image (map_Kd); loaded untextured")
         return raw
     raw.texture = inv[int(used[0])]
-    uv = np.zeros((len(poly), 3, 2))
     ok = has_vt & (tri_tex == used[0])
-    uv[ok] = VT[tri_vt[ok]]
-    if not ok.all():
+    if ok.all():
+        uv = VT[tri_vt]
+    else:
+        uv = np.zeros((len(poly), 3, 2))
+        uv[ok] = VT[tri_vt[ok]]
         raw.warnings.append(f"{int((~ok).sum())} faces have no texture coordinates or another "
                             "material; they get texture coordinate (0, 0)")
     raw.texcoords = uv

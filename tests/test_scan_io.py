@@ -1,0 +1,628 @@
+"""Scan loading: formats, seam welding, textures, units, real scans and bad input."""
+from __future__ import annotations
+
+import struct
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.io.scan import LoadedScan, load_scan
+
+REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real"
+
+
+# ------------------------------------------------------------------ helpers
+
+
+def _png(path: Path, size=(8, 8)) -> Path:
+    from PIL import Image
+
+    Image.new("RGB", size, (200, 100, 50)).save(path)
+    return path
+
+
+def _grid(nu=4, nv=3):
+    """A (nu+1) x (nv+1) vertex grid on a half cylinder; faces CCW seen from outside."""
+    th = np.linspace(0.0, np.pi, nu + 1)
+    z = np.linspace(0.0, 2.0, nv + 1)
+    T, Z = np.meshgrid(th, z, indexing="ij")
+    V = np.stack([np.cos(T), np.sin(T), Z], -1).reshape(-1, 3)
+    idx = np.arange(len(V)).reshape(nu + 1, nv + 1)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    F = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    # faces must be CCW from outside (+radial): check and fix once
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    cen = V[F].mean(1)
+    if np.einsum("ij,ij->i", n[:, :2], cen[:, :2]).mean() < 0:
+        F = F[:, [0, 2, 1]]
+    return V, F
+
+
+def _uv_of(P):
+    """Texture coordinate as a function of position (to check corner alignment)."""
+    P = np.asarray(P)
+    return np.stack([np.arctan2(P[..., 1], P[..., 0]) / np.pi, P[..., 2] / 2.0], -1)
+
+
+def _write_seam_obj(tmp_path: Path, texture=True) -> tuple[Path, np.ndarray, np.ndarray]:
+    """OBJ whose vertices are split into two charts at the middle column (as an atlas does):
+    the seam vertices appear twice with identical positions and different vt."""
+    V, F = _grid()
+    nu, nv = 4, 3
+    col = (np.arange(len(V)) // (nv + 1))  # column index of each vertex
+    # chart of each face: left half (columns 0..2) or right half (2..4)
+    fcol = col[F].max(axis=1)
+    chart = (fcol > 2).astype(int)
+    # file vertex list: chart 0 vertices (col <= 2), then chart 1 vertices (col >= 2)
+    ids0 = np.flatnonzero(col <= 2)
+    ids1 = np.flatnonzero(col >= 2)
+    fv = np.concatenate([ids0, ids1])
+    map0 = {v: k for k, v in enumerate(ids0)}
+    map1 = {v: k + len(ids0) for k, v in enumerate(ids1)}
+    # texture coordinates of charts placed apart in the atlas (different vt at the seam)
+    tc_all = _uv_of(V[fv]) * 0.5 + np.where(np.arange(len(fv)) < len(ids0), 0.0, 0.5)[:, None]
+    lines = ["mtllib seam.mtl", "o part", "usemtl paint"]
+    lines += [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in V[fv]]
+    lines += [f"vt {u:.17g} {v:.17g}" for u, v in tc_all]
+    lines += ["vn 0 0 1"]
+    expected_tc = np.zeros((len(F), 3, 2))
+    for f, (tri, ch) in enumerate(zip(F, chart)):
+        mp = map0 if ch == 0 else map1
+        idx = [mp[v] for v in tri]
+        expected_tc[f] = tc_all[idx]
+        lines.append("f " + " ".join(f"{i + 1}/{i + 1}/1" for i in idx))
+    obj = tmp_path / "seam.obj"
+    obj.write_text("\n".join(lines) + "\n")
+    if texture:
+        (tmp_path / "seam.mtl").write_text("newmtl paint\nKd 1 1 1\nmap_Kd -bm 1 atlas.png\n")
+        _png(tmp_path / "atlas.png")
+    return obj, V[F], expected_tc
+
+
+def _match_faces(mesh, tri_positions):
+    """Index of each loaded face in the reference (by its sorted corner positions)."""
+    ref = {tuple(np.round(np.sort(t, axis=0), 5).ravel()): k for k, t in enumerate(tri_positions)}
+    got = mesh.vertices[mesh.faces]
+    return np.array([ref[tuple(np.round(np.sort(t, axis=0), 5).ravel())] for t in got])
+
+
+def _assert_corner_texcoords(mesh, tri_positions, expected_tc):
+    """Each corner keeps its own texture coordinate (matched by position)."""
+    k = _match_faces(mesh, tri_positions)
+    for f, r in enumerate(k):
+        for c in range(3):
+            j = int(np.argmin(np.linalg.norm(tri_positions[r] - mesh.vertices[mesh.faces[f, c]], axis=1)))
+            np.testing.assert_allclose(mesh.texcoords[f, c], expected_tc[r, j], atol=1e-6)
+
+
+def _write_ply(path: Path, V, faces_lists, *, binary=True, endian="<", vprops=(), vextra=None,
+               texcoord=None, comments=(), truncate=0):
+    """Minimal PLY writer for tests: float xyz [+ extra vertex props], face list uchar int
+    [+ texcoord list uchar float]."""
+    n = len(V)
+    fmt = "ascii" if not binary else "binary_little_endian" if endian == "<" else "binary_big_endian"
+    head = ["ply", f"format {fmt} 1.0"]
+    head += [f"comment {c}" for c in comments]
+    head += [f"element vertex {n}", "property float x", "property float y", "property float z"]
+    head += [f"property {t} {name}" for name, t in vprops]
+    head += [f"element face {len(faces_lists)}", "property list uchar int vertex_indices"]
+    if texcoord is not None:
+        head.append("property list uchar float texcoord")
+    head.append("end_header")
+    codes = {"float": "f", "uchar": "B", "double": "d"}
+    if binary:
+        body = bytearray()
+        for i in range(n):
+            body += struct.pack(endian + "3f", *V[i])
+            for k, (name, t) in enumerate(vprops):
+                body += struct.pack(endian + codes[t], vextra[i][k])
+        for f, fl in enumerate(faces_lists):
+            body += struct.pack(endian + "B" + f"{len(fl)}i", len(fl), *fl)
+            if texcoord is not None:
+                body += struct.pack(endian + "B" + f"{len(texcoord[f])}f", len(texcoord[f]), *texcoord[f])
+        data = ("\n".join(head) + "\n").encode() + bytes(body)
+    else:
+        rows = []
+        for i in range(n):
+            rows.append(" ".join([repr(float(x)) for x in V[i]] + [str(x) for x in (vextra[i] if vprops else [])]))
+        for f, fl in enumerate(faces_lists):
+            row = [str(len(fl))] + [str(i) for i in fl]
+            if texcoord is not None:
+                row += [str(len(texcoord[f]))] + [repr(float(t)) for t in texcoord[f]]
+            rows.append(" ".join(row))
+        data = ("\n".join(head + rows) + "\n").encode()
+    path.write_bytes(data[:len(data) - truncate] if truncate else data)
+    return path
+
+
+def _one_line(exc: pytest.ExceptionInfo, *needles):
+    msg = str(exc.value)
+    assert "\n" not in msg
+    for s in needles:
+        assert s in msg, msg
+    return msg
+
+
+# ------------------------------------------------------------------ OBJ
+
+
+def test_obj_welds_atlas_seam_and_keeps_corner_texcoords(tmp_path):
+    obj, tri_pos, expected_tc = _write_seam_obj(tmp_path)
+    scan = load_scan(obj)
+    assert isinstance(scan, LoadedScan)
+    mesh = scan.mesh
+    V, F = _grid()
+    assert len(mesh.vertices) == len(np.unique(V, axis=0)) == 20  # file has 24 (4 seam duplicates)
+    assert len(mesh.faces) == len(F)
+    assert scan.report.duplicate_vertices_merged == 4
+    assert scan.report.kept_component_area_fractions == (1.0,)  # one surface, not two charts
+    assert scan.report.boundary_loops == 1
+    assert mesh.texture_path == (tmp_path / "atlas.png").resolve() and mesh.texture_path.is_absolute()
+    _assert_corner_texcoords(mesh, tri_pos, expected_tc)
+    assert mesh.units == "mm" and mesh.source == obj.resolve()
+
+
+def test_obj_negative_indices_polygons_and_slash_forms(tmp_path):
+    text = """# a unit cube as quads, relative indices, v//vn and v/vt/vn forms
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+v 0 0 1
+v 1 0 1
+v 1 1 1
+v 0 1 1
+vn 0 0 1
+f -8//1 -5//1 -6//1 -7//1
+f 5 6 7 8
+f 1 2 6 5
+f 2 3 7 6
+f 3 4 8 7
+f 4 1 5 8
+"""
+    (tmp_path / "cube.obj").write_text(text)
+    scan = load_scan(tmp_path / "cube.obj")
+    assert scan.report.polygons_triangulated == 6
+    assert len(scan.mesh.vertices) == 8 and len(scan.mesh.faces) == 12
+    assert scan.report.boundary_loops == 0 and scan.report.orientation_conflicts == 0
+    import trimesh
+
+    tm = trimesh.Trimesh(scan.mesh.vertices, scan.mesh.faces, process=False)
+    assert tm.is_winding_consistent and tm.volume == pytest.approx(1.0)  # outward
+
+
+def test_obj_vertex_colours_and_untextured(tmp_path):
+    V, F = _grid()
+    rgb = (V[:, :1] * 0 + [0.0, 0.5, 1.0])
+    lines = [f"v {x} {y} {z} {r} {g} {b}" for (x, y, z), (r, g, b) in zip(V, rgb)]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in F]
+    (tmp_path / "col.obj").write_text("\n".join(lines) + "\n")
+    mesh = load_scan(tmp_path / "col.obj").mesh
+    assert mesh.texcoords is None and mesh.texture_path is None
+    np.testing.assert_array_equal(mesh.vertex_colors[0], [0, 128, 255, 255])
+
+
+def test_obj_same_texture_in_two_materials_is_one_atlas(tmp_path):
+    obj, tri_pos, expected_tc = _write_seam_obj(tmp_path)
+    text = obj.read_text().splitlines()
+    k = next(i for i, ln in enumerate(text) if ln.startswith("f "))
+    text.insert(k + 3, "usemtl paint2")
+    obj.write_text("\n".join(text) + "\n")
+    (tmp_path / "seam.mtl").write_text("newmtl paint\nmap_Kd atlas.png\nnewmtl paint2\nmap_Kd atlas.png\n")
+    mesh = load_scan(obj).mesh
+    _assert_corner_texcoords(mesh, tri_pos, expected_tc)
+
+
+def test_obj_float_parser_matches_python(tmp_path):
+    from potflat._kernels.mesh import obj_count, obj_fill
+
+    rng = np.random.default_rng(3)
+    vals = np.concatenate([rng.normal(0, 1e3, 60), rng.normal(0, 1e-4, 30), [0.0, -0.0, 1e-300, 123456789.0]])
+    texts = [repr(float(x)) for x in vals] + ["1e5", "-2.5E-3", "+7", ".5", "5.", "3.14159265358979323846"]
+    lines = []
+    for i in range(0, len(texts) - 2, 3):
+        lines.append("v " + " ".join(texts[i:i + 3]))
+    buf = np.frombuffer(("\n".join(lines) + "\n").encode(), np.uint8)
+    V = obj_fill(buf, obj_count(buf))[0][:, :3]
+    want = np.array([[float(t) for t in ln.split()[1:]] for ln in lines])
+    np.testing.assert_allclose(V, want, rtol=1e-15, atol=0)  # within a few ulp
+
+
+# ------------------------------------------------------------------ PLY
+
+
+@pytest.mark.parametrize("binary,endian", [(True, "<"), (True, ">"), (False, "<")])
+def test_ply_face_texcoord_texturefile_roundtrip(tmp_path, binary, endian):
+    V, F = _grid()
+    tc = _uv_of(V[F])  # (m, 3, 2)
+    _png(tmp_path / "tex.png")
+    ply = _write_ply(tmp_path / "s.ply", V, F.tolist(), binary=binary, endian=endian,
+                     texcoord=tc.reshape(-1, 6).tolist(), comments=["TextureFile tex.png"])
+    mesh = load_scan(ply).mesh
+    assert mesh.texture_path == (tmp_path / "tex.png").resolve()
+    _assert_corner_texcoords(mesh, V[F], tc)  # float32 in binary files
+
+
+@pytest.mark.parametrize("binary", [True, False])
+def test_ply_mixed_polygons_variable_lists(tmp_path, binary):
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0], [2, 1, 0]], float)
+    faces = [[0, 1, 2, 3], [1, 4, 5], [1, 5, 2]]
+    scan = load_scan(_write_ply(tmp_path / "p.ply", V, faces, binary=binary), min_faces=1)
+    assert scan.report.polygons_triangulated == 1
+    assert len(scan.mesh.faces) == 4
+
+
+@pytest.mark.parametrize("names", [("texture_u", "texture_v"), ("s", "t")])
+def test_ply_vertex_uv(tmp_path, names):
+    V, F = _grid()
+    uv = _uv_of(V)
+    _png(tmp_path / "t.png")
+    ply = _write_ply(tmp_path / "uv.ply", V, F.tolist(), vprops=[(names[0], "float"), (names[1], "float")],
+                     vextra=uv.tolist(), comments=["TextureFile t.png"])
+    mesh = load_scan(ply).mesh
+    np.testing.assert_allclose(mesh.texcoords, _uv_of(mesh.vertices[mesh.faces]), atol=1e-6)
+
+
+def test_ply_vertex_colours(tmp_path):
+    V, F = _grid()
+    cols = [[10, 20, 30]] * len(V)
+    ply = _write_ply(tmp_path / "c.ply", V, F.tolist(),
+                     vprops=[("red", "uchar"), ("green", "uchar"), ("blue", "uchar")], vextra=cols)
+    mesh = load_scan(ply).mesh
+    assert mesh.texcoords is None
+    np.testing.assert_array_equal(mesh.vertex_colors, np.tile([10, 20, 30, 255], (len(mesh.vertices), 1)))
+
+
+def test_ply_declared_units_and_override(tmp_path):
+    V, F = _grid()
+    ply = _write_ply(tmp_path / "u.ply", V, F.tolist(), comments=["units cm"])
+    assert load_scan(ply).mesh.units == "cm"
+    scan = load_scan(ply, units="m")
+    assert scan.mesh.units == "m" and any("declares units" in w for w in scan.report.warnings)
+
+
+# ------------------------------------------------------------------ STL, OFF, GLB
+
+
+def _trimesh_half_cylinder():
+    import trimesh
+
+    V, F = _grid()
+    return trimesh.Trimesh(V, F, process=False)
+
+
+def test_stl_soup_is_welded(tmp_path):
+    tm = _trimesh_half_cylinder()
+    tm.export(tmp_path / "h.stl")
+    scan = load_scan(tmp_path / "h.stl")
+    assert len(scan.mesh.vertices) == 20 and len(scan.mesh.faces) == 24
+    assert scan.report.duplicate_vertices_merged == 3 * 24 - 20
+    assert scan.report.kept_component_area_fractions == (1.0,)
+
+
+def test_off(tmp_path):
+    V, F = _grid()
+    lines = ["OFF", f"{len(V)} {len(F)} 0"] + [f"{x} {y} {z}" for x, y, z in V] + [f"3 {a} {b} {c}" for a, b, c in F]
+    (tmp_path / "h.off").write_text("\n".join(lines) + "\n")
+    scan = load_scan(tmp_path / "h.off", units="cm")
+    np.testing.assert_allclose(scan.mesh.vertices, V)  # true scale, no rescaling
+    assert scan.mesh.units == "cm"
+
+
+def test_glb_textured_via_trimesh(tmp_path):
+    import trimesh
+    from PIL import Image
+
+    V, F = _grid()
+    # split vertices per face, as glTF exporters do at seams
+    Vs, Fs = V[F].reshape(-1, 3), np.arange(3 * len(F)).reshape(-1, 3)
+    uv = _uv_of(Vs)
+    img = Image.new("RGB", (16, 16), (1, 2, 3))
+    tm = trimesh.Trimesh(Vs, Fs, process=False,
+                         visual=trimesh.visual.TextureVisuals(uv=uv, image=img))
+    tm.export(tmp_path / "h.glb")
+    scan = load_scan(tmp_path / "h.glb")
+    mesh = scan.mesh
+    assert mesh.units == "m"  # glTF is in metres by definition
+    assert len(mesh.vertices) == 20
+    np.testing.assert_allclose(mesh.texcoords, _uv_of(mesh.vertices[mesh.faces]), atol=1e-6)
+    assert mesh.texture_path.is_file()
+    assert load_scan(tmp_path / "h.glb", texture="ignore").mesh.texcoords is None
+
+
+# ------------------------------------------------------------------ real scans
+
+
+@pytest.mark.parametrize("name", ["plastic-vase.ply", "sea-vase.ply", "goblet.stl"])
+def test_real_scans_load_and_clean(name):
+    path = REAL / name
+    if not path.exists():
+        pytest.skip(f"{path} not present")
+    scan = load_scan(path)
+    r = scan.report
+    mesh = scan.mesh
+    assert mesh.units == "mm"
+    assert r.output_faces == (r.input_faces - r.degenerate_faces_removed - r.duplicate_faces_removed
+                              - r.faces_in_removed_components) == len(mesh.faces)
+    assert r.removed_area_fraction < 0.01  # only stray bits removed, the vessel intact
+    assert r.kept_component_area_fractions[0] > 0.95
+    assert r.orientation_conflicts == 0
+    import json
+
+    json.dumps(r.as_dict())
+    if name == "goblet.stl":  # closed, designed: nothing to repair, outward
+        import trimesh
+
+        assert r.boundary_loops == 0 and r.duplicate_vertices_merged > 0
+        assert trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).volume > 0
+    else:  # open scans with holes and stray fragments
+        assert r.boundary_loops > 1 and r.components_removed > 0
+
+
+def test_real_scan_inverted_is_turned_outward(tmp_path):
+    path = REAL / "sea-vase.ply"
+    if not path.exists():
+        pytest.skip(f"{path} not present")
+    import trimesh
+
+    tm = trimesh.load(path, process=False)
+    trimesh.Trimesh(tm.vertices, tm.faces[:, ::-1], process=False).export(tmp_path / "inv.ply")
+    a, b = load_scan(path), load_scan(tmp_path / "inv.ply")
+    assert b.report.components_reversed_outward == 1
+    np.testing.assert_allclose(b.mesh.vertices, a.mesh.vertices)
+    na = np.cross(*(a.mesh.vertices[a.mesh.faces[:, 1:]] - a.mesh.vertices[a.mesh.faces[:, :1]]).transpose(1, 0, 2))
+    nb = np.cross(*(b.mesh.vertices[b.mesh.faces[:, 1:]] - b.mesh.vertices[b.mesh.faces[:, :1]]).transpose(1, 0, 2))
+    assert np.einsum("ij,ij->i", na, nb).min() > 0  # same winding as the original
+
+
+# ------------------------------------------------------------------ options
+
+
+def test_units_option_validation(tmp_path):
+    obj, _, _ = _write_seam_obj(tmp_path)
+    assert load_scan(obj, units="cm").mesh.units == "cm"
+    with pytest.raises(InvalidOptionError, match="units"):
+        load_scan(obj, units="ft")
+    with pytest.raises(InvalidOptionError, match="texture"):
+        load_scan(obj, texture="maybe")
+    with pytest.raises(InvalidOptionError, match="max_texture_pixels"):
+        load_scan(obj, max_texture_pixels=0)
+    with pytest.raises(InvalidOptionError, match="min_faces"):
+        load_scan(obj, min_faces=0)
+    with pytest.raises(InvalidOptionError, match="min_component_fraction"):
+        load_scan(obj, min_component_fraction=2.0)
+    with pytest.raises(InvalidOptionError, match="tolerance"):
+        load_scan(obj, weld_tolerance=-1.0)
+
+
+def test_clean_false_only_welds(tmp_path):
+    obj, _, _ = _write_seam_obj(tmp_path)
+    scan = load_scan(obj, clean=False)
+    assert not scan.report.cleaned and scan.report.duplicate_vertices_merged == 4
+    assert len(scan.mesh.vertices) == 20
+
+
+# ------------------------------------------------------------------ bad input
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "nope.obj")
+    _one_line(e, "nope.obj", "does not exist")
+
+
+def test_directory(tmp_path):
+    (tmp_path / "d.obj").mkdir()
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "d.obj")
+    _one_line(e, "d.obj", "directory")
+
+
+def test_empty_file(tmp_path):
+    (tmp_path / "e.ply").write_bytes(b"")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "e.ply")
+    _one_line(e, "e.ply", "empty")
+
+
+def test_obj_without_faces(tmp_path):
+    (tmp_path / "pts.obj").write_text("v 0 0 0\nv 1 0 0\n")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "pts.obj")
+    _one_line(e, "pts.obj", "no faces")
+
+
+def test_unknown_extension(tmp_path):
+    (tmp_path / "s.xyz").write_text("1 2 3\n")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "s.xyz")
+    _one_line(e, "s.xyz", ".obj")
+
+
+@pytest.mark.parametrize("cut", [7, 200])
+def test_truncated_binary_ply(tmp_path, cut):
+    V, F = _grid()
+    ply = _write_ply(tmp_path / "t.ply", V, F.tolist(), truncate=cut)
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(ply)
+    _one_line(e, "t.ply", "truncated")
+
+
+def test_truncated_ascii_ply(tmp_path):
+    V, F = _grid()
+    ply = _write_ply(tmp_path / "t.ply", V, F.tolist(), binary=False)
+    ply.write_text(ply.read_text()[:-30])
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(ply)
+    _one_line(e, "t.ply", "truncated")
+
+
+def test_ply_header_errors(tmp_path):
+    (tmp_path / "a.ply").write_bytes(b"solid x\n")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "a.ply")
+    _one_line(e, "a.ply", "not a PLY")
+    (tmp_path / "b.ply").write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\n")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "b.ply")
+    _one_line(e, "b.ply", "end_header")
+    (tmp_path / "c.ply").write_bytes(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty quux x\nend_header\n1\n")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "c.ply")
+    _one_line(e, "c.ply", "header")
+
+
+def test_ply_point_cloud(tmp_path):
+    (tmp_path / "pc.ply").write_bytes(b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\n"
+                                      b"property float y\nproperty float z\nend_header\n0 0 0\n1 1 1\n")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "pc.ply")
+    _one_line(e, "pc.ply", "no faces")
+
+
+def test_ascii_ply_junk(tmp_path):
+    V, F = _grid()
+    ply = _write_ply(tmp_path / "j.ply", V, F.tolist(), binary=False)
+    ply.write_text(ply.read_text().replace("\n3 ", "\n3 x", 1))
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(ply)
+    _one_line(e, "j.ply", "not a number")
+
+
+@pytest.mark.parametrize("face", ["f 1 2 9", "f 1 2 0", "f -1 -2 -9", "f 1/7 2/1 3/1"])
+def test_obj_faces_point_at_missing_vertices(tmp_path, face):
+    (tmp_path / "m.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1 2 3\n" + face + "\n")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "m.obj")
+    _one_line(e, "m.obj", "do")
+
+
+def test_obj_bad_number(tmp_path):
+    (tmp_path / "n.obj").write_text("v 0 0 0\nv 1 0 zero\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "n.obj")
+    _one_line(e, "n.obj", "line 2")
+
+
+@pytest.mark.parametrize("bad", ["nan", "inf", "-inf"])
+def test_non_finite_coordinates_obj(tmp_path, bad):
+    V, F = _grid()
+    lines = [f"v {x} {y} {z}" for x, y, z in V] + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in F]
+    lines[3] = f"v 0 {bad} 1"
+    (tmp_path / "nan.obj").write_text("\n".join(lines) + "\n")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "nan.obj")
+    _one_line(e, "nan.obj", "NaN or infinite")
+
+
+def test_non_finite_coordinates_ply(tmp_path):
+    V, F = _grid()
+    V[2, 1] = np.inf
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(_write_ply(tmp_path / "inf.ply", V, F.tolist()))
+    _one_line(e, "inf.ply", "NaN or infinite")
+
+
+def test_single_triangle(tmp_path):
+    (tmp_path / "one.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "one.obj")
+    _one_line(e, "one.obj", "at least 4")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "one.obj", clean=False)
+    _one_line(e, "one.obj", "at least 4")
+
+
+def test_all_faces_degenerate(tmp_path):
+    lines = [f"v {i} {2 * i} 0" for i in range(6)] + ["f 1 2 3", "f 2 3 4", "f 4 5 6", "f 1 1 2", "f 1 3 6"]
+    (tmp_path / "flat.obj").write_text("\n".join(lines) + "\n")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "flat.obj")
+    _one_line(e, "flat.obj", "degenerate")
+
+
+def test_missing_texture_file(tmp_path):
+    obj, _, _ = _write_seam_obj(tmp_path)
+    (tmp_path / "atlas.png").unlink()
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(obj)
+    _one_line(e, "seam.obj", "atlas.png", "not found", "texture='ignore'")
+    scan = load_scan(obj, texture="ignore")
+    assert scan.mesh.texcoords is None and len(scan.mesh.vertices) == 20
+
+
+def test_missing_material_library(tmp_path):
+    obj, _, _ = _write_seam_obj(tmp_path, texture=False)
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(obj)
+    _one_line(e, "seam.obj", "seam.mtl", "not found")
+
+
+def test_corrupt_texture(tmp_path):
+    obj, _, _ = _write_seam_obj(tmp_path)
+    (tmp_path / "atlas.png").write_bytes(b"\x89PNG\r\n\x1a\n garbage, not an image")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(obj)
+    _one_line(e, "seam.obj", "atlas.png", "not a readable image")
+
+
+def test_texture_with_bad_crc(tmp_path):
+    obj, _, _ = _write_seam_obj(tmp_path)
+    png = bytearray((tmp_path / "atlas.png").read_bytes())
+    png[-20] ^= 0xFF  # damage the last chunks
+    (tmp_path / "atlas.png").write_bytes(bytes(png))
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(obj)
+    _one_line(e, "atlas.png", "not a readable image")
+
+
+def _chunk(kind: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+
+def test_texture_decompression_bomb(tmp_path):
+    obj, _, _ = _write_seam_obj(tmp_path)
+    ihdr = struct.pack(">IIBBBBB", 100_000, 100_000, 8, 0, 0, 0, 0)  # 10 gigapixels declared
+    png = b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", ihdr) + _chunk(b"IDAT", zlib.compress(b"\0" * 64)) + _chunk(b"IEND", b"")
+    (tmp_path / "atlas.png").write_bytes(png)
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(obj)
+    _one_line(e, "atlas.png", "100000 x 100000", "max_texture_pixels")
+    # the limit is configurable: a small genuine texture over a tiny limit is refused too
+    _png(tmp_path / "atlas.png", (64, 64))
+    with pytest.raises(InvalidInputError):
+        load_scan(obj, max_texture_pixels=100)
+    assert load_scan(obj).mesh.texture_path is not None
+
+
+def test_several_texture_images(tmp_path):
+    obj, _, _ = _write_seam_obj(tmp_path)
+    text = obj.read_text().splitlines()
+    k = next(i for i, ln in enumerate(text) if ln.startswith("f "))
+    text.insert(k + 3, "usemtl other")
+    obj.write_text("\n".join(text) + "\n")
+    (tmp_path / "seam.mtl").write_text("newmtl paint\nmap_Kd atlas.png\nnewmtl other\nmap_Kd b.png\n")
+    _png(tmp_path / "b.png")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(obj)
+    _one_line(e, "seam.obj", "2 texture images", "one texture atlas")
+    assert load_scan(obj, texture="ignore").mesh.texture_path is None
+
+
+def test_truncated_binary_stl(tmp_path):
+    _trimesh_half_cylinder().export(tmp_path / "h.stl")
+    data = (tmp_path / "h.stl").read_bytes()
+    (tmp_path / "h.stl").write_bytes(data[:-60])
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "h.stl")
+    _one_line(e, "h.stl", "truncated")
+
+
+def test_corrupt_glb(tmp_path):
+    (tmp_path / "x.glb").write_bytes(b"glTF\x02\x00\x00\x00garbage")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "x.glb")
+    _one_line(e, "x.glb")
