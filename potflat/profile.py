@@ -33,7 +33,7 @@ _AUTO_BIN_EDGES = 2.0
 _AUTO_BINS_MIN, _AUTO_BINS_MAX = 8, 1000
 #: Runs of at most this many empty bins between measured ones are interpolated.
 _MAX_GAP_BINS = 2
-#: Faces closer to the axis than this fraction of the largest radius count as base/floor.
+#: Faces reaching closer to the axis than this fraction of the largest radius count as base/floor.
 _NEAR_AXIS_FRACTION = 0.25
 
 
@@ -207,7 +207,7 @@ def vessel_profile(mesh: Mesh, axis_point, axis_direction, *, bins: int | None =
         out[name] = (_at_centres(centres, hmed, q50), (q75 - q25) / 1.349,
                      np.bincount(b, minlength=int(bins)).astype(np.int64))
     rmax = float(np.nanmax(np.r_[out["outer"][0], 0.0]))
-    near = use & (fr.radius < _NEAR_AXIS_FRACTION * rmax)
+    near = use & (r_v[mesh.faces].min(axis=1) < _NEAR_AXIS_FRACTION * rmax)
     base = near & (labels == OUTER) & (fr.n_axial < -0.5)
     floor = near & (labels == INNER) & (fr.n_axial > 0.5)
     return Profile(

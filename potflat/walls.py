@@ -266,14 +266,31 @@ def binned_median(h: np.ndarray, values: np.ndarray, weights: np.ndarray, edges:
     b = np.searchsorted(edges, h, side="right") - 1
     b[h == edges[-1]] = k - 1
     ok = (b >= 0) & (b < k) & (weights > 0)
-    rows = [_weighted_quantiles(b[ok], values[ok], weights[ok], k, quantiles)]
+    rows = [weighted_quantiles(b[ok], values[ok], weights[ok], k, quantiles)]
     if extra is not None:
-        rows.append(_weighted_quantiles(b[ok], extra[ok], weights[ok], k, (0.5,)))
+        rows.append(weighted_quantiles(b[ok], extra[ok], weights[ok], k, (0.5,)))
     total = np.bincount(b[ok], weights=weights[ok], minlength=k)
     return np.vstack(rows), total
 
 
-def _weighted_quantiles(b: np.ndarray, v: np.ndarray, w: np.ndarray, k: int, quantiles) -> np.ndarray:
+def weighted_quantiles(b: np.ndarray, v: np.ndarray, w: np.ndarray, k: int, quantiles) -> np.ndarray:
+    """Weighted quantiles of ``v`` per group.
+
+    Parameters
+    ----------
+    b : (s,) int64
+        Group of each sample, in ``[0, k)``.
+    v, w : (s,) float64
+        Values and positive weights.
+    k : int
+        Number of groups.
+    quantiles : sequence of float
+
+    Returns
+    -------
+    (len(quantiles), k) float64
+        NaN for empty groups.
+    """
     order = np.lexsort((v, b))
     b, v, w = b[order], v[order], w[order]
     cw = np.concatenate([[0.0], np.cumsum(w)])

@@ -128,8 +128,9 @@ def cup(n_theta=72, foot_ring=False):
     return revolve(rs, hs, n_theta, labels=lab[1:] + [None], jitter=0.3)
 
 
-def handle_tube(R=40.0, hc=50.0, loop=22.0, tube=4.0, n_path=48, n_ring=12, extend=0.25):
-    """A tube along a half loop in the meridian plane y = 0, ends buried inside radius R."""
+def handle_tube(R=40.0, hc=50.0, loop=22.0, tube=4.0, n_path=64, n_ring=12, extend=0.0):
+    """A tube along a half loop in the meridian plane y = 0 whose end rings touch radius R
+    (``extend`` > 0 buries the ends inside)."""
     phi = np.linspace(-extend, np.pi + extend, n_path)
     c = np.column_stack([R + loop * np.sin(phi), np.zeros_like(phi), hc + loop * np.cos(phi)])
     tang = np.gradient(c, axis=0)

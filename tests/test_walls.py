@@ -1,0 +1,196 @@
+"""Outer/inner wall separation (potflat.walls) on analytic shells with construction labels."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import _vessel_meshes as vm
+from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.types import Mesh
+from potflat.walls import INNER, OUTER, check_axis, largest_component, select_wall
+
+
+def _posed(V, F, seed=1, units="mm"):
+    Vp, p, a = vm.pose(V, seed=seed)
+    return Mesh(Vp, F, units=units), p, a
+
+
+def _assert_clean_split(outer, inner, L, outer_parts, inner_parts):
+    is_out = np.isin(L, outer_parts)
+    is_in = np.isin(L, inner_parts)
+    # the outer selection holds every outer face and no inner face, and vice versa
+    assert outer.face_mask[is_out].all()
+    assert not outer.face_mask[is_in].any()
+    assert inner.face_mask[is_in].all()
+    assert not inner.face_mask[is_out].any()
+    # the two walls never share a face
+    assert not (outer.face_mask & inner.face_mask).any()
+
+
+@pytest.mark.parametrize("foot_ring", [False, True])
+def test_cup_walls_match_construction(foot_ring):
+    V, F, L, _ = vm.cup(foot_ring=foot_ring)
+    mesh, p, a = _posed(V, F)
+    outer = select_wall(mesh, p, a)
+    inner = select_wall(mesh, p, a, side="inner")
+    _assert_clean_split(outer, inner, L, ["base", "ring", "outer"], ["inner", "floor"])
+    # the rim is split exactly once, at its crest: every rim face on one side, about half each
+    rim = L == "rim"
+    assert (outer.face_mask[rim] ^ inner.face_mask[rim]).all()
+    assert abs(outer.face_mask[rim].mean() - 0.5) < 0.1
+    assert outer.two_walled and inner.two_walled
+    assert len(outer.rim_faces) > 0 and np.isin(L[outer.rim_faces], ["rim"]).all()
+    assert outer.n_outer + outer.n_inner == len(F)
+    assert not outer.normals_inverted
+
+
+def test_cup_walls_with_noise():
+    V, F, L, _ = vm.cup(foot_ring=True, n_theta=96)
+    V = V + np.random.default_rng(5).normal(scale=0.3, size=V.shape)  # 10 % of the wall thickness
+    mesh, p, a = _posed(V, F, seed=2)
+    outer = select_wall(mesh, p, a)
+    inner = select_wall(mesh, p, a, side="inner")
+    _assert_clean_split(outer, inner, L, ["base", "ring", "outer"], ["inner", "floor"])
+
+
+def test_kylix_tondo_is_inner():
+    # shallow bowl on a stem: the whole interior incl. the tondo floor is the inner wall
+    rs = [0, 20, 20.5, 4, 4, 30, 62, 64, 63, 61, 30, 0]
+    hs = [0, 0, 1, 8, 30, 34, 45, 46.5, 47.5, 46.5, 37, 36]
+    crest = 8  # index of the rim crest point (63, 47.5)
+    r, h, lab = [], [], []
+    for i in range(len(rs) - 1):
+        r += list(np.linspace(rs[i], rs[i + 1], 6, endpoint=False))
+        h += list(np.linspace(hs[i], hs[i + 1], 6, endpoint=False))
+        lab += ["outer" if i < crest else "inner"] * 6
+    r.append(0.0)
+    h.append(36.0)
+    V, F, L, _ = vm.revolve(r, h, 72, labels=lab + [None])
+    mesh, p, a = _posed(V, F, seed=3)
+    outer = select_wall(mesh, p, a)
+    inner = select_wall(mesh, p, a, side="inner")
+    _assert_clean_split(outer, inner, L, ["outer"], ["inner"])
+
+
+def test_single_walled_vessel_is_all_outer():
+    V, F, _, _ = vm.open_vase()
+    mesh, p, a = _posed(V, F)
+    w = select_wall(mesh, p, a)
+    assert w.face_mask.all() and (w.labels == OUTER).all()
+    assert not w.two_walled and w.n_inner == 0 and len(w.rim_faces) == 0
+    json.dumps(w.summary())
+
+
+def test_inside_out_single_surface_is_read_flipped():
+    V, F, _, _ = vm.open_vase()
+    mesh, p, a = _posed(V, F[:, ::-1])
+    w = select_wall(mesh, p, a)
+    assert w.normals_inverted and w.face_mask.all()
+
+
+def test_inner_wall_requested_on_single_surface_raises():
+    V, F, _, _ = vm.open_vase()
+    mesh, p, a = _posed(V, F)
+    with pytest.raises(InvalidInputError, match="no inner wall"):
+        select_wall(mesh, p, a, side="inner")
+
+
+def test_sherd_shell_walls():
+    V, F, L = vm.sherd_shell(theta_span=np.deg2rad(70))
+    mesh, p, a = _posed(V, F, seed=4)
+    outer = select_wall(mesh, p, a)
+    inner = select_wall(mesh, p, a, side="inner")
+    _assert_clean_split(outer, inner, L, ["outer"], ["inner"])
+
+
+@pytest.mark.parametrize("span_deg", [60, 120])
+def test_open_sherd_patch_is_outer(span_deg):
+    h = np.linspace(10, 70, 31)
+    V, F, _, _ = vm.revolve(vm.vase_radius(h), h, 40, theta1=np.deg2rad(span_deg))
+    mesh, p, a = _posed(V, F)
+    w = select_wall(mesh, p, a)
+    assert w.face_mask.all()
+
+
+def test_holed_cup():
+    V, F, L, T = vm.cup()
+    tri_h = V[F][:, :, 2].mean(axis=1)
+    hole = (np.abs(T - 1.0) < 0.3) & (np.abs(tri_h - 30) < 8)  # a hole through the outer wall
+    mesh, p, a = _posed(V, F[~hole])
+    outer = select_wall(mesh, p, a)
+    inner = select_wall(mesh, p, a, side="inner")
+    _assert_clean_split(outer, inner, L[~hole], ["base", "outer"], ["inner", "floor"])
+
+
+def test_handle_inner_side_belongs_to_outer():
+    V, F, is_handle = vm.cylinder_with_handle()
+    mesh, p, a = _posed(V, F)
+    w = select_wall(mesh, p, a)
+    assert (w.labels[is_handle] == OUTER).all()  # the side of the handle facing the body too
+    # the handle is a separate component: the selection is the body
+    assert w.face_mask[~is_handle].all() and w.n_dropped == is_handle.sum()
+
+
+def test_deterministic():
+    V, F, _, _ = vm.cup(foot_ring=True)
+    mesh, p, a = _posed(V, F)
+    w1 = select_wall(mesh, p, a, side="inner")
+    w2 = select_wall(mesh, p, a, side="inner")
+    assert np.array_equal(w1.labels, w2.labels) and np.array_equal(w1.face_mask, w2.face_mask)
+
+
+def test_largest_component():
+    V, F, is_handle = vm.cylinder_with_handle()
+    mesh = Mesh(V, F)
+    keep = largest_component(mesh, np.ones(len(F), bool))
+    assert np.array_equal(keep, ~is_handle)
+    assert not largest_component(mesh, np.zeros(len(F), bool)).any()
+    with pytest.raises(InvalidInputError):
+        largest_component(mesh, np.ones(3, bool))
+
+
+def test_check_axis_normalises():
+    p, a = check_axis([1, 2, 3], [0, 0, 5])
+    assert np.allclose(a, [0, 0, 1]) and np.allclose(p, [1, 2, 3])
+
+
+@pytest.mark.parametrize("axis_point, axis_direction", [
+    ([0, 0, 0], [0, 0, 0]),          # zero length
+    ([0, 0, 0], [0, 0, 1e-15]),      # numerically zero
+    ([0, 0, np.nan], [0, 0, 1]),     # not finite
+    ([0, 0], [0, 0, 1]),             # wrong shape
+    ([0, 0, 0], [0, np.inf, 1]),
+])
+def test_bad_axis(axis_point, axis_direction):
+    V, F, _, _ = vm.open_vase(n_theta=16, n_h=5)
+    with pytest.raises(InvalidInputError):
+        select_wall(Mesh(V, F), axis_point, axis_direction)
+
+
+@pytest.mark.parametrize("kwargs", [{"side": "top"}, {"side": "Outer"}, {"side": None},
+                                    {"flat_tolerance": 0.0}, {"flat_tolerance": 1.0}])
+def test_bad_options(kwargs):
+    V, F, _, _ = vm.open_vase(n_theta=16, n_h=5)
+    with pytest.raises(InvalidOptionError):
+        select_wall(Mesh(V, F), [0, 0, 0], [0, 0, 1], **kwargs)
+
+
+def test_bad_mesh():
+    with pytest.raises(InvalidInputError):
+        select_wall("not a mesh", [0, 0, 0], [0, 0, 1])
+    with pytest.raises(InvalidInputError, match="no faces"):
+        select_wall(Mesh(np.zeros((3, 3)), np.zeros((0, 3), np.int64)), [0, 0, 0], [0, 0, 1])
+    with pytest.raises(InvalidInputError, match="non-finite"):
+        select_wall(Mesh(np.array([[0, 0, 0], [1, 0, 0], [0, np.nan, 0]]), [[0, 1, 2]]), [0, 0, 0], [0, 0, 1])
+
+
+def test_synthetic_vessels_if_available():
+    synthetic = pytest.importorskip("potflat.synthetic")
+    v = synthetic.make_vessel("cup", n_vertices=6000, texture_size=64)
+    outer = select_wall(v.mesh, v.axis_point, v.axis_direction)
+    inner = select_wall(v.mesh, v.axis_point, v.axis_direction, side="inner")
+    part = v.face_part
+    _assert_clean_split(outer, inner, part, [synthetic.PART_OUTER, synthetic.PART_BASE], [synthetic.PART_INNER])
+    assert set(np.unique(outer.labels)) == {OUTER, INNER}
