@@ -1,0 +1,349 @@
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from _revolve import cone, cylinder, revolve, vase
+from potflat.axis import _boundary_loops
+from potflat.distortion import face_distortion
+from potflat.errors import InvalidOptionError
+from potflat.io.stage import read_flat_ply
+from potflat.rollout import RolloutOptions, cut_open, rollout, run_rollout_stage
+from potflat.types import Mesh
+
+
+def _local(res, local, Rot):
+    """Local (unposed) coordinates of the output vertices, seen along the fitted axis.
+
+    Returns theta (counter-clockwise about the fitted axis), height along it, radius; an
+    open tube may be oriented either way, so local z and theta change sign with it.
+    """
+    p = local[res.vertex_index]
+    s = np.sign(res.axis.direction @ Rot[:, 2])
+    return s * np.arctan2(p[:, 1], p[:, 0]), s * p[:, 2], np.hypot(p[:, 0], p[:, 1])
+
+
+def _local_angle(res, Rot, angle_deg):
+    """Local angle (degrees, about local +z) of a direction given in degrees from the axis' reference."""
+    a = np.radians(angle_deg)
+    w = np.cos(a) * res.axis.reference + np.sin(a) * np.cross(res.axis.direction, res.axis.reference)
+    loc = Rot.T @ w
+    return np.degrees(np.arctan2(loc[1], loc[0])) % 360
+
+
+def _euler(faces):
+    e = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1), axis=0)
+    return len(np.unique(faces)) - len(e) + len(faces)
+
+
+def _areas(V, F):
+    return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+
+
+def _wrap(x):
+    return (x + np.pi) % (2 * np.pi) - np.pi
+
+
+def test_posed_cylinder_unrolls_exactly():
+    R0 = 30.0
+    mesh, Rot, _, local = cylinder(R=R0, seed=7)
+    res = rollout(mesh, proxy="cylinder")
+    th, z, _ = _local(res, local, Rot)
+    uv = res.flat.uv
+    assert np.isclose(res.proxy.params["radius"], R0, rtol=1e-12)
+    # the flat point of every vertex is (R theta, h): v is the height, u / R the angle
+    np.testing.assert_allclose(uv[:, 1], z - z.min(), atol=1e-9)
+    offset = _wrap(uv[:, 0] / R0 - th)
+    np.testing.assert_allclose(_wrap(offset - offset[0]), 0, atol=1e-10)
+    # the only distortion left is the faceting (chord vs arc), predicted edge by edge
+    F = res.flat.mesh.faces
+    e = np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1), axis=0)
+    dth = _wrap(th[e[:, 1]] - th[e[:, 0]])
+    dz = z[e[:, 1]] - z[e[:, 0]]
+    predicted = np.hypot(R0 * dth, dz) / np.hypot(2 * R0 * np.sin(dth / 2), dz) - 1
+    d = res.distortion
+    assert np.isclose(d.edge_rms, np.sqrt(np.mean(predicted**2)), rtol=1e-8)
+    assert d.flipped == 0
+    assert abs(d.scale - 1) < np.max(predicted) + 1e-12  # flat area = 3D area up to faceting
+
+
+def test_cylinder_distortion_is_only_faceting():
+    """Halving the angular step divides the rollout's edge error by about 4 (chord vs arc)."""
+    coarse = rollout(cylinder(seed=1, n_theta=48, n_t=12)[0], proxy="cylinder").distortion
+    fine = rollout(cylinder(seed=1, n_theta=96, n_t=12)[0], proxy="cylinder").distortion
+    assert 3.0 < coarse.edge_rms / fine.edge_rms < 5.0
+    assert fine.area_max_abs_log < 1e-3 and fine.flipped == 0
+
+
+@pytest.mark.parametrize("r0,r1", [(40.0, 20.0), (20.0, 45.0)])
+def test_posed_cone_unrolls_exactly(r0, r1):
+    H = 60.0
+    mesh, Rot, shift, local = cone(r0, r1, H, seed=8, cap=False)
+    res = rollout(mesh, proxy="cone")
+    p = res.proxy.params
+    # every vertex keeps its exact distance from the apex, and the angle at the apex is
+    # the angle about the axis times sin(alpha): the isometric development
+    apex_local = np.array([0, 0, -r0 * H / (r1 - r0)])
+    th, z, _ = _local(res, local, Rot)
+    slant = np.linalg.norm(local[res.vertex_index] - apex_local, axis=1)
+    mid = np.radians(p["bisector_deg"])
+    apex_uv = np.array([p["reference_radius"] * mid, p["reference_height"] - p["reference_radius"] / p["generator"][1]])
+    d = res.flat.uv - apex_uv
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), slant, rtol=1e-9)
+    sin_a = abs(r1 - r0) / np.hypot(r1 - r0, H)
+    assert np.isclose(np.sin(np.radians(p["half_angle_deg"])), sin_a, rtol=1e-9)
+    ang = np.arctan2(d[:, 0], np.sign(p["generator"][1]) * d[:, 1])
+    offset = _wrap(ang / sin_a - th)
+    np.testing.assert_allclose(_wrap(offset - offset[0]), 0, atol=1e-9)
+    assert res.distortion.flipped == 0 and res.distortion.edge_rms < 1e-3
+
+
+def test_no_face_is_lost_and_the_mesh_becomes_a_disk():
+    mesh, *_ = vase(seed=2)
+    res = rollout(mesh)
+    fm = res.flat.mesh
+    assert len(fm.faces) == len(mesh.faces) == res.region.faces
+    np.testing.assert_array_equal(np.sort(res.face_index), np.arange(len(mesh.faces)))
+    # same triangles, same 3D corners, same area
+    np.testing.assert_array_equal(fm.vertices[fm.faces], mesh.vertices[mesh.faces[res.face_index]])
+    assert np.isclose(_areas(fm.vertices, fm.faces).sum(), _areas(mesh.vertices, mesh.faces).sum(), rtol=1e-14)
+    # the cut: one copy per seam vertex (one per row of the grid), a disk with one boundary
+    assert res.seam_vertices == 25 and res.split_vertices == 0 and res.region.cut
+    assert len(fm.vertices) == len(mesh.vertices) + res.seam_vertices
+    assert _euler(fm.faces) == 1
+    assert len(_boundary_loops(fm)) == 1
+    # the two copies of a seam vertex are one turn apart
+    v, counts = np.unique(res.vertex_index, return_counts=True)
+    twins = v[counts == 2]
+    assert len(twins) == 25
+    u = res.flat.uv[:, 0]
+    for t in twins[:5]:
+        a, b = np.flatnonzero(res.vertex_index == t)
+        assert abs(abs(u[a] - u[b]) - 2 * np.pi * res.proxy.params["reference_radius"]) < 0.3 * abs(u[a] - u[b])
+
+
+def test_upright_and_not_mirrored():
+    mesh, Rot, shift, local = vase(seed=3, cap=True)  # closed foot: mouth known to be +z local
+    res = rollout(mesh, band=(0.03, 1.0), proxy="cylinder")
+    th, z, _ = _local(res, local, Rot)
+    uv = res.flat.uv
+    assert res.axis.direction @ Rot[:, 2] > 0.999
+    assert np.corrcoef(uv[:, 1], z)[0, 1] > 0.999  # higher on the vessel = higher in the image
+    F = res.flat.mesh.faces
+    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    dth = _wrap(th[e[:, 1]] - th[e[:, 0]])
+    du = uv[e[:, 1], 0] - uv[e[:, 0], 0]
+    big = np.abs(dth) > 1e-3
+    assert np.all(np.sign(du[big]) == np.sign(dth[big]))  # larger angle (CCW) = further right
+    fd = face_distortion(res.flat.mesh.vertices, uv, F)
+    assert np.all(fd.area_2d > 0)
+    assert res.distortion.flipped == 0
+
+
+def test_band_and_angles_select_faces_by_centroid():
+    mesh, Rot, shift, local = cylinder(seed=5, n_theta=72)
+    res = rollout(mesh, band=(0.25, 0.5), angles=(-40.0, 70.0), seam=200.0, proxy="cylinder")
+    c = local[mesh.faces].mean(axis=1)
+    s = np.sign(res.axis.direction @ Rot[:, 2])
+    rel = s * (np.degrees(np.arctan2(c[:, 1], c[:, 0])) - _local_angle(res, Rot, 200.0))
+    rel = (rel + 40.0) % 360.0 - 40.0
+    frac = c[:, 2] / 80.0 if s > 0 else 1 - c[:, 2] / 80.0
+    expect = np.flatnonzero((frac >= 0.25) & (frac <= 0.5) & (rel <= 70.0))
+    np.testing.assert_array_equal(res.face_index, expect)
+    assert not res.region.cut and res.seam_vertices == 0
+    lo, hi = res.region.theta_range_deg
+    assert -45 < lo < -35 and 65 < hi < 75
+    assert res.region.angles_deg == (-40.0, 70.0) and res.seam_method == "user"
+    assert np.isclose(res.seam_angle, 200.0)
+    # u = R * angle from the seam: the requested range maps to [-40, 70] degrees of arc
+    u = res.flat.uv[:, 0] / res.proxy.params["radius"]
+    assert -45 < np.degrees(u.min()) < -35 and 65 < np.degrees(u.max()) < 75
+
+
+def test_sherd_is_not_cut():
+    mesh, *_ = vase(seed=4, theta_range=(0.5, 2.5))
+    res = rollout(mesh)
+    assert res.seam_method == "gap" and not res.region.cut and res.seam_vertices == 0
+    assert len(res.flat.mesh.vertices) == len(mesh.vertices)
+    assert _euler(res.flat.mesh.faces) == 1 and res.distortion.flipped == 0
+    span = res.region.theta_range_deg[1] - res.region.theta_range_deg[0]
+    assert np.isclose(span, np.degrees(2.0), atol=1.0)
+
+
+def test_user_seam_across_a_sherd_does_not_cut_it():
+    mesh, Rot, _, _ = cylinder(seed=4, theta_range=(0.5, 2.5))
+    first = rollout(mesh)
+    mid = (first.seam_angle + 180.0) % 360.0  # through the middle of the sherd
+    res = rollout(mesh, seam=mid)
+    assert res.seam_vertices == 0 and _euler(res.flat.mesh.faces) == 1
+    lo, hi = res.region.theta_range_deg
+    assert lo < 0 < hi  # angles measured from the seam, on both sides of it
+
+
+def test_holes_stay_holes():
+    holes = [(1.0, 1.6, 0.3, 0.6), (4.0, 4.3, 0.1, 0.9)]
+    mesh, Rot, _, _ = cylinder(seed=6, holes=holes)
+    res = rollout(mesh)
+    assert len(res.flat.mesh.faces) == len(mesh.faces)
+    assert res.distortion.flipped == 0 and res.proxy.kind == "cylinder"
+    # the automatic seam runs through the long hole (least to cut): one hole is left inside
+    assert 4.0 < np.radians(_local_angle(res, Rot, res.seam_angle)) < 4.3
+    assert _euler(res.flat.mesh.faces) == 0
+    # a seam away from both holes keeps both as holes
+    turn = np.degrees(2.8) - _local_angle(res, Rot, res.seam_angle)  # to local angle 2.8 rad
+    kept = rollout(mesh, seam=(res.seam_angle + np.sign(res.axis.direction @ Rot[:, 2]) * turn) % 360)
+    assert np.isclose(np.radians(_local_angle(kept, Rot, kept.seam_angle)), 2.8)
+    assert _euler(kept.flat.mesh.faces) == 1 - len(holes)
+    assert len(_boundary_loops(kept.flat.mesh)) == 1 + len(holes)
+
+
+def test_seam_goes_where_the_painting_is_plain():
+    mesh, Rot, shift, local = cylinder(seed=9, n_theta=90)
+    th = np.arctan2(local[:, 1], local[:, 0]) % (2 * np.pi)
+    rng = np.random.default_rng(0)
+    colors = rng.integers(0, 255, (len(th), 3))
+    plain = (th > np.radians(100)) & (th < np.radians(150))
+    colors[plain] = 128
+    res = rollout(mesh.replace(vertex_colors=colors))
+    assert res.seam_method == "colours"
+    assert 105 < _local_angle(res, Rot, res.seam_angle) < 145
+
+
+def test_seam_from_the_texture(tmp_path):
+    import cv2
+
+    mesh, Rot, shift, local = cylinder(seed=9, n_theta=90)
+    th = np.arctan2(local[:, 1], local[:, 0]) % (2 * np.pi)
+    tc = np.stack([th / (2 * np.pi), local[:, 2] / 80.0], axis=1)[mesh.faces]
+    # seam faces (spanning 0/2pi) get consistent texture u
+    tc[..., 0] = np.where(tc[..., 0].max(axis=1, keepdims=True) - tc[..., 0] > 0.5, tc[..., 0] + 1, tc[..., 0]) % 1.0
+    img = np.random.default_rng(1).integers(0, 255, (256, 1024, 3), dtype=np.uint8)
+    img[:, int(1024 * 200 / 360):int(1024 * 250 / 360)] = 90
+    tex = tmp_path / "atlas.png"
+    cv2.imwrite(str(tex), img)
+    res = rollout(mesh.replace(texcoords=tc, texture_path=tex))
+    assert res.seam_method == "texture"
+    assert 203 < _local_angle(res, Rot, res.seam_angle) < 247
+    np.testing.assert_array_equal(res.flat.mesh.texcoords, tc[res.face_index])
+
+
+def test_ortho_cutout_is_seen_face_on():
+    mesh, Rot, shift, local = cylinder(seed=2)
+    res = rollout(mesh, proxy="ortho", angles=(-30.0, 30.0), band=(0.2, 0.8), seam=90.0)
+    assert res.proxy.kind == "ortho" and res.seam_vertices == 0
+    assert res.distortion.flipped == 0 and res.distortion.scale < 1.0
+    other = np.cross(res.axis.direction, res.axis.reference)
+    centre = np.cos(np.pi / 2) * res.axis.reference + np.sin(np.pi / 2) * other
+    assert np.asarray(res.proxy.params["view"]) @ centre > 0.99
+    custom = rollout(mesh, proxy="ortho", angles=(-30.0, 30.0), seam=90.0, view=tuple(2 * centre))
+    np.testing.assert_allclose(custom.proxy.params["view"], centre, atol=1e-12)
+
+
+def test_manual_axis_option():
+    mesh, Rot, shift, _ = cone(seed=1)
+    res = rollout(mesh, axis=(*shift, *(-Rot[:, 2])), flip=True)
+    assert res.axis.method == "manual"
+    np.testing.assert_allclose(res.axis.direction, Rot[:, 2], atol=1e-12)
+    assert res.proxy.kind == "cone" and res.distortion.edge_rms < 1e-3
+
+
+def test_rollout_is_deterministic():
+    mesh, *_ = vase(seed=11)
+    a, b = rollout(mesh), rollout(mesh)
+    assert np.array_equal(a.flat.uv, b.flat.uv) and np.array_equal(a.flat.mesh.faces, b.flat.mesh.faces)
+
+
+def test_cut_open_splits_only_disagreeing_corners():
+    # two triangles sharing edge (1, 2); vertex 1 seen one turn apart by the two faces
+    faces = np.array([[0, 1, 2], [2, 1, 3]])
+    theta = np.array([[0.1, 0.2, 0.15], [0.15, 0.2 + 2 * np.pi, 0.3]])
+    new_faces, vidx, th, seam, split = cut_open(faces, theta)
+    assert seam == 1 and split == 0 and len(vidx) == 5
+    np.testing.assert_array_equal(vidx, [0, 1, 1, 2, 3])
+    assert new_faces[0, 1] != new_faces[1, 1] and new_faces[0, 2] == new_faces[1, 0]
+    # a bow-tie vertex (two fans touching at vertex 0) becomes one vertex per fan
+    bow = np.array([[0, 1, 2], [0, 3, 4]])
+    _, vidx, _, seam, split = cut_open(bow, np.zeros((2, 3)))
+    assert seam == 0 and split == 1 and len(vidx) == 6
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"units": "furlong"}, "units"),
+    ({"proxy": "cyl"}, "proxy"),
+    ({"axis": (0, 0, 0, 1)}, "6 finite"),
+    ({"axis": (0, 0, 0, 0, 0, 0)}, "zero"),
+    ({"axis": (0, 0, 0, 0, 0, float("nan"))}, "6 finite"),
+    ({"seam": float("inf")}, "seam"),
+    ({"seam": "north"}, "seam"),
+    ({"band": (0.6, 0.2)}, "band"),
+    ({"band": (-0.1, 0.5)}, "band"),
+    ({"band": (0.1,)}, "band"),
+    ({"angles": (60, -60)}, "angles"),
+    ({"angles": (0, 400)}, "angles"),
+    ({"view": (0, 0, 0), "proxy": "ortho"}, "zero"),
+    ({"view": (1, 0, 0)}, "ortho"),
+    ({"view": (1, 0), "proxy": "ortho"}, "view"),
+])
+def test_options_are_validated(kwargs, match):
+    with pytest.raises(InvalidOptionError, match=match):
+        RolloutOptions(**kwargs)
+
+
+def test_options_or_keywords_not_both_and_empty_region():
+    mesh, *_ = cylinder()
+    with pytest.raises(InvalidOptionError, match="not both"):
+        rollout(mesh, options=RolloutOptions(), proxy="cone")
+    with pytest.raises(InvalidOptionError, match="select no faces"):
+        rollout(mesh, angles=(0.0, 1e-6), band=(0.0, 1e-6))
+
+
+def test_options_as_dict_round_trip():
+    opts = RolloutOptions(proxy="cone", axis=(0, 0, 0, 0, 0, 1), band=(0.1, 0.9), seam=10)
+    d = opts.as_dict()
+    assert d["axis"] == [0, 0, 0, 0, 0, 1] and d["band"] == [0.1, 0.9] and d["seam"] == 10.0
+    assert RolloutOptions(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}) == opts
+
+
+def test_run_rollout_stage_writes_ply_and_json(tmp_path):
+    mesh, *_ = vase(seed=1, colors=True)
+    scan = tmp_path / "pot.ply"
+    trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_colors=mesh.vertex_colors, process=False).export(scan)
+    out = run_rollout_stage(scan, tmp_path / "out", RolloutOptions(band=(0.1, 0.9)))
+    ply, js = out.paths["ply"], out.paths["json"]
+    assert ply == tmp_path / "out" / "pot.rollout.ply" and js.name == "pot.rollout.json"
+    data = json.loads(js.read_text())
+    assert data == json.loads(json.dumps(out.summary))
+    for key in ("axis", "proxy", "seam", "region", "units", "counts", "cleaning", "distortion", "provenance"):
+        assert key in data
+    assert np.isclose(np.linalg.norm(data["axis"]["direction"]), 1.0)
+    assert data["region"]["band"] == [0.1, 0.9] and data["units"] == "mm"
+    assert data["provenance"]["options"]["band"] == [0.1, 0.9]
+    flat = read_flat_ply(ply)
+    assert len(flat.mesh.faces) == data["counts"]["faces"]
+    assert len(flat.mesh.vertices) == data["counts"]["vertices"]
+    assert flat.mesh.vertex_colors is not None
+    d = face_distortion(flat.mesh.vertices, flat.uv, flat.mesh.faces)
+    assert np.count_nonzero(d.area_2d <= 0) == data["distortion"]["flipped"]
+    assert not list((tmp_path / "out").glob("*.part"))
+
+
+def test_run_rollout_stage_refuses_to_overwrite_its_input(tmp_path):
+    mesh, *_ = cylinder()
+    scan = tmp_path / "pot.rollout.ply"
+    trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).export(scan)
+    before = scan.read_bytes()
+    with pytest.raises(InvalidOptionError, match="overwrite the input"):
+        run_rollout_stage(scan, tmp_path, name="pot")
+    assert scan.read_bytes() == before
+    with pytest.raises(InvalidOptionError, match="plain file stem"):
+        run_rollout_stage(scan, tmp_path, name="a/b")
+
+
+@pytest.mark.skipif(not Path("/work/shared/data/real/goblet.stl").exists(), reason="shared real scans absent")
+def test_real_goblet_band_rolls_out(tmp_path):
+    out = run_rollout_stage("/work/shared/data/real/goblet.stl", tmp_path)
+    s = out.summary
+    assert s["counts"]["faces"] == s["cleaning"]["output_faces"]
+    assert s["axis"]["direction"][2] > 0.999
