@@ -1,0 +1,120 @@
+"""Attachment detection (potflat.attachments): handles flagged, clean vessels untouched."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import _vessel_meshes as vm
+from potflat.attachments import detect_attachments
+from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.types import Mesh
+
+
+def _posed(V, F, seed=1):
+    Vp, p, a = vm.pose(V, seed=seed)
+    return Mesh(Vp, F), p, a
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.15])
+def test_handle_tube_is_flagged(noise):
+    V, F, is_handle = vm.cylinder_with_handle(noise=noise)
+    mesh, p, a = _posed(V, F)
+    att = detect_attachments(mesh, p, a)
+    recall = att.face_mask[is_handle].mean()
+    false_pos = att.face_mask[~is_handle].mean()
+    assert recall > 0.95, recall
+    assert false_pos < 0.01, false_pos
+    assert len(att.components) == 1
+    c = att.components[0]
+    # the loop spans heights 50 +- 22 plus the tube radius 4 (heights from the foot at 0)
+    assert 22 <= c.height_min < 30 and 70 < c.height_max <= 78
+    assert c.n_faces == att.n_faces and c.area > 0 and c.max_offset > 20
+    json.dumps(att.summary())
+
+
+def test_handle_root_painting_stays():
+    # every body face keeps its place, also the ring where the handle meets the wall
+    V, F, is_handle = vm.cylinder_with_handle()
+    mesh, p, a = _posed(V, F, seed=3)
+    att = detect_attachments(mesh, p, a)
+    assert not att.face_mask[~is_handle].any()
+    # unflagged handle faces are only those touching the wall (offset of a corner ~ 0)
+    missed = is_handle & ~att.face_mask
+    assert (np.nanmin(att.vertex_offset[F[missed]], axis=1) <= att.offset_threshold).all()
+
+
+@pytest.mark.parametrize("builder", ["cylinder", "vase", "cup", "sherd"])
+def test_clean_vessels_with_noise_have_no_attachments(builder):
+    rng = np.random.default_rng(11)
+    if builder == "cylinder":
+        V, F, is_handle = vm.cylinder_with_handle(noise=0.3)
+        keep = ~is_handle
+        V, F = V, F[keep]
+    elif builder == "vase":
+        V, F, _, _ = vm.open_vase()
+        V = V + rng.normal(scale=0.2, size=V.shape)
+    elif builder == "cup":
+        V, F, _, _ = vm.cup(foot_ring=True)  # two walls, foot ring, flat base and floor
+        V = V + rng.normal(scale=0.2, size=V.shape)
+    else:
+        V, F, _ = vm.sherd_shell(theta_span=np.deg2rad(60))
+        V = V + rng.normal(scale=0.1, size=V.shape)
+    mesh, p, a = _posed(V, F, seed=2)
+    att = detect_attachments(mesh, p, a)
+    assert att.n_faces == 0 and att.components == ()
+
+
+def test_holed_body_with_handle():
+    V, F, is_handle = vm.cylinder_with_handle()
+    zc = V[F][:, :, 2].mean(axis=1)
+    ang = np.arctan2(V[F][:, :, 1].mean(axis=1), V[F][:, :, 0].mean(axis=1))
+    hole = ~is_handle & (np.abs(ang - 2.0) < 0.5) & (np.abs(zc - 50) < 20)
+    mesh, p, a = _posed(V, F[~hole])
+    att = detect_attachments(mesh, p, a)
+    kept_handle = is_handle[~hole]
+    assert att.face_mask[kept_handle].mean() > 0.95
+    assert not att.face_mask[~kept_handle].any()
+
+
+def test_explicit_tolerance_is_used():
+    V, F, is_handle = vm.cylinder_with_handle()
+    mesh, p, a = _posed(V, F)
+    att = detect_attachments(mesh, p, a, tolerance=3.0)
+    assert att.tolerance == 3.0
+    assert att.face_mask[is_handle].mean() > 0.95 and not att.face_mask[~is_handle].any()
+
+
+def test_deterministic():
+    V, F, _ = vm.cylinder_with_handle(noise=0.1)
+    mesh, p, a = _posed(V, F)
+    a1 = detect_attachments(mesh, p, a)
+    a2 = detect_attachments(mesh, p, a)
+    assert np.array_equal(a1.face_mask, a2.face_mask)
+    assert np.array_equal(a1.vertex_offset, a2.vertex_offset, equal_nan=True)
+
+
+@pytest.mark.parametrize("kwargs", [{"tolerance": 0.0}, {"tolerance": -1.0}, {"tolerance": float("nan")},
+                                    {"tolerance": "2"}, {"coverage_ratio": 0.0}, {"coverage_ratio": 1.0},
+                                    {"coverage_ratio": True}])
+def test_bad_options(kwargs):
+    V, F, _, _ = vm.open_vase(n_theta=16, n_h=5)
+    with pytest.raises(InvalidOptionError):
+        detect_attachments(Mesh(V, F), [0, 0, 0], [0, 0, 1], **kwargs)
+
+
+def test_bad_axis():
+    V, F, _, _ = vm.open_vase(n_theta=16, n_h=5)
+    with pytest.raises(InvalidInputError):
+        detect_attachments(Mesh(V, F), [0, 0, 0], [0, 0, 0])
+
+
+def test_synthetic_handles_if_available():
+    synthetic = pytest.importorskip("potflat.synthetic")
+    v = synthetic.make_vessel("amphora", n_vertices=8000, texture_size=64, handles=True)
+    att = detect_attachments(v.mesh, v.axis_point, v.axis_direction)
+    handle = v.face_part == synthetic.PART_HANDLE
+    assert att.face_mask[handle].mean() > 0.85
+    assert att.face_mask[~handle].mean() < 0.001
+    assert len(att.components) == 2
