@@ -12,9 +12,11 @@ each action, for the JSON sidecars:
    components are all kept and reported: two vessels, or two walls, are decided later);
 4. count non-manifold edges and vertices and, by default, split them (each fan of faces
    gets its own copy of the vertex; no face is removed);
-5. orient faces consistently per component, outward (normals point away from the
-   component's centroid on average: exact for closed shells, where this flux is 3x the
-   volume, and right for open surfaces of revolution, bowls and sherds);
+5. orient faces consistently per component (keeping the file's majority orientation) and
+   outward: the largest component's normals must point away from its centroid on average
+   (exact for closed shells, where this flux is 3x the volume, and right for open surfaces
+   of revolution, bowls and sherds); other components keep their orientation relative to
+   it (a separate inner wall keeps facing the axis);
 6. count boundary loops (holes and open rims) and drop unreferenced vertices.
 """
 from __future__ import annotations
@@ -65,7 +67,7 @@ class CleaningReport:
     faces_reoriented : int
         Faces whose winding was reversed (consistency and outward orientation).
     components_reversed_outward : int
-        Components turned over so that their normals point outward.
+        Components turned over because the largest one pointed inward (all of them are).
     boundary_edges, boundary_loops : int
         Open edges and the loops they form (holes, rims, the missing base).
     unreferenced_vertices_removed : int
@@ -303,6 +305,34 @@ def _boundary_loops(F: np.ndarray, n: int, topo: _Topology, split: bool) -> tupl
     return nb, len(np.unique(label[a]))
 
 
+def _outward_flips(mesh: Mesh, cross: np.ndarray, area2: np.ndarray, flip: np.ndarray,
+                   comp: np.ndarray) -> tuple[np.ndarray, int]:
+    """Faces to reverse for a consistent, outward orientation, and components reversed.
+
+    ``flip`` (from :func:`propagate_orientation`) makes each component consistent relative
+    to its first face; each component then takes the orientation of the (area) majority of
+    its faces in the file, so a scanner's orientation is kept where it is consistent. The
+    largest component is turned outward when its normals point, on average, towards its
+    centroid (the flux ``sum(area * n . (x - c))``, 3x the volume for a closed shell); the
+    other components follow the same decision, so the relative orientation in the file is
+    kept (a separate inner wall keeps facing the axis).
+    """
+    ncomp = int(comp.max()) + 1
+    weight = np.bincount(comp, weights=area2, minlength=ncomp)
+    agree = np.bincount(comp, weights=np.where(flip, -area2, area2), minlength=ncomp)
+    flip = flip ^ (agree < 0)[comp]
+    main = int(np.argmax(weight))
+    sel = comp == main
+    centroid = mesh.vertices[mesh.faces[sel]].mean(axis=1)
+    c = (area2[sel, None] * centroid).sum(axis=0) / max(weight[main], np.finfo(float).tiny)
+    sign = np.where(flip[sel], -1.0, 1.0)
+    flux = float((sign * np.einsum("ij,ij->i", cross[sel], centroid - c)).sum())
+    scale = float((area2[sel] * np.linalg.norm(centroid - c, axis=1)).sum())
+    if flux < -1e-6 * scale:  # clearly inward (a flat patch stays as it is)
+        return ~flip, ncomp
+    return flip, 0
+
+
 def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fraction: float = 0.01,
                split_nonmanifold: bool = True, orient: bool = True,
                min_faces: int = 4) -> tuple[Mesh, CleaningReport]:
@@ -392,17 +422,7 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
     n_reoriented = 0
     reversed_out = 0
     if orient:
-        flip = flip.astype(bool)
-        ncomp = int(comp.max()) + 1
-        centroid = mesh.vertices[mesh.faces].mean(axis=1)
-        weight = np.bincount(comp, weights=area2, minlength=ncomp)
-        c = np.stack([np.bincount(comp, weights=area2 * centroid[:, k], minlength=ncomp) for k in range(3)], 1)
-        c /= np.maximum(weight, np.finfo(float).tiny)[:, None]
-        sign = np.where(flip, -1.0, 1.0)
-        flux = np.bincount(comp, weights=sign * np.einsum("ij,ij->i", cross, centroid - c[comp]), minlength=ncomp)
-        outward_flip = flux < 0
-        reversed_out = int(outward_flip.sum())
-        total_flip = flip ^ outward_flip[comp]
+        total_flip, reversed_out = _outward_flips(mesh, cross, area2, flip.astype(bool), comp)
         n_reoriented = int(np.count_nonzero(total_flip))
         mesh = _reverse_faces(mesh, total_flip)
         if conflicts:

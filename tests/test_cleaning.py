@@ -238,6 +238,31 @@ def test_open_cylinder_inward_is_turned_outward_with_texcoords():
     assert r_kept.faces_reoriented == 0 and (_radial_outward(mesh_kept) < 0).all()
 
 
+def test_separate_inner_wall_keeps_facing_the_axis():
+    """Two walls as separate components (rim not scanned): the file's relative orientation
+    is kept (the inner wall faces the axis), and a globally inverted file is turned over."""
+    Vo, Fo = _cylinder()
+    Vi, Fi = _cylinder(r=0.9)
+    Fi = Fi[:, [0, 2, 1]]  # the inner wall's outside (of the material) faces the axis
+    V = np.concatenate([Vo, Vi])
+    F = np.concatenate([Fo, Fi + len(Vo)])
+    for faces, reversed_ in ((F, 0), (F[:, [0, 2, 1]], 2)):
+        mesh, r = clean_mesh(Mesh(V, faces, texcoords=_pos_texcoords(V, faces)))
+        assert r.components_reversed_outward == reversed_
+        radial = _radial_outward(mesh)
+        outer = np.linalg.norm(mesh.vertices[mesh.faces].mean(1)[:, :2], axis=1) > 0.95
+        assert (radial[outer] > 0).all() and (radial[~outer] < 0).all()
+        _check_alignment(mesh)
+
+
+def test_majority_orientation_of_the_file_is_kept():
+    V, F = _cylinder()
+    G = F.copy()
+    G[:5] = G[:5, [0, 2, 1]]  # a few faces wound the wrong way: those are the ones fixed
+    _, r = clean_mesh(Mesh(V, G))
+    assert r.faces_reoriented == 5 and r.components_reversed_outward == 0
+
+
 def test_closed_sphere_outward_and_hole_counted():
     import trimesh
 
