@@ -213,8 +213,9 @@ class _Grid:
 
 
 def _make_grid(flat: FlatMesh, px_per_mm: float, max_megapixels: float) -> _Grid:
-    used = np.unique(flat.mesh.faces)
-    if not len(used):
+    used = np.zeros(len(flat.uv), bool)
+    used[flat.mesh.faces.ravel()] = True
+    if not used.any():
         raise InvalidInputError(f"{flat.mesh.source or 'the mesh'} has no faces to bake; check the stage file")
     uv = flat.uv[used]
     lo, hi = uv.min(axis=0), uv.max(axis=0)
@@ -228,23 +229,6 @@ def _make_grid(flat: FlatMesh, px_per_mm: float, max_megapixels: float) -> _Grid
             f"over the {max_megapixels:g} MP limit); use px_per_mm {suggest:.3g} or less")
     origin = np.array([lo[0] - PAD_PX / scale, hi[1] + PAD_PX / scale])
     return _Grid(px_per_mm, scale, origin, width, height)
-
-
-def _reduce(values: np.ndarray, covered: np.ndarray, n: int) -> np.ndarray:
-    """Mean of the covered sub-samples of each pixel; NaN where none is covered.
-
-    values : (k n, w n, c) float32 (NaN where not covered); covered : (k n, w n) bool.
-    Returns (k, w, c) float32.
-    """
-    if n == 1:
-        return values
-    kn, wn, c = values.shape
-    k, w = kn // n, wn // n
-    total = np.where(covered[..., None], values, 0.0).reshape(k, n, w, n, c).sum(axis=(1, 3), dtype=np.float32)
-    count = covered.reshape(k, n, w, n).sum(axis=(1, 3))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        out = total / count[..., None].astype(np.float32)
-    return out
 
 
 class _Renderer:
@@ -277,7 +261,7 @@ class _Renderer:
             while n > 1 and g.width * g.height * n * n > AUTO_SUPERSAMPLE_BUDGET:
                 n -= 1
         self.n = n
-        self.levels = None
+        self.mip_levels = 0
         self.lod = None
         if self.texture is not None:
             self._build_mips()
@@ -310,21 +294,23 @@ class _Renderer:
         return ratio
 
     def _build_mips(self) -> None:
+        """Mip levels (area-averaged halvings) down to the coarsest level any face needs."""
         import cv2
-        from numba.typed import List
 
         lod = np.log2(np.maximum(self.texels_per_pixel / self.n, 1.0))
         top = int(math.ceil(min(np.max(lod), math.log2(max(min(self.texture.shape[:2]), 1)))))
-        levels = List()
-        levels.append(self.texture)
-        cur = self.texture
+        levels, cur = [], self.texture
         for _ in range(top):
             h, w = cur.shape[:2]
             cur = cv2.resize(cur, (max(1, (w + 1) // 2), max(1, (h + 1) // 2)), interpolation=cv2.INTER_AREA)
-            if cur.ndim == 2:
-                cur = cur[..., None]
-            levels.append(np.ascontiguousarray(cur))
-        self.levels = levels
+            levels.append(cur.reshape(cur.shape[0], cur.shape[1], -1))
+        shapes = [self.texture.shape[:2]] + [lv.shape[:2] for lv in levels]
+        sizes = [0] + [lv.size for lv in levels]
+        self.mip_levels = top
+        self._mip_shapes = np.array(shapes, np.int64).reshape(-1, 2)
+        self._mip_offsets = np.concatenate([[0], np.cumsum(sizes[:-1])]).astype(np.int64)
+        self._mips = (np.concatenate([lv.ravel() for lv in levels]) if levels
+                      else np.zeros(1, self.texture.dtype))
         self.lod = np.ascontiguousarray(lod)
 
     # -- strips --------------------------------------------------------------------
@@ -349,59 +335,51 @@ class _Renderer:
     def coverage(self, r0: int, r1: int) -> np.ndarray:
         """Covered fraction of each pixel. Shape (k, w) float32."""
         face, _ = self._raster(r0, r1)
-        n = self.n
-        cov = (face >= 0).reshape(r1 - r0, n, -1, n).mean(axis=(1, 3), dtype=np.float32)
-        return cov
+        out = np.empty((r1 - r0, self.grid.width), np.float32)
+        self._raster_mod.coverage(face, self.n, out)
+        return out
 
     def _vertex_field(self, values: np.ndarray, r0: int, r1: int) -> np.ndarray:
         face, bary = self._raster(r0, r1)
         attr = np.ascontiguousarray(values.reshape(len(values), -1), dtype=np.float64)
-        out = np.empty(face.shape + (attr.shape[1],), np.float32)
-        self._raster_mod.interpolate_vertex_attr(face, bary, self.faces, attr, out)
+        out = np.empty((r1 - r0, self.grid.width, attr.shape[1]), np.float32)
+        self._raster_mod.interpolate_vertex_attr(face, bary, self.faces, attr, self.n, out)
         return out
-
-    def _face_field(self, values: np.ndarray, r0: int, r1: int) -> np.ndarray:
-        face, _ = self._raster(r0, r1)
-        vals = values.astype(np.float32)
-        out = np.where(face >= 0, vals[np.maximum(face, 0)], np.float32(np.nan))
-        return out[..., None]
 
     def painting(self, r0: int, r1: int) -> np.ndarray:
         """RGB in [0, 1] (NaN outside). Shape (k, w, 3) float32."""
         face, bary = self._raster(r0, r1)
         mesh = self.flat.mesh
         if self.texture is not None:
-            out = np.empty(face.shape + (3,), np.float32)
-            self._raster_mod.sample_texture(face, bary, mesh.texcoords, self.lod, self.levels, out)
+            out = np.empty((r1 - r0, self.grid.width, 3), np.float32)
+            self._raster_mod.sample_texture(face, bary, mesh.texcoords, self.lod, self.texture.reshape(-1), self._mips,
+                                            self._mip_offsets, self._mip_shapes, self.n, out)
             out /= np.float32(np.iinfo(self.texture.dtype).max)
-        elif mesh.vertex_colors is not None:
-            out = self._vertex_field(mesh.vertex_colors[:, :3] / 255.0, r0, r1)
-        else:
-            if "relief" not in self._vertex_values:
-                V, F = mesh.vertices, self.faces
-                self._vertex_values["relief"] = _relief_normals_and_light(V, self.flat.uv, F, mesh.mm_per_unit)
-            nl = self._vertex_field(self._vertex_values["relief"], r0, r1)
-            nrm, light = nl[..., :3], nl[..., 3:]
-            dot = np.einsum("...i,...i->...", nrm, light) / np.maximum(
-                np.linalg.norm(nrm, axis=-1) * np.linalg.norm(light, axis=-1), 1e-30)
-            shade = 0.15 + 0.85 * np.clip(dot, 0.0, 1.0)
-            out = np.repeat(shade[..., None], 3, axis=-1).astype(np.float32)
-        return _reduce(out, face >= 0, self.n)
+            return out
+        if mesh.vertex_colors is not None:
+            return self._vertex_field(mesh.vertex_colors[:, :3] / 255.0, r0, r1)
+        if "relief" not in self._vertex_values:
+            self._vertex_values["relief"] = _relief_normals_and_light(mesh.vertices, self.flat.uv, self.faces,
+                                                                      mesh.mm_per_unit)
+        nl = self._vertex_field(self._vertex_values["relief"], r0, r1)
+        nrm, light = nl[..., :3], nl[..., 3:]
+        dot = np.einsum("...i,...i->...", nrm, light) / np.maximum(
+            np.linalg.norm(nrm, axis=-1) * np.linalg.norm(light, axis=-1), 1e-30)
+        shade = 0.15 + 0.85 * np.clip(dot, 0.0, 1.0)
+        return np.repeat(shade[..., None], 3, axis=-1).astype(np.float32)
 
     def scalar(self, name: str, r0: int, r1: int) -> np.ndarray:
         """A distortion map's values (NaN outside). Shape (k, w) float32."""
-        face, _ = self._raster(r0, r1)
         if name == "stress":
-            out = self._vertex_field(self.vertex_stress, r0, r1)
-        else:
-            out = self._face_field(self.face_values[name], r0, r1)
-        return _reduce(out, face >= 0, self.n)[..., 0]
+            return self._vertex_field(self.vertex_stress, r0, r1)[..., 0]
+        face, _ = self._raster(r0, r1)
+        out = np.empty((r1 - r0, self.grid.width), np.float32)
+        self._raster_mod.face_values(face, np.ascontiguousarray(self.face_values[name], dtype=np.float64), self.n, out)
+        return out
 
     def position(self, r0: int, r1: int) -> np.ndarray:
         """3D point under each pixel, scan units (NaN outside). Shape (k, w, 3) float32."""
-        face, _ = self._raster(r0, r1)
-        out = self._vertex_field(self.flat.mesh.vertices, r0, r1)
-        return _reduce(out, face >= 0, self.n)
+        return self._vertex_field(self.flat.mesh.vertices, r0, r1)
 
     # -- distortion values ---------------------------------------------------------
     @property
@@ -453,7 +431,7 @@ def _figures(r: _Renderer, covered_px: float) -> dict:
         "image_mm": [g.width / g.px_per_mm, g.height / g.px_per_mm],
         "origin_uv": [float(g.origin[0]), float(g.origin[1])],
         "supersample": r.n,
-        "mip_levels": 0 if r.levels is None else len(r.levels) - 1,
+        "mip_levels": r.mip_levels,
         "texture": str(flat.mesh.texture_path) if r.texture is not None else None,
         "texture_px": list(r.texture.shape[1::-1]) if r.texture is not None else None,
         "texels_per_pixel_median": float(np.median(r.texels_per_pixel)) if r.texels_per_pixel is not None else None,

@@ -123,42 +123,99 @@ def rasterize_rows(pix, faces, ptr, idx, block_rows, row0, nrows, width, eps, fa
 
 
 @parallel
-def interpolate_vertex_attr(face, bary, faces, attr, out):
-    """Barycentric interpolation of a per-vertex attribute at each sample.
+def coverage(face, n, out):
+    """Covered fraction of each pixel from its ``n x n`` sub-samples.
 
     Parameters
     ----------
-    face : (h, w) int32
-        Face under each sample (-1: none).
-    bary : (h, w, 2) float64
-    faces : (m, 3) int64
-    attr : (n, k) float64
-    out : (h, w, k) float32
-        Output; NaN where ``face`` is -1.
+    face : (k n, w n) int32
+        Face under each sub-sample (-1: none).
+    n : int
+    out : (k, w) float32
+        Output.
     """
-    h, w = face.shape
-    k = attr.shape[1]
-    for r in prange(h):
+    k, w = out.shape
+    inv = 1.0 / (n * n)
+    for r in prange(k):
         for c in range(w):
-            f = face[r, c]
-            if f < 0:
-                for j in range(k):
-                    out[r, c, j] = np.nan
-                continue
-            w1 = bary[r, c, 0]
-            w2 = bary[r, c, 1]
-            w0 = 1.0 - w1 - w2
-            a = faces[f, 0]
-            b = faces[f, 1]
-            e = faces[f, 2]
-            for j in range(k):
-                out[r, c, j] = w0 * attr[a, j] + w1 * attr[b, j] + w2 * attr[e, j]
+            cnt = 0
+            for i in range(r * n, r * n + n):
+                for j in range(c * n, c * n + n):
+                    if face[i, j] >= 0:
+                        cnt += 1
+            out[r, c] = cnt * inv
+
+
+@parallel
+def interpolate_vertex_attr(face, bary, faces, attr, n, out):
+    """Barycentric interpolation of a per-vertex attribute, averaged over each pixel's sub-samples.
+
+    Parameters
+    ----------
+    face : (k n, w n) int32
+        Face under each sub-sample (-1: none).
+    bary : (k n, w n, 2) float64
+    faces : (m, 3) int64
+    attr : (v, d) float64
+    n : int
+        Sub-samples per pixel side.
+    out : (k, w, d) float32
+        Mean over the covered sub-samples; NaN where none is covered.
+    """
+    k, w, d = out.shape
+    acc = np.empty((k, d))
+    for r in prange(k):
+        for c in range(w):
+            for j in range(d):
+                acc[r, j] = 0.0
+            cnt = 0
+            for i in range(r * n, r * n + n):
+                for q in range(c * n, c * n + n):
+                    f = face[i, q]
+                    if f < 0:
+                        continue
+                    cnt += 1
+                    w1 = bary[i, q, 0]
+                    w2 = bary[i, q, 1]
+                    w0 = 1.0 - w1 - w2
+                    a = faces[f, 0]
+                    b = faces[f, 1]
+                    e = faces[f, 2]
+                    for j in range(d):
+                        acc[r, j] += w0 * attr[a, j] + w1 * attr[b, j] + w2 * attr[e, j]
+            for j in range(d):
+                out[r, c, j] = acc[r, j] / cnt if cnt > 0 else np.nan
+
+
+@parallel
+def face_values(face, values, n, out):
+    """Per-face values averaged over each pixel's covered sub-samples.
+
+    Parameters
+    ----------
+    face : (k n, w n) int32
+    values : (m,) float64
+    n : int
+    out : (k, w) float32
+        NaN where no sub-sample is covered.
+    """
+    k, w = out.shape
+    for r in prange(k):
+        for c in range(w):
+            acc = 0.0
+            cnt = 0
+            for i in range(r * n, r * n + n):
+                for q in range(c * n, c * n + n):
+                    f = face[i, q]
+                    if f >= 0:
+                        acc += values[f]
+                        cnt += 1
+            out[r, c] = acc / cnt if cnt > 0 else np.nan
 
 
 @leaf
-def _bilinear(tex, x, y, ch):
-    """Bilinear tap of channel ``ch`` at continuous texel position (x, y), edges clamped."""
-    h, w = tex.shape[0], tex.shape[1]
+def _bilinear_taps(x, y, h, w):
+    """Indices and weights of the bilinear taps at continuous texel position (x, y), edges clamped."""
     fx = x - 0.5
     fy = y - 0.5
     i0 = int(np.floor(fx))
@@ -169,60 +226,90 @@ def _bilinear(tex, x, y, ch):
     j1 = min(max(j0 + 1, 0), h - 1)
     i0 = min(max(i0, 0), w - 1)
     j0 = min(max(j0, 0), h - 1)
-    top = (1.0 - tx) * tex[j0, i0, ch] + tx * tex[j0, i1, ch]
-    bot = (1.0 - tx) * tex[j1, i0, ch] + tx * tex[j1, i1, ch]
-    return (1.0 - ty) * top + ty * bot
+    return i0, i1, j0, j1, tx, ty
+
+
+@leaf
+def _tap(buf, off, h, w, nch, x, y, weight, acc):
+    """Add ``weight`` x the bilinear sample of the level stored at ``buf[off:]`` ((h, w, nch), row-major) to ``acc``."""
+    i0, i1, j0, j1, tx, ty = _bilinear_taps(x, y, h, w)
+    w00 = (1.0 - tx) * (1.0 - ty) * weight
+    w01 = tx * (1.0 - ty) * weight
+    w10 = (1.0 - tx) * ty * weight
+    w11 = tx * ty * weight
+    p00 = off + (j0 * w + i0) * nch
+    p01 = off + (j0 * w + i1) * nch
+    p10 = off + (j1 * w + i0) * nch
+    p11 = off + (j1 * w + i1) * nch
+    for ch in range(acc.shape[0]):
+        acc[ch] += w00 * buf[p00 + ch] + w01 * buf[p01 + ch] + w10 * buf[p10 + ch] + w11 * buf[p11 + ch]
 
 
 @parallel
-def sample_texture(face, bary, texcoords, lod, levels, out):
-    """Trilinear texture sampling through per-corner texture coordinates.
+def sample_texture(face, bary, texcoords, lod, tex0, mips, mip_offsets, mip_shapes, n, out):
+    """Trilinear texture sampling through per-corner texture coordinates, averaged per pixel.
 
     Parameters
     ----------
-    face : (h, w) int32
-        Face under each sample (-1: none).
-    bary : (h, w, 2) float64
+    face : (k n, w n) int32
+        Face under each sub-sample (-1: none).
+    bary : (k n, w n, 2) float64
     texcoords : (m, 3, 2) float64
         Per-corner texture coordinates, OBJ convention ((0, 0) bottom-left, v up).
     lod : (m,) float64
         Mip level of detail per face (0: full resolution; fractions blend two levels).
-    levels : typed List of (H_l, W_l, C) arrays
-        The mip pyramid, level 0 first.
-    out : (h, w, C) float32
-        Output in the texture's value range; NaN where ``face`` is -1.
+    tex0 : (H * W * C,) uint8 or uint16
+        Level 0 (the texture, row 0 at the top), flattened.
+    mips : (t,) same dtype
+        Levels 1, 2, ... flattened one after the other.
+    mip_offsets : (L,) int64
+        Start of each level: level 0 in ``tex0`` (offset 0), the others in ``mips``.
+    mip_shapes : (L, 2) int64
+        ``(height, width)`` of each level.
+    n : int
+        Sub-samples per pixel side.
+    out : (k, w, C) float32
+        Mean over the covered sub-samples, in the texture's value range; NaN where none.
     """
-    h, w = face.shape
-    nch = out.shape[2]
-    top = len(levels) - 1
-    H0 = levels[0].shape[0]
-    W0 = levels[0].shape[1]
-    for r in prange(h):
+    k, w, nch = out.shape
+    top = mip_shapes.shape[0] - 1
+    H0 = mip_shapes[0, 0]
+    W0 = mip_shapes[0, 1]
+    acc = np.empty((k, nch))
+    for r in prange(k):
+        a = acc[r]
         for c in range(w):
-            f = face[r, c]
-            if f < 0:
-                for j in range(nch):
-                    out[r, c, j] = np.nan
-                continue
-            w1 = bary[r, c, 0]
-            w2 = bary[r, c, 1]
-            w0 = 1.0 - w1 - w2
-            s = w0 * texcoords[f, 0, 0] + w1 * texcoords[f, 1, 0] + w2 * texcoords[f, 2, 0]
-            t = w0 * texcoords[f, 0, 1] + w1 * texcoords[f, 1, 1] + w2 * texcoords[f, 2, 1]
-            x = s * W0
-            y = (1.0 - t) * H0
-            lv = min(max(lod[f], 0.0), float(top))
-            l0 = int(np.floor(lv))
-            frac = lv - l0
-            l1 = min(l0 + 1, top)
-            t0 = levels[l0]
-            sx0 = t0.shape[1] / W0
-            sy0 = t0.shape[0] / H0
-            t1 = levels[l1]
-            sx1 = t1.shape[1] / W0
-            sy1 = t1.shape[0] / H0
             for j in range(nch):
-                v = _bilinear(t0, x * sx0, y * sy0, j)
-                if frac > 0.0:
-                    v = (1.0 - frac) * v + frac * _bilinear(t1, x * sx1, y * sy1, j)
-                out[r, c, j] = v
+                a[j] = 0.0
+            cnt = 0
+            for i in range(r * n, r * n + n):
+                for q in range(c * n, c * n + n):
+                    f = face[i, q]
+                    if f < 0:
+                        continue
+                    cnt += 1
+                    w1 = bary[i, q, 0]
+                    w2 = bary[i, q, 1]
+                    w0 = 1.0 - w1 - w2
+                    s = w0 * texcoords[f, 0, 0] + w1 * texcoords[f, 1, 0] + w2 * texcoords[f, 2, 0]
+                    t = w0 * texcoords[f, 0, 1] + w1 * texcoords[f, 1, 1] + w2 * texcoords[f, 2, 1]
+                    x = s * W0
+                    y = (1.0 - t) * H0
+                    lv = min(max(lod[f], 0.0), float(top))
+                    l0 = int(np.floor(lv))
+                    frac = lv - l0
+                    for li in range(2):
+                        level = l0 + li
+                        weight = 1.0 - frac if li == 0 else frac
+                        if weight <= 0.0 or level > top:
+                            continue
+                        h = mip_shapes[level, 0]
+                        wl = mip_shapes[level, 1]
+                        xs = x * wl / W0
+                        ys = y * h / H0
+                        if level == 0:
+                            _tap(tex0, 0, h, wl, nch, xs, ys, weight, a)
+                        else:
+                            _tap(mips, mip_offsets[level], h, wl, nch, xs, ys, weight, a)
+            for j in range(nch):
+                out[r, c, j] = a[j] / cnt if cnt > 0 else np.nan

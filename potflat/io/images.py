@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+from concurrent.futures import ThreadPoolExecutor
 import struct
 import zlib
 from pathlib import Path
@@ -21,6 +22,8 @@ from potflat.io.atomic import atomic_path
 
 #: zlib level of the PNG encoder (6 is libpng's default; 9 is much slower for ~2% less).
 PNG_COMPRESSION = 6
+#: Filtered row blocks a PNG writer may queue for its compression thread.
+PNG_QUEUE = 2
 
 _PNG_COLOR_TYPE = {1: 0, 2: 4, 3: 2, 4: 6}  # channels -> grey, grey+alpha, RGB, RGBA
 
@@ -54,7 +57,7 @@ def read_texture(path: str | os.PathLike) -> np.ndarray:
     elif img.shape[2] == 4:
         img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
     else:
-        img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+        cv2.cvtColor(img, cv2.COLOR_BGR2RGB, dst=img)
     return np.ascontiguousarray(img)
 
 
@@ -62,28 +65,13 @@ def _chunk(tag: bytes, data: bytes) -> bytes:
     return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
 
 
-def _paeth_filter(rows: np.ndarray, prev: np.ndarray, bpp: int) -> np.ndarray:
-    """PNG filter type 4 (Paeth) of ``rows`` (h, rowbytes) uint8 given the row above them."""
-    up = np.concatenate([prev[None], rows[:-1]]).astype(np.int16)
-    x = rows.astype(np.int16)
-    left = np.zeros_like(x)
-    left[:, bpp:] = x[:, :-bpp]
-    upleft = np.zeros_like(x)
-    upleft[:, bpp:] = up[:, :-bpp]
-    p = left + up - upleft
-    pa, pb, pc = np.abs(p - left), np.abs(p - up), np.abs(p - upleft)
-    pred = np.where((pa <= pb) & (pa <= pc), left, np.where(pb <= pc, up, upleft))
-    out = np.empty((x.shape[0], x.shape[1] + 1), np.uint8)
-    out[:, 0] = 4
-    out[:, 1:] = (x - pred).astype(np.uint8)
-    return out
-
-
 class PngWriter:
     """Write a PNG row strip by row strip (8 or 16 bits, 1-4 channels), atomically.
 
     Use as a context manager; the file appears under its final name only when all rows
-    were written and the block exits without error.
+    were written and the block exits without error. Rows are Paeth-filtered and deflated
+    in a background thread (zlib releases the GIL), so several writers fed strip by strip
+    compress in parallel with the rendering.
 
     Parameters
     ----------
@@ -111,6 +99,8 @@ class PngWriter:
         tmp = self._stack.enter_context(atomic_path(self.path))
         self._fh = self._stack.enter_context(open(tmp, "wb"))
         self._z = zlib.compressobj(PNG_COMPRESSION)
+        self._pool = self._stack.enter_context(ThreadPoolExecutor(1))
+        self._pending = []
         self._prev = np.zeros(self.width * self.channels * self.bits // 8, np.uint8)
         ihdr = struct.pack(">IIBBBBB", self.width, self.height, self.bits, _PNG_COLOR_TYPE[self.channels], 0, 0, 0)
         head = b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", ihdr)
@@ -133,19 +123,30 @@ class PngWriter:
         raw = rows.reshape(len(rows), -1)
         if self.bits == 16:
             raw = raw.astype(">u2").view(np.uint8).reshape(len(rows), -1)
-        filtered = _paeth_filter(raw, self._prev, self.channels * self.bits // 8)
+        from potflat._kernels.png import paeth_filter
+
+        raw = np.ascontiguousarray(raw)
+        filtered = np.empty((raw.shape[0], raw.shape[1] + 1), np.uint8)
+        paeth_filter(raw, self._prev, self.channels * self.bits // 8, filtered)
         self._prev = raw[-1].copy()
-        data = self._z.compress(filtered.tobytes())
+        self._pending.append(self._pool.submit(self._z.compress, filtered))
+        while len(self._pending) > PNG_QUEUE or (self._pending and self._pending[0].done()):
+            self._write_idat(self._pending.pop(0).result())
+        self._rows += len(rows)
+
+    def _write_idat(self, data: bytes) -> None:
         if data:
             self._fh.write(_chunk(b"IDAT", data))
-        self._rows += len(rows)
 
     def __exit__(self, exc_type, exc, tb) -> bool:
         if exc_type is None:
             try:
                 if self._rows != self.height:
                     raise ValueError(f"PNG {self.path}: {self._rows} of {self.height} rows written")
-                self._fh.write(_chunk(b"IDAT", self._z.flush()) + _chunk(b"IEND", b""))
+                for job in self._pending:
+                    self._write_idat(job.result())
+                self._write_idat(self._z.flush())
+                self._fh.write(_chunk(b"IEND", b""))
                 self._fh.flush()
                 os.fsync(self._fh.fileno())
             except BaseException as err:

@@ -1,0 +1,126 @@
+"""Bake benchmark: time and peak memory of ``run_bake_stage`` on a large textured frieze.
+
+The frieze is a band of a vessel (radius 160 mm, 300 mm high, the whole circumference:
+1005 x 300 mm) triangulated on a jittered lattice with random diagonals, textured from
+an 8192 x 8192 atlas holding the band in four charts. The bake runs in a fresh child
+process so its peak resident memory (``ru_maxrss``) is measured alone.
+
+Reproduce (the table in docs/performance.md, section "Bake")::
+
+    python benchmarks/bench_bake.py --vertices 2.5e6 --px-per-mm 20
+    python benchmarks/bench_bake.py --vertices 2.5e6 --px-per-mm 20 --maps none --position-map --tiff
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+RADIUS_MM, HEIGHT_MM, ATLAS = 160.0, 300.0, 8192
+
+
+def make_frieze(n_vertices: float, out: Path, *, seed: int = 0) -> Path:
+    """Write ``frieze.relaxed.ply`` (and its atlas) into ``out`` and return the PLY path."""
+    import cv2
+
+    from potflat.io.stage import write_flat_ply
+    from potflat.types import FlatMesh, Mesh
+
+    rng = np.random.default_rng(seed)
+    circ = 2 * np.pi * RADIUS_MM
+    nv = int(np.sqrt(n_vertices * HEIGHT_MM / circ))
+    nu = int(n_vertices / nv)
+    u, v = np.meshgrid(np.linspace(0, circ, nu), np.linspace(0, HEIGHT_MM, nv))
+    du, dv = circ / (nu - 1), HEIGHT_MM / (nv - 1)
+    u[:, 1:-1] += rng.uniform(-0.3, 0.3, u[:, 1:-1].shape) * du
+    v[1:-1, :] += rng.uniform(-0.3, 0.3, v[1:-1, :].shape) * dv
+    theta = u / RADIUS_MM
+    X = np.stack([RADIUS_MM * np.cos(theta), RADIUS_MM * np.sin(theta), v], -1).reshape(-1, 3)
+    uv = np.stack([u, v], -1).reshape(-1, 2)
+    idx = np.arange(nu * nv).reshape(nv, nu)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    flip = rng.random(len(a)) < 0.5
+    f1 = np.where(flip[:, None], np.stack([a, b, d], 1), np.stack([a, b, c], 1))
+    f2 = np.where(flip[:, None], np.stack([a, d, c], 1), np.stack([b, d, c], 1))
+    F = np.concatenate([f1, f2]).astype(np.int64)
+    # atlas: four charts (quarters of the circumference), one per atlas row band, 8-texel gutters
+    quarter = np.minimum((uv[F].mean(axis=1)[:, 0] / circ * 4).astype(int), 3)
+    tpm = (ATLAS - 16) / (circ / 4)
+    band_h = ATLAS // 4
+    tc = np.empty((len(F), 3, 2))
+    pts = uv[F]
+    x = 8 + (pts[..., 0] - quarter[:, None] * circ / 4) * tpm
+    y = quarter[:, None] * band_h + 8 + (HEIGHT_MM - pts[..., 1]) * tpm
+    tc[..., 0], tc[..., 1] = x / ATLAS, 1.0 - y / ATLAS
+    img = rng.integers(150, 230, (ATLAS // 8, ATLAS // 8, 3), dtype=np.uint8)
+    img = cv2.resize(img, (ATLAS, ATLAS), interpolation=cv2.INTER_CUBIC)
+    for _ in range(400):
+        cv2.circle(img, (int(rng.integers(0, ATLAS)), int(rng.integers(0, ATLAS))), int(rng.integers(10, 120)),
+                   tuple(int(t) for t in rng.integers(0, 255, 3)), -1, cv2.LINE_AA)
+    out.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(out / "frieze_atlas.png"), img)
+    flat = FlatMesh(Mesh(X, F, texcoords=tc, texture_path=out / "frieze_atlas.png", units="mm"), uv)
+    return write_flat_ply(out / "frieze.relaxed.ply", flat)
+
+
+def _child(ply: str, out: str, options: str) -> None:
+    from potflat.bake import BakeOptions, run_bake_stage
+
+    t = time.perf_counter()
+    res = run_bake_stage(ply, out, BakeOptions(**json.loads(options)))
+    seconds = time.perf_counter() - t
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    s = res.summary
+    print(json.dumps({"seconds": seconds, "peak_mb": peak_mb, "image_px": s["image_px"],
+                      "supersample": s["supersample"], "mip_levels": s["mip_levels"],
+                      "files_mb": sum(p.stat().st_size for p in res.paths.values()) / 1e6,
+                      "files": sorted(res.summary["files"].values())}))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--vertices", type=float, default=2.5e6)
+    ap.add_argument("--px-per-mm", type=float, default=20.0)
+    ap.add_argument("--maps", default="stress,area,anisotropy")
+    ap.add_argument("--position-map", action="store_true")
+    ap.add_argument("--tiff", action="store_true")
+    ap.add_argument("--workdir", type=Path, default=None, help="keep the frieze and outputs here")
+    ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child:
+        _child(*args.child)
+        return
+    work = args.workdir or Path(tempfile.mkdtemp(prefix="potflat-bench-bake-"))
+    ply = work / "frieze.relaxed.ply"
+    t = time.perf_counter()
+    if not ply.exists():
+        make_frieze(args.vertices, work)
+    build = time.perf_counter() - t
+    maps = [] if args.maps == "none" else args.maps.split(",")
+    options = {"px_per_mm": args.px_per_mm, "maps": maps, "position_map": args.position_map, "tiff": args.tiff}
+    proc = subprocess.run([sys.executable, __file__, "--child", str(ply), str(work / "out"), json.dumps(options)],
+                          check=True, capture_output=True, text=True, env={**os.environ})
+    r = json.loads(proc.stdout.strip().splitlines()[-1])
+    from potflat.io.stage import read_flat_ply
+
+    flat = read_flat_ply(ply)
+    w, h = r["image_px"]
+    print(f"frieze {len(flat.mesh.vertices) / 1e6:.2f}M vertices, {len(flat.mesh.faces) / 1e6:.2f}M faces "
+          f"(built in {build:.0f} s), atlas {ATLAS}^2")
+    print("| vertices | px/mm | image | outputs | supersample | time | peak memory | files |")
+    print("|---|---|---|---|---|---|---|---|")
+    outs = ", ".join(f.split(".", 1)[1] for f in r["files"])
+    print(f"| {len(flat.mesh.vertices) / 1e6:.2f}M | {args.px_per_mm:g} | {w} x {h} ({w * h / 1e6:.0f} MP) | {outs} | "
+          f"{r['supersample']} | {r['seconds']:.0f} s | {r['peak_mb'] / 1024:.2f} GB | {r['files_mb']:.0f} MB |")
+
+
+if __name__ == "__main__":
+    main()
