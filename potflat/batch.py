@@ -25,6 +25,7 @@ import glob
 import io
 import json
 import os
+import re
 import time
 import traceback
 from dataclasses import dataclass
@@ -34,7 +35,6 @@ from typing import Any, Callable
 import yaml
 
 from potflat.errors import InvalidInputError, InvalidOptionError, PotflatError
-from potflat.io.scan import SCAN_EXTENSIONS
 
 #: Top-level keys of a batch file.
 TOP_KEYS = ("output", "defaults", "scans")
@@ -400,6 +400,8 @@ class _Validator:
         return jobs
 
     def scan_files(self, entry: _LineDict, output: Path) -> list[Path]:
+        from potflat.io.scan import SCAN_EXTENSIONS
+
         if "path" not in entry:
             self.problem(entry.line, "scan entry without 'path:'; add 'path: FILE-OR-PATTERN'")
             return []
@@ -562,7 +564,7 @@ class ScanReport:
 
 def one_line(exc: BaseException, *, limit: int = 400) -> str:
     """An exception as one line: the message of user errors, ``Type: message`` otherwise."""
-    text = " ".join(str(exc).split())
+    text = " ".join(re.sub(r"\x1b\[[0-9;]*[A-Za-z]", "", str(exc)).split())  # no colour codes
     if not isinstance(exc, PotflatError):
         text = f"{type(exc).__name__}: {text}" if text else type(exc).__name__
     return text if len(text) <= limit else text[: limit - 3] + "..."
@@ -641,11 +643,6 @@ def _run_job_on_dask_worker(job: ScanJob, key: str) -> ScanReport:
     worker = get_worker()
     nthreads = getattr(getattr(worker, "state", None), "nthreads", None) or worker.nthreads
     return run_job(job, key, threads=max(1, _cores() // max(1, nthreads)))
-
-
-def _init_pool_worker(threads: int) -> None:
-    # Runs in each fresh (spawned) worker before Numba is imported.
-    os.environ["NUMBA_NUM_THREADS"] = str(threads)
 
 
 def _cores() -> int:
@@ -794,8 +791,7 @@ def _run_pool(todo: list, workers: int, record: Callable[[int, ScanReport], None
     threads = max(1, _cores() // workers)
     context = multiprocessing.get_context(START_METHOD)
     crashed = []
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_pool_worker,
-                             initargs=(threads,)) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
         try:
             futures = {pool.submit(run_job, job, key, threads=threads): (index, job, key)
                        for index, job, key in todo}
@@ -812,8 +808,7 @@ def _run_pool(todo: list, workers: int, record: Callable[[int, ScanReport], None
     # broken and every unfinished scan is affected. Retry each alone in a fresh process, so
     # only the scan that kills its process again is reported failed.
     for index, job, key in sorted(crashed, key=lambda item: item[0]):
-        with ProcessPoolExecutor(max_workers=1, mp_context=context, initializer=_init_pool_worker,
-                                 initargs=(_cores(),)) as pool:
+        with ProcessPoolExecutor(max_workers=1, mp_context=context) as pool:
             try:
                 report = pool.submit(run_job, job, key).result()
             except BrokenProcessPool:

@@ -274,3 +274,13 @@ def test_glob_skips_the_output_folder(tmp_path, fake_stages):
     path = tmp_path / "batch.yaml"
     path.write_text("output: res\nscans: ['**/*.obj']\n")
     assert [j.scan.name for j in load_batch(path).jobs] == ["a.obj"]
+
+
+def test_one_line_strips_newlines_and_colour_codes():
+    from potflat.batch import one_line
+    from potflat.errors import InvalidInputError
+
+    assert one_line(RuntimeError("\x1b[1mIllegal IR\x1b[0m\n  at x")) == "RuntimeError: Illegal IR at x"
+    assert one_line(InvalidInputError("a.ply: truncated; re-export")) == "a.ply: truncated; re-export"
+    assert one_line(KeyError()) == "KeyError"
+    assert len(one_line(ValueError("x" * 1000))) == 400
