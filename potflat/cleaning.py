@@ -239,7 +239,7 @@ class _Topology:
     h2: np.ndarray  # (k,) ... and the second
     same: np.ndarray  # (k,) True when both run the edge the same way
     nbr: np.ndarray  # (m, 3) face across each half-edge's manifold edge, or -1
-    nbr_same: np.ndarray  # (m, 3) 1 when that neighbour runs the edge the same way
+    nbr_same: np.ndarray  # (m, 3) int8, 1 when that neighbour runs the edge the same way
 
 
 def _topology(F: np.ndarray, n: int) -> _Topology:
@@ -250,7 +250,7 @@ def _topology(F: np.ndarray, n: int) -> _Topology:
     same = flat[h1] == flat[h2]
     nbr = np.full(3 * len(F), -1, np.int64)
     nbr[h1], nbr[h2] = h2 // 3, h1 // 3
-    nbr_same = np.zeros(3 * len(F), np.int64)
+    nbr_same = np.zeros(3 * len(F), np.int8)
     nbr_same[h1] = nbr_same[h2] = same
     return _Topology(edge_of, count, h1, h2, same, nbr.reshape(-1, 3), nbr_same.reshape(-1, 3))
 

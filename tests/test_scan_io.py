@@ -194,6 +194,17 @@ f 4 1 5 8
     assert tm.is_winding_consistent and tm.volume == pytest.approx(1.0)  # outward
 
 
+def test_obj_crlf_tabs_bom_comments(tmp_path):
+    obj, tri_pos, expected_tc = _write_seam_obj(tmp_path)
+    text = obj.read_text().replace(" ", "\t").replace("\n", "  # note\r\n")
+    text = text.replace("mtllib\tseam.mtl  # note", "mtllib seam.mtl")  # names keep their spaces
+    text = text.replace("usemtl\tpaint  # note", "usemtl paint")
+    obj.write_bytes(b"\xef\xbb\xbf" + text.encode())
+    mesh = load_scan(obj).mesh
+    assert len(mesh.vertices) == 20
+    _assert_corner_texcoords(mesh, tri_pos, expected_tc)
+
+
 def test_obj_vertex_colours_and_untextured(tmp_path):
     V, F = _grid()
     rgb = (V[:, :1] * 0 + [0.0, 0.5, 1.0])

@@ -317,7 +317,7 @@ def propagate_orientation(nbr, same):
     nbr : (m, 3) int64
         Face across each edge ``(F[f, k], F[f, (k + 1) % 3])`` when that edge is manifold
         (exactly two faces), else -1.
-    same : (m, 3) int64
+    same : (m, 3) int8
         1 when the neighbour traverses the shared edge in the same direction (inconsistent).
 
     Returns
@@ -453,6 +453,20 @@ def weld_representatives(V, order, h):
 
 
 @leaf
+def _edge_lo(F, h):
+    a = F[h // 3, h % 3]
+    b = F[h // 3, (h % 3 + 1) % 3]
+    return min(a, b)
+
+
+@leaf
+def _edge_hi(F, h):
+    a = F[h // 3, h % 3]
+    b = F[h // 3, (h % 3 + 1) % 3]
+    return max(a, b)
+
+
+@leaf
 def edge_table(F, n):
     """Undirected edges of a triangle mesh by counting sort (linear time, deterministic).
 
@@ -475,48 +489,45 @@ def edge_table(F, n):
         The first two half-edges of each edge (lowest ids), ``-1`` if absent.
     """
     m = F.shape[0]
-    lo = np.empty(3 * m, np.int64)
-    hi = np.empty(3 * m, np.int64)
-    for f in range(m):
-        for k in range(3):
-            a = F[f, k]
-            b = F[f, (k + 1) % 3]
-            lo[3 * f + k] = min(a, b)
-            hi[3 * f + k] = max(a, b)
     start = np.zeros(n + 1, np.int64)
     for h in range(3 * m):
-        start[lo[h] + 1] += 1
+        start[_edge_lo(F, h) + 1] += 1
     for v in range(n):
         start[v + 1] += start[v]
     fill = start[:-1].copy()
     bucket = np.empty(3 * m, np.int64)
     for h in range(3 * m):
-        bucket[fill[lo[h]]] = h
-        fill[lo[h]] += 1
+        lo = _edge_lo(F, h)
+        bucket[fill[lo]] = h
+        fill[lo] += 1
+    # sort each bucket by the other endpoint (buckets are small) and number the edges
     edge_of = np.empty(3 * m, np.int64)
-    edges = np.empty((3 * m, 2), np.int64)
-    count = np.zeros(3 * m, np.int64)
-    halves = np.full((3 * m, 2), -1, np.int64)
     ne = 0
     for v in range(n):
         s = start[v]
         e = start[v + 1]
-        # insertion sort of the bucket by the other endpoint (buckets are small)
         for a in range(s + 1, e):
             x = bucket[a]
+            hx = _edge_hi(F, x)
             b = a - 1
-            while b >= s and (hi[bucket[b]] > hi[x] or (hi[bucket[b]] == hi[x] and bucket[b] > x)):
+            while b >= s and (_edge_hi(F, bucket[b]) > hx or (_edge_hi(F, bucket[b]) == hx and bucket[b] > x)):
                 bucket[b + 1] = bucket[b]
                 b -= 1
             bucket[b + 1] = x
         for a in range(s, e):
-            x = bucket[a]
-            if a == s or hi[bucket[a - 1]] != hi[x]:
-                edges[ne, 0] = v
-                edges[ne, 1] = hi[x]
+            if a == s or _edge_hi(F, bucket[a - 1]) != _edge_hi(F, bucket[a]):
                 ne += 1
-            edge_of[x] = ne - 1
-            if count[ne - 1] < 2:
-                halves[ne - 1, count[ne - 1]] = x
-            count[ne - 1] += 1
-    return edge_of, edges[:ne].copy(), count[:ne].copy(), halves[:ne].copy()
+            edge_of[bucket[a]] = ne - 1
+    edges = np.empty((ne, 2), np.int64)
+    count = np.zeros(ne, np.int64)
+    halves = np.full((ne, 2), -1, np.int64)
+    for v in range(n):
+        for a in range(start[v], start[v + 1]):
+            x = bucket[a]
+            k = edge_of[x]
+            edges[k, 0] = v
+            edges[k, 1] = _edge_hi(F, x)
+            if count[k] < 2:
+                halves[k, count[k]] = x
+            count[k] += 1
+    return edge_of, edges, count, halves

@@ -293,7 +293,7 @@ def _read_obj(path: Path, texture: str) -> _Raw:
     from potflat._kernels.mesh import obj_count, obj_fill
 
     data = _read_bytes(path)
-    buf = np.frombuffer(data, dtype=np.uint8)
+    buf = np.frombuffer(data, dtype=np.uint8, offset=3 if data.startswith(b"\xef\xbb\xbf") else 0)  # BOM
     counts = obj_count(buf)
     V6, vcols, VT, cv, cvt, face_ptr, use_spans, lib_spans, bad_line = obj_fill(buf, counts)
     if bad_line:
@@ -301,7 +301,7 @@ def _read_obj(path: Path, texture: str) -> _Raw:
     if len(V6) and vcols.min() < 3:
         line = int(np.argmax(vcols < 3)) + 1
         raise InvalidInputError(f"{path}: vertex {line} has fewer than 3 coordinates; export the scan again")
-    raw = _Raw(vertices=V6[:, :3], faces=np.zeros((0, 3), np.int64))
+    raw = _Raw(vertices=np.ascontiguousarray(V6[:, :3]), faces=np.zeros((0, 3), np.int64))
     if len(V6) and vcols.min() >= 6:
         raw.colors = _colors_to_u8(V6[:, 3:6])
     lengths = np.diff(face_ptr)
@@ -329,8 +329,8 @@ def _read_obj(path: Path, texture: str) -> _Raw:
         return raw
 
     # materials: which texture each triangle uses
-    names = [data[s:e].decode("utf-8", "replace") for s, e, _ in use_spans]
-    textures = _obj_material_textures(path, [data[s:e].decode("utf-8", "replace") for s, e in lib_spans])
+    names = [buf[s:e].tobytes().decode("utf-8", "replace") for s, e, _ in use_spans]
+    textures = _obj_material_textures(path, [buf[s:e].tobytes().decode("utf-8", "replace") for s, e in lib_spans])
     if len(names):
         mat_of_poly = np.searchsorted(use_spans[:, 2], np.arange(len(lengths)), side="right") - 1
         tex_of_name = [textures.get(nm) for nm in names]
@@ -709,9 +709,9 @@ def _read_trimesh(path: Path, texture: str) -> _Raw:
 def _check_stl_size(path: Path) -> None:
     """A binary STL's size must match its triangle count (trimesh may not notice)."""
     with open(path, "rb") as fh:
-        head = fh.read(84)
+        head = fh.read(1024)
     size = path.stat().st_size
-    if head[:5].lower() == b"solid" and b"facet" in open(path, "rb").read(1024):
+    if head[:5].lower() == b"solid" and b"facet" in head:
         return  # ascii STL
     if len(head) < 84:
         raise _truncated(path, "header")
@@ -755,7 +755,7 @@ def _read_gltf(path: Path, texture: str) -> _Raw:
 
 
 def _gltf_images(path: Path) -> list[Path]:
-    """Texture images of a glTF/GLB as files: external ones as they are, embedded ones
+    """Base-colour texture images of a glTF/GLB as files: external ones as they are, embedded ones
     extracted (content-addressed, atomically) into a ``potflat-textures`` temp folder."""
     from potflat.io.atomic import write_bytes_atomic
 
@@ -775,8 +775,19 @@ def _gltf_images(path: Path) -> list[Path]:
             doc = json.loads(data)
         except ValueError:
             raise InvalidInputError(f"{path} is not valid glTF JSON; export the scan again") from None
+    images = doc.get("images", [])
+    textures = doc.get("textures", [])
+    base = set()  # images used as base colour (not normal or roughness maps)
+    for mat in doc.get("materials", []):
+        for ref in ((mat.get("pbrMetallicRoughness") or {}).get("baseColorTexture"),
+                    ((mat.get("extensions") or {}).get("KHR_materials_pbrSpecularGlossiness") or {})
+                    .get("diffuseTexture")):
+            if ref and 0 <= ref.get("index", -1) < len(textures) and "source" in textures[ref["index"]]:
+                base.add(textures[ref["index"]]["source"])
     out = []
-    for img in doc.get("images", []):
+    for k, img in enumerate(images):
+        if k not in base:
+            continue
         uri = img.get("uri")
         blob = None
         if uri is not None and not uri.startswith("data:"):
