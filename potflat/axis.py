@@ -235,7 +235,7 @@ def _weighted_median(x: np.ndarray, w: np.ndarray) -> float:
     return float(x[order][np.searchsorted(cw, 0.5 * cw[-1])])
 
 
-def axis_residuals(mesh: Mesh, point, direction) -> tuple[float, float, float, float]:
+def axis_residuals(mesh: Mesh, point, direction, *, lines=None) -> tuple[float, float, float, float]:
     """Fit-quality figures of an axis on ``mesh`` (see module docs).
 
     Parameters
@@ -243,12 +243,14 @@ def axis_residuals(mesh: Mesh, point, direction) -> tuple[float, float, float, f
     mesh : Mesh
     point, direction : (3,) float64
         A point of the axis and its direction (normalised here).
+    lines : tuple, optional
+        ``normal_lines(mesh)`` if already computed.
 
     Returns
     -------
     rms_angle_deg, median_angle_deg, rms_distance, profile_deviation : float
     """
-    c, n, area = normal_lines(mesh)
+    c, n, area = normal_lines(mesh) if lines is None else lines
     direction = np.asarray(direction, float) / np.linalg.norm(direction)
     det, r = _meridian_residuals(c, n, np.asarray(point, float), direction)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -360,12 +362,17 @@ def _boundary_loops(mesh: Mesh) -> list[np.ndarray]:
     """Directed boundary edges (k, 2) grouped by connected boundary component."""
     F = mesh.faces
     half = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    und = np.sort(half, axis=1)
-    _, inv, counts = np.unique(und, axis=0, return_inverse=True, return_counts=True)
-    bnd = half[counts[inv.ravel()] == 1]
+    n = len(mesh.vertices)
+    key = np.minimum(half[:, 0], half[:, 1]) * n + np.maximum(half[:, 0], half[:, 1])
+    order = np.argsort(key, kind="stable")
+    k = key[order]
+    single = np.ones(len(k), bool)  # an edge used by one face only (np.unique is slow here)
+    same = k[1:] == k[:-1]
+    single[1:] &= ~same
+    single[:-1] &= ~same
+    bnd = half[order[single]]
     if len(bnd) == 0:
         return []
-    n = len(mesh.vertices)
     g = scipy.sparse.coo_matrix((np.ones(len(bnd)), (bnd[:, 0], bnd[:, 1])), shape=(n, n))
     _, labels = scipy.sparse.csgraph.connected_components(g, directed=False)
     lab = labels[bnd[:, 0]]
@@ -374,7 +381,7 @@ def _boundary_loops(mesh: Mesh) -> list[np.ndarray]:
     return [bnd[idx] for idx in np.split(order, splits)]
 
 
-def orient(mesh: Mesh, point, direction) -> tuple[np.ndarray, str]:
+def orient(mesh: Mesh, point, direction, *, lines=None) -> tuple[np.ndarray, str]:
     """Sign of the axis direction from foot to mouth (see module docs for the rule).
 
     Returns
@@ -386,11 +393,9 @@ def orient(mesh: Mesh, point, direction) -> tuple[np.ndarray, str]:
     """
     direction = np.asarray(direction, float)
     ref = reference_direction(direction)
-    h, r, theta = cylindrical(mesh.vertices, point, direction, ref)
-    used = np.zeros(len(h), bool)
-    used[mesh.faces.ravel()] = True
+    h, r, theta_all = cylindrical(mesh.vertices, point, direction, ref)
+    used = _used(mesh)
     h, r = h[used], r[used]
-    theta_all = cylindrical(mesh.vertices, point, direction, ref)[2]
     lo, hi = h.min(), h.max()
     mid = 0.5 * (lo + hi)
     best = None
@@ -404,7 +409,7 @@ def orient(mesh: Mesh, point, direction) -> tuple[np.ndarray, str]:
         h_loop = float(np.mean((mesh.vertices[loop].reshape(-1, 3) - point) @ direction))
         if best is None or length > best[0]:
             best = (length, h_loop)
-    c, n, area = normal_lines(mesh)
+    c, n, area = normal_lines(mesh) if lines is None else lines
     hc = (c - point) @ direction
     radial = c - point - hc[:, None] * direction
     facing_axis = np.einsum("ij,ij->i", n, radial) < -0.5 * np.linalg.norm(radial, axis=1)
@@ -423,16 +428,15 @@ def orient(mesh: Mesh, point, direction) -> tuple[np.ndarray, str]:
     return (direction if up else -direction), reason
 
 
-def _finish(mesh, point, direction, *, method, orientation, flip, note="") -> AxisFit:
+def _finish(mesh, point, direction, *, method, orientation, flip, note="", lines=None) -> AxisFit:
     direction = np.asarray(direction, float)
     direction = direction / np.linalg.norm(direction)
     if flip:
         direction = -direction
         orientation += "; flipped on request"
-    used = np.unique(mesh.faces)
-    h = (mesh.vertices[used] - point) @ direction
+    h = (mesh.vertices[_used(mesh)] - point) @ direction
     foot = np.asarray(point, float) + h.min() * direction
-    rms_angle, median_angle, rms_dist, prof = axis_residuals(mesh, foot, direction)
+    rms_angle, median_angle, rms_dist, prof = axis_residuals(mesh, foot, direction, lines=lines)
     return AxisFit(point=foot, direction=direction, reference=reference_direction(direction),
                    height=float(h.max() - h.min()), method=method, orientation=orientation,
                    rms_angle_deg=rms_angle, median_angle_deg=median_angle, rms_distance=rms_dist,
@@ -494,7 +498,8 @@ def estimate_axis(mesh: Mesh, *, flip: bool = False, profile: bool = True,
         When no axis fits (the shape is not a surface of revolution).
     """
     _check_mesh(mesh)
-    c, n, area = normal_lines(mesh)
+    lines = normal_lines(mesh)
+    c, n, area = lines
     idx = _sample(area, MAX_FIT_POINTS)
     if len(idx) < 3:
         raise InvalidInputError(f"{mesh.source or 'mesh'} has fewer than 3 vertices with area; give a real scan")
@@ -539,10 +544,10 @@ def estimate_axis(mesh: Mesh, *, flip: bool = False, profile: bool = True,
             if med1 <= 1.02 * med0 + 1e-9 and prof1 <= 1.02 * prof0 + 1e-12:
                 point, direction, method = p2, d2, "normals+profile"
     point = centre + size * point
-    rms_angle, median_angle, _, prof = axis_residuals(mesh, point, direction)
+    rms_angle, median_angle, _, prof = axis_residuals(mesh, point, direction, lines=lines)
     if _unsymmetric(median_angle, prof, max_median_angle_deg):
-        pc, pdir = _pca_axis(mesh.vertices[np.unique(mesh.faces)])
-        p_rms, p_median, _, p_prof = axis_residuals(mesh, pc, pdir)
+        pc, pdir = _pca_axis(mesh.vertices[_used(mesh)])
+        p_rms, p_median, _, p_prof = axis_residuals(mesh, pc, pdir, lines=lines)
         if not _unsymmetric(p_median, p_prof, max_median_angle_deg):
             point, direction, method = pc, pdir, "pca"
         else:
@@ -551,8 +556,14 @@ def estimate_axis(mesh: Mesh, *, flip: bool = False, profile: bool = True,
                 f"(radius varies by {100 * prof:.1f} % within height slices, limit "
                 f"{100 * MAX_PROFILE_DEVIATION:g} %; median normal-to-meridian angle "
                 f"{median_angle:.1f} deg, RMS {rms_angle:.1f} deg); give --axis px,py,pz,dx,dy,dz")
-    direction, orientation = orient(mesh, point, direction)
-    return _finish(mesh, point, direction, method=method, orientation=orientation, flip=flip, note=note)
+    direction, orientation = orient(mesh, point, direction, lines=lines)
+    return _finish(mesh, point, direction, method=method, orientation=orientation, flip=flip, note=note,
+                   lines=lines)
+
+
+def _used(mesh: Mesh) -> np.ndarray:
+    """Mask of the vertices referenced by a face. Shape (n,) bool."""
+    return np.bincount(mesh.faces.ravel(), minlength=len(mesh.vertices)) > 0
 
 
 def _unsymmetric(median_angle: float, profile_deviation: float, max_median_angle_deg: float) -> bool:

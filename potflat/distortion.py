@@ -137,9 +137,12 @@ def face_distortion(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> 
 
 def unique_edges(faces: np.ndarray) -> np.ndarray:
     """Undirected edges of ``faces``, each once, sorted. Shape (e, 2) int64."""
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]).astype(np.int64)
     e.sort(axis=1)
-    return np.unique(e, axis=0)
+    n = int(e.max()) + 1 if len(e) else 1
+    key = np.sort(e[:, 0] * n + e[:, 1])  # sorted 1D keys: np.unique is slow on big arrays
+    key = key[np.concatenate([[True], key[1:] != key[:-1]])] if len(key) else key
+    return np.stack([key // n, key % n], axis=1)
 
 
 def edge_length_error(vertices: np.ndarray, uv: np.ndarray, edges: np.ndarray) -> np.ndarray:

@@ -334,8 +334,9 @@ def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, n
     rows, cols = np.concatenate(rows), np.concatenate(cols)
     graph = scipy.sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
     n_comp, labels = scipy.sparse.csgraph.connected_components(graph, directed=False)
-    first = np.full(n_comp, 3 * m, np.int64)
-    np.minimum.at(first, labels, np.arange(3 * m))
+    by_label = np.argsort(labels, kind="stable")
+    starts = np.searchsorted(labels[by_label], np.arange(n_comp))
+    first = by_label[starts]  # lowest corner of each component
     vertex_of = corner_v[first]
     perm = np.lexsort((first, vertex_of))
     rank = np.empty(n_comp, np.int64)
@@ -343,10 +344,12 @@ def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, n
     new_faces = rank[labels].reshape(m, 3)
     vertex_index = vertex_of[perm]
     theta = th[first][perm]
-    base = np.unique(corner_v).size
+    base = np.count_nonzero(np.bincount(corner_v))
     # copies of one vertex made by the cut differ in angle by whole turns
     turns = np.floor(theta / TWO_PI + 0.5).astype(np.int64)
-    seam = len(np.unique(np.stack([vertex_index, turns], axis=1), axis=0)) - base
+    o = np.lexsort((turns, vertex_index))
+    distinct = 1 + np.count_nonzero((np.diff(vertex_index[o]) != 0) | (np.diff(turns[o]) != 0))
+    seam = distinct - base
     return new_faces, vertex_index, theta, int(seam), int(n_comp - base - seam)
 
 
@@ -426,8 +429,10 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, **option_field
     corner_theta = rel_c[face_index, None] + _wrap_pi(theta_v[sub_f] - seam - rel_c[face_index, None])
 
     if options.proxy == "ortho":
-        vertex_index = np.unique(sub_f)
-        new_faces = np.searchsorted(vertex_index, sub_f)
+        vertex_index = np.flatnonzero(np.bincount(sub_f.ravel(), minlength=len(V)))
+        new_index = np.zeros(len(V), np.int64)
+        new_index[vertex_index] = np.arange(len(vertex_index))
+        new_faces = new_index[sub_f]
         theta_new = np.zeros(len(vertex_index))
         theta_new[new_faces.ravel()] = corner_theta.ravel()
         n_seam = n_split = 0
