@@ -201,6 +201,79 @@ def _relief_normals_and_light(V: np.ndarray, uv: np.ndarray, F: np.ndarray, mm_p
     return np.concatenate([relief, light], axis=1)
 
 
+def _chart_mask(texcoords: np.ndarray, height: int, width: int) -> np.ndarray:
+    """Texels covered by the texture-space triangles, grown by one texel. Shape (height, width) bool.
+
+    Parameters
+    ----------
+    texcoords : (m, 3, 2) float64
+        OBJ convention (v up).
+    height, width : int
+        Texture size.
+    """
+    import cv2
+
+    from potflat._kernels import raster
+
+    m = len(texcoords)
+    pts = np.empty((3 * m, 2))
+    pts[:, 0] = texcoords[..., 0].ravel() * width
+    pts[:, 1] = (1.0 - texcoords[..., 1].ravel()) * height
+    tri = np.arange(3 * m, dtype=np.int64).reshape(m, 3)
+    ptr, idx = raster.bin_triangles(pts, tri, float(BLOCK_ROWS), (height + BLOCK_ROWS - 1) // BLOCK_ROWS)
+    mask = np.zeros((height, width), np.uint8)
+    rows = max(BLOCK_ROWS, STRIP_SAMPLES // max(width, 1) // BLOCK_ROWS * BLOCK_ROWS)
+    for r0 in range(0, height, rows):
+        r1 = min(height, r0 + rows)
+        face = np.full((r1 - r0, width), -1, np.int32)
+        raster.rasterize_rows(pts, tri, ptr, idx, BLOCK_ROWS, r0, r1 - r0, width, 1e-9, face,
+                              np.zeros(face.shape + (2,)))
+        mask[r0:r1] = face >= 0
+    return cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool)
+
+
+def _halve_masked(img: np.ndarray, valid: np.ndarray, band: int = 512) -> tuple[np.ndarray, np.ndarray]:
+    """2 x 2 box average over the valid texels only, in bands of rows (no full-size float copy).
+
+    img : (H, W, C) uint8/uint16, valid : (H, W) bool -> ((H+1)//2, (W+1)//2, C) same dtype, and its
+    validity (any valid texel in the block).
+    """
+    H, W, C = img.shape
+    h, w = (H + 1) // 2, (W + 1) // 2
+    out = np.zeros((h, w, C), img.dtype)
+    out_valid = np.zeros((h, w), bool)
+    top = float(np.iinfo(img.dtype).max)
+    for r in range(0, H, band):  # band is even: blocks never straddle two bands
+        k = min(band, H - r)
+        kh = (k + 1) // 2
+        m = np.zeros((2 * kh, 2 * w), np.float32)
+        m[:k, :W] = valid[r:r + k]
+        a = np.zeros((2 * kh, 2 * w, C), np.float32)
+        a[:k, :W] = img[r:r + k]
+        a *= m[..., None]
+        total = a.reshape(kh, 2, w, 2, C).sum(axis=(1, 3))
+        count = m.reshape(kh, 2, w, 2).sum(axis=(1, 3))
+        ok = count > 0
+        total[ok] /= count[ok][:, None]
+        out[r // 2:r // 2 + kh] = np.rint(np.clip(total, 0.0, top))
+        out_valid[r // 2:r // 2 + kh] = ok
+    return out, out_valid
+
+
+def _pull_fill(levels: list, valids: list) -> None:
+    """Fill each level's texels outside the charts from the next coarser level (in place)."""
+    import cv2
+
+    last, ok = levels[-1], valids[-1]
+    if ok.any() and not ok.all():
+        last[~ok] = last[ok].mean(axis=0).round().astype(last.dtype)
+    for k in range(len(levels) - 2, -1, -1):
+        hole = ~valids[k]
+        if hole.any():
+            up = cv2.resize(levels[k + 1], levels[k].shape[1::-1], interpolation=cv2.INTER_LINEAR)
+            levels[k][hole] = up.reshape(levels[k].shape)[hole]
+
+
 @dataclass(frozen=True)
 class _Grid:
     """Pixel grid of a flattening."""
@@ -294,16 +367,23 @@ class _Renderer:
         return ratio
 
     def _build_mips(self) -> None:
-        """Mip levels (area-averaged halvings) down to the coarsest level any face needs."""
-        import cv2
+        """Mip levels down to the coarsest level any face needs.
 
+        Each level averages the texels of the level above that lie in an atlas chart
+        (the texture-space footprint of the triangles, grown by one texel), and the texels
+        outside every chart are then filled from the coarser levels (push-pull), so a
+        coarse tap at a chart border never mixes in the atlas background: no seams.
+        """
         lod = np.log2(np.maximum(self.texels_per_pixel / self.n, 1.0))
         top = int(math.ceil(min(np.max(lod), math.log2(max(min(self.texture.shape[:2]), 1)))))
-        levels, cur = [], self.texture
-        for _ in range(top):
-            h, w = cur.shape[:2]
-            cur = cv2.resize(cur, (max(1, (w + 1) // 2), max(1, (h + 1) // 2)), interpolation=cv2.INTER_AREA)
-            levels.append(cur.reshape(cur.shape[0], cur.shape[1], -1))
+        levels, valids = [], []
+        if top > 0:
+            cur, valid = self.texture, _chart_mask(self.flat.mesh.texcoords, *self.texture.shape[:2])
+            for _ in range(top):
+                cur, valid = _halve_masked(cur, valid)
+                levels.append(cur)
+                valids.append(valid)
+            _pull_fill(levels, valids)
         shapes = [self.texture.shape[:2]] + [lv.shape[:2] for lv in levels]
         sizes = [0] + [lv.size for lv in levels]
         self.mip_levels = top
