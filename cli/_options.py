@@ -92,11 +92,14 @@ def stage_parameters(stage: str) -> list[inspect.Parameter]:
     for name, tp in option_types(cls).items():
         flag = "--" + name.replace("_", "-")
         cli_type = _cli_type(tp)
-        decls = (f"{flag}/--no-{flag[2:]}",) if cli_type == Optional[bool] else (flag,)
         default = defaults.get(name)
-        shown = "" if default is dataclasses.MISSING else f" \\[default: {_shown_default(default)}]"
-        info = typer.Option(*decls, help=(helps.get(name) or f"{stage} option {name}.") + shown,
-                            rich_help_panel=_PANELS[stage], show_default=False)
+        # a flag that is off by default is just --flag, as in the stage commands
+        on_off = cli_type == Optional[bool] and default is not False
+        decls = (f"{flag}/--no-{flag[2:]}",) if on_off else (flag,)
+        text = (helps.get(name) or f"{stage} option {name}.").replace("``", "'")
+        if "[default" not in text and default is not dataclasses.MISSING and default is not False:
+            text += f" \\[default: {_shown_default(default)}]"
+        info = typer.Option(*decls, help=text, rich_help_panel=_PANELS[stage], show_default=False)
         params.append(inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY,
                                         annotation=Annotated[cli_type, info], default=None))
     return params

@@ -331,7 +331,7 @@ class _Validator:
                 message = " ".join(str(exc).split())
                 at = next((ln for k, (_, ln) in given.items() if k in message
                            or k.replace("_", "-") in message), line)
-                self.problem(at, f"{message}; fix this value")
+                self.problem(at, message)
                 return None
         return built
 

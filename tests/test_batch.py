@@ -284,3 +284,19 @@ def test_one_line_strips_newlines_and_colour_codes():
     assert one_line(InvalidInputError("a.ply: truncated; re-export")) == "a.ply: truncated; re-export"
     assert one_line(KeyError()) == "KeyError"
     assert len(one_line(ValueError("x" * 1000))) == 400
+
+
+def test_sample_batch_file_is_valid():
+    from potflat.pipeline import STAGES, stage_api
+
+    try:
+        [stage_api(stage) for stage in STAGES]
+    except (ImportError, AttributeError):
+        pytest.skip("a stage module is not there yet")
+    sample = Path(__file__).resolve().parents[1] / "samples" / "batch.yaml"
+    batch = load_batch(sample)
+    assert [job.name for job in batch.jobs] == ["amphora", "cone"]
+    assert batch.jobs[0].options["rollout"].band == (0.05, 0.95)
+    assert batch.jobs[1].options["rollout"].proxy == "cone"
+    assert batch.jobs[1].options["bake"].maps == ("stress", "area")
+    assert batch.output == sample.parent.parent / "out" / "batch"
