@@ -47,6 +47,8 @@ STATUSES = ("done", "skipped", "failed", "interrupted")
 #: Start method of local worker processes: fresh interpreters, so no Numba thread pool or
 #: lock is inherited from the parent (fork is unsafe once threads exist).
 START_METHOD = "spawn"
+#: How long to try reaching a Dask scheduler before giving up.
+CONNECT_TIMEOUT = "20s"
 #: Columns of ``summary.csv``.
 CSV_COLUMNS = ("name", "status", "seconds", "edge_rms", "area_mean_abs_log", "anisotropy_p95",
                "flipped", "error", "scan", "output")
@@ -825,7 +827,7 @@ def _run_dask(todo: list, address: str, record: Callable[[int, ScanReport], None
         raise InvalidOptionError("--scheduler needs Dask distributed, which is not installed; "
                                  "install it with: pip install 'dask[distributed]'") from None
     try:
-        client = Client(address, timeout="20s", set_as_default=False)
+        client = Client(address, timeout=CONNECT_TIMEOUT, set_as_default=False)
     except (OSError, TimeoutError, ValueError) as exc:
         raise InvalidOptionError(f"cannot connect to the Dask scheduler at {address}: "
                                  f"{one_line(exc)}; check the address or start one with "

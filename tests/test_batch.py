@@ -170,6 +170,7 @@ def test_local_pool_matches_serial_and_survives_a_dying_worker(three, monkeypatc
     assert serial.reports[0].figures == pooled.reports[0].figures
 
 
+@pytest.mark.dask
 def test_dask_local_cluster_gives_identical_results(three, tmp_path):
     distributed = pytest.importorskip("distributed")
     serial = run_batch(load_batch(three, output=tmp_path / "serial"), workers=1)
@@ -185,8 +186,10 @@ def test_dask_local_cluster_gives_identical_results(three, tmp_path):
     assert [r["edge_rms"] for r in data["scans"]] == [r.figures.get("edge_rms") for r in serial.reports]
 
 
-def test_unreachable_scheduler_is_a_usage_error(three):
+@pytest.mark.dask
+def test_unreachable_scheduler_is_a_usage_error(three, monkeypatch):
     pytest.importorskip("distributed")
+    monkeypatch.setattr(batch_mod, "CONNECT_TIMEOUT", "2s")
     result = cli("batch", three, "--scheduler", "tcp://127.0.0.1:1")
     assert result.exit_code == 2
     assert "cannot connect to the Dask scheduler" in result.stderr
@@ -300,3 +303,19 @@ def test_sample_batch_file_is_valid():
     assert batch.jobs[1].options["rollout"].proxy == "cone"
     assert batch.jobs[1].options["bake"].maps == ("stress", "area")
     assert batch.output == sample.parent.parent / "out" / "batch"
+
+
+def test_interrupt_keeps_finished_scans_and_writes_the_summary(three):
+    fakes.SABOTAGE["amphora-2"] = ("interrupt", "bake")
+    result = cli("batch", three, "-w", 1)
+    assert result.exit_code == 130
+    assert "interrupted" in result.stderr
+    res = three.parent / "results"
+    assert (res / "amphora-1" / MANIFEST).is_file()
+    assert not (res / "amphora-2" / MANIFEST).exists()
+    assert not [p for p in res.rglob("*") if p.name.endswith(".part")]
+    summary = json.loads((res / "summary.json").read_text())
+    assert [r["status"] for r in summary["scans"]] == ["done", "interrupted", "interrupted"]
+    fakes.SABOTAGE.clear()
+    again = run_batch(load_batch(three), workers=1)
+    assert [r.status for r in again.reports] == ["skipped", "done", "failed"]

@@ -89,7 +89,7 @@ class BakeOptions:
             raise InvalidOptionError(f"maps: unknown map {bad[0]!r}; use any of {', '.join(MAPS)}")
 
 
-#: Scan names for which a fake stage misbehaves: name -> ("raise" | "exit", stage).
+#: Scan names for which a fake stage misbehaves: name -> ("raise" | "exit" | "interrupt", stage).
 SABOTAGE: dict[str, tuple[str, str]] = {}
 
 
@@ -110,6 +110,8 @@ def _sabotage(name: str, stage: str) -> None:
         raise RuntimeError(f"{stage} exploded\nsecond line")
     if at == stage and how == "exit":
         os._exit(3)
+    if at == stage and how == "interrupt":
+        raise KeyboardInterrupt
 
 
 def run_rollout_stage(scan_path, out_dir, options, *, name=None):
