@@ -16,11 +16,18 @@ Quality figures (reported, never hidden):
   in scan units, over the faces whose normal is at least 10 degrees away from the axis
   direction (the distance is undefined for normals parallel to the axis).
 
-Orientation (foot to mouth): a boundary loop that winds once around the axis is an open rim.
-The mouth is the end of the vessel nearer to the longest open rim (so an open vessel's only
-rim, or the larger of two). Without any open rim (a closed scan, a sherd) the mouth is taken
-at the wider end (larger mean radius over the last 10 % of the height at each end). ``flip``
-reverses the result. The chosen rule is reported in :attr:`AxisFit.orientation`.
+Orientation (foot to mouth), the first rule that applies:
+
+1. an inner wall (at least 1 % of the area has normals facing the axis, as inside a cup,
+   a two-walled scan or a scanned inner neck): the mouth is on its side of mid-height;
+2. an open rim (a boundary loop that winds once around the axis): the mouth is the end
+   nearer to the longest one (an open vessel's only rim, or the larger of two: a scan
+   open at both ends with a narrow neck and a wide open foot comes out upside down, and
+   says so);
+3. otherwise (a closed scan without cavity, a sherd) the wider end (larger mean radius over
+   the last 10 % of the height at each end).
+
+``flip`` reverses the result. The rule used is reported in :attr:`AxisFit.orientation`.
 """
 from __future__ import annotations
 
@@ -398,7 +405,7 @@ def orient(mesh: Mesh, point, direction, *, lines=None) -> tuple[np.ndarray, str
     h, r = h[used], r[used]
     lo, hi = h.min(), h.max()
     mid = 0.5 * (lo + hi)
-    best = None
+    rims = []
     for loop in _boundary_loops(mesh):
         dth = theta_all[loop[:, 1]] - theta_all[loop[:, 0]]
         dth = (dth + np.pi) % (2 * np.pi) - np.pi
@@ -407,8 +414,8 @@ def orient(mesh: Mesh, point, direction, *, lines=None) -> tuple[np.ndarray, str
         seg = mesh.vertices[loop[:, 1]] - mesh.vertices[loop[:, 0]]
         length = float(np.linalg.norm(seg, axis=1).sum())
         h_loop = float(np.mean((mesh.vertices[loop].reshape(-1, 3) - point) @ direction))
-        if best is None or length > best[0]:
-            best = (length, h_loop)
+        rims.append((length, h_loop))
+    best = max(rims) if rims else None
     c, n, area = normal_lines(mesh) if lines is None else lines
     hc = (c - point) @ direction
     radial = c - point - hc[:, None] * direction
@@ -420,6 +427,10 @@ def orient(mesh: Mesh, point, direction, *, lines=None) -> tuple[np.ndarray, str
     elif best is not None:
         up = best[1] >= mid
         reason = f"mouth at the longest open rim ({best[0]:.4g} units around)"
+        other = [length for length, h_loop in rims if (h_loop >= mid) != up]
+        if other:
+            reason += (f"; the other end is open too ({max(other):.4g} units around): "
+                       "use flip if the vessel is upside down")
     else:
         band = 0.1 * (hi - lo)
         top, bottom = r[h >= hi - band], r[h <= lo + band]

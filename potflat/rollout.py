@@ -353,7 +353,8 @@ def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, n
     return new_faces, vertex_index, theta, int(seam), int(n_comp - base - seam)
 
 
-def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, **option_fields) -> RolloutResult:
+def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.ndarray | None = None,
+            **option_fields) -> RolloutResult:
     """Unroll a scan: axis, region, seam cut and proxy development.
 
     Parameters
@@ -362,6 +363,11 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, **option_field
         The scan (outward-oriented faces), e.g. ``load_scan(path).mesh``.
     options : RolloutOptions, optional
         All options; or give them as keywords (``rollout(mesh, proxy="cone")``), not both.
+    face_mask : (m,) bool, optional
+        Faces that may be unrolled (e.g. the outer wall from
+        :func:`potflat.walls.select_wall`, without handles); the band and angles select
+        within them. The axis is fitted on the whole scan and the band's fractions refer
+        to the whole scan's height.
     **option_fields
         Fields of :class:`RolloutOptions`.
 
@@ -398,6 +404,12 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, **option_field
     band = options.band or (0.0, 1.0)
     frac = h_c / axis.height if axis.height > 0 else np.zeros(len(F))
     keep = (frac >= band[0]) & (frac <= band[1])
+    if face_mask is not None:
+        face_mask = np.asarray(face_mask)
+        if face_mask.dtype != bool or face_mask.shape != (len(F),):
+            raise InvalidInputError(f"face_mask must be a bool array of shape ({len(F)},), got "
+                                    f"{face_mask.dtype} {face_mask.shape}")
+        keep &= face_mask
     if options.seam is not None:
         seam, seam_method = math.radians(options.seam % 360.0), "user"
     elif options.angles is not None:

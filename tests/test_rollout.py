@@ -8,7 +8,7 @@ import trimesh
 from _revolve import cone, cylinder, revolve, vase
 from potflat.axis import _boundary_loops
 from potflat.distortion import face_distortion
-from potflat.errors import InvalidOptionError
+from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.stage import read_flat_ply
 from potflat.rollout import RolloutOptions, cut_open, rollout, run_rollout_stage
 from potflat.types import Mesh
@@ -347,3 +347,35 @@ def test_real_goblet_band_rolls_out(tmp_path):
     s = out.summary
     assert s["counts"]["faces"] == s["cleaning"]["output_faces"]
     assert s["axis"]["direction"][2] > 0.999
+
+
+def test_synthetic_samples_from_the_generator():
+    synthetic = pytest.importorskip("potflat.synthetic")
+    for kind in ("cylinder", "cone", "sherd"):
+        sv = synthetic.make_vessel(kind, n_vertices=2000, seed=3, texture_size=64)
+        res = rollout(sv.mesh)
+        cos = abs(res.axis.direction @ sv.axis_direction) / np.linalg.norm(sv.axis_direction)
+        assert np.degrees(np.arccos(min(cos, 1.0))) < 0.05, kind
+        assert res.distortion.flipped == 0, kind
+        assert len(res.flat.mesh.faces) == len(sv.mesh.faces)
+        if kind != "sherd":
+            assert res.proxy.kind == kind and res.distortion.edge_rms < 1e-3
+        else:
+            assert res.seam_method == "gap" and res.seam_vertices == 0
+
+
+def test_face_mask_restricts_the_region():
+    mesh, *_ = vase(seed=1)
+    mask = np.zeros(len(mesh.faces), bool)
+    mask[::2] = True
+    res = rollout(mesh, face_mask=mask, band=(0.2, 0.8))
+    assert np.all(mask[res.face_index])
+    full = rollout(mesh, band=(0.2, 0.8))
+    np.testing.assert_array_equal(res.face_index, full.face_index[mask[full.face_index]])
+    with pytest.raises(InvalidInputError, match="face_mask"):
+        rollout(mesh, face_mask=np.ones(3, bool))
+
+
+def test_two_open_ends_say_flip_may_be_needed():
+    mesh, *_ = cylinder(seed=1)
+    assert "use flip" in rollout(mesh).axis.orientation
