@@ -385,28 +385,39 @@ def _wrap(a):
     return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi
 
 
-def _periodic_delaunay(theta, sigma, margin) -> np.ndarray:
-    """Delaunay triangles of points on a band periodic in ``theta`` (period 2 pi).
+def _ring_strip_faces(rows, theta, n_row, k_lo, k_hi) -> np.ndarray:
+    """Triangles between consecutive closed rings of points, rows ``k_lo .. k_hi``.
 
-    Points near either end are copied one period over; a triangle is kept when its
-    centroid lies in [0, 2 pi), so every triangle appears exactly once and the band is
-    closed around without duplicated points. Returns indices into ``theta``.
+    Each ring's edges (between angle-sorted neighbours, closing around 2 pi) are swept
+    together with the next ring's edges in the order of their mid-angles; an edge's
+    triangle takes the vertex that is current on the other ring at that moment. This is
+    a valid strip triangulation of every pair of rings (no seam, no duplicated points).
+    Faces are counter-clockwise in the (angle, row) plane. Returns global vertex indices.
     """
-    from scipy.spatial import Delaunay
-
     two_pi = 2 * math.pi
-    idx = np.arange(len(theta))
-    right = theta < margin
-    left = theta >= two_pi - margin
-    ext_t = np.concatenate([theta, theta[right] + two_pi, theta[left] - two_pi])
-    ext_s = np.concatenate([sigma, sigma[right], sigma[left]])
-    ext_i = np.concatenate([idx, idx[right], idx[left]])
-    tri = Delaunay(np.stack([ext_t, ext_s], axis=1)).simplices
-    ct = ext_t[tri].mean(axis=1)
-    x, y = ext_t[tri], ext_s[tri]
-    area = (x[:, 1] - x[:, 0]) * (y[:, 2] - y[:, 0]) - (x[:, 2] - x[:, 0]) * (y[:, 1] - y[:, 0])
-    keep = (ct >= 0) & (ct < two_pi) & (np.abs(area) > 1e-14)
-    return ext_i[tri[keep]]
+    sel = np.flatnonzero((rows >= k_lo) & (rows <= k_hi))
+    order = sel[np.lexsort((theta[sel], rows[sel]))]
+    loc = rows[order] - k_lo
+    th = theta[order]
+    counts = n_row[k_lo:k_hi + 1]
+    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    i_in = np.arange(len(order)) - start[loc]
+    nxt = start[loc] + (i_in + 1) % counts[loc]
+    th0 = th[start]
+    mid = th + 0.5 * ((th[nxt] - th) % two_pi)
+    key = 10.0 * loc + (mid - th0[loc])  # rows 10 apart, each spanning [0, 2 pi)
+    faces = []
+    for step, side in ((1, "left"), (-1, "right")):
+        e = np.flatnonzero((loc + step >= 0) & (loc + step < len(counts)))
+        other = loc[e] + step
+        q = 10.0 * other + (mid[e] - th0[other]) % two_pi
+        c = np.searchsorted(key, q, side=side) - start[other]
+        apex = order[start[other] + c % counts[other]]
+        if step == 1:
+            faces.append(np.stack([order[e], order[nxt[e]], apex], axis=1))
+        else:
+            faces.append(np.stack([order[nxt[e]], order[e], apex], axis=1))
+    return np.concatenate(faces)
 
 
 def _planar_delaunay(xy) -> np.ndarray:
@@ -464,21 +475,13 @@ def _revolve(g: _Generatrix, n_target: int, rng) -> tuple:
     z = np.interp(s, g.s, g.z)
     V = np.stack([r * np.cos(theta), r * np.sin(theta), z], axis=1)
 
-    # conformal coordinate sigma = integral ds / r (midpoint rule, finite at poles)
-    seg = np.diff(g.s) / np.maximum(0.5 * (g.r[1:] + g.r[:-1]), 1e-300)
-    sig_poly = np.concatenate([[0.0], np.cumsum(seg)])
-    wall = np.flatnonzero((rows >= ka) & (rows <= kb))
-    sigma = np.interp(s[wall], g.s, sig_poly)
-    n_min = int(n_row[ka:kb + 1].min())
-    margin = min(math.pi, 4 * 2 * math.pi / n_min)
-    faces = [wall[_periodic_delaunay(theta[wall], sigma, margin)]]
+    faces = [_ring_strip_faces(rows, theta, n_row, ka, kb)]
     for cap in ((rows <= ka) if pole0 else None, (rows >= kb) if pole1 else None):
         if cap is None:
             continue
         ci = np.flatnonzero(cap)
-        faces.append(ci[_planar_delaunay(V[ci, :2])])
+        faces.append(_orient_outward(g, V, ci[_planar_delaunay(V[ci, :2])], s))
     F = np.concatenate(faces).astype(np.int64)
-    F = _orient_outward(g, V, F, s)
     _check_manifold(F, len(V), holes_expected=int(not pole0) + int(not pole1))
     return V, F, s, theta, h
 
@@ -502,15 +505,17 @@ def _orient_outward(g: _Generatrix, V, F, s) -> np.ndarray:
 def _check_manifold(F, n_vertices, holes_expected) -> None:
     """Internal consistency: oriented 2-manifold of genus 0 with the expected boundaries."""
     directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    key = directed[:, 0] * n_vertices + directed[:, 1]
-    if len(np.unique(key)) != len(key):
+    key = np.sort(directed[:, 0] * n_vertices + directed[:, 1])
+    if np.any(key[1:] == key[:-1]):
         raise RuntimeError("synthetic mesh is not consistently oriented")
-    und = np.sort(directed, axis=1)
-    n_edges = len(np.unique(und[:, 0] * n_vertices + und[:, 1]))
-    used = len(np.unique(F))
-    chi = used - n_edges + len(F)
-    if used != n_vertices or chi != 2 - holes_expected:
-        raise RuntimeError(f"synthetic mesh topology is wrong (euler {chi}, {used}/{n_vertices} used)")
+    und = np.sort(np.minimum(directed[:, 0], directed[:, 1]) * n_vertices
+                  + np.maximum(directed[:, 0], directed[:, 1]))
+    n_edges = 1 + int(np.count_nonzero(und[1:] != und[:-1]))
+    used = np.zeros(n_vertices, bool)
+    used[F.ravel()] = True
+    chi = int(used.sum()) - n_edges + len(F)
+    if not used.all() or chi != 2 - holes_expected:
+        raise RuntimeError(f"synthetic mesh topology is wrong (euler {chi}, {used.sum()}/{n_vertices} used)")
 
 
 def _bezier(p, t):
@@ -565,11 +570,8 @@ def _handle_mesh(g: _Generatrix, hd: _Handle, h: float, rng) -> tuple:
     other /= np.linalg.norm(other, axis=1, keepdims=True)
     side = np.cross(tangent, other)
     V = centre + hd.radius * (np.cos(phi)[:, None] * other + np.sin(phi)[:, None] * side)
-    F = _periodic_delaunay(phi, s / hd.radius, min(math.pi, 8 * math.pi / n)).astype(np.int64)
-    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    out = V[F].mean(axis=1) - centre[F].mean(axis=1)
-    flip = np.einsum("ij,ij->i", fn, out) < 0
-    F[flip] = F[flip][:, ::-1]
+    rows = np.repeat(np.arange(K + 1), n)
+    F = _ring_strip_faces(rows, phi, n_row, 0, K).astype(np.int64)
     _check_manifold(F, len(V), holes_expected=2)
     return V, F, s, phi
 
@@ -823,15 +825,18 @@ def _chart_layouts(V, F, vs, vth, face_part, face_handle, handle_radii, g: _Gene
 
 
 def _render_atlas(vessel_paint, V_world, F, face_part, texcoords, size) -> np.ndarray:
-    """Texture atlas: every covered texel painted at its 3D point, gutters dilated."""
-    from scipy.ndimage import distance_transform_edt
+    """Texture atlas: every texel painted at its 3D point, with gutters around the charts.
 
+    Texels whose centre lies within :data:`_GUTTER_PX` pixels outside a chart take the
+    painting at the nearest point of the nearest triangle, so bilinear sampling at chart
+    borders never reads the background.
+    """
     from potflat._kernels.raster_atlas import rasterize_faces
 
     tri = np.empty(texcoords.shape, np.float64)
     tri[..., 0] = texcoords[..., 0] * size
     tri[..., 1] = (1.0 - texcoords[..., 1]) * size
-    face, bary = rasterize_faces(np.ascontiguousarray(tri), size, size)
+    face, bary, _ = rasterize_faces(np.ascontiguousarray(tri), size, size, float(_GUTTER_PX))
     cov = face >= 0
     fid = face[cov]
     P = np.einsum("nk,nkd->nd", bary[cov], V_world[F[fid]])
@@ -842,9 +847,6 @@ def _render_atlas(vessel_paint, V_world, F, face_part, texcoords, size) -> np.nd
     img = np.empty((size, size, 3), np.uint8)
     img[:] = ATLAS_BACKGROUND
     img[cov] = colours
-    dist, (ii, jj) = distance_transform_edt(~cov, return_indices=True)
-    fill = (~cov) & (dist <= _GUTTER_PX)
-    img[fill] = img[ii[fill], jj[fill]]
     return img
 
 

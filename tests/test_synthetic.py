@@ -380,3 +380,55 @@ def test_invalid_options(kind, kw):
 def test_write_obj_needs_obj_suffix(tmp_path, amphora):
     with pytest.raises(InvalidOptionError):
         write_obj(amphora, tmp_path / "a.ply")
+
+
+# --------------------------------------------------------------------------- raster kernel
+
+
+def _reference_raster(tri, h, w, pad):
+    """Slow reference: every pixel against every triangle."""
+    face = np.full((h, w), -1)
+    bary = np.zeros((h, w, 3))
+    dist = np.full((h, w), np.inf)
+    for i in range(h):
+        for j in range(w):
+            p = np.array([j + 0.5, i + 0.5])
+            for f, t in enumerate(tri):
+                m = np.array([t[1] - t[0], t[2] - t[0]]).T
+                l1, l2 = np.linalg.solve(m, p - t[0])
+                b = np.array([1 - l1 - l2, l1, l2])
+                if np.all(b >= -1e-9):
+                    face[i, j], bary[i, j], dist[i, j] = f, np.clip(b, 0, None), 0.0
+                    continue
+                if dist[i, j] == 0.0:
+                    continue
+                best, bb = np.inf, None
+                for e in range(3):
+                    a, c = t[e], t[(e + 1) % 3]
+                    s = np.clip((p - a) @ (c - a) / ((c - a) @ (c - a)), 0, 1)
+                    d = np.linalg.norm(a + s * (c - a) - p)
+                    if d < best:
+                        best, bb = d, np.zeros(3)
+                        bb[e], bb[(e + 1) % 3] = 1 - s, s
+                if best <= pad and best < dist[i, j]:
+                    face[i, j], bary[i, j], dist[i, j] = f, bb, best
+    return face, bary, dist
+
+
+def test_raster_kernel_matches_reference():
+    from potflat._kernels.raster_atlas import rasterize_faces
+
+    rng = np.random.default_rng(0)
+    tri = rng.uniform(2, 22, (6, 3, 2))
+    for pad in (0.0, 2.5):
+        face, bary, dist = rasterize_faces(tri, 20, 24, pad)
+        rf, rb, rd = _reference_raster(tri, 20, 24, pad)
+        np.testing.assert_array_equal(face, rf)
+        np.testing.assert_allclose(bary, rb, atol=1e-9)
+        np.testing.assert_allclose(dist, rd, atol=1e-9)
+        assert np.any(face >= 0) and np.any(face < 0)
+    # barycentric coordinates reproduce the pixel centre inside the triangles
+    inside = dist == 0
+    ii, jj = np.nonzero(inside)
+    pts = np.einsum("nk,nkd->nd", bary[ii, jj], tri[face[ii, jj]])
+    np.testing.assert_allclose(pts, np.stack([jj + 0.5, ii + 0.5], axis=1), atol=1e-9)
