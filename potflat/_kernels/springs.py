@@ -1,0 +1,482 @@
+"""Spring-model kernels of the relax stage (paper Eq. 1 and 2), all in 2D.
+
+Arrays in, arrays out, no I/O. Parallel kernels only write to per-iteration slots:
+forces are gathered per vertex over a CSR adjacency (each spring stored once per
+endpoint), sums are returned per vertex or per fixed-size block and added up serially,
+so every result is bit-identical run to run and for any thread count.
+
+Energy (normalised units, ``coef = k`` or ``k / r^2``)::
+
+    E = 1/2 sum_springs coef (|x_i - x_j| - r)^2  +  sum_faces B(A_f)
+
+with the barrier ``B = mu k a_ref phi(A / (eps a_ref))``, ``phi(a) = a - 1 - log a`` for
+``a < 1`` and 0 above: it is zero unless a triangle is squeezed below ``eps`` of its
+reference area, and infinite for a flipped one.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from potflat._kernels._jit import leaf, parallel, prange
+
+#: Block size of the deterministic reductions (independent of the thread count).
+BLOCK = 4096
+
+
+@leaf
+def halfedge_springs(faces, n):
+    """Unique edges and cross springs of a triangle mesh.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+    n : int
+        Number of vertices.
+
+    Returns
+    -------
+    edges : (e, 2) int64
+        Each undirected edge once (``i < j``), ordered by ``(i, j)``.
+    cross : (c, 4) int64
+        One row ``(p, q, a, b)`` per edge shared by exactly two faces: the opposite
+        vertices ``p`` (of the face where ``a -> b`` runs counter-clockwise) and ``q``, and
+        the shared edge ``a, b``.
+    boundary : (b, 2) int64
+        The edges used by one face only, as in ``edges``.
+    """
+    m = faces.shape[0]
+    keys = np.empty(3 * m, np.int64)
+    for f in range(m):
+        for c in range(3):
+            a = faces[f, c]
+            b = faces[f, (c + 1) % 3]
+            lo = min(a, b)
+            hi = max(a, b)
+            keys[3 * f + c] = lo * n + hi
+    order = np.argsort(keys, kind="mergesort")
+    ne = 0
+    nc = 0
+    nb = 0
+    h = 0
+    while h < 3 * m:
+        g = h
+        while g < 3 * m and keys[order[g]] == keys[order[h]]:
+            g += 1
+        ne += 1
+        if g - h == 2:
+            nc += 1
+        elif g - h == 1:
+            nb += 1
+        h = g
+    edges = np.empty((ne, 2), np.int64)
+    cross = np.empty((nc, 4), np.int64)
+    boundary = np.empty((nb, 2), np.int64)
+    ib = 0
+    ie = 0
+    ic = 0
+    h = 0
+    while h < 3 * m:
+        g = h
+        while g < 3 * m and keys[order[g]] == keys[order[h]]:
+            g += 1
+        k0 = keys[order[h]]
+        edges[ie, 0] = k0 // n
+        edges[ie, 1] = k0 % n
+        ie += 1
+        if g - h == 1:
+            boundary[ib, 0] = edges[ie - 1, 0]
+            boundary[ib, 1] = edges[ie - 1, 1]
+            ib += 1
+        if g - h == 2:
+            h0 = order[h]
+            h1 = order[h + 1]
+            f0 = h0 // 3
+            c0 = h0 % 3
+            f1 = h1 // 3
+            c1 = h1 % 3
+            a = faces[f0, c0]
+            b = faces[f0, (c0 + 1) % 3]
+            p = faces[f0, (c0 + 2) % 3]
+            q = faces[f1, (c1 + 2) % 3]
+            if p != q:
+                cross[ic, 0] = p
+                cross[ic, 1] = q
+                cross[ic, 2] = a
+                cross[ic, 3] = b
+                ic += 1
+        h = g
+    return edges, cross[:ic], boundary
+
+
+@leaf
+def cross_rest_lengths(V, cross):
+    """Intrinsic rest length of each cross spring: the distance of the two opposite
+    vertices with the winged pair unfolded flat about the shared edge.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+    cross : (c, 4) int64
+        Rows ``(p, q, a, b)`` from :func:`halfedge_springs`.
+
+    Returns
+    -------
+    (c,) float64
+        Falls back to the 3D chord when the shared edge has zero length.
+    """
+    nc = cross.shape[0]
+    out = np.empty(nc)
+    for s in range(nc):
+        p, q, a, b = cross[s, 0], cross[s, 1], cross[s, 2], cross[s, 3]
+        ab = 0.0
+        ap = 0.0
+        bp = 0.0
+        aq = 0.0
+        bq = 0.0
+        pq = 0.0
+        for d in range(3):
+            ab += (V[b, d] - V[a, d]) ** 2
+            ap += (V[p, d] - V[a, d]) ** 2
+            bp += (V[p, d] - V[b, d]) ** 2
+            aq += (V[q, d] - V[a, d]) ** 2
+            bq += (V[q, d] - V[b, d]) ** 2
+            pq += (V[q, d] - V[p, d]) ** 2
+        L = math.sqrt(ab)
+        if L <= 0.0:
+            out[s] = math.sqrt(pq)
+            continue
+        xp = (ap - bp + ab) / (2.0 * L)
+        xq = (aq - bq + ab) / (2.0 * L)
+        yp = math.sqrt(max(ap - xp * xp, 0.0))
+        yq = -math.sqrt(max(aq - xq * xq, 0.0))
+        out[s] = math.sqrt((xp - xq) ** 2 + (yp - yq) ** 2)
+    return out
+
+
+@leaf
+def build_csr(n, pairs, rest):
+    """Per-vertex adjacency of symmetric springs: each spring once per endpoint.
+
+    Parameters
+    ----------
+    n : int
+    pairs : (s, 2) int64
+    rest : (s,) float64
+
+    Returns
+    -------
+    ptr : (n + 1,) int64
+    nbr : (2 s,) int32
+        The other endpoint, in spring order within each vertex.
+    rst : (2 s,) float64
+        The rest length.
+    """
+    deg = np.zeros(n + 1, np.int64)
+    ns = pairs.shape[0]
+    for s in range(ns):
+        deg[pairs[s, 0] + 1] += 1
+        deg[pairs[s, 1] + 1] += 1
+    ptr = np.cumsum(deg)
+    fill = ptr[:-1].copy()
+    nbr = np.empty(2 * ns, np.int32)
+    rst = np.empty(2 * ns)
+    for s in range(ns):
+        i = pairs[s, 0]
+        j = pairs[s, 1]
+        nbr[fill[i]] = j
+        rst[fill[i]] = rest[s]
+        fill[i] += 1
+        nbr[fill[j]] = i
+        rst[fill[j]] = rest[s]
+        fill[j] += 1
+    return ptr, nbr, rst
+
+
+@leaf
+def vertex_faces(n, faces):
+    """Incident faces of each vertex (CSR, faces in increasing order).
+
+    Returns
+    -------
+    ptr : (n + 1,) int64
+    tri : (3 m,) int32
+    """
+    m = faces.shape[0]
+    deg = np.zeros(n + 1, np.int64)
+    for f in range(m):
+        for c in range(3):
+            deg[faces[f, c] + 1] += 1
+    ptr = np.cumsum(deg)
+    fill = ptr[:-1].copy()
+    tri = np.empty(3 * m, np.int32)
+    for f in range(m):
+        for c in range(3):
+            v = faces[f, c]
+            tri[fill[v]] = f
+            fill[v] += 1
+    return ptr, tri
+
+
+@leaf
+def _phi(a):
+    """Barrier profile: ``a - 1 - log a`` below 1, 0 above, inf at or below 0."""
+    if a >= 1.0:
+        return 0.0
+    if a <= 0.0:
+        return np.inf
+    return a - 1.0 - math.log(a)
+
+
+@parallel
+def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, faces, a_ref, mu, eps,
+                    grad, e_spring, e_barrier):
+    """Spring + barrier energy per vertex and the gradient, gathered per vertex.
+
+    Parameters
+    ----------
+    x : (n, 2) float64
+        Positions (normalised units).
+    ptr, nbr, rst : CSR from :func:`build_csr`
+    k : float
+        Stiffness.
+    relative : bool
+        Weight each spring by ``1 / max(r, r_floor)^2`` (relative length error).
+    r_floor : float
+    vf_ptr, vf_tri : CSR from :func:`vertex_faces`
+    faces : (m, 3) int64
+    a_ref : (m,) float64
+        Reference (rest) area of each face, floored.
+    mu, eps : float
+        Barrier weight and activation threshold (fraction of ``a_ref``); ``mu = 0`` disables it.
+    grad : (n, 2) float64
+        Output: dE/dx.
+    e_spring, e_barrier : (n,) float64
+        Output: each vertex's share of the spring and barrier energy (sum = energy).
+    """
+    n = x.shape[0]
+    for i in prange(n):
+        gx = 0.0
+        gy = 0.0
+        es = 0.0
+        xi = x[i, 0]
+        yi = x[i, 1]
+        for p in range(ptr[i], ptr[i + 1]):
+            j = nbr[p]
+            dx = xi - x[j, 0]
+            dy = yi - x[j, 1]
+            ln = math.sqrt(dx * dx + dy * dy)
+            r = rst[p]
+            c = k
+            if relative:
+                rr = max(r, r_floor)
+                c = k / (rr * rr)
+            dl = ln - r
+            es += 0.25 * c * dl * dl
+            if ln > 0.0:
+                f = c * dl / ln
+                gx += f * dx
+                gy += f * dy
+        eb = 0.0
+        if mu > 0.0:
+            for p in range(vf_ptr[i], vf_ptr[i + 1]):
+                t = vf_tri[p]
+                a0 = faces[t, 0]
+                a1 = faces[t, 1]
+                a2 = faces[t, 2]
+                area = 0.5 * ((x[a1, 0] - x[a0, 0]) * (x[a2, 1] - x[a0, 1])
+                              - (x[a1, 1] - x[a0, 1]) * (x[a2, 0] - x[a0, 0]))
+                th = eps * a_ref[t]
+                if area >= th:
+                    continue
+                if area <= 0.0:
+                    eb = np.inf
+                    continue
+                a = area / th
+                scale = mu * k * a_ref[t]
+                eb += scale * (a - 1.0 - math.log(a)) / 3.0
+                dphi = scale * (1.0 - 1.0 / a) / th
+                # corner order (i, j, l) counter-clockwise
+                if a0 == i:
+                    j1 = a1
+                    j2 = a2
+                elif a1 == i:
+                    j1 = a2
+                    j2 = a0
+                else:
+                    j1 = a0
+                    j2 = a1
+                gx += dphi * 0.5 * (x[j1, 1] - x[j2, 1])
+                gy += dphi * 0.5 * (x[j2, 0] - x[j1, 0])
+        grad[i, 0] = gx
+        grad[i, 1] = gy
+        e_spring[i] = es
+        e_barrier[i] = eb
+
+
+@parallel
+def max_step(x, d, faces, out):
+    """Per block of faces, the largest ``t`` for which ``x + t d`` keeps every face's
+    signed area positive (the smallest positive root of a quadratic in ``t``).
+
+    Parameters
+    ----------
+    x, d : (n, 2) float64
+    faces : (m, 3) int64
+    out : (ceil(m / BLOCK),) float64
+        Output: minimum over each block (inf when no face ever collapses).
+    """
+    m = faces.shape[0]
+    nb = out.shape[0]
+    for b in prange(nb):
+        best = np.inf
+        for f in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
+            a0 = faces[f, 0]
+            a1 = faces[f, 1]
+            a2 = faces[f, 2]
+            e1x = x[a1, 0] - x[a0, 0]
+            e1y = x[a1, 1] - x[a0, 1]
+            e2x = x[a2, 0] - x[a0, 0]
+            e2y = x[a2, 1] - x[a0, 1]
+            f1x = d[a1, 0] - d[a0, 0]
+            f1y = d[a1, 1] - d[a0, 1]
+            f2x = d[a2, 0] - d[a0, 0]
+            f2y = d[a2, 1] - d[a0, 1]
+            c0 = e1x * e2y - e1y * e2x
+            c1 = e1x * f2y - e1y * f2x + f1x * e2y - f1y * e2x
+            c2 = f1x * f2y - f1y * f2x
+            t = _first_root(c0, c1, c2)
+            if t < best:
+                best = t
+        out[b] = best
+
+
+@leaf
+def _first_root(c0, c1, c2):
+    """Smallest positive root of ``c0 + c1 t + c2 t^2`` (inf if none); 0 if ``c0 <= 0``."""
+    if c0 <= 0.0:
+        return 0.0
+    scale = abs(c0) + abs(c1) + abs(c2)
+    if abs(c2) <= 1e-14 * scale:
+        if c1 < 0.0:
+            return -c0 / c1
+        return np.inf
+    disc = c1 * c1 - 4.0 * c2 * c0
+    if disc < 0.0:
+        return np.inf
+    sq = math.sqrt(disc)
+    q = -0.5 * (c1 + sq) if c1 >= 0.0 else -0.5 * (c1 - sq)
+    best = np.inf
+    if q != 0.0:
+        r1 = q / c2
+        r2 = c0 / q
+        if r1 > 0.0:
+            best = r1
+        if 0.0 < r2 < best:
+            best = r2
+    return best
+
+
+@parallel
+def dynamics_step(x, v, ptr, nbr, rst, k, relative, r_floor, friction, dt, x_out, v_out, e_spring):
+    """One semi-implicit Euler step of the paper's damped spring system (mass 1).
+
+    ``v <- (1 - c_i) v + dt F``, ``x <- x + dt v`` with friction ``c_i`` applied per step.
+
+    Parameters
+    ----------
+    x, v : (n, 2) float64
+        Positions and velocities now.
+    ptr, nbr, rst, k, relative, r_floor
+        Springs as in :func:`energy_gradient`.
+    friction : (n,) float64
+    dt : float
+    x_out, v_out : (n, 2) float64
+        Output: the state after the step.
+    e_spring : (n,) float64
+        Output: each vertex's share of the spring energy at ``x`` (before the step).
+    """
+    n = x.shape[0]
+    for i in prange(n):
+        fx = 0.0
+        fy = 0.0
+        es = 0.0
+        xi = x[i, 0]
+        yi = x[i, 1]
+        for p in range(ptr[i], ptr[i + 1]):
+            j = nbr[p]
+            dx = xi - x[j, 0]
+            dy = yi - x[j, 1]
+            ln = math.sqrt(dx * dx + dy * dy)
+            r = rst[p]
+            c = k
+            if relative:
+                rr = max(r, r_floor)
+                c = k / (rr * rr)
+            dl = ln - r
+            es += 0.25 * c * dl * dl
+            if ln > 0.0:
+                f = c * dl / ln
+                fx -= f * dx
+                fy -= f * dy
+        keep = 1.0 - friction[i]
+        vx = keep * v[i, 0] + dt * fx
+        vy = keep * v[i, 1] + dt * fy
+        v_out[i, 0] = vx
+        v_out[i, 1] = vy
+        x_out[i, 0] = xi + dt * vx
+        x_out[i, 1] = yi + dt * vy
+        e_spring[i] = es
+
+
+@parallel
+def laplacian_matvec(y, ptr, nbr, rst, k, relative, r_floor, out):
+    """``out = L y`` for the spring graph Laplacian with weights ``coef`` (per coordinate).
+
+    Its largest eigenvalue bounds the spring energy's Hessian (each spring's Hessian is at
+    most ``coef I``), which sets the stable time step of the dynamics.
+
+    Parameters
+    ----------
+    y : (n,) float64
+    out : (n,) float64
+    """
+    n = y.shape[0]
+    for i in prange(n):
+        acc = 0.0
+        for p in range(ptr[i], ptr[i + 1]):
+            c = k
+            if relative:
+                rr = max(rst[p], r_floor)
+                c = k / (rr * rr)
+            acc += c * (y[i] - y[nbr[p]])
+        out[i] = acc
+
+
+@parallel
+def block_dot(a, b, out):
+    """Partial dot products of two flat vectors over fixed blocks (sum ``out`` serially).
+
+    Parameters
+    ----------
+    a, b : (N,) float64
+    out : (ceil(N / BLOCK),) float64
+    """
+    N = a.shape[0]
+    for blk in prange(out.shape[0]):
+        acc = 0.0
+        for i in range(blk * BLOCK, min(N, (blk + 1) * BLOCK)):
+            acc += a[i] * b[i]
+        out[blk] = acc
+
+
+@leaf
+def block_dot_serial(a, b, out):
+    """:func:`block_dot` without threads (same blocks, same result), for short vectors."""
+    N = a.shape[0]
+    for blk in range(out.shape[0]):
+        acc = 0.0
+        for i in range(blk * BLOCK, min(N, (blk + 1) * BLOCK)):
+            acc += a[i] * b[i]
+        out[blk] = acc

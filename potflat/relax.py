@@ -1,0 +1,703 @@
+"""Relax stage: fold-free elastic relaxation of a rollout (the paper's spring model, Eq. 1).
+
+Springs along every mesh edge plus one cross spring over every winged triangle pair (rest
+length: the opposite vertices' distance with the pair unfolded flat about the shared edge),
+all in 2D. Two solvers minimise the same spring energy:
+
+* the default presets (``preview``, ``standard``, ``archival``): L-BFGS with a
+  flip-avoiding, monotone line search (no step ever lets a triangle's signed area reach
+  zero, the energy never increases), a barrier that only acts on triangles squeezed below
+  a few percent of their rest area, and coarse-to-fine levels of bilinear displacement
+  fields in the rollout's domain (:mod:`potflat.hierarchy`). The result is checked for
+  flipped triangles and boundary self-overlap; a folded result is never returned.
+* ``paper``: the paper's damped dynamics (stretch 2, k = 0.5, mass 1, friction 0.01 inside
+  and 1 on the boundary applied per step, semi-implicit Euler, time step from the spring
+  graph's largest eigenvalue), reported with its flip count, whatever it is.
+
+See ``docs/method.md`` for the method and ``docs/performance.md`` for measurements.
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import time
+from collections import deque
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from potflat.distortion import DistortionSummary, summarize, vertex_stress
+from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
+from potflat.types import FlatMesh, StageOutput
+
+#: Settings of each preset; ``None`` in :class:`RelaxOptions` takes the preset's value.
+PRESETS: dict[str, dict] = {
+    "preview": dict(solver="multilevel", stretch=1.0, stiffness=1.0, weighting="relative",
+                    tol=1e-4, max_iter=400, fine=False, level_iter=40, cell_vertices=16.0),
+    "standard": dict(solver="multilevel", stretch=1.0, stiffness=1.0, weighting="relative",
+                     tol=1e-6, max_iter=1500, fine=True, level_iter=60, cell_vertices=8.0),
+    "archival": dict(solver="multilevel", stretch=1.0, stiffness=1.0, weighting="relative",
+                     tol=1e-9, max_iter=20000, fine=True, level_iter=150, cell_vertices=4.0),
+    "paper": dict(solver="dynamics", stretch=2.0, stiffness=0.5, weighting="uniform",
+                  tol=1e-7, max_iter=100000, friction_inside=0.01, friction_boundary=1.0),
+}
+WEIGHTINGS = ("uniform", "relative")
+
+#: Barrier: weight (times k times the face's rest area) and activation (fraction of rest area).
+BARRIER_MU, BARRIER_EPS = 1.0, 0.5
+#: Floor of rest areas and spring lengths, in units of the mean edge length (squared).
+AREA_FLOOR, LENGTH_FLOOR = 1e-2, 1e-3
+#: L-BFGS memory, Armijo constant, fraction of the flip-free step taken at most.
+LBFGS_MEMORY, ARMIJO, STEP_FRACTION = 6, 1e-4, 0.9
+#: Window (iterations) of the relative-energy-change test: multilevel, dynamics.
+WINDOW_LBFGS, WINDOW_DYNAMICS = 5, 100
+
+
+@dataclass(frozen=True, kw_only=True)
+class RelaxOptions:
+    """Options of the relax stage (field names are the CLI options with ``_`` for ``-``).
+
+    Attributes
+    ----------
+    preset : str
+        ``preview``, ``standard`` (default), ``archival`` (fold-free L-BFGS, coarse to fine,
+        increasingly thorough) or ``paper`` (the paper's damped dynamics, may fold).
+    tol : float or None
+        Stop when the relative energy decrease per iteration (averaged over a window) falls
+        below this. None: the preset's.
+    max_iter : int or None
+        Iteration cap (all levels together). None: the preset's.
+    time_budget : float or None
+        Seconds of relaxation after which the best state so far is returned (not converged).
+    threads : int or None
+        Numba threads (None: Numba's default).
+    stretch : float or None
+        Uniform initial scale of the rollout (the paper's s). None: the preset's (2 for paper, else 1).
+    stiffness : float or None
+        Spring stiffness k (> 0). None: the preset's (0.5 for paper).
+    weighting : str or None
+        ``uniform`` (the paper: absolute length errors) or ``relative`` (each spring weighted
+        by 1/r^2: relative length errors). None: the preset's.
+    """
+
+    preset: str = "standard"
+    tol: float | None = None
+    max_iter: int | None = None
+    time_budget: float | None = None
+    threads: int | None = None
+    stretch: float | None = None
+    stiffness: float | None = None
+    weighting: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.preset not in PRESETS:
+            raise InvalidOptionError(f"unknown relax preset {self.preset!r}; use one of {', '.join(PRESETS)}")
+        _positive("tol", self.tol)
+        _positive("time_budget", self.time_budget)
+        _positive("stretch", self.stretch)
+        _positive("stiffness", self.stiffness)
+        for name in ("max_iter", "threads"):
+            val = getattr(self, name)
+            if val is not None and (isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1):
+                raise InvalidOptionError(f"{name.replace('_', '-')} must be a whole number >= 1, got {val!r}")
+        if self.weighting is not None and self.weighting not in WEIGHTINGS:
+            raise InvalidOptionError(f"unknown weighting {self.weighting!r}; use one of {', '.join(WEIGHTINGS)}")
+
+    def resolved(self) -> dict:
+        """The preset's settings with the options given here applied."""
+        out = dict(PRESETS[self.preset])
+        for name in ("tol", "max_iter", "stretch", "stiffness", "weighting"):
+            if getattr(self, name) is not None:
+                out[name] = getattr(self, name)
+        out["time_budget"] = self.time_budget
+        return out
+
+
+def _positive(name: str, val) -> None:
+    if val is None:
+        return
+    if isinstance(val, bool) or not isinstance(val, (int, float, np.floating, np.integer)) or not (
+            math.isfinite(val) and val > 0):
+        raise InvalidOptionError(f"{name.replace('_', '-')} must be a positive number, got {val!r}")
+
+
+@dataclass(frozen=True)
+class RelaxResult:
+    """Outcome of :func:`relax`.
+
+    Attributes
+    ----------
+    flat : FlatMesh
+        The relaxed flattening (same vertices and faces, new ``uv``) with per-vertex
+        ``stress`` (the paper's Eq. 3 over mesh edges in sqrt(mm), from
+        :func:`potflat.distortion.vertex_stress`).
+    energy_history : (k,) float64
+        The minimised energy after each iteration, all levels in order (normalised units:
+        lengths divided by the mean 3D edge length): springs plus the barrier for the
+        fold-free presets (never increases), springs only for ``paper``.
+    iterations : int
+        Iterations (steps) taken, all levels together.
+    converged : bool
+        The convergence test passed (False when stopped by the iteration cap or time budget).
+    flipped : int
+        Faces with non-positive signed area in the result (always 0 unless preset ``paper``).
+    boundary_overlap : int
+        Crossing pairs of boundary segments in the result (0: the boundary does not overlap itself).
+    distortion : DistortionSummary
+        Distortion of the result.
+    distortion_before : DistortionSummary
+        Distortion of the input flattening.
+    timings : dict
+        Seconds per phase (``setup``, ``solve``, ``check``, ``total``).
+    preset : str
+    levels : tuple of dict
+        Per level: name, iterations, spring energy (without barrier) at its end, seconds.
+    settings : dict
+        The resolved settings (preset values with options applied).
+    notes : tuple of str
+        What the solver had to do beyond the plan (untangling, fallback), for the JSON.
+    """
+
+    flat: FlatMesh
+    energy_history: np.ndarray
+    iterations: int
+    converged: bool
+    flipped: int
+    boundary_overlap: int
+    distortion: DistortionSummary
+    distortion_before: DistortionSummary
+    timings: dict
+    preset: str
+    levels: tuple = ()
+    settings: dict = field(default_factory=dict)
+    notes: tuple = ()
+
+
+@contextlib.contextmanager
+def numba_threads(threads: int | None):
+    """Temporarily set Numba's thread count (restored on exit, also on error)."""
+    import numba
+
+    if threads is None:
+        yield
+        return
+    before = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
+
+
+class _Springs:
+    """Spring system and triangles of a mesh in normalised, Morton-sorted form."""
+
+    def __init__(self, V: np.ndarray, faces: np.ndarray, n: int, *, k: float, relative: bool):
+        from potflat._kernels import springs as ks
+
+        self.ks = ks
+        edges, cross, self.boundary_segments = ks.halfedge_springs(faces, n)
+        r_edge = np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1)
+        r_cross = ks.cross_rest_lengths(V, cross)
+        pairs = np.concatenate([edges, cross[:, :2]])
+        rest = np.concatenate([r_edge, r_cross])
+        self.ptr, self.nbr, self.rst = ks.build_csr(n, np.ascontiguousarray(pairs), rest)
+        self.vf_ptr, self.vf_tri = ks.vertex_faces(n, faces)
+        p0, p1, p2 = (V[faces[:, c]] for c in range(3))
+        a3 = 0.5 * np.linalg.norm(np.cross(p1 - p0, p2 - p0), axis=1)
+        self.a_ref = np.maximum(a3, AREA_FLOOR)
+        self.faces = faces
+        self.k, self.relative = float(k), bool(relative)
+        self.n, self.m = n, len(faces)
+        self.n_springs = len(pairs)
+        count = np.bincount(faces.ravel(), minlength=n) if len(faces) else np.zeros(n, np.int64)
+        self.boundary = np.zeros(n, bool)
+        self.boundary[self.boundary_segments.ravel()] = True
+        self.isolated = count == 0
+        self._g = np.empty((n, 2))
+        self._es = np.empty(n)
+        self._eb = np.empty(n)
+        self._blocks = np.empty(max(1, -(-self.m // ks.BLOCK)))
+
+    def evaluate(self, x: np.ndarray, *, barrier: bool = True) -> tuple[float, float, np.ndarray]:
+        """Total energy, spring energy and gradient (a fresh (n, 2) array) at ``x``."""
+        g = np.empty((self.n, 2))
+        self.ks.energy_gradient(x, self.ptr, self.nbr, self.rst, self.k, self.relative, LENGTH_FLOOR,
+                                self.vf_ptr, self.vf_tri, self.faces, self.a_ref,
+                                BARRIER_MU if barrier else 0.0, BARRIER_EPS, g, self._es, self._eb)
+        es = float(np.sum(self._es))
+        return es + float(np.sum(self._eb)), es, g
+
+    def spring_energy(self, x: np.ndarray) -> float:
+        """Spring energy only (Eq. 1 with the 1/2 per spring)."""
+        return self.evaluate(x, barrier=False)[1]
+
+    def max_step(self, x: np.ndarray, d: np.ndarray) -> float:
+        """Largest ``t`` keeping all faces of ``x + t d`` positively oriented."""
+        if self.m == 0:
+            return np.inf
+        self.ks.max_step(x, d, self.faces, self._blocks)
+        return float(self._blocks.min())
+
+    def dot(self, a: np.ndarray, b: np.ndarray) -> float:
+        """Deterministic dot product of two arrays of equal shape."""
+        a, b = a.reshape(-1), b.reshape(-1)
+        out = np.empty(max(1, -(-len(a) // self.ks.BLOCK)))
+        if len(a) > 16 * self.ks.BLOCK:
+            self.ks.block_dot(a, b, out)
+        else:
+            self.ks.block_dot_serial(a, b, out)
+        return float(np.sum(out))
+
+    def signed_areas(self, x: np.ndarray) -> np.ndarray:
+        """Signed area of every face at ``x``, shape (m,)."""
+        f = self.faces
+        e1 = x[f[:, 1]] - x[f[:, 0]]
+        e2 = x[f[:, 2]] - x[f[:, 0]]
+        return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+    def overlap(self, x: np.ndarray) -> int:
+        """Crossing pairs of boundary segments at ``x`` (counting stops at 1000)."""
+        from potflat._kernels.relax_overlap import count_crossings
+
+        seg = self.boundary_segments
+        if len(seg) < 2:
+            return 0
+        lens = np.linalg.norm(x[seg[:, 0]] - x[seg[:, 1]], axis=1)
+        extent = float(np.ptp(x[seg.ravel()], axis=0).max()) or 1.0
+        cell = max(2.0 * float(np.mean(lens)), extent / 2048.0, 1e-12)
+        count, _ = count_crossings(x, seg, cell, 1000)
+        return int(count)
+
+    def largest_eigenvalue(self, iters: int = 30) -> float:
+        """Largest eigenvalue of the spring graph Laplacian (power iteration, padded 5%)."""
+        y = np.cos(np.arange(self.n) * 0.7071) + 1.1  # fixed, deterministic start
+        out = np.empty(self.n)
+        lam = 0.0
+        for _ in range(iters):
+            y -= y.mean()
+            nrm = math.sqrt(self.dot(y, y)) or 1.0
+            y /= nrm
+            self.ks.laplacian_matvec(y, self.ptr, self.nbr, self.rst, self.k, self.relative, LENGTH_FLOOR, out)
+            lam = self.dot(y, out)
+            y, out = out, y
+        return 1.05 * lam
+
+
+class _Run:
+    """Bookkeeping shared by the solvers: history, budget, progress, callback."""
+
+    def __init__(self, max_iter: int, deadline: float, callback, progress):
+        self.history: list[float] = []
+        self.max_iter = max_iter
+        self.deadline = deadline
+        self.callback = callback
+        self.progress = progress
+        self.level = ""
+        self.stopped = ""
+
+    def record(self, energy: float) -> bool:
+        """Store one iteration; True when the run must stop (cap, budget, callback)."""
+        self.history.append(energy)
+        it = len(self.history)
+        if self.progress is not None and (it % 10 == 0 or it == 1):
+            self.progress(it, energy, self.level)
+        if self.callback is not None and self.callback({"iteration": it, "energy": energy, "level": self.level}):
+            self.stopped = "callback"
+        elif it >= self.max_iter:
+            self.stopped = "max_iter"
+        elif time.perf_counter() > self.deadline:
+            self.stopped = "time_budget"
+        return bool(self.stopped)
+
+
+def _relative_change(hist: list[float], window: int) -> float:
+    if len(hist) <= window:
+        return np.inf
+    old, new = hist[-1 - window], hist[-1]
+    return abs(old - new) / (window * max(abs(new), 1e-300))
+
+
+def _lbfgs(sp: _Springs, x: np.ndarray, run: _Run, *, prolong, restrict, max_iter: int, tol: float) -> tuple[np.ndarray, bool, int]:
+    """Minimise the energy over ``x + prolong(c)`` with L-BFGS and a flip-free monotone line search.
+
+    Returns the new positions, whether the level converged, and its iteration count.
+    """
+    E, Es, gf = sp.evaluate(x)
+    g = restrict(gf)
+    S: deque = deque(maxlen=LBFGS_MEMORY)
+    Y: deque = deque(maxlen=LBFGS_MEMORY)
+    hist = [E]
+    it = 0
+    converged = False
+    while it < max_iter:
+        q = -g
+        alphas = []
+        for s, y, rho in reversed(list(zip(S, Y, (1.0 / sp.dot(s, y) for s, y in zip(S, Y))))):
+            a = rho * sp.dot(s, q)
+            alphas.append((a, rho, s, y))
+            q = q - a * y
+        if S:
+            q = q * (sp.dot(S[-1], Y[-1]) / sp.dot(Y[-1], Y[-1]))
+        for a, rho, s, y in reversed(alphas):
+            b = rho * sp.dot(y, q)
+            q = q + (a - b) * s
+        gd = sp.dot(g, q)
+        if not gd < 0.0:
+            S.clear()
+            Y.clear()
+            q = -g
+            gd = -sp.dot(g, g)
+            if not gd < 0.0:
+                converged = True  # zero gradient
+                break
+        dx = prolong(q)
+        t = 1.0
+        if not S:
+            peak = float(np.abs(dx).max())
+            t = min(1.0, 0.1 / peak) if peak > 0 else 1.0
+        t = min(t, STEP_FRACTION * sp.max_step(x, dx))
+        accepted = False
+        for _ in range(50):
+            xn = x + t * dx
+            En, Esn, gfn = sp.evaluate(xn)
+            if math.isfinite(En) and En <= E + ARMIJO * t * gd:
+                accepted = True
+                break
+            t *= 0.5
+        if not accepted or t == 0.0:
+            converged = True  # no descent possible at machine precision
+            break
+        gn = restrict(gfn)
+        s = t * q
+        y = gn - g
+        if sp.dot(s, y) > 1e-300:
+            S.append(s)
+            Y.append(y)
+        x, E, g = xn, En, gn
+        it += 1
+        hist.append(En)
+        if run.record(En):
+            break
+        if En == 0.0 or _relative_change(hist, WINDOW_LBFGS) < tol:
+            converged = True
+            break
+    return x, converged, it
+
+
+def _multilevel(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, levels_out: list, notes: list):
+    tol = settings["tol"]
+    level_tol = max(tol, 1e-5)
+    overlap_free = sp.overlap(x) == 0
+    converged = False
+    plan = [("grid", L) for L in hier.levels]
+    if settings["fine"] or not plan:
+        plan.append(("fine", None))
+    for kind, L in plan:
+        t0 = time.perf_counter()
+        run.level = f"grid {1 << L}" if kind == "grid" else "fine"
+        if kind == "grid":
+            cs = hier.cell_start(L)
+            shape = (hier.n_nodes(L), 2)
+            prolong = lambda c, L=L: hier.prolong(L, c.reshape(shape))  # noqa: E731
+            restrict = lambda g, L=L, cs=cs: hier.restrict(L, cs, g)  # noqa: E731
+            cap, ltol = settings["level_iter"], level_tol
+        else:
+            prolong = restrict = lambda a: a  # noqa: E731
+            cap, ltol = settings["max_iter"], tol
+        cap = min(cap, run.max_iter - len(run.history))
+        if cap <= 0:
+            break
+        x_new, conv, its = _lbfgs(sp, x, run, prolong=prolong, restrict=restrict, max_iter=cap, tol=ltol)
+        if overlap_free and sp.overlap(x_new) > 0:
+            notes.append(f"level {run.level} made the boundary overlap itself; kept the previous level's result")
+            levels_out.append(dict(level=run.level, iterations=its, energy=sp.spring_energy(x),
+                                   seconds=time.perf_counter() - t0, rejected=True))
+            break
+        x = x_new
+        levels_out.append(dict(level=run.level, iterations=its, energy=sp.spring_energy(x),
+                               seconds=time.perf_counter() - t0))
+        converged = conv
+        if run.stopped:
+            converged = False
+            break
+    return x, converged
+
+
+def _dynamics(sp: _Springs, x: np.ndarray, settings: dict, run: _Run, levels_out: list):
+    friction = np.where(sp.boundary, settings["friction_boundary"], settings["friction_inside"]).astype(np.float64)
+    lam = sp.largest_eigenvalue()
+    dt = 1.9 / math.sqrt(lam) if lam > 0 else 1.0
+    v = np.zeros_like(x)
+    xo, vo = np.empty_like(x), np.empty_like(x)
+    es = np.empty(sp.n)
+    t0 = time.perf_counter()
+    run.level = "dynamics"
+    hist: list[float] = []
+    converged = False
+    it = 0
+    while True:
+        sp.ks.dynamics_step(x, v, sp.ptr, sp.nbr, sp.rst, sp.k, sp.relative, LENGTH_FLOOR, friction, dt, xo, vo, es)
+        x, xo, v, vo = xo, x, vo, v
+        it += 1
+        e = float(np.sum(es))  # energy before this step
+        hist.append(e)
+        if not np.isfinite(e):
+            break
+        if run.record(e):
+            break
+        if it % WINDOW_DYNAMICS == 0 and _relative_change(hist, WINDOW_DYNAMICS) < settings["tol"]:
+            converged = True
+            break
+    levels_out.append(dict(level="dynamics", iterations=it, energy=sp.spring_energy(x),
+                           seconds=time.perf_counter() - t0, dt=dt))
+    return x, converged
+
+
+def _untangle(sp: _Springs, x: np.ndarray, rounds: int = 200) -> tuple[np.ndarray, int]:
+    """Move the vertices of non-positive faces to their neighbours' mean until none is left.
+
+    Returns the positions and the number of faces that were flipped at the start.
+    """
+    import scipy.sparse as sps
+
+    bad = sp.signed_areas(x) <= 0
+    n_bad = int(bad.sum())
+    if n_bad == 0:
+        return x, 0
+    n = sp.n
+    rows = np.repeat(np.arange(n), np.diff(sp.ptr))
+    A = sps.csr_matrix((np.ones(len(sp.nbr)), (rows, sp.nbr.astype(np.int64))), shape=(n, n))
+    deg = np.maximum(np.asarray(A.sum(axis=1)).ravel(), 1)
+    x = x.copy()
+    region = np.zeros(n, bool)
+    for r in range(rounds):
+        bad = sp.signed_areas(x) <= 0
+        if not bad.any():
+            break
+        region[sp.faces[bad].ravel()] = True
+        if r % 20 == 19:  # widen the region around persistent tangles
+            region |= (A @ region.astype(np.float64)) > 0
+        mean = (A @ x) / deg[:, None]
+        x[region] = mean[region]
+    return x, n_bad
+
+
+def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool = False,
+          callback: Callable[[dict], bool | None] | None = None, **kwargs) -> RelaxResult:
+    """Relax a rollout's flattening by minimising the paper's spring energy.
+
+    Parameters
+    ----------
+    flat : FlatMesh
+        The rollout: ``flat.mesh.vertices`` (n, 3) give the rest lengths, ``flat.uv`` (n, 2)
+        the start, ``flat.mesh.faces`` (m, 3) a cut (disk-like) mesh.
+    options : RelaxOptions, optional
+        Or give its fields as keyword arguments (``relax(flat, preset="archival")``).
+    progress : bool
+        Show a progress bar on stderr.
+    callback : callable, optional
+        Called after every iteration with ``{"iteration", "energy", "level"}``; return True
+        to stop early.
+
+    Returns
+    -------
+    RelaxResult
+
+    Raises
+    ------
+    InvalidInputError
+        Empty mesh or non-finite coordinates.
+    FoldedResultError
+        With a fold-free preset, when the start cannot be untangled or the result would
+        have flipped triangles or an overlapping boundary (nothing folded is returned).
+    """
+    if options is None:
+        options = RelaxOptions(**kwargs)
+    elif kwargs:
+        raise InvalidOptionError("give either options= or option keywords to relax(), not both")
+    settings = options.resolved()
+    V = np.ascontiguousarray(flat.mesh.vertices, dtype=np.float64)
+    uv = np.ascontiguousarray(flat.uv, dtype=np.float64)
+    F = np.ascontiguousarray(flat.mesh.faces, dtype=np.int64)
+    n = len(V)
+    if n == 0 or len(F) == 0:
+        raise InvalidInputError("the rollout has no faces; nothing to relax (check the rollout stage's output)")
+    if not (np.isfinite(V).all() and np.isfinite(uv).all()):
+        raise InvalidInputError("the rollout has NaN or infinite coordinates; run the rollout stage again")
+    fold_free = settings["solver"] != "dynamics"
+    t_start = time.perf_counter()
+    deadline = t_start + (settings["time_budget"] or np.inf)
+    before = summarize(V, uv, F)
+
+    with numba_threads(options.threads):
+        # normalised units: lengths / mean 3D edge length, layout centred on its bounding box
+        el = np.linalg.norm(V[F[:, [1, 2, 0]]] - V[F], axis=2)
+        unit = float(el.mean())
+        if not unit > 0:
+            raise InvalidInputError("all edges of the rollout have zero length; check the scan's units and faces")
+        centre = 0.5 * (uv.min(axis=0) + uv.max(axis=0))
+        x_in = (uv - centre) / unit
+        from potflat.hierarchy import GridHierarchy
+
+        # locality-preserving order (Morton curve of the layout) and the coarse-to-fine grids
+        hier = GridHierarchy.build(x_in, min_vertices_per_cell=settings.get("cell_vertices", 8.0))
+        order = hier.order
+        inverse = np.empty(n, np.int64)
+        inverse[order] = np.arange(n)
+        Vs = np.ascontiguousarray(V[order] / unit)
+        Fs = np.ascontiguousarray(inverse[F])
+        sp = _Springs(Vs, Fs, n, k=settings["stiffness"], relative=settings["weighting"] == "relative")
+        x = np.ascontiguousarray(x_in[order]) * settings["stretch"]
+        notes: list[str] = []
+        if fold_free:
+            x, n_bad = _untangle(sp, x)
+            if n_bad:
+                left = int((sp.signed_areas(x) <= 0).sum())
+                if left:
+                    raise FoldedResultError(
+                        f"the rollout has {n_bad} flipped or degenerate triangles and {left} could not be "
+                        "untangled; run the rollout again (another seam or proxy) or use --preset paper")
+                notes.append(f"untangled {n_bad} flipped or degenerate triangles of the rollout before relaxing")
+        t_setup = time.perf_counter()
+
+        bar = _progress_bar(settings["max_iter"]) if progress else contextlib.nullcontext(None)
+        with bar as report:
+            run = _Run(settings["max_iter"], deadline, callback, report)
+            levels: list[dict] = []
+            if fold_free:
+                x, converged = _multilevel(sp, x, hier, settings, run, levels, notes)
+            else:
+                x, converged = _dynamics(sp, x, settings, run, levels)
+        t_solve = time.perf_counter()
+
+        finite = bool(np.isfinite(x).all())
+        flipped = int((sp.signed_areas(x) <= 0).sum()) if finite else len(F)
+        overlap = sp.overlap(x) if finite else 1
+    if fold_free and (flipped or overlap or not finite):
+        raise FoldedResultError(
+            f"relaxation ended with {flipped} flipped triangles and {overlap} boundary crossings; "
+            "nothing written: report this mesh, or try --preset preview")
+    if not finite:
+        raise FoldedResultError("the paper dynamics diverged (NaN); use the default preset")
+    uv_out = np.empty_like(x)
+    uv_out[order] = x * unit + centre
+    after = summarize(V, uv_out, F)
+    stress = vertex_stress(V, uv_out, F, flat.mesh.mm_per_unit)
+    t_end = time.perf_counter()
+    return RelaxResult(
+        flat=flat.replace(uv=uv_out, stress=stress),
+        energy_history=np.asarray(run.history, dtype=np.float64),
+        iterations=len(run.history),
+        converged=bool(converged),
+        flipped=flipped,
+        boundary_overlap=overlap,
+        distortion=after,
+        distortion_before=before,
+        timings={"setup": t_setup - t_start, "solve": t_solve - t_setup, "check": t_end - t_solve,
+                 "total": t_end - t_start},
+        preset=options.preset,
+        levels=tuple(levels),
+        settings=settings,
+        notes=tuple(notes + ([f"stopped by {run.stopped}"] if run.stopped else [])),
+    )
+
+
+@contextlib.contextmanager
+def _progress_bar(total: int):
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    with Progress(TextColumn("relax {task.fields[level]}"), BarColumn(), TextColumn("{task.completed} it"),
+                  TextColumn("E={task.fields[energy]:.4g}"), TimeElapsedColumn(), transient=True) as prog:
+        task = prog.add_task("relax", total=total, level="", energy=float("nan"))
+
+        def report(it: int, energy: float, level: str) -> None:
+            prog.update(task, completed=it, energy=energy, level=level)
+
+        yield report
+
+
+def _history_for_json(h: np.ndarray, limit: int = 1000) -> list[float]:
+    """The energy history, thinned to at most ``limit`` entries (first and last kept)."""
+    if len(h) <= limit:
+        return [float(e) for e in h]
+    idx = np.unique(np.linspace(0, len(h) - 1, limit).round().astype(np.int64))
+    return [float(h[i]) for i in idx]
+
+
+def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: RelaxOptions | None = None, *,
+                    name: str | None = None, progress: bool = False) -> StageOutput:
+    """Relax ``NAME.rollout.ply`` and write ``NAME.relaxed.ply`` and ``NAME.relaxed.json``.
+
+    Parameters
+    ----------
+    rollout_ply : path-like
+        The rollout stage's output.
+    out_dir : path-like
+        Folder for the outputs (created if needed).
+    options : RelaxOptions, optional
+    name : str, optional
+        Output stem (default: the input's name without ``.rollout.ply``).
+    progress : bool
+        Show a progress bar.
+
+    Returns
+    -------
+    StageOutput
+        ``paths`` with ``ply`` and ``json``; ``summary`` the JSON content.
+    """
+    from potflat.io.atomic import write_json_atomic
+    from potflat.io.stage import read_flat_ply, write_flat_ply
+    from potflat.provenance import provenance
+
+    options = options or RelaxOptions()
+    rollout_ply = Path(rollout_ply)
+    out_dir = Path(out_dir)
+    stem = rollout_ply.name
+    for suffix in (".ply", ".rollout"):
+        stem = stem[: -len(suffix)] if stem.endswith(suffix) else stem
+    name = name or stem
+    flat = read_flat_ply(rollout_ply)
+    result = relax(flat, options=options, progress=progress)
+    ply_path = out_dir / f"{name}.relaxed.ply"
+    json_path = out_dir / f"{name}.relaxed.json"
+    summary = {
+        "preset": result.preset,
+        "options": asdict(options),
+        "settings": result.settings,
+        "iterations": result.iterations,
+        "converged": result.converged,
+        "flipped": result.flipped,
+        "boundary_overlap": result.boundary_overlap,
+        "fold_free": result.flipped == 0 and result.boundary_overlap == 0,
+        "fold_free_verified_by": "signed area of every face > 0 and no crossing boundary segments, checked after solving",
+        "energy_history": _history_for_json(result.energy_history),
+        "energy_units": "lengths divided by the mean 3D edge length; springs + barrier (fold-free presets) or springs only (paper)",
+        "spring_energy": result.levels[-1]["energy"] if result.levels else None,
+        "stress": "paper Eq. 3 over mesh edges in sqrt(mm) (potflat.distortion.vertex_stress)",
+        "levels": list(result.levels),
+        "notes": list(result.notes),
+        "distortion_before": result.distortion_before.as_dict(),
+        "distortion": result.distortion.as_dict(),
+        "timings": result.timings,
+        "units": flat.mesh.units,
+        "vertices": len(flat.mesh.vertices),
+        "faces": len(flat.mesh.faces),
+    }
+    rollout_json = rollout_ply.with_name(f"{stem}.rollout.json")
+    if rollout_json.exists():
+        try:
+            rj = json.loads(rollout_json.read_text())
+        except (OSError, ValueError):
+            rj = {}
+        for key in ("axis", "proxy", "units"):
+            if key in rj:
+                summary[key] = rj[key]
+    inputs = [rollout_ply] + ([rollout_json] if rollout_json.exists() else [])
+    summary["provenance"] = provenance(stage="relax", inputs=inputs, options=asdict(options))
+    write_flat_ply(ply_path, result.flat, comments=(f"potflat relax preset {result.preset}",))
+    write_json_atomic(json_path, summary)
+    return StageOutput(paths={"ply": ply_path, "json": json_path}, summary=summary)

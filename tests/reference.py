@@ -1,0 +1,116 @@
+"""Slow, plain numpy reference implementations of the relax kernels (tiny meshes only)."""
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+
+def springs(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Edge springs and cross springs with their rest lengths, by brute force.
+
+    Cross springs join the two opposite vertices of every edge shared by two faces; the rest
+    length is their distance after rotating one face about the shared edge into the plane
+    of the other (the pair unfolded flat).
+
+    Returns
+    -------
+    pairs : (s, 2) int64
+        Sorted rows (edges first, then cross springs, each sorted by vertex pair).
+    rest : (s,) float64
+    """
+    edge_faces: dict[tuple[int, int], list[int]] = {}
+    for f, tri in enumerate(F):
+        for a, b in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
+            edge_faces.setdefault((min(a, b), max(a, b)), []).append(f)
+    edges = sorted(edge_faces)
+    out_pairs = [list(e) for e in edges]
+    out_rest = [float(np.linalg.norm(V[a] - V[b])) for a, b in edges]
+    cross = []
+    for (a, b), fs in edge_faces.items():
+        if len(fs) != 2:
+            continue
+        p = [v for v in F[fs[0]] if v not in (a, b)][0]
+        q = [v for v in F[fs[1]] if v not in (a, b)][0]
+        if p == q:
+            continue
+        cross.append((min(p, q), max(p, q), unfolded_distance(V[a], V[b], V[p], V[q])))
+    cross.sort()
+    out_pairs += [[p, q] for p, q, _ in cross]
+    out_rest += [r for _, _, r in cross]
+    return np.array(out_pairs, np.int64).reshape(-1, 2), np.array(out_rest)
+
+
+def unfolded_distance(a, b, p, q) -> float:
+    """Distance of ``p`` and ``q`` after unfolding triangles ``(a, b, p)`` and ``(a, b, q)``
+    flat about ``ab`` (``q`` rotated about the edge into the plane of ``abp``, opposite side)."""
+    a, b, p, q = (np.asarray(v, float) for v in (a, b, p, q))
+    e = (b - a) / np.linalg.norm(b - a)
+    # in-plane coordinates along the edge and perpendicular distance from it
+    def coords(v):
+        t = np.dot(v - a, e)
+        h = np.linalg.norm((v - a) - t * e)
+        return t, h
+    tp, hp = coords(p)
+    tq, hq = coords(q)
+    return float(np.hypot(tp - tq, hp + hq))
+
+
+def energy(x: np.ndarray, pairs: np.ndarray, rest: np.ndarray, k: float, relative: bool,
+           r_floor: float = 1e-3) -> float:
+    """Paper Eq. 1 with the 1/2 per spring: ``1/2 sum coef (|x_i - x_j| - r)^2``."""
+    l = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1)
+    coef = k / np.maximum(rest, r_floor) ** 2 if relative else np.full(len(rest), k)
+    return float(0.5 * np.sum(coef * (l - rest) ** 2))
+
+
+def forces(x: np.ndarray, pairs: np.ndarray, rest: np.ndarray, k: float, relative: bool,
+           r_floor: float = 1e-3) -> np.ndarray:
+    """Paper Eq. 2: the Hookean restoring force on every vertex (= minus the energy gradient)."""
+    out = np.zeros_like(x)
+    for (i, j), r in zip(pairs, rest):
+        d = x[i] - x[j]
+        l = np.linalg.norm(d)
+        coef = k / max(r, r_floor) ** 2 if relative else k
+        if l > 0:
+            f = -coef * (l - r) * d / l
+            out[i] += f
+            out[j] -= f
+    return out
+
+
+def barrier_energy(x: np.ndarray, F: np.ndarray, a_ref: np.ndarray, k: float, mu: float, eps: float) -> float:
+    """``sum mu k a_ref phi(A / (eps a_ref))`` with ``phi(a) = a - 1 - log a`` below 1."""
+    e1 = x[F[:, 1]] - x[F[:, 0]]
+    e2 = x[F[:, 2]] - x[F[:, 0]]
+    A = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    a = A / (eps * a_ref)
+    if np.any(a <= 0):
+        return np.inf
+    phi = np.where(a < 1, a - 1 - np.log(np.minimum(a, 1)), 0.0)
+    return float(np.sum(mu * k * a_ref * phi))
+
+
+def numeric_gradient(fun, x: np.ndarray, h: float = 1e-6) -> np.ndarray:
+    """Central finite differences of a scalar function of an (n, 2) array."""
+    g = np.zeros_like(x)
+    for i, d in itertools.product(range(len(x)), range(2)):
+        xp, xm = x.copy(), x.copy()
+        xp[i, d] += h
+        xm[i, d] -= h
+        g[i, d] = (fun(xp) - fun(xm)) / (2 * h)
+    return g
+
+
+def max_step(x: np.ndarray, d: np.ndarray, F: np.ndarray, samples: int = 200001, t_max: float = 10.0) -> float:
+    """First ``t`` in ``[0, t_max]`` at which some face's signed area of ``x + t d`` reaches 0,
+    found by dense sampling (inf when none does)."""
+    ts = np.linspace(0.0, t_max, samples)
+    for f in F:
+        e1 = x[f[1]] - x[f[0]] + ts[:, None] * (d[f[1]] - d[f[0]])
+        e2 = x[f[2]] - x[f[0]] + ts[:, None] * (d[f[2]] - d[f[0]])
+        A = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+        hit = np.nonzero(A <= 0)[0]
+        if len(hit):
+            t_max = min(t_max, ts[hit[0]])
+    return t_max if t_max < 10.0 else np.inf

@@ -1,0 +1,346 @@
+"""Relax stage: kernels against tests/reference.py, fold-freedom, developable recovery,
+determinism, scaling, extremes, the paper preset, the stage files and the CLI."""
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+import reference as ref  # noqa: E402
+
+from potflat.distortion import summarize  # noqa: E402
+from potflat.errors import FoldedResultError, InvalidOptionError  # noqa: E402
+from potflat.relax import RelaxOptions, relax, run_relax_stage  # noqa: E402
+from potflat.types import FlatMesh, Mesh  # noqa: E402
+
+_spec = importlib.util.spec_from_file_location("_meshes", Path(__file__).parents[1] / "benchmarks" / "_meshes.py")
+meshes = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(meshes)
+
+
+def _signed_areas(uv, F):
+    e1 = uv[F[:, 1]] - uv[F[:, 0]]
+    e2 = uv[F[:, 2]] - uv[F[:, 0]]
+    return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
+def _procrustes_error(a, b):
+    """Max distance between ``a`` and ``b`` after the best rigid motion (no reflection)."""
+    a0, b0 = a - a.mean(0), b - b.mean(0)
+    u, _, vt = np.linalg.svd(a0.T @ b0)
+    d = np.sign(np.linalg.det(u @ vt))
+    rot = u @ np.diag([1, d]) @ vt
+    return float(np.abs(a0 @ rot - b0).max())
+
+
+def _springs(V, F, **kw):
+    from potflat.relax import _Springs
+
+    return _Springs(np.ascontiguousarray(V, float), np.ascontiguousarray(F, np.int64), len(V), **kw)
+
+
+@pytest.fixture(scope="module")
+def bumpy():
+    """A tiny non-planar irregular mesh (random heights over a jittered lattice)."""
+    flat, _ = meshes.cylinder_patch(5, 4, seed=3)
+    V = flat.mesh.vertices.copy()
+    V[:, 0] += np.random.default_rng(1).normal(0, 0.05, len(V))
+    return FlatMesh(Mesh(V, flat.mesh.faces), flat.uv)
+
+
+@pytest.fixture(scope="module")
+def vessel():
+    return meshes.vessel_rollout(1500, seed=2)
+
+
+# --- kernels against the references ---------------------------------------------------------
+
+def test_springs_and_cross_rest_lengths_match_reference(bumpy):
+    from potflat._kernels.springs import cross_rest_lengths, halfedge_springs
+
+    V, F = bumpy.mesh.vertices, bumpy.mesh.faces
+    edges, cross, boundary = halfedge_springs(F, len(V))
+    r_cross = cross_rest_lengths(V, cross)
+    want_pairs, want_rest = ref.springs(V, F)
+    got = np.concatenate([edges, np.sort(cross[:, :2], axis=1)])
+    got_rest = np.concatenate([np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1), r_cross])
+    order = np.lexsort((got[:, 1], got[:, 0], np.r_[np.zeros(len(edges)), np.ones(len(cross))]))
+    np.testing.assert_array_equal(got[order], want_pairs)
+    np.testing.assert_allclose(got_rest[order], want_rest, rtol=1e-12)
+    # cross rest lengths are intrinsic: longer than the 3D chord on a bent surface
+    chord = np.linalg.norm(V[cross[:, 0]] - V[cross[:, 1]], axis=1)
+    assert np.all(r_cross >= chord - 1e-12) and np.any(r_cross > chord + 1e-6)
+    np.testing.assert_array_equal(boundary, _boundary_edges(F))
+
+
+@pytest.mark.parametrize("relative", [False, True])
+def test_energy_and_gradient_match_reference(bumpy, relative):
+    V, F = bumpy.mesh.vertices, bumpy.mesh.faces
+    pairs, rest = ref.springs(V, F)
+    sp = _springs(V, F, k=0.7, relative=relative)
+    x = np.ascontiguousarray(bumpy.uv * 1.1)
+    E, Es, g = sp.evaluate(x, barrier=False)
+    assert Es == pytest.approx(ref.energy(x, pairs, rest, 0.7, relative), rel=1e-12)
+    assert E == Es
+    np.testing.assert_allclose(-g, ref.forces(x, pairs, rest, 0.7, relative), atol=1e-12)
+
+
+def test_barrier_energy_and_gradient_match_reference(bumpy):
+    from potflat.relax import BARRIER_EPS, BARRIER_MU
+
+    V, F = bumpy.mesh.vertices, bumpy.mesh.faces
+    sp = _springs(V, F, k=1.0, relative=False)
+    x = np.ascontiguousarray(bumpy.uv.copy())
+    x[:, 0] *= 0.4  # squeeze: triangles below half their rest area switch the barrier on
+    E, Es, g = sp.evaluate(x)
+    Eb = ref.barrier_energy(x, F, sp.a_ref, 1.0, BARRIER_MU, BARRIER_EPS)
+    assert Eb > 0
+    assert E - Es == pytest.approx(Eb, rel=1e-10)
+    num = ref.numeric_gradient(lambda y: sp.evaluate(np.ascontiguousarray(y))[0], x)
+    np.testing.assert_allclose(g, num, atol=1e-6 * np.abs(num).max())
+    x[:, 0] *= -1  # mirrored: every face flipped, infinite energy
+    assert sp.evaluate(np.ascontiguousarray(x))[0] == np.inf
+
+
+def test_max_step_matches_reference(bumpy):
+    F = bumpy.mesh.faces
+    sp = _springs(bumpy.mesh.vertices, F, k=1.0, relative=False)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        d = rng.normal(size=bumpy.uv.shape)
+        got = sp.max_step(bumpy.uv, d)
+        want = ref.max_step(bumpy.uv, d, F)
+        assert got == pytest.approx(want, abs=1e-4)
+        if np.isfinite(got):
+            assert np.all(_signed_areas(bumpy.uv + 0.999 * got * d, F) > 0)
+            assert np.any(_signed_areas(bumpy.uv + 1.001 * got * d, F) <= 0)
+
+
+def test_overlap_counts_crossing_boundary():
+    from potflat._kernels.relax_overlap import count_crossings
+
+    x = np.array([[0, 0], [2, 0], [1, -1], [1, 1], [5, 5], [6, 5]], float)
+    seg = np.array([[0, 1], [2, 3], [4, 5], [1, 2]])
+    count, first = count_crossings(x, seg, 0.5, 100)
+    assert count == 1 and sorted(first) == [0, 1]
+    count, _ = count_crossings(x, seg[[0, 2, 3]], 0.5, 100)
+    assert count == 0
+
+
+# --- the default solver ---------------------------------------------------------------------
+
+@pytest.mark.parametrize("proxy", ["cylinder", "sphere"])
+def test_default_is_fold_free_on_a_bulgy_vessel(proxy):
+    flat = meshes.vessel_rollout(1500, seed=1, proxy=proxy)
+    r = relax(flat)
+    F = flat.mesh.faces
+    assert r.flipped == 0 and r.boundary_overlap == 0
+    assert np.all(_signed_areas(r.flat.uv, F) > 0)
+    assert summarize(flat.mesh.vertices, r.flat.uv, F).flipped == 0
+    assert r.distortion.edge_rms < 0.6 * r.distortion_before.edge_rms
+    assert np.all(np.isfinite(r.flat.stress)) and r.flat.stress.shape == (len(flat.uv),)
+
+
+def test_energy_never_increases_under_the_default(vessel):
+    r = relax(vessel, preset="standard")
+    h = r.energy_history
+    assert len(h) == r.iterations > 10
+    assert np.all(np.diff(h) <= 0)
+
+
+def test_fold_free_from_a_deliberately_distorted_start(vessel):
+    u, v = vessel.uv.T
+    warped = np.stack([u + 25 * np.sin(v / 40), v * 1.6 + 10 * np.sin(u / 50)], axis=1)
+    start = vessel.replace(uv=warped)
+    assert np.all(_signed_areas(warped, vessel.mesh.faces) > 0)
+    r = relax(start)
+    assert r.flipped == 0 and r.boundary_overlap == 0
+    assert r.distortion.edge_rms < 0.5 * r.distortion_before.edge_rms
+
+
+@pytest.mark.parametrize("start", ["orthographic", "sphere"])
+def test_cylinder_patch_relaxes_to_its_development(start):
+    flat, exact = meshes.cylinder_patch(24, 16, start=start)
+    assert summarize(flat.mesh.vertices, flat.uv, flat.mesh.faces).edge_rms > 0.05
+    r = relax(flat, tol=1e-12, max_iter=3000)
+    assert r.distortion.edge_rms < 1e-4
+    assert _procrustes_error(r.flat.uv, exact) < 2e-3
+
+
+def test_cone_relaxes_to_its_development():
+    flat, exact = meshes.cone_patch(64, 10)
+    r = relax(flat, tol=1e-12, max_iter=4000)
+    assert r.distortion_before.edge_rms > 0.1
+    assert r.distortion.edge_rms < 1e-3
+    assert _procrustes_error(r.flat.uv, exact) < 1e-2
+
+
+def test_deterministic_run_to_run_and_across_thread_counts(vessel):
+    a = relax(vessel, preset="preview", threads=1)
+    b = relax(vessel, preset="preview", threads=1)
+    c = relax(vessel, preset="preview", threads=2)
+    np.testing.assert_array_equal(a.flat.uv, b.flat.uv)
+    np.testing.assert_array_equal(a.flat.uv, c.flat.uv)
+    np.testing.assert_array_equal(a.energy_history, c.energy_history)
+
+
+def test_result_scales_with_the_input_units(vessel):
+    base = relax(vessel, preset="preview")
+    for factor, rtol in ((1024.0, 0.0), (1e3, 1e-7), (1e-3, 1e-7)):
+        scaled = FlatMesh(vessel.mesh.replace(vertices=vessel.mesh.vertices * factor), vessel.uv * factor)
+        r = relax(scaled, preset="preview")
+        if rtol == 0.0:
+            np.testing.assert_array_equal(r.flat.uv, base.flat.uv * factor)
+        else:
+            np.testing.assert_allclose(r.flat.uv / factor, base.flat.uv, rtol=0, atol=rtol * np.ptp(base.flat.uv))
+
+
+# --- extremes ----------------------------------------------------------------------------------
+
+def test_two_triangle_mesh(square_mesh):
+    uv = square_mesh.vertices[:, :2] * np.array([2.0, 0.5])
+    r = relax(FlatMesh(square_mesh, uv), tol=1e-12)
+    assert r.flipped == 0
+    assert r.distortion.edge_rms < 1e-6
+    assert np.all(np.isfinite(r.flat.uv))
+
+
+def test_slivers_stay_unflipped():
+    flat, _ = meshes.cylinder_patch(16, 10, seed=5)
+    V, uv, F = flat.mesh.vertices.copy(), flat.uv.copy(), flat.mesh.faces
+    # collapse some interior vertices onto an edge of their ring: needle and cap slivers in 3D
+    rng = np.random.default_rng(0)
+    inner = [i for i in range(len(V)) if 0.2 < V[i, 2] < 1.3 and abs(np.arctan2(V[i, 1], V[i, 0])) < 0.8]
+    for i in rng.choice(inner, 6, replace=False):
+        j = F[np.nonzero((F == i).any(1))[0][0]]
+        j = j[j != i]
+        V[i] = 0.5 * (V[j[0]] + V[j[1]]) + 1e-9
+    fd = summarize(V, uv, F)
+    r = relax(FlatMesh(Mesh(V, F), uv))
+    assert r.flipped == 0 and np.all(_signed_areas(r.flat.uv, F) > 0)
+    assert r.distortion.edge_rms < fd.edge_rms
+
+
+def test_high_valence_fan():
+    k = 24
+    ang = np.linspace(0, 2 * np.pi, k, endpoint=False)
+    ring = np.stack([np.cos(ang), np.sin(ang), 0.3 * np.cos(3 * ang)], axis=1)
+    V = np.vstack([[0, 0, 0.5], ring])
+    F = np.array([[0, 1 + i, 1 + (i + 1) % k] for i in range(k)])
+    uv = V[:, :2] * 0.7
+    r = relax(FlatMesh(Mesh(V, F), uv))
+    assert r.flipped == 0 and r.boundary_overlap == 0
+    assert np.all(np.isfinite(r.flat.uv))
+
+
+def test_float32_input(vessel):
+    V32 = vessel.mesh.vertices.astype(np.float32)
+    uv32 = vessel.uv.astype(np.float32)
+    r = relax(FlatMesh(vessel.mesh.replace(vertices=V32), uv32), preset="preview")
+    assert r.flat.uv.dtype == np.float64 and r.flipped == 0
+
+
+@pytest.mark.parametrize("stretch", [1.0, 4.0])
+@pytest.mark.parametrize("preset", ["standard", "paper"])
+def test_stretch_factors_never_nan(vessel, stretch, preset):
+    r = relax(vessel, preset=preset, stretch=stretch, max_iter=400)
+    assert np.all(np.isfinite(r.flat.uv)) and np.all(np.isfinite(r.energy_history))
+    if preset != "paper":
+        assert r.flipped == 0 and r.boundary_overlap == 0
+
+
+@pytest.mark.parametrize("bad", [dict(stiffness=0.0), dict(stiffness=-1.0), dict(stretch=0.0), dict(tol=-1e-3),
+                                 dict(max_iter=0), dict(threads=0), dict(time_budget=-1.0), dict(preset="fast"),
+                                 dict(weighting="cubic"), dict(stiffness=float("nan")), dict(max_iter=2.5)])
+def test_invalid_options_raise_one_line_errors(bad):
+    with pytest.raises(InvalidOptionError) as err:
+        RelaxOptions(**bad)
+    assert "\n" not in str(err.value)
+
+
+def test_mirrored_start_is_refused(vessel):
+    mirrored = vessel.replace(uv=vessel.uv * np.array([-1.0, 1.0]))
+    with pytest.raises(FoldedResultError):
+        relax(mirrored)
+
+
+def test_degenerate_start_is_untangled(vessel):
+    uv = vessel.uv.copy()
+    F = vessel.mesh.faces
+    interior = np.setdiff1d(np.arange(len(uv)), _boundary_edges(F))
+    i = interior[len(interior) // 2]
+    f = F[np.nonzero((F == i).any(1))[0][0]]
+    a, b = f[f != i]
+    uv[i] = 0.5 * (uv[a] + uv[b])  # collinear: zero-area triangle in the start
+    r = relax(vessel.replace(uv=uv), preset="preview")
+    assert r.flipped == 0 and any("untangled" in n for n in r.notes)
+
+
+def _boundary_edges(F):
+    e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    u, c = np.unique(e, axis=0, return_counts=True)
+    return u[c == 1]
+
+
+def test_time_budget_and_callback_stop_early(vessel):
+    r = relax(vessel, callback=lambda info: info["iteration"] >= 7)
+    assert r.iterations == 7 and not r.converged and r.flipped == 0
+    r = relax(vessel, time_budget=1e-9)
+    assert r.iterations == 1 and not r.converged and any("time_budget" in n for n in r.notes)
+
+
+# --- paper preset ------------------------------------------------------------------------------
+
+def test_paper_preset_reports_flips_honestly(vessel):
+    r = relax(vessel, preset="paper", max_iter=3000)
+    assert r.settings["stretch"] == 2.0 and r.settings["stiffness"] == 0.5
+    assert r.flipped == int(np.sum(_signed_areas(r.flat.uv, vessel.mesh.faces) <= 0))
+    assert r.levels[0]["dt"] > 0 and np.all(np.isfinite(r.flat.uv))
+    assert r.energy_history[-1] < r.energy_history[0]
+
+
+# --- stage files and CLI ---------------------------------------------------------------------------
+
+def _write_rollout(tmp_path, flat, name="pot"):
+    from potflat.io.stage import write_flat_ply
+
+    path = tmp_path / f"{name}.rollout.ply"
+    write_flat_ply(path, flat)
+    (tmp_path / f"{name}.rollout.json").write_text(json.dumps({"axis": [0, 0, 1], "proxy": {"kind": "cylinder"}}))
+    return path
+
+
+def test_run_relax_stage_writes_ply_and_json(tmp_path, vessel):
+    from potflat.io.stage import read_flat_ply
+
+    src = _write_rollout(tmp_path, vessel)
+    out = run_relax_stage(src, tmp_path / "out", RelaxOptions(preset="preview"))
+    assert out.paths["ply"] == tmp_path / "out" / "pot.relaxed.ply"
+    back = read_flat_ply(out.paths["ply"])
+    assert back.stress is not None and back.uv.shape == vessel.uv.shape
+    js = json.loads(out.paths["json"].read_text())
+    assert js["fold_free"] is True and js["flipped"] == 0 and js["boundary_overlap"] == 0
+    assert js["axis"] == [0, 0, 1] and js["proxy"]["kind"] == "cylinder"
+    assert js["provenance"]["stage"] == "relax" and len(js["energy_history"]) >= 1
+    assert js["distortion"]["edge_rms"] < js["distortion_before"]["edge_rms"]
+
+
+def test_cli_relax(tmp_path, vessel):
+    from typer.testing import CliRunner
+
+    from potflat_cli.main import app
+
+    src = _write_rollout(tmp_path, vessel, name="hydria")
+    runner = CliRunner()
+    res = runner.invoke(app, ["relax", str(src), "-o", str(tmp_path / "o"), "--preset", "preview"])
+    assert res.exit_code == 0, res.output
+    assert "fold-free" in res.output and (tmp_path / "o" / "hydria.relaxed.json").exists()
+    res = runner.invoke(app, ["relax", str(src), "--stiffness", "0"])
+    assert res.exit_code == 2 and "stiffness" in res.output
+    res = runner.invoke(app, ["relax", "--help"])
+    assert res.exit_code == 0 and "Example" in res.output
