@@ -10,11 +10,21 @@ consistency). PCA of the surface is only a fallback.
 Quality figures (reported, never hidden):
 
 * ``rms_angle_deg`` / ``median_angle_deg``: area-weighted RMS / median angle between each
-  face normal and the plane that contains the axis and the face centre (0 for an exact
-  surface of revolution, whatever the scan's size);
-* ``rms_distance``: area-weighted RMS distance between each face's normal line and the axis,
-  in scan units, over the faces whose normal is at least 10 degrees away from the axis
-  direction (the distance is undefined for normals parallel to the axis).
+  vertex normal and the plane that contains the axis and the vertex (0 for an exact
+  surface of revolution whatever the scan's size; the faceting of a coarse mesh alone gives
+  about 1 degree, noisy or fluted scans up to about 10);
+* ``rms_distance``: area-weighted RMS distance between each vertex normal line and the axis,
+  in scan units, over the vertices whose normal is at least 10 degrees away from the axis
+  direction (the distance is undefined for normals parallel to the axis);
+* ``profile_deviation``: median of ``|r - median r of its height slice|`` over the vertices,
+  relative to the median radius. It decides whether the scan has an axis at all: a box
+  gives about 0.1, scanned vessels (even fluted ones) 0.01-0.02; above
+  :data:`MAX_PROFILE_DEVIATION` (or a median angle above :data:`MAX_MEDIAN_ANGLE_DEG`)
+  :class:`~potflat.errors.AxisNotFoundError` is raised.
+
+The lines used are vertex normal lines (area-weighted mean of the adjacent face normals,
+through the vertex): on an exactly sampled surface of revolution they meet the axis far
+more closely than face normals through face centroids, which the faceting tilts.
 
 Orientation (foot to mouth), the first rule that applies:
 

@@ -40,9 +40,10 @@ class RolloutOptions:
 
     Attributes
     ----------
-    units : str
-        Length unit of the scan file (used when reading it; the library function uses
-        :attr:`Mesh.units`).
+    units : str or None
+        Length unit of the scan file (``mm``, ``cm``, ``m``, ``um``, ``in``); None: the unit
+        the file declares (a PLY ``comment units``, an STL header, glTF's metres), else mm.
+        Used when reading the file; :func:`rollout` itself uses :attr:`Mesh.units`.
     proxy : str
         ``auto``, ``cylinder``, ``cone``, ``sphere`` or ``ortho``.
     axis : tuple of 6 float or None
@@ -61,7 +62,7 @@ class RolloutOptions:
         coordinates); default: from the axis towards the region's centre.
     """
 
-    units: str = "mm"
+    units: str | None = None
     proxy: str = "auto"
     axis: tuple[float, ...] | None = None
     flip: bool = False
@@ -71,7 +72,7 @@ class RolloutOptions:
     view: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
-        if self.units not in UNITS_MM:
+        if self.units is not None and self.units not in UNITS_MM:
             raise InvalidOptionError(f"units {self.units!r} is unknown; use one of {', '.join(UNITS_MM)}")
         if self.proxy not in ("auto", *_proxy.KINDS):
             raise InvalidOptionError(

@@ -379,3 +379,18 @@ def test_face_mask_restricts_the_region():
 def test_two_open_ends_say_flip_may_be_needed():
     mesh, *_ = cylinder(seed=1)
     assert "use flip" in rollout(mesh).axis.orientation
+
+
+def test_units_declared_by_the_file_are_kept_unless_given(tmp_path):
+    mesh, *_ = vase(seed=1)
+    scan = tmp_path / "pot.ply"
+    lines = ["ply", "format ascii 1.0", "comment units cm", f"element vertex {len(mesh.vertices)}",
+             "property double x", "property double y", "property double z",
+             f"element face {len(mesh.faces)}", "property list uchar int vertex_indices", "end_header"]
+    lines += [" ".join(map(repr, v)) for v in mesh.vertices.tolist()]
+    lines += ["3 " + " ".join(map(str, f)) for f in mesh.faces.tolist()]
+    scan.write_text("\n".join(lines) + "\n")
+    assert run_rollout_stage(scan, tmp_path / "a").summary["units"] == "cm"
+    out = run_rollout_stage(scan, tmp_path / "b", RolloutOptions(units="mm"))
+    assert out.summary["units"] == "mm" and out.summary["mm_per_unit"] == 1.0
+    assert read_flat_ply(out.paths["ply"]).mesh.units == "mm"

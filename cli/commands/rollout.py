@@ -44,7 +44,8 @@ def rollout_command(
         "--view", help="With --proxy ortho: direction x,y,z from the vessel to the viewer "
                        "\\[default: towards the region's centre].")] = None,
     units: Annotated[Optional[str], typer.Option(
-        "--units", help="Length unit of the scan: mm, cm, m, um, in \\[default: mm].")] = None,
+        "--units", help="Length unit of the scan: mm, cm, m, um, in \\[default: as the file "
+                        "declares (PLY comment, STL header, glTF metres), else mm].")] = None,
     name: Name = None,
     quiet: Quiet = False,
     json: Json = False,
