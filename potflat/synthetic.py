@@ -731,20 +731,21 @@ def _atlas_coords(chart_uv, face_chart, size, rng):
 
     n_ch = int(face_chart.max()) + 1
     dims = np.zeros((n_ch, 2))
-    local = chart_uv.copy()
+    order = np.argsort(face_chart, kind="stable")
+    bounds = np.searchsorted(face_chart[order], np.arange(n_ch + 1))
+    local = chart_uv[order].reshape(-1, 2)
     for c in range(n_ch):
-        sel = face_chart == c
-        if not np.any(sel):
+        uv = local[3 * bounds[c]:3 * bounds[c + 1]]  # a view: edited in place
+        if len(uv) == 0:
             continue
-        uv = local[sel].reshape(-1, 2)
         # align the chart's minimum-area box with the atlas, then a random quarter turn
-        (_, _), (_, _), box_deg = cv2.minAreaRect(uv.astype(np.float32))
+        sub = uv[:: max(1, len(uv) // 60000)].astype(np.float32)
+        (_, _), (_, _), box_deg = cv2.minAreaRect(sub)
         a = -math.radians(box_deg) + rng.integers(0, 4) * math.pi / 2
         rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
-        uv = uv @ rot.T * rng.uniform(0.8, 1.2)
+        uv[:] = uv @ (rot.T * rng.uniform(0.8, 1.2))
         uv -= uv.min(axis=0)
         dims[c] = uv.max(axis=0)
-        local[sel] = uv.reshape(-1, 3, 2)
     pad = 2 * _GUTTER_PX + 2
     lo, hi = 0.0, (size - 2 * pad) / max(dims.max(), 1e-12)
     for _ in range(50):
@@ -755,7 +756,8 @@ def _atlas_coords(chart_uv, face_chart, size, rng):
         else:
             hi = k
     pos, _ = _shelf_pack(dims * lo, size, pad)
-    px = local * lo + pos[face_chart][:, None, :]
+    px = np.empty_like(chart_uv)
+    px[order] = local.reshape(-1, 3, 2) * lo + pos[face_chart[order]][:, None, :]
     return px / size, lo
 
 

@@ -43,6 +43,7 @@ def rasterize_faces(tri, height, width, pad):
     bary = np.zeros((height, width, 3), np.float64)
     dist = np.full((height, width), np.inf)
     eps = 1e-9
+    # pass 1: pixel centres inside a triangle
     for f in range(tri.shape[0]):
         x0, y0 = tri[f, 0, 0], tri[f, 0, 1]
         x1, y1 = tri[f, 1, 0], tri[f, 1, 1]
@@ -50,10 +51,10 @@ def rasterize_faces(tri, height, width, pad):
         det = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
         if det == 0.0:
             continue
-        jlo = max(int(np.floor(min(x0, x1, x2) - pad - 0.5)), 0)
-        jhi = min(int(np.ceil(max(x0, x1, x2) + pad - 0.5)), width - 1)
-        ilo = max(int(np.floor(min(y0, y1, y2) - pad - 0.5)), 0)
-        ihi = min(int(np.ceil(max(y0, y1, y2) + pad - 0.5)), height - 1)
+        jlo = max(int(np.floor(min(x0, x1, x2) - 0.5)), 0)
+        jhi = min(int(np.ceil(max(x0, x1, x2) - 0.5)), width - 1)
+        ilo = max(int(np.floor(min(y0, y1, y2) - 0.5)), 0)
+        ihi = min(int(np.ceil(max(y0, y1, y2) - 0.5)), height - 1)
         for i in range(ilo, ihi + 1):
             py = i + 0.5
             for j in range(jlo, jhi + 1):
@@ -67,10 +68,25 @@ def rasterize_faces(tri, height, width, pad):
                     bary[i, j, 1] = max(b1, 0.0)
                     bary[i, j, 2] = max(b2, 0.0)
                     dist[i, j] = 0.0
+    if pad <= 0.0:
+        return face, bary, dist
+    # pass 2: the gutter, uncovered centres within pad of a triangle take its nearest point
+    for f in range(tri.shape[0]):
+        x0, y0 = tri[f, 0, 0], tri[f, 0, 1]
+        x1, y1 = tri[f, 1, 0], tri[f, 1, 1]
+        x2, y2 = tri[f, 2, 0], tri[f, 2, 1]
+        if (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0) == 0.0:
+            continue
+        jlo = max(int(np.floor(min(x0, x1, x2) - pad - 0.5)), 0)
+        jhi = min(int(np.ceil(max(x0, x1, x2) + pad - 0.5)), width - 1)
+        ilo = max(int(np.floor(min(y0, y1, y2) - pad - 0.5)), 0)
+        ihi = min(int(np.ceil(max(y0, y1, y2) + pad - 0.5)), height - 1)
+        for i in range(ilo, ihi + 1):
+            py = i + 0.5
+            for j in range(jlo, jhi + 1):
+                if dist[i, j] == 0.0:
                     continue
-                if pad <= 0.0 or dist[i, j] == 0.0:
-                    continue
-                # nearest point on the three edges
+                px = j + 0.5
                 best = np.inf
                 c0 = c1 = c2 = 0.0
                 for e in range(3):
