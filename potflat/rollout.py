@@ -397,51 +397,15 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         axis = estimate_axis(mesh, flip=options.flip)
 
     V, F = mesh.vertices, mesh.faces
-    _, _, theta_v = axis.cylindrical(V)
     p0, p1, p2 = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
     area = 0.5 * np.linalg.norm(np.cross(p1 - p0, p2 - p0), axis=1)
     h_c, _, theta_c = axis.cylindrical((p0 + p1 + p2) / 3.0)
-
     band = options.band or (0.0, 1.0)
-    frac = h_c / axis.height if axis.height > 0 else np.zeros(len(F))
-    keep = (frac >= band[0]) & (frac <= band[1])
-    if face_mask is not None:
-        face_mask = np.asarray(face_mask)
-        if face_mask.dtype != bool or face_mask.shape != (len(F),):
-            raise InvalidInputError(f"face_mask must be a bool array of shape ({len(F)},), got "
-                                    f"{face_mask.dtype} {face_mask.shape}")
-        keep &= face_mask
-    if options.seam is not None:
-        seam, seam_method = math.radians(options.seam % 360.0), "user"
-    elif options.angles is not None:
-        seam, seam_method = 0.0, "user"
-    else:
-        sel = np.flatnonzero(keep)
-        if len(sel) == 0:
-            raise InvalidOptionError(f"band {band[0]:g} {band[1]:g} selects no faces; widen it")
-        corners = theta_c[sel, None] + _wrap_pi(theta_v[F[sel]] - theta_c[sel, None])
-        seam, seam_method = choose_seam(mesh, sel, theta_c[sel], area[sel],
-                                        _covered(theta_c[sel], corners))
-
-    lo = math.radians(options.angles[0]) if options.angles is not None else 0.0
-    rel_c = (theta_c - seam - lo) % TWO_PI + lo
-    if options.angles is not None:
-        keep &= rel_c <= math.radians(options.angles[1])
-    face_index = np.flatnonzero(keep)
-    if len(face_index) == 0:
-        raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
+    face_index, seam, seam_method, corner_theta = _select(
+        mesh, axis, options, face_mask, band, h_c, theta_c, area)
     sub_f = F[face_index]
 
-    if options.angles is None and seam_method == "user":
-        # a region that does not go round is not cut: unwrap from the middle of its gap
-        corners = rel_c[face_index, None] + _wrap_pi(theta_v[sub_f] - seam - rel_c[face_index, None])
-        gap = _gap_middle(_covered(rel_c[face_index], corners))
-        if gap is not None:
-            rel_c = (theta_c - seam - gap) % TWO_PI + gap
-            rel_c -= TWO_PI * np.round(np.average(rel_c[face_index], weights=area[face_index]) / TWO_PI)
-    corner_theta = rel_c[face_index, None] + _wrap_pi(theta_v[sub_f] - seam - rel_c[face_index, None])
-
-    if options.proxy == "ortho":
+    if options.proxy == "ortho":  # a projection: nothing to cut
         vertex_index = np.flatnonzero(np.bincount(sub_f.ravel(), minlength=len(V)))
         new_index = np.zeros(len(V), np.int64)
         new_index[vertex_index] = np.arange(len(vertex_index))
@@ -462,14 +426,8 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
     vert_area = np.bincount(new_faces.ravel(), np.repeat(area[face_index] / 3.0, 3), len(vertex_index))
 
     if options.proxy == "ortho":
-        view = options.view
-        if view is None:
-            w = area[face_index]
-            mean_angle = math.atan2(w @ np.sin(theta_c[face_index]), w @ np.cos(theta_c[face_index]))
-            if np.hypot(w @ np.sin(theta_c[face_index]), w @ np.cos(theta_c[face_index])) < 1e-6 * w.sum():
-                mean_angle = seam + math.pi
-            other = np.cross(axis.direction, axis.reference)
-            view = math.cos(mean_angle) * axis.reference + math.sin(mean_angle) * other
+        view = options.view if options.view is not None else _default_view(
+            axis, theta_c[face_index], area[face_index], seam)
         prox = _proxy.ortho_proxy(axis.direction, axis.reference, np.asarray(view, float))
         prox = _proxy.Proxy(prox.kind, prox.params, reason="requested (orthographic projection)")
         uv = _proxy.project_ortho(prox, cut_mesh.vertices, axis.point)
@@ -492,6 +450,58 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         seam_angle=float(math.degrees(seam) % 360.0), seam_method=seam_method, region=region,
         distortion=summary, face_index=face_index, vertex_index=vertex_index,
         seam_vertices=n_seam, split_vertices=n_split)
+
+
+def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c, area):
+    """Faces of the region, the seam (radians, and how it was chosen) and the corners' unwrapped angles."""
+    V, F = mesh.vertices, mesh.faces
+    theta_v = axis.cylindrical(V)[2]
+    frac = h_c / axis.height if axis.height > 0 else np.zeros(len(F))
+    keep = (frac >= band[0]) & (frac <= band[1])
+    if face_mask is not None:
+        face_mask = np.asarray(face_mask)
+        if face_mask.dtype != bool or face_mask.shape != (len(F),):
+            raise InvalidInputError(f"face_mask must be a bool array of shape ({len(F)},), got "
+                                    f"{face_mask.dtype} {face_mask.shape}")
+        keep &= face_mask
+    if options.seam is not None:
+        seam, seam_method = math.radians(options.seam % 360.0), "user"
+    elif options.angles is not None:
+        seam, seam_method = 0.0, "user"
+    else:
+        sel = np.flatnonzero(keep)
+        if len(sel) == 0:
+            raise InvalidOptionError(f"band {band[0]:g} {band[1]:g} selects no faces; widen it")
+        corners = theta_c[sel, None] + _wrap_pi(theta_v[F[sel]] - theta_c[sel, None])
+        seam, seam_method = choose_seam(mesh, sel, theta_c[sel], area[sel],
+                                        _covered(theta_c[sel], corners))
+
+    # centroid angle from the seam, in [lo, lo + 2 pi): faces are unwrapped around it
+    lo = math.radians(options.angles[0]) if options.angles is not None else 0.0
+    rel_c = (theta_c - seam - lo) % TWO_PI + lo
+    if options.angles is not None:
+        keep &= rel_c <= math.radians(options.angles[1])
+    face_index = np.flatnonzero(keep)
+    if len(face_index) == 0:
+        raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
+    sub_f = F[face_index]
+    if options.angles is None and seam_method == "user":
+        # a region that does not go round is not cut: unwrap from the middle of its gap
+        corners = rel_c[face_index, None] + _wrap_pi(theta_v[sub_f] - seam - rel_c[face_index, None])
+        gap = _gap_middle(_covered(rel_c[face_index], corners))
+        if gap is not None:
+            rel_c = (theta_c - seam - gap) % TWO_PI + gap
+            rel_c -= TWO_PI * np.round(np.average(rel_c[face_index], weights=area[face_index]) / TWO_PI)
+    corner_theta = rel_c[face_index, None] + _wrap_pi(theta_v[sub_f] - seam - rel_c[face_index, None])
+    return face_index, seam, seam_method, corner_theta
+
+
+def _default_view(axis: AxisFit, theta_c: np.ndarray, area: np.ndarray, seam: float) -> np.ndarray:
+    """From the axis towards the region's (area-weighted) centre angle; opposite the seam if all round."""
+    s, c = area @ np.sin(theta_c), area @ np.cos(theta_c)
+    angle = math.atan2(s, c) if np.hypot(s, c) >= 1e-6 * area.sum() else seam + math.pi
+    other = np.cross(axis.direction, axis.reference)
+    return math.cos(angle) * axis.reference + math.sin(angle) * other
 
 
 def _covered(theta_c: np.ndarray, corner_theta: np.ndarray) -> np.ndarray:

@@ -52,9 +52,7 @@ def test_axis_sign_points_to_the_open_mouth():
 def test_axis_sign_from_the_inner_wall():
     # a cup: outer wall, lip, inner wall (facing the axis), closed outer foot; the mouth is
     # where the inner wall is, although both ends are the same width
-    t = np.linspace(0, 1, 40)
-    outer = lambda s: np.full_like(s, 30.0)
-    m_out, *_ = revolve(outer, lambda s: 60 * s, pose=False, seed=0, cap=True)
+    m_out, *_ = revolve(lambda s: np.full_like(s, 30.0), lambda s: 60 * s, pose=False, seed=0, cap=True)
     m_in, *_ = revolve(lambda s: np.full_like(s, 27.0), lambda s: 15 + 45 * s, pose=False, seed=1)
     inner_faces = m_in.faces[:, ::-1] + len(m_out.vertices)
     V = np.vstack([m_out.vertices, m_in.vertices])
@@ -62,7 +60,6 @@ def test_axis_sign_from_the_inner_wall():
     cup = Mesh(V, F)
     d, reason = orient(cup, np.zeros(3), np.array([0, 0, -1.0]))
     assert d[2] > 0 and "inner wall" in reason
-    del t
 
 
 def test_wider_end_tie_break_for_a_closed_shape():

@@ -5,13 +5,12 @@ import numpy as np
 import pytest
 import trimesh
 
-from _revolve import cone, cylinder, revolve, vase
+from _revolve import cone, cylinder, vase
 from potflat.axis import _boundary_loops
 from potflat.distortion import face_distortion
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.stage import read_flat_ply
 from potflat.rollout import RolloutOptions, cut_open, rollout, run_rollout_stage
-from potflat.types import Mesh
 
 
 def _local(res, local, Rot):
