@@ -307,8 +307,7 @@ def _make_grid(flat: FlatMesh, px_per_mm: float, max_megapixels: float) -> _Grid
 class _Renderer:
     """Rasterises a flattening strip by strip and produces every bake layer."""
 
-    def __init__(self, flat: FlatMesh, px_per_mm: float, *, supersample: int = 0, max_megapixels: float = 1000.0,
-                 need_painting: bool = True):
+    def __init__(self, flat: FlatMesh, px_per_mm: float, *, supersample: int = 0, max_megapixels: float = 1000.0):
         from potflat._kernels import raster
 
         self.flat = flat
@@ -316,13 +315,20 @@ class _Renderer:
         self.faces = mesh.faces
         self.grid = _make_grid(flat, px_per_mm, max_megapixels)
         g = self.grid
+        # distortion first: its temporaries come and go before the texture is loaded
+        self.summary = distortion.summarize(mesh.vertices, flat.uv, self.faces)
+        fd = distortion.face_distortion(mesh.vertices, flat.uv, self.faces)
+        self.area_3d, self.area_2d, self.valid = fd.area_3d, fd.area_2d, fd.valid
+        self.face_values = {"area": fd.log_area_ratio / math.log(2.0), "anisotropy": np.minimum(fd.anisotropy, 1e6)}
+        del fd
+        self.vertex_stress = flat.stress if flat.stress is not None else distortion.vertex_stress(
+            mesh.vertices, flat.uv, self.faces, mesh.mm_per_unit)
         pix = np.empty_like(flat.uv)
         pix[:, 0] = (flat.uv[:, 0] - g.origin[0]) * g.scale
         pix[:, 1] = (g.origin[1] - flat.uv[:, 1]) * g.scale
-        self._pix_px = pix
         self.texture = None
         self.texels_per_pixel = None
-        if need_painting and mesh.texcoords is not None and mesh.texture_path is not None:
+        if mesh.texcoords is not None and mesh.texture_path is not None:
             from potflat.io.images import read_texture
 
             self.texture = read_texture(mesh.texture_path)
@@ -344,26 +350,32 @@ class _Renderer:
         self._ptr, self._idx = raster.bin_triangles(self._pix, self.faces, float(self._block), nblocks)
         self._raster_mod = raster
         self._cache = None
-        self._face_values = {}
-        self._vertex_values = {}
+        self._vertex_paint = None  # per-vertex field of an untextured painting, made on first use
 
     # -- setup ---------------------------------------------------------------------
-    def _texel_ratio(self, pix: np.ndarray) -> np.ndarray:
-        """Texels per output pixel (largest singular value of the pixel-to-texel map) per face."""
+    def _texel_ratio(self, pix: np.ndarray, chunk: int = 1 << 20) -> np.ndarray:
+        """Texels per output pixel (largest singular value of the pixel-to-texel map) per face.
+
+        Computed in chunks of faces so no (m, 3, 2) temporaries are made for big meshes.
+        """
         F, tc = self.faces, self.flat.mesh.texcoords
         H0, W0 = self.texture.shape[:2]
-        tx = np.stack([tc[..., 0] * W0, (1.0 - tc[..., 1]) * H0], axis=-1)  # (m, 3, 2)
-        P = np.stack([pix[F[:, 1]] - pix[F[:, 0]], pix[F[:, 2]] - pix[F[:, 0]]], axis=-1)  # (m, 2, 2) columns
-        T = np.stack([tx[:, 1] - tx[:, 0], tx[:, 2] - tx[:, 0]], axis=-1)
-        det = P[:, 0, 0] * P[:, 1, 1] - P[:, 0, 1] * P[:, 1, 0]
-        ok = np.abs(det) > 1e-12
-        inv = np.empty_like(P)
-        safe = np.where(ok, det, 1.0)
-        inv[:, 0, 0], inv[:, 1, 1] = P[:, 1, 1] / safe, P[:, 0, 0] / safe
-        inv[:, 0, 1], inv[:, 1, 0] = -P[:, 0, 1] / safe, -P[:, 1, 0] / safe
-        J = T @ inv
-        ratio = np.linalg.svd(J, compute_uv=False)[:, 0]
-        ratio[~ok] = 1.0
+        ratio = np.ones(len(F))
+        for a in range(0, len(F), chunk):
+            f, t = F[a:a + chunk], tc[a:a + chunk]
+            p1, p2 = pix[f[:, 1]] - pix[f[:, 0]], pix[f[:, 2]] - pix[f[:, 0]]
+            t1 = np.stack([(t[:, 1, 0] - t[:, 0, 0]) * W0, (t[:, 0, 1] - t[:, 1, 1]) * H0], axis=1)
+            t2 = np.stack([(t[:, 2, 0] - t[:, 0, 0]) * W0, (t[:, 0, 1] - t[:, 2, 1]) * H0], axis=1)
+            det = p1[:, 0] * p2[:, 1] - p2[:, 0] * p1[:, 1]
+            ok = np.abs(det) > 1e-12
+            det = np.where(ok, det, 1.0)
+            # J = [t1 t2] [p1 p2]^-1, then its largest singular value in closed form
+            a11 = (t1[:, 0] * p2[:, 1] - t2[:, 0] * p1[:, 1]) / det
+            a12 = (t2[:, 0] * p1[:, 0] - t1[:, 0] * p2[:, 0]) / det
+            a21 = (t1[:, 1] * p2[:, 1] - t2[:, 1] * p1[:, 1]) / det
+            a22 = (t2[:, 1] * p1[:, 0] - t1[:, 1] * p2[:, 0]) / det
+            smax = np.hypot(0.5 * (a11 + a22), 0.5 * (a21 - a12)) + np.hypot(0.5 * (a11 - a22), 0.5 * (a21 + a12))
+            ratio[a:a + chunk] = np.where(ok, smax, 1.0)
         return ratio
 
     def _build_mips(self) -> None:
@@ -437,11 +449,12 @@ class _Renderer:
             out /= np.float32(np.iinfo(self.texture.dtype).max)
             return out
         if mesh.vertex_colors is not None:
-            return self._vertex_field(mesh.vertex_colors[:, :3] / 255.0, r0, r1)
-        if "relief" not in self._vertex_values:
-            self._vertex_values["relief"] = _relief_normals_and_light(mesh.vertices, self.flat.uv, self.faces,
-                                                                      mesh.mm_per_unit)
-        nl = self._vertex_field(self._vertex_values["relief"], r0, r1)
+            if self._vertex_paint is None:
+                self._vertex_paint = mesh.vertex_colors[:, :3] / 255.0
+            return self._vertex_field(self._vertex_paint, r0, r1)
+        if self._vertex_paint is None:
+            self._vertex_paint = _relief_normals_and_light(mesh.vertices, self.flat.uv, self.faces, mesh.mm_per_unit)
+        nl = self._vertex_field(self._vertex_paint, r0, r1)
         nrm, light = nl[..., :3], nl[..., 3:]
         dot = np.einsum("...i,...i->...", nrm, light) / np.maximum(
             np.linalg.norm(nrm, axis=-1) * np.linalg.norm(light, axis=-1), 1e-30)
@@ -461,25 +474,6 @@ class _Renderer:
         """3D point under each pixel, scan units (NaN outside). Shape (k, w, 3) float32."""
         return self._vertex_field(self.flat.mesh.vertices, r0, r1)
 
-    # -- distortion values ---------------------------------------------------------
-    @property
-    def vertex_stress(self) -> np.ndarray:
-        if "stress" not in self._vertex_values:
-            flat = self.flat
-            st = flat.stress if flat.stress is not None else distortion.vertex_stress(
-                flat.mesh.vertices, flat.uv, flat.mesh.faces, flat.mesh.mm_per_unit)
-            self._vertex_values["stress"] = st
-        return self._vertex_values["stress"]
-
-    @property
-    def face_values(self) -> dict:
-        if not self._face_values:
-            fd = distortion.face_distortion(self.flat.mesh.vertices, self.flat.uv, self.faces)
-            self._fd = fd
-            self._face_values = {"area": fd.log_area_ratio / math.log(2.0),
-                                 "anisotropy": np.minimum(fd.anisotropy, 1e6)}
-        return self._face_values
-
 
 # --------------------------------------------------------------------------------------
 # figures
@@ -497,10 +491,9 @@ def _figures(r: _Renderer, covered_px: float) -> dict:
     g, flat = r.grid, r.flat
     mpu = flat.mesh.mm_per_unit
     fv = r.face_values
-    fd = r._fd
-    valid = fd.valid
-    w = fd.area_3d[valid]
-    summary = distortion.summarize(flat.mesh.vertices, flat.uv, r.faces).as_dict()
+    valid = r.valid
+    w = r.area_3d[valid]
+    summary = r.summary.as_dict()
     figures = {
         "px_per_mm": g.px_per_mm,
         "dpi": g.px_per_mm * 25.4,
@@ -522,8 +515,8 @@ def _figures(r: _Renderer, covered_px: float) -> dict:
         "anisotropy": {**_stats(fv["anisotropy"][valid], w), "unit": "sigma_max / sigma_min"},
         "distortion": summary,
         "covered_area_mm2": covered_px / g.px_per_mm ** 2,
-        "flattened_area_mm2": float(np.abs(fd.area_2d).sum()) * mpu ** 2,
-        "surface_area_mm2": float(fd.area_3d.sum()) * mpu ** 2,
+        "flattened_area_mm2": float(np.abs(r.area_2d).sum()) * mpu ** 2,
+        "surface_area_mm2": float(r.area_3d.sum()) * mpu ** 2,
     }
     return figures
 
