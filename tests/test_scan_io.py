@@ -1,6 +1,7 @@
 """Scan loading: formats, seam welding, textures, units, real scans and bad input."""
 from __future__ import annotations
 
+import os
 import struct
 import zlib
 from pathlib import Path
@@ -637,3 +638,68 @@ def test_corrupt_glb(tmp_path):
     with pytest.raises(InvalidInputError) as e:
         load_scan(tmp_path / "x.glb")
     _one_line(e, "x.glb")
+
+
+# ------------------------------------------------------------------ fuzzing (pytest -m fuzz)
+
+
+def _fuzz_seeds(tmp: Path) -> dict[str, bytes]:
+    import trimesh
+
+    V, F = _grid()
+    obj, _, _ = _write_seam_obj(tmp)
+    seeds = {".obj": obj.read_bytes()}
+    tc = _uv_of(V[F]).reshape(-1, 6).tolist()
+    seeds[".ply"] = _write_ply(tmp / "b.ply", V, F.tolist(), texcoord=tc, comments=["TextureFile atlas.png"]).read_bytes()
+    seeds[".ascii.ply"] = _write_ply(tmp / "a.ply", V, F.tolist(), binary=False).read_bytes()
+    trimesh.Trimesh(V, F, process=False).export(tmp / "s.stl")
+    seeds[".stl"] = (tmp / "s.stl").read_bytes()
+    lines = ["OFF", f"{len(V)} {len(F)} 0"] + [f"{x} {y} {z}" for x, y, z in V] + [f"3 {a} {b} {c}" for a, b, c in F]
+    seeds[".off"] = ("\n".join(lines) + "\n").encode()
+    from PIL import Image
+
+    Vs, Fs = V[F].reshape(-1, 3), np.arange(3 * len(F)).reshape(-1, 3)
+    trimesh.Trimesh(Vs, Fs, process=False, visual=trimesh.visual.TextureVisuals(
+        uv=_uv_of(Vs), image=Image.new("RGB", (4, 4)))).export(tmp / "g.glb")
+    seeds[".glb"] = (tmp / "g.glb").read_bytes()
+    return seeds
+
+
+@pytest.mark.fuzz
+def test_fuzz_loaders_never_crash(tmp_path_factory):
+    """Random mutations of small valid files: load_scan succeeds or raises a PotflatError."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from potflat.errors import PotflatError
+
+    tmp = tmp_path_factory.mktemp("fuzz")
+    seeds = _fuzz_seeds(tmp)
+
+    @settings(max_examples=int(os.environ.get("POTFLAT_FUZZ_EXAMPLES", "300")), deadline=None,
+              derandomize="POTFLAT_FUZZ_RANDOM" not in os.environ)
+    @given(st.sampled_from(sorted(seeds)), st.lists(st.tuples(st.sampled_from(["flip", "cut", "insert", "digit"]),
+                                                              st.floats(0, 1), st.binary(min_size=1, max_size=4)),
+                                                    min_size=1, max_size=4))
+    def run(kind, edits):
+        data = bytearray(seeds[kind])
+        for op, where, blob in edits:
+            i = int(where * (len(data) - 1))
+            if op == "flip":
+                data[i] ^= blob[0] or 1
+            elif op == "cut":
+                del data[i:]
+            elif op == "insert":
+                data[i:i] = blob
+            else:
+                data[i:i + 1] = str(blob[0] % 10).encode()
+            if not data:
+                break
+        path = tmp / ("case" + (".ply" if kind == ".ascii.ply" else kind))
+        path.write_bytes(bytes(data))
+        try:
+            load_scan(path)
+        except PotflatError as exc:
+            assert "\n" not in str(exc)
+
+    run()

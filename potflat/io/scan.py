@@ -606,6 +606,8 @@ def _read_ply(path: Path, texture: str) -> _Raw:
         _ply_binary(memoryview(data)[body_start:], elements, "<" if fmt == "binary_little_endian" else ">", path)
     by_name = {e.name: e for e in elements}
     vert, face = by_name.get("vertex"), by_name.get("face")
+    if vert is not None:  # list properties of vertices are never coordinates, colours or uv
+        vert.data = {k: v for k, v in vert.data.items() if isinstance(v, np.ndarray)}
     if vert is None or not {"x", "y", "z"} <= set(vert.data):
         raise InvalidInputError(f"{path} has no vertex x y z; export the scan as a mesh")
     V = np.stack([vert.data[c] for c in "xyz"], axis=1).astype(np.float64)
@@ -724,19 +726,27 @@ def _read_gltf(path: Path, texture: str) -> _Raw:
     import trimesh
 
     scene = _trimesh_load(path, force="scene")
-    geoms = [g for g in (scene.dump() if isinstance(scene, trimesh.Scene) else [scene])
-             if isinstance(g, trimesh.Trimesh) and len(g.faces)]
+    try:  # trimesh decodes embedded images lazily, here
+        geoms = [g for g in (scene.dump() if isinstance(scene, trimesh.Scene) else [scene])
+                 if isinstance(g, trimesh.Trimesh) and len(g.faces)]
+        kinds = [g.visual.kind for g in geoms]
+    except Exception as exc:  # corrupt embedded data: many exception types
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InvalidInputError(f"{path} cannot be read as {path.suffix[1:].upper()} ({msg[:120]}); "
+                                "export the scan again") from None
     if not geoms:
         raise InvalidInputError(f"{path} contains no triangle meshes; export the scan as a mesh")
     verts, faces, uvs, offset = [], [], [], 0
-    for g in geoms:
+    for g, kind in zip(geoms, kinds):
+        if np.asarray(g.faces).min() < 0 or np.asarray(g.faces).max() >= len(g.vertices):
+            raise InvalidInputError(f"{path}: faces point at missing vertices; the file is corrupt: export it again")
         verts.append(np.asarray(g.vertices, np.float64))
         faces.append(np.asarray(g.faces, np.int64) + offset)
-        uv = getattr(g.visual, "uv", None) if g.visual.kind == "texture" else None
+        uv = getattr(g.visual, "uv", None) if kind == "texture" else None
         uvs.append(None if uv is None or len(uv) != len(g.vertices) else np.asarray(uv, np.float64)[g.faces])
         offset += len(g.vertices)
     raw = _Raw(vertices=np.concatenate(verts), faces=np.concatenate(faces), units="m")
-    if all(g.visual.kind == "vertex" for g in geoms):
+    if all(kind == "vertex" for kind in kinds):
         raw.colors = np.concatenate([np.asarray(g.visual.vertex_colors, np.uint8) for g in geoms])
     if texture == "ignore" or all(u is None for u in uvs):
         return raw
@@ -757,6 +767,14 @@ def _read_gltf(path: Path, texture: str) -> _Raw:
 def _gltf_images(path: Path) -> list[Path]:
     """Base-colour texture images of a glTF/GLB as files: external ones as they are, embedded ones
     extracted (content-addressed, atomically) into a ``potflat-textures`` temp folder."""
+    try:
+        return _gltf_image_files(path)
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError, struct.error):
+        raise InvalidInputError(f"{path}: its texture images cannot be read (broken glTF structure); "
+                                f"export the scan again {_IGNORE_HINT}") from None
+
+
+def _gltf_image_files(path: Path) -> list[Path]:
     from potflat.io.atomic import write_bytes_atomic
 
     data = _read_bytes(path)
@@ -770,11 +788,15 @@ def _gltf_images(path: Path) -> list[Path]:
                 bin_chunk = data[28 + jlen:28 + jlen + blen]
         except (struct.error, ValueError):
             raise InvalidInputError(f"{path} is not a valid GLB file; export the scan again") from None
+        if not isinstance(doc, dict):
+            raise InvalidInputError(f"{path} is not a valid GLB file; export the scan again")
     else:
         try:
             doc = json.loads(data)
         except ValueError:
             raise InvalidInputError(f"{path} is not valid glTF JSON; export the scan again") from None
+        if not isinstance(doc, dict):
+            raise InvalidInputError(f"{path} is not valid glTF JSON; export the scan again")
     images = doc.get("images", [])
     textures = doc.get("textures", [])
     base = set()  # images used as base colour (not normal or roughness maps)
