@@ -31,7 +31,8 @@ from scipy.spatial import cKDTree
 
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
-from potflat.walls import weighted_quantiles, check_axis, check_mesh, cylindrical, face_components
+from potflat.walls import (FaceGraph, check_axis, check_mesh, cylindrical, face_adjacency, unique_ints,
+                           weighted_quantiles)
 
 #: Automatic cell size: at least this many median edge lengths ...
 _CELL_EDGES = 2.0
@@ -123,6 +124,26 @@ class AttachmentSelection:
         """Number of attachment faces."""
         return int(self.face_mask.sum())
 
+    def root_faces(self, faces: np.ndarray) -> np.ndarray:
+        """Faces not flagged that share a vertex with an attachment: where each one meets the
+        wall (its footprint on the rollout, to show as a mask in the bake).
+
+        Parameters
+        ----------
+        faces : (m, 3) int64
+            The faces of the mesh the selection was made on.
+
+        Returns
+        -------
+        (m,) bool
+        """
+        faces = np.asarray(faces)
+        if faces.shape != (len(self.face_mask), 3):
+            raise InvalidInputError("faces must be the (m, 3) faces of the mesh the attachments were detected on")
+        on = np.zeros(len(self.vertex_offset), dtype=bool)
+        on[faces[self.face_mask].ravel()] = True
+        return on[faces].any(axis=1) & ~self.face_mask
+
     def summary(self) -> dict:
         """JSON-ready figures for a stage sidecar (lengths in millimetres)."""
         s = self.mm_per_unit
@@ -186,7 +207,7 @@ def detect_attachments(mesh: Mesh, axis_point, axis_direction, *, tolerance: flo
     p, a = check_axis(axis_point, axis_direction)
     V, F = mesh.vertices, mesh.faces
     h_all, r_all, _ = cylindrical(V, p, a)
-    used = np.unique(F)
+    used = np.flatnonzero(np.bincount(F.ravel(), minlength=len(V)))
     h0 = float(h_all[used].min())
     med_edge = float(np.median(np.linalg.norm(V[F[:, [1, 2, 0]]] - V[F], axis=2)))
 
@@ -220,26 +241,27 @@ def detect_attachments(mesh: Mesh, axis_point, axis_direction, *, tolerance: flo
     mask = np.zeros(len(F), dtype=bool)
     components: list[Attachment] = []
     if core_f.any():
-        import trimesh
-
-        adj = np.asarray(trimesh.graph.face_adjacency(faces=F), dtype=np.int64).reshape(-1, 2)
-        comp = face_components(len(F), adj[off_f[adj[:, 0]] & off_f[adj[:, 1]]])
-        seeded = np.unique(comp[core_f])
-        mask = off_f & np.isin(comp, seeded)
+        graph = FaceGraph(len(F), face_adjacency(F))
+        adj = graph.pairs
+        comp = graph.components(off_f[adj[:, 0]] & off_f[adj[:, 1]])
+        seeded = np.zeros(int(comp.max()) + 1, dtype=bool)
+        seeded[comp[core_f]] = True
         tri = V[F]
         area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        cand = off_f & seeded[comp]
+        comp_area = np.bincount(comp[cand], weights=area[cand], minlength=len(seeded))
+        big = seeded & (comp_area >= cell * cell)  # smaller flagged specks are noise
+        mask = off_f & big[comp]
+        idx = np.flatnonzero(mask)
+        idx = idx[np.argsort(comp[idx], kind="stable")]
+        groups = np.split(idx, np.flatnonzero(np.diff(comp[idx])) + 1) if len(idx) else []
         cen = tri.mean(axis=1)
-        min_area = cell * cell
-        for c in seeded:
-            fm = mask & (comp == c)
+        for fm in groups:
             ar = float(area[fm].sum())
-            if ar < min_area:
-                mask &= ~fm
-                continue
-            vi = np.unique(F[fm])
+            vi = unique_ints(F[fm])
             hc = h_all[vi] - h0
             components.append(Attachment(
-                n_faces=int(fm.sum()),
+                n_faces=len(fm),
                 area=ar,
                 area_mm2=ar * mesh.mm_per_unit ** 2,
                 height_min=float(hc.min()),
@@ -295,11 +317,11 @@ def _coverage_pass(hv: np.ndarray, rv: np.ndarray, tv: np.ndarray, cell: float,
         ok = (th >= 0) & (th < nh) & (tr >= 0)
         na = n_ang(tr[ok])
         ia = np.minimum((tv[ok] / (2 * np.pi) * na).astype(np.int64), na - 1)
-        return np.unique((th[ok] * nr + tr[ok]) * _MAX_ANGLE_BINS + ia)
+        return unique_ints((th[ok] * nr + tr[ok]) * _MAX_ANGLE_BINS + ia)
 
     own_keys = occupied(0, 0)
-    keys = np.unique(np.concatenate([occupied(dh, dr) for dh in (-1, 0, 1) for dr in (-1, 0, 1)]))
-    cells, counts = np.unique(keys // _MAX_ANGLE_BINS, return_counts=True)
+    keys = unique_ints(np.concatenate([occupied(dh, dr) for dh in (-1, 0, 1) for dr in (-1, 0, 1)]))
+    cells, counts = unique_ints(keys // _MAX_ANGLE_BINS, return_counts=True)
     frac = counts / n_ang(cells % nr)
     row_ref = np.zeros(nh)
     np.maximum.at(row_ref, cells // nr, frac)
@@ -309,7 +331,7 @@ def _coverage_pass(hv: np.ndarray, rv: np.ndarray, tv: np.ndarray, cell: float,
 
     # revolution surface: median (r, h) of the vertices of each cell that the scan itself
     # covers over many angles (a handle's few vertices in a wall cell do not move the median)
-    ocells, ocounts = np.unique(own_keys // _MAX_ANGLE_BINS, return_counts=True)
+    ocells, ocounts = unique_ints(own_keys // _MAX_ANGLE_BINS, return_counts=True)
     good_ids = ocells[ocounts / n_ang(ocells % nr) >= coverage_ratio * row_ref[ocells // nr]]
     offset = np.full(len(hv), np.nan)
     if len(good_ids) == 0:

@@ -167,18 +167,19 @@ def vessel_profile(mesh: Mesh, axis_point, axis_direction, *, bins: int | None =
             raise InvalidInputError(f"face_mask must have one entry per face ({m}), got shape {use.shape}")
         if not use.any():
             raise InvalidInputError("face_mask selects no faces; select at least part of the vessel")
-    fr = face_frame(mesh, p, a)
+    fr = face_frame(mesh, p, a, adjacency=labels is None)
     if labels is None:
         labels, _ = wall_labels(fr)
     else:
         labels = np.asarray(labels)
-        if labels.shape != (m,) or not np.isin(labels, (OUTER, INNER)).all():
+        if labels.shape != (m,) or not ((labels == OUTER) | (labels == INNER)).all():
             raise InvalidInputError("labels must hold 1 (outer) or -1 (inner) for every face")
 
     F = mesh.faces[use]
     lab = labels[use]
     h_v, r_v, _ = cylindrical(mesh.vertices, p, a)
-    used_v = np.unique(F)
+    n = len(mesh.vertices)
+    used_v = np.flatnonzero(np.bincount(F.ravel(), minlength=n))
     h0 = float(h_v[used_v].min())
     h1 = float(h_v[used_v].max())
     if bins is None:
@@ -194,15 +195,17 @@ def vessel_profile(mesh: Mesh, axis_point, axis_direction, *, bins: int | None =
     out = {}
     for name, side in (("outer", OUTER), ("inner", INNER)):
         sel = lab == side
-        corners = F[sel].ravel()
-        # projected area of the faces that face away from (outer) / towards (inner) the axis
-        w = np.repeat(fr.area[use][sel] / 3.0 * np.maximum(side * fr.n_radial[use][sel], 0.0), 3)
+        Fs = F[sel].ravel()
+        # vertex weight: projected area of its faces that face away from (outer) / towards
+        # (inner) the axis, i.e. their area on a cylinder around the axis
+        wf = fr.area[use][sel] / 3.0 * np.maximum(side * fr.n_radial[use][sel], 0.0)
+        wv = np.bincount(Fs, weights=np.repeat(wf, 3), minlength=n)
+        verts = np.flatnonzero(np.bincount(Fs, minlength=n))
         (q25, q50, q75, hmed), total = binned_median(
-            hh[corners], np.r_[r_v[corners]], w, edges, (0.25, 0.5, 0.75), extra=hh[corners])
+            hh[verts], r_v[verts], wv[verts], edges, (0.25, 0.5, 0.75), extra=hh[verts])
         if (total > 0).any():
             low = total < _MIN_BIN_WEIGHT_FRACTION * np.median(total[total > 0])
             q25[low] = q50[low] = q75[low] = hmed[low] = np.nan
-        verts = np.unique(corners)
         b = np.clip(np.searchsorted(edges, hh[verts], side="right") - 1, 0, int(bins) - 1)
         out[name] = (_at_centres(centres, hmed, q50), (q75 - q25) / 1.349,
                      np.bincount(b, minlength=int(bins)).astype(np.int64))

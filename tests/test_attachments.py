@@ -43,6 +43,11 @@ def test_handle_root_painting_stays():
     # unflagged handle faces are only those touching the wall (offset of a corner ~ 0)
     missed = is_handle & ~att.face_mask
     assert (np.nanmin(att.vertex_offset[F[missed]], axis=1) <= att.offset_threshold).all()
+    # the root ring: unflagged faces next to the handle, all on the handle (it is a separate part)
+    roots = att.root_faces(F)
+    assert roots.any() and not (roots & att.face_mask).any() and is_handle[roots].all()
+    with pytest.raises(InvalidInputError):
+        att.root_faces(F[:5])
 
 
 @pytest.mark.parametrize("builder", ["cylinder", "vase", "cup", "sherd"])
