@@ -73,3 +73,14 @@ def test_failed_write_leaves_previous_file(tmp_path, monkeypatch):
         write_flat_ply(out, flat)
     assert out.read_bytes() == before
     assert not list(tmp_path.glob("*.part"))
+
+
+def test_outputs_get_normal_permissions(tmp_path):
+    import os
+    import stat
+
+    out = tmp_path / "x.rollout.ply"
+    write_flat_ply(out, _flat(tmp_path))
+    mask = os.umask(0)
+    os.umask(mask)
+    assert stat.S_IMODE(out.stat().st_mode) == 0o666 & ~mask
