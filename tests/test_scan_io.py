@@ -610,18 +610,77 @@ def test_texture_decompression_bomb(tmp_path):
     assert load_scan(obj).mesh.texture_path is not None
 
 
-def test_several_texture_images(tmp_path):
-    obj, _, _ = _write_seam_obj(tmp_path)
+def _sample(img, uv):
+    """Colour of an image at OBJ-convention texture coordinates (nearest pixel)."""
+    w, h = img.size
+    x = min(int(uv[0] * w), w - 1)
+    y = min(int((1.0 - uv[1]) * h), h - 1)
+    return img.getpixel((x, y))[:3]
+
+
+def _paint(path, size, colours):
+    """An image whose left and right halves have two colours."""
+    from PIL import Image
+
+    im = Image.new("RGB", size, colours[0])
+    im.paste(Image.new("RGB", (size[0] // 2, size[1]), colours[1]), (size[0] // 2, 0))
+    im.save(path)
+
+
+def test_several_texture_images_packed_into_one_atlas(tmp_path):
+    from PIL import Image
+
+    obj, tri_pos, expected_tc = _write_seam_obj(tmp_path)
     text = obj.read_text().splitlines()
     k = next(i for i, ln in enumerate(text) if ln.startswith("f "))
-    text.insert(k + 3, "usemtl other")
+    text.insert(k + 3, "usemtl other")  # faces 3, 4, ... use the second image
     obj.write_text("\n".join(text) + "\n")
     (tmp_path / "seam.mtl").write_text("newmtl paint\nmap_Kd atlas.png\nnewmtl other\nmap_Kd b.png\n")
-    _png(tmp_path / "b.png")
+    _paint(tmp_path / "atlas.png", (16, 8), [(255, 0, 0), (0, 255, 0)])
+    _paint(tmp_path / "b.png", (8, 12), [(0, 0, 255), (255, 255, 0)])
+    scan = load_scan(obj)
+    mesh = scan.mesh
+    assert any("2 texture images" in w and "packed" in w for w in scan.report.warnings)
+    assert Image.open(mesh.texture_path).size == (32, 12)  # two 16 x 12 cells side by side
+    # image 0 in the left cell (16 x 8 at the top), image 1 in the right cell (8 x 12)
+    want = expected_tc.copy()
+    first = np.arange(len(want)) < 3
+    want[first, :, 0] = expected_tc[first, :, 0] * 16 / 32
+    want[first, :, 1] = 1 - (1 - expected_tc[first, :, 1]) * 8 / 12
+    want[~first, :, 0] = (16 + expected_tc[~first, :, 0] * 8) / 32
+    _assert_corner_texcoords(mesh, tri_pos, want)
+    assert load_scan(obj, texture="ignore").mesh.texture_path is None
+    assert load_scan(obj).mesh.texture_path == mesh.texture_path  # made once, then reused
+    (tmp_path / "b.png").write_bytes(b"not an image")
     with pytest.raises(InvalidInputError) as e:
         load_scan(obj)
-    _one_line(e, "seam.obj", "2 texture images", "one texture atlas")
-    assert load_scan(obj, texture="ignore").mesh.texture_path is None
+    _one_line(e, "b.png", "not a readable image")
+
+
+def test_ply_texnumber_atlas_colours(tmp_path):
+    from PIL import Image
+
+    V, F = _grid()
+    # each face samples the middle of the left half of its image: red in image 0, blue in image 1
+    tc = np.tile([0.25, 0.5], (len(F), 3, 1))
+    _paint(tmp_path / "t0.png", (8, 8), [(255, 0, 0), (0, 255, 0)])
+    _paint(tmp_path / "t1.png", (4, 16), [(0, 0, 255), (255, 255, 0)])
+    which = np.arange(len(F)) % 2
+    head = ["ply", "format ascii 1.0", "comment TextureFile t0.png", "comment TextureFile t1.png",
+            f"element vertex {len(V)}", "property float x", "property float y", "property float z",
+            f"element face {len(F)}", "property list uchar int vertex_indices", "property list uchar float texcoord",
+            "property int texnumber", "end_header"]
+    rows = [" ".join(map(str, v)) for v in V]
+    rows += [f"3 {a} {b} {c} 6 " + " ".join(map(str, tc[f].ravel())) + f" {which[f]}" for f, (a, b, c) in enumerate(F)]
+    (tmp_path / "tn.ply").write_text("\n".join(head + rows) + "\n")
+    mesh = load_scan(tmp_path / "tn.ply").mesh
+    atlas = Image.open(mesh.texture_path)
+    assert atlas.size == (16, 16)
+    ref = _match_faces(mesh, V[F])
+    for f, r in enumerate(ref):
+        want = (255, 0, 0) if which[r] == 0 else (0, 0, 255)
+        for c in range(3):
+            assert _sample(atlas, mesh.texcoords[f, c]) == want
 
 
 def test_truncated_binary_stl(tmp_path):

@@ -145,7 +145,7 @@ def load_scan(path: str | os.PathLike, *, units: str | None = None, clean: bool 
     path = path.resolve()
     reader = {".obj": _read_obj, ".ply": _read_ply, ".stl": _read_trimesh, ".off": _read_trimesh,
               ".glb": _read_gltf, ".gltf": _read_gltf}[ext]
-    raw = reader(path, texture)
+    raw = reader(path, texture, max_texture_pixels)
     mesh = _validate(raw, path, units, texture, max_texture_pixels)
     if clean:
         mesh, report = clean_mesh(mesh, weld_tolerance=weld_tolerance,
@@ -196,7 +196,7 @@ def _validate(raw: _Raw, path: Path, units: str | None, texture: str, max_pixels
         raw.warnings.append(f"texture {tex.name} declared but no texture coordinates; loaded untextured")
         tex = None
     if tex is not None:
-        tex = _check_texture(tex, path, max_pixels)
+        tex = _check_texture(tex, path, max_pixels)[0]
     declared = raw.units
     if units is None:
         units = declared or "mm"
@@ -206,8 +206,9 @@ def _validate(raw: _Raw, path: Path, units: str | None, texture: str, max_pixels
     return Mesh(V, F, texcoords=tc, texture_path=tex, vertex_colors=colors, units=units, source=path)
 
 
-def _check_texture(tex: Path, source: Path, max_pixels: int) -> Path:
-    """Check that ``tex`` is a readable image within ``max_pixels`` (header only)."""
+def _check_texture(tex: Path, source: Path, max_pixels: int) -> tuple[Path, tuple[int, int]]:
+    """Check that ``tex`` is a readable image within ``max_pixels`` (header only); return
+    its absolute path and its (width, height)."""
     from PIL import Image
 
     tex = tex.resolve()
@@ -235,7 +236,87 @@ def _check_texture(tex: Path, source: Path, max_pixels: int) -> Path:
                                 f"restore the file {_IGNORE_HINT}") from None
     finally:
         Image.MAX_IMAGE_PIXELS = old
-    return tex
+    return tex, (w, h)
+
+
+def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source: Path,
+                    max_pixels: int) -> tuple[Path, np.ndarray, str]:
+    """Pack several texture images into one atlas (a grid) and remap the texture coordinates.
+
+    Parameters
+    ----------
+    paths : list of Path
+        The images, in the order of the indices in ``which``.
+    which : (m,) int64
+        Image of each face, -1 for none (those keep their coordinates).
+    uv : (m, 3, 2) float64
+        Texture coordinates in each face's own image (OBJ convention, v up).
+
+    Returns
+    -------
+    atlas : Path
+        PNG in a ``potflat-textures`` temporary folder, named by the sources' paths, sizes
+        and modification times (so it is made once and reused).
+    uv : (m, 3, 2) float64
+        Coordinates in the atlas (clipped to each image: tiling cannot be packed).
+    note : str
+        Report line.
+    """
+    from PIL import Image
+
+    from potflat.io.atomic import atomic_path
+
+    checked = [_check_texture(p, source, max_pixels) for p in paths]
+    paths = [p for p, _ in checked]
+    sizes = [size for _, size in checked]
+    cols = int(np.ceil(np.sqrt(len(paths))))
+    rows = int(np.ceil(len(paths) / cols))
+    cw, ch = max(w for w, _ in sizes), max(h for _, h in sizes)
+    W, H = cols * cw, rows * ch
+    if W * H > max_pixels:
+        raise InvalidInputError(f"{source}: its {len(paths)} texture images would make a {W} x {H} atlas, over "
+                                f"max_texture_pixels={max_pixels}; re-export with one texture {_IGNORE_HINT}")
+    key = json.dumps([[str(p), p.stat().st_size, p.stat().st_mtime_ns] for p in paths]).encode()
+    target = Path(tempfile.gettempdir()) / "potflat-textures" / (hashlib.sha256(key).hexdigest()[:32] + ".png")
+    if not target.exists():
+        old = Image.MAX_IMAGE_PIXELS
+        try:
+            Image.MAX_IMAGE_PIXELS = None  # sizes were checked against max_pixels above
+            modes = []
+            for p in paths:
+                with Image.open(p) as im:
+                    modes.append(im.mode)
+            mode = "RGBA" if any("A" in m for m in modes) else "RGB"
+            atlas = Image.new(mode, (W, H))
+            for k, p in enumerate(paths):
+                r, c = divmod(k, cols)
+                with Image.open(p) as im:
+                    atlas.paste(im.convert(mode), (c * cw, r * ch))
+            with atomic_path(target) as tmp:
+                atlas.save(tmp, format="PNG", compress_level=1)
+        except InvalidInputError:
+            raise
+        except Exception as exc:  # Pillow raises many types for corrupt images
+            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise InvalidInputError(f"{source}: its texture images cannot be decoded ({msg}); restore them "
+                                    f"{_IGNORE_HINT}") from None
+        finally:
+            Image.MAX_IMAGE_PIXELS = old
+    out = uv.copy()
+    sel = which >= 0
+    k = which[sel]
+    r, c = np.divmod(k, cols)
+    w = np.array([s[0] for s in sizes], float)[k]
+    h = np.array([s[1] for s in sizes], float)[k]
+    t = np.clip(uv[sel], 0.0, 1.0)
+    clipped = int(np.count_nonzero((t != uv[sel]).any(axis=(1, 2))))
+    out[sel, :, 0] = (c[:, None] * cw + t[..., 0] * w[:, None]) / W
+    out[sel, :, 1] = 1.0 - (r[:, None] * ch + (1.0 - t[..., 1]) * h[:, None]) / H
+    note = (f"{len(paths)} texture images ({', '.join(p.name for p in paths[:4])}"
+            f"{', ...' if len(paths) > 4 else ''}) packed into one {W} x {H} atlas {target}")
+    if clipped:
+        note += f"; {clipped} faces had texture coordinates outside their image (clipped)"
+    return target, out, note
 
 
 def _triangulate(lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, int]:
@@ -289,7 +370,7 @@ def _find_file(name: str, *dirs: Path) -> Path:
 # OBJ
 
 
-def _read_obj(path: Path, texture: str) -> _Raw:
+def _read_obj(path: Path, texture: str, max_pixels: int) -> _Raw:
     from potflat._kernels.mesh import obj_count, obj_fill
 
     data = _read_bytes(path)
@@ -344,9 +425,17 @@ def _read_obj(path: Path, texture: str) -> _Raw:
     used = np.unique(tri_tex[has_vt & (tri_tex >= 0)])
     inv = {k: t for t, k in tex_ids.items()}
     if len(used) > 1:
-        listed = ", ".join(inv[k].name for k in used[:4]) + (", ..." if len(used) > 4 else "")
-        raise InvalidInputError(f"{path} uses {len(used)} texture images ({listed}); potflat supports one "
-                                f"texture atlas: re-export the scan with a single texture {_IGNORE_HINT}")
+        ok = has_vt & (tri_tex >= 0)
+        uv = np.zeros((len(poly), 3, 2))
+        uv[ok] = VT[tri_vt[ok]]
+        which = np.searchsorted(used, tri_tex)
+        raw.texture, raw.texcoords, note = _merge_textures([inv[int(k)] for k in used], np.where(ok, which, -1),
+                                                           uv, path, max_pixels)
+        raw.warnings.append(note)
+        if not ok.all():
+            raw.warnings.append(f"{int((~ok).sum())} faces have no texture coordinates or no textured "
+                                "material; they get texture coordinate (0, 0)")
+        return raw
     if len(used) == 0:
         if lib_spans.shape[0] == 0:
             raw.warnings.append("texture coordinates but no material library (mtllib); loaded untextured")
@@ -597,7 +686,7 @@ def _ply_ascii(body: bytes, elements: list[_PlyElement], path: Path) -> None:
                    if len(p) == 3 else np.array(cols[p[0]]) for p in el.props}
 
 
-def _read_ply(path: Path, texture: str) -> _Raw:
+def _read_ply(path: Path, texture: str, max_pixels: int) -> _Raw:
     data = _read_bytes(path)
     fmt, comments, elements, body_start = _ply_header(data, path)
     if fmt == "ascii":
@@ -659,11 +748,21 @@ def _read_ply(path: Path, texture: str) -> _Raw:
         return raw
     if len(names) > 1:
         tn = face.data.get("texnumber")
-        used = np.unique(np.asarray(tn)[poly]).astype(int) if isinstance(tn, np.ndarray) else np.arange(len(names))
+        if not isinstance(tn, np.ndarray):
+            raise InvalidInputError(f"{path} names {len(names)} texture images but its faces do not say which "
+                                    f"(no texnumber); re-export with a single texture {_IGNORE_HINT}")
+        which = np.asarray(tn, np.int64)[poly]
+        if which.min() < 0 or which.max() >= len(names):
+            raise InvalidInputError(f"{path}: face texnumber out of range (the file names {len(names)} "
+                                    f"textures); export it again {_IGNORE_HINT}")
+        used = np.unique(which)
         if len(used) > 1:
-            raise InvalidInputError(f"{path} uses {len(used)} texture images ({', '.join(names[:4])}); potflat "
-                                    f"supports one texture atlas: re-export with a single texture {_IGNORE_HINT}")
-        names = [names[int(used[0])] if len(used) and used[0] < len(names) else names[0]]
+            raw.texture, raw.texcoords, note = _merge_textures(
+                [_find_file(names[k], path.parent) for k in used], np.searchsorted(used, which), tc, path,
+                max_pixels)
+            raw.warnings.append(note)
+            return raw
+        names = [names[int(used[0])]]
     raw.texture = _find_file(names[0], path.parent)
     raw.texcoords = tc
     return raw
@@ -688,7 +787,7 @@ def _trimesh_load(path: Path, **kwargs):
                                 "export the scan again") from None
 
 
-def _read_trimesh(path: Path, texture: str) -> _Raw:
+def _read_trimesh(path: Path, texture: str, max_pixels: int) -> _Raw:
     import trimesh
 
     if path.suffix.lower() == ".stl":
@@ -722,7 +821,7 @@ def _check_stl_size(path: Path) -> None:
         raise _truncated(path, "triangle")
 
 
-def _read_gltf(path: Path, texture: str) -> _Raw:
+def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
     import trimesh
 
     scene = _trimesh_load(path, force="scene")
