@@ -319,7 +319,25 @@ def _nice_bar_cm(height_mm: float) -> int:
     return best
 
 
-def write_profile_svg(profile: Profile, path, *, scale: float = 1.0, title: str | None = None) -> Path:
+#: Publication scales tried by ``write_profile_svg(scale=None)``, largest first.
+PUBLICATION_SCALES = (1.0, 1 / 2, 1 / 3, 1 / 4, 1 / 5, 1 / 10, 1 / 20)
+#: The automatic scale keeps the drawing within this page area (A4 minus margins), mm.
+_PAGE_MM = (180.0, 250.0)
+
+
+def auto_scale(profile: Profile) -> float:
+    """The largest of :data:`PUBLICATION_SCALES` at which the drawing fits an A4 page."""
+    _check_profile(profile)
+    lo, hi = profile.height_range
+    height = (hi - lo) * profile.mm_per_unit
+    width = 2 * np.nan_to_num(profile.max_radius, nan=0.0) * profile.mm_per_unit
+    for s in PUBLICATION_SCALES:
+        if width * s <= _PAGE_MM[0] and height * s <= _PAGE_MM[1]:
+            return s
+    return PUBLICATION_SCALES[-1]
+
+
+def write_profile_svg(profile: Profile, path, *, scale: float | None = None, title: str | None = None) -> Path:
     """Draw the profile as an archaeological section drawing (SVG, true scale), atomically.
 
     Right of the axis: the wall section, filled black between the outer and the inner line
@@ -333,8 +351,10 @@ def write_profile_svg(profile: Profile, path, *, scale: float = 1.0, title: str 
     ----------
     profile : Profile
     path : str or Path
-    scale : float
-        Drawing millimetres per vessel millimetre (1.0 = 1:1, 0.5 = 1:2).
+    scale : float, optional
+        Drawing millimetres per vessel millimetre (1.0 = 1:1, 0.5 = 1:2). Default: the
+        largest of 1:1, 1:2, 1:3, 1:4, 1:5, 1:10, 1:20 at which the drawing fits an A4 page
+        (:func:`auto_scale`).
     title : str, optional
         Caption written below the drawing.
 
@@ -343,6 +363,8 @@ def write_profile_svg(profile: Profile, path, *, scale: float = 1.0, title: str 
     Path
     """
     _check_profile(profile)
+    if scale is None:
+        scale = auto_scale(profile)
     if not (isinstance(scale, (int, float)) and not isinstance(scale, bool) and math.isfinite(scale) and scale > 0):
         raise InvalidOptionError(f"scale must be a positive number (drawing mm per vessel mm), got {scale!r}")
     mm = profile.mm_per_unit * float(scale)  # drawing mm per scan unit
@@ -415,7 +437,7 @@ def write_profile_svg(profile: Profile, path, *, scale: float = 1.0, title: str 
     font = 'font-family="sans-serif" font-size="3" text-anchor="middle"'
     parts.append(f'<text x="{bx:.3f}" y="{by + 5.5:.3f}" {font}>0</text>')
     parts.append(f'<text x="{bx + bar_len:.3f}" y="{by + 5.5:.3f}" {font}>{bar_cm} cm</text>')
-    ratio = "1:1" if scale == 1 else (f"1:{1 / scale:g}" if scale < 1 else f"{scale:g}:1")
+    ratio = "1:1" if scale == 1 else (f"1:{1 / scale:.3g}" if scale < 1 else f"{scale:.3g}:1")
     parts.append(f'<text x="{bx + bar_len + 8:.3f}" y="{by + 1.5:.3f}" {font}>{ratio}</text>')
     if title:
         parts.append(f'<text x="{cx:.3f}" y="{by + 11.5:.3f}" {font}>{escape(title)}</text>')

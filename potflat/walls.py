@@ -366,7 +366,7 @@ class WallSelection:
     Attributes
     ----------
     face_mask : (m,) bool
-        Faces of the selected wall (its largest connected region).
+        Faces of the selected wall (its largest connected region, without ``exclude``).
     labels : (m,) int8
         Side of every face: ``1`` outer wall, ``-1`` inner wall.
     side : str
@@ -378,7 +378,7 @@ class WallSelection:
     n_selected : int
         Faces in ``face_mask``.
     n_dropped : int
-        Faces of the chosen side left out because they are not connected to its largest region.
+        Faces of the chosen side left out: excluded, or not connected to its largest region.
     rim_faces : (k,) int64
         Selected faces that share an edge with the other wall (the split line).
     two_walled : bool
@@ -419,7 +419,7 @@ class WallSelection:
 
 
 def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
-                flat_tolerance: float = 0.25) -> WallSelection:
+                exclude=None, flat_tolerance: float = 0.25) -> WallSelection:
     """Select the outer or the inner wall of a (possibly two-walled) vessel scan.
 
     Parameters
@@ -433,6 +433,9 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         Axis direction from the foot to the mouth.
     side : {"outer", "inner"}
         Painted side to select.
+    exclude : (m,) bool, optional
+        Faces to leave out of the selection (e.g. ``detect_attachments(...).face_mask``);
+        the largest connected region is taken after removing them.
     flat_tolerance : float
         Faces whose smoothed radial normal component is below this (0-1) are treated as
         horizontal (base, floor, rim top) and take the side of the wall they connect to.
@@ -450,10 +453,16 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
     """
     if side not in SIDES:
         raise InvalidOptionError(f"side must be 'outer' or 'inner', got {side!r}")
-    if not (0.0 < float(flat_tolerance) < 1.0):
+    if (isinstance(flat_tolerance, bool) or not isinstance(flat_tolerance, (int, float, np.floating))
+            or not 0.0 < float(flat_tolerance) < 1.0):
         raise InvalidOptionError(f"flat_tolerance must lie between 0 and 1, got {flat_tolerance!r}")
     check_mesh(mesh)
     p, a = check_axis(axis_point, axis_direction)
+    if exclude is not None:
+        exclude = np.asarray(exclude)
+        if exclude.shape != (len(mesh.faces),) or exclude.dtype != bool:
+            raise InvalidInputError(
+                f"exclude must be a boolean mask with one entry per face ({len(mesh.faces)}), got {exclude.shape}")
     fr = face_frame(mesh, p, a)
     labels, inverted = wall_labels(fr, flat_tolerance=float(flat_tolerance))
     want = OUTER if side == "outer" else INNER
@@ -466,7 +475,8 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         raise InvalidInputError(
             f"the scan{where} has no inner wall (its faces all face away from the axis); use side='outer'"
         )
-    mask = _largest_region(chosen, fr.graph, fr.area)
+    candidates = chosen if exclude is None else chosen & ~exclude
+    mask = _largest_region(candidates, fr.graph, fr.area) if candidates.any() else candidates
     adj = fr.adjacency
     cross = labels[adj[:, 0]] != labels[adj[:, 1]]
     touching = np.zeros(len(labels), dtype=bool)

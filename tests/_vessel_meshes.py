@@ -205,3 +205,19 @@ def sherd_shell(theta_span=np.deg2rad(90), n_theta=30, thickness=4.0):
     L = np.r_[L, np.asarray(cap_lab, object)]
     V, F, keep = weld(V, F)
     return V, F[keep], L[keep]
+
+
+def cylinder_with_knob(n_theta=180, n_h=76, height=12.0, radius=10.0, seed=0):
+    """Open cylinder R=40, 0<=h<=100, with a smooth knob pushed out of the wall (one surface).
+
+    Returns ``V, F, bump`` with ``bump`` (n,) the radial displacement of every vertex.
+    """
+    h = np.linspace(0.0, 100.0, n_h)
+    V, F, _, _ = revolve(np.full(n_h, 40.0), h, n_theta, jitter=0.3, seed=seed)
+    centre = np.array([40.0, 0.0, 50.0])
+    d = np.linalg.norm(V - centre, axis=1)
+    bump = np.where(d < radius, height * np.cos(0.5 * np.pi * d / radius) ** 2, 0.0)
+    rad = V[:, :2] / np.linalg.norm(V[:, :2], axis=1)[:, None]
+    V = V.copy()
+    V[:, :2] += rad * bump[:, None]
+    return V, F, bump

@@ -50,6 +50,17 @@ def test_handle_root_painting_stays():
         att.root_faces(F[:5])
 
 
+def test_knob_merged_into_the_wall():
+    V, F, bump = vm.cylinder_with_knob()
+    mesh, p, a = _posed(V, F, seed=4)
+    att = detect_attachments(mesh, p, a)
+    low = bump[F].min(axis=1)
+    assert att.face_mask[low > 3.0].all()  # clearly off the wall: flagged
+    assert not att.face_mask[bump[F].max(axis=1) == 0].any()  # the wall around: kept
+    assert (low[att.face_mask] > att.offset_threshold).all()  # the margin rule
+    assert len(att.components) == 1 and att.components[0].max_offset > 10
+
+
 @pytest.mark.parametrize("builder", ["cylinder", "vase", "cup", "sherd"])
 def test_clean_vessels_with_noise_have_no_attachments(builder):
     rng = np.random.default_rng(11)

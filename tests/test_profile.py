@@ -151,6 +151,19 @@ def test_svg_true_scale(tmp_path, scale):
     assert ("1:2" if scale == 0.5 else "1:1") in texts
 
 
+def test_svg_automatic_scale(tmp_path):
+    from potflat.profile import auto_scale
+
+    mesh, p, a = _vase()  # 80 mm high, 76 mm wide: fits A4 at 1:1
+    prof = vessel_profile(mesh, p, a, bins=20)
+    assert auto_scale(prof) == 1.0
+    big = vessel_profile(Mesh(mesh.vertices * 3.0, mesh.faces), p * 3.0, a, bins=20)  # 240 x 228 mm
+    assert auto_scale(big) == 0.5
+    root = ET.parse(write_profile_svg(big, tmp_path / "big.svg")).getroot()
+    assert "1:2" in [el.text for el in root.iter(SVG + "text")]
+    assert float(root.get("height")[:-2]) < 297
+
+
 def test_svg_single_wall_has_no_section_fill(tmp_path):
     mesh, p, a = _vase()
     prof = vessel_profile(mesh, p, a, bins=20)

@@ -133,6 +133,24 @@ def test_handle_inner_side_belongs_to_outer():
     assert w.face_mask[~is_handle].all() and w.n_dropped == is_handle.sum()
 
 
+def test_exclude_attachments():
+    from potflat.attachments import detect_attachments
+
+    # a knob pushed out of the wall is part of the same surface: only the exclusion removes it
+    V, F, bump = vm.cylinder_with_knob()
+    mesh, p, a = _posed(V, F)
+    att = detect_attachments(mesh, p, a)
+    assert att.n_faces > 0
+    assert select_wall(mesh, p, a).face_mask.all()
+    w = select_wall(mesh, p, a, exclude=att.face_mask)
+    assert np.array_equal(w.face_mask, ~att.face_mask)  # the rest stays one connected region
+    assert w.n_dropped == att.n_faces
+    with pytest.raises(InvalidInputError):
+        select_wall(mesh, p, a, exclude=np.zeros(5, bool))
+    with pytest.raises(InvalidInputError):
+        select_wall(mesh, p, a, exclude=np.zeros(len(F)))  # not boolean
+
+
 def test_deterministic():
     V, F, _, _ = vm.cup(foot_ring=True)
     mesh, p, a = _posed(V, F)
@@ -170,7 +188,8 @@ def test_bad_axis(axis_point, axis_direction):
 
 
 @pytest.mark.parametrize("kwargs", [{"side": "top"}, {"side": "Outer"}, {"side": None},
-                                    {"flat_tolerance": 0.0}, {"flat_tolerance": 1.0}])
+                                    {"flat_tolerance": 0.0}, {"flat_tolerance": 1.0},
+                                    {"flat_tolerance": "0.2"}])
 def test_bad_options(kwargs):
     V, F, _, _ = vm.open_vase(n_theta=16, n_h=5)
     with pytest.raises(InvalidOptionError):
