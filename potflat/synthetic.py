@@ -18,6 +18,7 @@ are arc-length ranges about a meridian.
 """
 from __future__ import annotations
 
+import itertools
 import math
 import os
 from dataclasses import dataclass
@@ -35,12 +36,13 @@ KINDS = (
 )
 
 #: Face/vertex part labels (:attr:`SyntheticVessel.face_part`).
-PART_OUTER, PART_INNER, PART_RIM, PART_BASE, PART_HANDLE = 0, 1, 2, 3, 4
-PART_NAMES = ("outer", "inner", "rim", "base", "handle")
+PART_OUTER, PART_INNER, PART_RIM, PART_BASE, PART_HANDLE, PART_BREAK = 0, 1, 2, 3, 4, 5
+PART_NAMES = ("outer", "inner", "rim", "base", "handle", "break")
 
 TERRACOTTA = (188, 94, 52)
 BLACK = (28, 22, 20)
 CREAM = (232, 214, 178)
+CLAY = (176, 120, 88)
 ATLAS_BACKGROUND = (127, 127, 127)
 
 #: Radius (mm) of the painted frieze circles.
@@ -261,9 +263,13 @@ class SyntheticVessel:
         return _paint(self.painting, self._geometry, self.to_canonical(points))
 
     def vertex_colors(self) -> np.ndarray:
-        """Painting colour of every mesh vertex, ``(n, 3)`` uint8 (handles black)."""
+        """Painting colour of every mesh vertex, ``(n, 3)`` uint8.
+
+        Handles are black; a thick sherd's back and break faces plain clay (:data:`CLAY`).
+        """
         col = self.paint(self.mesh.vertices)
-        col[self.vertex_part == PART_HANDLE] = BLACK
+        for part, rgb in _plain_colours(self._geometry).items():
+            col[self.vertex_part == part] = rgb
         return col
 
 
@@ -503,7 +509,9 @@ def _orient_outward(g: _Generatrix, V, F, s) -> np.ndarray:
 
 
 def _check_manifold(F, n_vertices, holes_expected) -> None:
-    """Internal consistency: oriented 2-manifold of genus 0 with the expected boundaries."""
+    """Internal consistency: an oriented 2-manifold, all vertices used, Euler characteristic
+    ``2 - holes_expected`` (genus 0 with that many boundary loops, or a closed surface of
+    genus ``holes_expected / 2``)."""
     directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
     key = np.sort(directed[:, 0] * n_vertices + directed[:, 1])
     if np.any(key[1:] == key[:-1]):
@@ -705,6 +713,60 @@ def _compact(V, F, *arrays):
     return (V[used], new[F]) + tuple(a[used] for a in arrays)
 
 
+def _thicken_sherd(g: _Generatrix, V, F, vs, vth, thickness):
+    """Give a one-sided patch a back (offset inwards along the section normal) and break faces.
+
+    Returns the new V, F, vs, vth, face parts, vertex parts and the break faces' preset
+    chart layout (face indices, corner layouts (k, 3, 2) in mm, piece ids).
+    """
+    n, m = len(V), len(F)
+    nrm = _normals2d(g.r, g.z)
+    nr, nz = np.interp(vs, g.s, nrm[:, 0]), np.interp(vs, g.s, nrm[:, 1])
+    back = V - thickness * np.stack([nr * np.cos(vth), nr * np.sin(vth), nz], axis=1)
+    directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    key = directed[:, 0] * n + directed[:, 1]
+    rev = directed[:, 1] * n + directed[:, 0]
+    bnd = directed[~np.isin(key, rev)]
+    nxt = dict(zip(bnd[:, 0].tolist(), bnd[:, 1].tolist()))
+    if len(nxt) != len(bnd):
+        raise RuntimeError("sherd boundary has a pinch vertex")
+    sides, uvs, pieces = [], [], []
+    todo = set(nxt)
+    while todo:  # one strip of break faces per boundary loop (outline and through-holes)
+        loop = [min(todo)]
+        while nxt[loop[-1]] != loop[0]:
+            loop.append(nxt[loop[-1]])
+        todo -= set(loop)
+        a = np.array(loop)
+        b = np.roll(a, -1)
+        ell = np.linalg.norm(V[b] - V[a], axis=1)
+        c = np.concatenate([[0.0], np.cumsum(ell)[:-1]])
+        zero, full = np.zeros_like(c), np.full_like(c, thickness)
+        sides += [np.stack([b, a, a + n], axis=1), np.stack([b, a + n, b + n], axis=1)]
+        uvs += [np.stack([np.stack([c + ell, zero], 1), np.stack([c, zero], 1), np.stack([c, full], 1)], 1),
+                np.stack([np.stack([c + ell, zero], 1), np.stack([c, full], 1), np.stack([c + ell, full], 1)], 1)]
+        k = np.minimum((4 * c / (c[-1] + ell[-1])).astype(np.int64), 3) + 4 * (len(pieces) // 2)
+        pieces += [k, k]
+    side = np.concatenate(sides)
+    n_loops = len(pieces) // 2
+    F2 = np.concatenate([F, F[:, ::-1] + n, side])
+    V2 = np.concatenate([V, back])
+    face_part = np.concatenate([np.full(m, PART_OUTER, np.int8), np.full(m, PART_INNER, np.int8),
+                                np.full(len(side), PART_BREAK, np.int8)])
+    vertex_part = np.concatenate([np.full(n, PART_OUTER, np.int8), np.full(n, PART_INNER, np.int8)])
+    _check_manifold(F2, len(V2), holes_expected=2 * (n_loops - 1))  # genus = through-holes
+    preset = (np.arange(2 * m, 2 * m + len(side)), np.concatenate(uvs), np.concatenate(pieces))
+    return V2, F2, np.concatenate([vs, vs]), np.concatenate([vth, vth]), face_part, vertex_part, preset
+
+
+def _plain_colours(g: _Generatrix) -> dict:
+    """Parts painted in one plain colour instead of the painting."""
+    plain = {PART_HANDLE: BLACK, PART_BREAK: CLAY}
+    if not math.isfinite(g.s_inner):
+        plain[PART_INNER] = CLAY  # the back of a thick sherd
+    return plain
+
+
 # --------------------------------------------------------------------------- atlas
 
 
@@ -761,14 +823,20 @@ def _atlas_coords(chart_uv, face_chart, size, rng):
     return px / size, lo
 
 
-def _chart_layouts(V, F, vs, vth, face_part, face_handle, handle_radii, g: _Generatrix, n_sectors, rng):
-    """Chart of every face and its corners' local 2D layout (mm), CCW."""
+def _chart_layouts(V, F, vs, vth, face_part, face_handle, handle_radii, g: _Generatrix, n_sectors,
+                   rng, preset=None):
+    """Chart of every face and its corners' local 2D layout (mm), CCW.
+
+    ``preset`` = (face indices, corner layouts (k, 3, 2), piece ids) for faces laid out by
+    the caller (a sherd's break faces), one chart per piece.
+    """
     m = len(F)
     sc = vs[F].mean(axis=1)
     chart = np.full(m, -1, np.int64)
     uv = np.zeros((m, 3, 2))
     next_id = 0
-    body = face_part != PART_HANDLE
+    body = (face_part != PART_HANDLE) & (face_part != PART_BREAK)
+    back = (face_part == PART_INNER) & (not math.isfinite(g.s_inner))  # a thick sherd's back
     # planar charts: the flat base and the inner floor
     for sel in (body & (sc < g.s_outer[0]), body & (sc > g.s_floor)):
         if np.any(sel):
@@ -780,9 +848,8 @@ def _chart_layouts(V, F, vs, vth, face_part, face_handle, handle_radii, g: _Gene
     cth = np.arctan2(V[F, 1].mean(axis=1), V[F, 0].mean(axis=1))
     sector = np.floor(((cth - phase) % (2 * math.pi)) / (2 * math.pi / n_sectors)).astype(np.int64)
     sector = np.minimum(sector, n_sectors - 1)
-    rest = body & (chart < 0)
     pieces = [(g.s_outer[0], g.s_outer[1]), (g.s_outer[1], g.s_floor)]
-    for lo, hi in pieces:
+    for (lo, hi), rest in itertools.product(pieces, (body & ~back & (chart < 0), back)):
         if not math.isfinite(hi):
             continue
         edges = np.linspace(lo, hi, 3)
@@ -801,6 +868,13 @@ def _chart_layouts(V, F, vs, vth, face_part, face_handle, handle_radii, g: _Gene
                 chart[sel] = next_id
                 next_id += 1
                 rest &= ~sel
+    if preset is not None:
+        idx, corner_uv, piece = preset
+        for p in np.unique(piece):
+            sel = idx[piece == p]
+            uv[sel] = corner_uv[piece == p]
+            chart[sel] = next_id
+            next_id += 1
     # handles: two charts per tube (half turns), unwrapped (radius * dphi, arc length)
     for h, radius in enumerate(handle_radii):
         fsel = np.flatnonzero(face_handle == h)
@@ -826,7 +900,7 @@ def _chart_layouts(V, F, vs, vth, face_part, face_handle, handle_radii, g: _Gene
     return chart, uv
 
 
-def _render_atlas(vessel_paint, V_world, F, face_part, texcoords, size) -> np.ndarray:
+def _render_atlas(vessel_paint, plain, V_world, F, face_part, texcoords, size) -> np.ndarray:
     """Texture atlas: every texel painted at its 3D point, with gutters around the charts.
 
     Texels whose centre lies within :data:`_GUTTER_PX` pixels outside a chart take the
@@ -843,9 +917,12 @@ def _render_atlas(vessel_paint, V_world, F, face_part, texcoords, size) -> np.nd
     fid = face[cov]
     P = np.einsum("nk,nkd->nd", bary[cov], V_world[F[fid]])
     colours = np.empty((len(fid), 3), np.uint8)
-    handle = face_part[fid] == PART_HANDLE
-    colours[~handle] = vessel_paint(P[~handle])
-    colours[handle] = BLACK
+    part = face_part[fid]
+    painted = np.ones(len(fid), bool)
+    for p, rgb in plain.items():
+        colours[part == p] = rgb
+        painted &= part != p
+    colours[painted] = vessel_paint(P[painted])
     img = np.empty((size, size, 3), np.uint8)
     img[:] = ATLAS_BACKGROUND
     img[cov] = colours
@@ -906,6 +983,7 @@ def make_vessel(
     holes: int = 0,
     sherd_of: str = "hydria",
     sherd_span: float = 80.0,
+    sherd_thickness: float = 0.0,
 ) -> SyntheticVessel:
     """Build a synthetic painted vessel with known axis, profile, painting and pose.
 
@@ -941,6 +1019,10 @@ def make_vessel(
     sherd_span : float
         Angular width of a ``sherd`` in degrees (10 to 300); it covers about 60% of the
         wall height around the frieze, with irregular break edges.
+    sherd_thickness : float
+        0 = the sherd's painted outer surface only; otherwise (1 to 15 mm) a closed
+        fragment: the back is the outer surface offset inwards along the section normal,
+        joined by break faces (:data:`PART_BREAK`); back and breaks are plain clay.
 
     Returns
     -------
@@ -954,6 +1036,10 @@ def make_vessel(
     holes = _check_int("holes", holes, 0, 20)
     thickness = _check_float("thickness", thickness, 1.0, 10.0)
     sherd_span = _check_float("sherd_span", sherd_span, 10.0, 300.0)
+    if sherd_thickness != 0:
+        sherd_thickness = _check_float("sherd_thickness", sherd_thickness, 1.0, 15.0)
+        if kind != "sherd":
+            raise InvalidOptionError(f"sherd_thickness applies to kind 'sherd', not {kind!r}; drop it")
     for name, val in (("pose", pose), ("handles", handles)):
         if not isinstance(val, bool):
             raise InvalidOptionError(f"{name} must be True or False, got {val!r}")
@@ -979,7 +1065,8 @@ def make_vessel(
     options = dict(kind=kind, n_vertices=n_vertices, seed=seed, pose=pose, texture_size=texture_size,
                    base=base, walls=walls, thickness=thickness, handles=handles, holes=holes,
                    sherd_of=sherd_of if kind == "sherd" else None,
-                   sherd_span=sherd_span if kind == "sherd" else None)
+                   sherd_span=sherd_span if kind == "sherd" else None,
+                   sherd_thickness=float(sherd_thickness) if kind == "sherd" else None)
 
     rng = np.random.default_rng(seed)
     g = _build_generatrix(spec, walls=walls, base=base, thickness=thickness)
@@ -1027,9 +1114,13 @@ def make_vessel(
         F, face_part, face_handle = F[~remove], face_part[~remove], face_handle[~remove]
         V, F, vs, vth, vertex_part = _compact(V, F, vs, vth, vertex_part)
 
+    preset = None
+    if kind == "sherd" and sherd_thickness > 0:
+        V, F, vs, vth, face_part, vertex_part, preset = _thicken_sherd(g, V, F, vs, vth, sherd_thickness)
+        face_handle = np.full(len(F), -1, np.int64)
     n_sectors = 12 if kind == "sherd" else 4
     face_chart, chart_uv = _chart_layouts(V, F, vs, vth, face_part, face_handle, handle_radii,
-                                          g, n_sectors, rng)
+                                          g, n_sectors, rng, preset)
     texcoords, _ = _atlas_coords(chart_uv, face_chart, texture_size, rng)
 
     T = _random_pose(rng) if pose else np.eye(4)
@@ -1049,7 +1140,7 @@ def make_vessel(
         face_part=face_part, vertex_part=vertex_part, face_chart=face_chart, options=options,
         _geometry=g,
     )
-    texture = _render_atlas(vessel.paint, Vw, F, face_part, texcoords, texture_size)
+    texture = _render_atlas(vessel.paint, _plain_colours(g), Vw, F, face_part, texcoords, texture_size)
     object.__setattr__(vessel, "texture", texture)
     return vessel
 

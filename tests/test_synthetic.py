@@ -351,6 +351,24 @@ def test_sherd_is_one_patch_of_the_requested_width():
         assert np.sum(d < c.radius) > 5
 
 
+def test_thick_sherd_is_a_closed_fragment_with_a_plain_back():
+    from potflat.synthetic import CLAY, PART_BREAK
+
+    v = make_vessel("sherd", sherd_thickness=6.0, holes=1, seed=1, n_vertices=3000, texture_size=256)
+    V, F = v.mesh.vertices, v.mesh.faces
+    assert _boundary_loops(F, len(V)) == 0 and _components(F, len(V)) == 1
+    n = _face_normals(V, F)
+    vol = np.einsum("ij,ij->i", V[F[:, 0]] - V.mean(axis=0), n).sum() / 6
+    outer_area = 0.5 * np.linalg.norm(n[v.face_part == PART_OUTER], axis=1).sum()
+    assert vol == pytest.approx(6.0 * outer_area, rel=0.1)  # slab of 6 mm over the painted face
+    assert np.any(v.face_part == PART_BREAK)
+    col = v.vertex_colors()
+    assert np.all(col[v.vertex_part == PART_INNER] == CLAY)
+    assert not np.all(col[v.vertex_part == PART_OUTER] == CLAY)
+    h, r = _axis_coords(v, V[v.vertex_part == PART_OUTER])
+    np.testing.assert_allclose(r, v.radius_at(h), atol=1e-6)
+
+
 # --------------------------------------------------------------------------- validation
 
 
@@ -371,6 +389,8 @@ def test_sherd_is_one_patch_of_the_requested_width():
     ("sherd", {"sherd_of": "vase"}),
     ("sherd", {"sherd_span": 5.0}),
     ("sherd", {"handles": True}),
+    ("sherd", {"sherd_thickness": 0.5}),
+    ("amphora", {"sherd_thickness": 5.0}),
 ])
 def test_invalid_options(kind, kw):
     with pytest.raises(InvalidOptionError):
