@@ -371,7 +371,9 @@ def write_profile_svg(profile: Profile, path, *, scale: float | None = None, tit
     ro, ri, hs = profile.outer_radius, profile.inner_radius, profile.heights
     ok_o = np.isfinite(ro)
     if not ok_o.any():
-        raise InvalidInputError("the profile has no outer radius anywhere; nothing to draw")
+        raise InvalidInputError(
+            "the profile has no outer wall radius at any height (no wall faces away from the axis); "
+            "check the axis or the scan")
     h_lo, h_hi = profile.height_range
     rmax = float(np.nanmax(np.r_[ro[ok_o], ri[np.isfinite(ri)]]))
     margin = 10.0
