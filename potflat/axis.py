@@ -28,8 +28,10 @@ more closely than face normals through face centroids, which the faceting tilts.
 
 Orientation (foot to mouth), the first rule that applies:
 
-1. an inner wall (at least 1 % of the area has normals facing the axis, as inside a cup,
-   a two-walled scan or a scanned inner neck): the mouth is on its side of mid-height;
+1. an inner wall (normals facing the axis, as inside a cup, a two-walled scan or a scanned
+   inner neck) shows from the mouth down: the mouth is the end (last 10 % of the height)
+   where a larger share of the area faces the axis, by at least 5 points (a two-sided
+   sherd has its inner face at both ends and goes to the next rules);
 2. an open rim (a boundary loop that winds once around the axis): the mouth is the end
    nearer to the longest one (an open vessel's only rim, or the larger of two: a scan
    open at both ends with a narrow neck and a wide open foot comes out upside down, and
@@ -67,8 +69,11 @@ HUBER_K = 1.345
 #: fit equally (eigenvalues within this relative spread).
 DEGENERATE_ABS = 1e-4
 DEGENERATE_SPREAD = 0.1
-#: Fraction of the area facing the axis (an inner wall) that decides the mouth's side.
-INNER_WALL_FRACTION = 0.01
+#: The mouth is the end where the inner wall (area facing the axis) is reached: the fraction
+#: of the area facing the axis within INNER_WALL_END of the height at each end must differ
+#: by at least INNER_WALL_FRACTION.
+INNER_WALL_END = 0.1
+INNER_WALL_FRACTION = 0.05
 
 
 @dataclass(frozen=True, eq=False)
@@ -286,6 +291,12 @@ def axis_residuals(mesh: Mesh, point, direction, *, lines=None) -> tuple[float, 
 
 
 def _profile_deviation(points: np.ndarray, point, direction, *, slices: int = 32) -> float:
+    """Median ``|r - profile(h)|`` over ``points`` divided by their median radius.
+
+    The profile interpolates linearly between the slices' median radii (at the slices'
+    mean heights), so a sloped or curved profile gives (nearly) 0, as a surface of
+    revolution should.
+    """
     h = (points - point) @ direction
     r = np.linalg.norm(points - point - h[:, None] * direction, axis=1)
     lo, hi = h.min(), h.max()
@@ -294,9 +305,14 @@ def _profile_deviation(points: np.ndarray, point, direction, *, slices: int = 32
     r_sorted, idx_sorted = r[order], idx[order]
     starts = np.searchsorted(idx_sorted, np.arange(slices))
     ends = np.searchsorted(idx_sorted, np.arange(slices), side="right")
-    med = np.where(ends > starts, r_sorted[(starts + np.maximum(ends - 1, starts)) // 2], 0.0)
+    have = ends > starts
+    med = r_sorted[(starts + ends - 1)[have] // 2]
+    count = np.bincount(idx, minlength=slices)[have]
+    mean_h = np.bincount(idx, h, slices)[have] / count
     scale = float(np.median(r))
-    return float(np.median(np.abs(r - med[idx])) / scale) if scale > 0 else 0.0
+    if scale <= 0:
+        return 0.0
+    return float(np.median(np.abs(r - np.interp(h, mean_h, med))) / scale)
 
 
 def _irls(c, n, area, point, direction, *, iterations: int = 40):
@@ -429,11 +445,19 @@ def orient(mesh: Mesh, point, direction, *, lines=None) -> tuple[np.ndarray, str
     c, n, area = normal_lines(mesh) if lines is None else lines
     hc = (c - point) @ direction
     radial = c - point - hc[:, None] * direction
-    facing_axis = np.einsum("ij,ij->i", n, radial) < -0.5 * np.linalg.norm(radial, axis=1)
-    inner = area[facing_axis].sum() / area.sum()
-    if inner >= INNER_WALL_FRACTION:
-        up = np.average(hc[facing_axis], weights=area[facing_axis]) >= mid
-        reason = f"mouth on the side of the inner wall ({100 * inner:.0f} % of the area faces the axis)"
+    n_r = np.einsum("ij,ij->i", n, radial)
+    facing_axis = n_r < -0.5 * np.linalg.norm(radial, axis=1)
+    # the inner wall shows from the mouth down: it reaches the mouth's end of the vessel,
+    # not the foot's (a two-sided sherd has it at both ends, a closed jar at neither)
+    band = INNER_WALL_END * (hi - lo)
+    ends = []
+    for sel in (hc <= lo + band, hc >= hi - band):
+        total = area[sel].sum()
+        ends.append(area[sel & facing_axis].sum() / total if total > 0 else 0.0)
+    if abs(ends[1] - ends[0]) >= INNER_WALL_FRACTION:
+        up = ends[1] > ends[0]
+        reason = (f"mouth at the end the inner wall reaches ({100 * max(ends):.0f} % of the area there "
+                  f"faces the axis, {100 * min(ends):.0f} % at the other end)")
     elif best is not None:
         up = best[1] >= mid
         reason = f"mouth at the longest open rim ({best[0]:.4g} units around)"
@@ -504,8 +528,8 @@ def estimate_axis(mesh: Mesh, *, flip: bool = False, profile: bool = True,
     flip : bool
         Reverse the foot-to-mouth direction found.
     profile : bool
-        Polish the normal-line fit by profile consistency (kept only when it does not
-        worsen the normal residual by more than 10 %).
+        Polish the normal-line fit by profile consistency on the outer wall (kept unless
+        it worsens the median normal angle by more than 2 %).
     max_median_angle_deg : float
         Refuse axes whose median normal-to-meridian angle exceeds this.
 
@@ -556,14 +580,18 @@ def estimate_axis(mesh: Mesh, *, flip: bool = False, profile: bool = True,
     else:
         point, direction = _irls(cs, n, area, point, direction)
         if profile:
-            pick = _sample(area, MAX_PROFILE_POINTS)
-            p2, d2 = _profile_refine(cs[pick], area[pick] if len(pick) == len(area) else np.ones(len(pick)),
-                                     point, direction)
-            # keep the polish only when the robust figures of both criteria agree
-            med0, prof0 = _robust_figures(cs, n, area, point, direction)
-            med1, prof1 = _robust_figures(cs, n, area, p2, d2)
-            if med1 <= 1.02 * med0 + 1e-9 and prof1 <= 1.02 * prof0 + 1e-12:
-                point, direction, method = p2, d2, "normals+profile"
+            # the outer wall only (normals facing away from the axis): an inner wall would
+            # make the radius two-valued within a slice
+            h0 = (cs - point) @ direction
+            radial = cs - point - h0[:, None] * direction
+            outer = np.flatnonzero(np.einsum("ij,ij->i", n, radial) > 0.3 * np.linalg.norm(radial, axis=1))
+            pick = outer[_sample(area[outer], MAX_PROFILE_POINTS)]
+            weights = area[pick] if len(pick) == len(outer) else np.ones(len(pick))
+            if len(pick) >= 20:
+                p2, d2 = _profile_refine(cs[pick], weights, point, direction)
+                # kept unless the normals disagree (outliers the profile followed)
+                if _median_sin(cs, n, area, p2, d2) <= 1.02 * _median_sin(cs, n, area, point, direction) + 1e-12:
+                    point, direction, method = p2, d2, "normals+profile"
     point = centre + size * point
     rms_angle, median_angle, _, prof = axis_residuals(mesh, point, direction, lines=lines)
     if _unsymmetric(median_angle, prof, max_median_angle_deg):
@@ -591,11 +619,10 @@ def _unsymmetric(median_angle: float, profile_deviation: float, max_median_angle
     return profile_deviation > MAX_PROFILE_DEVIATION or median_angle > max_median_angle_deg
 
 
-def _robust_figures(c, n, area, point, direction) -> tuple[float, float]:
-    """Median normal-to-meridian sine and profile deviation of an axis (normalised coordinates)."""
+def _median_sin(c, n, area, point, direction) -> float:
+    """Area-weighted median sine of the normal-to-meridian angle (normalised coordinates)."""
     det, r = _meridian_residuals(c, n, point, direction)
-    s = np.abs(det) / np.maximum(r, 0.05 * np.median(r) + 1e-300)
-    return _weighted_median(s, area), _profile_deviation(c, point, direction)
+    return _weighted_median(np.abs(det) / np.maximum(r, 0.05 * np.median(r) + 1e-300), area)
 
 
 def _closest_point_to_lines(c: np.ndarray, n: np.ndarray, w: np.ndarray) -> np.ndarray:
