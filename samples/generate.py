@@ -36,6 +36,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--holes", type=int, default=0)
     ap.add_argument("--sherd-of", default="hydria", help="parent profile of --kind sherd")
     ap.add_argument("--sherd-span", type=float, default=80.0, help="sherd width in degrees")
+    ap.add_argument("--sherd-thickness", type=float, default=0.0,
+                    help="0 = painted surface only; else a closed fragment this thick (mm)")
     ap.add_argument("--ply", action="store_true", help="also write a vertex-coloured PLY")
     ap.add_argument("--name", default=None, help="output file stem (default: the kind)")
     ap.add_argument("-o", "--out", type=Path, default=Path("."), help="output folder")
@@ -50,6 +52,7 @@ def main(argv: list[str] | None = None) -> int:
             texture_size=args.texture_size, base=args.base, walls=args.walls,
             thickness=args.thickness, handles=args.handles, holes=args.holes,
             sherd_of=args.sherd_of, sherd_span=args.sherd_span,
+            sherd_thickness=args.sherd_thickness,
         )
         stem = args.name or args.kind
         obj = write_obj(vessel, args.out / f"{stem}.obj")

@@ -452,3 +452,25 @@ def test_raster_kernel_matches_reference():
     ii, jj = np.nonzero(inside)
     pts = np.einsum("nk,nkd->nd", bary[ii, jj], tri[face[ii, jj]])
     np.testing.assert_allclose(pts, np.stack([jj + 0.5, ii + 0.5], axis=1), atol=1e-9)
+
+
+def test_generate_script_writes_obj_and_truth(tmp_path):
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "samples" / "generate.py"
+    spec = importlib.util.spec_from_file_location("generate", script)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert mod.main(["--kind", "cone", "--vertices", "2000", "--texture-size", "128", "--ply",
+                     "-o", str(tmp_path)]) == 0
+    for suffix in (".obj", ".mtl", ".png", ".ply", ".truth.json"):
+        assert (tmp_path / f"cone{suffix}").stat().st_size > 0
+    truth = json.loads((tmp_path / "cone.truth.json").read_text())
+    v = make_vessel("cone", n_vertices=2000, texture_size=128)
+    np.testing.assert_allclose(truth["axis_direction"], v.axis_direction)
+    np.testing.assert_allclose(np.interp(truth["profile"]["height"], v.profile[:, 0], v.profile[:, 1]),
+                               truth["profile"]["radius"], atol=1e-5)
+    assert len(truth["circles"]) == len(v.features)
+    assert mod.main(["--kind", "cone", "--vertices", "10", "-o", str(tmp_path)]) == 2
