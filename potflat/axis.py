@@ -16,8 +16,9 @@ Quality figures (reported, never hidden):
 * ``rms_distance``: area-weighted RMS distance between each vertex normal line and the axis,
   in scan units, over the vertices whose normal is at least 10 degrees away from the axis
   direction (the distance is undefined for normals parallel to the axis);
-* ``profile_deviation``: median of ``|r - median r of its height slice|`` over the vertices,
-  relative to the median radius. It decides whether the scan has an axis at all: a box
+* ``profile_deviation``: median of ``|r - profile(h)|`` over the outer wall's vertices
+  (normals facing away from the axis), relative to their median radius; the profile
+  interpolates the height slices' median radii. It decides whether the scan has an axis at all: a box
   gives about 0.1, scanned vessels (even fluted ones) 0.01-0.02; above
   :data:`MAX_PROFILE_DEVIATION` (or a median angle above :data:`MAX_MEDIAN_ANGLE_DEG`)
   :class:`~potflat.errors.AxisNotFoundError` is raised.
@@ -101,7 +102,7 @@ class AxisFit:
     rms_distance : float
         Area-weighted RMS distance of normal lines to the axis, scan units.
     profile_deviation : float
-        Median of ``|r - median r of the height slice|`` over the vertices, divided by the
+        Median of ``|r - profile(h)|`` over the outer wall's vertices, divided by their
         median radius (0 for a surface of revolution; a box gives about 0.1).
     note : str
         Warning about the fit (e.g. undetermined axis), empty when none.
@@ -286,8 +287,13 @@ def axis_residuals(mesh: Mesh, point, direction, *, lines=None) -> tuple[float, 
         rms_dist = float(np.sqrt(np.average(dist**2, weights=area[far])))
     else:
         rms_dist = 0.0
-    return (float(np.sqrt(np.sum(w * ang**2))), _weighted_median(ang, w), rms_dist,
-            _profile_deviation(c, point, direction))
+    # the profile of the outer wall (normals facing away from the axis): an inner wall
+    # would make the radius two-valued
+    hc = (c - point) @ direction
+    radial = c - point - hc[:, None] * direction
+    outer = np.einsum("ij,ij->i", n, radial) > 0.3 * np.linalg.norm(radial, axis=1)
+    prof = _profile_deviation(c[outer] if outer.sum() >= 20 else c, point, direction)
+    return float(np.sqrt(np.sum(w * ang**2))), _weighted_median(ang, w), rms_dist, prof
 
 
 def _profile_deviation(points: np.ndarray, point, direction, *, slices: int = 32) -> float:
