@@ -49,11 +49,6 @@ class MapScale:
         cm = matplotlib.colormaps[self.cmap]
         return np.rint(cm(np.linspace(0.0, 1.0, 256))[:, :3] * 255).astype(np.uint8)
 
-    def index(self, values: np.ndarray) -> np.ndarray:
-        """Colour table index of each value (NaN -> 0). Same shape, uint8."""
-        t = (np.nan_to_num(values, nan=self.lo) - self.lo) / (self.hi - self.lo)
-        return np.rint(np.clip(t, 0.0, 1.0) * 255).astype(np.uint8)
-
 
 def map_scale(name: str, values: np.ndarray, *, hi: float | None = None) -> MapScale:
     """The colour scale of map ``name`` for these per-vertex (stress) or per-face values.
@@ -90,20 +85,23 @@ def map_scale(name: str, values: np.ndarray, *, hi: float | None = None) -> MapS
 
 def colorize(values: np.ndarray, scale: MapScale, coverage: np.ndarray) -> np.ndarray:
     """Heat map rows: (k, w) values and coverage -> (k, w, 4) uint8 (transparent outside)."""
+    from potflat._kernels.raster import heat_rgba
+
+    values = np.ascontiguousarray(values, dtype=np.float32)
     out = np.empty(values.shape + (4,), np.uint8)
-    out[..., :3] = scale.lut()[scale.index(values)]
-    out[..., 3] = np.rint(coverage * 255.0)
+    heat_rgba(values, float(scale.lo), float(scale.hi), scale.lut(), np.ascontiguousarray(coverage, np.float32),
+              values, 1.0, out)
     return out
 
 
 def overlay(rgb: np.ndarray, values: np.ndarray, scale: MapScale, coverage: np.ndarray) -> np.ndarray:
     """Heat map over the greyscale painting: (k, w, 3) rgb in [0, 1], (k, w) values -> (k, w, 4) uint8."""
-    grey = np.nan_to_num(rgb @ np.array([0.299, 0.587, 0.114], np.float32), nan=0.0)[..., None]
-    heat = scale.lut()[scale.index(values)].astype(np.float32) / 255.0
-    mix = (1.0 - OVERLAY_ALPHA) * grey + OVERLAY_ALPHA * heat
+    from potflat._kernels.raster import heat_rgba
+
+    grey = np.ascontiguousarray(rgb @ np.array([0.299, 0.587, 0.114], np.float32), dtype=np.float32)
     out = np.empty(values.shape + (4,), np.uint8)
-    out[..., :3] = np.rint(np.clip(mix, 0.0, 1.0) * 255.0)
-    out[..., 3] = np.rint(coverage * 255.0)
+    heat_rgba(np.ascontiguousarray(values, dtype=np.float32), float(scale.lo), float(scale.hi), scale.lut(),
+              np.ascontiguousarray(coverage, np.float32), grey, OVERLAY_ALPHA, out)
     return out
 
 

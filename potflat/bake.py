@@ -232,31 +232,18 @@ def _chart_mask(texcoords: np.ndarray, height: int, width: int) -> np.ndarray:
     return cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool)
 
 
-def _halve_masked(img: np.ndarray, valid: np.ndarray, band: int = 512) -> tuple[np.ndarray, np.ndarray]:
-    """2 x 2 box average over the valid texels only, in bands of rows (no full-size float copy).
+def _halve_masked(img: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """2 x 2 box average over the valid texels only.
 
     img : (H, W, C) uint8/uint16, valid : (H, W) bool -> ((H+1)//2, (W+1)//2, C) same dtype, and its
     validity (any valid texel in the block).
     """
-    H, W, C = img.shape
-    h, w = (H + 1) // 2, (W + 1) // 2
-    out = np.zeros((h, w, C), img.dtype)
-    out_valid = np.zeros((h, w), bool)
-    top = float(np.iinfo(img.dtype).max)
-    for r in range(0, H, band):  # band is even: blocks never straddle two bands
-        k = min(band, H - r)
-        kh = (k + 1) // 2
-        m = np.zeros((2 * kh, 2 * w), np.float32)
-        m[:k, :W] = valid[r:r + k]
-        a = np.zeros((2 * kh, 2 * w, C), np.float32)
-        a[:k, :W] = img[r:r + k]
-        a *= m[..., None]
-        total = a.reshape(kh, 2, w, 2, C).sum(axis=(1, 3))
-        count = m.reshape(kh, 2, w, 2).sum(axis=(1, 3))
-        ok = count > 0
-        total[ok] /= count[ok][:, None]
-        out[r // 2:r // 2 + kh] = np.rint(np.clip(total, 0.0, top))
-        out_valid[r // 2:r // 2 + kh] = ok
+    from potflat._kernels.raster import halve_masked
+
+    h, w = (img.shape[0] + 1) // 2, (img.shape[1] + 1) // 2
+    out = np.empty((h, w, img.shape[2]), img.dtype)
+    out_valid = np.empty((h, w), bool)
+    halve_masked(img, np.ascontiguousarray(valid), out, out_valid)
     return out, out_valid
 
 

@@ -313,3 +313,72 @@ def sample_texture(face, bary, texcoords, lod, tex0, mips, mip_offsets, mip_shap
                             _tap(mips, mip_offsets[level], h, wl, nch, xs, ys, weight, a)
             for j in range(nch):
                 out[r, c, j] = a[j] / cnt if cnt > 0 else np.nan
+
+
+@parallel
+def halve_masked(img, valid, out, out_valid):
+    """2 x 2 box average of the valid texels only (one mip level of a chart-masked atlas).
+
+    Parameters
+    ----------
+    img : (H, W, C) uint8 or uint16
+    valid : (H, W) bool
+    out : ((H + 1) // 2, (W + 1) // 2, C), dtype of ``img``
+        Output: the mean of the valid texels of each block, rounded; 0 where none.
+    out_valid : ((H + 1) // 2, (W + 1) // 2) bool
+        Output: whether the block has a valid texel.
+    """
+    H, W, C = img.shape
+    h, w = out_valid.shape
+    acc = np.empty((h, C))
+    for r in prange(h):
+        a = acc[r]
+        for c in range(w):
+            for ch in range(C):
+                a[ch] = 0.0
+            cnt = 0
+            for i in range(2 * r, min(2 * r + 2, H)):
+                for j in range(2 * c, min(2 * c + 2, W)):
+                    if valid[i, j]:
+                        cnt += 1
+                        for ch in range(C):
+                            a[ch] += img[i, j, ch]
+            out_valid[r, c] = cnt > 0
+            for ch in range(C):
+                out[r, c, ch] = int(a[ch] / cnt + 0.5) if cnt > 0 else 0
+
+
+@parallel
+def heat_rgba(values, lo, hi, lut, coverage, grey, mix, out):
+    """Colour-map values into RGBA rows, optionally blended over a greyscale painting.
+
+    Parameters
+    ----------
+    values : (k, w) float32
+        NaN where nothing is covered.
+    lo, hi : float
+        Values mapped to the first and last colour (clipped beyond).
+    lut : (256, 3) uint8
+        Colour table.
+    coverage : (k, w) float32
+        Alpha in [0, 1].
+    grey : (k, w) float32
+        Painting luminance in [0, 1] (used when ``mix`` < 1).
+    mix : float
+        Opacity of the heat colour over ``grey`` (1: plain heat map).
+    out : (k, w, 4) uint8
+    """
+    k, w = values.shape
+    scale = 255.0 / (hi - lo)
+    for r in prange(k):
+        for c in range(w):
+            v = values[r, c]
+            t = 0.0 if np.isnan(v) else min(max((v - lo) * scale, 0.0), 255.0)
+            idx = int(t + 0.5)
+            g = grey[r, c] * 255.0 if mix < 1.0 else 0.0
+            if np.isnan(g):
+                g = 0.0
+            for ch in range(3):
+                x = mix * lut[idx, ch] + (1.0 - mix) * g
+                out[r, c, ch] = int(min(max(x, 0.0), 255.0) + 0.5)
+            out[r, c, 3] = int(coverage[r, c] * 255.0 + 0.5)
