@@ -31,8 +31,15 @@ from scipy.spatial import cKDTree
 
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
-from potflat.walls import (FaceGraph, check_axis, check_mesh, cylindrical, face_adjacency, unique_ints,
-                           weighted_quantiles)
+from potflat.walls import (
+    FaceGraph,
+    check_axis,
+    check_mesh,
+    cylindrical,
+    face_adjacency,
+    unique_ints,
+    weighted_quantiles,
+)
 
 #: Automatic cell size: at least this many median edge lengths ...
 _CELL_EDGES = 2.0
@@ -223,8 +230,7 @@ def detect_attachments(mesh: Mesh, axis_point, axis_direction, *, tolerance: flo
         _, off1 = _coverage_pass(hv, rv, tv, cell, coverage_ratio)
         fin = np.isfinite(off1)
         noise1 = float(np.median(off1[fin]) / 0.6745) if fin.any() else 0.0
-        if _CELL_NOISE * noise1 > cell:
-            cell = _CELL_NOISE * noise1
+        cell = max(cell, _CELL_NOISE * noise1)
     else:
         cell = float(tolerance)
     core_v, offset_u = _coverage_pass(hv, rv, tv, cell, coverage_ratio)

@@ -14,6 +14,7 @@ drawing as archaeologists publish it beside a rollout (see ``docs/profile.md``).
 """
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,7 +25,16 @@ import numpy as np
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.atomic import write_bytes_atomic
 from potflat.types import Mesh
-from potflat.walls import INNER, OUTER, binned_median, check_axis, check_mesh, cylindrical, face_frame, wall_labels
+from potflat.walls import (
+    INNER,
+    OUTER,
+    binned_median,
+    check_axis,
+    check_mesh,
+    cylindrical,
+    face_frame,
+    wall_labels,
+)
 
 #: Bins whose weight is below this fraction of the side's median bin weight get no radius.
 _MIN_BIN_WEIGHT_FRACTION = 0.01
@@ -106,7 +116,7 @@ class Profile:
         """JSON-ready figures (millimetres)."""
         s = self.mm_per_unit
         return {
-            "bins": int(len(self.heights)),
+            "bins": len(self.heights),
             "height_mm": float((self.bin_edges[-1] - self.bin_edges[0]) * s),
             "max_radius_mm": self.max_radius * s,
             "two_walled": self.two_walled,
@@ -265,7 +275,7 @@ def _at_centres(centres: np.ndarray, h: np.ndarray, r: np.ndarray) -> np.ndarray
         est[hi] = rk[-1] + (centres[hi] - hk[-1]) * (rk[-1] - rk[-2]) / (hk[-1] - hk[-2])
     keep = ok.copy()
     idx = np.flatnonzero(ok)
-    for i, j in zip(idx[:-1], idx[1:]):
+    for i, j in itertools.pairwise(idx):
         if 1 < j - i <= _MAX_GAP_BINS + 1:
             keep[i + 1:j] = True
     out[keep] = est[keep]

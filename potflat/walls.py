@@ -128,7 +128,7 @@ class FaceFrame:
     n_axial: np.ndarray
     adjacency: np.ndarray
     edge_length: np.ndarray
-    graph: "FaceGraph | None" = None
+    graph: FaceGraph | None = None
 
 
 class FaceGraph:
@@ -412,7 +412,7 @@ class WallSelection:
             "faces_inner": self.n_inner,
             "faces_selected": self.n_selected,
             "faces_dropped_disconnected": self.n_dropped,
-            "rim_faces": int(len(self.rim_faces)),
+            "rim_faces": len(self.rim_faces),
             "normals_inverted": self.normals_inverted,
             "method": self.method,
         }

@@ -172,7 +172,7 @@ def cylinder_with_handle(n_theta=120, n_h=51, noise=0.0, seed=0):
     return V, F, is_handle
 
 
-def sherd_shell(theta_span=np.deg2rad(90), n_theta=30, thickness=4.0):
+def sherd_shell(theta_span=np.pi / 2, n_theta=30, thickness=4.0):
     """Closed thin shell of a wall fragment: outer, inner, top/bottom breaks and side breaks.
 
     Labels: "outer", "inner", "break".

@@ -5,12 +5,17 @@ import csv
 import json
 import xml.etree.ElementTree as ET
 
+import _vessel_meshes as vm
 import numpy as np
 import pytest
 
-import _vessel_meshes as vm
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.profile import Profile, vessel_profile, write_profile_csv, write_profile_svg
+from potflat.profile import (
+    Profile,
+    vessel_profile,
+    write_profile_csv,
+    write_profile_svg,
+)
 from potflat.types import Mesh
 from potflat.walls import select_wall
 

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import json
 
+import _vessel_meshes as vm
 import numpy as np
 import pytest
 
-import _vessel_meshes as vm
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
 from potflat.walls import INNER, OUTER, check_axis, largest_component, select_wall
@@ -137,7 +137,7 @@ def test_exclude_attachments():
     from potflat.attachments import detect_attachments
 
     # a knob pushed out of the wall is part of the same surface: only the exclusion removes it
-    V, F, bump = vm.cylinder_with_knob()
+    V, F, _ = vm.cylinder_with_knob()
     mesh, p, a = _posed(V, F)
     att = detect_attachments(mesh, p, a)
     assert att.n_faces > 0
