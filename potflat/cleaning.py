@@ -25,7 +25,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from potflat._kernels.mesh import edge_table, propagate_orientation, union_find, weld_representatives
+from potflat._kernels.mesh import (edge_table, face_geometry, propagate_orientation, union_find,
+                                   weld_representatives)
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
 
@@ -181,20 +182,6 @@ def weld_vertices(mesh: Mesh, *, tolerance: float = 0.0) -> tuple[Mesh, int]:
     return _apply_vertex_map(mesh, rep), merged
 
 
-def _face_geometry(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Cross products (m, 3), twice the areas (m,) and longest squared edge (m,) of faces."""
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    e0, e1, e2 = b - a, c - b, a - c
-    cross = np.empty_like(e0)
-    cross[:, 0] = e2[:, 1] * e0[:, 2] - e2[:, 2] * e0[:, 1]
-    cross[:, 1] = e2[:, 2] * e0[:, 0] - e2[:, 0] * e0[:, 2]
-    cross[:, 2] = e2[:, 0] * e0[:, 1] - e2[:, 1] * e0[:, 0]
-    area2 = np.sqrt(np.einsum("ij,ij->i", cross, cross))
-    longest2 = np.maximum(np.maximum(np.einsum("ij,ij->i", e0, e0), np.einsum("ij,ij->i", e1, e1)),
-                          np.einsum("ij,ij->i", e2, e2))
-    return cross, area2, longest2
-
-
 def _select_faces(mesh: Mesh, keep: np.ndarray) -> Mesh:
     if keep.all():
         return mesh
@@ -305,7 +292,7 @@ def _boundary_loops(F: np.ndarray, n: int, topo: _Topology, split: bool) -> tupl
     return nb, len(np.unique(label[a]))
 
 
-def _outward_flips(mesh: Mesh, cross: np.ndarray, area2: np.ndarray, flip: np.ndarray,
+def _outward_flips(cross: np.ndarray, area2: np.ndarray, centroid: np.ndarray, flip: np.ndarray,
                    comp: np.ndarray) -> tuple[np.ndarray, int]:
     """Faces to reverse for a consistent, outward orientation, and components reversed.
 
@@ -323,11 +310,14 @@ def _outward_flips(mesh: Mesh, cross: np.ndarray, area2: np.ndarray, flip: np.nd
     flip = flip ^ (agree < 0)[comp]
     main = int(np.argmax(weight))
     sel = comp == main
-    centroid = mesh.vertices[mesh.faces[sel]].mean(axis=1)
-    c = (area2[sel, None] * centroid).sum(axis=0) / max(weight[main], np.finfo(float).tiny)
+    if sel.all():  # no copies in the common single-component case
+        sel = slice(None)
+    cen = centroid[sel]
+    c = (area2[sel, None] * cen).sum(axis=0) / max(weight[main], np.finfo(float).tiny)
+    d = cen - c
     sign = np.where(flip[sel], -1.0, 1.0)
-    flux = float((sign * np.einsum("ij,ij->i", cross[sel], centroid - c)).sum())
-    scale = float((area2[sel] * np.linalg.norm(centroid - c, axis=1)).sum())
+    flux = float((sign * np.einsum("ij,ij->i", cross[sel], d)).sum())
+    scale = float((area2[sel] * np.sqrt(np.einsum("ij,ij->i", d, d))).sum())
     if flux < -1e-6 * scale:  # clearly inward (a flat patch stays as it is)
         return ~flip, ncomp
     return flip, 0
@@ -376,7 +366,7 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
 
     # degenerate faces: repeated vertex or (numerically) zero area
     F = mesh.faces
-    cross, area2, longest2 = _face_geometry(mesh.vertices, F)
+    cross, area2, longest2, centroid = face_geometry(mesh.vertices, F)
     degenerate = ((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
                   | (area2 <= DEGENERATE_RELATIVE_AREA * longest2))
     n_degenerate = int(degenerate.sum())
@@ -390,7 +380,8 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
     n_dup = int(dup.sum())
     keep[np.flatnonzero(keep)[dup]] = False
     mesh = _select_faces(mesh, keep)
-    cross, area2 = cross[keep], area2[keep]
+    if not keep.all():
+        cross, area2, centroid = cross[keep], area2[keep], centroid[keep]
 
     # stray components, by manifold-edge connectivity
     n = len(mesh.vertices)
@@ -406,7 +397,7 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
                         "were removed; lower min_component_fraction to keep them")
     if drop.any():
         mesh = _select_faces(mesh, ~drop)
-        cross, area2 = cross[~drop], area2[~drop]
+        cross, area2, centroid = cross[~drop], area2[~drop], centroid[~drop]
         topo = _topology(mesh.faces, n)
         flip, comp, conflicts = propagate_orientation(topo.nbr, topo.nbr_same)
     n_nm_edges = int(np.count_nonzero(topo.count > 2))
@@ -422,7 +413,7 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
     n_reoriented = 0
     reversed_out = 0
     if orient:
-        total_flip, reversed_out = _outward_flips(mesh, cross, area2, flip.astype(bool), comp)
+        total_flip, reversed_out = _outward_flips(cross, area2, centroid, flip.astype(bool), comp)
         n_reoriented = int(np.count_nonzero(total_flip))
         mesh = _reverse_faces(mesh, total_flip)
         if conflicts:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from potflat._kernels._jit import leaf
+from potflat._kernels._jit import leaf, parallel, prange
 
 #: Marker for an index that can never be valid (``0`` in an OBJ face, or malformed).
 BAD_INDEX = -(2**62)
@@ -531,3 +531,61 @@ def edge_table(F, n):
                 halves[k, count[k]] = x
             count[k] += 1
     return edge_of, edges, count, halves
+
+
+@parallel
+def face_geometry(V, F):
+    """Per-face cross product, twice the area, longest squared edge and centroid.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+        Vertex positions.
+    F : (m, 3) int64
+        Faces.
+
+    Returns
+    -------
+    cross : (m, 3) float64
+        ``(V[F1] - V[F0]) x (V[F2] - V[F0])`` (normal times twice the area).
+    area2 : (m,) float64
+        Twice the area (norm of ``cross``).
+    longest2 : (m,) float64
+        Squared length of the longest edge.
+    centroid : (m, 3) float64
+        Mean of the three corners.
+    """
+    m = F.shape[0]
+    cross = np.empty((m, 3))
+    area2 = np.empty(m)
+    longest2 = np.empty(m)
+    centroid = np.empty((m, 3))
+    for f in prange(m):
+        a = F[f, 0]
+        b = F[f, 1]
+        c = F[f, 2]
+        e0x = V[b, 0] - V[a, 0]
+        e0y = V[b, 1] - V[a, 1]
+        e0z = V[b, 2] - V[a, 2]
+        e1x = V[c, 0] - V[b, 0]
+        e1y = V[c, 1] - V[b, 1]
+        e1z = V[c, 2] - V[b, 2]
+        e2x = V[a, 0] - V[c, 0]
+        e2y = V[a, 1] - V[c, 1]
+        e2z = V[a, 2] - V[c, 2]
+        # (b - a) x (c - a) = e0 x (-e2)
+        cx = e2y * e0z - e2z * e0y
+        cy = e2z * e0x - e2x * e0z
+        cz = e2x * e0y - e2y * e0x
+        cross[f, 0] = cx
+        cross[f, 1] = cy
+        cross[f, 2] = cz
+        area2[f] = np.sqrt(cx * cx + cy * cy + cz * cz)
+        l0 = e0x * e0x + e0y * e0y + e0z * e0z
+        l1 = e1x * e1x + e1y * e1y + e1z * e1z
+        l2 = e2x * e2x + e2y * e2y + e2z * e2z
+        longest2[f] = max(l0, max(l1, l2))
+        centroid[f, 0] = (V[a, 0] + V[b, 0] + V[c, 0]) / 3.0
+        centroid[f, 1] = (V[a, 1] + V[b, 1] + V[c, 1]) / 3.0
+        centroid[f, 2] = (V[a, 2] + V[b, 2] + V[c, 2]) / 3.0
+    return cross, area2, longest2, centroid
