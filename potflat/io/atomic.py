@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -58,9 +59,30 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:
 
 
 def write_json_atomic(path: str | os.PathLike, obj: Any) -> Path:
-    """Write ``obj`` as indented, key-sorted JSON to ``path`` atomically."""
-    text = json.dumps(obj, indent=2, sort_keys=True, allow_nan=False, default=_json_default)
+    """Write ``obj`` as indented, key-sorted JSON to ``path`` atomically.
+
+    Strict JSON has no infinity or NaN: non-finite floats (e.g. the anisotropy of a face
+    flattened to a segment) are written as ``null``.
+    """
+    text = json.dumps(_finite(obj), indent=2, sort_keys=True, allow_nan=False, default=_json_default)
     return write_bytes_atomic(path, (text + "\n").encode("utf-8"))
+
+
+def _finite(obj: Any) -> Any:
+    """``obj`` with non-finite floats (also NumPy scalars) replaced by None, recursively."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    import numpy as np
+
+    if isinstance(obj, np.floating):
+        return _finite(float(obj))
+    if isinstance(obj, np.ndarray) and obj.dtype.kind == "f":
+        return _finite(obj.tolist())
+    return obj
 
 
 def _json_default(obj: Any) -> Any:
