@@ -578,7 +578,7 @@ def estimate_axis(mesh: Mesh, *, flip: bool = False, profile: bool = True,
                 direction = -direction
             method = "centre+opening"
         else:
-            pc, direction = _pca_axis(cs)
+            _, direction = _pca_axis(cs)
             method = "pca"
         direction = direction / np.linalg.norm(direction)
         point = centre_pt
