@@ -255,7 +255,7 @@ class _Validator:
         return Batch(path=self.path, output=output, jobs=tuple(jobs))
 
     def unknown_key(self, node: _LineDict, key: Any, valid: tuple[str, ...], what: str,
-                    *, options_hint: bool = False) -> None:
+                    *, where: str = "", options_hint: bool = False) -> None:
         close = difflib.get_close_matches(str(key), list(valid), n=1, cutoff=0.6)
         if close:
             fix = f"did you mean '{close[0]}'?"
@@ -263,7 +263,7 @@ class _Validator:
             fix = "stage options go under 'defaults:' or under a scan entry"
         else:
             fix = f"valid keys: {', '.join(valid)}"
-        self.problem(_line(node, key), f"unknown {what} '{key}'; {fix}")
+        self.problem(_line(node, key), f"unknown {what} '{key}'{where}; {fix}")
 
     def output_dir(self, data: _LineDict) -> Path:
         if self.output_override is not None:
@@ -302,8 +302,8 @@ class _Validator:
             if key in extra:
                 continue
             if key not in self.options:
-                self.unknown_key(node, key, tuple(sorted(self.options)) + extra,
-                                 f"option in {where}")
+                self.unknown_key(node, key, tuple(sorted(self.options)) + extra, "option",
+                                 where=f" in {where}")
 
     def stage_values(self, node: _LineDict) -> dict[str, dict[str, tuple[Any, int]]]:
         """Stage -> option -> (coerced value, line) for the option keys of ``node``."""
