@@ -27,20 +27,34 @@ _PLY_TYPES = {
 }
 
 
-def _place_texture(texture: Path, out_dir: Path) -> str:
-    """Make ``texture`` available beside the output and return its name there."""
-    target = out_dir / texture.name
-    if not target.exists():
-        try:
-            os.link(texture, target)
-        except OSError:
-            with atomic_path(target) as tmp:
-                shutil.copyfile(texture, tmp)
-    elif not os.path.samefile(target, texture) and target.stat().st_size != texture.stat().st_size:
-        raise InvalidInputError(
-            f"{target} exists and is not the texture {texture}; choose another output directory"
-        )
-    return texture.name
+def _place_texture(texture: Path, ply_path: Path) -> str:
+    """Make ``texture`` available beside ``ply_path`` and return its name there.
+
+    A texture already in that folder is used as it is. Otherwise it is hard-linked (or
+    copied) as ``NAME.texture.EXT`` (NAME the stage name of ``ply_path``): a name no stage
+    writes (a texture ``NAME.png`` would otherwise be replaced by the baked ``NAME.png``) and
+    no other scan's texture can take (one output folder, several scans with a
+    ``texture.jpg``). A stale file of that name is replaced.
+    """
+    out_dir = ply_path.parent
+    if os.path.samefile(texture.parent, out_dir):
+        return texture.name
+    stem = ply_path.name
+    for suffix in (".ply", ".rollout", ".relaxed"):
+        stem = stem[: -len(suffix)] if stem.endswith(suffix) else stem
+    target = out_dir / f"{stem}.texture{texture.suffix.lower()}"
+    if target.exists() and os.path.samefile(target, texture):
+        return target.name
+    tmp = out_dir / f".{target.name}.{os.getpid()}.part"
+    try:  # link under a temporary name, then rename (atomic_path would chmod the scan's texture)
+        tmp.unlink(missing_ok=True)
+        os.link(texture, tmp)
+        os.replace(tmp, target)
+    except OSError:
+        tmp.unlink(missing_ok=True)
+        with atomic_path(target) as part:
+            shutil.copyfile(texture, part)
+    return target.name
 
 
 def write_flat_ply(path: str | os.PathLike, flat: FlatMesh, *, comments: tuple[str, ...] = ()) -> Path:
@@ -69,7 +83,7 @@ def write_flat_ply(path: str | os.PathLike, flat: FlatMesh, *, comments: tuple[s
     texture_name = None
     if mesh.texture_path is not None and mesh.texcoords is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
-        texture_name = _place_texture(mesh.texture_path, path.parent)
+        texture_name = _place_texture(mesh.texture_path, path)
 
     vfields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("u", "<f8"), ("v", "<f8")]
     if mesh.vertex_colors is not None:
