@@ -450,6 +450,13 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         ``side`` not "outer"/"inner" or ``flat_tolerance`` outside (0, 1).
     InvalidInputError
         Bad mesh or axis, or ``side="inner"`` on a scan without an inner wall.
+
+    Notes
+    -----
+    The inner wall's faces are counter-clockwise seen from the cavity (their normals point
+    towards the axis), so a development seen from outside (``u = R theta``) shows it
+    mirrored, every face flipped: unroll the inner side with ``u`` reversed, which is the
+    painting as seen from inside the vessel.
     """
     if side not in SIDES:
         raise InvalidOptionError(f"side must be 'outer' or 'inner', got {side!r}")
