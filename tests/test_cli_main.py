@@ -122,3 +122,19 @@ def test_run_corrupt_scan_one_line_error(tmp_path, fake_stages):
     assert result.exit_code == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and "bad.ply" in lines[0]
+
+
+@pytest.mark.parametrize("stage", ["rollout", "relax", "bake"])
+def test_stage_commands_use_the_shared_option_names(stage):
+    """Every options field is --field-name on its stage command, with -o/--output and --name."""
+    from potflat.pipeline import stage_api
+
+    try:
+        cls = stage_api(stage)[0]
+    except (ImportError, AttributeError):
+        pytest.skip(f"potflat.{stage} is not there yet")
+    text = " ".join(cli(stage, "--help").stdout.split())
+    missing = [f"--{f.name.replace('_', '-')}" for f in dataclasses.fields(cls)
+               if f"--{f.name.replace('_', '-')}" not in text]
+    missing += [flag for flag in ("--output", "-o", "--name", "--quiet", "--json") if f" {flag} " not in text]
+    assert not missing, f"potflat {stage} lacks {', '.join(missing)}"
