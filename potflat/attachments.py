@@ -43,7 +43,7 @@ from potflat.walls import (
 
 #: Automatic cell size: at least this many median edge lengths ...
 _CELL_EDGES = 2.0
-#: ... and at least this many times the profile's radial noise.
+#: ... and at least this many times the noise measured around the revolution surface.
 _CELL_NOISE = 4.0
 #: An offset above this many noise sigmas is "clearly off" the surface of revolution.
 _OFF_SIGMAS = 3.0

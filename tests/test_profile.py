@@ -39,6 +39,8 @@ def test_profile_matches_radius_function(seed):
     # chord error of 96 segments is 0.05 % of R; the rest is the median's interpolation
     assert np.abs(prof.outer_radius - vm.vase_radius(prof.heights)).max() < 0.05
     assert np.isnan(prof.inner_radius).all() and not prof.two_walled
+    at = prof.outer_radius_at(np.array([-1.0, 40.0, 81.0]))
+    assert np.isnan(at[[0, 2]]).all() and abs(at[1] - vm.vase_radius(40.0)) < 0.05
     assert np.allclose(prof.origin, p)  # the vase's foot is at the canonical origin
     assert np.allclose(prof.axis_direction, a)
     assert prof.outer_count.sum() >= len(mesh.vertices)
