@@ -390,12 +390,13 @@ class _Validator:
                                  "list each scan once (narrow the pattern)")
                     continue
                 seen_files[scan] = line
-                if scan_name in seen_names:
-                    other, other_line = seen_names[scan_name]
+                folder_key = scan_name.casefold()  # one folder on case-insensitive file systems
+                if folder_key in seen_names:
+                    other, other_line = seen_names[folder_key]
                     self.problem(line, f"{scan} and {other} (line {other_line}) would both write to "
                                  f"{output / scan_name}; give one of them its own entry with 'name:'")
                     continue
-                seen_names[scan_name] = (scan, line)
+                seen_names[folder_key] = (scan, line)
                 if options is not None:
                     jobs.append(ScanJob(name=scan_name, scan=scan, out_dir=output / scan_name,
                                         options=options, line=line))

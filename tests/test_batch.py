@@ -228,6 +228,8 @@ BAD = {
     "same output name": ("output: r/\nscans:\n  - a.obj\n  - sub/a.obj\n", 4, "would both write"),
     "not a scan format": ("output: r/\nscans:\n  - notes.txt\n", 3, "not a scan format"),
     "glob matching no scan": ("output: r/\nscans:\n  - '*.txt'\n", 3, "matches 1 files but no scan"),
+    "same name but for case": ("output: r/\nscans:\n  - a.obj\n  - path: b.obj\n    name: A\n", 4,
+                               "would both write"),
     "name with a glob": ("output: r/\nscans:\n  - path: '*.obj'\n    name: x\n", 4, "matches 2"),
 }
 
