@@ -480,7 +480,8 @@ def _figures(r: _Renderer, covered_px: float) -> dict:
     fv = r.face_values
     valid = r.valid
     w = r.area_3d[valid]
-    summary = r.summary.as_dict()
+    # JSON has no infinity: a collapsed flat triangle (anisotropy inf) is reported as null
+    summary = {k: (v if not isinstance(v, float) or math.isfinite(v) else None) for k, v in r.summary.as_dict().items()}
     figures = {
         "px_per_mm": g.px_per_mm,
         "dpi": g.px_per_mm * 25.4,
@@ -586,6 +587,18 @@ def stage_name(path: Path) -> str:
     return stem[: -len(".relaxed")] if stem.endswith(".relaxed") else stem
 
 
+def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: list) -> None:
+    """Refuse to bake when an output name is an input file (e.g. the scan's texture ``NAME.png``
+    when baking into the scan's own folder): the input would be replaced."""
+    suffixes = (".png", ".tif", ".position.tif", ".sheet.png", ".bake.json", ".overlay.png", ".scale-layer.png",
+                ".scalebar.png", *(f".{m}.png" for m in options.maps))
+    for src in (Path(p) for p in inputs if p is not None):
+        for out in (out_dir / f"{name}{s}" for s in suffixes):
+            if src.exists() and out.exists() and os.path.samefile(out, src):
+                raise InvalidOptionError(f"the output {out} is the input {src} and would be overwritten; "
+                                         "bake into another folder (-o) or give another --name")
+
+
 def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, options: BakeOptions | None = None, *,
                    name: str | None = None) -> StageOutput:
     """Bake ``NAME.relaxed.ply`` (or a rollout) into images and ``NAME.bake.json``.
@@ -631,6 +644,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
         rollout_ply = flat_ply.with_name(flat_ply.name[: -len(".relaxed.ply")] + ".rollout.ply")
         if not rollout_ply.is_file():
             raise InvalidInputError(f"--sheet needs {rollout_ply.name} beside {flat_ply}; copy it there or drop --sheet")
+    _check_not_inputs(out_dir, name, options, [flat_ply, flat.mesh.texture_path, rollout_ply])
     ppm = options.resolution
     r = _Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels)
     g = r.grid

@@ -447,3 +447,14 @@ def test_masked_halving_matches_reference():
             if m.any():
                 want = img[blk][m].mean(axis=0)
                 assert np.abs(out[r, c].astype(float) - want).max() <= 0.5
+
+
+def test_collapsed_flat_triangle_keeps_the_json_valid(tmp_path):
+    V, F, uv = grid_mesh(10.0, 10.0, 5.0)
+    uv = uv.copy()
+    uv[4] = uv[1]  # the centre vertex onto a neighbour: faces collapse to segments
+    write_flat_ply(tmp_path / "c.relaxed.ply", FlatMesh(Mesh(V, F), uv))
+    out = run_bake_stage(tmp_path / "c.relaxed.ply", tmp_path, BakeOptions(px_per_mm=2))
+    summary = json.loads((tmp_path / "c.bake.json").read_text())
+    assert summary["distortion"]["anisotropy_max"] is None  # infinite
+    assert out.summary["anisotropy"]["max"] >= 1e6
