@@ -321,3 +321,12 @@ def test_interrupt_keeps_finished_scans_and_writes_the_summary(three):
     fakes.SABOTAGE.clear()
     again = run_batch(load_batch(three), workers=1)
     assert [r.status for r in again.reports] == ["skipped", "done", "failed"]
+
+
+def test_scheduler_without_dask_says_what_to_install(three, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed -> ImportError
+    result = cli("batch", three, "--scheduler", "tcp://127.0.0.1:8786")
+    assert result.exit_code == 2
+    assert "pip install 'dask[distributed]'" in result.stderr
