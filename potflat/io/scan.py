@@ -10,6 +10,10 @@ OBJ and PLY are read by potflat's own parsers (OBJ by a Numba tokenizer: trimesh
 loader splits vertices at seams and is slow on multi-million-vertex scans); STL, OFF and
 GLB/glTF go through trimesh.
 
+Several texture images (OBJ materials with different ``map_Kd``, PLY ``texnumber``) are
+packed into one atlas image (a PNG in a ``potflat-textures`` temporary folder, made once per
+set of sources) with the texture coordinates remapped, since a :class:`Mesh` has one texture.
+
 Units: positions are never rescaled. ``units=None`` takes the unit the file declares (a PLY
 ``comment units X``, an STL ``UNITS=`` header, glTF's metres) and millimetres otherwise.
 """
@@ -90,7 +94,8 @@ def load_scan(path: str | os.PathLike, *, units: str | None = None, clean: bool 
         Run :func:`potflat.cleaning.clean_mesh`; if False only exact welding and checks run.
     texture : {"use", "ignore"}
         ``"use"``: a declared texture must exist and be a readable image of sane size
-        (else an error); ``"ignore"``: load geometry (and vertex colours) only.
+        (else an error); several images are packed into one atlas; ``"ignore"``: load
+        geometry (and vertex colours) only.
     min_component_fraction : float
         Remove components with less area than this fraction of the largest (stray fragments).
     weld_tolerance : float
@@ -113,7 +118,7 @@ def load_scan(path: str | os.PathLike, *, units: str | None = None, clean: bool 
     InvalidInputError
         Missing, empty, truncated or corrupt file; unknown extension; faces pointing at
         missing vertices; NaN or infinite coordinates; too few or only degenerate faces;
-        missing, corrupt or oversized texture; several texture images.
+        missing, corrupt or oversized texture.
     InvalidOptionError
         An option out of range.
     """
@@ -377,6 +382,9 @@ def _read_obj(path: Path, texture: str, max_pixels: int) -> _Raw:
     buf = np.frombuffer(data, dtype=np.uint8, offset=3 if data.startswith(b"\xef\xbb\xbf") else 0)  # BOM
     counts = obj_count(buf)
     V6, vcols, VT, cv, cvt, face_ptr, use_spans, lib_spans, bad_line = obj_fill(buf, counts)
+    names = [buf[s:e].tobytes().decode("utf-8", "replace") for s, e, _ in use_spans]
+    libs = [buf[s:e].tobytes().decode("utf-8", "replace") for s, e in lib_spans]
+    del buf, data  # the file's bytes are the largest array here
     if bad_line:
         raise InvalidInputError(f"{path} line {bad_line}: not a number; repair the file or export it again")
     if len(V6) and vcols.min() < 3:
@@ -385,12 +393,14 @@ def _read_obj(path: Path, texture: str, max_pixels: int) -> _Raw:
     raw = _Raw(vertices=np.ascontiguousarray(V6[:, :3]), faces=np.zeros((0, 3), np.int64))
     if len(V6) and vcols.min() >= 6:
         raw.colors = _colors_to_u8(V6[:, 3:6])
+    nv = len(V6)
+    del V6
     lengths = np.diff(face_ptr)
     corners, poly, n_poly, n_short = _triangulate(lengths)
     raw.polygons_triangulated = n_poly
     if n_short:
         raw.warnings.append(f"{n_short} faces with fewer than 3 corners were ignored")
-    nv, nvt = len(V6), len(VT)
+    nvt = len(VT)
     bad = (cv < 0) | (cv >= nv)
     if bad.any():
         idx = int(np.flatnonzero(bad)[0])
@@ -398,6 +408,7 @@ def _read_obj(path: Path, texture: str, max_pixels: int) -> _Raw:
         raise InvalidInputError(f"{path}: face {fno} points at a vertex that does not exist (the file "
                                 f"has {nv} vertices); the file is corrupt or cut short: export it again")
     raw.faces = cv[corners]
+    del cv
     if texture == "ignore" or nvt == 0:
         return raw
     badt = (cvt < -1) | (cvt >= nvt)
@@ -405,13 +416,13 @@ def _read_obj(path: Path, texture: str, max_pixels: int) -> _Raw:
         raise InvalidInputError(f"{path}: faces point at texture coordinates that do not exist (the file "
                                 f"has {nvt}); export it again {_IGNORE_HINT}")
     tri_vt = cvt[corners]
+    del cvt
     has_vt = (tri_vt >= 0).all(axis=1)
     if not has_vt.any():
         return raw
 
     # materials: which texture each triangle uses
-    names = [buf[s:e].tobytes().decode("utf-8", "replace") for s, e, _ in use_spans]
-    textures = _obj_material_textures(path, [buf[s:e].tobytes().decode("utf-8", "replace") for s, e in lib_spans])
+    textures = _obj_material_textures(path, libs)
     if len(names):
         mat_of_poly = np.searchsorted(use_spans[:, 2], np.arange(len(lengths)), side="right") - 1
         tex_of_name = [textures.get(nm) for nm in names]
