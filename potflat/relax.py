@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import os
 import time
 from collections import deque
 from dataclasses import asdict, dataclass, field
@@ -29,6 +30,10 @@ from typing import Callable
 
 import numpy as np
 
+# The solver runs many short parallel regions per iteration; OpenMP's default busy-waiting
+# made them up to 20x slower on a machine shared with other jobs (measured, docs/performance.md).
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 from potflat.distortion import DistortionSummary, summarize, vertex_stress
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
 from potflat.types import FlatMesh, StageOutput
@@ -36,11 +41,11 @@ from potflat.types import FlatMesh, StageOutput
 #: Settings of each preset; ``None`` in :class:`RelaxOptions` takes the preset's value.
 PRESETS: dict[str, dict] = {
     "preview": dict(solver="multilevel", stretch=1.0, stiffness=1.0, weighting="relative",
-                    tol=1e-4, max_iter=400, fine=False, level_iter=40, cell_vertices=16.0),
+                    tol=1e-4, max_iter=400, level_iter=12, level_tol=1e-4, fine_iter=0, cell_vertices=16.0),
     "standard": dict(solver="multilevel", stretch=1.0, stiffness=1.0, weighting="relative",
-                     tol=1e-6, max_iter=1500, fine=True, level_iter=60, cell_vertices=8.0),
+                     tol=1e-5, max_iter=2000, level_iter=15, level_tol=1e-4, fine_iter=200, cell_vertices=8.0),
     "archival": dict(solver="multilevel", stretch=1.0, stiffness=1.0, weighting="relative",
-                     tol=1e-9, max_iter=20000, fine=True, level_iter=150, cell_vertices=4.0),
+                     tol=1e-8, max_iter=20000, level_iter=100, level_tol=1e-5, fine_iter=20000, cell_vertices=4.0),
     "paper": dict(solver="dynamics", stretch=2.0, stiffness=0.5, weighting="uniform",
                   tol=1e-7, max_iter=100000, friction_inside=0.01, friction_boundary=1.0),
 }
@@ -328,27 +333,26 @@ def _lbfgs(sp: _Springs, x: np.ndarray, run: _Run, *, prolong, restrict, max_ite
     """
     E, Es, gf = sp.evaluate(x)
     g = restrict(gf)
-    S: deque = deque(maxlen=LBFGS_MEMORY)
-    Y: deque = deque(maxlen=LBFGS_MEMORY)
+    mem: deque = deque(maxlen=LBFGS_MEMORY)  # (s, y, 1 / s.y)
     hist = [E]
     it = 0
     converged = False
     while it < max_iter:
         q = -g
         alphas = []
-        for s, y, rho in reversed(list(zip(S, Y, (1.0 / sp.dot(s, y) for s, y in zip(S, Y))))):
+        for s, y, rho in reversed(mem):
             a = rho * sp.dot(s, q)
-            alphas.append((a, rho, s, y))
+            alphas.append(a)
             q = q - a * y
-        if S:
-            q = q * (sp.dot(S[-1], Y[-1]) / sp.dot(Y[-1], Y[-1]))
-        for a, rho, s, y in reversed(alphas):
+        if mem:
+            s, y, rho = mem[-1]
+            q = q * (1.0 / (rho * sp.dot(y, y)))
+        for (s, y, rho), a in zip(mem, reversed(alphas)):
             b = rho * sp.dot(y, q)
             q = q + (a - b) * s
         gd = sp.dot(g, q)
         if not gd < 0.0:
-            S.clear()
-            Y.clear()
+            mem.clear()
             q = -g
             gd = -sp.dot(g, g)
             if not gd < 0.0:
@@ -356,7 +360,7 @@ def _lbfgs(sp: _Springs, x: np.ndarray, run: _Run, *, prolong, restrict, max_ite
                 break
         dx = prolong(q)
         t = 1.0
-        if not S:
+        if not mem:
             peak = float(np.abs(dx).max())
             t = min(1.0, 0.1 / peak) if peak > 0 else 1.0
         t = min(t, STEP_FRACTION * sp.max_step(x, dx))
@@ -374,9 +378,9 @@ def _lbfgs(sp: _Springs, x: np.ndarray, run: _Run, *, prolong, restrict, max_ite
         gn = restrict(gfn)
         s = t * q
         y = gn - g
-        if sp.dot(s, y) > 1e-300:
-            S.append(s)
-            Y.append(y)
+        sy = sp.dot(s, y)
+        if sy > 1e-300:
+            mem.append((s, y, 1.0 / sy))
         x, E, g = xn, En, gn
         it += 1
         hist.append(En)
@@ -390,11 +394,11 @@ def _lbfgs(sp: _Springs, x: np.ndarray, run: _Run, *, prolong, restrict, max_ite
 
 def _multilevel(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, levels_out: list, notes: list):
     tol = settings["tol"]
-    level_tol = max(tol, 1e-5)
+    level_tol = max(tol, settings["level_tol"])
     overlap_free = sp.overlap(x) == 0
     converged = False
     plan = [("grid", L) for L in hier.levels]
-    if settings["fine"] or not plan:
+    if settings["fine_iter"] > 0 or not plan:
         plan.append(("fine", None))
     for kind, L in plan:
         t0 = time.perf_counter()
@@ -407,7 +411,7 @@ def _multilevel(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, le
             cap, ltol = settings["level_iter"], level_tol
         else:
             prolong = restrict = lambda a: a  # noqa: E731
-            cap, ltol = settings["max_iter"], tol
+            cap, ltol = settings["fine_iter"] or settings["max_iter"], tol
         cap = min(cap, run.max_iter - len(run.history))
         if cap <= 0:
             break
