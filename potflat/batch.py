@@ -747,9 +747,17 @@ def run_batch(batch: Batch, *, workers: int | None = None, scheduler: str | None
     reports: dict[int, ScanReport] = {}
     todo: list[tuple[int, ScanJob, str]] = []
     emit = on_result or (lambda report: None)
+    if workers is not None and workers < 1:
+        raise InvalidOptionError(f"--workers must be at least 1, got {workers}")
+    client = _dask_client(scheduler) if scheduler is not None else None  # fail before any work
     try:
         for index, job in enumerate(batch.jobs):
-            key = job_key(job)
+            try:
+                key = job_key(job)
+            except OSError as exc:  # the scan vanished or became unreadable since validation
+                reports[index] = _report(job, "failed", error=f"{job.scan}: cannot read: "
+                                         f"{exc.strerror or one_line(exc)}; check the file")
+                continue
             manifest = None if force else is_complete(job, key)
             if manifest is not None:
                 reports[index] = _report(job, "skipped", figures=manifest.get("figures"))
@@ -764,18 +772,18 @@ def run_batch(batch: Batch, *, workers: int | None = None, scheduler: str | None
             reports[index] = report
             emit(report)
 
-        if scheduler is not None:
-            _run_dask(todo, scheduler, record)
+        if client is not None:
+            _run_dask(todo, client, record)
         else:
             n = workers or default_workers(len(todo))
-            if n < 1:
-                raise InvalidOptionError(f"--workers must be at least 1, got {n}")
             if n == 1 or len(todo) <= 1:
                 for index, job, key in todo:
                     record(index, run_job(job, key))
             else:
                 _run_pool(todo, n, record)
     finally:
+        if client is not None:
+            client.close()
         ordered = tuple(reports.get(i) or _report(job, "interrupted", error="not finished: the batch "
                                                   "was interrupted; rerun it to resume")
                         for i, job in enumerate(batch.jobs))
@@ -821,32 +829,35 @@ def _run_pool(todo: list, workers: int, record: Callable[[int, ScanReport], None
         record(index, report)
 
 
-def _run_dask(todo: list, address: str, record: Callable[[int, ScanReport], None]) -> None:
+def _dask_client(address: str):
+    """A Dask client connected to the scheduler at ``address`` (clear errors otherwise)."""
     try:
-        from distributed import Client, as_completed
+        from distributed import Client
     except ImportError:
         raise InvalidOptionError("--scheduler needs Dask distributed, which is not installed; "
                                  "install it with: pip install 'dask[distributed]'") from None
     try:
-        client = Client(address, timeout=CONNECT_TIMEOUT, set_as_default=False)
+        return Client(address, timeout=CONNECT_TIMEOUT, set_as_default=False)
     except (OSError, TimeoutError, ValueError) as exc:
         raise InvalidOptionError(f"cannot connect to the Dask scheduler at {address}: "
                                  f"{one_line(exc)}; check the address or start one with "
                                  "'dask scheduler'") from None
+
+
+def _run_dask(todo: list, client, record: Callable[[int, ScanReport], None]) -> None:
+    from distributed import as_completed
+
+    futures = {client.submit(_run_job_on_dask_worker, job, key, pure=False,
+                             key=f"potflat-{job.name}-{key[:12]}-{index}"): (index, job)
+               for index, job, key in todo}
     try:
-        futures = {client.submit(_run_job_on_dask_worker, job, key, pure=False,
-                                 key=f"potflat-{job.name}-{key[:12]}-{index}"): (index, job)
-                   for index, job, key in todo}
-        try:
-            for future in as_completed(futures, loop=client.loop):
-                index, job = futures[future]
-                try:
-                    report = future.result()
-                except Exception as exc:  # noqa: BLE001 - a lost worker fails this scan only
-                    report = _report(job, "failed", error=f"on the Dask cluster: {one_line(exc)}")
-                record(index, report)
-        except BaseException:
-            client.cancel(list(futures))
-            raise
-    finally:
-        client.close()
+        for future in as_completed(futures, loop=client.loop):
+            index, job = futures[future]
+            try:
+                report = future.result()
+            except Exception as exc:  # noqa: BLE001 - a lost worker fails this scan only
+                report = _report(job, "failed", error=f"on the Dask cluster: {one_line(exc)}")
+            record(index, report)
+    except BaseException:
+        client.cancel(list(futures))
+        raise

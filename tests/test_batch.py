@@ -193,6 +193,7 @@ def test_unreachable_scheduler_is_a_usage_error(three, monkeypatch):
     result = cli("batch", three, "--scheduler", "tcp://127.0.0.1:1")
     assert result.exit_code == 2
     assert "cannot connect to the Dask scheduler" in result.stderr
+    assert not (three.parent / "results").exists()
 
 
 # ------------------------------------------------------------------ validation (exit code 2)
@@ -330,3 +331,12 @@ def test_scheduler_without_dask_says_what_to_install(three, monkeypatch):
     result = cli("batch", three, "--scheduler", "tcp://127.0.0.1:8786")
     assert result.exit_code == 2
     assert "pip install 'dask[distributed]'" in result.stderr
+    assert not (three.parent / "results").exists()  # nothing ran, no summary
+
+
+def test_scan_vanishing_after_validation_fails_only_that_scan(three):
+    batch = load_batch(three)
+    (three.parent / "scans" / "amphora-1.obj").unlink()
+    summary = run_batch(batch, workers=1)
+    assert [r.status for r in summary.reports] == ["failed", "done", "failed"]
+    assert "amphora-1.obj: cannot read" in summary.reports[0].error
