@@ -25,8 +25,13 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from potflat._kernels.mesh import (edge_table, face_geometry, propagate_orientation, union_find,
-                                   weld_representatives)
+from potflat._kernels.mesh import (
+    edge_table,
+    face_geometry,
+    propagate_orientation,
+    union_find,
+    weld_representatives,
+)
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
 

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from potflat._kernels.mesh import edge_table, propagate_orientation, union_find
+from potflat._kernels.mesh import edge_table, union_find
 from potflat.cleaning import CleaningReport, clean_mesh, weld_vertices
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
@@ -102,7 +102,7 @@ def test_propagate_orientation_counts_conflicts_on_moebius():
         j = (i + 1) % n
         b0, b1 = (2 * j, 2 * j + 1) if j else (1, 0)  # the half twist
         F += [[a0, b0, b1], [a0, b1, a1]]
-    mesh, report = clean_mesh(Mesh(V, np.array(F)))
+    _, report = clean_mesh(Mesh(V, np.array(F)))
     assert report.orientation_conflicts >= 1
     assert any("non-orientable" in w for w in report.warnings)
 
@@ -285,7 +285,7 @@ def test_bowl_and_sherd_outward():
     a, b = idx[:-1], np.roll(idx, -1, axis=1)[:-1]
     c, d = np.roll(idx, -1, axis=1)[1:], idx[1:]
     F = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
-    mesh, r = clean_mesh(Mesh(V, F), min_component_fraction=0.0)
+    mesh, _ = clean_mesh(Mesh(V, F), min_component_fraction=0.0)
     W, G = mesh.vertices, mesh.faces
     n = np.cross(W[G[:, 1]] - W[G[:, 0]], W[G[:, 2]] - W[G[:, 0]])
     ok = np.linalg.norm(n, axis=1) > 1e-12

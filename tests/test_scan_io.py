@@ -52,7 +52,7 @@ def _write_seam_obj(tmp_path: Path, texture=True) -> tuple[Path, np.ndarray, np.
     """OBJ whose vertices are split into two charts at the middle column (as an atlas does):
     the seam vertices appear twice with identical positions and different vt."""
     V, F = _grid()
-    nu, nv = 4, 3
+    nv = 3
     col = (np.arange(len(V)) // (nv + 1))  # column index of each vertex
     # chart of each face: left half (columns 0..2) or right half (2..4)
     fcol = col[F].max(axis=1)

@@ -235,7 +235,7 @@ def _check_texture(tex: Path, source: Path, max_pixels: int) -> tuple[Path, tupl
                     im.verify()  # chunk CRCs, without decoding pixels
     except InvalidInputError:
         raise
-    except Exception as exc:  # Pillow raises many types for corrupt images
+    except Exception as exc:  # noqa: BLE001 - Pillow raises many types for corrupt images
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise InvalidInputError(f"{source}: texture {tex.name} is not a readable image ({msg}); "
                                 f"restore the file {_IGNORE_HINT}") from None
@@ -301,7 +301,7 @@ def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source
                 atlas.save(tmp, format="PNG", compress_level=1)
         except InvalidInputError:
             raise
-        except Exception as exc:  # Pillow raises many types for corrupt images
+        except Exception as exc:  # noqa: BLE001 - Pillow raises many types for corrupt images
             msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             raise InvalidInputError(f"{source}: its texture images cannot be decoded ({msg}); restore them "
                                     f"{_IGNORE_HINT}") from None
@@ -792,7 +792,7 @@ def _trimesh_load(path: Path, **kwargs):
             return trimesh.load(str(path), process=False, **kwargs)
     except InvalidInputError:
         raise
-    except Exception as exc:  # trimesh raises many types for corrupt files
+    except Exception as exc:  # noqa: BLE001 - trimesh raises many types for corrupt files
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise InvalidInputError(f"{path} cannot be read as {path.suffix[1:].upper()} ({msg[:120]}); "
                                 "export the scan again") from None
@@ -840,7 +840,7 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
         geoms = [g for g in (scene.dump() if isinstance(scene, trimesh.Scene) else [scene])
                  if isinstance(g, trimesh.Trimesh) and len(g.faces)]
         kinds = [g.visual.kind for g in geoms]
-    except Exception as exc:  # corrupt embedded data: many exception types
+    except Exception as exc:  # noqa: BLE001 - corrupt embedded data: many exception types
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise InvalidInputError(f"{path} cannot be read as {path.suffix[1:].upper()} ({msg[:120]}); "
                                 "export the scan again") from None
