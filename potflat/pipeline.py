@@ -57,9 +57,7 @@ def options_dict(options: Any) -> dict[str, Any]:
     """A stage options dataclass as a JSON-ready dict (tuples become lists)."""
     import json
 
-    from potflat.io.atomic import _json_default
-
-    return json.loads(json.dumps(dataclasses.asdict(options), default=_json_default))
+    return json.loads(json.dumps(dataclasses.asdict(options), default=str))
 
 
 @dataclass(frozen=True)
