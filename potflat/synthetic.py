@@ -531,8 +531,12 @@ def _bezier(p, t):
     return ((1 - t) ** 3) * p[0] + 3 * ((1 - t) ** 2) * t * p[1] + 3 * (1 - t) * t * t * p[2] + t ** 3 * p[3]
 
 
-def _handle_mesh(g: _Generatrix, hd: _Handle, h: float, rng) -> tuple:
-    """Tube mesh of one handle whose open ends sink 2 mm into the wall."""
+def _handle_mesh(g: _Generatrix, hd: _Handle, h: float, rng, sink: float) -> tuple:
+    """Tube mesh of one handle whose open ends sink ``sink`` mm into the wall.
+
+    Returns V, F, arc length and angle per vertex, and both ends as (surface point,
+    unit wall normal, indices of the end ring's vertices).
+    """
     _, pr, pz = _outer_polyline(g)
     nrm = _normals2d(pr, pz)
 
@@ -540,7 +544,7 @@ def _handle_mesh(g: _Generatrix, hd: _Handle, h: float, rng) -> tuple:
         i = int(np.argmin(np.abs(pz - z)))
         n3 = np.array([nrm[i, 0] * math.cos(th), nrm[i, 0] * math.sin(th), nrm[i, 1]])
         p3 = np.array([pr[i] * math.cos(th), pr[i] * math.sin(th), pz[i]])
-        return p3 - 2.0 * n3, n3
+        return p3 - sink * n3, n3
 
     a0, n0 = anchor(hd.z0, hd.theta + hd.dtheta0)
     a1, n1 = anchor(hd.z1, hd.theta + hd.dtheta1)
@@ -581,7 +585,91 @@ def _handle_mesh(g: _Generatrix, hd: _Handle, h: float, rng) -> tuple:
     rows = np.repeat(np.arange(K + 1), n)
     F = _ring_strip_faces(rows, phi, n_row, 0, K).astype(np.int64)
     _check_manifold(F, len(V), holes_expected=2)
-    return V, F, s, phi
+    ends = ((a0 + sink * n0, n0, np.flatnonzero(rows == 0)), (a1 + sink * n1, n1, np.flatnonzero(rows == K)))
+    return V, F, s, phi, ends
+
+
+def _weld_handles(V, F, arrays, face_arrays, ends, h):
+    """Weld handle tubes into the wall: cut a hole around each root, stitch it to the ring.
+
+    ``arrays`` are per-vertex arrays and ``face_arrays`` per-face arrays (the first one
+    the face part) to carry along; ``ends`` = (root point, wall normal, ring vertex
+    indices, tube radius). The hole (wall faces within the tube radius plus 1.5 ``h`` of
+    the root, grown where its outline is not star-shaped around the root) is stitched
+    to the tube's end ring by a strip of handle faces. Returns V, F, arrays, face arrays
+    and the stitched faces' preset chart layout (face indices, tangent-plane projection,
+    two charts per root).
+    """
+    face_part = face_arrays[0]
+    wall_face = face_part == PART_OUTER  # never cut through an inner wall behind the root
+    near = np.zeros(len(V), bool)
+    frames = []
+    for A, nA, ring, a in ends:
+        d = np.linalg.norm(V - A, axis=1)
+        d[ring] = np.inf
+        near |= d <= a + max(1.5 * h, 1.0)
+        e1 = np.cross(nA, [1.0, 0.0, 0.0] if abs(nA[0]) < 0.9 else [0.0, 1.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        frames.append((e1, np.cross(nA, e1)))
+    for _ in range(20):
+        remove = _remove_faces(F, wall_face & near[F].any(axis=1))
+        Fk = F[~remove]
+        used = np.zeros(len(V), bool)
+        used[Fk.ravel()] = True
+        old = np.flatnonzero(used)
+        new = np.cumsum(used) - 1
+        Vk, Fk = V[used], new[Fk]
+        n = len(Vk)
+        directed = np.concatenate([Fk[:, [0, 1]], Fk[:, [1, 2]], Fk[:, [2, 0]]])
+        key = directed[:, 0] * n + directed[:, 1]
+        bnd = directed[~np.isin(key, directed[:, 1] * n + directed[:, 0])]
+        nxt = dict(zip(bnd[:, 0].tolist(), bnd[:, 1].tolist()))
+        is_handle_vertex = np.zeros(n, bool)
+        is_handle_vertex[Fk[face_part[~remove] == PART_HANDLE].ravel()] = True
+        start = np.flatnonzero(~is_handle_vertex[bnd[:, 0]])
+        stitched, uvs, pieces, grow = [], [], [], False
+        for (A, nA, ring, _), (e1, e2) in zip(ends, frames):
+            # the wall's boundary loop nearest to the root
+            first = bnd[start[np.argmin(np.linalg.norm(Vk[bnd[start, 0]] - A, axis=1))], 0]
+            hole = [int(first)]
+            while nxt[hole[-1]] != hole[0]:
+                hole.append(nxt[hole[-1]])
+            hole = np.array(hole)
+            if any(np.isin(hole, f).any() for f in stitched):
+                raise InvalidOptionError("the mesh is too coarse to weld the handles; use more n_vertices")
+            ang = lambda idx: np.arctan2((Vk[idx] - A) @ e2, (Vk[idx] - A) @ e1) % (2 * math.pi)  # noqa: E731
+            turn = _wrap(ang(np.roll(hole, -1)) - ang(hole))
+            wrong = np.sign(turn) != np.sign(turn.sum())
+            if np.any(wrong) or abs(abs(turn.sum()) - 2 * math.pi) > 1e-6:
+                near[old[hole[wrong | np.roll(wrong, 1)]]] = True  # cut the notch away
+                grow = True
+                continue
+            ring = new[ring]
+            idx = np.concatenate([hole, ring])
+            rows = np.concatenate([np.zeros(len(hole), np.int64), np.ones(len(ring), np.int64)])
+            faces = idx[_ring_strip_faces(rows, ang(idx), np.array([len(hole), len(ring)]), 0, 1)]
+            u, v = hole[0], hole[1]
+            if np.any((faces == u) & (np.roll(faces, -1, axis=1) == v)):
+                faces = faces[:, ::-1]
+            stitched.append(faces)
+            P = Vk[faces] - A
+            uvs.append(np.stack([P @ e1, P @ e2], axis=2))
+            c = P.mean(axis=1)
+            pieces.append((np.arctan2(c @ e2, c @ e1) >= 0).astype(np.int64) + 2 * len(pieces))
+        if not grow:
+            break
+    else:
+        raise InvalidOptionError("the mesh is too coarse to weld the handles; use more n_vertices")
+    V, F = Vk, Fk
+    arrays = [a[used] for a in arrays]
+    face_arrays = [a[~remove] for a in face_arrays]
+    m0 = len(F)
+    extra = np.concatenate(stitched)
+    F = np.concatenate([F, extra])
+    fills = [PART_HANDLE] + [-1] * (len(face_arrays) - 1)
+    face_arrays = [np.concatenate([a, np.full(len(extra), f, a.dtype)]) for a, f in zip(face_arrays, fills)]
+    preset = (np.arange(m0, len(F)), np.concatenate(uvs), np.concatenate(pieces))
+    return V, F, arrays, face_arrays, preset
 
 
 # --------------------------------------------------------------------------- painting
@@ -827,8 +915,8 @@ def _chart_layouts(V, F, vs, vth, face_part, face_handle, handle_radii, g: _Gene
                    rng, preset=None):
     """Chart of every face and its corners' local 2D layout (mm), CCW.
 
-    ``preset`` = (face indices, corner layouts (k, 3, 2), piece ids) for faces laid out by
-    the caller (a sherd's break faces), one chart per piece.
+    ``preset`` = (piece id per face, -1 for none; corner layouts (m, 3, 2)) for faces laid
+    out by the caller (a sherd's break faces, welded handle roots), one chart per piece.
     """
     m = len(F)
     sc = vs[F].mean(axis=1)
@@ -869,10 +957,10 @@ def _chart_layouts(V, F, vs, vth, face_part, face_handle, handle_radii, g: _Gene
                 next_id += 1
                 rest &= ~sel
     if preset is not None:
-        idx, corner_uv, piece = preset
-        for p in np.unique(piece):
-            sel = idx[piece == p]
-            uv[sel] = corner_uv[piece == p]
+        piece, corner_uv = preset
+        for p in np.unique(piece[piece >= 0]):
+            sel = piece == p
+            uv[sel] = corner_uv[sel]
             chart[sel] = next_id
             next_id += 1
     # handles: two charts per tube (half turns), unwrapped (radius * dphi, arc length)
@@ -979,7 +1067,7 @@ def make_vessel(
     base: bool | None = None,
     walls: int | None = None,
     thickness: float = 4.0,
-    handles: bool = False,
+    handles: bool | str = False,
     holes: int = 0,
     sherd_of: str = "hydria",
     sherd_span: float = 80.0,
@@ -1009,9 +1097,12 @@ def make_vessel(
         a painted tondo.
     thickness : float
         Wall thickness in mm for ``walls=2`` (1 to 10).
-    handles : bool
+    handles : bool or str
         Add handle tubes (``amphora``, ``hydria``, ``lekythos``, ``kylix``), part of the
-        same mesh, their open ends sunk 2 mm into the wall (intersecting, as in scans).
+        same mesh (:data:`PART_HANDLE`). ``True`` or ``"intersecting"``: separate tubes whose
+        open ends sink 2 mm into the intact wall (as in merged scans); ``"welded"``: the wall
+        is cut around each root and stitched to the tube, one manifold surface of genus
+        = number of handles (as in a single scan surface).
     holes : int
         Number of holes cut into the painted outer wall (0 to 20).
     sherd_of : str
@@ -1040,9 +1131,11 @@ def make_vessel(
         sherd_thickness = _check_float("sherd_thickness", sherd_thickness, 1.0, 15.0)
         if kind != "sherd":
             raise InvalidOptionError(f"sherd_thickness applies to kind 'sherd', not {kind!r}; drop it")
-    for name, val in (("pose", pose), ("handles", handles)):
-        if not isinstance(val, bool):
-            raise InvalidOptionError(f"{name} must be True or False, got {val!r}")
+    if not isinstance(pose, bool):
+        raise InvalidOptionError(f"pose must be True or False, got {pose!r}")
+    if handles not in (False, True, "intersecting", "welded") or not isinstance(handles, (bool, str)):
+        raise InvalidOptionError(f"handles must be False, True, 'intersecting' or 'welded', got {handles!r}")
+    handles = "intersecting" if handles is True else handles
     if base is not None and not isinstance(base, bool):
         raise InvalidOptionError(f"base must be True, False or None, got {base!r}")
     parent = kind
@@ -1082,9 +1175,11 @@ def make_vessel(
     face_part = _parts_of(g, vs[F].mean(axis=1))
     face_handle = np.full(len(F), -1, np.int64)
     handle_radii = []
+    ends = []
     if handles:
         for hd in spec.handles:
-            hV, hF, hs, hphi = _handle_mesh(g, hd, h, rng)
+            hV, hF, hs, hphi, hends = _handle_mesh(g, hd, h, rng, sink=0.0 if handles == "welded" else 2.0)
+            ends += [(A, nA, ring + len(V), hd.radius) for A, nA, ring in hends]
             F = np.concatenate([F, hF + len(V)])
             V = np.concatenate([V, hV])
             vs, vth = np.concatenate([vs, hs]), np.concatenate([vth, hphi])
@@ -1092,6 +1187,15 @@ def make_vessel(
             face_part = np.concatenate([face_part, np.full(len(hF), PART_HANDLE, np.int8)])
             face_handle = np.concatenate([face_handle, np.full(len(hF), len(handle_radii))])
             handle_radii.append(hd.radius)
+    preset = None  # caller-made chart layouts: (piece per face or -1, corner layouts)
+    if handles == "welded":
+        chi = len(V) - len(np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]),
+                                                  axis=1), axis=0)) + len(F)
+        V, F, (vs, vth, vertex_part), (face_part, face_handle), weld = _weld_handles(
+            V, F, [vs, vth, vertex_part], [face_part, face_handle], ends, h)
+        _check_manifold(F, len(V), holes_expected=2 - (chi - 2 * len(spec.handles)))
+        preset = (np.full(len(F), -1, np.int64), np.zeros((len(F), 3, 2)))
+        preset[0][weld[0]], preset[1][weld[0]] = weld[2], weld[1]
 
     remove = np.zeros(len(F), bool)
     circles = painting.circles
@@ -1105,19 +1209,23 @@ def make_vessel(
         circles = tuple(c for c in circles if circle_ok(c))
     hole_list = []
     if holes:
-        hole_list = _place_holes(g, painting, holes, rng, region)
+        avoid = [(A, a + 2 * h + 5.0) for A, _, _, a in ends]
+        hole_list = _place_holes(g, painting, holes, rng, region, avoid)
         cen = V[F].mean(axis=1)
         for hc, hr in hole_list:
             remove |= (face_part == PART_OUTER) & (np.linalg.norm(cen - hc, axis=1) <= hr)
         remove = _remove_faces(F, remove)
     if np.any(remove):
         F, face_part, face_handle = F[~remove], face_part[~remove], face_handle[~remove]
+        if preset is not None:
+            preset = (preset[0][~remove], preset[1][~remove])
         V, F, vs, vth, vertex_part = _compact(V, F, vs, vth, vertex_part)
 
-    preset = None
     if kind == "sherd" and sherd_thickness > 0:
-        V, F, vs, vth, face_part, vertex_part, preset = _thicken_sherd(g, V, F, vs, vth, sherd_thickness)
+        V, F, vs, vth, face_part, vertex_part, breaks = _thicken_sherd(g, V, F, vs, vth, sherd_thickness)
         face_handle = np.full(len(F), -1, np.int64)
+        preset = (np.full(len(F), -1, np.int64), np.zeros((len(F), 3, 2)))
+        preset[0][breaks[0]], preset[1][breaks[0]] = breaks[2], breaks[1]
     n_sectors = 12 if kind == "sherd" else 4
     face_chart, chart_uv = _chart_layouts(V, F, vs, vth, face_part, face_handle, handle_radii,
                                           g, n_sectors, rng, preset)
@@ -1191,8 +1299,9 @@ def _sherd_region(g: _Generatrix, painting: Painting, span_deg: float, rng):
     return inside, circle_ok, float(frac)
 
 
-def _place_holes(g: _Generatrix, painting: Painting, n: int, rng, region):
-    """Hole centres and radii on the painted outer wall, clear of circles and each other."""
+def _place_holes(g: _Generatrix, painting: Painting, n: int, rng, region, avoid):
+    """Hole centres and radii on the painted outer wall, clear of circles, of the discs
+    ``avoid`` (centre, radius) and of each other."""
     z_lo = float(np.interp(g.s_outer[0], g.s, g.z))
     z_hi = float(np.interp(g.s_outer[1], g.s, g.z))
     H = z_hi - z_lo
@@ -1210,7 +1319,7 @@ def _place_holes(g: _Generatrix, painting: Painting, n: int, rng, region):
         c = np.array([r * math.cos(th), r * math.sin(th), z])
         if any(np.linalg.norm(c - pc.centre) < pc.radius + rad + 3.0 for pc in painting.circles):
             continue
-        if any(np.linalg.norm(c - oc) < orad + rad + 6.0 for oc, orad in out):
+        if any(np.linalg.norm(c - oc) < orad + rad + 6.0 for oc, orad in out + avoid):
             continue
         if region is not None:
             sc = float(np.interp(z, pz, prof_s))

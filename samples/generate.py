@@ -32,7 +32,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--walls", type=int, choices=(1, 2), default=None,
                     help="2 = outer and inner wall (cup, kylix)")
     ap.add_argument("--thickness", type=float, default=4.0, help="wall thickness (mm) for --walls 2")
-    ap.add_argument("--handles", action="store_true")
+    ap.add_argument("--handles", nargs="?", const="intersecting", default=None,
+                    choices=("intersecting", "welded"),
+                    help="add handles: tubes sunk into the wall (default) or welded into it")
     ap.add_argument("--holes", type=int, default=0)
     ap.add_argument("--sherd-of", default="hydria", help="parent profile of --kind sherd")
     ap.add_argument("--sherd-span", type=float, default=80.0, help="sherd width in degrees")
@@ -50,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
         vessel = make_vessel(
             args.kind, n_vertices=args.vertices, seed=args.seed, pose=not args.no_pose,
             texture_size=args.texture_size, base=args.base, walls=args.walls,
-            thickness=args.thickness, handles=args.handles, holes=args.holes,
+            thickness=args.thickness, handles=args.handles or False, holes=args.holes,
             sherd_of=args.sherd_of, sherd_span=args.sherd_span,
             sherd_thickness=args.sherd_thickness,
         )

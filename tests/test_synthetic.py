@@ -320,6 +320,25 @@ def test_handles_are_extra_tubes_sunk_into_the_wall():
     assert np.max(r - v.radius_at(h)) > 20  # the loops stand off the wall
 
 
+def test_welded_handles_make_one_surface_of_higher_genus():
+    v = make_vessel("amphora", handles="welded", n_vertices=6000, texture_size=256)
+    V, F = v.mesh.vertices, v.mesh.faces
+    u, cnt = _edges(F)
+    assert cnt.max() == 2
+    directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    assert len(np.unique(directed, axis=0)) == len(directed)
+    assert _components(F, len(V)) == 1
+    assert _boundary_loops(F, len(V)) == 2  # mouth and foot only: the roots are closed
+    chi = len(V) - len(u) + len(F)
+    assert chi == 0 - 2 * 2  # an open band (0) with two handles, each adding a genus
+    h, r = _axis_coords(v, V[np.unique(F[v.face_part == PART_HANDLE])])
+    assert np.max(r - v.radius_at(h)) > 20
+    # the wall is cut only just around each root: wall vertices remain close to it
+    body = np.unique(F[v.face_part != PART_HANDLE])
+    hb, rb = _axis_coords(v, V[body])
+    assert np.all(np.abs(rb - v.radius_at(hb)) < 1e-6)
+
+
 def test_holes_are_interior_boundaries_clear_of_circles():
     v = make_vessel("hydria", holes=3, seed=4, **SMALL)
     V, F = v.mesh.vertices, v.mesh.faces
@@ -385,6 +404,8 @@ def test_thick_sherd_is_a_closed_fragment_with_a_plain_back():
     ("cylinder", {"handles": True}),
     ("amphora", {"pose": "yes"}),
     ("amphora", {"handles": 1}),
+    ("amphora", {"handles": "glued"}),
+    ("amphora", {"handles": "welded", "n_vertices": 600}),
     ("amphora", {"base": "no"}),
     ("sherd", {"sherd_of": "vase"}),
     ("sherd", {"sherd_span": 5.0}),
