@@ -408,7 +408,7 @@ def test_missing_texture_is_a_clear_error(tmp_path, painted_plane):
     from potflat.errors import InvalidInputError
 
     write_flat_ply(tmp_path / "t.relaxed.ply", painted_plane)
-    (tmp_path / "tex.png").unlink()
+    (tmp_path / "t.texture.png").unlink()  # the texture as placed beside the stage file
     with pytest.raises(InvalidInputError, match="texture .* not found"):
         run_bake_stage(tmp_path / "t.relaxed.ply", tmp_path / "out", BakeOptions())
 
