@@ -15,6 +15,14 @@ from potflat.io.scan import LoadedScan, load_scan
 REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real"
 
 
+@pytest.fixture(autouse=True)
+def _private_tempdir(tmp_path, monkeypatch):
+    """Packed atlases and extracted GLB textures go to the temp folder: keep them in tmp_path."""
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+
+
 # ------------------------------------------------------------------ helpers
 
 
@@ -341,7 +349,7 @@ def test_glb_textured_via_trimesh(tmp_path):
     assert mesh.units == "m"  # glTF is in metres by definition
     assert len(mesh.vertices) == 20
     np.testing.assert_allclose(mesh.texcoords, _uv_of(mesh.vertices[mesh.faces]), atol=1e-6)
-    assert mesh.texture_path.is_file()
+    assert mesh.texture_path.is_file() and mesh.texture_path.is_relative_to(tmp_path)
     assert load_scan(tmp_path / "h.glb", texture="ignore").mesh.texcoords is None
 
 
