@@ -2,11 +2,12 @@
 
 :func:`make_vessel` builds a surface of revolution with an archaeological profile (or a
 cylinder / cone frustum as developable known-answer cases), meshes it with irregular
-triangles (jittered samples, Delaunay in a conformal parameter domain, no seam
-duplication: one connected manifold like a real scan), poses it arbitrarily in space,
-paints it with measurable features and bakes the painting into a multi-chart texture
-atlas as photogrammetry software does (UV seams lie inside the surface). Issue 7 kinds:
-two-walled cups, handles, holes and sherds.
+triangles (jittered rings of samples joined by strips, planar Delaunay caps at closed
+poles; no seam duplication: one connected manifold like a real scan), poses it
+arbitrarily in space, paints it with measurable features and bakes the painting into a
+multi-chart texture atlas as photogrammetry software does (UV seams lie inside the
+surface). Issue 7 kinds: two-walled cups, handles (intersecting or welded), holes and
+sherds.
 
 :func:`write_obj` writes OBJ + MTL + PNG (one ``v`` per 3D point, several ``vt`` where
 charts meet), :func:`write_ply_colored` a binary vertex-coloured PLY. Units are mm.
@@ -21,7 +22,7 @@ from __future__ import annotations
 import itertools
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -242,7 +243,7 @@ class SyntheticVessel:
     vertex_part: np.ndarray
     face_chart: np.ndarray
     options: dict
-    _geometry: "_Generatrix"
+    _geometry: "_Generatrix" = field(repr=False)
 
     def radius_at(self, heights) -> np.ndarray:
         """Outer wall radius (mm) at ``heights`` along the axis from :attr:`axis_point`."""
@@ -1046,15 +1047,6 @@ def _random_pose(rng) -> np.ndarray:
     T[:3, :3] = R
     T[:3, 3] = rng.uniform(-150.0, 150.0, 3)
     return T
-
-
-def _smooth_noise(rng, x, period):
-    """Smooth noise in [-1, 1] along ``x`` (sum of three random sines)."""
-    out = np.zeros_like(x, dtype=float)
-    for k in (1, 2, 3):
-        out += math.cos(rng.uniform(0, 2 * math.pi)) / k * np.sin(2 * math.pi * k * x / period
-                                                                   + rng.uniform(0, 2 * math.pi))
-    return out / (1 + 1 / 2 + 1 / 3)
 
 
 def make_vessel(
