@@ -177,18 +177,6 @@ def cylindrical(points, point, direction, reference) -> tuple[np.ndarray, np.nda
     return h, r, theta
 
 
-def face_geometry(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Centroids (m, 3), unit normals (m, 3) and areas (m,) of the faces (zero normal when degenerate)."""
-    V, F = mesh.vertices, mesh.faces
-    p0, p1, p2 = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    cross = np.cross(p1 - p0, p2 - p0)
-    norm = np.linalg.norm(cross, axis=1)
-    normals = np.zeros_like(cross)
-    ok = norm > 0
-    normals[ok] = cross[ok] / norm[ok, None]
-    return (p0 + p1 + p2) / 3.0, normals, 0.5 * norm
-
-
 def normal_lines(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Vertex normal lines of ``mesh``: points (k, 3), unit normals (k, 3), areas (k,).
 
