@@ -11,8 +11,8 @@ loader splits vertices at seams and is slow on multi-million-vertex scans); STL,
 GLB/glTF go through trimesh.
 
 Several texture images (OBJ materials with different ``map_Kd``, PLY ``texnumber``) are
-packed into one atlas image (a PNG in a ``potflat-textures`` temporary folder, made once per
-set of sources) with the texture coordinates remapped, since a :class:`Mesh` has one texture.
+packed into one atlas image (a PNG in a per-user ``potflat-textures-USER`` temporary
+folder, made once per set of sources) with the texture coordinates remapped, since a :class:`Mesh` has one texture.
 
 Units: positions are never rescaled. ``units=None`` takes the unit the file declares (a PLY
 ``comment units X``, an STL ``UNITS=`` header, glTF's metres) and millimetres otherwise.
@@ -20,6 +20,7 @@ Units: positions are never rescaled. ``units=None`` takes the unit the file decl
 from __future__ import annotations
 
 import base64
+import getpass
 import hashlib
 import json
 import os
@@ -244,6 +245,16 @@ def _check_texture(tex: Path, source: Path, max_pixels: int) -> tuple[Path, tupl
     return tex, (w, h)
 
 
+def _texture_cache() -> Path:
+    """Folder for generated textures (packed atlases, images extracted from GLB): per user,
+    in the temporary folder; files are named by content so they are made once."""
+    try:
+        user = getpass.getuser()
+    except Exception:  # noqa: BLE001 - no login name in some containers
+        user = "user"
+    return Path(tempfile.gettempdir()) / f"potflat-textures-{re.sub(r'[^A-Za-z0-9_.-]', '_', user)}"
+
+
 def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source: Path,
                     max_pixels: int) -> tuple[Path, np.ndarray, str]:
     """Pack several texture images into one atlas (a grid) and remap the texture coordinates.
@@ -260,7 +271,7 @@ def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source
     Returns
     -------
     atlas : Path
-        PNG in a ``potflat-textures`` temporary folder, named by the sources' paths, sizes
+        PNG in :func:`_texture_cache`, named by the sources' paths, sizes
         and modification times (so it is made once and reused).
     uv : (m, 3, 2) float64
         Coordinates in the atlas (clipped to each image: tiling cannot be packed).
@@ -282,7 +293,7 @@ def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source
         raise InvalidInputError(f"{source}: its {len(paths)} texture images would make a {W} x {H} atlas, over "
                                 f"max_texture_pixels={max_pixels}; re-export with one texture {_IGNORE_HINT}")
     key = json.dumps([[str(p), p.stat().st_size, p.stat().st_mtime_ns] for p in paths]).encode()
-    target = Path(tempfile.gettempdir()) / "potflat-textures" / (hashlib.sha256(key).hexdigest()[:32] + ".png")
+    target = _texture_cache() / (hashlib.sha256(key).hexdigest()[:32] + ".png")
     if not target.exists():
         old = Image.MAX_IMAGE_PIXELS
         try:
@@ -876,7 +887,7 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
 
 def _gltf_images(path: Path) -> list[Path]:
     """Base-colour texture images of a glTF/GLB as files: external ones as they are, embedded ones
-    extracted (content-addressed, atomically) into a ``potflat-textures`` temp folder."""
+    extracted (content-addressed, atomically) into :func:`_texture_cache`."""
     try:
         return _gltf_image_files(path)
     except (KeyError, IndexError, TypeError, ValueError, AttributeError, struct.error):
@@ -933,7 +944,7 @@ def _gltf_image_files(path: Path) -> list[Path]:
             blob = bin_chunk[start:start + bv["byteLength"]]
         if blob:
             ext = {"image/png": ".png", "image/jpeg": ".jpg"}.get(img.get("mimeType", ""), ".png")
-            target = Path(tempfile.gettempdir()) / "potflat-textures" / (hashlib.sha256(blob).hexdigest()[:32] + ext)
+            target = _texture_cache() / (hashlib.sha256(blob).hexdigest()[:32] + ext)
             if not target.exists():
                 target.parent.mkdir(parents=True, exist_ok=True)
                 write_bytes_atomic(target, blob)
