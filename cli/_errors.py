@@ -17,7 +17,7 @@ def fail(message: str, code: int = EXIT_USAGE) -> "typer.Exit":
 
 
 def user_errors(func):
-    """Decorator for command functions: PotflatError and OSError become exit code 2."""
+    """Decorator for command functions: PotflatError and file-system errors become exit code 2."""
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
@@ -27,8 +27,10 @@ def user_errors(func):
             return func(*args, **kwargs)
         except PotflatError as exc:
             raise fail(str(exc)) from None
-        except (FileNotFoundError, PermissionError, IsADirectoryError) as exc:
-            raise fail(f"{exc.filename}: {exc.strerror}") from None
+        except (FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError) as exc:
+            # e.g. an output folder under a regular file: -o notes.txt/out
+            raise fail(f"{exc.filename}: {exc.strerror}; check the path (every folder in it must be a "
+                       "writable folder)") from None
         except KeyboardInterrupt:
             raise fail("interrupted; outputs already finished are kept, none is half-written", 130) from None
 
