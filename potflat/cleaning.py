@@ -146,6 +146,14 @@ def _apply_vertex_map(mesh: Mesh, rep: np.ndarray) -> Mesh:
                         vertex_colors=colors)
 
 
+def check_cleaning_options(*, weld_tolerance: float = 0.0, min_component_fraction: float = 0.01) -> None:
+    """Raise :class:`InvalidOptionError` for out-of-range cleaning options (before any work)."""
+    if not (np.isfinite(weld_tolerance) and 0.0 <= weld_tolerance < 0.01):
+        raise InvalidOptionError(f"weld tolerance must be in [0, 0.01) of the diagonal, got {weld_tolerance!r}")
+    if not (np.isfinite(min_component_fraction) and 0.0 <= min_component_fraction <= 1.0):
+        raise InvalidOptionError(f"min_component_fraction must be in [0, 1], got {min_component_fraction!r}")
+
+
 def weld_vertices(mesh: Mesh, *, tolerance: float = 0.0) -> tuple[Mesh, int]:
     """Merge vertices at the same position; faces keep their per-corner texture coordinates.
 
@@ -164,8 +172,7 @@ def weld_vertices(mesh: Mesh, *, tolerance: float = 0.0) -> tuple[Mesh, int]:
     merged : int
         Number of vertices merged away.
     """
-    if not (np.isfinite(tolerance) and 0.0 <= tolerance < 0.01):
-        raise InvalidOptionError(f"weld tolerance must be in [0, 0.01) of the diagonal, got {tolerance!r}")
+    check_cleaning_options(weld_tolerance=tolerance)
     n = len(mesh.vertices)
     if n == 0:
         return mesh, 0
@@ -361,8 +368,7 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
     InvalidInputError
         When every face is degenerate or too few faces remain.
     """
-    if not (np.isfinite(min_component_fraction) and 0.0 <= min_component_fraction <= 1.0):
-        raise InvalidOptionError(f"min_component_fraction must be in [0, 1], got {min_component_fraction!r}")
+    check_cleaning_options(weld_tolerance=weld_tolerance, min_component_fraction=min_component_fraction)
     name = _name(mesh)
     n0, m0 = len(mesh.vertices), len(mesh.faces)
     warnings: list[str] = []

@@ -33,7 +33,12 @@ from pathlib import Path
 
 import numpy as np
 
-from potflat.cleaning import CleaningReport, clean_mesh, weld_vertices
+from potflat.cleaning import (
+    CleaningReport,
+    check_cleaning_options,
+    clean_mesh,
+    weld_vertices,
+)
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import UNITS_MM, Mesh
 
@@ -131,6 +136,7 @@ def load_scan(path: str | os.PathLike, *, units: str | None = None, clean: bool 
         raise InvalidOptionError(f"max_texture_pixels must be a positive integer, got {max_texture_pixels!r}")
     if not (isinstance(min_faces, (int, np.integer)) and min_faces >= 1):
         raise InvalidOptionError(f"min_faces must be a positive integer, got {min_faces!r}")
+    check_cleaning_options(weld_tolerance=weld_tolerance, min_component_fraction=min_component_fraction)
 
     path = Path(path).expanduser()
     ext = path.suffix.lower()
