@@ -117,6 +117,8 @@ class RelaxOptions:
         for name in ("tol", "max_iter", "stretch", "stiffness", "weighting"):
             if getattr(self, name) is not None:
                 out[name] = getattr(self, name)
+        if self.max_iter is not None and out.get("fine_iter"):
+            out["fine_iter"] = self.max_iter  # an explicit cap overrides the preset's fine-level cap
         out["time_budget"] = self.time_budget
         return out
 
