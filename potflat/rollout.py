@@ -44,6 +44,9 @@ class RolloutOptions:
         Length unit of the scan file (``mm``, ``cm``, ``m``, ``um``, ``in``); None: the unit
         the file declares (a PLY ``comment units``, an STL header, glTF's metres), else mm.
         Used when reading the file; :func:`rollout` itself uses :attr:`Mesh.units`.
+    texture : bool
+        Use the scan's texture image; False loads the geometry (and vertex colours) only,
+        e.g. when the texture file is missing or corrupt. Used when reading the file.
     proxy : str
         ``auto``, ``cylinder``, ``cone``, ``sphere`` or ``ortho``.
     axis : tuple of 6 float or None
@@ -63,6 +66,7 @@ class RolloutOptions:
     """
 
     units: str | None = None
+    texture: bool = True
     proxy: str = "auto"
     axis: tuple[float, ...] | None = None
     flip: bool = False
@@ -74,6 +78,8 @@ class RolloutOptions:
     def __post_init__(self) -> None:
         if self.units is not None and self.units not in UNITS_MM:
             raise InvalidOptionError(f"units {self.units!r} is unknown; use one of {', '.join(UNITS_MM)}")
+        if not isinstance(self.texture, bool):
+            raise InvalidOptionError(f"texture must be true or false, got {self.texture!r}")
         if self.proxy not in ("auto", *_proxy.KINDS):
             raise InvalidOptionError(
                 f"proxy {self.proxy!r} is unknown; use auto, {', '.join(_proxy.KINDS)}")
@@ -599,7 +605,7 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
         if out.resolve() == scan_path.resolve():
             raise InvalidOptionError(
                 f"output {out} would overwrite the input scan; choose another output folder or --name")
-    loaded = load_scan(scan_path, units=options.units)
+    loaded = load_scan(scan_path, units=options.units, texture="use" if options.texture else "ignore")
     result = rollout(loaded.mesh, options=options)
     summary = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_summary(result),
                "cleaning": loaded.report.as_dict(),

@@ -46,6 +46,9 @@ def rollout_command(
     units: Annotated[Optional[str], typer.Option(
         "--units", help="Length unit of the scan: mm, cm, m, um, in \\[default: as the file "
                         "declares (PLY comment, STL header, glTF metres), else mm].")] = None,
+    texture: Annotated[bool, typer.Option(
+        "--texture/--no-texture", help="Use the scan's texture image; --no-texture loads the geometry "
+                                       "(and vertex colours) only, e.g. when the texture is missing or corrupt.")] = True,
     name: Name = None,
     quiet: Quiet = False,
     json: Json = False,
@@ -57,7 +60,7 @@ def rollout_command(
     if output is not None and output.exists() and not output.is_dir():
         raise InvalidOptionError(f"--output {output} is a file; give a folder")
     values = {"proxy": proxy, "axis": axis, "flip": flip or None, "seam": seam, "band": band,
-              "angles": angles, "view": view, "units": units}
+              "angles": angles, "view": view, "units": units, "texture": None if texture else False}
     options = options_from_cli("rollout", values)
     _rollout(scan, output, options, name=name, quiet=quiet, as_json=json)
 
