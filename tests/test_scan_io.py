@@ -214,6 +214,14 @@ def test_obj_crlf_tabs_bom_comments(tmp_path):
     _assert_corner_texcoords(mesh, tri_pos, expected_tc)
 
 
+def test_obj_texture_named_windows_style(tmp_path):
+    obj, tri_pos, expected_tc = _write_seam_obj(tmp_path)
+    (tmp_path / "seam.mtl").write_text("newmtl paint\nmap_Kd C:\\Users\\someone\\scan\\ATLAS.PNG\n")
+    mesh = load_scan(obj).mesh
+    assert mesh.texture_path == (tmp_path / "atlas.png").resolve()
+    _assert_corner_texcoords(mesh, tri_pos, expected_tc)
+
+
 def test_obj_vertex_colours_and_untextured(tmp_path):
     V, F = _grid()
     rgb = (V[:, :1] * 0 + [0.0, 0.5, 1.0])

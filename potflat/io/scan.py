@@ -377,7 +377,9 @@ def _colors_to_u8(cols: np.ndarray) -> np.ndarray:
 
 
 def _find_file(name: str, *dirs: Path) -> Path:
-    """Resolve a file name written by another program (maybe absolute, Windows-style)."""
+    """Resolve a file name written by another program: relative to ``dirs[0]``, absolute,
+    Windows-style (backslashes, another machine's folders: the base name is looked up in
+    ``dirs``), or differing in letter case (exports made on Windows)."""
     name = name.strip().strip('"')
     cand = Path(name.replace("\\", "/"))
     tried = [cand if cand.is_absolute() else dirs[0] / cand]
@@ -385,6 +387,13 @@ def _find_file(name: str, *dirs: Path) -> Path:
     for p in tried:
         if p.is_file():
             return p
+    for d in dirs:
+        try:
+            match = sorted(p for p in d.iterdir() if p.name.lower() == cand.name.lower() and p.is_file())
+        except OSError:
+            continue
+        if match:
+            return match[0]
     return tried[0]
 
 
