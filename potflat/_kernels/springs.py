@@ -230,7 +230,25 @@ def _phi(a):
 
 
 @parallel
-def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, faces, a_ref, mu, eps,
+def face_areas(x, faces, out):
+    """Signed area of every face.
+
+    Parameters
+    ----------
+    x : (n, 2) float64
+    faces : (m, 3) int32 or int64
+    out : (m,) float64
+    """
+    for t in prange(faces.shape[0]):
+        a0 = faces[t, 0]
+        a1 = faces[t, 1]
+        a2 = faces[t, 2]
+        out[t] = 0.5 * ((x[a1, 0] - x[a0, 0]) * (x[a2, 1] - x[a0, 1])
+                        - (x[a1, 1] - x[a0, 1]) * (x[a2, 0] - x[a0, 0]))
+
+
+@parallel
+def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, faces, areas, a_ref, mu, eps,
                     grad, e_spring, e_barrier):
     """Spring + barrier energy per vertex and the gradient, gathered per vertex.
 
@@ -245,7 +263,9 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, face
         Weight each spring by ``1 / max(r, r_floor)^2`` (relative length error).
     r_floor : float
     vf_ptr, vf_tri : CSR from :func:`vertex_faces`
-    faces : (m, 3) int64
+    faces : (m, 3) int32 or int64
+    areas : (m,) float64
+        Signed face areas at ``x`` (:func:`face_areas`).
     a_ref : (m,) float64
         Reference (rest) area of each face, floored.
     mu, eps : float
@@ -282,14 +302,13 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, face
         if mu > 0.0:
             for p in range(vf_ptr[i], vf_ptr[i + 1]):
                 t = vf_tri[p]
-                a0 = faces[t, 0]
-                a1 = faces[t, 1]
-                a2 = faces[t, 2]
-                area = 0.5 * ((x[a1, 0] - x[a0, 0]) * (x[a2, 1] - x[a0, 1])
-                              - (x[a1, 1] - x[a0, 1]) * (x[a2, 0] - x[a0, 0]))
+                area = areas[t]
                 th = eps * a_ref[t]
                 if area >= th:
                     continue
+                a0 = faces[t, 0]
+                a1 = faces[t, 1]
+                a2 = faces[t, 2]
                 if area <= 0.0:
                     eb = np.inf
                     continue
@@ -346,6 +365,8 @@ def max_step(x, d, faces, out):
             c0 = e1x * e2y - e1y * e2x
             c1 = e1x * f2y - e1y * f2x + f1x * e2y - f1y * e2x
             c2 = f1x * f2y - f1y * f2x
+            if c0 > 0.0 and c1 >= 0.0 and c2 >= 0.0:
+                continue  # the area only grows along d
             t = _first_root(c0, c1, c2)
             if t < best:
                 best = t
