@@ -201,11 +201,15 @@ def main() -> None:
     ap.add_argument("--paper-max-size", type=float, default=0.5, help="largest size for the paper dynamics")
     ap.add_argument("--write", action="store_true", help="rewrite the ## Relax section of docs/performance.md")
     ap.add_argument("--json", type=Path, help="also dump all rows here")
+    ap.add_argument("--note", default="", help="with --from-json: how the rows were measured")
+    ap.add_argument("--from-json", type=Path, nargs="+", help="no runs: tabulate rows dumped by earlier --json runs")
     args = ap.parse_args()
     sizes = [float(s) for s in args.sizes.split(",")]
     methods = args.methods.split(",")
     rows = []
-    for size in sizes:
+    for path in args.from_json or []:
+        rows += json.loads(path.read_text())
+    for size in sizes if not args.from_json else []:
         _mesh(size)
         for m in methods:
             if m == "paper":
@@ -241,9 +245,10 @@ def main() -> None:
                                  + (f"reached it after {t:.1f} s ({t / ref['seconds']:.0f}x slower)." if t else
                                     f"did not reach it within {r['seconds']:.0f} s (ended at {r.get('paper_energy_end', float('nan')):.3e}; "
                                     f"more than {r['seconds'] / ref['seconds']:.0f}x slower)."))
+        how = (f"`python benchmarks/bench_relax.py --sizes {args.sizes} --methods {args.methods} "
+               f"--repeat {args.repeat} --write`") if not args.from_json else args.note
         text = ("## Relax\n\n"
-                f"Measured with `python benchmarks/bench_relax.py --sizes {args.sizes} --methods {args.methods} "
-                f"--repeat {args.repeat} --write` on {cpu} cores ({args.threads} threads), "
+                f"Measured with {how} on {cpu} cores ({args.threads} threads), "
                 f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}. Time = setup + solve of `relax()` "
                 "(springs, hierarchy, solver; not file I/O or the distortion summaries), ARAP = libigl "
                 "`arap_precomputation` + 10 `arap_solve` iterations from the same rollout. Energy = paper Eq. 1 with "

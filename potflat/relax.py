@@ -617,10 +617,12 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
 
 @contextlib.contextmanager
 def _progress_bar(total: int):
+    from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     with Progress(TextColumn("relax {task.fields[level]}"), BarColumn(), TextColumn("{task.completed} it"),
-                  TextColumn("E={task.fields[energy]:.4g}"), TimeElapsedColumn(), transient=True) as prog:
+                  TextColumn("E={task.fields[energy]:.4g}"), TimeElapsedColumn(), transient=True,
+                  console=Console(stderr=True)) as prog:
         task = prog.add_task("relax", total=total, level="", energy=float("nan"))
 
         def report(it: int, energy: float, level: str) -> None:

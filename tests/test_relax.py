@@ -344,3 +344,8 @@ def test_cli_relax(tmp_path, vessel):
     assert res.exit_code == 2 and "stiffness" in res.output
     res = runner.invoke(app, ["relax", "--help"])
     assert res.exit_code == 0 and "Example" in res.output
+
+
+def test_progress_bar_goes_to_stderr(vessel, capsys):
+    r = relax(vessel, preset="preview", progress=True)
+    assert r.flipped == 0 and capsys.readouterr().out == ""
