@@ -305,7 +305,8 @@ def comparison_sheet(path: str | Path, rollout: FlatMesh, relaxed: FlatMesh, *, 
         panels.append((label, res, stress, distortion.summarize(flat.mesh.vertices, flat.uv, flat.mesh.faces)))
     hi = max(map_scale("stress", p[2]).hi for p in panels)
     scale = map_scale("stress", np.zeros(1), hi=hi)
-    aspect = max(p[1].image.shape[0] / p[1].image.shape[1] for p in panels)
+    aspect = max(p[1].image.shape[0] / p[1].px_per_mm for p in panels) / max(
+        p[1].image.shape[1] / p[1].px_per_mm for p in panels)
     panel_h = min(6.4 * aspect, 8.0)
     fig_h = 2 * panel_h + 3.4
     fig = Figure(figsize=(14, fig_h), dpi=100, facecolor="white")
@@ -313,6 +314,9 @@ def comparison_sheet(path: str | Path, rollout: FlatMesh, relaxed: FlatMesh, *, 
     gs = fig.add_gridspec(3, 2, height_ratios=[panel_h, panel_h, 0.25], hspace=1.1 / panel_h + 0.1, wspace=0.12,
                           left=0.05, right=0.98, top=1 - 0.8 / fig_h, bottom=0.7 / fig_h)
     fig.suptitle(f"{title}: what relaxation bought" if title else "proxy rollout vs relaxed", fontsize=15)
+    # one millimetre scale for all panels, so the two flattenings compare at true relative size
+    max_w = max(p[1].image.shape[1] / p[1].px_per_mm for p in panels)
+    max_h = max(p[1].image.shape[0] / p[1].px_per_mm for p in panels)
     for col, (label, res, stress, summ) in enumerate(panels):
         h, w = res.image.shape[:2]
         extent = [0, w / res.px_per_mm, h / res.px_per_mm, 0]
@@ -328,6 +332,9 @@ def comparison_sheet(path: str | Path, rollout: FlatMesh, relaxed: FlatMesh, *, 
                       f"anisotropy p95 {summ.anisotropy_p95:.3f}   flipped {summ.flipped}   "
                       f"stress p95 {np.percentile(stress, 95):.3g} √mm", fontsize=10)
         ax2.set_xlabel("mm")
+        for a in (ax, ax2):
+            a.set_xlim(0, max_w)
+            a.set_ylim(max_h, 0)
     _colorbar(fig.add_subplot(gs[2, :]), scale, 10)
     canvas.draw()
     buf = io.BytesIO()
