@@ -20,18 +20,29 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse
 import scipy.sparse.csgraph
+from scipy.spatial import cKDTree
 
 from potflat import proxy as _proxy
+from potflat.attachments import AttachmentSelection, detect_attachments
 from potflat.axis import AxisFit, estimate_axis, manual_axis
 from potflat.distortion import DistortionSummary, summarize
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import UNITS_MM, FlatMesh, Mesh, StageOutput
+from potflat.walls import SIDES, FaceGraph, WallSelection, face_adjacency, select_wall, unique_ints
 
 TWO_PI = 2.0 * np.pi
 #: Angular bins (per turn) used to choose the seam and to find gaps in a region.
 SEAM_BINS = 360
 #: Width (bins) of the circular moving average applied to the seam cost.
 SEAM_SMOOTH = 5
+#: A face is edge-on to the proxy when its flat area is below this fraction of its 3D area.
+EDGE_ON_RATIO = 0.05
+#: Rounds of trimming folded border strips (each round unrolls again without them).
+TRIM_ROUNDS = 3
+#: Passes of :func:`border_folds` over one development (each peels what the last exposed).
+BORDER_PASSES = 12
+#: Rounds of :func:`untangle`; its region widens by one ring every ``UNTANGLE_WIDEN`` rounds.
+UNTANGLE_ROUNDS, UNTANGLE_WIDEN = 200, 20
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -62,7 +73,16 @@ class RolloutOptions:
         Angle range in degrees relative to the seam, e.g. ``(-60, 60)``; at most 360 wide.
     view : tuple of 3 float or None
         For ``proxy="ortho"``: direction from the vessel to the viewer (``x,y,z``, scan
-        coordinates); default: from the axis towards the region's centre.
+        coordinates); default: from the axis towards the region's centre (from the region
+        towards the axis for the inner side).
+    side : str
+        Painted side to unroll: ``outer`` (the outside, default) or ``inner`` (the inside
+        seen from within: a cup's interior, a kylix tondo). Two-walled scans are split at
+        the rim (:func:`potflat.walls.select_wall`).
+    keep_attachments : bool
+        Keep handles, spouts and knobs (parts off the surface of revolution, found by
+        :func:`potflat.attachments.detect_attachments`) in the rollout; by default they are
+        left out and reported, and the painting around their roots stays.
     """
 
     units: str | None = None
@@ -74,8 +94,14 @@ class RolloutOptions:
     band: tuple[float, float] | None = None
     angles: tuple[float, float] | None = None
     view: tuple[float, ...] | None = None
+    side: str = "outer"
+    keep_attachments: bool = False
 
     def __post_init__(self) -> None:
+        if self.side not in SIDES:
+            raise InvalidOptionError(f"side {self.side!r} is unknown; use outer or inner")
+        if not isinstance(self.keep_attachments, bool):
+            raise InvalidOptionError(f"keep_attachments must be true or false, got {self.keep_attachments!r}")
         if self.units is not None and self.units not in UNITS_MM:
             raise InvalidOptionError(f"units {self.units!r} is unknown; use one of {', '.join(UNITS_MM)}")
         if not isinstance(self.texture, bool):
@@ -189,6 +215,27 @@ class RolloutResult:
     split_vertices : int
         Vertex copies added where the input was not manifold (a vertex whose faces form
         separate fans becomes one vertex per fan).
+    walls : WallSelection
+        The painted side's faces (``side`` outer or inner) and the wall labels.
+    attachments : AttachmentSelection
+        Handles, spouts, knobs found off the surface of revolution.
+    attachments_kept : bool
+        Whether the attachments were kept in the rollout (``keep_attachments``).
+    attachment_roots : (k,) int64
+        Rollout faces (indices into ``flat.mesh.faces``) where a left-out attachment met
+        the wall: its footprint, to show as a mask in the bake (empty when kept or none).
+    trimmed : (t,) int64
+        Input faces left out because they are edge-on to the proxy at the region's border
+        (the rim top, a base's underside, a sherd's break faces): their development folds
+        over (see :func:`border_folds`).
+    trimmed_area : float
+        Their 3D area, scan units squared.
+    untangled_faces, untangled_vertices : int
+        Faces folded inside the development (creases of the scan surface, slivers) before
+        :func:`untangle`, and the vertices it moved to unfold them.
+    boundary_overlap : int
+        Crossing pairs of boundary segments left in the development (0: its outline and
+        holes do not overlap).
     """
 
     flat: FlatMesh
@@ -202,6 +249,20 @@ class RolloutResult:
     vertex_index: np.ndarray
     seam_vertices: int
     split_vertices: int
+    walls: WallSelection
+    attachments: AttachmentSelection
+    attachments_kept: bool
+    attachment_roots: np.ndarray
+    trimmed: np.ndarray
+    trimmed_area: float
+    untangled_faces: int
+    untangled_vertices: int
+    boundary_overlap: int
+
+    @property
+    def side(self) -> str:
+        """The painted side unrolled, ``outer`` or ``inner``."""
+        return self.walls.side
 
 
 def _wrap_pi(x: np.ndarray) -> np.ndarray:
@@ -362,7 +423,15 @@ def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, n
 
 def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.ndarray | None = None,
             **option_fields) -> RolloutResult:
-    """Unroll a scan: axis, region, seam cut and proxy development.
+    """Unroll a scan: axis, painted side, region, seam cut and proxy development.
+
+    After the axis, the attachments (handles, spouts, knobs) are found and, unless
+    ``keep_attachments``, left out; the painted side (``side``: the outer wall, or the inner
+    one seen from inside with ``u`` mirrored so that faces keep their orientation) is
+    selected, so the two walls of a cup are never mixed. Strips at the region's border
+    that are edge-on to the proxy and fold over in the development (the rim top, a base's
+    underside, a sherd's break faces) are trimmed and reported (:func:`border_folds`);
+    folds inside the region (scan noise) stay for the relax stage to untangle.
 
     Parameters
     ----------
@@ -371,10 +440,9 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
     options : RolloutOptions, optional
         All options; or give them as keywords (``rollout(mesh, proxy="cone")``), not both.
     face_mask : (m,) bool, optional
-        Faces that may be unrolled (e.g. the outer wall from
-        :func:`potflat.walls.select_wall`, without handles); the band and angles select
-        within them. The axis is fitted on the whole scan and the band's fractions refer
-        to the whole scan's height.
+        Faces that may be unrolled, further restricting the painted side's faces; the band
+        and angles select within them. The axis is fitted on the whole scan and the band's
+        fractions refer to the whole scan's height.
     **option_fields
         Fields of :class:`RolloutOptions`.
 
@@ -388,6 +456,8 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         When no axis is given and the scan has no rotational symmetry.
     InvalidOptionError
         When an option is invalid or the region selects no face.
+    InvalidInputError
+        When ``side="inner"`` and the scan has no inner wall, or ``face_mask`` is malformed.
     """
     if options is None:
         options = RolloutOptions(**option_fields)
@@ -403,13 +473,80 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         axis = estimate_axis(mesh, flip=options.flip)
 
     V, F = mesh.vertices, mesh.faces
+    if face_mask is not None:
+        face_mask = np.asarray(face_mask)
+        if face_mask.dtype != bool or face_mask.shape != (len(F),):
+            raise InvalidInputError(f"face_mask must be a bool array of shape ({len(F)},), got "
+                                    f"{face_mask.dtype} {face_mask.shape}")
+    attachments = detect_attachments(mesh, axis.point, axis.direction)
+    walls = select_wall(mesh, axis.point, axis.direction, side=options.side,
+                        exclude=None if options.keep_attachments else attachments.face_mask)
+    allowed = walls.face_mask if face_mask is None else walls.face_mask & face_mask
+
     p0, p1, p2 = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
     area = 0.5 * np.linalg.norm(np.cross(p1 - p0, p2 - p0), axis=1)
     h_c, _, theta_c = axis.cylindrical((p0 + p1 + p2) / 3.0)
     band = options.band or (0.0, 1.0)
+    trimmed = np.zeros(len(F), bool)
+    un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, area)
+    for _ in range(TRIM_ROUNDS):
+        fold = border_folds(un.flat.mesh.faces, un.flat.uv, area[un.face_index])
+        if not fold.any() or fold.all():
+            break
+        trimmed[un.face_index[fold]] = True
+        un = _unroll(mesh, axis, options, allowed & ~trimmed, band, h_c, theta_c, area,
+                     seam=(un.seam, un.seam_method))
+    uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv)
+    overlap = len(crossing_segments(uv, boundary_segments(un.flat.mesh.faces, len(uv))[0])[0])
+    distortion = un.distortion
+    if n_untangled:
+        distortion = summarize(un.flat.mesh.vertices, uv, un.flat.mesh.faces)
+    if options.keep_attachments or not attachments.n_faces:
+        roots = np.zeros(0, np.int64)
+    else:
+        roots = np.flatnonzero(attachments.root_faces(F)[un.face_index]).astype(np.int64)
+
+    theta_deg = np.degrees(un.theta)
+    region = Region(
+        band=tuple(band), angles_deg=options.angles,
+        height_range=(float(h_c[un.face_index].min()), float(h_c[un.face_index].max())),
+        theta_range_deg=(float(theta_deg.min()), float(theta_deg.max())),
+        faces=len(un.face_index), faces_total=len(F), cut=un.seam_vertices > 0)
+    return RolloutResult(
+        flat=un.flat.replace(uv=uv), axis=axis, proxy=un.proxy,
+        seam_angle=float(math.degrees(un.seam) % 360.0), seam_method=un.seam_method, region=region,
+        distortion=distortion, face_index=un.face_index, vertex_index=un.vertex_index,
+        seam_vertices=un.seam_vertices, split_vertices=un.split_vertices, walls=walls,
+        attachments=attachments, attachments_kept=options.keep_attachments, attachment_roots=roots,
+        trimmed=np.flatnonzero(trimmed).astype(np.int64), trimmed_area=float(area[trimmed].sum()),
+        untangled_faces=n_untangled, untangled_vertices=moved, boundary_overlap=overlap)
+
+
+@dataclass(frozen=True, eq=False)
+class _Unrolled:
+    """One unrolling of a face selection (what :func:`rollout` repeats while trimming)."""
+
+    flat: FlatMesh
+    proxy: _proxy.Proxy
+    distortion: DistortionSummary
+    face_index: np.ndarray
+    vertex_index: np.ndarray
+    theta: np.ndarray
+    seam: float
+    seam_method: str
+    seam_vertices: int
+    split_vertices: int
+
+
+def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndarray, band, h_c, theta_c,
+            area, seam: tuple[float, str] | None = None) -> _Unrolled:
+    """Select the region within ``allowed``, cut it open and develop it on the proxy (with
+    ``seam`` = (radians, method) from an earlier unrolling, or a seam chosen here)."""
+    V = mesh.vertices
     face_index, seam, seam_method, corner_theta = _select(
-        mesh, axis, options, face_mask, band, h_c, theta_c, area)
-    sub_f = F[face_index]
+        mesh, axis, options, allowed, band, h_c, theta_c, area, seam)
+    sub_f = mesh.faces[face_index]
+    inner = options.side == "inner"
 
     if options.proxy == "ortho":  # a projection: nothing to cut
         vertex_index = np.flatnonzero(np.bincount(sub_f.ravel(), minlength=len(V)))
@@ -430,47 +567,248 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         units=mesh.units, source=mesh.source)
     h, r, _ = axis.cylindrical(cut_mesh.vertices)
     vert_area = np.bincount(new_faces.ravel(), np.repeat(area[face_index] / 3.0, 3), len(vertex_index))
+    # the inner side is seen from the axis: u runs clockwise (seen from above), which is the
+    # development of -theta (an exact mirror of u for every proxy)
+    dev_theta = -theta_new if inner else theta_new
 
     if options.proxy == "ortho":
-        view = options.view if options.view is not None else _default_view(
-            axis, theta_c[face_index], area[face_index], seam)
+        view = options.view
+        if view is None:
+            view = _default_view(axis, theta_c[face_index], area[face_index], seam)
+            view = -view if inner else view
         prox = _proxy.ortho_proxy(axis.direction, axis.reference, np.asarray(view, float))
         prox = _proxy.Proxy(prox.kind, prox.params, reason="requested (orthographic projection)")
         uv = _proxy.project_ortho(prox, cut_mesh.vertices, axis.point)
         summary = summarize(cut_mesh.vertices, uv, new_faces)
     elif options.proxy == "auto":
-        prox, uv, summary = _proxy.choose(cut_mesh.vertices, new_faces, h, r, theta_new, vert_area)
+        prox, uv, summary = _proxy.choose(cut_mesh.vertices, new_faces, h, r, dev_theta, vert_area)
     else:
-        prox = _proxy.fit(options.proxy, h, r, theta_new, vert_area)
+        prox = _proxy.fit(options.proxy, h, r, dev_theta, vert_area)
         prox = _proxy.Proxy(prox.kind, prox.params, reason="requested")
-        uv = _proxy.develop(prox, h, r, theta_new)
+        uv = _proxy.develop(prox, h, r, dev_theta)
         summary = summarize(cut_mesh.vertices, uv, new_faces)
-
-    region = Region(
-        band=tuple(band), angles_deg=options.angles,
-        height_range=(float(h_c[face_index].min()), float(h_c[face_index].max())),
-        theta_range_deg=(float(np.degrees(theta_new.min())), float(np.degrees(theta_new.max()))),
-        faces=len(face_index), faces_total=len(F), cut=n_seam > 0)
-    return RolloutResult(
-        flat=FlatMesh(cut_mesh, uv), axis=axis, proxy=prox,
-        seam_angle=float(math.degrees(seam) % 360.0), seam_method=seam_method, region=region,
-        distortion=summary, face_index=face_index, vertex_index=vertex_index,
-        seam_vertices=n_seam, split_vertices=n_split)
+    return _Unrolled(FlatMesh(cut_mesh, uv), prox, summary, face_index, vertex_index, theta_new, seam,
+                     seam_method, n_seam, n_split)
 
 
-def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c, area):
+def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.ndarray:
+    """Faces at the border of a development that fold it over: to trim before relaxing.
+
+    Two kinds, peeled in up to :data:`BORDER_PASSES` passes (each pass looks at the border
+    the previous one exposed):
+
+    * **edge-on strips**: a face is edge-on when its flat signed area is below
+      :data:`EDGE_ON_RATIO` times its 3D area (it faces along the proxy surface, not out
+      of it: a rim top, a flat base's underside, the break faces of a thick sherd, the wall
+      of a hole through a thick wall). A connected strip of edge-on faces that contains a
+      flipped face (signed area <= 0) and reaches the boundary (the outline, the seam, a
+      hole) is not part of the painted surface and cannot be unrolled without a fold.
+    * **overlapping border**: faces owning boundary segments that cross or touch another
+      boundary segment (a ragged rim or hole edge whose thin border faces overlap their
+      neighbours).
+    * **pinched vertices**: where a vertex's faces form separate fans (they meet at the
+      vertex only, e.g. after trimming), all but the fan of largest area are left out, so
+      the development does not touch itself.
+
+    Folds enclosed by well-unrolled faces (scan noise, slivers) are left to :func:`untangle`.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+        Faces of the cut mesh.
+    uv : (n, 2) float64
+        Its development.
+    area_3d : (m,) float64
+        3D area of each face.
+
+    Returns
+    -------
+    (m,) bool
+    """
+    faces = np.asarray(faces, np.int64)
+    keep = np.ones(len(faces), bool)
+    for _ in range(BORDER_PASSES):
+        idx = np.flatnonzero(keep)
+        if len(idx) == 0:
+            break
+        sub = faces[idx]
+        seg, owner = boundary_segments(sub, len(uv))
+        drop = _edge_on_strips(sub, uv, area_3d[idx], seg) | _minor_fans(sub, area_3d[idx])
+        a, b = crossing_segments(uv, seg)
+        drop[owner[a]] = True
+        drop[owner[b]] = True
+        if not drop.any():
+            break
+        keep[idx[drop]] = False
+    return ~keep
+
+
+def signed_areas(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Signed flat area ((m,) float64) of each face, positive when counter-clockwise."""
+    a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
+    return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+
+
+def boundary_segments(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Edges used by one face only.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+    n : int
+        Number of vertices.
+
+    Returns
+    -------
+    segments : (b, 2) int64
+        Vertex pairs, in their face's order.
+    owner : (b,) int64
+        The face of each segment.
+    """
+    e = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    s = np.sort(e, axis=1)
+    key = s[:, 0] * n + s[:, 1]
+    order = np.argsort(key, kind="stable")
+    k = key[order]
+    single = np.ones(len(k), bool)
+    same = k[1:] == k[:-1]
+    single[1:] &= ~same
+    single[:-1] &= ~same
+    pick = order[single]
+    return e[pick], pick // 3
+
+
+def crossing_segments(uv: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs of segments that cross or touch (segments sharing a vertex are not compared).
+
+    Parameters
+    ----------
+    uv : (n, 2) float64
+    seg : (b, 2) int64
+
+    Returns
+    -------
+    a, b : (k,) int64
+        Indices into ``seg`` of each crossing pair.
+    """
+    if len(seg) < 2:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    P, Q = uv[seg[:, 0]], uv[seg[:, 1]]
+    length = np.linalg.norm(Q - P, axis=1)
+    # crossing segments have midpoints closer than the longer one's length
+    pairs = cKDTree(0.5 * (P + Q)).query_pairs(float(length.max()), output_type="ndarray")
+    a, b = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
+    a, b = a[length[a] + length[b] > 0], b[length[a] + length[b] > 0]
+    share = ((seg[a, 0] == seg[b, 0]) | (seg[a, 0] == seg[b, 1])
+             | (seg[a, 1] == seg[b, 0]) | (seg[a, 1] == seg[b, 1]))
+    a, b = a[~share], b[~share]
+
+    def orient(p, q, r):
+        return np.sign((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
+
+    def within(p, q, r):  # r inside the bounding box of segment p-q
+        return ((np.minimum(p, q) <= r) & (r <= np.maximum(p, q))).all(axis=1)
+
+    pa, qa, pb, qb = P[a], Q[a], P[b], Q[b]
+    o1, o2, o3, o4 = orient(pa, qa, pb), orient(pa, qa, qb), orient(pb, qb, pa), orient(pb, qb, qa)
+    # proper crossings, and touching (a vertex on the other segment, e.g. two copies of a vertex)
+    cross = (((o1 * o2 < 0) & (o3 * o4 < 0)) | ((o1 == 0) & within(pa, qa, pb)) | ((o2 == 0) & within(pa, qa, qb))
+             | ((o3 == 0) & within(pb, qb, pa)) | ((o4 == 0) & within(pb, qb, qa)))
+    return a[cross], b[cross]
+
+
+def _minor_fans(faces: np.ndarray, area_3d: np.ndarray) -> np.ndarray:
+    """Faces of the smaller fans at vertices whose faces form several fans (see :func:`border_folds`)."""
+    new_faces, vertex_index, _, _, n_split = cut_open(faces, np.zeros(faces.shape))
+    if n_split == 0:
+        return np.zeros(len(faces), bool)
+    fan_area = np.bincount(new_faces.ravel(), np.repeat(area_3d, 3), len(vertex_index))
+    # copies of a vertex are consecutive in vertex_index; keep the largest fan of each
+    order = np.lexsort((-fan_area, vertex_index))
+    first = np.ones(len(order), bool)
+    first[1:] = vertex_index[order][1:] != vertex_index[order][:-1]
+    minor = np.zeros(len(vertex_index), bool)
+    minor[order[~first]] = True
+    return minor[new_faces].any(axis=1)
+
+
+def _edge_on_strips(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """Edge-on strips that contain a flipped face and touch the boundary (see :func:`border_folds`)."""
+    flat = signed_areas(faces, uv)
+    edge_on = flat < EDGE_ON_RATIO * area_3d
+    flipped = flat <= 0
+    if not flipped.any():
+        return np.zeros(len(faces), bool)
+    on_border = np.zeros(len(uv), bool)
+    on_border[seg.ravel()] = True
+    graph = FaceGraph(len(faces), face_adjacency(faces))
+    pairs = graph.pairs
+    comp = graph.components(edge_on[pairs[:, 0]] & edge_on[pairs[:, 1]])
+    k = int(comp.max()) + 1
+    has_flip = np.bincount(comp[flipped], minlength=k) > 0
+    touches = np.bincount(comp[edge_on & on_border[faces].any(axis=1)], minlength=k) > 0
+    return edge_on & (has_flip & touches)[comp]
+
+
+def untangle(faces: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """Unfold folds inside a development by moving their vertices to their neighbours' mean.
+
+    The vertices of flipped faces (signed area <= 0) move to the mean of their edge
+    neighbours (Jacobi steps), the region widening by one ring every
+    :data:`UNTANGLE_WIDEN` rounds, for up to :data:`UNTANGLE_ROUNDS` rounds; boundary
+    vertices stay. Such folds come from the scan (a crease, a sliver, a spike), not from
+    the development; the relax stage then restores the lengths around them.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+    uv : (n, 2) float64
+
+    Returns
+    -------
+    uv : (n, 2) float64
+        A new array (``uv`` itself when nothing was flipped).
+    flipped : int
+        Faces flipped before.
+    moved : int
+        Vertices moved.
+    """
+    bad = signed_areas(faces, uv) <= 0
+    n_bad = int(bad.sum())
+    if n_bad == 0:
+        return uv, 0, 0
+    n = len(uv)
+    e = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    A = scipy.sparse.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
+                                shape=(n, n)).tocsr()
+    A.data[:] = 1.0  # duplicates (an edge of two faces) summed: count once
+    deg = np.maximum(np.asarray(A.sum(axis=1)).ravel(), 1.0)
+    fixed = np.zeros(n, bool)
+    fixed[boundary_segments(faces, n)[0].ravel()] = True
+    x = uv.copy()
+    region = np.zeros(n, bool)
+    for r in range(UNTANGLE_ROUNDS):
+        bad = signed_areas(faces, x) <= 0
+        if not bad.any():
+            break
+        region[faces[bad].ravel()] = True
+        if r % UNTANGLE_WIDEN == UNTANGLE_WIDEN - 1:
+            region |= (A @ region.astype(np.float64)) > 0
+        region &= ~fixed
+        x[region] = (A @ x)[region] / deg[region, None]
+    return x, n_bad, int(np.count_nonzero(np.any(x != uv, axis=1)))
+
+
+def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c, area,
+            seam_given: tuple[float, str] | None = None):
     """Faces of the region, the seam (radians, and how it was chosen) and the corners' unwrapped angles."""
     V, F = mesh.vertices, mesh.faces
     theta_v = axis.cylindrical(V)[2]
     frac = h_c / axis.height if axis.height > 0 else np.zeros(len(F))
-    keep = (frac >= band[0]) & (frac <= band[1])
-    if face_mask is not None:
-        face_mask = np.asarray(face_mask)
-        if face_mask.dtype != bool or face_mask.shape != (len(F),):
-            raise InvalidInputError(f"face_mask must be a bool array of shape ({len(F)},), got "
-                                    f"{face_mask.dtype} {face_mask.shape}")
-        keep &= face_mask
-    if options.seam is not None:
+    keep = (frac >= band[0]) & (frac <= band[1]) & face_mask
+    if seam_given is not None:
+        seam, seam_method = seam_given
+    elif options.seam is not None:
         seam, seam_method = math.radians(options.seam % 360.0), "user"
     elif options.angles is not None:
         seam, seam_method = 0.0, "user"
@@ -561,12 +899,41 @@ def rollout_summary(result: RolloutResult) -> dict:
             "nonmanifold_vertices_split": result.split_vertices,
         },
         "distortion": result.distortion.as_dict(),
+        "boundary_overlap": result.boundary_overlap,
+        "walls": result.walls.summary(),
+        "attachments": _attachments_summary(result),
+        "trimmed": _trimmed_summary(result, mesh.mm_per_unit),
+        "untangled": {"faces": result.untangled_faces, "vertices_moved": result.untangled_vertices,
+                      "reason": "faces folded inside the development by the scan's own creases and "
+                                "slivers, unfolded by moving their vertices to their neighbours' mean"},
     }
+
+
+def _attachments_summary(result: RolloutResult) -> dict:
+    att = result.attachments
+    summary = att.summary()
+    return {**summary, "kept": result.attachments_kept,
+            "faces_left_out": 0 if result.attachments_kept else att.n_faces,
+            "area_left_out_mm2": 0.0 if result.attachments_kept else summary["area_mm2"],
+            "root_faces": result.attachment_roots.tolist(),
+            "root_faces_note": "rollout faces (indices into the PLY's faces) where a left-out "
+                               "attachment met the wall, to mask in the bake"}
+
+
+def _trimmed_summary(result: RolloutResult, mm_per_unit: float) -> dict:
+    """Counts and area of the edge-on border strips left out (see :func:`border_folds`)."""
+    return {"faces": int(len(result.trimmed)), "area_mm2": result.trimmed_area * mm_per_unit ** 2,
+            "reason": "border faces that fold the development over: strips edge-on to the proxy "
+                      "(rim top, base underside, break faces) and overlapping border faces"}
 
 
 def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None, *,
                       name: str | None = None) -> StageOutput:
-    """Read a scan, roll it out, write ``NAME.rollout.ply`` and ``NAME.rollout.json``.
+    """Read a scan, roll it out, write ``NAME.rollout.ply``, ``NAME.rollout.json`` and its profile.
+
+    The profile (:func:`potflat.profile.vessel_profile` of both walls around the rollout's
+    axis, attachments left out) is written as ``NAME.profile.csv`` and ``NAME.profile.svg``
+    (a section drawing, see ``docs/profile.md``).
 
     Parameters
     ----------
@@ -581,7 +948,8 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     Returns
     -------
     StageOutput
-        ``paths`` with ``"ply"`` and ``"json"``; ``summary`` = the JSON content.
+        ``paths`` with ``"ply"``, ``"json"``, ``"profile_csv"`` and ``"profile_svg"``;
+        ``summary`` = the JSON content.
 
     Raises
     ------
@@ -592,6 +960,7 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     from potflat.io.atomic import write_json_atomic
     from potflat.io.scan import load_scan
     from potflat.io.stage import write_flat_ply
+    from potflat.profile import vessel_profile, write_profile_csv, write_profile_svg
     from potflat.provenance import provenance
 
     options = options or RolloutOptions()
@@ -601,16 +970,26 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
         raise InvalidOptionError(f"name {name!r} must be a plain file stem without folders")
     ply_path = out_dir / f"{name}.rollout.ply"
     json_path = out_dir / f"{name}.rollout.json"
-    for out in (ply_path, json_path):
+    csv_path = out_dir / f"{name}.profile.csv"
+    svg_path = out_dir / f"{name}.profile.svg"
+    for out in (ply_path, json_path, csv_path, svg_path):
         if out.resolve() == scan_path.resolve():
             raise InvalidOptionError(
                 f"output {out} would overwrite the input scan; choose another output folder or --name")
     loaded = load_scan(scan_path, units=options.units, texture="use" if options.texture else "ignore")
     result = rollout(loaded.mesh, options=options)
+    body = None if result.attachments_kept or not result.attachments.n_faces else ~result.attachments.face_mask
+    profile = vessel_profile(loaded.mesh, result.axis.point, result.axis.direction, face_mask=body,
+                             labels=result.walls.labels)
     summary = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_summary(result),
+               "profile": profile.summary(),
                "cleaning": loaded.report.as_dict(),
-               "files": {"ply": ply_path.name, "json": json_path.name}}
+               "files": {"ply": ply_path.name, "json": json_path.name, "profile_csv": csv_path.name,
+                         "profile_svg": svg_path.name}}
     summary["provenance"] = provenance(stage="rollout", inputs=[scan_path], options=options.as_dict())
     write_flat_ply(ply_path, result.flat, comments=(f"potflat {__version__} rollout of {scan_path.name}",))
+    write_profile_csv(profile, csv_path)
+    write_profile_svg(profile, svg_path, title=f"{name}: profile ({profile.units})")
     write_json_atomic(json_path, summary)
-    return StageOutput({"ply": ply_path, "json": json_path}, summary)
+    return StageOutput({"ply": ply_path, "json": json_path, "profile_csv": csv_path, "profile_svg": svg_path},
+                       summary)

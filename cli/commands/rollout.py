@@ -11,7 +11,7 @@ from potflat_cli._options import Json, Name, OutputDir, Quiet
 
 HELP = """Unroll a vessel scan: find its rotation axis, fit a cylinder/cone/sphere, cut a seam, develop it.
 
-Writes NAME.rollout.ply (3D positions + flattened u v, texture coordinates or colours; the input of 'potflat relax') and NAME.rollout.json (axis, proxy, seam, region, counts, cleaning report, distortion). Angles are degrees counter-clockwise about the axis (mouth up): the seam from the axis' reference direction (printed), --angles from the seam. Exit codes: 0 success, 2 bad input or options (e.g. no rotational symmetry: give --axis).
+Writes NAME.rollout.ply (3D positions + flattened u v, texture coordinates or colours; the input of 'potflat relax'), NAME.rollout.json (axis, proxy, seam, region, walls, attachments left out, trimmed border, counts, cleaning report, distortion) and the profile NAME.profile.csv / NAME.profile.svg. The outer wall is unrolled (--side inner: the inside); handles are left out unless --keep-attachments. Angles are degrees counter-clockwise about the axis (mouth up): the seam from the axis' reference direction (printed), --angles from the seam. Exit codes: 0 success, 2 bad input or options (e.g. no rotational symmetry: give --axis).
 
 Example:  potflat rollout scans/amphora.obj -o out --band 0.2 0.7 --proxy cone
 """
@@ -43,6 +43,12 @@ def rollout_command(
     view: Annotated[Optional[str], typer.Option(
         "--view", help="With --proxy ortho: direction x,y,z from the vessel to the viewer "
                        "\\[default: towards the region's centre].")] = None,
+    side: Annotated[Optional[str], typer.Option(
+        "--side", help="Painted side: outer (the outside) or inner (the inside seen from within: a cup's "
+                       "interior, a kylix tondo); two-walled scans are split at the rim \\[default: outer].")] = None,
+    keep_attachments: Annotated[bool, typer.Option(
+        "--keep-attachments", help="Keep handles, spouts and knobs in the rollout (by default they are "
+                                   "left out and reported; the painting around their roots stays).")] = False,
     units: Annotated[Optional[str], typer.Option(
         "--units", help="Length unit of the scan: mm, cm, m, um, in \\[default: as the file "
                         "declares (PLY comment, STL header, glTF metres), else mm].")] = None,
@@ -98,6 +104,18 @@ def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quie
     out.print(f"seam {s['seam']['angle_deg']:.1f} deg ({s['seam']['method']}) from reference "
               f"{fmt(f'{x:.4f}' for x in ax['reference_direction'])}; {c['faces']} faces, "
               f"{c['vertices']} vertices, {c['seam_vertices_duplicated']} seam vertices duplicated")
+    w, at, tr = s["walls"], s["attachments"], s["trimmed"]
+    mm2 = "mm\N{SUPERSCRIPT TWO}"
+    out.print(f"{w['side']} wall: {w['faces_selected']} faces"
+              + (f" (two-walled scan: {w['faces_inner' if w['side'] == 'outer' else 'faces_outer']} faces "
+                 f"of the other wall left out)" if w["two_walled"] else ""))
+    if at["faces"]:
+        what = "kept" if at["kept"] else "left out"
+        out.print(f"attachments {what}: {len(at['components'])} ({at['faces']} faces, {at['area_mm2']:.4g} {mm2})")
+    if tr["faces"] or s["untangled"]["faces"]:
+        out.print(f"trimmed {tr['faces']} folded border faces ({tr['area_mm2']:.4g} {mm2}: rim top, base "
+                  f"underside, breaks); untangled {s['untangled']['faces']} folded faces inside")
+    out.print(f"profile: {result.paths['profile_csv'].name}, {result.paths['profile_svg'].name}")
     flipped = f"[red]{d['flipped']} flipped[/]" if d["flipped"] else "0 flipped"
     out.print(f"distortion: edge-length RMS {d['edge_rms']:.4f}, mean |log area| {d['area_mean_abs_log']:.4f}, "
               f"anisotropy mean {d['anisotropy_mean']:.3f}, {flipped}")
