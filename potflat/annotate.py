@@ -70,7 +70,7 @@ def map_scale(name: str, values: np.ndarray, *, hi: float | None = None) -> MapS
     """
     v = np.asarray(values, float)
     v = v[np.isfinite(v)]
-    p99 = lambda x: float(np.percentile(x, 99)) if len(x) else 0.0  # noqa: E731
+    p99 = lambda x: float(np.percentile(x, 99)) if len(x) else 0.0
     if name == "stress":
         top = hi if hi is not None else max(p99(v), 1e-3)
         return MapScale(name, 0.0, top, "magma", "stress (paper Eq. 3), √mm")
@@ -224,7 +224,7 @@ class ScaleLayer:
         return self._font_cache[1]
 
     def _box_size(self) -> tuple[int, int]:
-        return (int(math.ceil(self.bar_mm * self.px_per_mm)) + 2 * self.margin,
+        return (math.ceil(self.bar_mm * self.px_per_mm) + 2 * self.margin,
                 self.thick + self.font_px + 3 * self.margin)
 
     def bar_image(self) -> np.ndarray:
@@ -253,7 +253,7 @@ class ScaleLayer:
             for i in range(max(1, int(r0 / step)), int(r1 / step) + 1):
                 y = round(i * step) - r0
                 draw.line([(0, y), (self.width, y)], fill=colour, width=line)
-            k = int(round(self.label_step / GRID_MM))
+            k = round(self.label_step / GRID_MM)
             for i in range(k, int(self.width / step) + 1, k):
                 draw.text((round(i * step) + 2, 2 - r0), f"{i * GRID_MM:g}", fill=(0, 0, 0, 255), font=self._gf)
             for i in range(k, int(self.height / step) + 1, k):

@@ -20,10 +20,10 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Iterator
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
@@ -280,8 +280,8 @@ def _make_grid(flat: FlatMesh, px_per_mm: float, max_megapixels: float) -> _Grid
     uv = flat.uv[used]
     lo, hi = uv.min(axis=0), uv.max(axis=0)
     scale = px_per_mm * flat.mesh.mm_per_unit
-    width = int(math.ceil((hi[0] - lo[0]) * scale)) + 2 * PAD_PX
-    height = int(math.ceil((hi[1] - lo[1]) * scale)) + 2 * PAD_PX
+    width = math.ceil((hi[0] - lo[0]) * scale) + 2 * PAD_PX
+    height = math.ceil((hi[1] - lo[1]) * scale) + 2 * PAD_PX
     if width * height > max_megapixels * 1e6:
         suggest = px_per_mm * math.sqrt(max_megapixels * 1e6 / (width * height)) * 0.99
         raise InvalidOptionError(
@@ -374,7 +374,7 @@ class _Renderer:
         coarse tap at a chart border never mixes in the atlas background: no seams.
         """
         lod = np.log2(np.maximum(self.texels_per_pixel / self.n, 1.0))
-        top = int(math.ceil(min(np.max(lod), math.log2(max(min(self.texture.shape[:2]), 1)))))
+        top = math.ceil(min(np.max(lod), math.log2(max(min(self.texture.shape[:2]), 1))))
         levels, valids = [], []
         if top > 0:
             cur, valid = self.texture, _chart_mask(self.flat.mesh.texcoords, *self.texture.shape[:2])
@@ -584,7 +584,7 @@ def _rgba16(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
 def stage_name(path: Path) -> str:
     """Output NAME for a stage file: ``X.relaxed.ply`` -> ``X``; ``X.rollout.ply`` -> ``X.rollout``."""
     stem = path.name[: -len(path.suffix)] if path.suffix else path.name
-    return stem[: -len(".relaxed")] if stem.endswith(".relaxed") else stem
+    return stem.removesuffix(".relaxed")
 
 
 def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: list) -> None:

@@ -14,13 +14,12 @@ from potflat.errors import InvalidOptionError
 from potflat.io.stage import write_flat_ply
 from potflat.types import FlatMesh, Mesh
 
-
 # ---------------------------------------------------------------------------- fixtures
 
 
 def grid_mesh(width, height, step, *, z=None):
     """Plane grid ``width x height`` (mm) with isometric uv = (x, y); CCW seen from +z."""
-    nu, nv = int(round(width / step)) + 1, int(round(height / step)) + 1
+    nu, nv = round(width / step) + 1, round(height / step) + 1
     x, y = np.meshgrid(np.linspace(0, width, nu), np.linspace(0, height, nv))
     V = np.stack([x, y, np.zeros_like(x) if z is None else z(x, y)], -1).reshape(-1, 3)
     a = (np.arange(nv - 1)[:, None] * nu + np.arange(nu - 1)[None, :]).ravel()
@@ -40,7 +39,7 @@ def cylinder_band(R=20.0, H=30.0, span=1.5 * np.pi, nu=90, nv=16):
 
 def texcoords_for(uv, F, size_mm, texels_per_mm):
     """Texcoords mapping uv (mm, origin 0) onto an image of ``size_mm`` at ``texels_per_mm``."""
-    W, H = (int(round(s * texels_per_mm)) for s in size_mm)
+    W, H = (round(s * texels_per_mm) for s in size_mm)
     tc = np.stack([uv[:, 0] * texels_per_mm / W, uv[:, 1] * texels_per_mm / H], -1)
     return tc[F], (H, W)
 
@@ -51,9 +50,9 @@ def draw_texture(path, shape, texels_per_mm, *, circles=(), bars=(), background=
     img = np.zeros((H, W, 3), np.uint8)
     img[:] = background
     s = 16  # cv2 sub-pixel drawing shift
-    to_px = lambda u, v: (int(round(u * texels_per_mm * s)), int(round((H - v * texels_per_mm) * s)))  # noqa: E731
+    to_px = lambda u, v: (round(u * texels_per_mm * s), round((H - v * texels_per_mm) * s))
     for u, v, r, rgb in circles:
-        cv2.circle(img, to_px(u, v), int(round(r * texels_per_mm * s)), rgb, -1, cv2.LINE_AA, shift=4)
+        cv2.circle(img, to_px(u, v), round(r * texels_per_mm * s), rgb, -1, cv2.LINE_AA, shift=4)
     for u0, v0, u1, v1, rgb in bars:
         p0, p1 = to_px(u0, v1), to_px(u1, v0)
         cv2.rectangle(img, (p0[0] // s, p0[1] // s), (p1[0] // s - 1, p1[1] // s - 1), rgb, -1)
@@ -221,16 +220,16 @@ def test_vertex_colours_interpolated():
     res = bake(FlatMesh(Mesh(V, F, vertex_colors=colours), uv), px_per_mm=4, maps=())
     row = res.image[res.image.shape[0] // 2]
     assert tuple(row[5, :3]) == (255, 0, 0) and tuple(row[-6, :3]) == (0, 0, 255)
-    mid = row[int(round((15 - res.origin[0]) * 4))]
+    mid = row[round((15 - res.origin[0]) * 4)]
     assert 64 < mid[0] < 192 and 64 < mid[2] < 192  # blended half way between the columns of vertices
 
 
 def test_untextured_relief_lit_from_upper_left():
-    bump = lambda x, y: 2.0 * np.exp(-((x - 20) ** 2 + (y - 20) ** 2) / 18.0)  # noqa: E731
+    bump = lambda x, y: 2.0 * np.exp(-((x - 20) ** 2 + (y - 20) ** 2) / 18.0)
     V, F, uv = grid_mesh(40.0, 40.0, 0.5, z=bump)
     res = bake(FlatMesh(Mesh(V, F), uv), px_per_mm=4, maps=())
     img = res.image[..., 0].astype(int)
-    at = lambda u, v: img[int((res.origin[1] - v) * 4), int((u - res.origin[0]) * 4)]  # noqa: E731
+    at = lambda u, v: img[int((res.origin[1] - v) * 4), int((u - res.origin[0]) * 4)]
     upper_left, lower_right, flat_part = at(17, 23), at(23, 17), at(5, 5)
     assert upper_left > flat_part + 15 > lower_right + 30
     assert res.figures["painting"] == "shaded relief"
@@ -329,7 +328,7 @@ def stage_dir(tmp_path_factory, painted_plane):
 
 
 def test_stage_writes_files_with_resolution(stage_dir, tmp_path):
-    out = run_bake_stage(stage_dir / "vase.relaxed.ply", tmp_path,
+    run_bake_stage(stage_dir / "vase.relaxed.ply", tmp_path,
                          BakeOptions(dpi=300, sheet=True, grid=True, tiff=True, position_map=True))
     ppm = 300 / 25.4
     names = {p.name for p in tmp_path.iterdir()}
@@ -414,9 +413,8 @@ def test_missing_texture_is_a_clear_error(tmp_path, painted_plane):
 
 
 def test_cli(stage_dir, tmp_path):
-    from typer.testing import CliRunner
-
     from potflat_cli.main import app
+    from typer.testing import CliRunner
 
     runner = CliRunner()
     res = runner.invoke(app, ["bake", str(stage_dir / "vase.relaxed.ply"), "-o", str(tmp_path),

@@ -68,21 +68,18 @@ def test_png_written_in_strips_equals_whole(tmp_path):
 
 
 def test_incomplete_png_leaves_no_file(tmp_path):
-    with pytest.raises(ValueError, match="rows written"):
-        with PngWriter(tmp_path / "x.png", 10, 10, 4, px_per_mm=1) as png:
-            png.write(np.zeros((5, 10, 4), np.uint8))
+    with pytest.raises(ValueError, match="rows written"), PngWriter(tmp_path / "x.png", 10, 10, 4, px_per_mm=1) as png:
+        png.write(np.zeros((5, 10, 4), np.uint8))
     assert list(tmp_path.iterdir()) == []
-    with pytest.raises(RuntimeError):
-        with PngWriter(tmp_path / "y.png", 10, 10, 4, px_per_mm=1) as png:
-            png.write(np.zeros((5, 10, 4), np.uint8))
-            raise RuntimeError("boom")
+    with pytest.raises(RuntimeError), PngWriter(tmp_path / "y.png", 10, 10, 4, px_per_mm=1) as png:
+        png.write(np.zeros((5, 10, 4), np.uint8))
+        raise RuntimeError("boom")
     assert list(tmp_path.iterdir()) == []
 
 
 def test_png_rejects_wrong_rows(tmp_path):
-    with pytest.raises(ValueError, match="rows must be"):
-        with PngWriter(tmp_path / "z.png", 10, 10, 4, px_per_mm=1) as png:
-            png.write(np.zeros((5, 9, 4), np.uint8))
+    with pytest.raises(ValueError, match="rows must be"), PngWriter(tmp_path / "z.png", 10, 10, 4, px_per_mm=1) as png:
+        png.write(np.zeros((5, 9, 4), np.uint8))
 
 
 @pytest.mark.parametrize("shape", [(40, 30, 3), (300, 520, 3), (513, 10, 4)])

@@ -2,10 +2,9 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
-
 from potflat_cli._errors import user_errors
 from potflat_cli._options import Json, Name, OutputDir, Quiet
 
@@ -24,11 +23,11 @@ Input = Annotated[Path, typer.Argument(help="NAME.relaxed.ply (or NAME.rollout.p
 def bake_command(
     flat_ply: Input,
     output: OutputDir = None,
-    px_per_mm: Annotated[Optional[float], typer.Option(
+    px_per_mm: Annotated[float | None, typer.Option(
         "--px-per-mm", help="Resolution in pixels per millimetre \\[default: 4].")] = None,
-    dpi: Annotated[Optional[float], typer.Option(
+    dpi: Annotated[float | None, typer.Option(
         "--dpi", help="Resolution in dots per inch (instead of --px-per-mm).")] = None,
-    maps: Annotated[Optional[str], typer.Option(
+    maps: Annotated[str | None, typer.Option(
         "--maps", help="Comma-separated distortion maps: stress,area,anisotropy (or 'none').")] = None,
     sheet: Annotated[bool, typer.Option(
         "--sheet", help="Also write NAME.sheet.png: the rollout beside the relaxed result, with stress maps.")] = False,
@@ -36,9 +35,9 @@ def bake_command(
         "--position-map", help="Also write NAME.position.tif: the 3D point (scan units) under each pixel.")] = False,
     grid: Annotated[bool, typer.Option("--grid", help="Draw a labelled 10 mm grid in the scale layer.")] = False,
     tiff: Annotated[bool, typer.Option("--tiff", help="Also write the painting as a 16-bit RGBA TIFF.")] = False,
-    supersample: Annotated[Optional[int], typer.Option(
+    supersample: Annotated[int | None, typer.Option(
         "--supersample", help="Sub-samples per pixel side, 1-8 \\[default: automatic from the texture density].")] = None,
-    max_megapixels: Annotated[Optional[float], typer.Option(
+    max_megapixels: Annotated[float | None, typer.Option(
         "--max-megapixels", help="Refuse images larger than this \\[default: 1000].")] = None,
     name: Name = None,
     quiet: Quiet = False,

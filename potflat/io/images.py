@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import contextlib
 import os
-from concurrent.futures import ThreadPoolExecutor
 import struct
 import zlib
+from collections.abc import Iterable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Iterable
+from typing import Self
 
 import numpy as np
 
@@ -95,7 +96,7 @@ class PngWriter:
         self._rows = 0
         self._stack = contextlib.ExitStack()
 
-    def __enter__(self) -> "PngWriter":
+    def __enter__(self) -> Self:
         tmp = self._stack.enter_context(atomic_path(self.path))
         self._fh = self._stack.enter_context(open(tmp, "wb"))
         self._z = zlib.compressobj(PNG_COMPRESSION)
@@ -105,7 +106,7 @@ class PngWriter:
         ihdr = struct.pack(">IIBBBBB", self.width, self.height, self.bits, _PNG_COLOR_TYPE[self.channels], 0, 0, 0)
         head = b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", ihdr)
         if self.px_per_mm:
-            ppm = int(round(self.px_per_mm * 1000.0))
+            ppm = round(self.px_per_mm * 1000.0)
             head += _chunk(b"pHYs", struct.pack(">IIB", ppm, ppm, 1))
         self._fh.write(head)
         return self
