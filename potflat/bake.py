@@ -62,7 +62,8 @@ class BakeOptions:
     dpi : float or None
         Output resolution in dots per inch (``px_per_mm = dpi / 25.4``).
     maps : tuple of str
-        Distortion maps to write, from :data:`MAP_NAMES`; ``stress`` also writes the overlay.
+        Distortion maps to write, from :data:`MAP_NAMES` (``"none"``: no maps); ``stress``
+        also writes the overlay.
     sheet : bool
         Write the rollout-vs-relaxed comparison sheet (needs ``NAME.rollout.ply`` beside the input).
     position_map : bool
@@ -96,6 +97,8 @@ class BakeOptions:
                                       or not math.isfinite(value) or value <= 0):
                 raise InvalidOptionError(f"{name} must be a positive number, got {value!r}")
         maps = (self.maps,) if isinstance(self.maps, str) else tuple(self.maps)
+        if maps == ("none",):
+            maps = ()
         unknown = [m for m in maps if m not in MAP_NAMES]
         if unknown:
             raise InvalidOptionError(f"unknown map {unknown[0]!r}; choose from {', '.join(MAP_NAMES)}")

@@ -307,6 +307,7 @@ def test_resolution_from_dpi_and_default():
     assert BakeOptions(dpi=254).resolution == pytest.approx(10.0)
     assert BakeOptions().resolution == 4.0
     assert BakeOptions(maps="area").maps == ("area",)
+    assert BakeOptions(maps="none").maps == () and BakeOptions(maps=()).maps == ()
 
 
 def test_refuses_giant_image(painted_plane):
@@ -427,7 +428,12 @@ def test_cli(stage_dir, tmp_path):
     assert bad.exit_code == 2
     both = runner.invoke(app, ["bake", str(stage_dir / "vase.relaxed.ply"), "--dpi", "300", "--px-per-mm", "3"])
     assert both.exit_code == 2
-    assert "bake" in runner.invoke(app, ["bake", "--help"]).output
+    assert "Example" in runner.invoke(app, ["bake", "--help"]).output
+    quiet = runner.invoke(app, ["bake", str(stage_dir / "vase.relaxed.ply"), "-o", str(tmp_path / "j"),
+                                "--maps", "none", "--json"])
+    assert quiet.exit_code == 0, quiet.output
+    assert json.loads(quiet.output)["files"]["png"] == "vase.png"
+    assert not (tmp_path / "j" / "vase.stress.png").exists()
 
 
 def test_masked_halving_matches_reference():

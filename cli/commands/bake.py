@@ -48,7 +48,7 @@ def bake_command(
 
     values = {"px_per_mm": px_per_mm, "dpi": dpi, "sheet": sheet or None, "position_map": position_map or None,
               "grid": grid or None, "tiff": tiff or None, "supersample": supersample, "max_megapixels": max_megapixels,
-              "maps": ("" if maps.strip().lower() == "none" else maps) if maps is not None else None}
+              "maps": maps}
     options = options_from_cli("bake", values)
     _bake(flat_ply, output, options, name=name, quiet=quiet, as_json=json)
 
