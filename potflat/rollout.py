@@ -634,9 +634,10 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.n
         sub = faces[idx]
         seg, owner = boundary_segments(sub, len(uv))
         drop = _edge_on_strips(sub, uv, area_3d[idx], seg) | _minor_fans(sub, area_3d[idx])
-        a, b = crossing_segments(uv, seg)
-        drop[owner[a]] = True
-        drop[owner[b]] = True
+        if not drop.any():  # overlaps are judged on a border without folded strips
+            a, b = crossing_segments(uv, seg)
+            drop[owner[a]] = True
+            drop[owner[b]] = True
         if not drop.any():
             break
         keep[idx[drop]] = False

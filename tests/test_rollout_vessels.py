@@ -1,0 +1,224 @@
+"""Rollout of real vessels: painted side, attachments, folded border, profile files, real scans."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from _vessel_meshes import revolve
+from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.io.stage import read_flat_ply
+from potflat.rollout import (
+    RolloutOptions,
+    border_folds,
+    boundary_segments,
+    crossing_segments,
+    rollout,
+    run_rollout_stage,
+    signed_areas,
+    untangle,
+)
+from potflat.synthetic import PART_BASE, PART_HANDLE, PART_INNER, PART_OUTER, make_vessel, write_ply_colored
+from potflat.types import Mesh
+from potflat.walls import OUTER
+
+#: The shared real scans (CI has ../shared beside the repository).
+REAL = Path(__file__).resolve().parents[2] / "shared/data/real"
+SCANS = ("goblet.stl", "plastic-vase.ply", "sea-vase.ply")
+
+
+@pytest.fixture(scope="module")
+def cup():
+    return make_vessel("cup", n_vertices=3000, seed=2, texture_size=64)
+
+
+@pytest.fixture(scope="module")
+def amphora():
+    return make_vessel("amphora", n_vertices=3000, seed=1, texture_size=64, handles="welded")
+
+
+def _check_clean(res):
+    """No flipped face, no overlapping border: a start the relax stage can take."""
+    assert res.distortion.flipped == 0
+    assert np.all(signed_areas(res.flat.mesh.faces, res.flat.uv) > 0)
+    assert res.boundary_overlap == 0
+
+
+def test_cup_outer_wall_only(cup):
+    res = rollout(cup.mesh)
+    parts = cup.face_part[res.face_index]
+    assert not np.any(parts == PART_INNER)
+    assert np.count_nonzero(parts == PART_OUTER) == np.count_nonzero(cup.face_part == PART_OUTER)
+    assert res.walls.two_walled and res.side == "outer"
+    _check_clean(res)
+    # what was trimmed is the rim's thickness, never the painted wall
+    assert not np.any(cup.face_part[res.trimmed] == PART_OUTER)
+
+
+def test_cup_inner_wall_seen_from_inside(cup):
+    res = rollout(cup.mesh, side="inner")
+    parts = cup.face_part[res.face_index]
+    assert not np.any((parts == PART_OUTER) | (parts == PART_BASE))
+    assert np.count_nonzero(parts == PART_INNER) >= 0.99 * np.count_nonzero(cup.face_part == PART_INNER)
+    # the inner faces are counter-clockwise seen from the cavity: mirrored u keeps them positive
+    _check_clean(res)
+    outer = rollout(cup.mesh, side="inner", proxy="cylinder")
+    h, _, theta = outer.axis.cylindrical(outer.flat.mesh.vertices)
+    slope = np.polyfit(np.unwrap(theta[np.argsort(outer.flat.uv[:, 0])]), np.sort(outer.flat.uv[:, 0]), 1)[0]
+    assert slope < 0  # u runs clockwise seen from above: to the right of a viewer inside
+
+
+def test_inner_side_needs_an_inner_wall():
+    sv = make_vessel("cylinder", n_vertices=1000, seed=1, texture_size=64)
+    with pytest.raises(InvalidInputError, match="no inner wall"):
+        rollout(sv.mesh, side="inner")
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"side": "both"}, "side"),
+    ({"keep_attachments": "yes"}, "keep_attachments"),
+])
+def test_new_options_are_validated(kwargs, match):
+    with pytest.raises(InvalidOptionError, match=match):
+        RolloutOptions(**kwargs)
+
+
+def test_handles_are_left_out_and_reported(amphora):
+    res = rollout(amphora.mesh)
+    att = res.attachments
+    assert att.n_faces > 0 and not np.any(att.face_mask[res.face_index])
+    handle = amphora.face_part == PART_HANDLE
+    assert np.count_nonzero(handle[res.face_index]) < 0.5 * handle.sum()  # only the roots stay
+    assert np.count_nonzero(amphora.face_part[res.face_index] == PART_OUTER) >= 0.99 * np.count_nonzero(
+        amphora.face_part == PART_OUTER)
+    _check_clean(res)
+    roots = res.attachment_roots
+    assert len(roots) > 0 and roots.max() < len(res.flat.mesh.faces)
+    # each root face touches a left-out attachment face in the scan
+    touched = np.zeros(len(amphora.mesh.vertices), bool)
+    touched[amphora.mesh.faces[att.face_mask].ravel()] = True
+    assert touched[amphora.mesh.faces[res.face_index[roots]]].any(axis=1).all()
+
+
+def test_keep_attachments_keeps_them(amphora):
+    res = rollout(amphora.mesh, keep_attachments=True)
+    handle = amphora.face_part == PART_HANDLE
+    assert np.all(np.isin(np.flatnonzero(handle), res.face_index))
+    assert len(res.attachment_roots) == 0 and res.attachments_kept
+
+
+def _rim_cylinder(n_theta=48):
+    """An open cylinder (radius 30, height 40) with a flat rim top 4 wide facing up."""
+    r = [30.0, 30.0, 30.0, 28.0, 26.0]
+    h = [0.0, 20.0, 40.0, 40.0, 40.0]
+    V, F, labels, _ = revolve(r, h, n_theta, labels=["wall", "wall", "rim", "rim"])
+    return Mesh(V, F), labels
+
+
+def test_rim_top_is_trimmed_exactly():
+    mesh, labels = _rim_cylinder()
+    res = rollout(mesh, proxy="cylinder", axis=(0, 0, 0, 0, 0, 1))
+    assert set(labels[res.trimmed]) == {"rim"}
+    assert set(labels[res.face_index]) == {"wall"}
+    assert len(res.trimmed) == np.count_nonzero(labels == "rim")
+    assert res.distortion.edge_rms < 1e-3  # chords of the 48-gon
+    _check_clean(res)
+
+
+def test_border_folds_keeps_enclosed_folds_and_untangle_fixes_them():
+    # a 6 x 6 vertex grid with one interior vertex pushed across its neighbours
+    x, y = np.meshgrid(np.arange(6.0), np.arange(6.0))
+    uv = np.column_stack([x.ravel(), y.ravel()])
+    q = np.arange(36).reshape(6, 6)
+    a, b, c, d = q[:-1, :-1].ravel(), q[:-1, 1:].ravel(), q[1:, 1:].ravel(), q[1:, :-1].ravel()
+    faces = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    area = np.full(len(faces), 0.5)
+    folded = uv.copy()
+    folded[q[2, 2]] += [1.6, 1.3]
+    assert np.any(signed_areas(faces, folded) <= 0)
+    assert not border_folds(faces, folded, area).any()  # enclosed: left to untangle
+    fixed, n_bad, moved = untangle(faces, folded)
+    assert n_bad > 0 and moved >= 1 and np.all(signed_areas(faces, fixed) > 0)
+    border = np.unique(boundary_segments(faces, 36)[0])
+    np.testing.assert_array_equal(fixed[border], folded[border])
+    # the same fold on the border is trimmed
+    edge = uv.copy()
+    edge[q[0, 2]] += [0.0, 1.5]
+    drop = border_folds(faces, edge, area)
+    assert drop.any() and np.all(signed_areas(faces[~drop], edge) > 0)
+
+
+def test_crossing_segments_against_brute_force():
+    rng = np.random.default_rng(3)
+    uv = rng.uniform(0, 10, (60, 2))
+    seg = rng.integers(0, 60, (40, 2))
+    seg = seg[seg[:, 0] != seg[:, 1]]
+    a, b = crossing_segments(uv, seg)
+    got = {tuple(sorted(p)) for p in zip(a.tolist(), b.tolist())}
+
+    def orient(p, q, r):
+        return np.sign((q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0]))
+
+    want = set()
+    for i in range(len(seg)):
+        for j in range(i + 1, len(seg)):
+            if set(seg[i]) & set(seg[j]):
+                continue
+            p, q, r, s = uv[seg[i, 0]], uv[seg[i, 1]], uv[seg[j, 0]], uv[seg[j, 1]]
+            if orient(p, q, r) * orient(p, q, s) < 0 and orient(r, s, p) * orient(r, s, q) < 0:
+                want.add((i, j))
+    assert got == want and len(want) > 0
+    # touching: a copy of a vertex on another segment counts
+    uv2 = np.array([[0.0, 0.0], [2.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
+    a, _ = crossing_segments(uv2, np.array([[0, 1], [2, 3]]))
+    assert len(a) == 1
+
+
+def test_stage_writes_profile_and_reports(tmp_path, cup):
+    scan = write_ply_colored(cup, tmp_path / "cup.ply")
+    out = run_rollout_stage(scan, tmp_path / "out")
+    csv, svg = out.paths["profile_csv"], out.paths["profile_svg"]
+    assert csv.name == "cup.profile.csv" and svg.name == "cup.profile.svg"
+    rows = csv.read_text().splitlines()
+    assert rows[0] == "height_mm,outer_radius_mm,inner_radius_mm" and len(rows) > 5
+    inner = [r.split(",")[2] for r in rows[1:]]
+    assert sum(bool(x) for x in inner) > len(inner) // 2  # the cup's two walls are both profiled
+    assert svg.read_text().startswith("<?xml") and "<polygon" in svg.read_text()
+    data = json.loads(out.paths["json"].read_text())
+    assert data["files"]["profile_csv"] == csv.name and data["files"]["profile_svg"] == svg.name
+    assert data["walls"]["side"] == "outer" and data["walls"]["two_walled"]
+    assert data["trimmed"]["faces"] > 0 and data["trimmed"]["area_mm2"] > 0
+    assert data["attachments"]["faces_left_out"] == 0 and data["boundary_overlap"] == 0
+    assert data["profile"]["two_walled"] and data["provenance"]["options"]["side"] == "outer"
+
+
+@pytest.mark.skipif(not REAL.is_dir(), reason="shared real scans absent")
+@pytest.mark.parametrize("scan", SCANS)
+def test_real_scans_roll_out_one_wall_cleanly(scan):
+    from potflat.io.scan import load_scan
+
+    mesh = load_scan(REAL / scan).mesh
+    res = rollout(mesh)
+    assert res.walls.two_walled
+    assert np.all(res.walls.labels[res.face_index] == OUTER)
+    _check_clean(res)
+    # what was trimmed is a fringe (rim top, base underside, ragged borders)
+    assert len(res.trimmed) < 0.05 * res.walls.n_selected
+
+
+@pytest.mark.skipif(not REAL.is_dir(), reason="shared real scans absent")
+def test_potflat_run_on_a_real_scan_is_fold_free(tmp_path):
+    from potflat_cli.main import app
+
+    out = tmp_path / "out"
+    result = CliRunner().invoke(app, ["run", str(REAL / "sea-vase.ply"), "-o", str(out), "--preset", "preview",
+                                      "--px-per-mm", "1", "--quiet"])
+    assert result.exit_code == 0, result.output
+    relaxed = json.loads((out / "sea-vase.relaxed.json").read_text())
+    assert relaxed["flipped"] == 0 and relaxed["fold_free"]
+    rolled = json.loads((out / "sea-vase.rollout.json").read_text())
+    assert rolled["attachments"]["faces_left_out"] > 0 and rolled["untangled"]["faces"] > 0
+    assert (out / "sea-vase.png").exists() and (out / "sea-vase.profile.svg").exists()
+    flat = read_flat_ply(out / "sea-vase.relaxed.ply")
+    assert np.all(signed_areas(flat.mesh.faces, flat.uv) > 0)
