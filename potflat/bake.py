@@ -281,6 +281,8 @@ def _make_grid(flat: FlatMesh, px_per_mm: float, max_megapixels: float) -> _Grid
     if not used.any():
         raise InvalidInputError(f"{flat.mesh.source or 'the mesh'} has no faces to bake; check the stage file")
     uv = flat.uv[used]
+    if not np.isfinite(uv).all():
+        raise InvalidInputError(f"{flat.mesh.source or 'the flattening'} has NaN or infinite uv; flatten it again")
     lo, hi = uv.min(axis=0), uv.max(axis=0)
     scale = px_per_mm * flat.mesh.mm_per_unit
     width = math.ceil((hi[0] - lo[0]) * scale) + 2 * PAD_PX

@@ -310,6 +310,15 @@ def test_resolution_from_dpi_and_default():
     assert BakeOptions(maps="none").maps == () and BakeOptions(maps=()).maps == ()
 
 
+def test_refuses_non_finite_uv(painted_plane):
+    from potflat.errors import InvalidInputError
+
+    uv = painted_plane.uv.copy()
+    uv[3, 0] = np.nan
+    with pytest.raises(InvalidInputError, match="NaN"):
+        bake(painted_plane.replace(uv=uv), px_per_mm=2)
+
+
 def test_refuses_giant_image(painted_plane):
     with pytest.raises(InvalidOptionError, match="px_per_mm .* or less"):
         bake(painted_plane, px_per_mm=2000)
