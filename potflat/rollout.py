@@ -28,7 +28,7 @@ from potflat.axis import AxisFit, estimate_axis, manual_axis
 from potflat.distortion import DistortionSummary, summarize
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import UNITS_MM, FlatMesh, Mesh, StageOutput
-from potflat.walls import SIDES, FaceGraph, WallSelection, face_adjacency, select_wall, unique_ints
+from potflat.walls import SIDES, FaceGraph, WallSelection, face_adjacency, select_wall
 
 TWO_PI = 2.0 * np.pi
 #: Angular bins (per turn) used to choose the seam and to find gaps in a region.
@@ -922,8 +922,8 @@ def _attachments_summary(result: RolloutResult) -> dict:
 
 
 def _trimmed_summary(result: RolloutResult, mm_per_unit: float) -> dict:
-    """Counts and area of the edge-on border strips left out (see :func:`border_folds`)."""
-    return {"faces": int(len(result.trimmed)), "area_mm2": result.trimmed_area * mm_per_unit ** 2,
+    """Counts and area of the folded border faces left out (see :func:`border_folds`)."""
+    return {"faces": len(result.trimmed), "area_mm2": result.trimmed_area * mm_per_unit ** 2,
             "reason": "border faces that fold the development over: strips edge-on to the proxy "
                       "(rim top, base underside, break faces) and overlapping border faces"}
 

@@ -4,9 +4,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _vessel_meshes import revolve
 from typer.testing import CliRunner
 
-from _vessel_meshes import revolve
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.stage import read_flat_ply
 from potflat.rollout import (
@@ -19,7 +19,14 @@ from potflat.rollout import (
     signed_areas,
     untangle,
 )
-from potflat.synthetic import PART_BASE, PART_HANDLE, PART_INNER, PART_OUTER, make_vessel, write_ply_colored
+from potflat.synthetic import (
+    PART_BASE,
+    PART_HANDLE,
+    PART_INNER,
+    PART_OUTER,
+    make_vessel,
+    write_ply_colored,
+)
 from potflat.types import Mesh
 from potflat.walls import OUTER
 
@@ -63,10 +70,15 @@ def test_cup_inner_wall_seen_from_inside(cup):
     assert np.count_nonzero(parts == PART_INNER) >= 0.99 * np.count_nonzero(cup.face_part == PART_INNER)
     # the inner faces are counter-clockwise seen from the cavity: mirrored u keeps them positive
     _check_clean(res)
-    outer = rollout(cup.mesh, side="inner", proxy="cylinder")
-    h, _, theta = outer.axis.cylindrical(outer.flat.mesh.vertices)
-    slope = np.polyfit(np.unwrap(theta[np.argsort(outer.flat.uv[:, 0])]), np.sort(outer.flat.uv[:, 0]), 1)[0]
-    assert slope < 0  # u runs clockwise seen from above: to the right of a viewer inside
+    # u = -R theta: to the right of a viewer inside is clockwise seen from above
+    for side, sign in (("inner", -1), ("outer", 1)):
+        cyl = rollout(cup.mesh, side=side, proxy="cylinder")
+        theta = cyl.axis.cylindrical(cyl.flat.mesh.vertices)[2]
+        e = cyl.flat.mesh.faces[:, :2]
+        dth = (theta[e[:, 1]] - theta[e[:, 0]] + np.pi) % (2 * np.pi) - np.pi
+        du = cyl.flat.uv[e[:, 1], 0] - cyl.flat.uv[e[:, 0], 0]
+        big = np.abs(dth) > 1e-3
+        assert np.all(sign * du[big] * dth[big] > 0), side
 
 
 def test_inner_side_needs_an_inner_wall():
