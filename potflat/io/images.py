@@ -23,6 +23,10 @@ from potflat.io.atomic import atomic_path
 
 #: zlib level of the PNG encoder (6 is libpng's default; 9 is much slower for ~2% less).
 PNG_COMPRESSION = 6
+#: zlib level above :data:`PNG_LARGE_PIXELS`: on a 121 MP painting level 3 deflates 4x faster
+#: than level 6 (53 vs 13 MB/s per core) for a 13% larger file.
+PNG_COMPRESSION_LARGE = 3
+PNG_LARGE_PIXELS = 16_000_000
 #: Filtered row blocks a PNG writer may queue for its compression thread.
 PNG_QUEUE = 2
 
@@ -99,7 +103,8 @@ class PngWriter:
     def __enter__(self) -> Self:
         tmp = self._stack.enter_context(atomic_path(self.path))
         self._fh = self._stack.enter_context(open(tmp, "wb"))
-        self._z = zlib.compressobj(PNG_COMPRESSION)
+        large = self.width * self.height > PNG_LARGE_PIXELS
+        self._z = zlib.compressobj(PNG_COMPRESSION_LARGE if large else PNG_COMPRESSION)
         self._pool = self._stack.enter_context(ThreadPoolExecutor(1))
         self._pending = []
         self._prev = np.zeros(self.width * self.channels * self.bits // 8, np.uint8)
