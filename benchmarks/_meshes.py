@@ -72,8 +72,8 @@ def vessel_rollout(n_vertices: int, *, seed: int = 0, proxy: str = "cylinder", j
     H = PROFILE[-1, 0]
     # aspect: circumference ~ 2 pi * 0.7 vs height 2 -> about 2.2 : 1
     ratio = 2 * np.pi * 0.7 * turn / H
-    nv = max(2, int(round(np.sqrt(n_vertices / ratio))))
-    nu = max(2, int(round(n_vertices / nv)))
+    nv = max(2, round(np.sqrt(n_vertices / ratio)))
+    nu = max(2, round(n_vertices / nv))
     P, F = _lattice(nu, nv, rng, jitter)
     theta = P[:, 0] * 2 * np.pi * turn
     h = P[:, 1] * H

@@ -37,7 +37,7 @@ class GridHierarchy:
     levels: tuple
 
     @classmethod
-    def build(cls, ref: np.ndarray, *, min_vertices_per_cell: float, coarsest: int = 2) -> "GridHierarchy":
+    def build(cls, ref: np.ndarray, *, min_vertices_per_cell: float, coarsest: int = 2) -> GridHierarchy:
         """Sort the vertices along a Morton curve of ``ref`` and choose the levels.
 
         Parameters

@@ -24,9 +24,9 @@ import math
 import os
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -40,14 +40,17 @@ from potflat.types import FlatMesh, StageOutput
 
 #: Settings of each preset; ``None`` in :class:`RelaxOptions` takes the preset's value.
 PRESETS: dict[str, dict] = {
-    "preview": dict(solver="multilevel", stretch=1.0, stiffness=1.0, weighting="relative",
-                    tol=1e-4, max_iter=400, level_iter=12, level_tol=1e-4, fine_iter=0, cell_vertices=16.0),
-    "standard": dict(solver="multilevel", stretch=1.0, stiffness=1.0, weighting="relative",
-                     tol=1e-5, max_iter=2000, level_iter=15, level_tol=1e-4, fine_iter=200, cell_vertices=8.0),
-    "archival": dict(solver="multilevel", stretch=1.0, stiffness=1.0, weighting="relative",
-                     tol=1e-8, max_iter=20000, level_iter=100, level_tol=1e-5, fine_iter=20000, cell_vertices=4.0),
-    "paper": dict(solver="dynamics", stretch=2.0, stiffness=0.5, weighting="uniform",
-                  tol=1e-7, max_iter=100000, friction_inside=0.01, friction_boundary=1.0),
+    "preview": {"solver": "multilevel", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
+                "tol": 1e-4, "max_iter": 400, "level_iter": 12, "level_tol": 1e-4, "fine_iter": 0,
+                "cell_vertices": 16.0},
+    "standard": {"solver": "multilevel", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
+                 "tol": 1e-5, "max_iter": 2000, "level_iter": 15, "level_tol": 1e-4, "fine_iter": 200,
+                 "cell_vertices": 8.0},
+    "archival": {"solver": "multilevel", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
+                 "tol": 1e-8, "max_iter": 20000, "level_iter": 100, "level_tol": 1e-5, "fine_iter": 20000,
+                 "cell_vertices": 4.0},
+    "paper": {"solver": "dynamics", "stretch": 2.0, "stiffness": 0.5, "weighting": "uniform",
+              "tol": 1e-7, "max_iter": 100000, "friction_inside": 0.01, "friction_boundary": 1.0},
 }
 WEIGHTINGS = ("uniform", "relative")
 
@@ -336,7 +339,7 @@ def _lbfgs(sp: _Springs, x: np.ndarray, run: _Run, *, prolong, restrict, max_ite
 
     Returns the new positions, whether the level converged, and its iteration count.
     """
-    E, Es, gf = sp.evaluate(x)
+    E, _Es, gf = sp.evaluate(x)
     g = restrict(gf)
     mem: deque = deque(maxlen=LBFGS_MEMORY)  # (s, y, 1 / s.y)
     hist = [E]
@@ -372,7 +375,7 @@ def _lbfgs(sp: _Springs, x: np.ndarray, run: _Run, *, prolong, restrict, max_ite
         accepted = False
         for _ in range(50):
             xn = x + t * dx
-            En, Esn, gfn = sp.evaluate(xn)
+            En, _Esn, gfn = sp.evaluate(xn)
             if math.isfinite(En) and En <= E + ARMIJO * t * gd:
                 accepted = True
                 break
@@ -411,11 +414,11 @@ def _multilevel(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, le
         if kind == "grid":
             cs = hier.cell_start(L)
             shape = (hier.n_nodes(L), 2)
-            prolong = lambda c, L=L: hier.prolong(L, c.reshape(shape))  # noqa: E731
-            restrict = lambda g, L=L, cs=cs: hier.restrict(L, cs, g)  # noqa: E731
+            prolong = lambda c, L=L, shape=shape: hier.prolong(L, c.reshape(shape))
+            restrict = lambda g, L=L, cs=cs: hier.restrict(L, cs, g)
             cap, ltol = settings["level_iter"], level_tol
         else:
-            prolong = restrict = lambda a: a  # noqa: E731
+            prolong = restrict = lambda a: a
             cap, ltol = settings["fine_iter"] or settings["max_iter"], tol
         cap = min(cap, run.max_iter - len(run.history))
         if cap <= 0:
@@ -423,12 +426,12 @@ def _multilevel(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, le
         x_new, conv, its = _lbfgs(sp, x, run, prolong=prolong, restrict=restrict, max_iter=cap, tol=ltol)
         if overlap_free and sp.overlap(x_new) > 0:
             notes.append(f"level {run.level} made the boundary overlap itself; kept the previous level's result")
-            levels_out.append(dict(level=run.level, iterations=its, energy=sp.spring_energy(x),
-                                   seconds=time.perf_counter() - t0, rejected=True))
+            levels_out.append({"level": run.level, "iterations": its, "energy": sp.spring_energy(x),
+                                   "seconds": time.perf_counter() - t0, "rejected": True})
             break
         x = x_new
-        levels_out.append(dict(level=run.level, iterations=its, energy=sp.spring_energy(x),
-                               seconds=time.perf_counter() - t0))
+        levels_out.append({"level": run.level, "iterations": its, "energy": sp.spring_energy(x),
+                               "seconds": time.perf_counter() - t0})
         converged = conv
         if run.stopped:
             converged = False
@@ -461,8 +464,8 @@ def _dynamics(sp: _Springs, x: np.ndarray, settings: dict, run: _Run, levels_out
         if it % WINDOW_DYNAMICS == 0 and _relative_change(hist, WINDOW_DYNAMICS) < settings["tol"]:
             converged = True
             break
-    levels_out.append(dict(level="dynamics", iterations=it, energy=sp.spring_energy(x),
-                           seconds=time.perf_counter() - t0, dt=dt))
+    levels_out.append({"level": "dynamics", "iterations": it, "energy": sp.spring_energy(x),
+                           "seconds": time.perf_counter() - t0, "dt": dt})
     return x, converged
 
 
@@ -669,7 +672,7 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     out_dir = Path(out_dir)
     stem = rollout_ply.name
     for suffix in (".ply", ".rollout"):
-        stem = stem[: -len(suffix)] if stem.endswith(suffix) else stem
+        stem = stem.removesuffix(suffix)
     name = name or stem
     flat = read_flat_ply(rollout_ply)
     result = relax(flat, options=options, progress=progress)

@@ -30,8 +30,8 @@ def springs(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     for (a, b), fs in edge_faces.items():
         if len(fs) != 2:
             continue
-        p = [v for v in F[fs[0]] if v not in (a, b)][0]
-        q = [v for v in F[fs[1]] if v not in (a, b)][0]
+        p = next(v for v in F[fs[0]] if v not in (a, b))
+        q = next(v for v in F[fs[1]] if v not in (a, b))
         if p == q:
             continue
         cross.append((min(p, q), max(p, q), unfolded_distance(V[a], V[b], V[p], V[q])))

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-import reference as ref  # noqa: E402
+import reference as ref
 
-from potflat.distortion import summarize  # noqa: E402
-from potflat.errors import FoldedResultError, InvalidOptionError  # noqa: E402
-from potflat.relax import RelaxOptions, relax, run_relax_stage  # noqa: E402
-from potflat.types import FlatMesh, Mesh  # noqa: E402
+from potflat.distortion import summarize
+from potflat.errors import FoldedResultError, InvalidOptionError
+from potflat.relax import RelaxOptions, relax, run_relax_stage
+from potflat.types import FlatMesh, Mesh
 
 _spec = importlib.util.spec_from_file_location("_meshes", Path(__file__).parents[1] / "benchmarks" / "_meshes.py")
 meshes = importlib.util.module_from_spec(_spec)
@@ -254,9 +254,9 @@ def test_stretch_factors_never_nan(vessel, stretch, preset):
         assert r.flipped == 0 and r.boundary_overlap == 0
 
 
-@pytest.mark.parametrize("bad", [dict(stiffness=0.0), dict(stiffness=-1.0), dict(stretch=0.0), dict(tol=-1e-3),
-                                 dict(max_iter=0), dict(threads=0), dict(time_budget=-1.0), dict(preset="fast"),
-                                 dict(weighting="cubic"), dict(stiffness=float("nan")), dict(max_iter=2.5)])
+@pytest.mark.parametrize("bad", [{"stiffness": 0.0}, {"stiffness": -1.0}, {"stretch": 0.0}, {"tol": -1e-3},
+                                 {"max_iter": 0}, {"threads": 0}, {"time_budget": -1.0}, {"preset": "fast"},
+                                 {"weighting": "cubic"}, {"stiffness": float("nan")}, {"max_iter": 2.5}])
 def test_invalid_options_raise_one_line_errors(bad):
     with pytest.raises(InvalidOptionError) as err:
         RelaxOptions(**bad)
@@ -331,9 +331,8 @@ def test_run_relax_stage_writes_ply_and_json(tmp_path, vessel):
 
 
 def test_cli_relax(tmp_path, vessel):
-    from typer.testing import CliRunner
-
     from potflat_cli.main import app
+    from typer.testing import CliRunner
 
     src = _write_rollout(tmp_path, vessel, name="hydria")
     runner = CliRunner()

@@ -8,8 +8,6 @@ prolongation) is a gather per grid node over four ranges: race-free and determin
 """
 from __future__ import annotations
 
-import numpy as np
-
 from potflat._kernels._jit import leaf, parallel, prange
 
 #: Bits of the Morton quantisation per axis.

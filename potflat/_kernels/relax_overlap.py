@@ -40,9 +40,7 @@ def _segments_cross(p, q, r, s):
         return True
     if o3 == 0 and _on_segment(r[0], r[1], s[0], s[1], p[0], p[1]):
         return True
-    if o4 == 0 and _on_segment(r[0], r[1], s[0], s[1], q[0], q[1]):
-        return True
-    return False
+    return bool(o4 == 0 and _on_segment(r[0], r[1], s[0], s[1], q[0], q[1]))
 
 
 @leaf

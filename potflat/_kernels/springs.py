@@ -368,8 +368,7 @@ def max_step(x, d, faces, out):
             if c0 > 0.0 and c1 >= 0.0 and c2 >= 0.0:
                 continue  # the area only grows along d
             t = _first_root(c0, c1, c2)
-            if t < best:
-                best = t
+            best = min(best, t)
         out[b] = best
 
 
