@@ -563,6 +563,7 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
         Vs = np.ascontiguousarray(V[order] / unit)
         Fs = np.ascontiguousarray(inverse[F])
         sp = _Springs(Vs, Fs, n, k=settings["stiffness"], relative=settings["weighting"] == "relative")
+        del Vs, Fs
         x = np.ascontiguousarray(x_in[order]) * settings["stretch"]
         notes: list[str] = []
         if fold_free:
@@ -589,6 +590,7 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
         finite = bool(np.isfinite(x).all())
         flipped = int((sp.signed_areas(x) <= 0).sum()) if finite else len(F)
         overlap = sp.overlap(x) if finite else 1
+        del sp, hier  # release the spring system before the distortion summaries (peak memory)
     if fold_free and (flipped or overlap or not finite):
         raise FoldedResultError(
             f"relaxation ended with {flipped} flipped triangles and {overlap} boundary crossings; "
