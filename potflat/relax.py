@@ -423,15 +423,22 @@ def _multilevel(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, le
         cap = min(cap, run.max_iter - len(run.history))
         if cap <= 0:
             break
+        done = len(run.history)
         x_new, conv, its = _lbfgs(sp, x, run, prolong=prolong, restrict=restrict, max_iter=cap, tol=ltol)
         if overlap_free and sp.overlap(x_new) > 0:
-            notes.append(f"level {run.level} made the boundary overlap itself; kept the previous level's result")
+            # the boundary would overlap itself: drop this level (and its iterations from the
+            # history, which stays the path of the returned state) and go on from the previous one
+            notes.append(f"level {run.level} made the boundary overlap itself ({its} iterations dropped)")
+            del run.history[done:]
             levels_out.append({"level": run.level, "iterations": its, "energy": sp.spring_energy(x),
-                                   "seconds": time.perf_counter() - t0, "rejected": True})
-            break
+                               "seconds": time.perf_counter() - t0, "rejected": True})
+            converged = False
+            if run.stopped:
+                break
+            continue
         x = x_new
         levels_out.append({"level": run.level, "iterations": its, "energy": sp.spring_energy(x),
-                               "seconds": time.perf_counter() - t0})
+                           "seconds": time.perf_counter() - t0})
         converged = conv
         if run.stopped:
             converged = False

@@ -348,3 +348,23 @@ def test_cli_relax(tmp_path, vessel):
 def test_progress_bar_goes_to_stderr(vessel, capsys):
     r = relax(vessel, preset="preview", progress=True)
     assert r.flipped == 0 and capsys.readouterr().out == ""
+
+
+def test_a_level_that_overlaps_the_boundary_is_dropped(vessel, monkeypatch):
+    from potflat import relax as relax_module
+
+    calls = []
+    real = relax_module._Springs.overlap
+
+    def overlap(self, x):
+        calls.append(1)
+        return 5 if len(calls) == 3 else real(self, x)  # call 1: start, 2: first level, 3: second level
+
+    monkeypatch.setattr(relax_module._Springs, "overlap", overlap)
+    r = relax(vessel, preset="preview")
+    rejected = [lv for lv in r.levels if lv.get("rejected")]
+    assert len(rejected) == 1 and rejected[0]["level"] == r.levels[1]["level"]
+    assert any("dropped" in n for n in r.notes)
+    assert np.all(np.diff(r.energy_history) <= 0)
+    assert r.iterations == sum(lv["iterations"] for lv in r.levels if not lv.get("rejected"))
+    assert r.flipped == 0 and r.boundary_overlap == 0
