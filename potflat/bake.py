@@ -18,6 +18,7 @@ so large outputs (hundreds of megapixels) are streamed to disk by
 """
 from __future__ import annotations
 
+import json
 import math
 import os
 from collections.abc import Iterator
@@ -567,6 +568,15 @@ def bake(flat: FlatMesh, *, px_per_mm: float | None = None, dpi: float | None = 
                       origin=g.origin.copy(), figures=_figures(r, covered))
 
 
+def _attachment_rows(share: np.ndarray) -> np.ndarray:
+    """RGBA rows of the attachment mask from the covered share of marked faces per pixel."""
+    alpha = np.nan_to_num(share, nan=0.0)
+    out = np.zeros(share.shape + (4,), np.uint8)
+    out[..., :3] = ATTACHMENT_COLOUR[:3]
+    out[..., 3] = np.round(alpha * ATTACHMENT_COLOUR[3]).astype(np.uint8)
+    return out
+
+
 def _rgba8(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
     """(k, w, 3) float in [0, 1] (NaN outside) and coverage -> (k, w, 4) uint8."""
     out = np.empty(rgb.shape[:2] + (4,), np.uint8)
@@ -592,10 +602,35 @@ def stage_name(path: Path) -> str:
     return stem.removesuffix(".relaxed")
 
 
+#: Colour (RGBA) of the faces where a left-out attachment (handle, spout, knob) met the wall.
+ATTACHMENT_COLOUR = (230, 0, 160, 220)
+
+
+def _attachment_roots(flat_ply: Path, n_faces: int) -> tuple[np.ndarray, Path | None]:
+    """Faces where the rollout left out an attachment, from ``NAME.rollout.json`` beside the input.
+
+    Returns a per-face indicator (n_faces,) float64 (empty when there is nothing to show) and
+    the JSON read (for provenance), or ``None``.
+    """
+    stem = flat_ply.name.removesuffix(".ply").removesuffix(".relaxed").removesuffix(".rollout")
+    rollout_json = flat_ply.with_name(f"{stem}.rollout.json")
+    try:
+        att = json.loads(rollout_json.read_text()).get("attachments", {})
+    except (OSError, ValueError):
+        return np.zeros(0), None
+    roots = np.asarray(att.get("root_faces") or [], dtype=np.int64)
+    if att.get("kept") or not len(roots) or roots.max() >= n_faces:
+        return np.zeros(0), rollout_json
+    marks = np.zeros(n_faces)
+    marks[roots] = 1.0
+    return marks, rollout_json
+
+
 def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: list) -> None:
     """Refuse to bake when an output name is an input file (e.g. the scan's texture ``NAME.png``
     when baking into the scan's own folder): the input would be replaced."""
     suffixes = (".png", ".tif", ".position.tif", ".sheet.png", ".bake.json", ".overlay.png", ".scale-layer.png",
+                ".attachments.png",
                 ".scalebar.png", *(f".{m}.png" for m in options.maps))
     for src in (Path(p) for p in inputs if p is not None):
         for out in (out_dir / f"{name}{s}" for s in suffixes):
@@ -613,7 +648,9 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     ``NAME.overlay.png`` (stress over the greyscale painting), ``NAME.scale-layer.png``
     (scale bar and optional 10 mm grid, same size as ``NAME.png``), ``NAME.scalebar.png``
     (the bar alone, true scale), optionally ``NAME.tif`` (16-bit RGBA),
-    ``NAME.position.tif`` (float32 3D points) and ``NAME.sheet.png``; all images share
+    ``NAME.position.tif`` (float32 3D points) and ``NAME.sheet.png``, and
+    ``NAME.attachments.png`` (where handles or other attachments left out by the rollout met
+    the wall, from ``NAME.rollout.json`` beside the input); all images share
     the pixel grid of ``NAME.png`` (maps add a legend band below it).
 
     Parameters
@@ -650,9 +687,12 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
         if not rollout_ply.is_file():
             raise InvalidInputError(f"--sheet needs {rollout_ply.name} beside {flat_ply}; copy it there or drop --sheet")
     _check_not_inputs(out_dir, name, options, [flat_ply, flat.mesh.texture_path, rollout_ply])
+    attachment_marks, rollout_json = _attachment_roots(flat_ply, len(flat.mesh.faces))
     ppm = options.resolution
     r = _Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels)
     g = r.grid
+    if len(attachment_marks):
+        r.face_values["attachments"] = attachment_marks
     paths: dict[str, Path] = {"png": out_dir / f"{name}.png"}
     scales = {m: annotate.map_scale(m, r.vertex_stress if m == "stress" else r.face_values[m]) for m in options.maps}
     legends = {m: annotate.legend_band(scales[m], g.width) for m in options.maps}
@@ -668,6 +708,9 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
             writers[key] = stack.enter_context(PngWriter(paths[key], g.width, g.height + len(band), 4, px_per_mm=ppm))
         paths["scale_layer"] = out_dir / f"{name}.scale-layer.png"
         layer_png = stack.enter_context(PngWriter(paths["scale_layer"], g.width, g.height, 4, px_per_mm=ppm))
+        if len(attachment_marks):
+            paths["attachments"] = out_dir / f"{name}.attachments.png"
+            mask_png = stack.enter_context(PngWriter(paths["attachments"], g.width, g.height, 4, px_per_mm=ppm))
         for r0, r1 in r.strips():
             cov = r.coverage(r0, r1)
             covered += float(cov.sum(dtype=np.float64))
@@ -679,6 +722,8 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
                 if m == "stress":
                     writers["overlay"].write(annotate.overlay(rgb, values, scales[m], cov))
             layer_png.write(layer.rows(r0, r1))
+            if len(attachment_marks):
+                mask_png.write(_attachment_rows(r.scalar("attachments", r0, r1)))
         for key, band in legends.items():
             writers[key].write(band)
     paths["scalebar"] = write_png(out_dir / f"{name}.scalebar.png", layer.bar_image(), px_per_mm=ppm)
@@ -694,7 +739,8 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     if rollout_ply is not None:
         paths["sheet"] = annotate.comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat,
                                                    title=name)
-    inputs = [flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else []) + ([rollout_ply] if rollout_ply else [])
+    inputs = ([flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else [])
+              + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else []))
     summary = {
         **figures,
         "scale_bar_mm": layer.bar_mm,
