@@ -1,0 +1,15 @@
+import importlib
+
+import potflat
+
+
+def test_every_lazy_export_resolves():
+    for name, module in potflat._LAZY.items():
+        assert getattr(potflat, name) is getattr(importlib.import_module(module), name)
+
+
+def test_unknown_attribute_is_an_attribute_error():
+    import pytest
+
+    with pytest.raises(AttributeError):
+        potflat.no_such_thing  # noqa: B018
