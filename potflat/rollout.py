@@ -13,6 +13,7 @@ with a gap from foot to rim) needs no cut.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
@@ -37,10 +38,11 @@ SEAM_BINS = 360
 SEAM_SMOOTH = 5
 #: A face is edge-on to the proxy when its flat area is below this fraction of its 3D area.
 EDGE_ON_RATIO = 0.05
-#: Rounds of trimming folded border strips (each round unrolls again without them).
+#: Rounds of trimming folded border faces: all but the last unroll again without them (the
+#: proxy is refitted), the last removes them from the development as it is.
 TRIM_ROUNDS = 3
 #: Passes of :func:`border_folds` over one development (each peels what the last exposed).
-BORDER_PASSES = 12
+BORDER_PASSES = 50
 #: Rounds of :func:`untangle`; its region widens by one ring every ``UNTANGLE_WIDEN`` rounds.
 UNTANGLE_ROUNDS, UNTANGLE_WIDEN = 200, 20
 
@@ -489,14 +491,25 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
     band = options.band or (0.0, 1.0)
     trimmed = np.zeros(len(F), bool)
     un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, area)
-    for _ in range(TRIM_ROUNDS):
+    for rnd in range(TRIM_ROUNDS):
         fold = border_folds(un.flat.mesh.faces, un.flat.uv, area[un.face_index])
         if not fold.any() or fold.all():
             break
         trimmed[un.face_index[fold]] = True
-        un = _unroll(mesh, axis, options, allowed & ~trimmed, band, h_c, theta_c, area,
-                     seam=(un.seam, un.seam_method))
+        if rnd < TRIM_ROUNDS - 1:
+            un = _unroll(mesh, axis, options, allowed & ~trimmed, band, h_c, theta_c, area,
+                         seam=(un.seam, un.seam_method))
+        else:
+            un = _without(un, ~fold)
     uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv)
+    for _ in range(TRIM_ROUNDS):  # folds pushed against the border by untangling are trimmed
+        fold = border_folds(un.flat.mesh.faces, uv, area[un.face_index])
+        if not fold.any() or fold.all():
+            break
+        trimmed[un.face_index[fold]] = True
+        un = _without(dataclasses.replace(un, flat=un.flat.replace(uv=uv)), ~fold)
+        uv, more, moved_more = untangle(un.flat.mesh.faces, un.flat.uv)
+        n_untangled, moved = n_untangled + more, moved + moved_more
     overlap = len(crossing_segments(uv, boundary_segments(un.flat.mesh.faces, len(uv))[0])[0])
     distortion = un.distortion
     if n_untangled:
@@ -591,6 +604,24 @@ def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndar
                      seam_method, n_seam, n_split)
 
 
+def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
+    """The same development restricted to the faces in ``keep`` ((m,) bool), vertices compacted."""
+    mesh = un.flat.mesh
+    faces = mesh.faces[keep]
+    used = np.flatnonzero(np.bincount(faces.ravel(), minlength=len(mesh.vertices)))
+    new_index = np.zeros(len(mesh.vertices), np.int64)
+    new_index[used] = np.arange(len(used))
+    cut = mesh.replace(vertices=mesh.vertices[used], faces=new_index[faces],
+                       texcoords=None if mesh.texcoords is None else mesh.texcoords[keep],
+                       vertex_colors=None if mesh.vertex_colors is None else mesh.vertex_colors[used])
+    uv = un.flat.uv[used]
+    vertex_index = un.vertex_index[used]
+    copies = len(used) - len(np.unique(vertex_index))
+    seam = min(un.seam_vertices, copies)
+    return _Unrolled(FlatMesh(cut, uv), un.proxy, summarize(cut.vertices, uv, cut.faces), un.face_index[keep],
+                     vertex_index, un.theta[used], un.seam, un.seam_method, seam, copies - seam)
+
+
 def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.ndarray:
     """Faces at the border of a development that fold it over: to trim before relaxing.
 
@@ -632,8 +663,8 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.n
         if len(idx) == 0:
             break
         sub = faces[idx]
-        seg, owner = boundary_segments(sub, len(uv))
-        drop = _edge_on_strips(sub, uv, area_3d[idx], seg) | _minor_fans(sub, area_3d[idx])
+        edges, seg, owner = _edge_table(sub, len(uv))
+        drop = _edge_on_strips(sub, uv, area_3d[idx], seg) | _minor_fans(sub, area_3d[idx], edges, len(uv))
         if not drop.any():  # overlaps are judged on a border without folded strips
             a, b = crossing_segments(uv, seg)
             drop[owner[a]] = True
@@ -666,17 +697,23 @@ def boundary_segments(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray
     owner : (b,) int64
         The face of each segment.
     """
+    _, seg, owner = _edge_table(faces, n)
+    return seg, owner
+
+
+def _edge_table(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unique edges ((e, 2) int64, sorted pairs), boundary segments and their faces."""
     e = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
     s = np.sort(e, axis=1)
     key = s[:, 0] * n + s[:, 1]
     order = np.argsort(key, kind="stable")
     k = key[order]
-    single = np.ones(len(k), bool)
-    same = k[1:] == k[:-1]
-    single[1:] &= ~same
-    single[:-1] &= ~same
-    pick = order[single]
-    return e[pick], pick // 3
+    first = np.ones(len(k), bool)
+    first[1:] = k[1:] != k[:-1]
+    start = np.flatnonzero(first)
+    count = np.diff(np.append(start, len(k)))
+    single = order[start[count == 1]]
+    return s[order[start]], e[single], single // 3
 
 
 def crossing_segments(uv: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -718,37 +755,47 @@ def crossing_segments(uv: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.n
     return a[cross], b[cross]
 
 
-def _minor_fans(faces: np.ndarray, area_3d: np.ndarray) -> np.ndarray:
-    """Faces of the smaller fans at vertices whose faces form several fans (see :func:`border_folds`)."""
-    new_faces, vertex_index, _, _, n_split = cut_open(faces, np.zeros(faces.shape))
-    if n_split == 0:
-        return np.zeros(len(faces), bool)
-    fan_area = np.bincount(new_faces.ravel(), np.repeat(area_3d, 3), len(vertex_index))
-    # copies of a vertex are consecutive in vertex_index; keep the largest fan of each
+def _minor_fans(faces: np.ndarray, area_3d: np.ndarray, edges: np.ndarray, n: int) -> np.ndarray:
+    """Faces of the smaller fans at vertices whose faces form several fans (see :func:`border_folds`).
+
+    A vertex with ``k`` faces in open fans has ``k`` plus one edge per fan, so a vertex
+    with at least two more edges than faces is pinched; only the faces around those are cut
+    apart (:func:`cut_open`) to find the fans.
+    """
+    pinched = np.bincount(edges.ravel(), minlength=n) - np.bincount(faces.ravel(), minlength=n) >= 2
+    out = np.zeros(len(faces), bool)
+    if not pinched.any():
+        return out
+    local = np.flatnonzero(pinched[faces].any(axis=1))
+    new_faces, vertex_index, _, _, _ = cut_open(faces[local], np.zeros((len(local), 3)))
+    fan_area = np.bincount(new_faces.ravel(), np.repeat(area_3d[local], 3), len(vertex_index))
+    # keep the largest fan of each pinched vertex
     order = np.lexsort((-fan_area, vertex_index))
     first = np.ones(len(order), bool)
     first[1:] = vertex_index[order][1:] != vertex_index[order][:-1]
     minor = np.zeros(len(vertex_index), bool)
     minor[order[~first]] = True
-    return minor[new_faces].any(axis=1)
+    minor &= pinched[vertex_index]
+    out[local] = minor[new_faces].any(axis=1)
+    return out
 
 
 def _edge_on_strips(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, seg: np.ndarray) -> np.ndarray:
     """Edge-on strips that contain a flipped face and touch the boundary (see :func:`border_folds`)."""
     flat = signed_areas(faces, uv)
-    edge_on = flat < EDGE_ON_RATIO * area_3d
-    flipped = flat <= 0
-    if not flipped.any():
-        return np.zeros(len(faces), bool)
+    out = np.zeros(len(faces), bool)
+    if not (flat <= 0).any():
+        return out
+    sel = np.flatnonzero(flat < EDGE_ON_RATIO * area_3d)
+    sub = faces[sel]
+    comp = FaceGraph(len(sel), face_adjacency(sub)).components()
     on_border = np.zeros(len(uv), bool)
     on_border[seg.ravel()] = True
-    graph = FaceGraph(len(faces), face_adjacency(faces))
-    pairs = graph.pairs
-    comp = graph.components(edge_on[pairs[:, 0]] & edge_on[pairs[:, 1]])
     k = int(comp.max()) + 1
-    has_flip = np.bincount(comp[flipped], minlength=k) > 0
-    touches = np.bincount(comp[edge_on & on_border[faces].any(axis=1)], minlength=k) > 0
-    return edge_on & (has_flip & touches)[comp]
+    has_flip = np.bincount(comp[flat[sel] <= 0], minlength=k) > 0
+    touches = np.bincount(comp[on_border[sub].any(axis=1)], minlength=k) > 0
+    out[sel] = (has_flip & touches)[comp]
+    return out
 
 
 def untangle(faces: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, int, int]:
@@ -779,24 +826,33 @@ def untangle(faces: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, int, int]:
     if n_bad == 0:
         return uv, 0, 0
     n = len(uv)
-    e = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    A = scipy.sparse.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
-                                shape=(n, n)).tocsr()
-    A.data[:] = 1.0  # duplicates (an edge of two faces) summed: count once
-    deg = np.maximum(np.asarray(A.sum(axis=1)).ravel(), 1.0)
-    fixed = np.zeros(n, bool)
-    fixed[boundary_segments(faces, n)[0].ravel()] = True
+    edges, seg, _ = _edge_table(faces, n)
+    A = scipy.sparse.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]],
+                                                            np.r_[edges[:, 1], edges[:, 0]])), shape=(n, n)).tocsr()
+    deg = np.maximum(np.diff(A.indptr), 1).astype(np.float64)
+    movable = np.ones(n, bool)
+    movable[seg.ravel()] = False
+    # faces of each vertex (CSR), to re-check only the faces around the moved vertices
+    corner_order = np.argsort(faces.ravel(), kind="stable")
+    vf_ptr = np.concatenate([[0], np.cumsum(np.bincount(faces.ravel(), minlength=n))])
     x = uv.copy()
     region = np.zeros(n, bool)
+    region[faces[bad].ravel()] = True
     for r in range(UNTANGLE_ROUNDS):
-        bad = signed_areas(faces, x) <= 0
-        if not bad.any():
-            break
-        region[faces[bad].ravel()] = True
-        if r % UNTANGLE_WIDEN == UNTANGLE_WIDEN - 1:
+        if r % UNTANGLE_WIDEN == UNTANGLE_WIDEN - 1:  # widen the region around persistent tangles
             region |= (A @ region.astype(np.float64)) > 0
-        region &= ~fixed
-        x[region] = (A @ x)[region] / deg[region, None]
+        region &= movable
+        idx = np.flatnonzero(region)
+        if len(idx) == 0:
+            break
+        x[idx] = (A[idx] @ x) / deg[idx, None]
+        count = vf_ptr[idx + 1] - vf_ptr[idx]
+        offset = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+        near = np.unique(corner_order[np.repeat(vf_ptr[idx], count) + offset] // 3)
+        still = near[signed_areas(faces[near], x) <= 0]
+        if len(still) == 0:
+            break
+        region[faces[still].ravel()] = True
     return x, n_bad, int(np.count_nonzero(np.any(x != uv, axis=1)))
 
 
