@@ -2,8 +2,15 @@
 
 ``rollout(mesh)`` returns a :class:`RolloutResult` whose :attr:`~RolloutResult.flat` is a
 disk-topology mesh covering every selected face, with seam vertices duplicated (one copy per
-side) and no triangle deleted or altered. ``run_rollout_stage(scan, out_dir)`` reads a scan
-and writes ``NAME.rollout.ply`` and ``NAME.rollout.json`` (see ``docs/formats.md``).
+side) and no triangle altered. The selected faces are the painted side asked for (the outer
+wall, or the inner one seen from inside: :mod:`potflat.walls`), without attachments such as
+handles (:mod:`potflat.attachments`) and without the border faces that fold the development
+over (the rim top, a base's underside, break faces: :func:`border_folds`); folds inside the
+region, from the scan itself, are unfolded (:func:`untangle`), so the result has no flipped
+face and no overlapping border, and everything left out is reported.
+``run_rollout_stage(scan, out_dir)`` reads a scan and writes ``NAME.rollout.ply``,
+``NAME.rollout.json`` (see ``docs/formats.md``) and the profile ``NAME.profile.csv`` /
+``NAME.profile.svg`` (see ``docs/profile.md``).
 
 Angles: the reference direction of the axis (:attr:`AxisFit.reference`) is 0 degrees; the
 seam angle is measured from it counter-clockwise about the axis (axis pointing up). Angles
@@ -960,10 +967,23 @@ def rollout_summary(result: RolloutResult) -> dict:
         "walls": result.walls.summary(),
         "attachments": _attachments_summary(result),
         "trimmed": _trimmed_summary(result, mesh.mm_per_unit),
+        "notes": _notes(result),
         "untangled": {"faces": result.untangled_faces, "vertices_moved": result.untangled_vertices,
                       "reason": "faces folded inside the development by the scan's own creases and "
                                 "slivers, unfolded by moving their vertices to their neighbours' mean"},
     }
+
+
+def _notes(result: RolloutResult) -> list[str]:
+    """Warnings for the sidecar: what the user should know before relaxing."""
+    notes = []
+    if result.distortion.flipped:
+        why = (" (kept attachments: a handle cannot be unrolled without folds; leave them out)"
+               if result.attachments_kept and result.attachments.n_faces else "")
+        notes.append(f"{result.distortion.flipped} faces stay flipped{why}; the relax stage will refuse them")
+    if result.boundary_overlap:
+        notes.append(f"the border overlaps itself at {result.boundary_overlap} places; the relax stage will refuse it")
+    return notes
 
 
 def _attachments_summary(result: RolloutResult) -> dict:

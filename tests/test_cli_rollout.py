@@ -92,3 +92,17 @@ def test_help_shows_an_example():
     result = runner.invoke(app, ["rollout", "--help"])
     assert result.exit_code == 0
     assert "Example:" in result.output and "potflat rollout" in result.output
+
+
+def test_side_and_keep_attachments_reach_the_stage(tmp_path):
+    from potflat.synthetic import make_vessel, write_ply_colored
+
+    scan = write_ply_colored(make_vessel("cup", n_vertices=2000, seed=1, texture_size=64), tmp_path / "cup.ply")
+    result = runner.invoke(app, ["rollout", str(scan), "-o", str(tmp_path), "--side", "inner",
+                                 "--keep-attachments", "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert data["walls"]["side"] == "inner" and data["attachments"]["kept"] is True
+    assert data["distortion"]["flipped"] == 0 and (tmp_path / "cup.profile.svg").is_file()
+    result = runner.invoke(app, ["rollout", str(scan), "-o", str(tmp_path), "--side", "both"])
+    assert result.exit_code == 2 and "side" in result.output

@@ -66,7 +66,8 @@ def rollout_command(
     if output is not None and output.exists() and not output.is_dir():
         raise InvalidOptionError(f"--output {output} is a file; give a folder")
     values = {"proxy": proxy, "axis": axis, "flip": flip or None, "seam": seam, "band": band,
-              "angles": angles, "view": view, "units": units, "texture": None if texture else False}
+              "angles": angles, "view": view, "units": units, "texture": None if texture else False,
+              "side": side, "keep_attachments": keep_attachments or None}
     options = options_from_cli("rollout", values)
     _rollout(scan, output, options, name=name, quiet=quiet, as_json=json)
 
@@ -116,6 +117,8 @@ def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quie
         out.print(f"trimmed {tr['faces']} folded border faces ({tr['area_mm2']:.4g} {mm2}: rim top, base "
                   f"underside, breaks); untangled {s['untangled']['faces']} folded faces inside")
     out.print(f"profile: {result.paths['profile_csv'].name}, {result.paths['profile_svg'].name}")
+    for note in s["notes"]:
+        out.print(f"[yellow]note:[/] {note}")
     flipped = f"[red]{d['flipped']} flipped[/]" if d["flipped"] else "0 flipped"
     out.print(f"distortion: edge-length RMS {d['edge_rms']:.4f}, mean |log area| {d['area_mean_abs_log']:.4f}, "
               f"anisotropy mean {d['anisotropy_mean']:.3f}, {flipped}")
