@@ -13,10 +13,10 @@ the seam found in one pose, carried into the other by the same motion.
 from __future__ import annotations
 
 import numpy as np
+from _revolve import random_rotation, revolve
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from _revolve import random_rotation, revolve
 from potflat.relax import relax
 from potflat.rollout import rollout
 from potflat.types import Mesh

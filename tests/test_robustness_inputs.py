@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from potflat_cli.main import app
 from typer.testing import CliRunner
 
 from potflat.io.stage import read_flat_ply
 from potflat.synthetic import make_vessel, write_obj, write_ply_colored
-from potflat_cli.main import app
 
 runner = CliRunner()
 
@@ -161,7 +161,7 @@ def test_broken_scan_in_a_real_process(tmp_path):
     p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 7\n")
     out = tmp_path / "out"
     r = subprocess.run([sys.executable, "-m", "potflat_cli", "run", str(p), "-o", str(out)],
-                       capture_output=True, text=True, timeout=120)
+                       check=False, capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and r.stdout == ""
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and "missing.obj" in lines[0], r.stderr
