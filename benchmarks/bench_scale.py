@@ -55,7 +55,7 @@ def _status_kb(pid: int) -> dict[str, int]:
         text = Path(f"/proc/{pid}/status").read_text()
     except OSError:
         return {}
-    return {k: int(v) for k, v in re.findall(r"^(VmRSS|VmHWM):\s+(\d+) kB", text, re.M)}
+    return {k: int(v) for k, v in re.findall(r"^(VmRSS|VmHWM):\s+(\d+) kB", text, re.MULTILINE)}
 
 
 def run_benchmark(scan: Path, out: Path, *, preset: str, px_per_mm: float, interval: float = 0.1) -> dict:
@@ -115,24 +115,23 @@ def _image(out: Path, name: str) -> str:
 
 def table(info: dict, result: dict, image: str, *, command: str, preset: str, px_per_mm: float) -> str:
     """The Markdown section (heading, setup line, table, verdict)."""
-    lines = [SECTION, "",
-             f"`{command}` "
+    setup = (f"`{command}` "
              f"({time.strftime('%Y-%m-%d')}, {os.cpu_count()} cores, {platform.machine()}, Python "
              f"{platform.python_version()}): a synthetic painted amphora, {info['vertices']:,} vertices, "
              f"{info['faces']:,} faces, {info['texture']} texture atlas, OBJ {info['obj_mb']:.0f} MB "
              f"(generated in {info['generate_s']:.0f} s, not counted), through `potflat run --preset {preset} "
              f"--px-per-mm {px_per_mm:g}` in one process: painting {image}. Memory is the resident set sampled "
              "every 0.1 s (stage peaks) and the process's high-water mark (total); the machine is shared, "
-             "so treat times as +-30%.", "",
-             "| stage | wall s | peak memory GB |", "|---|---:|---:|"]
+             "so treat times as +-30%.")
+    lines = [SECTION, "", setup, "", "| stage | wall s | peak memory GB |", "|---|---:|---:|"]
     for r in result["rows"]:
         lines.append(f"| {r['stage']} | {r['wall_s']:.1f} | {r['peak_gb']:.2f} |")
     lines.append(f"| **whole run** (incl. start-up) | **{result['total_wall_s']:.1f}** "
                  f"(CPU {result['cpu_s']:.0f}) | **{result['peak_gb']:.2f}** |")
     f = result["figures"]
     verdict = "within" if result["peak_gb"] <= GOAL_GB else "OVER"
-    lines += ["", f"Peak {result['peak_gb']:.2f} GB: {verdict} the {GOAL_GB:g} GB goal. Relaxed: edge-length "
-              f"RMS {f.get('edge_rms', float('nan')):.4f}, {f.get('flipped')} flipped triangles.", ""]
+    lines += ["", (f"Peak {result['peak_gb']:.2f} GB: {verdict} the {GOAL_GB:g} GB goal. Relaxed: edge-length "
+                   f"RMS {f.get('edge_rms', float('nan')):.4f}, {f.get('flipped')} flipped triangles."), ""]
     return "\n".join(lines)
 
 
