@@ -231,6 +231,7 @@ class _Springs:
         self._es = np.empty(n)
         self._eb = np.empty(n)
         self._areas = np.empty(self.m)
+        self.diag = np.empty(n)
         self._blocks = np.empty(max(1, -(-self.m // ks.BLOCK)))
 
     def evaluate(self, x: np.ndarray, *, barrier: bool = True) -> tuple[float, float, np.ndarray]:
@@ -240,7 +241,7 @@ class _Springs:
             self.ks.face_areas(x, self.faces, self._areas)
         self.ks.energy_gradient(x, self.ptr, self.nbr, self.rst, self.k, self.relative, LENGTH_FLOOR,
                                 self.vf_ptr, self.vf_tri, self.faces, self._areas, self.a_ref,
-                                BARRIER_MU if barrier else 0.0, BARRIER_EPS, g, self._es, self._eb)
+                                BARRIER_MU if barrier else 0.0, BARRIER_EPS, g, self._es, self._eb, self.diag)
         es = float(np.sum(self._es))
         return es + float(np.sum(self._eb)), es, g
 
@@ -334,13 +335,18 @@ def _relative_change(hist: list[float], window: int) -> float:
     return abs(old - new) / (window * max(abs(new), 1e-300))
 
 
-def _lbfgs(sp: _Springs, x: np.ndarray, run: _Run, *, prolong, restrict, max_iter: int, tol: float) -> tuple[np.ndarray, bool, int]:
+def _lbfgs(sp: _Springs, x: np.ndarray, run: _Run, *, prolong, restrict, max_iter: int, tol: float,
+           jacobi: bool = False) -> tuple[np.ndarray, bool, int]:
     """Minimise the energy over ``x + prolong(c)`` with L-BFGS and a flip-free monotone line search.
 
+    With ``jacobi`` (per-vertex unknowns only) the initial inverse Hessian is the inverse of
+    the Hessian diagonal bound of the current state instead of a multiple of the identity, so
+    a squeezed triangle's stiff barrier does not shrink everybody's step.
     Returns the new positions, whether the level converged, and its iteration count.
     """
     E, _Es, gf = sp.evaluate(x)
     g = restrict(gf)
+    dinv = 1.0 / np.maximum(sp.diag, 1e-12)[:, None] if jacobi else None
     mem: deque = deque(maxlen=LBFGS_MEMORY)  # (s, y, 1 / s.y)
     hist = [E]
     it = 0
@@ -352,7 +358,12 @@ def _lbfgs(sp: _Springs, x: np.ndarray, run: _Run, *, prolong, restrict, max_ite
             a = rho * sp.dot(s, q)
             alphas.append(a)
             q = q - a * y
-        if mem:
+        if dinv is not None:
+            q = q * dinv
+            if mem:
+                s, y, rho = mem[-1]
+                q = q * (1.0 / (rho * sp.dot(y, y * dinv)))
+        elif mem:
             s, y, rho = mem[-1]
             q = q * (1.0 / (rho * sp.dot(y, y)))
         for (s, y, rho), a in zip(mem, reversed(alphas)):
@@ -361,14 +372,14 @@ def _lbfgs(sp: _Springs, x: np.ndarray, run: _Run, *, prolong, restrict, max_ite
         gd = sp.dot(g, q)
         if not gd < 0.0:
             mem.clear()
-            q = -g
-            gd = -sp.dot(g, g)
+            q = -g if dinv is None else -g * dinv
+            gd = sp.dot(g, q)
             if not gd < 0.0:
                 converged = True  # zero gradient
                 break
         dx = prolong(q)
         t = 1.0
-        if not mem:
+        if not mem and dinv is None:
             peak = float(np.abs(dx).max())
             t = min(1.0, 0.1 / peak) if peak > 0 else 1.0
         t = min(t, STEP_FRACTION * sp.max_step(x, dx))
@@ -390,6 +401,8 @@ def _lbfgs(sp: _Springs, x: np.ndarray, run: _Run, *, prolong, restrict, max_ite
         if sy > 1e-300:
             mem.append((s, y, 1.0 / sy))
         x, E, g = xn, En, gn
+        if dinv is not None:
+            dinv = 1.0 / np.maximum(sp.diag, 1e-12)[:, None]
         it += 1
         hist.append(En)
         if run.record(En):
@@ -424,7 +437,8 @@ def _multilevel(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, le
         if cap <= 0:
             break
         done = len(run.history)
-        x_new, conv, its = _lbfgs(sp, x, run, prolong=prolong, restrict=restrict, max_iter=cap, tol=ltol)
+        x_new, conv, its = _lbfgs(sp, x, run, prolong=prolong, restrict=restrict, max_iter=cap, tol=ltol,
+                                  jacobi=kind == "fine")
         if overlap_free and sp.overlap(x_new) > 0:
             # the boundary would overlap itself: drop this level (and its iterations from the
             # history, which stays the path of the returned state) and go on from the previous one

@@ -249,7 +249,7 @@ def face_areas(x, faces, out):
 
 @parallel
 def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, faces, areas, a_ref, mu, eps,
-                    grad, e_spring, e_barrier):
+                    grad, e_spring, e_barrier, diag):
     """Spring + barrier energy per vertex and the gradient, gathered per vertex.
 
     Parameters
@@ -274,12 +274,16 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, face
         Output: dE/dx.
     e_spring, e_barrier : (n,) float64
         Output: each vertex's share of the spring and barrier energy (sum = energy).
+    diag : (n,) float64
+        Output: a bound of the Hessian's diagonal per vertex (sum of spring coefficients plus
+        the barrier's curvature), the Jacobi preconditioner of the fine-level solve.
     """
     n = x.shape[0]
     for i in prange(n):
         gx = 0.0
         gy = 0.0
         es = 0.0
+        hd = 0.0
         xi = x[i, 0]
         yi = x[i, 1]
         for p in range(ptr[i], ptr[i + 1]):
@@ -292,6 +296,7 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, face
             if relative:
                 rr = max(r, r_floor)
                 c = k / (rr * rr)
+            hd += c
             dl = ln - r
             es += 0.25 * c * dl * dl
             if ln > 0.0:
@@ -326,8 +331,12 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, face
                 else:
                     j1 = a0
                     j2 = a1
-                gx += dphi * 0.5 * (x[j1, 1] - x[j2, 1])
-                gy += dphi * 0.5 * (x[j2, 0] - x[j1, 0])
+                ax = 0.5 * (x[j1, 1] - x[j2, 1])
+                ay = 0.5 * (x[j2, 0] - x[j1, 0])
+                gx += dphi * ax
+                gy += dphi * ay
+                hd += scale / (area * area) * (ax * ax + ay * ay)
+        diag[i] = hd
         grad[i, 0] = gx
         grad[i, 1] = gy
         e_spring[i] = es
