@@ -403,3 +403,19 @@ def test_relax_and_bake_never_write_over_their_input(tmp_path, scan):
     for args in (["relax", rollout, "-o", blocker / "sub", "--preset", "preview"],
                  ["bake", relaxed, "-o", blocker / "sub", "--px-per-mm", "1"]):
         _assert_clean_error(_invoke(args), None, "notes.txt")
+
+
+@pytest.mark.parametrize("command,name", [("relax", "pot.rollout.ply"), ("bake", "pot.relaxed.ply")])
+def test_truncated_or_foreign_stage_file_is_one_clear_line(tmp_path, command, name):
+    """A stage file cut short (a copy interrupted) or an ascii PLY from another tool."""
+    from potflat.io.stage import write_flat_ply
+    from potflat.types import FlatMesh, Mesh
+
+    V = np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0], [10, 10, 0]], float)
+    flat = FlatMesh(Mesh(V, np.array([[0, 1, 2], [1, 3, 2]])), V[:, :2])
+    data = write_flat_ply(tmp_path / name, flat).read_bytes()
+    (tmp_path / name).write_bytes(data[: len(data) - 20])
+    out = tmp_path / "out"
+    _assert_clean_error(_invoke([command, tmp_path / name, "-o", out]), out, name, "truncated", "again")
+    (tmp_path / name).write_text("ply\nformat ascii 1.0\nelement vertex 0\nend_header\n")
+    _assert_clean_error(_invoke([command, tmp_path / name, "-o", out]), out, name, "ascii", "potflat")
