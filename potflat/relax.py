@@ -161,7 +161,8 @@ class RelaxResult:
     distortion_before : DistortionSummary
         Distortion of the input flattening.
     timings : dict
-        Seconds per phase (``setup``, ``solve``, ``check``, ``total``).
+        Seconds per phase: ``setup`` (springs, hierarchy, untangling), ``solve``, ``check``
+        (fold checks, distortion summaries, stress), ``total``.
     preset : str
     levels : tuple of dict
         Per level: name, iterations, spring energy (without barrier) at its end, seconds.
@@ -564,7 +565,6 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
     fold_free = settings["solver"] != "dynamics"
     t_start = time.perf_counter()
     deadline = t_start + (settings["time_budget"] or np.inf)
-    before = summarize(V, uv, F)
 
     with numba_threads(options.threads):
         # normalised units: lengths / mean 3D edge length, layout centred on its bounding box
@@ -620,6 +620,7 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
         raise FoldedResultError("the paper dynamics diverged (NaN); use the default preset")
     uv_out = np.empty_like(x)
     uv_out[order] = x * unit + centre
+    before = summarize(V, uv, F)
     after = summarize(V, uv_out, F)
     stress = vertex_stress(V, uv_out, F, flat.mesh.mm_per_unit)
     t_end = time.perf_counter()
