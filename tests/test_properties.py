@@ -147,3 +147,15 @@ def test_rollout_and_relax_scale_with_the_unit(mesh, unit):
     # the residual stress is in sqrt(mm): the same in every unit
     # (a unit mistake would scale it by sqrt(k) or 1/sqrt(k): at least 1.6 times here)
     np.testing.assert_allclose(rb.flat.stress, ra.flat.stress, rtol=0, atol=1e-2 * ra.flat.stress.max() + 1e-5)
+
+
+def test_georeferenced_coordinates_far_from_the_origin():
+    """A scan stored 5 km from the origin (georeferenced, in mm) unrolls as at the origin."""
+    mesh, *_ = revolve(lambda t: 30 + 8 * np.sin(1.3 * np.pi * t), lambda t: 90 * t, n_theta=32, n_t=10, seed=1)
+    far = Mesh(mesh.vertices + [5e6, -5e6, 2.5e6], mesh.faces)
+    a, b = rollout(mesh), rollout(far)
+    np.testing.assert_allclose(b.axis.direction, a.axis.direction, atol=1e-7)
+    np.testing.assert_allclose(_seam_direction(b), _seam_direction(a), atol=1e-7)
+    _figures_close(a.distortion, b.distortion, 1e-6)
+    m = len(mesh.faces)
+    assert _rigid_residual(_corner_uv(a, m), _corner_uv(b, m)) < 1e-6

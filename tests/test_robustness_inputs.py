@@ -419,3 +419,15 @@ def test_truncated_or_foreign_stage_file_is_one_clear_line(tmp_path, command, na
     _assert_clean_error(_invoke([command, tmp_path / name, "-o", out]), out, name, "truncated", "again")
     (tmp_path / name).write_text("ply\nformat ascii 1.0\nelement vertex 0\nend_header\n")
     _assert_clean_error(_invoke([command, tmp_path / name, "-o", out]), out, name, "ascii", "potflat")
+
+
+@pytest.mark.parametrize("value,words", [("1000", ("1000 px/mm", "megapixels", "or less")),
+                                         ("0", ("px_per_mm", "positive")), ("nan", ("px_per_mm", "positive"))])
+def test_absurd_resolution_is_refused_before_rendering(tmp_path, value, words):
+    from potflat.io.stage import write_flat_ply
+    from potflat.types import FlatMesh, Mesh
+
+    V = np.array([[0, 0, 0], [600, 0, 0], [0, 500, 0], [600, 500, 0]], float)  # 600 x 500 mm
+    path = write_flat_ply(tmp_path / "pot.relaxed.ply", FlatMesh(Mesh(V, np.array([[0, 1, 2], [1, 3, 2]])), V[:, :2]))
+    out = tmp_path / "out"
+    _assert_clean_error(_invoke(["bake", path, "-o", out, "--px-per-mm", value]), out, *words)
