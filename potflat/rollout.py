@@ -980,6 +980,10 @@ def _notes(result: RolloutResult) -> list[str]:
     if result.distortion.flipped:
         why = (" (kept attachments: a handle cannot be unrolled without folds; leave them out)"
                if result.attachments_kept and result.attachments.n_faces else "")
+        if result.distortion.flipped > 0.05 * len(result.flat.mesh.faces):
+            why = (" (they face the other way: the two sides of the wall were not told apart"
+                   + (", the scan's faces were read as pointing inwards" if result.walls.normals_inverted else "")
+                   + "; check the axis (--axis) or try --side inner)")
         notes.append(f"{result.distortion.flipped} faces stay flipped{why}; the relax stage will refuse them")
     if result.boundary_overlap:
         notes.append(f"the border overlaps itself at {result.boundary_overlap} places; the relax stage will refuse it")

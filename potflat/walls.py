@@ -22,7 +22,8 @@ towards it, and the rim crest is the fold where ``n_r`` changes sign.
 4. the selection is the largest connected region of the side asked for.
 
 Scans whose faces all point inwards (an open surface the loader could not orient) are
-detected by the inner side being larger than the outer one, and read with flipped normals.
+detected by the inner side being more than twice as large as the outer one, and read with
+flipped normals.
 """
 from __future__ import annotations
 
@@ -46,6 +47,7 @@ _SMOOTH_ITERATIONS = 2
 _ISLAND_AREA_FRACTION = 0.002  # same-side regions below this share of the area are noise
 _FOLD_COSINE = 0.5  # |mean axial normal| at a region border above this = a rim/foot fold
 _CLEANUP_PASSES = 5
+_INSIDE_OUT_RATIO = 2.0  # inner/outer area above which a scan is tried with flipped normals
 
 
 def check_axis(axis_point, axis_direction) -> tuple[np.ndarray, np.ndarray]:
@@ -510,11 +512,14 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
 def wall_labels(fr: FaceFrame, *, flat_tolerance: float = 0.25) -> tuple[np.ndarray, bool]:
     """Side of every face: ``(labels (m,) int8 (+1 outer, -1 inner), normals_inverted)``.
 
-    See the module docstring for the steps. If the inner side comes out larger than the outer
-    one, the scan is taken to be inside-out and labelled again with flipped normals.
+    See the module docstring for the steps. If the inner side comes out more than twice as
+    large as the outer one, the scan is taken to be inside-out and labelled again with
+    flipped normals.
     """
     labels = _label_once(fr, flat_tolerance, sign=1.0)
-    if fr.area[labels == INNER].sum() > fr.area[labels == OUTER].sum():
+    # inside-out: most of the area faces the axis. Not when the two sides are about equal
+    # (a thick sherd: its back is as large as its face)
+    if fr.area[labels == INNER].sum() > _INSIDE_OUT_RATIO * fr.area[labels == OUTER].sum():
         flipped = _label_once(fr, flat_tolerance, sign=-1.0)
         if fr.area[flipped == OUTER].sum() > fr.area[labels == OUTER].sum():
             return flipped, True

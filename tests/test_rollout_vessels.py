@@ -234,3 +234,16 @@ def test_potflat_run_on_a_real_scan_is_fold_free(tmp_path):
     assert (out / "sea-vase.png").exists() and (out / "sea-vase.profile.svg").exists()
     flat = read_flat_ply(out / "sea-vase.relaxed.ply")
     assert np.all(signed_areas(flat.mesh.faces, flat.uv) > 0)
+
+
+def test_thick_sherd_unrolls_its_painted_face_only():
+    # a thick sherd's back is about as large as its face: it must not be read as inside-out
+    sv = make_vessel("sherd", n_vertices=6000, seed=3, texture_size=64, sherd_of="kylix", sherd_thickness=3.0)
+    res = rollout(sv.mesh)
+    assert not res.walls.normals_inverted
+    parts = sv.face_part[res.face_index]
+    assert not np.any(parts == PART_INNER)
+    # (about 12 % of the face is lost where the wall labels meet the break faces)
+    assert np.count_nonzero(parts == PART_OUTER) > 0.8 * np.count_nonzero(sv.face_part == PART_OUTER)
+    assert res.seam_method == "gap" and res.seam_vertices == 0
+    _check_clean(res)
