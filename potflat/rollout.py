@@ -314,7 +314,7 @@ def _longest_min_run(cost: np.ndarray) -> int:
         if run > best_len:
             best_len, best_mid = run, (i - run + (run - 1) / 2.0)
         run = 0
-    return int(round(start + best_mid)) % k
+    return round(start + best_mid) % k
 
 
 def choose_seam(mesh: Mesh, faces: np.ndarray, theta_c: np.ndarray, area: np.ndarray,

@@ -2,10 +2,9 @@ import json
 
 import pytest
 import trimesh
-from typer.testing import CliRunner
-
 from _revolve import vase
 from potflat_cli.main import app
+from typer.testing import CliRunner
 
 runner = CliRunner()
 
