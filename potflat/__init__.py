@@ -1,11 +1,16 @@
 """potflat: true-to-scale flat images of painted pottery from textured 3D scans.
 
-Stages, each a plain function with keyword-only options:
+Stages, each a plain function with keyword-only options, in the module of its name
+(``from potflat.rollout import rollout``):
 
 * :func:`potflat.load_scan` - read and clean a scan (OBJ, PLY, STL, OFF, GLB/glTF).
-* :func:`potflat.rollout` - find the axis, fit a proxy, cut a seam and unroll.
-* :func:`potflat.relax` - fold-free elastic relaxation of the rollout.
-* :func:`potflat.bake` - texture and distortion maps as true-scale images.
+* :func:`potflat.rollout.rollout` - find the axis, fit a proxy, cut a seam and unroll.
+* :func:`potflat.relax.relax` - fold-free elastic relaxation of the rollout.
+* :func:`potflat.bake.bake` - texture and distortion maps as true-scale images.
+* :func:`potflat.run_scan` - all three, from a scan file to images.
+
+The stage functions are not re-exported at the top level: ``potflat.rollout`` is the
+module once it is imported, and a name that changes meaning with import order is a trap.
 
 Heavy modules (Numba kernels) are imported on first use, so ``import potflat`` is fast.
 """
@@ -21,15 +26,12 @@ _LAZY = {
     "CleaningReport": "potflat.cleaning",
     "clean_mesh": "potflat.cleaning",
     "estimate_axis": "potflat.axis",
-    "rollout": "potflat.rollout",
     "RolloutOptions": "potflat.rollout",
     "RolloutResult": "potflat.rollout",
     "run_rollout_stage": "potflat.rollout",
-    "relax": "potflat.relax",
     "RelaxOptions": "potflat.relax",
     "RelaxResult": "potflat.relax",
     "run_relax_stage": "potflat.relax",
-    "bake": "potflat.bake",
     "BakeOptions": "potflat.bake",
     "BakeResult": "potflat.bake",
     "run_bake_stage": "potflat.bake",
