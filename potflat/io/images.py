@@ -51,7 +51,11 @@ def read_texture(path: str | os.PathLike) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise InvalidInputError(f"texture {path} not found; put the texture image beside the stage PLY")
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH)
+    try:
+        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH)
+    except cv2.error:  # e.g. a header declaring more than CV_IO_MAX_IMAGE_PIXELS (decompression bomb)
+        raise InvalidInputError(f"texture {path} declares an absurd size or is corrupt (OpenCV refused it); "
+                                "restore a sane image") from None
     if img is None:
         raise InvalidInputError(f"cannot decode texture {path}; convert it to PNG or JPEG")
     if img.dtype not in (np.uint8, np.uint16):
