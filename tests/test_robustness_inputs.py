@@ -431,3 +431,32 @@ def test_absurd_resolution_is_refused_before_rendering(tmp_path, value, words):
     path = write_flat_ply(tmp_path / "pot.relaxed.ply", FlatMesh(Mesh(V, np.array([[0, 1, 2], [1, 3, 2]])), V[:, :2]))
     out = tmp_path / "out"
     _assert_clean_error(_invoke(["bake", path, "-o", out, "--px-per-mm", value]), out, *words)
+
+
+@pytest.mark.parametrize("spoil,words", [
+    (lambda p: p.unlink(), ("pot.texture.png", "not found")),
+    (lambda p: p.write_bytes(b"garbage"), ("pot.texture.png", "cannot decode")),
+    (lambda p: _texture_bomb(p), ("pot.texture.png", "absurd size")),
+], ids=["missing", "corrupt", "bomb"])
+def test_bad_texture_at_bake_time_is_one_clear_line(tmp_path, spoil, words):
+    """The texture beside a stage file lost, damaged or replaced by a decompression bomb
+    between rollout and bake."""
+    from PIL import Image
+
+    from potflat.io.stage import write_flat_ply
+    from potflat.types import FlatMesh, Mesh
+
+    src = tmp_path / "src" / "pot.png"
+    src.parent.mkdir()
+    Image.new("RGB", (8, 8), (200, 100, 50)).save(src)
+    V = np.array([[0, 0, 0], [60, 0, 0], [0, 50, 0], [60, 50, 0]], float)
+    F = np.array([[0, 1, 2], [1, 3, 2]])
+    tc = (V[:, :2] / [60, 50])[F]
+    mesh = Mesh(V, F, texcoords=tc, texture_path=src)
+    path = write_flat_ply(tmp_path / "stage" / "pot.relaxed.ply", FlatMesh(mesh, V[:, :2]))
+    texture = path.parent / "pot.texture.png"
+    texture.unlink()  # a hard link to src: replace, never write through it
+    texture.write_bytes(src.read_bytes())
+    spoil(texture)
+    out = tmp_path / "out"
+    _assert_clean_error(_invoke(["bake", path, "-o", out, "--px-per-mm", "1"]), out, *words)
