@@ -31,6 +31,10 @@ def user_errors(func):
             # e.g. an output folder under a regular file: -o notes.txt/out
             raise fail(f"{exc.filename}: {exc.strerror}; check the path (every folder in it must be a "
                        "writable folder)") from None
+        except OSError as exc:  # disk full, file too large, I/O error: outputs are never left half-written
+            where = f"{exc.filename}: " if exc.filename else "writing the outputs: "
+            raise fail(f"{where}{exc.strerror or exc}; check the free disk space, quotas and the output "
+                       "folder, then run again") from None
         except KeyboardInterrupt:
             raise fail("interrupted; outputs already finished are kept, none is half-written", 130) from None
 

@@ -36,9 +36,11 @@ def atomic_path(final: str | os.PathLike) -> Iterator[Path]:
         # mkstemp creates 0600; give the file the permissions a plain open() would
         os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, final)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             tmp.unlink()
+        if isinstance(exc, OSError) and exc.filename is None and exc.strerror:  # e.g. disk full: name the file
+            raise OSError(exc.errno, exc.strerror, str(final)) from exc
         raise
 
 
