@@ -160,3 +160,31 @@ def test_batch_killed_mid_scan_then_resumed(scan, tmp_path):
         for rel, size in manifest["outputs"].items():
             assert (out / name / rel).stat().st_size == size
     assert (_inputs(scan), _inputs(other)) == before
+
+
+def test_disk_full_is_one_line_and_leaves_nothing_half_written(scan, tmp_path):
+    """Writes fail as on a full disk (RLIMIT_FSIZE: every write beyond 100 kB fails with
+    EFBIG): one line naming the file, exit 2, no output under its final name; then a rerun
+    with room completes."""
+    import resource
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (100_000, 100_000))
+
+    before = _inputs(scan)
+    # a first run fills Numba's cache (a cache file that cannot be written fails the run too,
+    # with the same one line but without a file name: Numba does not say which)
+    _run("run", scan, "-o", tmp_path / "warm", "--preset", "preview", "--px-per-mm", "2", "-q")
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "potflat_cli", "run", str(scan), "-o", str(out), "--preset", "preview",
+                        "--px-per-mm", "2"], check=False, capture_output=True, text=True, timeout=TIMEOUT,
+                       preexec_fn=limit)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), r.stderr[-3000:]
+    assert "pot.rollout.ply" in lines[0] and "disk space" in lines[0]
+    assert not [p for p in out.iterdir() if p.name.startswith("pot.") and p.name != "pot.texture.png"]
+    assert not _parts(out)
+    _run("run", scan, "-o", out, "--preset", "preview", "--px-per-mm", "2", "-q")
+    assert _check_outputs(out)["png"] >= 4
+    assert _inputs(scan) == before
