@@ -34,7 +34,7 @@ def test_round_trip(tmp_path, with_texture, with_colors, stress):
     assert back.mesh.units == "cm"
     if with_texture:
         np.testing.assert_allclose(back.mesh.texcoords, flat.mesh.texcoords, atol=1e-7)
-        assert back.mesh.texture_path == (out.parent / "atlas.png").resolve()
+        assert back.mesh.texture_path == (out.parent / "x.texture.png").resolve()  # NAME.texture.EXT
         assert back.mesh.texture_path.read_bytes() == flat.mesh.texture_path.read_bytes()
     if with_colors:
         np.testing.assert_array_equal(back.mesh.vertex_colors, flat.mesh.vertex_colors)
