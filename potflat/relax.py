@@ -60,6 +60,8 @@ BARRIER_MU, BARRIER_EPS = 1.0, 0.5
 AREA_FLOOR, LENGTH_FLOOR = 1e-2, 1e-3
 #: L-BFGS memory, Armijo constant, fraction of the flip-free step taken at most.
 LBFGS_MEMORY, ARMIJO, STEP_FRACTION = 6, 1e-4, 0.9
+#: Iterations between boundary self-overlap checks of the fold-free solver.
+OVERLAP_CHECK_EVERY = 25
 #: Window (iterations) of the relative-energy-change test: multilevel, dynamics.
 WINDOW_LBFGS, WINDOW_DYNAMICS = 5, 100
 
@@ -437,23 +439,27 @@ def _multilevel(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, le
         cap = min(cap, run.max_iter - len(run.history))
         if cap <= 0:
             break
-        done = len(run.history)
-        x_new, conv, its = _lbfgs(sp, x, run, prolong=prolong, restrict=restrict, max_iter=cap, tol=ltol,
-                                  jacobi=kind == "fine")
-        if overlap_free and sp.overlap(x_new) > 0:
-            # the boundary would overlap itself: drop this level (and its iterations from the
-            # history, which stays the path of the returned state) and go on from the previous one
-            notes.append(f"level {run.level} made the boundary overlap itself ({its} iterations dropped)")
-            del run.history[done:]
-            levels_out.append({"level": run.level, "iterations": its, "energy": sp.spring_energy(x),
-                               "seconds": time.perf_counter() - t0, "rejected": True})
-            converged = False
-            if run.stopped:
+        # run in chunks and check the boundary after each; if the level ends with the boundary
+        # overlapping itself, go back to its last overlap-free state (the undone iterations
+        # leave the history, which stays the path of the returned state)
+        its, conv, hit = 0, False, False
+        good = (x, len(run.history), 0)
+        while its < cap and not conv:
+            x, conv, k = _lbfgs(sp, x, run, prolong=prolong, restrict=restrict,
+                                max_iter=min(OVERLAP_CHECK_EVERY, cap - its), tol=ltol, jacobi=kind == "fine")
+            its += k
+            if not overlap_free or sp.overlap(x) == 0:
+                good = (x, len(run.history), its)
+            if run.stopped or k == 0:
                 break
-            continue
-        x = x_new
+        if good[2] != its:
+            notes.append(f"level {run.level}: ended with the boundary overlapping itself; went back "
+                         f"{its - good[2]} iterations to its last overlap-free state")
+            x, hit, conv = good[0], True, False
+            del run.history[good[1]:]
+            its = good[2]
         levels_out.append({"level": run.level, "iterations": its, "energy": sp.spring_energy(x),
-                           "seconds": time.perf_counter() - t0})
+                           "seconds": time.perf_counter() - t0, "boundary_contact": hit})
         converged = conv
         if run.stopped:
             converged = False

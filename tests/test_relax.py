@@ -350,7 +350,7 @@ def test_progress_bar_goes_to_stderr(vessel, capsys):
     assert r.flipped == 0 and capsys.readouterr().out == ""
 
 
-def test_a_level_that_overlaps_the_boundary_is_dropped(vessel, monkeypatch):
+def test_a_level_ending_in_boundary_overlap_is_undone(vessel, monkeypatch):
     from potflat import relax as relax_module
 
     calls = []
@@ -362,9 +362,9 @@ def test_a_level_that_overlaps_the_boundary_is_dropped(vessel, monkeypatch):
 
     monkeypatch.setattr(relax_module._Springs, "overlap", overlap)
     r = relax(vessel, preset="preview")
-    rejected = [lv for lv in r.levels if lv.get("rejected")]
-    assert len(rejected) == 1 and rejected[0]["level"] == r.levels[1]["level"]
-    assert any("dropped" in n for n in r.notes)
+    contact = [lv for lv in r.levels if lv["boundary_contact"]]
+    assert len(contact) == 1 and contact[0]["level"] == r.levels[1]["level"] and contact[0]["iterations"] == 0
+    assert any("went back" in n for n in r.notes)
     assert np.all(np.diff(r.energy_history) <= 0)
-    assert r.iterations == sum(lv["iterations"] for lv in r.levels if not lv.get("rejected"))
+    assert r.iterations == sum(lv["iterations"] for lv in r.levels)
     assert r.flipped == 0 and r.boundary_overlap == 0
