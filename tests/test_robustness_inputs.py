@@ -460,3 +460,25 @@ def test_bad_texture_at_bake_time_is_one_clear_line(tmp_path, spoil, words):
     spoil(texture)
     out = tmp_path / "out"
     _assert_clean_error(_invoke(["bake", path, "-o", out, "--px-per-mm", "1"]), out, *words)
+
+
+def test_two_scans_with_the_same_texture_name_into_one_folder(tmp_path):
+    """Photogrammetry exports often call every texture 'texture.png': two scans rolled out into
+    one folder each keep their own (was: the second failed or silently used the first's)."""
+    from PIL import Image
+
+    from potflat.io.stage import read_flat_ply, write_flat_ply
+    from potflat.types import FlatMesh, Mesh
+
+    V = np.array([[0, 0, 0], [60, 0, 0], [0, 50, 0], [60, 50, 0]], float)
+    F = np.array([[0, 1, 2], [1, 3, 2]])
+    out = tmp_path / "out"
+    for name, colour in (("a", (255, 0, 0)), ("b", (0, 0, 255))):  # same size, different content
+        tex = tmp_path / name / "texture.png"
+        tex.parent.mkdir()
+        Image.new("RGB", (8, 8), colour).save(tex)
+        mesh = Mesh(V, F, texcoords=(V[:, :2] / [60, 50])[F], texture_path=tex)
+        write_flat_ply(out / f"{name}.rollout.ply", FlatMesh(mesh, V[:, :2]))
+    for name, colour in (("a", (255, 0, 0)), ("b", (0, 0, 255))):
+        with Image.open(read_flat_ply(out / f"{name}.rollout.ply").mesh.texture_path) as im:
+            assert im.getpixel((0, 0)) == colour
