@@ -357,7 +357,20 @@ def choose_seam(mesh: Mesh, faces: np.ndarray, theta_c: np.ndarray, area: np.nda
     pad = SEAM_SMOOTH // 2
     smooth = np.convolve(np.concatenate([cost[-pad:], cost, cost[:pad]]), kernel, mode="valid")
     k = _longest_min_run(smooth)
-    return (k + 0.5) / SEAM_BINS * TWO_PI, method
+    return _snap_to_gap(theta_c, (k + 0.5) / SEAM_BINS * TWO_PI, TWO_PI / SEAM_BINS), method
+
+
+def _snap_to_gap(theta_c: np.ndarray, angle: float, half_width: float) -> float:
+    """Move ``angle`` to the middle of the widest gap between face-centroid angles within
+    ``half_width`` of it, so the cut lies at a place of the surface, not of the bin grid
+    (whose origin, the reference direction, depends on the scan's pose)."""
+    offset = (theta_c - angle + np.pi) % TWO_PI - np.pi
+    near = np.sort(offset[np.abs(offset) <= half_width])
+    if len(near) < 2:
+        return angle
+    gaps = np.diff(near)
+    i = int(np.argmax(gaps))
+    return float((angle + 0.5 * (near[i] + near[i + 1])) % TWO_PI)
 
 
 def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:

@@ -122,9 +122,6 @@ def test_posed_scans_give_the_same_image_with_the_same_cut(reference, tmp_path, 
     assert mad < 1.0 and coverage < 1e-3, (mad, coverage)
 
 
-@pytest.mark.xfail(strict=True, reason="the automatic seam is chosen in 1-degree bins counted from a reference "
-                   "direction that depends on the pose: in these poses the cut moves by 0.28-0.34 deg and the "
-                   "image is 3 px (1.5 mm) narrower; reported to the lead")
 @pytest.mark.parametrize("pose", [2, 3])
 def test_posed_scans_give_the_same_image_with_the_automatic_seam(reference, tmp_path, pose):
     scan, image, _ = reference
