@@ -34,6 +34,7 @@ from typing import Any, Callable
 
 import yaml
 
+from potflat._kernels._jit import numba_threads
 from potflat.errors import InvalidInputError, InvalidOptionError, PotflatError
 
 #: Top-level keys of a batch file.
@@ -577,22 +578,6 @@ def _report(job: ScanJob, status: str, seconds: float = 0.0, figures: dict | Non
             error: str = "") -> ScanReport:
     return ScanReport(name=job.name, scan=str(job.scan), output=str(job.out_dir), status=status,
                       seconds=seconds, figures=dict(figures or {}), error=error)
-
-
-@contextlib.contextmanager
-def numba_threads(n: int | None):
-    """Run the block with at most ``n`` Numba threads (restored afterwards); None: unchanged."""
-    if n is None:
-        yield
-        return
-    import numba
-
-    old = numba.get_num_threads()
-    numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
-    try:
-        yield
-    finally:
-        numba.set_num_threads(old)
 
 
 def run_job(job: ScanJob, key: str, *, threads: int | None = None) -> ScanReport:

@@ -368,3 +368,23 @@ def test_a_level_ending_in_boundary_overlap_is_undone(vessel, monkeypatch):
     assert np.all(np.diff(r.energy_history) <= 0)
     assert r.iterations == sum(lv["iterations"] for lv in r.levels)
     assert r.flipped == 0 and r.boundary_overlap == 0
+
+
+def test_untangle_fixes_flipped_interior_vertices():
+    from potflat.relax import _untangle
+
+    flat, _ = meshes.cylinder_patch(12, 10, seed=4)
+    F = flat.mesh.faces
+    uv = flat.uv.copy()
+    sp = _springs(flat.mesh.vertices, F, k=1.0, relative=True)
+    interior = np.setdiff1d(np.arange(len(uv)), _boundary_edges(F).ravel())
+    for i in interior[[3, len(interior) // 2, -4]]:
+        nb = np.unique(F[(F == i).any(1)])
+        nb = nb[nb != i]
+        uv[i] = 2.0 * uv[nb].mean(0) - uv[i] + 1.6 * (uv[nb[0]] - uv[i])  # pushed over its neighbour
+    n0 = int((_signed_areas(uv, F) <= 0).sum())
+    assert n0 >= 3
+    x, n_bad = _untangle(sp, uv, rounds=10)
+    assert n_bad == n0 and int((_signed_areas(x, F) <= 0).sum()) == 0
+    moved = np.nonzero((x != uv).any(1))[0]
+    assert 0 < len(moved) < len(uv) // 4  # only the tangled region moved

@@ -11,10 +11,34 @@ so parallel kernels only write to per-iteration slots (gather, never scatter ``+
 """
 from __future__ import annotations
 
-import numba
+import contextlib
+import os
+
+# Before any parallel kernel starts its OpenMP thread pool: the solvers run many short
+# parallel regions per iteration, and OpenMP's default busy-waiting between them made the
+# relax solver up to 20x slower on a machine shared with other jobs (docs/performance.md).
+# An explicit setting by the user wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import numba  # noqa: E402
 
 leaf = numba.njit(cache=True, nogil=True, fastmath=False)
 parallel = numba.njit(cache=True, nogil=True, parallel=True, fastmath=False)
 prange = numba.prange
 
-__all__ = ["leaf", "parallel", "prange"]
+
+@contextlib.contextmanager
+def numba_threads(n: int | None):
+    """Run the block with at most ``n`` Numba threads (restored afterwards, also on error); None: unchanged."""
+    if n is None:
+        yield
+        return
+    old = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(old)
+
+
+__all__ = ["leaf", "numba_threads", "parallel", "prange"]
