@@ -39,6 +39,13 @@ from potflat.types import UNITS_MM, FlatMesh, Mesh, StageOutput
 from potflat.walls import SIDES, FaceGraph, WallSelection, face_adjacency, select_wall
 
 TWO_PI = 2.0 * np.pi
+#: A connected piece with at least this fraction of the largest piece's area is an object of
+#: its own: it must share the largest piece's axis (an inner wall does) or it is left out.
+SEPARATE_OBJECT_FRACTION = 0.1
+#: Two pieces share an axis when their axes differ by less than this angle (degrees) ...
+SHARED_AXIS_DEG = 5.0
+#: ... and pass within this fraction of the largest piece's height of each other.
+SHARED_AXIS_OFFSET = 0.05
 #: Angular bins (per turn) used to choose the seam and to find gaps in a region.
 SEAM_BINS = 360
 #: Width (bins) of the circular moving average applied to the seam cost.
@@ -267,6 +274,7 @@ class RolloutResult:
     untangled_faces: int
     untangled_vertices: int
     boundary_overlap: int
+    other_objects_faces: int = 0
 
     @property
     def side(self) -> str:
@@ -489,17 +497,23 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         raise InvalidInputError(f"rollout needs a potflat Mesh, got {type(mesh).__name__}")
     if len(mesh.faces) == 0:
         raise InvalidInputError(f"{mesh.source or 'mesh'} has no faces; give a triangle mesh of the vessel")
-    if options.axis is not None:
-        axis = manual_axis(mesh, options.axis[:3], options.axis[3:], flip=options.flip)
-    else:
-        axis = estimate_axis(mesh, flip=options.flip)
-
     V, F = mesh.vertices, mesh.faces
     if face_mask is not None:
         face_mask = np.asarray(face_mask)
         if face_mask.dtype != bool or face_mask.shape != (len(F),):
             raise InvalidInputError(f"face_mask must be a bool array of shape ({len(F)},), got "
                                     f"{face_mask.dtype} {face_mask.shape}")
+    other_objects = np.zeros(len(F), bool)
+    if options.axis is not None:
+        axis = manual_axis(mesh, options.axis[:3], options.axis[3:], flip=options.flip)
+    else:
+        main = _main_object(mesh)
+        if main is None:
+            axis = estimate_axis(mesh, flip=options.flip)
+        else:
+            axis = estimate_axis(_submesh(mesh, main), flip=options.flip)
+            other_objects = ~main
+            face_mask = main if face_mask is None else face_mask & main
     attachments = detect_attachments(mesh, axis.point, axis.direction)
     walls = select_wall(mesh, axis.point, axis.direction, side=options.side,
                         exclude=None if options.keep_attachments else attachments.face_mask)
@@ -552,7 +566,8 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         seam_vertices=un.seam_vertices, split_vertices=un.split_vertices, walls=walls,
         attachments=attachments, attachments_kept=options.keep_attachments, attachment_roots=roots,
         trimmed=np.flatnonzero(trimmed).astype(np.int64), trimmed_area=float(area[trimmed].sum()),
-        untangled_faces=n_untangled, untangled_vertices=moved, boundary_overlap=overlap)
+        untangled_faces=n_untangled, untangled_vertices=moved, boundary_overlap=overlap,
+        other_objects_faces=int(other_objects.sum()))
 
 
 @dataclass(frozen=True, eq=False)
@@ -1000,7 +1015,66 @@ def _notes(result: RolloutResult) -> list[str]:
         notes.append(f"{result.distortion.flipped} faces stay flipped{why}; the relax stage will refuse them")
     if result.boundary_overlap:
         notes.append(f"the border overlaps itself at {result.boundary_overlap} places; the relax stage will refuse it")
+    if result.other_objects_faces:
+        notes.append(f"{result.other_objects_faces} faces of separate objects that do not share the vessel's axis "
+                     "(another vessel or fragment in the same file) were left out; split the file or give --axis")
     return notes
+
+
+def _submesh(mesh: Mesh, face_mask: np.ndarray) -> Mesh:
+    """The faces of ``mesh`` selected by ``face_mask`` with only the vertices they use."""
+    F = mesh.faces[face_mask]
+    used = np.zeros(len(mesh.vertices), bool)
+    used[F] = True
+    remap = np.cumsum(used) - 1  # np.unique is slow on millions of indices in numpy 2.4
+    return Mesh(mesh.vertices[used], remap[F], units=mesh.units, source=mesh.source)
+
+
+def _main_object(mesh: Mesh) -> np.ndarray | None:
+    """Faces of the vessel when the scan holds separate objects, else ``None``.
+
+    Pieces (connected components) with at least :data:`SEPARATE_OBJECT_FRACTION` of the
+    largest piece's area are objects; each is kept when its own axis agrees with the
+    largest piece's (a separately scanned inner wall or foot does), and left out when it
+    does not (a second vessel, a fragment lying beside it). Returns ``None`` when nothing
+    would be left out, so a single-object scan is fitted as a whole.
+    """
+    from potflat.errors import AxisNotFoundError
+
+    V, F = mesh.vertices, mesh.faces
+    graph = scipy.sparse.coo_matrix((np.ones(2 * len(F)), (np.concatenate([F[:, 0], F[:, 1]]),
+                                                           np.concatenate([F[:, 1], F[:, 2]]))),
+                                    shape=(len(V), len(V)))
+    n_pieces, labels = scipy.sparse.csgraph.connected_components(graph, directed=False)
+    if n_pieces < 2:
+        return None
+    face_label = labels[F[:, 0]]
+    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    piece_area = np.bincount(face_label, area, n_pieces)
+    order = np.argsort(-piece_area, kind="stable")
+    objects = [k for k in order if piece_area[k] >= SEPARATE_OBJECT_FRACTION * piece_area[order[0]]]
+    if len(objects) < 2:
+        return None
+    main = face_label == objects[0]
+    try:
+        ref = estimate_axis(_submesh(mesh, main))
+    except AxisNotFoundError:
+        return None  # the whole scan decides (and refuses honestly if it must)
+    keep = main.copy()
+    for k in objects[1:]:
+        piece = face_label == k
+        try:
+            own = estimate_axis(_submesh(mesh, piece))
+        except AxisNotFoundError:
+            continue
+        cos = abs(float(own.direction @ ref.direction))
+        offset = own.point - ref.point
+        distance = np.linalg.norm(offset - (offset @ ref.direction) * ref.direction)
+        if cos >= math.cos(math.radians(SHARED_AXIS_DEG)) and distance <= SHARED_AXIS_OFFSET * ref.height:
+            keep |= piece
+    small = ~np.isin(face_label, objects)
+    keep |= small  # small pieces are judged by the wall and attachment analysis
+    return None if keep.all() else keep
 
 
 def _attachments_summary(result: RolloutResult) -> dict:

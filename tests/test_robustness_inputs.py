@@ -192,9 +192,6 @@ def test_nonmanifold_fans_are_split_off_and_the_vessel_kept(tmp_path, vessel):
     assert np.isfinite(flat.uv).all()
 
 
-@pytest.mark.xfail(strict=True, reason="two vessels in one file: the axis is fitted through both (here "
-                   "horizontal, 85 deg off both true axes) and part of one vessel is unrolled about it, exit 0; "
-                   "the loader only warns '2 substantial components kept'; reported to the lead")
 def test_two_vessels_in_one_file_are_not_mixed(tmp_path, vessel):
     """Two separate upright surfaces of revolution side by side: a clear error, or one of
     them (the largest) unrolled about its own axis with a warning in the report; never an

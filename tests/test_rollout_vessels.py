@@ -247,3 +247,28 @@ def test_thick_sherd_unrolls_its_painted_face_only():
     assert np.count_nonzero(parts == PART_OUTER) > 0.8 * np.count_nonzero(sv.face_part == PART_OUTER)
     assert res.seam_method == "gap" and res.seam_vertices == 0
     _check_clean(res)
+
+
+def test_a_separate_inner_wall_is_kept_but_a_second_vessel_is_left_out():
+    """Pieces sharing the vessel's axis stay (an inner wall scanned apart); a second vessel
+    beside it is left out, with a note."""
+    from potflat.rollout import rollout
+    from potflat.synthetic import make_vessel
+    from potflat.types import Mesh
+
+    a = make_vessel("amphora", n_vertices=3000, seed=1, texture_size=64, pose=False)
+    inner = Mesh(a.mesh.vertices * [0.95, 0.95, 1.0], a.mesh.faces[:, ::-1])  # same axis, facing it
+    V = np.vstack([a.mesh.vertices, inner.vertices])
+    F = np.vstack([a.mesh.faces, inner.faces + len(a.mesh.vertices)])
+    res = rollout(Mesh(V, F))
+    assert res.other_objects_faces == 0
+    b = make_vessel("hydria", n_vertices=2000, seed=4, texture_size=64, pose=False)
+    V2 = np.vstack([a.mesh.vertices, b.mesh.vertices + [600.0, 0, 0]])
+    F2 = np.vstack([a.mesh.faces, b.mesh.faces + len(a.mesh.vertices)])
+    res2 = rollout(Mesh(V2, F2))
+    # the larger vessel is kept whole, the other left out whole
+    assert res2.other_objects_faces in (len(a.mesh.faces), len(b.mesh.faces))
+    x = res2.flat.mesh.vertices[:, 0]
+    assert x.max() < 300.0 or x.min() > 300.0
+    assert abs(res2.axis.direction[2]) > np.cos(np.radians(1.0))
+    assert any("separate objects" in n for n in __import__("potflat.rollout").rollout._notes(res2))
