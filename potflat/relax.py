@@ -51,6 +51,9 @@ WEIGHTINGS = ("uniform", "relative")
 
 #: Barrier: weight (times k times the face's rest area) and activation (fraction of rest area).
 BARRIER_MU, BARRIER_EPS = 1.0, 0.5
+#: Boundary angle barrier: weight (times k) and activation (radians below 2 pi of a boundary
+#: vertex's flat interior angle sum).
+BOUNDARY_MU, BOUNDARY_GAP = 1.0, 0.5
 #: Floor of rest areas and spring lengths, in units of the mean edge length (squared).
 AREA_FLOOR, LENGTH_FLOOR = 1e-2, 1e-3
 #: L-BFGS memory, Armijo constant, fraction of the flip-free step taken at most.
@@ -209,6 +212,11 @@ class _Springs:
         self.boundary = np.zeros(n, bool)
         self.boundary[self.boundary_segments.ravel()] = True
         self.isolated = count == 0
+        self.bprev, self.bnext = _boundary_neighbours(faces, self.boundary_segments, n)
+        self.bguard = np.zeros(n, bool)  # set by guard_boundary()
+        self.bverts = np.zeros(0, np.int64)
+        self.theta = np.zeros(n)
+        self._bblocks = np.empty(1)
         self._g = np.empty((n, 2))
         self._es = np.empty(n)
         self._eb = np.empty(n)
@@ -216,14 +224,34 @@ class _Springs:
         self.diag = np.empty(n)
         self._blocks = np.empty(max(1, -(-self.m // ks.BLOCK)))
 
+    def guard_boundary(self, x: np.ndarray) -> int:
+        """Guard the angle sum of every boundary vertex below ``2 pi`` from ``x`` on.
+
+        Vertices whose fan already wraps past ``2 pi`` at ``x`` (or whose boundary is not a
+        simple path through them) stay unguarded. Returns how many already wrapped.
+        """
+        cand = np.nonzero((self.bprev >= 0) & (self.bnext >= 0) & (self.bprev != self.bnext))[0]
+        theta = np.zeros(self.n)
+        if len(cand):
+            self.ks.boundary_angle_sums(x, cand, self.vf_ptr, self.vf_tri, self.faces, theta)
+        ok = theta[cand] < 2.0 * math.pi - 1e-9
+        self.bverts = np.ascontiguousarray(cand[ok])
+        self.bguard = np.zeros(self.n, bool)
+        self.bguard[self.bverts] = True
+        self._bblocks = np.empty(max(1, -(-len(self.bverts) // self.ks.BLOCK)))
+        return int((~ok).sum())
+
     def evaluate(self, x: np.ndarray, *, barrier: bool = True) -> tuple[float, float, np.ndarray]:
         """Total energy, spring energy and gradient (a fresh (n, 2) array) at ``x``."""
         g = np.empty((self.n, 2))
         if barrier:
             self.ks.face_areas(x, self.faces, self._areas)
+            if len(self.bverts):
+                self.ks.boundary_angle_sums(x, self.bverts, self.vf_ptr, self.vf_tri, self.faces, self.theta)
         self.ks.energy_gradient(x, self.ptr, self.nbr, self.rst, self.k, self.relative, LENGTH_FLOOR,
                                 self.vf_ptr, self.vf_tri, self.faces, self._areas, self.a_ref,
-                                BARRIER_MU if barrier else 0.0, BARRIER_EPS, g, self._es, self._eb, self.diag)
+                                BARRIER_MU if barrier else 0.0, BARRIER_EPS, self.bprev, self.bnext, self.bguard,
+                                self.theta, BOUNDARY_MU, BOUNDARY_GAP, g, self._es, self._eb, self.diag)
         es = float(np.sum(self._es))
         return es + float(np.sum(self._eb)), es, g
 
@@ -232,11 +260,16 @@ class _Springs:
         return self.evaluate(x, barrier=False)[1]
 
     def max_step(self, x: np.ndarray, d: np.ndarray) -> float:
-        """Largest ``t`` keeping all faces of ``x + t d`` positively oriented."""
+        """Largest ``t`` keeping all faces of ``x + t d`` positively oriented and every guarded
+        boundary vertex's angle sum below ``2 pi``."""
         if self.m == 0:
             return np.inf
         self.ks.max_step(x, d, self.faces, self._blocks)
-        return float(self._blocks.min())
+        t = float(self._blocks.min())
+        if len(self.bverts):
+            self.ks.boundary_max_step(x, d, self.bverts, self.bprev, self.bnext, self._bblocks)
+            t = min(t, float(self._bblocks.min()))
+        return t
 
     def dot(self, a: np.ndarray, b: np.ndarray) -> float:
         """Deterministic dot product of two arrays of equal shape."""
@@ -281,6 +314,31 @@ class _Springs:
             lam = self.dot(y, out)
             y, out = out, y
         return 1.05 * lam
+
+
+def _boundary_neighbours(faces: np.ndarray, segments: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each vertex's boundary predecessor and successor along the faces' orientation.
+
+    Returns ``bprev, bnext`` (n,) int32: for a boundary half-edge ``a -> b`` of a
+    counter-clockwise face, ``bnext[a] = b`` and ``bprev[b] = a``; -1 where a vertex has no
+    or several such half-edges (off the boundary, or where the boundary touches itself).
+    """
+    bprev = np.full(n, -1, np.int32)
+    bnext = np.full(n, -1, np.int32)
+    if len(segments) == 0:
+        return bprev, bnext
+    a = faces.ravel()
+    b = faces[:, [1, 2, 0]].ravel()
+    key = np.minimum(a, b) * n + np.maximum(a, b)
+    on = np.isin(key, segments[:, 0] * n + segments[:, 1])
+    a, b = a[on], b[on]
+    out_deg = np.bincount(a, minlength=n)
+    in_deg = np.bincount(b, minlength=n)
+    keep = out_deg[a] == 1
+    bnext[a[keep]] = b[keep]
+    keep = in_deg[b] == 1
+    bprev[b[keep]] = a[keep]
+    return bprev, bnext
 
 
 class _Run:
@@ -589,6 +647,10 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
                         f"the rollout has {n_bad} flipped or degenerate triangles and {left} could not be "
                         "untangled; run the rollout again (another seam or proxy) or use --preset paper")
                 notes.append(f"untangled {n_bad} flipped or degenerate triangles of the rollout before relaxing")
+            wrapped = sp.guard_boundary(x)
+            if wrapped:
+                notes.append(f"{wrapped} boundary vertices already wrap past 2 pi in the start; their angle "
+                             "sums are not guarded (the final boundary check still applies)")
         t_setup = time.perf_counter()
 
         bar = _progress_bar(settings["max_iter"]) if progress else contextlib.nullcontext(None)

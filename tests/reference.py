@@ -114,3 +114,24 @@ def max_step(x: np.ndarray, d: np.ndarray, F: np.ndarray, samples: int = 200001,
         if len(hit):
             t_max = min(t_max, ts[hit[0]])
     return t_max if t_max < 10.0 else np.inf
+
+
+def boundary_angle_barrier(x: np.ndarray, F: np.ndarray, verts, k: float, mu: float, gap: float) -> float:
+    """``sum mu k phi((2 pi - Theta_b) / gap)`` over ``verts``, ``Theta_b`` the sum of the
+    angles at ``b`` of its faces (each from ``acos``, so only for positively oriented faces)."""
+    total = 0.0
+    for b in verts:
+        theta = 0.0
+        for f in F:
+            if b not in f:
+                continue
+            j = list(f).index(b)
+            u = x[f[(j + 1) % 3]] - x[b]
+            w = x[f[(j + 2) % 3]] - x[b]
+            theta += np.arccos(np.clip(np.dot(u, w) / np.linalg.norm(u) / np.linalg.norm(w), -1, 1))
+        a = (2 * np.pi - theta) / gap
+        if a <= 0:
+            return np.inf
+        if a < 1:
+            total += mu * k * (a - 1 - np.log(a))
+    return total

@@ -388,3 +388,73 @@ def test_untangle_fixes_flipped_interior_vertices():
     assert n_bad == n0 and int((_signed_areas(x, F) <= 0).sum()) == 0
     moved = np.nonzero((x != uv).any(1))[0]
     assert 0 < len(moved) < len(uv) // 4  # only the tangled region moved
+
+
+def _saddle_fan(K=12, flat_gap=1.0):
+    """An open fan around vertex 0 whose 3D angle sum (8.67 rad) exceeds 2 pi, laid out flat
+    with angle sum ``2 pi - flat_gap``: its springs pull the fan to wrap over itself."""
+    a = np.arange(K + 1) * (2 * np.pi - 0.2) / K
+    V = np.zeros((K + 2, 3))
+    V[1:] = np.c_[np.cos(a), np.sin(a), 0.5 * np.sin(4 * a)]
+    F = np.array([[0, k + 1, k + 2] for k in range(K)])
+    b = np.arange(K + 1) * (2 * np.pi - flat_gap) / K
+    uv = np.zeros((K + 2, 2))
+    uv[1:] = np.c_[np.cos(b), np.sin(b)]
+    return FlatMesh(Mesh(V, F), uv)
+
+
+def _angle_sum(uv, F, b=0):
+    theta = 0.0
+    for f in F[(F == b).any(1)]:
+        j = list(f).index(b)
+        u, w = uv[f[(j + 1) % 3]] - uv[b], uv[f[(j + 2) % 3]] - uv[b]
+        theta += np.arctan2(u[0] * w[1] - u[1] * w[0], u @ w)
+    return theta
+
+
+def test_boundary_angle_barrier_matches_reference():
+    from potflat.relax import BARRIER_EPS, BARRIER_MU, BOUNDARY_GAP, BOUNDARY_MU
+
+    fan = _saddle_fan(flat_gap=0.15)  # the centre's gap 0.15 < BOUNDARY_GAP: its barrier is on
+    V, F = fan.mesh.vertices, fan.mesh.faces
+    sp = _springs(V, F, k=0.8, relative=True)
+    x = np.ascontiguousarray(fan.uv)
+    assert sp.guard_boundary(x) == 0 and sp.bguard.all()
+    E, Es, g = sp.evaluate(x)
+    boundary = np.arange(len(V))
+    want = ref.boundary_angle_barrier(x, F, boundary, 0.8, BOUNDARY_MU, BOUNDARY_GAP)
+    want += ref.barrier_energy(x, F, sp.a_ref, 0.8, BARRIER_MU, BARRIER_EPS)
+    assert want > 0.3
+    assert E - Es == pytest.approx(want, rel=1e-10)
+    num = ref.numeric_gradient(lambda y: sp.evaluate(np.ascontiguousarray(y))[0], x)
+    np.testing.assert_allclose(g, num, atol=1e-6 * np.abs(num).max())
+
+
+def test_boundary_max_step_stops_before_the_fan_wraps():
+    gap = 0.3
+    fan = _saddle_fan(flat_gap=gap)
+    F = fan.mesh.faces
+    sp = _springs(fan.mesh.vertices, F, k=1.0, relative=True)
+    x = np.ascontiguousarray(fan.uv)
+    d = np.zeros_like(x)
+    d[-1] = (0.0, 1.0)  # the last rim vertex (angle 2 pi - gap) moves up across the first one's ray
+    assert sp.max_step(x, d) == np.inf  # no face flips, nothing guarded yet
+    sp.guard_boundary(x)
+    t = sp.max_step(x, d)
+    assert t == pytest.approx(np.sin(gap), rel=1e-12)  # where the two boundary edges align
+    assert _angle_sum(x + 0.999 * t * d, F) < 2 * np.pi < _angle_sum(x + 1.001 * t * d, F)
+    assert sp.evaluate(np.ascontiguousarray(x + 1.001 * t * d))[0] == np.inf
+
+
+def test_boundary_vertex_with_a_large_angle_sum_does_not_wrap(monkeypatch):
+    from potflat import relax as relax_module
+
+    fan = _saddle_fan()
+    r = relax(fan, preset="standard")
+    assert r.boundary_overlap == 0 and r.flipped == 0 and not r.notes
+    assert r.levels[-1]["level"] == "fine" and r.levels[-1]["iterations"] > 0
+    assert 5.5 < _angle_sum(r.flat.uv, fan.mesh.faces) < 2 * np.pi
+    # without the guard the springs wrap the fan and the fine level is undone
+    monkeypatch.setattr(relax_module._Springs, "guard_boundary", lambda self, x: 0)
+    r = relax(fan, preset="standard")
+    assert any("went back" in n for n in r.notes)

@@ -12,6 +12,16 @@ Energy (normalised units, ``coef = k`` or ``k / r^2``)::
 with the barrier ``B = mu k a_ref phi(A / (eps a_ref))``, ``phi(a) = a - 1 - log a`` for
 ``a < 1`` and 0 above: it is zero unless a triangle is squeezed below ``eps`` of its
 reference area, and infinite for a flipped one.
+
+A second barrier keeps the boundary from wrapping over itself at a vertex: for each guarded
+boundary vertex ``b`` (one incoming and one outgoing boundary half-edge, ``prv -> b -> nxt``)
+the flat interior angle sum ``Theta_b`` (the sum of its faces' angles at ``b``, which with
+positively oriented faces equals the angle swept from ``nxt - b`` counter-clockwise to
+``prv - b``) must stay below ``2 pi``: ``mu_b k phi((2 pi - Theta_b) / gap)``. Every face
+may keep its orientation while a fan with ``Theta_b > 2 pi`` overlaps itself, so the face
+barrier alone does not prevent this. ``Theta_b`` depends only on ``b``, ``prv`` and ``nxt``
+(the inner fan edges cancel), so its gradient touches three boundary vertices and is
+gathered per vertex through ``prv``/``nxt``.
 """
 from __future__ import annotations
 
@@ -249,7 +259,7 @@ def face_areas(x, faces, out):
 
 @parallel
 def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, faces, areas, a_ref, mu, eps,
-                    grad, e_spring, e_barrier, diag):
+                    bprev, bnext, bguard, theta, mu_b, gap, grad, e_spring, e_barrier, diag):
     """Spring + barrier energy per vertex and the gradient, gathered per vertex.
 
     Parameters
@@ -269,7 +279,16 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, face
     a_ref : (m,) float64
         Reference (rest) area of each face, floored.
     mu, eps : float
-        Barrier weight and activation threshold (fraction of ``a_ref``); ``mu = 0`` disables it.
+        Barrier weight and activation threshold (fraction of ``a_ref``); ``mu = 0`` disables
+        both barriers.
+    bprev, bnext : (n,) int32
+        Each vertex's unique boundary predecessor and successor (-1: none or not unique).
+    bguard : (n,) bool
+        Boundary vertices whose angle sum is guarded.
+    theta : (n,) float64
+        Flat interior angle sums of the guarded vertices at ``x`` (:func:`boundary_angle_sums`).
+    mu_b, gap : float
+        Angle barrier weight and activation (radians below ``2 pi``).
     grad : (n, 2) float64
         Output: dE/dx.
     e_spring, e_barrier : (n,) float64
@@ -336,6 +355,55 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, face
                 gx += dphi * ax
                 gy += dphi * ay
                 hd += scale / (area * area) * (ax * ax + ay * ay)
+            if bprev[i] >= 0 or bnext[i] >= 0:
+                sb = mu_b * k
+                # own angle sum: depends on x_i through u = x_nxt - x_i and w = x_prv - x_i
+                if bguard[i]:
+                    a = (2.0 * math.pi - theta[i]) / gap
+                    if a <= 0.0:
+                        eb = np.inf
+                    elif a < 1.0:
+                        eb += sb * (a - 1.0 - math.log(a))
+                        cb = -sb * (1.0 - 1.0 / a) / gap  # dB / dTheta
+                        ux = x[bnext[i], 0] - xi
+                        uy = x[bnext[i], 1] - yi
+                        wx = x[bprev[i], 0] - xi
+                        wy = x[bprev[i], 1] - yi
+                        uu = ux * ux + uy * uy
+                        ww = wx * wx + wy * wy
+                        tx = -(uy / uu - wy / ww)
+                        ty = -(-ux / uu + wx / ww)
+                        gx += cb * tx
+                        gy += cb * ty
+                        hd += sb / (a * a * gap * gap) * (tx * tx + ty * ty)
+                # as the successor of its predecessor p: Theta_p grows with arg(x_i - x_p) decreasing
+                pv = bprev[i]
+                if pv >= 0 and bguard[pv]:
+                    a = (2.0 * math.pi - theta[pv]) / gap
+                    if 0.0 < a < 1.0:
+                        cb = -sb * (1.0 - 1.0 / a) / gap
+                        ux = xi - x[pv, 0]
+                        uy = yi - x[pv, 1]
+                        uu = ux * ux + uy * uy
+                        tx = uy / uu
+                        ty = -ux / uu
+                        gx += cb * tx
+                        gy += cb * ty
+                        hd += sb / (a * a * gap * gap) * (tx * tx + ty * ty)
+                # as the predecessor of its successor q
+                qv = bnext[i]
+                if qv >= 0 and bguard[qv]:
+                    a = (2.0 * math.pi - theta[qv]) / gap
+                    if 0.0 < a < 1.0:
+                        cb = -sb * (1.0 - 1.0 / a) / gap
+                        wx = xi - x[qv, 0]
+                        wy = yi - x[qv, 1]
+                        ww = wx * wx + wy * wy
+                        tx = -wy / ww
+                        ty = wx / ww
+                        gx += cb * tx
+                        gy += cb * ty
+                        hd += sb / (a * a * gap * gap) * (tx * tx + ty * ty)
         diag[i] = hd
         grad[i, 0] = gx
         grad[i, 1] = gy
@@ -405,6 +473,121 @@ def _first_root(c0, c1, c2):
         if 0.0 < r2 < best:
             best = r2
     return best
+
+
+@parallel
+def boundary_angle_sums(x, verts, vf_ptr, vf_tri, faces, out):
+    """Flat interior angle sum of each listed boundary vertex (sum of its faces' angles).
+
+    Parameters
+    ----------
+    x : (n, 2) float64
+    verts : (b,) int64
+        Distinct vertices.
+    vf_ptr, vf_tri : CSR from :func:`vertex_faces`
+    faces : (m, 3) int32 or int64
+    out : (n,) float64
+        Output at the rows ``verts`` (other rows untouched). Each face angle is
+        ``atan2(cross, dot)`` of its two edges at the vertex, in ``(-pi, pi]``.
+    """
+    for s in prange(verts.shape[0]):
+        i = verts[s]
+        acc = 0.0
+        for p in range(vf_ptr[i], vf_ptr[i + 1]):
+            t = vf_tri[p]
+            a0 = faces[t, 0]
+            a1 = faces[t, 1]
+            a2 = faces[t, 2]
+            if a0 == i:
+                j1 = a1
+                j2 = a2
+            elif a1 == i:
+                j1 = a2
+                j2 = a0
+            else:
+                j1 = a0
+                j2 = a1
+            ux = x[j1, 0] - x[i, 0]
+            uy = x[j1, 1] - x[i, 1]
+            wx = x[j2, 0] - x[i, 0]
+            wy = x[j2, 1] - x[i, 1]
+            acc += math.atan2(ux * wy - uy * wx, ux * wx + uy * wy)
+        out[i] = acc
+
+
+@parallel
+def boundary_max_step(x, d, verts, bprev, bnext, out):
+    """Per block of guarded boundary vertices, the largest ``t`` before the vertex's angle
+    sum at ``x + t d`` reaches ``2 pi`` (its two boundary edges align, pointing the same way).
+
+    With ``u = x_nxt - x_b`` and ``w = x_prv - x_b`` the angle sum is a multiple of ``2 pi``
+    exactly where ``cross(u, w) = 0`` (a quadratic in ``t``) and ``dot(u, w) > 0``; starting
+    below ``2 pi`` with no face flipping, the first such ``t`` is where it reaches ``2 pi``.
+
+    Parameters
+    ----------
+    x, d : (n, 2) float64
+    verts : (b,) int64
+        Guarded boundary vertices (angle sum below ``2 pi`` at ``x``).
+    bprev, bnext : (n,) int32
+    out : (ceil(b / BLOCK),) float64
+        Output: minimum over each block (inf when no angle sum reaches ``2 pi``).
+    """
+    nv = verts.shape[0]
+    for blk in prange(out.shape[0]):
+        best = np.inf
+        for s in range(blk * BLOCK, min(nv, (blk + 1) * BLOCK)):
+            b = verts[s]
+            nx = bnext[b]
+            pv = bprev[b]
+            ux = x[nx, 0] - x[b, 0]
+            uy = x[nx, 1] - x[b, 1]
+            wx = x[pv, 0] - x[b, 0]
+            wy = x[pv, 1] - x[b, 1]
+            dux = d[nx, 0] - d[b, 0]
+            duy = d[nx, 1] - d[b, 1]
+            dwx = d[pv, 0] - d[b, 0]
+            dwy = d[pv, 1] - d[b, 1]
+            c0 = ux * wy - uy * wx
+            c1 = ux * dwy - uy * dwx + dux * wy - duy * wx
+            c2 = dux * dwy - duy * dwx
+            e0 = ux * wx + uy * wy
+            e1 = ux * dwx + uy * dwy + dux * wx + duy * wy
+            e2 = dux * dwx + duy * dwy
+            r1, r2 = _positive_roots(c0, c1, c2)
+            if r1 < best and e0 + r1 * (e1 + r1 * e2) > 0.0:
+                best = r1
+            elif r2 < best and e0 + r2 * (e1 + r2 * e2) > 0.0:
+                best = r2
+        out[blk] = best
+
+
+@leaf
+def _positive_roots(c0, c1, c2):
+    """The non-negative roots of ``c0 + c1 t + c2 t^2`` in increasing order (inf for missing ones)."""
+    scale = abs(c0) + abs(c1) + abs(c2)
+    if scale == 0.0:
+        return np.inf, np.inf
+    if abs(c2) <= 1e-14 * scale:
+        if c1 != 0.0 and -c0 / c1 >= 0.0:
+            return -c0 / c1, np.inf
+        return np.inf, np.inf
+    disc = c1 * c1 - 4.0 * c2 * c0
+    if disc < 0.0:
+        return np.inf, np.inf
+    sq = math.sqrt(disc)
+    q = -0.5 * (c1 + sq) if c1 >= 0.0 else -0.5 * (c1 - sq)
+    r1 = q / c2
+    r2 = c0 / q if q != 0.0 else r1
+    lo = min(r1, r2)
+    hi = max(r1, r2)
+    if lo < 0.0:
+        lo = np.inf
+    if hi < 0.0:
+        hi = np.inf
+    if lo > hi:
+        lo, hi = hi, lo
+    return lo, hi
 
 
 @parallel
