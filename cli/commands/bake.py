@@ -57,21 +57,16 @@ bake_command.__doc__ = HELP
 
 
 def _bake(flat_ply: Path, output: Path | None, options, *, name: str | None, quiet: bool, as_json: bool) -> None:
-    import json as json_module
-
     from rich.console import Console
 
     from potflat.bake import run_bake_stage
+    from potflat_cli._stage import run_stage
 
-    err = Console(stderr=True, quiet=quiet or as_json)
-    with err.status(f"baking {flat_ply.name}"):
-        result = run_bake_stage(flat_ply, output or flat_ply.parent, options, name=name)
+    result = run_stage(f"baking {flat_ply.name}", lambda: run_bake_stage(flat_ply, output or flat_ply.parent, options, name=name),
+                       quiet=quiet, as_json=as_json)
+    if result is None:
+        return
     s = result.summary
-    if as_json:
-        print(json_module.dumps({k: v for k, v in s.items() if k != "provenance"}, indent=2))
-        return
-    if quiet:
-        return
     out = Console(highlight=False)
     w, h = s["image_px"]
     out.print(f"[bold]{result.paths['png']}[/]: {w} x {h} px = {s['image_mm'][0]:.1f} x {s['image_mm'][1]:.1f} mm "

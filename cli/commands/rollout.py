@@ -76,21 +76,16 @@ rollout_command.__doc__ = HELP
 
 
 def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quiet: bool, as_json: bool) -> None:
-    import json as json_module
-
     from rich.console import Console
 
     from potflat.rollout import run_rollout_stage
+    from potflat_cli._stage import run_stage
 
-    err = Console(stderr=True, quiet=quiet or as_json)
-    with err.status(f"rolling out {scan.name}"):
-        result = run_rollout_stage(scan, output or scan.parent, options, name=name)
+    result = run_stage(f"rolling out {scan.name}", lambda: run_rollout_stage(scan, output or scan.parent, options, name=name),
+                       quiet=quiet, as_json=as_json)
+    if result is None:
+        return
     s = result.summary
-    if as_json:
-        print(json_module.dumps({k: v for k, v in s.items() if k != "provenance"}, indent=2))
-        return
-    if quiet:
-        return
     out = Console(highlight=False)
     ax, px, d, c, u = s["axis"], s["proxy"], s["distortion"], s["counts"], s["units"]
     fmt = ", ".join

@@ -1,0 +1,26 @@
+"""Running one stage from its command: a status line on stderr, ``--json`` on stdout."""
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+
+
+def run_stage(status: str, call: Callable, *, quiet: bool, as_json: bool):
+    """Run ``call()`` (a ``run_<stage>_stage``) under a status spinner on stderr.
+
+    With ``as_json`` the stage's summary (without provenance) is printed to stdout.
+
+    Returns
+    -------
+    StageOutput or None
+        The result when a human-readable summary should follow, else ``None``.
+    """
+    from rich.console import Console
+
+    err = Console(stderr=True, quiet=quiet or as_json)
+    with err.status(status):
+        result = call()
+    if as_json:
+        print(json.dumps({k: v for k, v in result.summary.items() if k != "provenance"}, indent=2))
+        return None
+    return None if quiet else result
