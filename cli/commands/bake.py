@@ -57,10 +57,10 @@ bake_command.__doc__ = HELP
 
 
 def _bake(flat_ply: Path, output: Path | None, options, *, name: str | None, quiet: bool, as_json: bool) -> None:
+    from potflat_cli._stage import run_stage
     from rich.console import Console
 
     from potflat.bake import run_bake_stage
-    from potflat_cli._stage import run_stage
 
     result = run_stage(f"baking {flat_ply.name}", lambda: run_bake_stage(flat_ply, output or flat_ply.parent, options, name=name),
                        quiet=quiet, as_json=as_json)

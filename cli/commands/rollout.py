@@ -5,7 +5,6 @@ from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
-
 from potflat_cli._errors import user_errors
 from potflat_cli._options import Json, Name, OutputDir, Quiet
 
@@ -60,8 +59,9 @@ def rollout_command(
     json: Json = False,
 ) -> None:
     """Unroll a vessel scan onto a proxy surface."""
-    from potflat.errors import InvalidOptionError
     from potflat_cli._options import options_from_cli
+
+    from potflat.errors import InvalidOptionError
 
     if output is not None and output.exists() and not output.is_dir():
         raise InvalidOptionError(f"--output {output} is a file; give a folder")
@@ -76,10 +76,10 @@ rollout_command.__doc__ = HELP
 
 
 def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quiet: bool, as_json: bool) -> None:
+    from potflat_cli._stage import run_stage
     from rich.console import Console
 
     from potflat.rollout import run_rollout_stage
-    from potflat_cli._stage import run_stage
 
     result = run_stage(f"rolling out {scan.name}", lambda: run_rollout_stage(scan, output or scan.parent, options, name=name),
                        quiet=quiet, as_json=as_json)
