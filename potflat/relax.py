@@ -7,7 +7,8 @@ all in 2D. Two solvers minimise the same spring energy:
 * the default presets (``preview``, ``standard``, ``archival``): L-BFGS with a
   flip-avoiding, monotone line search (no step ever lets a triangle's signed area reach
   zero, the energy never increases), a barrier that only acts on triangles squeezed below
-  a few percent of their rest area, and coarse-to-fine levels of bilinear displacement
+  half their rest area, a barrier that keeps each boundary vertex's flat angle sum below
+  2 pi (its fan cannot wrap over itself; the step bound includes it), and coarse-to-fine levels of bilinear displacement
   fields in the rollout's domain (:mod:`potflat.hierarchy`). The result is checked for
   flipped triangles and boundary self-overlap; a folded result is never returned.
 * ``paper``: the paper's damped dynamics (stretch 2, k = 0.5, mass 1, friction 0.01 inside
