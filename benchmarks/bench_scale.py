@@ -165,8 +165,10 @@ def main(argv: list[str] | None = None) -> None:
         print(f"  {info['vertices']:,} vertices, {info['faces']:,} faces, {info['obj_mb']:.0f} MB, "
               f"{info['generate_s']:.0f} s; running potflat run ...", flush=True)
         result = run_benchmark(scan, root / "out", preset=args.preset, px_per_mm=args.px_per_mm)
-        command = "python benchmarks/bench_scale.py " + " ".join(
-            a for a in (argv if argv is not None else sys.argv[1:]) if not a.startswith("--keep"))
+        given = list(argv if argv is not None else sys.argv[1:])
+        if "--keep" in given:  # where the files went is not part of the benchmark
+            del given[given.index("--keep"):given.index("--keep") + 2]
+        command = "python benchmarks/bench_scale.py " + " ".join(a for a in given if not a.startswith("--keep="))
         section = table(info, result, _image(root / "out", scan.stem), command=command.strip(),
                         preset=args.preset, px_per_mm=args.px_per_mm)
     print(section)
