@@ -98,7 +98,7 @@ def _worker(size_m: float, method: str, budget: float, target: float | None) -> 
         uv = r.flat.uv
         out.update(seconds=r.timings["solve"] + r.timings["setup"], solve=r.timings["solve"],
                    setup=r.timings["setup"], iterations=r.iterations, converged=r.converged,
-                   levels=[(lv["level"], lv["iterations"]) for lv in r.levels])
+                   levels=[(lv["level"], lv["iterations"]) for lv in r.levels], notes=list(r.notes))
         if preset == "paper" and target is not None and trace:
             # time at which the dynamics first reached the target energy (its own, per spring)
             from potflat.relax import _Springs
