@@ -250,11 +250,14 @@ class _Springs:
             if len(self.bverts):
                 self.ks.boundary_angle_sums(x, self.bverts, self.vf_ptr, self.vf_tri, self.faces, self.theta)
         self.ks.energy_gradient(x, self.ptr, self.nbr, self.rst, self.k, self.relative, LENGTH_FLOOR,
-                                self.vf_ptr, self.vf_tri, self.faces, self._areas, self.a_ref,
-                                BARRIER_MU if barrier else 0.0, BARRIER_EPS, self.bprev, self.bnext, self.bguard,
-                                self.theta, BOUNDARY_MU, BOUNDARY_GAP, g, self._es, self._eb, self.diag)
+                                self.bprev, self.bnext, self.bguard, self.theta, BOUNDARY_MU if barrier else 0.0,
+                                BOUNDARY_GAP, g, self._es, self._eb, self.diag)
         es = float(np.sum(self._es))
-        return es + float(np.sum(self._eb)), es, g
+        if not barrier:
+            return es, es, g
+        eb = float(np.sum(self._eb))
+        ef = self.ks.face_barrier(x, self.faces, self._areas, self.a_ref, BARRIER_MU, self.k, BARRIER_EPS, g, self.diag)
+        return es + eb + ef, es, g
 
     def spring_energy(self, x: np.ndarray) -> float:
         """Spring energy only (Eq. 1 with the 1/2 per spring)."""

@@ -258,9 +258,11 @@ def face_areas(x, faces, out):
 
 
 @parallel
-def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, faces, areas, a_ref, mu, eps,
-                    bprev, bnext, bguard, theta, mu_b, gap, grad, e_spring, e_barrier, diag):
-    """Spring + barrier energy per vertex and the gradient, gathered per vertex.
+def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, bprev, bnext, bguard, theta, mu_b, gap,
+                    grad, e_spring, e_barrier, diag):
+    """Spring + boundary angle barrier energy per vertex and the gradient, gathered per vertex.
+
+    The face barrier is added afterwards by :func:`face_barrier` (it acts on few faces).
 
     Parameters
     ----------
@@ -272,15 +274,6 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, face
     relative : bool
         Weight each spring by ``1 / max(r, r_floor)^2`` (relative length error).
     r_floor : float
-    vf_ptr, vf_tri : CSR from :func:`vertex_faces`
-    faces : (m, 3) int32 or int64
-    areas : (m,) float64
-        Signed face areas at ``x`` (:func:`face_areas`).
-    a_ref : (m,) float64
-        Reference (rest) area of each face, floored.
-    mu, eps : float
-        Barrier weight and activation threshold (fraction of ``a_ref``); ``mu = 0`` disables
-        both barriers.
     bprev, bnext : (n,) int32
         Each vertex's unique boundary predecessor and successor (-1: none or not unique).
     bguard : (n,) bool
@@ -288,11 +281,11 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, face
     theta : (n,) float64
         Flat interior angle sums of the guarded vertices at ``x`` (:func:`boundary_angle_sums`).
     mu_b, gap : float
-        Angle barrier weight and activation (radians below ``2 pi``).
+        Angle barrier weight and activation (radians below ``2 pi``); ``mu_b = 0`` disables it.
     grad : (n, 2) float64
         Output: dE/dx.
     e_spring, e_barrier : (n,) float64
-        Output: each vertex's share of the spring and barrier energy (sum = energy).
+        Output: each vertex's share of the spring energy and its angle barrier energy.
     diag : (n,) float64
         Output: a bound of the Hessian's diagonal per vertex (sum of spring coefficients plus
         the barrier's curvature), the Jacobi preconditioner of the fine-level solve.
@@ -323,38 +316,7 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, face
                 gx += f * dx
                 gy += f * dy
         eb = 0.0
-        if mu > 0.0:
-            for p in range(vf_ptr[i], vf_ptr[i + 1]):
-                t = vf_tri[p]
-                area = areas[t]
-                th = eps * a_ref[t]
-                if area >= th:
-                    continue
-                a0 = faces[t, 0]
-                a1 = faces[t, 1]
-                a2 = faces[t, 2]
-                if area <= 0.0:
-                    eb = np.inf
-                    continue
-                a = area / th
-                scale = mu * k * a_ref[t]
-                eb += scale * (a - 1.0 - math.log(a)) / 3.0
-                dphi = scale * (1.0 - 1.0 / a) / th
-                # corner order (i, j, l) counter-clockwise
-                if a0 == i:
-                    j1 = a1
-                    j2 = a2
-                elif a1 == i:
-                    j1 = a2
-                    j2 = a0
-                else:
-                    j1 = a0
-                    j2 = a1
-                ax = 0.5 * (x[j1, 1] - x[j2, 1])
-                ay = 0.5 * (x[j2, 0] - x[j1, 0])
-                gx += dphi * ax
-                gy += dphi * ay
-                hd += scale / (area * area) * (ax * ax + ay * ay)
+        if mu_b > 0.0:
             if bprev[i] >= 0 or bnext[i] >= 0:
                 sb = mu_b * k
                 # own angle sum: depends on x_i through u = x_nxt - x_i and w = x_prv - x_i
@@ -409,6 +371,58 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, vf_ptr, vf_tri, face
         grad[i, 1] = gy
         e_spring[i] = es
         e_barrier[i] = eb
+
+
+@leaf
+def face_barrier(x, faces, areas, a_ref, mu, k, eps, grad, diag):
+    """Add the face barrier to ``grad`` and ``diag``; return its energy.
+
+    Serial over the faces in order (deterministic); only faces squeezed below ``eps`` of
+    their reference area contribute, usually a small fraction, so this costs one pass over
+    ``areas`` and ``a_ref`` instead of a gather over every vertex's incident faces.
+
+    Parameters
+    ----------
+    x : (n, 2) float64
+    faces : (m, 3) int32 or int64
+    areas : (m,) float64
+        Signed face areas at ``x`` (:func:`face_areas`).
+    a_ref : (m,) float64
+        Reference (rest) area of each face, floored.
+    mu, k, eps : float
+        Barrier weight, stiffness and activation threshold (fraction of ``a_ref``).
+    grad, diag : (n, 2), (n,) float64
+        Updated in place: gradient and Hessian diagonal bound.
+
+    Returns
+    -------
+    float
+        ``sum mu k a_ref phi(A / (eps a_ref))``; inf when a face has non-positive area.
+    """
+    total = 0.0
+    for t in range(faces.shape[0]):
+        area = areas[t]
+        th = eps * a_ref[t]
+        if area >= th:
+            continue
+        if area <= 0.0:
+            total = np.inf
+            continue
+        a = area / th
+        scale = mu * k * a_ref[t]
+        total += scale * (a - 1.0 - math.log(a))
+        dphi = scale * (1.0 - 1.0 / a) / th
+        h = scale / (area * area)
+        for c in range(3):
+            i = faces[t, c]
+            j1 = faces[t, (c + 1) % 3]
+            j2 = faces[t, (c + 2) % 3]
+            ax = 0.5 * (x[j1, 1] - x[j2, 1])
+            ay = 0.5 * (x[j2, 0] - x[j1, 0])
+            grad[i, 0] += dphi * ax
+            grad[i, 1] += dphi * ay
+            diag[i] += h * (ax * ax + ay * ay)
+    return total
 
 
 @parallel
