@@ -213,7 +213,7 @@ class _Springs:
         self.boundary = np.zeros(n, bool)
         self.boundary[self.boundary_segments.ravel()] = True
         self.isolated = count == 0
-        self.bprev, self.bnext = _boundary_neighbours(faces, self.boundary_segments, n)
+        self.bprev, self.bnext = _boundary_neighbours(self.boundary_segments, n)
         self.bguard = np.zeros(n, bool)  # set by guard_boundary()
         self.bverts = np.zeros(0, np.int64)
         self.theta = np.zeros(n)
@@ -320,27 +320,28 @@ class _Springs:
         return 1.05 * lam
 
 
-def _boundary_neighbours(faces: np.ndarray, segments: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+def _boundary_neighbours(segments: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Each vertex's boundary predecessor and successor along the faces' orientation.
 
-    Returns ``bprev, bnext`` (n,) int32: for a boundary half-edge ``a -> b`` of a
-    counter-clockwise face, ``bnext[a] = b`` and ``bprev[b] = a``; -1 where a vertex has no
-    or several such half-edges (off the boundary, or where the boundary touches itself).
+    Parameters
+    ----------
+    segments : (b, 2) int64
+        Boundary half-edges ``a -> b`` oriented as in their faces (:func:`halfedge_springs`).
+
+    Returns
+    -------
+    bprev, bnext : (n,) int32
+        ``bnext[a] = b`` and ``bprev[b] = a``; -1 where a vertex has no or several boundary
+        half-edges leaving (arriving), i.e. off the boundary or where the boundary touches itself.
     """
     bprev = np.full(n, -1, np.int32)
     bnext = np.full(n, -1, np.int32)
     if len(segments) == 0:
         return bprev, bnext
-    a = faces.ravel()
-    b = faces[:, [1, 2, 0]].ravel()
-    key = np.minimum(a, b) * n + np.maximum(a, b)
-    on = np.isin(key, segments[:, 0] * n + segments[:, 1])
-    a, b = a[on], b[on]
-    out_deg = np.bincount(a, minlength=n)
-    in_deg = np.bincount(b, minlength=n)
-    keep = out_deg[a] == 1
+    a, b = segments[:, 0], segments[:, 1]
+    keep = np.bincount(a, minlength=n)[a] == 1
     bnext[a[keep]] = b[keep]
-    keep = in_deg[b] == 1
+    keep = np.bincount(b, minlength=n)[b] == 1
     bprev[b[keep]] = a[keep]
     return bprev, bnext
 

@@ -75,7 +75,9 @@ def test_springs_and_cross_rest_lengths_match_reference(bumpy):
     # cross rest lengths are intrinsic: longer than the 3D chord on a bent surface
     chord = np.linalg.norm(V[cross[:, 0]] - V[cross[:, 1]], axis=1)
     assert np.all(r_cross >= chord - 1e-12) and np.any(r_cross > chord + 1e-6)
-    np.testing.assert_array_equal(boundary, _boundary_edges(F))
+    np.testing.assert_array_equal(np.sort(boundary, axis=1), _boundary_edges(F))
+    halfedges = {tuple(h) for f in F for h in (f[[0, 1]], f[[1, 2]], f[[2, 0]])}
+    assert all(tuple(h) in halfedges for h in boundary)  # oriented as in their faces
 
 
 @pytest.mark.parametrize("relative", [False, True])

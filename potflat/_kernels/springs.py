@@ -54,7 +54,8 @@ def halfedge_springs(faces, n):
         vertices ``p`` (of the face where ``a -> b`` runs counter-clockwise) and ``q``, and
         the shared edge ``a, b``.
     boundary : (b, 2) int64
-        The edges used by one face only, as in ``edges``.
+        The edges used by one face only, in ``edges``' order, each oriented as in its face
+        (``a -> b`` counter-clockwise).
     """
     m = faces.shape[0]
     keys = np.empty(3 * m, np.int64)
@@ -95,9 +96,10 @@ def halfedge_springs(faces, n):
         edges[ie, 0] = k0 // n
         edges[ie, 1] = k0 % n
         ie += 1
-        if g - h == 1:
-            boundary[ib, 0] = edges[ie - 1, 0]
-            boundary[ib, 1] = edges[ie - 1, 1]
+        if g - h == 1:  # oriented as in its face
+            h0 = order[h]
+            boundary[ib, 0] = faces[h0 // 3, h0 % 3]
+            boundary[ib, 1] = faces[h0 // 3, (h0 % 3 + 1) % 3]
             ib += 1
         if g - h == 2:
             h0 = order[h]
