@@ -20,7 +20,7 @@ import os
 # An explicit setting by the user wins.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-import numba  # noqa: E402
+import numba
 
 leaf = numba.njit(cache=True, nogil=True, fastmath=False)
 parallel = numba.njit(cache=True, nogil=True, parallel=True, fastmath=False)

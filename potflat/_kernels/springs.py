@@ -318,56 +318,55 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, bprev, bnext, bguard
                 gx += f * dx
                 gy += f * dy
         eb = 0.0
-        if mu_b > 0.0:
-            if bprev[i] >= 0 or bnext[i] >= 0:
-                sb = mu_b * k
-                # own angle sum: depends on x_i through u = x_nxt - x_i and w = x_prv - x_i
-                if bguard[i]:
-                    a = (2.0 * math.pi - theta[i]) / gap
-                    if a <= 0.0:
-                        eb = np.inf
-                    elif a < 1.0:
-                        eb += sb * (a - 1.0 - math.log(a))
-                        cb = -sb * (1.0 - 1.0 / a) / gap  # dB / dTheta
-                        ux = x[bnext[i], 0] - xi
-                        uy = x[bnext[i], 1] - yi
-                        wx = x[bprev[i], 0] - xi
-                        wy = x[bprev[i], 1] - yi
-                        uu = ux * ux + uy * uy
-                        ww = wx * wx + wy * wy
-                        tx = -(uy / uu - wy / ww)
-                        ty = -(-ux / uu + wx / ww)
-                        gx += cb * tx
-                        gy += cb * ty
-                        hd += sb / (a * a * gap * gap) * (tx * tx + ty * ty)
-                # as the successor of its predecessor p: Theta_p grows with arg(x_i - x_p) decreasing
-                pv = bprev[i]
-                if pv >= 0 and bguard[pv]:
-                    a = (2.0 * math.pi - theta[pv]) / gap
-                    if 0.0 < a < 1.0:
-                        cb = -sb * (1.0 - 1.0 / a) / gap
-                        ux = xi - x[pv, 0]
-                        uy = yi - x[pv, 1]
-                        uu = ux * ux + uy * uy
-                        tx = uy / uu
-                        ty = -ux / uu
-                        gx += cb * tx
-                        gy += cb * ty
-                        hd += sb / (a * a * gap * gap) * (tx * tx + ty * ty)
-                # as the predecessor of its successor q
-                qv = bnext[i]
-                if qv >= 0 and bguard[qv]:
-                    a = (2.0 * math.pi - theta[qv]) / gap
-                    if 0.0 < a < 1.0:
-                        cb = -sb * (1.0 - 1.0 / a) / gap
-                        wx = xi - x[qv, 0]
-                        wy = yi - x[qv, 1]
-                        ww = wx * wx + wy * wy
-                        tx = -wy / ww
-                        ty = wx / ww
-                        gx += cb * tx
-                        gy += cb * ty
-                        hd += sb / (a * a * gap * gap) * (tx * tx + ty * ty)
+        if mu_b > 0.0 and (bprev[i] >= 0 or bnext[i] >= 0):
+            sb = mu_b * k
+            # own angle sum: depends on x_i through u = x_nxt - x_i and w = x_prv - x_i
+            if bguard[i]:
+                a = (2.0 * math.pi - theta[i]) / gap
+                if a <= 0.0:
+                    eb = np.inf
+                elif a < 1.0:
+                    eb += sb * (a - 1.0 - math.log(a))
+                    cb = -sb * (1.0 - 1.0 / a) / gap  # dB / dTheta
+                    ux = x[bnext[i], 0] - xi
+                    uy = x[bnext[i], 1] - yi
+                    wx = x[bprev[i], 0] - xi
+                    wy = x[bprev[i], 1] - yi
+                    uu = ux * ux + uy * uy
+                    ww = wx * wx + wy * wy
+                    tx = -(uy / uu - wy / ww)
+                    ty = -(-ux / uu + wx / ww)
+                    gx += cb * tx
+                    gy += cb * ty
+                    hd += sb / (a * a * gap * gap) * (tx * tx + ty * ty)
+            # as the successor of its predecessor p: Theta_p grows with arg(x_i - x_p) decreasing
+            pv = bprev[i]
+            if pv >= 0 and bguard[pv]:
+                a = (2.0 * math.pi - theta[pv]) / gap
+                if 0.0 < a < 1.0:
+                    cb = -sb * (1.0 - 1.0 / a) / gap
+                    ux = xi - x[pv, 0]
+                    uy = yi - x[pv, 1]
+                    uu = ux * ux + uy * uy
+                    tx = uy / uu
+                    ty = -ux / uu
+                    gx += cb * tx
+                    gy += cb * ty
+                    hd += sb / (a * a * gap * gap) * (tx * tx + ty * ty)
+            # as the predecessor of its successor q
+            qv = bnext[i]
+            if qv >= 0 and bguard[qv]:
+                a = (2.0 * math.pi - theta[qv]) / gap
+                if 0.0 < a < 1.0:
+                    cb = -sb * (1.0 - 1.0 / a) / gap
+                    wx = xi - x[qv, 0]
+                    wy = yi - x[qv, 1]
+                    ww = wx * wx + wy * wy
+                    tx = -wy / ww
+                    ty = wx / ww
+                    gx += cb * tx
+                    gy += cb * ty
+                    hd += sb / (a * a * gap * gap) * (tx * tx + ty * ty)
         diag[i] = hd
         grad[i, 0] = gx
         grad[i, 1] = gy
