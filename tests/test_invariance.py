@@ -3,8 +3,11 @@ image at the same px/mm (issue 6; docs/robustness.md).
 
 One synthetic painted vessel is written as an OBJ in mm, rescaled copies (m, cm: the same
 texture, coordinates divided, ``--units`` given) and the same vessel in random poses.
-Each runs through rollout, the default relaxation and bake at 2 px/mm; the baked
-paintings are compared pixel by pixel.
+Each runs through rollout, the relaxation run to convergence (``archival``) and bake at
+2 px/mm; the baked paintings are compared pixel by pixel. The ``standard`` preset stops at a
+relative energy change of 1e-5, so two poses differ there by up to what the solver leaves
+unconverged (measured: 0.13-0.15 % of the pixels at the border, 0.5 grey levels inside);
+``archival`` reaches the same image to 0.01 %.
 """
 from __future__ import annotations
 
@@ -55,7 +58,7 @@ def _random_motion(seed: int):
 
 
 def _bake(scan: Path, out: Path, units: str = "mm", **rollout) -> tuple[np.ndarray, dict]:
-    result = run_scan(scan, out, rollout={"units": units, **rollout}, relax={},
+    result = run_scan(scan, out, rollout={"units": units, **rollout}, relax={"preset": "archival"},
                       bake={"px_per_mm": PX_PER_MM, "maps": ()})
     with Image.open(result.stages["bake"].paths["png"]) as im:
         return np.asarray(im.convert("RGBA")), result.stages["bake"].summary
