@@ -5,8 +5,11 @@ import json
 from collections.abc import Callable
 
 
-def run_stage(status: str, call: Callable, *, quiet: bool, as_json: bool):
+def run_stage(status: str | None, call: Callable, *, quiet: bool, as_json: bool):
     """Run ``call()`` (a ``run_<stage>_stage``) under a status spinner on stderr.
+
+    ``status=None`` shows no spinner (for a stage that draws its own progress bar: rich
+    allows one live display at a time).
 
     With ``as_json`` the stage's summary (without provenance) is printed to stdout.
 
@@ -17,9 +20,11 @@ def run_stage(status: str, call: Callable, *, quiet: bool, as_json: bool):
     """
     from rich.console import Console
 
-    err = Console(stderr=True, quiet=quiet or as_json)
-    with err.status(status):
+    if status is None:
         result = call()
+    else:
+        with Console(stderr=True, quiet=quiet or as_json).status(status):
+            result = call()
     if as_json:
         print(json.dumps({k: v for k, v in result.summary.items() if k != "provenance"}, indent=2))
         return None

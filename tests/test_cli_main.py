@@ -124,9 +124,7 @@ def test_run_corrupt_scan_one_line_error(tmp_path, fake_stages):
     assert len(lines) == 1 and lines[0].startswith("error: ") and "bad.ply" in lines[0]
 
 
-@pytest.mark.parametrize("stage", ["rollout", pytest.param("relax", marks=pytest.mark.xfail(
-    reason="potflat relax has --out-dir and lacks --name/--quiet/--json: remove this mark when it uses "
-           "potflat_cli._options (reported to the lead)")), "bake"])
+@pytest.mark.parametrize("stage", ["rollout", "relax", "bake"])
 def test_stage_commands_use_the_shared_option_names(stage):
     """Every options field is --field-name on its stage command, with -o/--output and --name."""
     from potflat.pipeline import stage_api

@@ -6,8 +6,9 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+
 from potflat_cli._errors import user_errors
-from potflat_cli._options import OutputDir
+from potflat_cli._options import Json, Name, OutputDir, Quiet
 
 HELP = """Relax a rollout into a fold-free flattening: writes NAME.relaxed.ply (with per-vertex stress) and NAME.relaxed.json (energy history, flips, boundary check, distortion before/after, timings, provenance).
 
@@ -39,13 +40,22 @@ def relax_command(
         "--stiffness", help="Spring stiffness k > 0 \\[default: 0.5 for paper, else 1].")] = None,
     weighting: Annotated[str | None, typer.Option(
         "--weighting", help="uniform (absolute length errors, the paper) | relative (1/r^2) \\[default: per preset].")] = None,
+    name: Name = None,
+    quiet: Quiet = False,
+    json: Json = False,
 ) -> None:
     from potflat.relax import RelaxOptions, run_relax_stage
+    from potflat_cli._stage import run_stage
 
     options = RelaxOptions(preset=preset, tol=tol, max_iter=max_iter, time_budget=time_budget, threads=threads,
                            stretch=stretch, stiffness=stiffness, weighting=weighting)
-    out = run_relax_stage(rollout_ply, output if output is not None else rollout_ply.parent, options,
-                          progress=sys.stderr.isatty())
+    show_progress = sys.stderr.isatty() and not (quiet or json)
+    out = run_stage(None if show_progress else f"relaxing {rollout_ply.name}",
+                    lambda: run_relax_stage(rollout_ply, output if output is not None else rollout_ply.parent,
+                                            options, name=name, progress=show_progress),
+                    quiet=quiet, as_json=json)
+    if out is None:
+        return
     s = out.summary
     before, after = s["distortion_before"], s["distortion"]
     state = "converged" if s["converged"] else "not converged (" + ", ".join(s["notes"][-1:]) + ")"
