@@ -260,6 +260,16 @@ def resolve_options(**given: Any) -> dict[str, Any]:
     return out
 
 
+def _check_painting_name_is_free(out: Path, name: str) -> None:
+    """Refuse before any work when ``NAME.png`` exists in ``out`` and was not baked by potflat
+    (typically the scan's own texture, when the output folder is the scan's folder): the bake
+    would stop there after rollout and relax had run."""
+    painting = out / f"{name}.png"
+    if painting.exists() and not (out / f"{name}.bake.json").exists():
+        raise InvalidOptionError(f"{painting} exists and was not made by potflat (the scan's texture?) and would be "
+                                 "overwritten; give another output folder (-o) or --name")
+
+
 def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: str | None = None,
              progress: Callable[[str], None] | None = None) -> ScanResult:
     """Run rollout, relax and bake on one scan, writing every output into ``out_dir``.
@@ -290,6 +300,7 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
     out = Path(out_dir)
     name = name or scan.stem
     options = resolve_options(rollout=rollout, relax=relax, bake=bake)
+    _check_painting_name_is_free(out, name)
     stages: dict[str, StageOutput] = {}
     seconds: dict[str, float] = {}
     start = time.perf_counter()

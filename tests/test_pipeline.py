@@ -125,3 +125,21 @@ def test_distortion_figures_prefers_distortion_key():
     assert figures["edge_rms"] == 0.1 and figures["flipped"] == 2
     assert set(figures) == set(FIGURES) and figures["anisotropy_p95"] is None
     assert distortion_figures({}) == dict.fromkeys(FIGURES)
+
+
+def test_run_refuses_early_when_the_painting_would_replace_the_scan_texture(tmp_path):
+    """`potflat run pot.obj` into the scan's own folder, whose texture is pot.png: refused
+    before any stage runs (nothing written), and the texture is kept."""
+    import pytest
+
+    from potflat.errors import InvalidOptionError
+    from potflat.pipeline import run_scan
+
+    scan = tmp_path / "pot.obj"
+    scan.write_text("v 0 0 0\n")
+    texture = tmp_path / "pot.png"
+    texture.write_bytes(b"texture")
+    with pytest.raises(InvalidOptionError, match="pot.png exists and was not made by potflat"):
+        run_scan(scan, tmp_path)
+    assert texture.read_bytes() == b"texture"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pot.obj", "pot.png"]

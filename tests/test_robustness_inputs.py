@@ -365,11 +365,12 @@ def test_rollout_onto_its_own_input_is_refused(tmp_path, vessel):
 
 def test_run_into_the_scan_folder_never_overwrites_the_texture(tmp_path, scan):
     """pot.obj with texture pot.png, outputs beside it: bake's pot.png would replace the
-    texture. Refused (after rollout and relax, whose files are complete); inputs unchanged."""
+    texture. Refused before any stage runs; inputs unchanged."""
     inputs = {p.name: _sha(p) for p in scan.parent.iterdir()}
     result = _invoke(["run", scan, "--preset", "preview", "--px-per-mm", "1"])
     _assert_clean_error(result, None, "pot.png", "overwritten", "-o")
     assert {p: _sha(scan.parent / p) for p in inputs} == inputs
+    assert sorted(p.name for p in scan.parent.iterdir()) == sorted(inputs)  # nothing written
     assert not list(scan.parent.glob("*.part")) and not list(scan.parent.glob(".*.part"))
     # with an output folder it works, and a rerun works too (the texture is not taken for output)
     out = tmp_path / "out"
