@@ -138,7 +138,7 @@ def table(info: dict, result: dict, image: str, *, command: str, preset: str, px
     verdict = "within" if result["peak_gb"] <= GOAL_GB else "OVER"
     lines += ["", (f"Peak {result['peak_gb']:.2f} GB (VmHWM {result['hwm_gb']:.2f}, ru_maxrss "
                    f"{result['maxrss_gb']:.2f}, which counts this benchmark's own memory at fork; "
-                   "GB = 2^30 bytes): {verdict} the {GOAL_GB:g} GB goal. Relaxed: edge-length "
+                   f"GB = 2^30 bytes): {verdict} the {GOAL_GB:g} GB goal. Relaxed: edge-length "
                    f"RMS {f.get('edge_rms', float('nan')):.4f}, {f.get('flipped')} flipped triangles."), ""]
     return "\n".join(lines)
 
