@@ -76,9 +76,11 @@ class GridHierarchy:
         """Number of grid nodes of ``level``."""
         return ((1 << level) + 1) ** 2
 
-    def prolong(self, level: int, c: np.ndarray) -> np.ndarray:
-        """Displacement of every (sorted) vertex from node values ``c`` ((nodes, 2)) -> (n, 2)."""
-        out = np.empty((len(self.un), 2))
+    def prolong(self, level: int, c: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Displacement of every (sorted) vertex from node values ``c`` ((nodes, 2)) -> (n, 2),
+        written into ``out`` when given."""
+        if out is None:
+            out = np.empty((len(self.un), 2))
         relax_grid.prolong(self.un, level, np.ascontiguousarray(c), out)
         return out
 

@@ -242,9 +242,11 @@ class _Springs:
         self._bblocks = np.empty(max(1, -(-len(self.bverts) // self.ks.BLOCK)))
         return int((~ok).sum())
 
-    def evaluate(self, x: np.ndarray, *, barrier: bool = True) -> tuple[float, float, np.ndarray]:
-        """Total energy, spring energy and gradient (a fresh (n, 2) array) at ``x``."""
-        g = np.empty((self.n, 2))
+    def evaluate(self, x: np.ndarray, *, barrier: bool = True,
+                 out: np.ndarray | None = None) -> tuple[float, float, np.ndarray]:
+        """Total energy, spring energy and gradient at ``x`` (written into ``out`` (n, 2) when
+        given, else a fresh array). Also sets ``diag``, the Hessian diagonal bound at ``x``."""
+        g = np.empty((self.n, 2)) if out is None else out
         if barrier:
             self.ks.face_areas(x, self.faces, self._areas)
             if len(self.bverts):
@@ -380,82 +382,147 @@ def _relative_change(hist: list[float], window: int) -> float:
     return abs(old - new) / (window * max(abs(new), 1e-300))
 
 
-def _lbfgs(sp: _Springs, x: np.ndarray, run: _Run, *, prolong, restrict, max_iter: int, tol: float,
-           jacobi: bool = False) -> tuple[np.ndarray, bool, int]:
-    """Minimise the energy over ``x + prolong(c)`` with L-BFGS and a flip-free monotone line search.
+class _Work:
+    """Per-vertex buffers shared by the levels of one solve, all (n, 2) float64.
 
-    With ``jacobi`` (per-vertex unknowns only) the initial inverse Hessian is the inverse of
-    the Hessian diagonal bound of the current state instead of a multiple of the identity, so
-    a squeezed triangle's stiff barrier does not shrink everybody's step.
-    Returns the new positions, whether the level converged, and its iteration count.
+    ``x``: current positions; ``trial``: line-search positions; ``good``: the level's last
+    positions without boundary overlap; ``grad``: two gradient buffers (current and trial);
+    ``dx``: a grid level's prolonged search direction.
     """
-    E, _Es, gf = sp.evaluate(x)
-    g = restrict(gf)
-    dinv = 1.0 / np.maximum(sp.diag, 1e-12)[:, None] if jacobi else None
-    mem: deque = deque(maxlen=LBFGS_MEMORY)  # (s, y, 1 / s.y)
-    hist = [E]
-    it = 0
-    converged = False
-    while it < max_iter:
-        q = -g
-        alphas = []
-        for s, y, rho in reversed(mem):
-            a = rho * sp.dot(s, q)
-            alphas.append(a)
-            q = q - a * y
-        if dinv is not None:
-            q = q * dinv
-            if mem:
-                s, y, rho = mem[-1]
-                q = q * (1.0 / (rho * sp.dot(y, y * dinv)))
-        elif mem:
-            s, y, rho = mem[-1]
-            q = q * (1.0 / (rho * sp.dot(y, y)))
-        for (s, y, rho), a in zip(mem, reversed(alphas)):
-            b = rho * sp.dot(y, q)
-            q = q + (a - b) * s
-        gd = sp.dot(g, q)
-        if not gd < 0.0:
-            mem.clear()
-            q = -g if dinv is None else -g * dinv
-            gd = sp.dot(g, q)
+
+    def __init__(self, x: np.ndarray):
+        self.x = np.array(x, dtype=np.float64, order="C")
+        self.trial = np.empty_like(self.x)
+        self.good = np.empty_like(self.x)
+        self.grad = [np.empty_like(self.x), np.empty_like(self.x)]
+        self.dx = np.empty_like(self.x)
+
+
+_NO_VECTOR = np.empty(0)
+
+
+class _LBFGS:
+    """L-BFGS over ``x + prolong(c)`` with a flip-free, monotone line search.
+
+    The state (positions, gradient, the last :data:`LBFGS_MEMORY` pairs) persists between
+    calls of :meth:`run`, so a level can be run in chunks with checks in between. With
+    ``jacobi`` (the fine level: per-vertex unknowns) the initial inverse Hessian is the
+    inverse of the Hessian diagonal bound of the current state instead of a multiple of the
+    identity, so a squeezed triangle's stiff barrier does not shrink everybody's step. The
+    vector algebra runs in fused in-place passes (:mod:`potflat._kernels.lbfgs`) over
+    preallocated buffers: two passes per stored pair and iteration.
+    """
+
+    def __init__(self, sp: _Springs, work: _Work, *, prolong, restrict, size: int, jacobi: bool):
+        from potflat._kernels import lbfgs as kl
+
+        self.kl, self.sp, self.work = kl, sp, work
+        self.prolong, self.restrict, self.jacobi = prolong, restrict, jacobi
+        # one slot more than the memory: a new pair is written before the oldest is dropped
+        self.S = np.empty((LBFGS_MEMORY + 1, size))
+        self.Y = np.empty((LBFGS_MEMORY + 1, size))
+        self.rho = np.zeros(LBFGS_MEMORY + 1)
+        self.yhy = np.zeros(LBFGS_MEMORY + 1)
+        self.slots: list[int] = []  # oldest first
+        self.q = np.empty(size)
+        self._part = np.empty(max(1, -(-size // kl.BLOCK)))
+        self._part2 = np.empty_like(self._part)
+        self._xpart = np.empty(max(1, -(-2 * sp.n // kl.BLOCK)))
+        self.cur = 0  # index of work.grad holding the current full gradient
+        self.E, _es, gf = sp.evaluate(work.x, out=work.grad[self.cur])
+        self.g = self._flat(restrict(gf))
+
+    @staticmethod
+    def _flat(a: np.ndarray) -> np.ndarray:
+        return a.reshape(-1)
+
+    def _diag(self) -> np.ndarray:
+        return self.sp.diag if self.jacobi else _NO_VECTOR
+
+    def _combine(self, q, c, src, a, y, diag, scale, s) -> float:
+        self.kl.combine(q, c, src, a, y, diag, scale, s, self._part)
+        return float(np.sum(self._part))
+
+    def _direction(self) -> float:
+        """Set ``q`` to the L-BFGS direction (two-loop recursion); return ``g . q``."""
+        q, g, diag, S, Y, rho = self.q, self.g, self._diag(), self.S, self.Y, self.rho
+        order = self.slots[::-1]  # newest first
+        if not order:
+            return self._combine(q, -1.0, g, 0.0, g, diag, 1.0, g)
+        gamma = 1.0 / (rho[order[0]] * self.yhy[order[0]])  # s.y / y.P.y of the newest pair
+        alpha = {}
+        part = self._combine(q, -1.0, g, 0.0, g, _NO_VECTOR, 1.0, S[order[0]])
+        for k, j in enumerate(order):
+            alpha[j] = rho[j] * part
+            if k + 1 < len(order):
+                part = self._combine(q, 1.0, q, -alpha[j], Y[j], _NO_VECTOR, 1.0, S[order[k + 1]])
+            else:  # apply the scaled initial inverse Hessian and start the second loop
+                part = self._combine(q, 1.0, q, -alpha[j], Y[j], diag, gamma, Y[order[-1]])
+        for k, j in enumerate(order[::-1]):  # oldest first
+            beta = rho[j] * part
+            nxt = Y[order[-2 - k]] if k + 1 < len(order) else g
+            part = self._combine(q, 1.0, q, alpha[j] - beta, S[j], _NO_VECTOR, 1.0, nxt)
+        return part
+
+    def _store_pair(self, t: float, g_new: np.ndarray) -> None:
+        used = set(self.slots)
+        slot = next(i for i in range(LBFGS_MEMORY + 1) if i not in used)
+        self.kl.pair(self.q, t, g_new, self.g, self._diag(), self.S[slot], self.Y[slot], self._part, self._part2)
+        sy, yhy = float(np.sum(self._part)), float(np.sum(self._part2))
+        if sy > 1e-300 and yhy > 0.0:
+            self.rho[slot], self.yhy[slot] = 1.0 / sy, yhy
+            self.slots.append(slot)
+            if len(self.slots) > LBFGS_MEMORY:
+                self.slots.pop(0)
+
+    def run(self, run: _Run, *, max_iter: int, tol: float, hist: list[float]) -> tuple[bool, int]:
+        """Up to ``max_iter`` iterations; returns (converged, iterations).
+
+        ``hist`` is the level's energy history (for the relative-change test), extended here.
+        """
+        sp, work, kl = self.sp, self.work, self.kl
+        it = 0
+        converged = False
+        while it < max_iter:
+            gd = self._direction()
             if not gd < 0.0:
-                converged = True  # zero gradient
+                self.slots.clear()
+                gd = self._direction()
+                if not gd < 0.0:
+                    converged = True  # zero gradient
+                    break
+            dx = self.prolong(self.q)
+            t = 1.0
+            if not self.slots and not self.jacobi:
+                peak = float(np.max(np.abs(dx)))
+                t = min(1.0, 0.1 / peak) if peak > 0 else 1.0
+            t = min(t, STEP_FRACTION * sp.max_step(work.x, dx))
+            trial_grad = work.grad[1 - self.cur]
+            accepted = False
+            for _ in range(50):
+                kl.combine(self._flat(work.trial), 1.0, self._flat(work.x), t, self._flat(dx), _NO_VECTOR, 1.0,
+                           _NO_VECTOR, self._xpart)
+                En, _es, gf = sp.evaluate(work.trial, out=trial_grad)
+                if math.isfinite(En) and En <= self.E + ARMIJO * t * gd:
+                    accepted = True
+                    break
+                t *= 0.5
+            if not accepted or t == 0.0:
+                converged = True  # no descent possible at machine precision
                 break
-        dx = prolong(q)
-        t = 1.0
-        if not mem and dinv is None:
-            peak = float(np.abs(dx).max())
-            t = min(1.0, 0.1 / peak) if peak > 0 else 1.0
-        t = min(t, STEP_FRACTION * sp.max_step(x, dx))
-        accepted = False
-        for _ in range(50):
-            xn = x + t * dx
-            En, _Esn, gfn = sp.evaluate(xn)
-            if math.isfinite(En) and En <= E + ARMIJO * t * gd:
-                accepted = True
+            g_new = self._flat(self.restrict(gf))
+            self._store_pair(t, g_new)  # sp.diag is now the Hessian bound at the new point
+            work.x, work.trial = work.trial, work.x
+            self.cur = 1 - self.cur
+            self.E, self.g = En, g_new
+            it += 1
+            hist.append(En)
+            if run.record(En):
                 break
-            t *= 0.5
-        if not accepted or t == 0.0:
-            converged = True  # no descent possible at machine precision
-            break
-        gn = restrict(gfn)
-        s = t * q
-        y = gn - g
-        sy = sp.dot(s, y)
-        if sy > 1e-300:
-            mem.append((s, y, 1.0 / sy))
-        x, E, g = xn, En, gn
-        if dinv is not None:
-            dinv = 1.0 / np.maximum(sp.diag, 1e-12)[:, None]
-        it += 1
-        hist.append(En)
-        if run.record(En):
-            break
-        if En == 0.0 or _relative_change(hist, WINDOW_LBFGS) < tol:
-            converged = True
-            break
-    return x, converged, it
+            if En == 0.0 or _relative_change(hist, WINDOW_LBFGS) < tol:
+                converged = True
+                break
+        return converged, it
 
 
 def _multilevel(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, levels_out: list, notes: list):
@@ -463,6 +530,8 @@ def _multilevel(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, le
     level_tol = max(tol, settings["level_tol"])
     overlap_free = sp.overlap(x) == 0
     converged = False
+    work = _Work(x)
+    del x
     plan = [("grid", L) for L in hier.levels]
     if settings["fine_iter"] > 0 or not plan:
         plan.append(("fine", None))
@@ -472,41 +541,47 @@ def _multilevel(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, le
         if kind == "grid":
             cs = hier.cell_start(L)
             shape = (hier.n_nodes(L), 2)
-            prolong = lambda c, L=L, shape=shape: hier.prolong(L, c.reshape(shape))
+            prolong = lambda c, L=L, shape=shape: hier.prolong(L, c.reshape(shape), out=work.dx)
             restrict = lambda g, L=L, cs=cs: hier.restrict(L, cs, g)
-            cap, ltol = settings["level_iter"], level_tol
+            cap, ltol, size = settings["level_iter"], level_tol, 2 * shape[0]
         else:
-            prolong = restrict = lambda a: a
-            cap, ltol = settings["fine_iter"] or settings["max_iter"], tol
+            prolong = lambda q: q.reshape(-1, 2)
+            restrict = lambda g: g
+            cap, ltol, size = settings["fine_iter"] or settings["max_iter"], tol, 2 * sp.n
         cap = min(cap, run.max_iter - len(run.history))
         if cap <= 0:
             break
         # run in chunks and check the boundary after each; if the level ends with the boundary
         # overlapping itself, go back to its last overlap-free state (the undone iterations
         # leave the history, which stays the path of the returned state)
+        solver = _LBFGS(sp, work, prolong=prolong, restrict=restrict, size=size, jacobi=kind == "fine")
+        hist = [solver.E]
         its, conv, hit = 0, False, False
-        good = (x, len(run.history), 0)
+        np.copyto(work.good, work.x)
+        good = (len(run.history), 0)
         while its < cap and not conv:
-            x, conv, k = _lbfgs(sp, x, run, prolong=prolong, restrict=restrict,
-                                max_iter=min(OVERLAP_CHECK_EVERY, cap - its), tol=ltol, jacobi=kind == "fine")
+            conv, k = solver.run(run, max_iter=min(OVERLAP_CHECK_EVERY, cap - its), tol=ltol, hist=hist)
             its += k
-            if not overlap_free or sp.overlap(x) == 0:
-                good = (x, len(run.history), its)
+            if not overlap_free or sp.overlap(work.x) == 0:
+                np.copyto(work.good, work.x)
+                good = (len(run.history), its)
             if run.stopped or k == 0:
                 break
-        if good[2] != its:
+        del solver
+        if good[1] != its:
             notes.append(f"level {run.level}: ended with the boundary overlapping itself; went back "
-                         f"{its - good[2]} iterations to its last overlap-free state")
-            x, hit, conv = good[0], True, False
-            del run.history[good[1]:]
-            its = good[2]
-        levels_out.append({"level": run.level, "iterations": its, "energy": sp.spring_energy(x),
+                         f"{its - good[1]} iterations to its last overlap-free state")
+            np.copyto(work.x, work.good)
+            hit, conv = True, False
+            del run.history[good[0]:]
+            its = good[1]
+        levels_out.append({"level": run.level, "iterations": its, "energy": sp.spring_energy(work.x),
                            "seconds": time.perf_counter() - t0, "boundary_contact": hit})
         converged = conv
         if run.stopped:
             converged = False
             break
-    return x, converged
+    return work.x, converged
 
 
 def _dynamics(sp: _Springs, x: np.ndarray, settings: dict, run: _Run, levels_out: list):
