@@ -25,6 +25,9 @@ from potflat.types import FlatMesh
 
 #: Relative 3D area below which a face counts as degenerate (fraction of the mean face area).
 DEGENERATE_AREA_FRACTION = 1e-12
+#: Faces (or edges) per block of the per-face and per-edge figures: bounds their
+#: temporaries on big meshes (the figures do not depend on it).
+BLOCK = 1 << 18
 
 
 @dataclass(frozen=True)
@@ -91,6 +94,9 @@ class DistortionSummary:
 def face_distortion(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> FaceDistortion:
     """Per-face distortion of the map from ``vertices`` to ``uv``.
 
+    Computed in blocks of :data:`BLOCK` faces, so the temporaries stay small on big
+    meshes (every figure is per face; the result does not depend on the blocks).
+
     Parameters
     ----------
     vertices : (n, 3) float64
@@ -104,54 +110,82 @@ def face_distortion(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> 
     -------
     FaceDistortion
     """
-    p0, p1, p2 = (vertices[faces[:, k]] for k in range(3))
-    d1, d2 = p1 - p0, p2 - p0
-    normal = np.cross(d1, d2)
-    area_3d = 0.5 * np.linalg.norm(normal, axis=1)
-    mean_area = area_3d.mean() if len(area_3d) else 0.0
+    m = len(faces)
+    area_3d = face_areas(vertices, faces)
+    mean_area = area_3d.mean() if m else 0.0
     valid = area_3d > DEGENERATE_AREA_FRACTION * max(mean_area, np.finfo(float).tiny)
-    len1 = np.linalg.norm(d1, axis=1)
-    safe = np.where(valid, 1.0, 0.0)
-    len1s = np.where(valid & (len1 > 0), len1, 1.0)
-    e1 = d1 / len1s[:, None]
-    q2x = np.einsum("ij,ij->i", d2, e1)
-    q2y = np.where(valid, 2.0 * area_3d / len1s, 1.0)
-    w0 = uv[faces[:, 0]]
-    w1 = uv[faces[:, 1]] - w0
-    w2 = uv[faces[:, 2]] - w0
-    area_2d = 0.5 * (w1[:, 0] * w2[:, 1] - w1[:, 1] * w2[:, 0])
-    # J = W Q^-1 with Q = [[len1, q2x], [0, q2y]]
-    inv11, inv12, inv22 = 1.0 / len1s, -q2x / (len1s * q2y), 1.0 / q2y
-    a = w1[:, 0] * inv11
-    b = w1[:, 0] * inv12 + w2[:, 0] * inv22
-    c = w1[:, 1] * inv11
-    d = w1[:, 1] * inv12 + w2[:, 1] * inv22
-    # stable closed-form 2x2 SVD: sigma = hypot(E, H) +- hypot(F, G); the smaller one is
-    # signed (negative when the map reverses orientation)
-    q = np.hypot(0.5 * (a + d), 0.5 * (c - b))
-    r = np.hypot(0.5 * (a - d), 0.5 * (c + b))
-    sigma_max = (q + r) * safe
-    sigma_min = (q - r) * safe
+    area_2d, sigma_max, sigma_min = np.empty(m), np.empty(m), np.empty(m)
+    for s in row_blocks(m):
+        f, v = faces[s], valid[s]
+        d1, d2 = _edge_vectors(vertices, f)
+        len1 = np.linalg.norm(d1, axis=1)
+        safe = np.where(v, 1.0, 0.0)
+        len1s = np.where(v & (len1 > 0), len1, 1.0)
+        e1 = d1 / len1s[:, None]
+        q2x = np.einsum("ij,ij->i", d2, e1)
+        q2y = np.where(v, 2.0 * area_3d[s] / len1s, 1.0)
+        w1, w2 = _edge_vectors(uv, f)
+        area_2d[s] = 0.5 * (w1[:, 0] * w2[:, 1] - w1[:, 1] * w2[:, 0])
+        # J = W Q^-1 with Q = [[len1, q2x], [0, q2y]]
+        inv11, inv12, inv22 = 1.0 / len1s, -q2x / (len1s * q2y), 1.0 / q2y
+        a = w1[:, 0] * inv11
+        b = w1[:, 0] * inv12 + w2[:, 0] * inv22
+        c = w1[:, 1] * inv11
+        d = w1[:, 1] * inv12 + w2[:, 1] * inv22
+        # stable closed-form 2x2 SVD: sigma = hypot(E, H) +- hypot(F, G); the smaller one is
+        # signed (negative when the map reverses orientation)
+        q = np.hypot(0.5 * (a + d), 0.5 * (c - b))
+        r = np.hypot(0.5 * (a - d), 0.5 * (c + b))
+        sigma_max[s] = (q + r) * safe
+        sigma_min[s] = (q - r) * safe
     return FaceDistortion(area_3d, area_2d, sigma_max, sigma_min, valid)
+
+
+def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """3D area of each face (computed in blocks of :data:`BLOCK` faces). Shape (m,) float64."""
+    area = np.empty(len(faces))
+    for s in row_blocks(len(faces)):
+        d1, d2 = _edge_vectors(vertices, faces[s])
+        area[s] = 0.5 * np.linalg.norm(np.cross(d1, d2), axis=1)
+    return area
+
+
+def row_blocks(m: int, size: int = BLOCK) -> list[slice]:
+    """Slices of ``size`` rows covering ``range(m)``, to bound the temporaries of per-row work."""
+    return [slice(a, min(a + size, m)) for a in range(0, m, size)]
+
+
+def _edge_vectors(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``p1 - p0`` and ``p2 - p0`` of each face ((k, d) float64 each)."""
+    p0 = points[faces[:, 0]]
+    return points[faces[:, 1]] - p0, points[faces[:, 2]] - p0
 
 
 def unique_edges(faces: np.ndarray) -> np.ndarray:
     """Undirected edges of ``faces``, each once, sorted. Shape (e, 2) int64."""
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]).astype(np.int64)
-    e.sort(axis=1)
-    n = int(e.max()) + 1 if len(e) else 1
-    key = np.sort(e[:, 0] * n + e[:, 1])  # sorted 1D keys: np.unique is slow on big arrays
+    faces = np.asarray(faces)
+    m = len(faces)
+    n = int(faces.max()) + 1 if m else 1
+    # one sorted 1D key per half-edge (np.unique is slow on big arrays), built column pair by
+    # column pair: no (3m, 2) temporaries
+    key = np.empty(3 * m, np.int64)
+    for k in range(3):
+        a, b = faces[:, k].astype(np.int64), faces[:, (k + 1) % 3].astype(np.int64)
+        key[k * m:(k + 1) * m] = np.minimum(a, b) * n + np.maximum(a, b)
+    key.sort()
     key = key[np.concatenate([[True], key[1:] != key[:-1]])] if len(key) else key
     return np.stack([key // n, key % n], axis=1)
 
 
 def edge_length_error(vertices: np.ndarray, uv: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """Relative edge-length error ``(l_2d - l_3d) / l_3d`` per edge (0 for zero-length edges). Shape (e,)."""
-    l3 = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
-    l2 = np.linalg.norm(uv[edges[:, 0]] - uv[edges[:, 1]], axis=1)
-    out = np.zeros_like(l3)
-    ok = l3 > 0
-    out[ok] = (l2[ok] - l3[ok]) / l3[ok]
+    out = np.zeros(len(edges))
+    for s in row_blocks(len(edges)):
+        e = edges[s]
+        l3 = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)
+        l2 = np.linalg.norm(uv[e[:, 0]] - uv[e[:, 1]], axis=1)
+        ok = l3 > 0
+        out[s][ok] = (l2[ok] - l3[ok]) / l3[ok]
     return out
 
 
@@ -173,8 +207,11 @@ def vertex_stress(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, mm_pe
     """
     edges = unique_edges(faces)
     n = len(vertices)
-    r = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1) * mm_per_unit
-    l = np.linalg.norm(uv[edges[:, 0]] - uv[edges[:, 1]], axis=1) * mm_per_unit
+    r, l = np.empty(len(edges)), np.empty(len(edges))
+    for s in row_blocks(len(edges)):
+        e = edges[s]
+        r[s] = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1) * mm_per_unit
+        l[s] = np.linalg.norm(uv[e[:, 0]] - uv[e[:, 1]], axis=1) * mm_per_unit
     sq = (l - r) ** 2
     num = np.bincount(edges[:, 0], sq, n) + np.bincount(edges[:, 1], sq, n)
     den = np.bincount(edges[:, 0], r, n) + np.bincount(edges[:, 1], r, n)

@@ -31,9 +31,10 @@ import scipy.sparse.csgraph
 from scipy.spatial import cKDTree
 
 from potflat import proxy as _proxy
+from potflat._kernels.mesh import union_find
 from potflat.attachments import AttachmentSelection, detect_attachments
 from potflat.axis import AxisFit, estimate_axis, manual_axis
-from potflat.distortion import DistortionSummary, summarize
+from potflat.distortion import DistortionSummary, face_areas, row_blocks, summarize
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import UNITS_MM, FlatMesh, Mesh, StageOutput
 from potflat.walls import SIDES, FaceGraph, WallSelection, face_adjacency, select_wall
@@ -293,12 +294,15 @@ def _luminance_variation(mesh: Mesh, faces: np.ndarray) -> tuple[np.ndarray | No
 
         img = cv2.imread(str(mesh.texture_path), cv2.IMREAD_REDUCED_GRAYSCALE_4)
         if img is not None and img.size:
-            tc = mesh.texcoords[faces]
-            pts = np.concatenate([tc, tc.mean(axis=1, keepdims=True)], axis=1) % 1.0
             hgt, wid = img.shape[:2]
-            col = np.minimum((pts[..., 0] * wid).astype(np.int64), wid - 1)
-            row = np.minimum(((1.0 - pts[..., 1]) * hgt).astype(np.int64), hgt - 1)
-            return img[row, col].astype(np.float64).std(axis=1), "texture"
+            out = np.empty(len(faces))
+            for s in row_blocks(len(faces)):
+                tc = mesh.texcoords[faces[s]]
+                pts = np.concatenate([tc, tc.mean(axis=1, keepdims=True)], axis=1) % 1.0
+                col = np.minimum((pts[..., 0] * wid).astype(np.int64), wid - 1)
+                row = np.minimum(((1.0 - pts[..., 1]) * hgt).astype(np.int64), hgt - 1)
+                out[s] = img[row, col].astype(np.float64).std(axis=1)
+            return out, "texture"
     if mesh.vertex_colors is not None:
         rgb = mesh.vertex_colors[:, :3].astype(np.float64)
         lum = rgb @ np.array([0.299, 0.587, 0.114])
@@ -413,25 +417,32 @@ def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, n
     m = len(faces)
     corner_v = faces.ravel()
     th = corner_theta.ravel()
-    ia = np.arange(3 * m).reshape(m, 3)
-    ib = ia[:, [1, 2, 0]]
-    va, vb = faces.ravel(), faces[:, [1, 2, 0]].ravel()
-    ca, cb = ia.ravel(), ib.ravel()
-    swap = va > vb
-    lo_v, hi_v = np.where(swap, vb, va), np.where(swap, va, vb)
-    lo_c, hi_c = np.where(swap, cb, ca), np.where(swap, ca, cb)
-    order = np.lexsort((hi_v, lo_v))
-    lo_v, hi_v, lo_c, hi_c = lo_v[order], hi_v[order], lo_c[order], hi_c[order]
-    same = (lo_v[1:] == lo_v[:-1]) & (hi_v[1:] == hi_v[:-1])
-    rows, cols = [], []
-    for c in (lo_c, hi_c):
-        a, b = c[:-1][same], c[1:][same]
-        ok = np.abs(th[a] - th[b]) < np.pi
-        rows.append(a[ok])
-        cols.append(b[ok])
-    rows, cols = np.concatenate(rows), np.concatenate(cols)
-    graph = scipy.sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
-    n_comp, labels = scipy.sparse.csgraph.connected_components(graph, directed=False)
+    # half-edge h runs from corner h to the next corner of its face; half-edges on the same
+    # edge are neighbours when sorted by (lower vertex, higher vertex) (stable: by h on ties)
+    nxt = faces[:, [1, 2, 0]].ravel()
+    swap = corner_v > nxt
+    n = int(corner_v.max()) + 1 if m else 1
+    key = np.minimum(corner_v, nxt) * n + np.maximum(corner_v, nxt)
+    del nxt
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    pair = np.flatnonzero(key[1:] == key[:-1])
+    del key
+    h1, h2 = order[pair], order[pair + 1]
+    del order, pair
+    # join the corners at the lower vertex of two such half-edges, and those at the higher
+    # one, where their faces agree on the angle
+    def ends(h):  # corners of half-edges h at their lower and at their higher vertex
+        nh = h - h % 3 + (h + 1) % 3
+        return np.where(swap[h], nh, h), np.where(swap[h], h, nh)
+
+    (lo1, hi1), (lo2, hi2) = ends(h1), ends(h2)
+    del h1, h2, swap
+    a, b = np.concatenate([lo1, hi1]), np.concatenate([lo2, hi2])
+    del lo1, hi1, lo2, hi2
+    ok = np.abs(th[a] - th[b]) < np.pi
+    labels, n_comp = union_find(3 * m, a[ok], b[ok])
+    del a, b, ok
     by_label = np.argsort(labels, kind="stable")
     starts = np.searchsorted(labels[by_label], np.arange(n_comp))
     first = by_label[starts]  # lowest corner of each component
@@ -519,9 +530,13 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
                         exclude=None if options.keep_attachments else attachments.face_mask)
     allowed = walls.face_mask if face_mask is None else walls.face_mask & face_mask
 
-    p0, p1, p2 = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    area = 0.5 * np.linalg.norm(np.cross(p1 - p0, p2 - p0), axis=1)
-    h_c, _, theta_c = axis.cylindrical((p0 + p1 + p2) / 3.0)
+    area = face_areas(V, F)
+    centroid = np.empty((len(F), 3))
+    for s in row_blocks(len(F)):
+        f = F[s]
+        centroid[s] = (V[f[:, 0]] + V[f[:, 1]] + V[f[:, 2]]) / 3.0
+    h_c, _, theta_c = axis.cylindrical(centroid)
+    del centroid
     band = options.band or (0.0, 1.0)
     trimmed = np.zeros(len(F), bool)
     un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, area)
@@ -559,8 +574,11 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         height_range=(float(h_c[un.face_index].min()), float(h_c[un.face_index].max())),
         theta_range_deg=(float(theta_deg.min()), float(theta_deg.max())),
         faces=len(un.face_index), faces_total=len(F), cut=un.seam_vertices > 0)
+    cut = un.flat.mesh
+    if mesh.texcoords is not None:  # attached once, to the final faces (see _unroll)
+        cut = cut.replace(texcoords=mesh.texcoords[un.face_index])
     return RolloutResult(
-        flat=un.flat.replace(uv=uv), axis=axis, proxy=un.proxy,
+        flat=un.flat.replace(mesh=cut, uv=uv), axis=axis, proxy=un.proxy,
         seam_angle=float(math.degrees(un.seam) % 360.0), seam_method=un.seam_method, region=region,
         distortion=distortion, face_index=un.face_index, vertex_index=un.vertex_index,
         seam_vertices=un.seam_vertices, split_vertices=un.split_vertices, walls=walls,
@@ -607,10 +625,11 @@ def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndar
     else:
         new_faces, vertex_index, theta_new, n_seam, n_split = cut_open(sub_f, corner_theta)
 
+    del sub_f, corner_theta
+    # without texture coordinates: rollout() attaches them to the final faces only (a copy
+    # per unrolling would be the largest array here)
     cut_mesh = Mesh(
-        V[vertex_index], new_faces,
-        texcoords=None if mesh.texcoords is None else mesh.texcoords[face_index],
-        texture_path=mesh.texture_path,
+        V[vertex_index], new_faces, texture_path=mesh.texture_path,
         vertex_colors=None if mesh.vertex_colors is None else mesh.vertex_colors[vertex_index],
         units=mesh.units, source=mesh.source)
     h, r, _ = axis.cylindrical(cut_mesh.vertices)
@@ -647,7 +666,6 @@ def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
     new_index = np.zeros(len(mesh.vertices), np.int64)
     new_index[used] = np.arange(len(used))
     cut = mesh.replace(vertices=mesh.vertices[used], faces=new_index[faces],
-                       texcoords=None if mesh.texcoords is None else mesh.texcoords[keep],
                        vertex_colors=None if mesh.vertex_colors is None else mesh.vertex_colors[used])
     uv = un.flat.uv[used]
     vertex_index = un.vertex_index[used]
@@ -908,7 +926,7 @@ def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band,
         sel = np.flatnonzero(keep)
         if len(sel) == 0:
             raise InvalidOptionError(f"band {band[0]:g} {band[1]:g} selects no faces; widen it")
-        corners = theta_c[sel, None] + _wrap_pi(theta_v[F[sel]] - theta_c[sel, None])
+        corners = _corner_angles(theta_v, F, sel, theta_c[sel])
         seam, seam_method = choose_seam(mesh, sel, theta_c[sel], area[sel],
                                         _covered(theta_c[sel], corners))
 
@@ -920,16 +938,26 @@ def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band,
     face_index = np.flatnonzero(keep)
     if len(face_index) == 0:
         raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
-    sub_f = F[face_index]
     if options.angles is None and seam_method == "user":
         # a region that does not go round is not cut: unwrap from the middle of its gap
-        corners = rel_c[face_index, None] + _wrap_pi(theta_v[sub_f] - seam - rel_c[face_index, None])
+        corners = _corner_angles(theta_v, F, face_index, rel_c[face_index], seam)
         gap = _gap_middle(_covered(rel_c[face_index], corners))
         if gap is not None:
             rel_c = (theta_c - seam - gap) % TWO_PI + gap
             rel_c -= TWO_PI * np.round(np.average(rel_c[face_index], weights=area[face_index]) / TWO_PI)
-    corner_theta = rel_c[face_index, None] + _wrap_pi(theta_v[sub_f] - seam - rel_c[face_index, None])
+    corner_theta = _corner_angles(theta_v, F, face_index, rel_c[face_index], seam)
     return face_index, seam, seam_method, corner_theta
+
+
+def _corner_angles(theta_v: np.ndarray, F: np.ndarray, idx: np.ndarray, centre: np.ndarray,
+                   shift: float = 0.0) -> np.ndarray:
+    """Corner angles of the faces ``F[idx]``, ``theta_v - shift`` unwrapped to within pi of
+    ``centre`` ((k,) angle of each face). Shape (k, 3); computed in blocks of faces."""
+    out = np.empty((len(idx), 3))
+    for s in row_blocks(len(idx)):
+        c = centre[s, None]
+        out[s] = c + _wrap_pi(theta_v[F[idx[s]]] - shift - c)
+    return out
 
 
 def _default_view(axis: AxisFit, theta_c: np.ndarray, area: np.ndarray, seam: float) -> np.ndarray:
@@ -1049,7 +1077,7 @@ def _main_object(mesh: Mesh) -> np.ndarray | None:
     if n_pieces < 2:
         return None
     face_label = labels[F[:, 0]]
-    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    area = face_areas(V, F)
     piece_area = np.bincount(face_label, area, n_pieces)
     order = np.argsort(-piece_area, kind="stable")
     objects = [k for k in order if piece_area[k] >= SEPARATE_OBJECT_FRACTION * piece_area[order[0]]]
