@@ -22,6 +22,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
+from potflat.distortion import row_blocks
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.atomic import write_bytes_atomic
 from potflat.types import Mesh
@@ -193,8 +194,11 @@ def vessel_profile(mesh: Mesh, axis_point, axis_direction, *, bins: int | None =
     h0 = float(h_v[used_v].min())
     h1 = float(h_v[used_v].max())
     if bins is None:
-        e = mesh.vertices[F[:, [1, 2, 0]]] - mesh.vertices[F]
-        med_edge = float(np.median(np.linalg.norm(e, axis=2)))
+        length = np.empty(F.shape)  # of each face's edges, in blocks of faces
+        for s in row_blocks(len(F)):
+            f = F[s]
+            length[s] = np.linalg.norm(mesh.vertices[f[:, [1, 2, 0]]] - mesh.vertices[f], axis=2)
+        med_edge = float(np.median(length))
         bins = int(np.clip(math.ceil((h1 - h0) / max(_AUTO_BIN_EDGES * med_edge, 1e-300)),
                            _AUTO_BINS_MIN, _AUTO_BINS_MAX))
     span = h1 - h0 if h1 > h0 else 1.0

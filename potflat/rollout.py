@@ -730,8 +730,12 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.n
 
 def signed_areas(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """Signed flat area ((m,) float64) of each face, positive when counter-clockwise."""
-    a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
-    return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    out = np.empty(len(faces))
+    for s in row_blocks(len(faces)):
+        f = faces[s]
+        a, b, c = uv[f[:, 0]], uv[f[:, 1]], uv[f[:, 2]]
+        out[s] = 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    return out
 
 
 def boundary_segments(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -756,17 +760,19 @@ def boundary_segments(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray
 
 def _edge_table(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Unique edges ((e, 2) int64, sorted pairs), boundary segments and their faces."""
-    e = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    s = np.sort(e, axis=1)
-    key = s[:, 0] * n + s[:, 1]
+    # half-edge h = 3 f + j runs from faces[f, j] to faces[f, (j + 1) % 3]
+    a, b = faces.ravel(), faces[:, [1, 2, 0]].ravel()
+    key = np.minimum(a, b) * n + np.maximum(a, b)
     order = np.argsort(key, kind="stable")
     k = key[order]
+    del key
     first = np.ones(len(k), bool)
     first[1:] = k[1:] != k[:-1]
     start = np.flatnonzero(first)
     count = np.diff(np.append(start, len(k)))
     single = order[start[count == 1]]
-    return s[order[start]], e[single], single // 3
+    k = k[start]
+    return np.stack([k // n, k % n], axis=1), np.stack([a[single], b[single]], axis=1), single // 3
 
 
 def crossing_segments(uv: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1173,13 +1179,17 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
             raise InvalidOptionError(
                 f"output {out} would overwrite the input scan; choose another output folder or --name")
     loaded = load_scan(scan_path, units=options.units, texture="use" if options.texture else "ignore")
-    result = rollout(loaded.mesh, options=options)
+    mesh, cleaning = loaded.mesh, loaded.report.as_dict()
+    del loaded
+    result = rollout(mesh, options=options)
+    mesh = mesh.replace(texcoords=None)  # the rollout has its own; the profile needs none
     body = None if result.attachments_kept or not result.attachments.n_faces else ~result.attachments.face_mask
-    profile = vessel_profile(loaded.mesh, result.axis.point, result.axis.direction, face_mask=body,
+    profile = vessel_profile(mesh, result.axis.point, result.axis.direction, face_mask=body,
                              labels=result.walls.labels)
+    del mesh
     summary = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_summary(result),
                "profile": profile.summary(),
-               "cleaning": loaded.report.as_dict(),
+               "cleaning": cleaning,
                "files": {"ply": ply_path.name, "json": json_path.name, "profile_csv": csv_path.name,
                          "profile_svg": svg_path.name}}
     summary["provenance"] = provenance(stage="rollout", inputs=[scan_path], options=options.as_dict())
