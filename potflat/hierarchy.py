@@ -1,10 +1,11 @@
-"""Coarse-to-fine spaces for the relaxation: bilinear displacement fields on quadtree grids.
+"""Coarse spaces of the relaxation's preconditioner: bilinear fields on quadtree grids.
 
 The coarse spaces live in the rollout's 2D domain (the reference layout), so nothing is
 interpolated across the seam: its two sides lie far apart there. A level ``L`` moves every
 vertex by the bilinear interpolation of displacements at the nodes of a ``2^L x 2^L`` grid
-over the layout's bounding square; the fine mesh's own springs and triangles are evaluated
-at every level, so the flip-avoiding line search protects every triangle at every level.
+over the layout's bounding square. The solver works on the vertices themselves (every
+triangle is protected by the flip-avoiding line search); the levels only shape its steps
+(:class:`MultilevelPreconditioner`).
 """
 from __future__ import annotations
 
@@ -85,7 +86,72 @@ class GridHierarchy:
         return out
 
     def restrict(self, level: int, cell_start: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """Transpose of :meth:`prolong` applied to per-vertex values ``g`` (n, 2) -> (nodes, 2)."""
-        out = np.empty((self.n_nodes(level), 2))
+        """Transpose of :meth:`prolong` applied to per-vertex values ``g`` (n, k) -> (nodes, k)."""
+        out = np.empty((self.n_nodes(level), g.shape[1]))
         relax_grid.restrict(self.un, level, cell_start, np.ascontiguousarray(g), out)
         return out
+
+
+class MultilevelPreconditioner:
+    """Additive multilevel (BPX-like) preconditioner of the spring energy's Hessian.
+
+    ``H0 r = D^-1 r + theta sum_L P_L Dbar_L^-1 P_L^T r`` applied to both coordinates alike:
+    ``D`` is the per-vertex Hessian diagonal bound (Jacobi), ``P_L`` the bilinear
+    prolongation from the nodes of grid level ``L`` (every level of the hierarchy) and
+    ``Dbar_L`` at a node the ``P_L``-weighted mean of ``D`` around it: in 2D a spring
+    network's stiffness against a smooth coarse field is about the same at every scale, so
+    every level gets the same weight. The levels are nested (a coarse bilinear field is
+    bilinear on the finer grid), so one restriction from the vertices to the finest grid and
+    one prolongation back carry every level; the rest is arithmetic on the grids.
+
+    Parameters
+    ----------
+    hier : GridHierarchy
+    theta : float
+        Weight of the coarse corrections relative to the Jacobi term.
+    """
+
+    def __init__(self, hier: GridHierarchy, *, theta: float):
+        if not hier.levels:
+            raise ValueError("the hierarchy has no grid levels")
+        self.hier, self.theta = hier, float(theta)
+        self.levels = hier.levels  # consecutive, coarse to fine
+        self.finest = self.levels[-1]
+        self.cell_start = hier.cell_start(self.finest)
+        n = len(hier.un)
+        self.weight_sums = self._down(hier.restrict(self.finest, self.cell_start, np.ones((n, 1))))
+        self.inv_mean: list[np.ndarray] = []
+
+    def _down(self, finest: np.ndarray) -> list[np.ndarray]:
+        """Node values of every level (coarse to fine) from the finest level's by restriction."""
+        out = [finest]
+        for level in reversed(self.levels[:-1]):
+            coarse = np.empty((self.hier.n_nodes(level), finest.shape[1]))
+            relax_grid.grid_restrict(out[0], level, coarse)
+            out.insert(0, coarse)
+        return out
+
+    def refresh(self, diag: np.ndarray) -> None:
+        """Take the Hessian diagonal bound ``diag`` (n,) of the current state."""
+        self.diag = diag
+        sums = self._down(self.hier.restrict(self.finest, self.cell_start, diag.reshape(-1, 1)))
+        self.inv_mean = [np.where(s > 0, self.theta * w / np.where(s > 0, s, 1.0), 0.0)
+                         for s, w in zip(sums, self.weight_sums)]
+
+    def coarse_norm(self, r: np.ndarray) -> float:
+        """``r . (H0 - D^-1) r``, the coarse levels' part of ``r . H0 r``, for ``r`` (n, 2)."""
+        parts = self._down(self.hier.restrict(self.finest, self.cell_start, r))
+        return float(sum(np.sum(p * p * inv) for p, inv in zip(parts, self.inv_mean)))
+
+    def apply(self, r: np.ndarray, out: np.ndarray) -> None:
+        """``out = H0 r`` for per-vertex vectors ``r``, ``out`` (n, 2) (distinct arrays)."""
+        from potflat._kernels.lbfgs import add_jacobi
+
+        parts = self._down(self.hier.restrict(self.finest, self.cell_start, r))
+        z = parts[0] * self.inv_mean[0]
+        for i, level in enumerate(self.levels[:-1]):
+            finer = parts[i + 1] * self.inv_mean[i + 1]
+            relax_grid.grid_prolong_add(z, level, finer)
+            z = finer
+        self.hier.prolong(self.finest, z, out=out)
+        add_jacobi(out.reshape(-1), r.reshape(-1), self.diag)

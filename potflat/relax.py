@@ -4,13 +4,15 @@ Springs along every mesh edge plus one cross spring over every winged triangle p
 length: the opposite vertices' distance with the pair unfolded flat about the shared edge),
 all in 2D. Two solvers minimise the same spring energy:
 
-* the default presets (``preview``, ``standard``, ``archival``): L-BFGS with a
-  flip-avoiding, monotone line search (no step ever lets a triangle's signed area reach
-  zero, the energy never increases), a barrier that only acts on triangles squeezed below
-  half their rest area, a barrier that keeps each boundary vertex's flat angle sum below
-  2 pi (its fan cannot wrap over itself; the step bound includes it), and coarse-to-fine levels of bilinear displacement
-  fields in the rollout's domain (:mod:`potflat.hierarchy`). The result is checked for
-  flipped triangles and boundary self-overlap; a folded result is never returned.
+* the default presets (``preview``, ``standard``, ``archival``, which differ in their
+  convergence tolerance): L-BFGS with a flip-avoiding, monotone line search (no step ever
+  lets a triangle's signed area reach zero, the energy never increases), a barrier that
+  only acts on triangles squeezed below half their rest area, a barrier that keeps each
+  boundary vertex's flat angle sum below 2 pi (its fan cannot wrap over itself; the step
+  bound includes it), preconditioned by Jacobi plus additive multilevel corrections on
+  bilinear grids over the rollout's domain (:mod:`potflat.hierarchy`), so smooth, long-range
+  moves take few iterations. The result is checked for flipped triangles and boundary
+  self-overlap; a folded result is never returned.
 * ``paper``: the paper's damped dynamics (stretch 2, k = 0.5, mass 1, friction 0.01 inside
   and 1 on the boundary applied per step, semi-implicit Euler, time step from the spring
   graph's largest eigenvalue), reported with its flip count, whatever it is.
@@ -36,15 +38,12 @@ from potflat.types import FlatMesh, StageOutput
 
 #: Settings of each preset; ``None`` in :class:`RelaxOptions` takes the preset's value.
 PRESETS: dict[str, dict] = {
-    "preview": {"solver": "multilevel", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
-                "tol": 1e-4, "max_iter": 400, "level_iter": 12, "level_tol": 1e-4, "fine_iter": 0,
-                "cell_vertices": 16.0},
-    "standard": {"solver": "multilevel", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
-                 "tol": 1e-5, "max_iter": 2000, "level_iter": 15, "level_tol": 1e-4, "fine_iter": 200,
-                 "cell_vertices": 8.0},
-    "archival": {"solver": "multilevel", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
-                 "tol": 1e-8, "max_iter": 20000, "level_iter": 100, "level_tol": 1e-5, "fine_iter": 20000,
-                 "cell_vertices": 4.0},
+    "preview": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
+                "tol": 1e-3, "max_iter": 300, "cell_vertices": 8.0},
+    "standard": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
+                 "tol": 1e-4, "max_iter": 2000, "cell_vertices": 8.0},
+    "archival": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
+                 "tol": 1e-7, "max_iter": 20000, "cell_vertices": 8.0},
     "paper": {"solver": "dynamics", "stretch": 2.0, "stiffness": 0.5, "weighting": "uniform",
               "tol": 1e-7, "max_iter": 100000, "friction_inside": 0.01, "friction_boundary": 1.0},
 }
@@ -59,9 +58,12 @@ BOUNDARY_MU, BOUNDARY_GAP = 1.0, 0.5
 AREA_FLOOR, LENGTH_FLOOR = 1e-2, 1e-3
 #: L-BFGS memory, Armijo constant, fraction of the flip-free step taken at most.
 LBFGS_MEMORY, ARMIJO, STEP_FRACTION = 6, 1e-4, 0.9
+#: Weight of the multilevel preconditioner's coarse terms against its Jacobi term (measured:
+#: 1 needs 30-50% more iterations than 2; 4 about as many as 2 but more backtracking).
+PRECOND_THETA = 2.0
 #: Iterations between boundary self-overlap checks of the fold-free solver.
 OVERLAP_CHECK_EVERY = 25
-#: Window (iterations) of the relative-energy-change test: multilevel, dynamics.
+#: Window (iterations) of the relative-energy-change test: L-BFGS, dynamics.
 WINDOW_LBFGS, WINDOW_DYNAMICS = 5, 100
 
 
@@ -121,8 +123,6 @@ class RelaxOptions:
         for name in ("tol", "max_iter", "stretch", "stiffness", "weighting"):
             if getattr(self, name) is not None:
                 out[name] = getattr(self, name)
-        if self.max_iter is not None and out.get("fine_iter"):
-            out["fine_iter"] = self.max_iter  # an explicit cap overrides the preset's fine-level cap
         out["time_budget"] = self.time_budget
         return out
 
@@ -265,12 +265,12 @@ class _Springs:
         """Spring energy only (Eq. 1 with the 1/2 per spring)."""
         return self.evaluate(x, barrier=False)[1]
 
-    def max_step(self, x: np.ndarray, d: np.ndarray) -> float:
-        """Largest ``t`` keeping all faces of ``x + t d`` positively oriented and every guarded
-        boundary vertex's angle sum below ``2 pi``."""
+    def max_step(self, x: np.ndarray, d: np.ndarray, cap: float = np.inf) -> float:
+        """Largest ``t`` (at most ``cap``) keeping all faces of ``x + t d`` positively oriented
+        and every guarded boundary vertex's angle sum below ``2 pi``."""
         if self.m == 0:
-            return np.inf
-        self.ks.max_step(x, d, self.faces, self._blocks)
+            return cap
+        self.ks.max_step(x, d, self.faces, float(cap), self._blocks)
         t = float(self._blocks.min())
         if len(self.bverts):
             self.ks.boundary_max_step(x, d, self.bverts, self.bprev, self.bnext, self._bblocks)
@@ -382,42 +382,36 @@ def _relative_change(hist: list[float], window: int) -> float:
     return abs(old - new) / (window * max(abs(new), 1e-300))
 
 
-class _Work:
-    """Per-vertex buffers shared by the levels of one solve, all (n, 2) float64.
-
-    ``x``: current positions; ``trial``: line-search positions; ``good``: the level's last
-    positions without boundary overlap; ``grad``: two gradient buffers (current and trial);
-    ``dx``: a grid level's prolonged search direction.
-    """
-
-    def __init__(self, x: np.ndarray):
-        self.x = np.array(x, dtype=np.float64, order="C")
-        self.trial = np.empty_like(self.x)
-        self.good = np.empty_like(self.x)
-        self.grad = [np.empty_like(self.x), np.empty_like(self.x)]
-        self.dx = np.empty_like(self.x)
-
-
 _NO_VECTOR = np.empty(0)
 
 
 class _LBFGS:
-    """L-BFGS over ``x + prolong(c)`` with a flip-free, monotone line search.
+    """Preconditioned L-BFGS with a flip-free, monotone line search.
 
-    The state (positions, gradient, the last :data:`LBFGS_MEMORY` pairs) persists between
-    calls of :meth:`run`, so a level can be run in chunks with checks in between. With
-    ``jacobi`` (the fine level: per-vertex unknowns) the initial inverse Hessian is the
-    inverse of the Hessian diagonal bound of the current state instead of a multiple of the
-    identity, so a squeezed triangle's stiff barrier does not shrink everybody's step. The
-    vector algebra runs in fused in-place passes (:mod:`potflat._kernels.lbfgs`) over
-    preallocated buffers: two passes per stored pair and iteration.
+    The initial inverse Hessian is ``H0 = D^-1 + coarse terms``: the inverse of the
+    Hessian's diagonal bound at the current state (Jacobi, so a squeezed triangle's stiff
+    barrier does not shrink everybody's step) plus the additive multilevel correction of
+    :class:`potflat.hierarchy.MultilevelPreconditioner` (smooth, long-range moves in one
+    step), scaled by ``s.y / y.H0.y`` of the newest pair. The state (positions, gradient, the
+    last :data:`LBFGS_MEMORY` pairs) persists between calls of :meth:`run`, so the solve can
+    run in chunks with checks in between. The vector algebra runs in fused in-place passes
+    (:mod:`potflat._kernels.lbfgs`) over preallocated buffers.
+
+    Attributes
+    ----------
+    x : (n, 2) float64
+        Current positions (``trial``: the line search's; ``good``: a saved state).
     """
 
-    def __init__(self, sp: _Springs, work: _Work, *, prolong, restrict, size: int, jacobi: bool):
+    def __init__(self, sp: _Springs, x: np.ndarray, precond=None):
         from potflat._kernels import lbfgs as kl
 
-        self.kl, self.sp, self.work = kl, sp, work
-        self.prolong, self.restrict, self.jacobi = prolong, restrict, jacobi
+        self.kl, self.sp, self.precond = kl, sp, precond
+        size = 2 * sp.n
+        self.x = np.array(x, dtype=np.float64, order="C")
+        self.trial = np.empty_like(self.x)
+        self.good = np.empty_like(self.x)
+        self.grads = [np.empty_like(self.x), np.empty_like(self.x)]
         # one slot more than the memory: a new pair is written before the oldest is dropped
         self.S = np.empty((LBFGS_MEMORY + 1, size))
         self.Y = np.empty((LBFGS_MEMORY + 1, size))
@@ -425,39 +419,41 @@ class _LBFGS:
         self.yhy = np.zeros(LBFGS_MEMORY + 1)
         self.slots: list[int] = []  # oldest first
         self.q = np.empty(size)
+        self._tmp = np.empty(size) if precond is not None else None
         self._part = np.empty(max(1, -(-size // kl.BLOCK)))
         self._part2 = np.empty_like(self._part)
-        self._xpart = np.empty(max(1, -(-2 * sp.n // kl.BLOCK)))
-        self.cur = 0  # index of work.grad holding the current full gradient
-        self.E, _es, gf = sp.evaluate(work.x, out=work.grad[self.cur])
-        self.g = self._flat(restrict(gf))
-
-    @staticmethod
-    def _flat(a: np.ndarray) -> np.ndarray:
-        return a.reshape(-1)
-
-    def _diag(self) -> np.ndarray:
-        return self.sp.diag if self.jacobi else _NO_VECTOR
+        self.cur = 0  # index of grads holding the current gradient
+        self.E, _es, g = sp.evaluate(self.x, out=self.grads[self.cur])
+        self.g = g.reshape(-1)
+        if precond is not None:
+            precond.refresh(sp.diag)
 
     def _combine(self, q, c, src, a, y, diag, scale, s) -> float:
         self.kl.combine(q, c, src, a, y, diag, scale, s, self._part)
         return float(np.sum(self._part))
 
+    def _initial(self, r: np.ndarray, scale: float, s: np.ndarray) -> float:
+        """``q = scale H0 r``; returns ``s . q``."""
+        if self.precond is None:
+            return self._combine(self.q, scale, r, 0.0, r, self.sp.diag, 1.0, s)
+        self.precond.apply(r.reshape(-1, 2), self.q.reshape(-1, 2))
+        return self._combine(self.q, scale, self.q, 0.0, self.q, _NO_VECTOR, 1.0, s)
+
     def _direction(self) -> float:
         """Set ``q`` to the L-BFGS direction (two-loop recursion); return ``g . q``."""
-        q, g, diag, S, Y, rho = self.q, self.g, self._diag(), self.S, self.Y, self.rho
+        q, g, tmp, S, Y, rho = self.q, self.g, self._tmp, self.S, self.Y, self.rho
+        tmp = q if tmp is None else tmp  # without a preconditioner H0 is applied in place
         order = self.slots[::-1]  # newest first
         if not order:
-            return self._combine(q, -1.0, g, 0.0, g, diag, 1.0, g)
-        gamma = 1.0 / (rho[order[0]] * self.yhy[order[0]])  # s.y / y.P.y of the newest pair
+            return self._initial(g, -1.0, g)
+        gamma = 1.0 / (rho[order[0]] * self.yhy[order[0]])  # s.y / y.H0.y of the newest pair
         alpha = {}
-        part = self._combine(q, -1.0, g, 0.0, g, _NO_VECTOR, 1.0, S[order[0]])
+        part = self._combine(tmp, -1.0, g, 0.0, g, _NO_VECTOR, 1.0, S[order[0]])
         for k, j in enumerate(order):
             alpha[j] = rho[j] * part
-            if k + 1 < len(order):
-                part = self._combine(q, 1.0, q, -alpha[j], Y[j], _NO_VECTOR, 1.0, S[order[k + 1]])
-            else:  # apply the scaled initial inverse Hessian and start the second loop
-                part = self._combine(q, 1.0, q, -alpha[j], Y[j], diag, gamma, Y[order[-1]])
+            nxt = S[order[k + 1]] if k + 1 < len(order) else _NO_VECTOR
+            part = self._combine(tmp, 1.0, tmp, -alpha[j], Y[j], _NO_VECTOR, 1.0, nxt)
+        part = self._initial(tmp, gamma, Y[order[-1]])
         for k, j in enumerate(order[::-1]):  # oldest first
             beta = rho[j] * part
             nxt = Y[order[-2 - k]] if k + 1 < len(order) else g
@@ -465,10 +461,14 @@ class _LBFGS:
         return part
 
     def _store_pair(self, t: float, g_new: np.ndarray) -> None:
+        """Store ``s = t q``, ``y = g_new - g`` (``sp.diag`` is the Hessian bound at the new point)."""
         used = set(self.slots)
         slot = next(i for i in range(LBFGS_MEMORY + 1) if i not in used)
-        self.kl.pair(self.q, t, g_new, self.g, self._diag(), self.S[slot], self.Y[slot], self._part, self._part2)
+        self.kl.pair(self.q, t, g_new, self.g, self.sp.diag, self.S[slot], self.Y[slot], self._part, self._part2)
         sy, yhy = float(np.sum(self._part)), float(np.sum(self._part2))
+        if self.precond is not None:  # H0 = D^-1 (in yhy already) + the coarse terms
+            self.precond.refresh(self.sp.diag)
+            yhy += self.precond.coarse_norm(self.Y[slot].reshape(-1, 2))
         if sy > 1e-300 and yhy > 0.0:
             self.rho[slot], self.yhy[slot] = 1.0 / sy, yhy
             self.slots.append(slot)
@@ -478,9 +478,9 @@ class _LBFGS:
     def run(self, run: _Run, *, max_iter: int, tol: float, hist: list[float]) -> tuple[bool, int]:
         """Up to ``max_iter`` iterations; returns (converged, iterations).
 
-        ``hist`` is the level's energy history (for the relative-change test), extended here.
+        ``hist`` is the energy history of the relative-change test, extended here.
         """
-        sp, work, kl = self.sp, self.work, self.kl
+        sp, kl = self.sp, self.kl
         it = 0
         converged = False
         while it < max_iter:
@@ -491,18 +491,14 @@ class _LBFGS:
                 if not gd < 0.0:
                     converged = True  # zero gradient
                     break
-            dx = self.prolong(self.q)
-            t = 1.0
-            if not self.slots and not self.jacobi:
-                peak = float(np.max(np.abs(dx)))
-                t = min(1.0, 0.1 / peak) if peak > 0 else 1.0
-            t = min(t, STEP_FRACTION * sp.max_step(work.x, dx))
-            trial_grad = work.grad[1 - self.cur]
+            dx = self.q.reshape(-1, 2)
+            t = STEP_FRACTION * sp.max_step(self.x, dx, cap=1.0 / STEP_FRACTION)
+            trial_grad = self.grads[1 - self.cur]
             accepted = False
             for _ in range(50):
-                kl.combine(self._flat(work.trial), 1.0, self._flat(work.x), t, self._flat(dx), _NO_VECTOR, 1.0,
-                           _NO_VECTOR, self._xpart)
-                En, _es, gf = sp.evaluate(work.trial, out=trial_grad)
+                kl.combine(self.trial.reshape(-1), 1.0, self.x.reshape(-1), t, self.q, _NO_VECTOR, 1.0,
+                           _NO_VECTOR, self._part)
+                En, _es, gn = sp.evaluate(self.trial, out=trial_grad)
                 if math.isfinite(En) and En <= self.E + ARMIJO * t * gd:
                     accepted = True
                     break
@@ -510,9 +506,9 @@ class _LBFGS:
             if not accepted or t == 0.0:
                 converged = True  # no descent possible at machine precision
                 break
-            g_new = self._flat(self.restrict(gf))
-            self._store_pair(t, g_new)  # sp.diag is now the Hessian bound at the new point
-            work.x, work.trial = work.trial, work.x
+            g_new = gn.reshape(-1)
+            self._store_pair(t, g_new)
+            self.x, self.trial = self.trial, self.x
             self.cur = 1 - self.cur
             self.E, self.g = En, g_new
             it += 1
@@ -525,63 +521,46 @@ class _LBFGS:
         return converged, it
 
 
-def _multilevel(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, levels_out: list, notes: list):
-    tol = settings["tol"]
-    level_tol = max(tol, settings["level_tol"])
+def _minimise(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, levels_out: list, notes: list):
+    """The fold-free solve: preconditioned L-BFGS on the whole mesh, checked in chunks.
+
+    The boundary is checked for self-overlap every :data:`OVERLAP_CHECK_EVERY` iterations;
+    if the solve ends with the boundary overlapping itself, it goes back to its last
+    overlap-free state (the undone iterations leave the history, which stays the path of
+    the returned state).
+    """
+    from potflat.hierarchy import MultilevelPreconditioner
+
+    t0 = time.perf_counter()
+    run.level = "fine"
     overlap_free = sp.overlap(x) == 0
-    converged = False
-    work = _Work(x)
+    precond = MultilevelPreconditioner(hier, theta=PRECOND_THETA) if hier.levels else None
+    solver = _LBFGS(sp, x, precond)
     del x
-    plan = [("grid", L) for L in hier.levels]
-    if settings["fine_iter"] > 0 or not plan:
-        plan.append(("fine", None))
-    for kind, L in plan:
-        t0 = time.perf_counter()
-        run.level = f"grid {1 << L}" if kind == "grid" else "fine"
-        if kind == "grid":
-            cs = hier.cell_start(L)
-            shape = (hier.n_nodes(L), 2)
-            prolong = lambda c, L=L, shape=shape: hier.prolong(L, c.reshape(shape), out=work.dx)
-            restrict = lambda g, L=L, cs=cs: hier.restrict(L, cs, g)
-            cap, ltol, size = settings["level_iter"], level_tol, 2 * shape[0]
-        else:
-            prolong = lambda q: q.reshape(-1, 2)
-            restrict = lambda g: g
-            cap, ltol, size = settings["fine_iter"] or settings["max_iter"], tol, 2 * sp.n
-        cap = min(cap, run.max_iter - len(run.history))
-        if cap <= 0:
+    hist = [solver.E]
+    its, conv, hit = 0, False, False
+    np.copyto(solver.good, solver.x)
+    good = (len(run.history), 0)
+    cap = run.max_iter
+    while its < cap and not conv:
+        conv, k = solver.run(run, max_iter=min(OVERLAP_CHECK_EVERY, cap - its), tol=settings["tol"], hist=hist)
+        its += k
+        if not overlap_free or sp.overlap(solver.x) == 0:
+            np.copyto(solver.good, solver.x)
+            good = (len(run.history), its)
+        if run.stopped or k == 0:
             break
-        # run in chunks and check the boundary after each; if the level ends with the boundary
-        # overlapping itself, go back to its last overlap-free state (the undone iterations
-        # leave the history, which stays the path of the returned state)
-        solver = _LBFGS(sp, work, prolong=prolong, restrict=restrict, size=size, jacobi=kind == "fine")
-        hist = [solver.E]
-        its, conv, hit = 0, False, False
-        np.copyto(work.good, work.x)
-        good = (len(run.history), 0)
-        while its < cap and not conv:
-            conv, k = solver.run(run, max_iter=min(OVERLAP_CHECK_EVERY, cap - its), tol=ltol, hist=hist)
-            its += k
-            if not overlap_free or sp.overlap(work.x) == 0:
-                np.copyto(work.good, work.x)
-                good = (len(run.history), its)
-            if run.stopped or k == 0:
-                break
-        del solver
-        if good[1] != its:
-            notes.append(f"level {run.level}: ended with the boundary overlapping itself; went back "
-                         f"{its - good[1]} iterations to its last overlap-free state")
-            np.copyto(work.x, work.good)
-            hit, conv = True, False
-            del run.history[good[0]:]
-            its = good[1]
-        levels_out.append({"level": run.level, "iterations": its, "energy": sp.spring_energy(work.x),
-                           "seconds": time.perf_counter() - t0, "boundary_contact": hit})
-        converged = conv
-        if run.stopped:
-            converged = False
-            break
-    return work.x, converged
+    x = solver.x
+    if good[1] != its:
+        notes.append(f"ended with the boundary overlapping itself; went back {its - good[1]} iterations "
+                     "to the last overlap-free state")
+        x, hit, conv = solver.good, True, False
+        del run.history[good[0]:]
+        its = good[1]
+    del solver.trial, solver.grads, solver.S, solver.Y
+    levels_out.append({"level": run.level, "iterations": its, "energy": sp.spring_energy(x),
+                       "seconds": time.perf_counter() - t0, "boundary_contact": hit})
+    return x, conv and not run.stopped
 
 
 def _dynamics(sp: _Springs, x: np.ndarray, settings: dict, run: _Run, levels_out: list):
@@ -738,7 +717,7 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
             run = _Run(settings["max_iter"], deadline, callback, report)
             levels: list[dict] = []
             if fold_free:
-                x, converged = _multilevel(sp, x, hier, settings, run, levels, notes)
+                x, converged = _minimise(sp, x, hier, settings, run, levels, notes)
             else:
                 x, converged = _dynamics(sp, x, settings, run, levels)
         t_solve = time.perf_counter()

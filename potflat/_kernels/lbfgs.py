@@ -111,3 +111,17 @@ def pair(q, t, g_new, g_old, diag, s_out, y_out, out_sy, out_yhy):
     else:
         for blk in prange(nb):
             out_sy[blk], out_yhy[blk] = _pair_block(q, t, g_new, g_old, diag, s_out, y_out, blk)
+
+
+@parallel
+def add_jacobi(out, r, diag):
+    """``out += r / max(diag, DIAG_FLOOR)`` (the Jacobi term of a preconditioner).
+
+    Parameters
+    ----------
+    out, r : (N,) float64
+    diag : (N // 2,) float64
+        Hessian diagonal bound per vertex.
+    """
+    for i in prange(out.shape[0]):
+        out[i] += r[i] / max(diag[i >> 1], DIAG_FLOOR)

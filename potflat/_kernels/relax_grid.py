@@ -8,6 +8,8 @@ prolongation) is a gather per grid node over four ranges: race-free and determin
 """
 from __future__ import annotations
 
+import numpy as np
+
 from potflat._kernels._jit import leaf, parallel, prange
 
 #: Bits of the Morton quantisation per axis.
@@ -80,7 +82,10 @@ def prolong(un, level, c, out):
 
 @parallel
 def restrict(un, level, cell_start, g, out):
-    """Transpose of :func:`prolong`: ``out[node] = sum_i w_node(i) g[i]``.
+    """Transpose of :func:`prolong`: ``out[node] = sum_i w_node(i) g[i]``, column by column.
+
+    Two race-free passes: each cell sums its vertices' weighted values per corner (one read
+    of every vertex), then each node adds the corners of its up to four cells.
 
     Parameters
     ----------
@@ -89,29 +94,97 @@ def restrict(un, level, cell_start, g, out):
     level : int
     cell_start : (4^level + 1,) int64
         First vertex of each cell (in Morton order of the cells).
-    g : (n, 2) float64
-    out : ((2^level + 1)^2, 2) float64
+    g : (n, k) float64
+    out : ((2^level + 1)^2, k) float64
     """
     side = 1 << level
     w = side + 1
+    k = g.shape[1]
+    corners = np.zeros((side * side, 4, k))
+    for code in prange(side * side):
+        for i in range(cell_start[code], cell_start[code + 1]):
+            _, fx = _cell_and_frac(un[i, 0], level)
+            _, fy = _cell_and_frac(un[i, 1], level)
+            w00 = (1.0 - fx) * (1.0 - fy)
+            w10 = fx * (1.0 - fy)
+            w01 = (1.0 - fx) * fy
+            w11 = fx * fy
+            for c in range(k):
+                v = g[i, c]
+                corners[code, 0, c] += w00 * v
+                corners[code, 1, c] += w10 * v
+                corners[code, 2, c] += w01 * v
+                corners[code, 3, c] += w11 * v
     for node in prange(w * w):
         ix = node % w
         iy = node // w
-        ax = 0.0
-        ay = 0.0
+        for c in range(k):
+            out[node, c] = 0.0
         for cy in range(iy - 1, iy + 1):
             if cy < 0 or cy >= side:
                 continue
             for cx in range(ix - 1, ix + 1):
                 if cx < 0 or cx >= side:
                     continue
+                corner = (1 if cx == ix - 1 else 0) + (2 if cy == iy - 1 else 0)
                 code = _interleave(cx, cy, level)
-                for i in range(cell_start[code], cell_start[code + 1]):
-                    _, fx = _cell_and_frac(un[i, 0], level)
-                    _, fy = _cell_and_frac(un[i, 1], level)
-                    wx = fx if cx == ix - 1 else 1.0 - fx
-                    wy = fy if cy == iy - 1 else 1.0 - fy
-                    ax += wx * wy * g[i, 0]
-                    ay += wx * wy * g[i, 1]
-        out[node, 0] = ax
-        out[node, 1] = ay
+                for c in range(k):
+                    out[node, c] += corners[code, corner, c]
+
+
+@parallel
+def grid_restrict(fine, level, out):
+    """Transpose of :func:`grid_prolong_add`: node values of ``level + 1`` to ``level``.
+
+    Parameters
+    ----------
+    fine : ((2^(level+1) + 1)^2, k) float64
+    level : int
+    out : ((2^level + 1)^2, k) float64
+    """
+    wc = (1 << level) + 1
+    wf = (1 << (level + 1)) + 1
+    k = fine.shape[1]
+    for node in prange(wc * wc):
+        ax = node % wc
+        ay = node // wc
+        for c in range(k):
+            out[node, c] = 0.0
+        for dy in range(-1, 2):
+            fy = 2 * ay + dy
+            if fy < 0 or fy >= wf:
+                continue
+            wy = 1.0 if dy == 0 else 0.5
+            for dx in range(-1, 2):
+                fx = 2 * ax + dx
+                if fx < 0 or fx >= wf:
+                    continue
+                wxy = wy * (1.0 if dx == 0 else 0.5)
+                for c in range(k):
+                    out[node, c] += wxy * fine[fy * wf + fx, c]
+
+
+@parallel
+def grid_prolong_add(coarse, level, fine):
+    """``fine += `` the bilinear interpolation of ``coarse`` (nodes of ``level``) at the nodes
+    of ``level + 1`` (exact: a bilinear field on a cell is bilinear on its four sub-cells).
+
+    Parameters
+    ----------
+    coarse : ((2^level + 1)^2, k) float64
+    level : int
+    fine : ((2^(level+1) + 1)^2, k) float64
+    """
+    wc = (1 << level) + 1
+    wf = (1 << (level + 1)) + 1
+    k = fine.shape[1]
+    for node in prange(wf * wf):
+        fx = node % wf
+        fy = node // wf
+        x0 = fx >> 1
+        y0 = fy >> 1
+        x1 = x0 + (fx & 1)
+        y1 = y0 + (fy & 1)
+        for c in range(k):
+            fine[node, c] += 0.25 * (coarse[y0 * wc + x0, c] + coarse[y0 * wc + x1, c]
+                                     + coarse[y1 * wc + x0, c] + coarse[y1 * wc + x1, c])

@@ -427,21 +427,26 @@ def face_barrier(x, faces, areas, a_ref, mu, k, eps, grad, diag):
 
 
 @parallel
-def max_step(x, d, faces, out):
-    """Per block of faces, the largest ``t`` for which ``x + t d`` keeps every face's
+def max_step(x, d, faces, cap, out):
+    """Per block of faces, the largest ``t <= cap`` for which ``x + t d`` keeps every face's
     signed area positive (the smallest positive root of a quadratic in ``t``).
+
+    A face whose area polynomial has no root in ``[0, best]`` (tested without a square root
+    or a division) is skipped; only the others solve their quadratic.
 
     Parameters
     ----------
     x, d : (n, 2) float64
     faces : (m, 3) int64
+    cap : float
+        Upper bound of interest (``inf``: none).
     out : (ceil(m / BLOCK),) float64
-        Output: minimum over each block (inf when no face ever collapses).
+        Output: minimum over each block (``cap`` when no face collapses before it).
     """
     m = faces.shape[0]
     nb = out.shape[0]
     for b in prange(nb):
-        best = np.inf
+        best = cap
         for f in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
             a0 = faces[f, 0]
             a1 = faces[f, 1]
@@ -457,10 +462,12 @@ def max_step(x, d, faces, out):
             c0 = e1x * e2y - e1y * e2x
             c1 = e1x * f2y - e1y * f2x + f1x * e2y - f1y * e2x
             c2 = f1x * f2y - f1y * f2x
-            if c0 > 0.0 and c1 >= 0.0 and c2 >= 0.0:
-                continue  # the area only grows along d
-            t = _first_root(c0, c1, c2)
-            best = min(best, t)
+            # no root in [0, best]: positive at both ends and no convex dip below zero in
+            # between (tested branch-free, without division: most faces stop here)
+            safe = (c0 > 0.0) & (c0 + best * (c1 + best * c2) > 0.0) & (
+                (c2 <= 0.0) | (c1 >= 0.0) | (-c1 >= 2.0 * c2 * best) | (4.0 * c0 * c2 > c1 * c1))
+            if not safe:
+                best = min(best, _first_root(c0, c1, c2))
         out[b] = best
 
 
