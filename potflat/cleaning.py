@@ -260,7 +260,9 @@ def _corner_fans(F: np.ndarray, topo: _Topology) -> tuple[np.ndarray, int]:
     nxt1 = h1 - h1 % 3 + (h1 + 1) % 3  # corner at the end of half-edge h1
     nxt2 = h2 - h2 % 3 + (h2 + 1) % 3
     a = np.concatenate([h1, nxt1])
+    del nxt1
     b = np.concatenate([np.where(same, h2, nxt2), np.where(same, nxt2, h2)])
+    del nxt2
     return union_find(3 * len(F), a, b)
 
 
@@ -377,22 +379,26 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
 
     # degenerate faces: repeated vertex or (numerically) zero area
     F = mesh.faces
-    cross, area2, longest2, centroid = face_geometry(mesh.vertices, F)
+    _, area2, longest2, _ = face_geometry(mesh.vertices, F)  # cross, centroid: made again when needed
     degenerate = ((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
                   | (area2 <= DEGENERATE_RELATIVE_AREA * longest2))
+    del longest2
     n_degenerate = int(degenerate.sum())
     if n_degenerate == len(F):
         raise InvalidInputError(f"{name}: all {len(F)} faces are degenerate (zero area); "
                                 "give a scan with a real surface")
     # duplicate faces (same vertex set, either winding): keep the first
     keep = ~degenerate
-    rep = _first_equal(np.sort(F[keep], axis=1).astype(np.float64))
+    corners = F[keep]
+    corners.sort(axis=1)
+    rep = _first_equal(corners.astype(np.float64))
+    del corners
     dup = rep != np.arange(len(rep))
     n_dup = int(dup.sum())
     keep[np.flatnonzero(keep)[dup]] = False
     mesh = _select_faces(mesh, keep)
     if not keep.all():
-        cross, area2, centroid = cross[keep], area2[keep], centroid[keep]
+        area2 = area2[keep]
 
     # stray components, by manifold-edge connectivity
     n = len(mesh.vertices)
@@ -408,7 +414,7 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
                         "were removed; lower min_component_fraction to keep them")
     if drop.any():
         mesh = _select_faces(mesh, ~drop)
-        cross, area2, centroid = cross[~drop], area2[~drop], centroid[~drop]
+        area2 = area2[~drop]
         topo = _topology(mesh.faces, n)
         flip, comp, conflicts = propagate_orientation(topo.nbr, topo.nbr_same)
     n_nm_edges = int(np.count_nonzero(topo.count > 2))
@@ -419,12 +425,16 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
         action = "split into separate fans" if split_nonmanifold else "left as they are"
         warnings.append(f"{n_nm_edges} non-manifold edges and {nm_vertices} non-manifold vertices, {action}")
     b_edges, b_loops = _boundary_loops(mesh.faces, len(mesh.vertices), topo, split_nonmanifold)
+    del topo
 
     # orientation: consistent per component, then outward
     n_reoriented = 0
     reversed_out = 0
     if orient:
+        # the same values as at the start, face for face (splitting only renumbers vertices)
+        cross, _, _, centroid = face_geometry(mesh.vertices, mesh.faces)
         total_flip, reversed_out = _outward_flips(cross, area2, centroid, flip.astype(bool), comp)
+        del cross, centroid
         n_reoriented = int(np.count_nonzero(total_flip))
         mesh = _reverse_faces(mesh, total_flip)
         if conflicts:
