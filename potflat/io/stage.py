@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from potflat.distortion import row_blocks
 from potflat.errors import InvalidInputError
 from potflat.io.atomic import atomic_path
 from potflat.types import UNITS_MM, FlatMesh, Mesh
@@ -90,26 +91,11 @@ def write_flat_ply(path: str | os.PathLike, flat: FlatMesh, *, comments: tuple[s
         vfields += [("red", "u1"), ("green", "u1"), ("blue", "u1"), ("alpha", "u1")]
     if flat.stress is not None:
         vfields.append(("stress", "<f8"))
-    vert = np.empty(n, dtype=vfields)
-    vert["x"], vert["y"], vert["z"] = mesh.vertices.T
-    vert["u"], vert["v"] = flat.uv.T
-    if mesh.vertex_colors is not None:
-        for k, name in enumerate(("red", "green", "blue", "alpha")):
-            vert[name] = mesh.vertex_colors[:, k]
-    if flat.stress is not None:
-        vert["stress"] = flat.stress
-
     ffields = [("n", "u1"), ("idx", "<i4", (3,))]
     if texture_name is not None:
         ffields += [("nt", "u1"), ("tc", "<f4", (6,))]
-    face = np.empty(m, dtype=ffields)
-    face["n"] = 3
     if mesh.faces.size and (mesh.faces.min() < 0 or mesh.faces.max() >= max(n, 1)):
         raise InvalidInputError("faces index vertices that do not exist")
-    face["idx"] = mesh.faces
-    if texture_name is not None:
-        face["nt"] = 6
-        face["tc"] = mesh.texcoords.reshape(m, 6)
 
     header = ["ply", "format binary_little_endian 1.0", f"comment units {mesh.units}"]
     header += [f"comment {c}" for c in (*flat.comments, *comments) if "\n" not in c]
@@ -126,8 +112,24 @@ def write_flat_ply(path: str | os.PathLike, flat: FlatMesh, *, comments: tuple[s
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
             fh.write(("\n".join(header) + "\n").encode("ascii"))
-            fh.write(vert.tobytes())
-            fh.write(face.tobytes())
+            for rows in row_blocks(n):  # records built and written in blocks: no copy of the mesh
+                vert = np.empty(rows.stop - rows.start, dtype=vfields)
+                vert["x"], vert["y"], vert["z"] = mesh.vertices[rows].T
+                vert["u"], vert["v"] = flat.uv[rows].T
+                if mesh.vertex_colors is not None:
+                    for k, name in enumerate(("red", "green", "blue", "alpha")):
+                        vert[name] = mesh.vertex_colors[rows, k]
+                if flat.stress is not None:
+                    vert["stress"] = flat.stress[rows]
+                fh.write(vert.data)
+            for rows in row_blocks(m):
+                face = np.empty(rows.stop - rows.start, dtype=ffields)
+                face["n"] = 3
+                face["idx"] = mesh.faces[rows]
+                if texture_name is not None:
+                    face["nt"] = 6
+                    face["tc"] = mesh.texcoords[rows].reshape(-1, 6)
+                fh.write(face.data)
             fh.flush()
             os.fsync(fh.fileno())
     return path
