@@ -232,26 +232,35 @@ class _Topology:
     """Edges and manifold face adjacency of a triangle mesh (half-edge ``3 f + k`` runs
     from corner ``k`` to corner ``(k + 1) % 3`` of face ``f``)."""
 
-    edge_of: np.ndarray  # (3m,) undirected edge of each half-edge
     count: np.ndarray  # (ne,) faces per edge
     h1: np.ndarray  # (k,) first half-edge of each manifold edge ...
     h2: np.ndarray  # (k,) ... and the second
     same: np.ndarray  # (k,) True when both run the edge the same way
-    nbr: np.ndarray  # (m, 3) face across each half-edge's manifold edge, or -1
-    nbr_same: np.ndarray  # (m, 3) int8, 1 when that neighbour runs the edge the same way
+    odd: np.ndarray  # (b,) half-edges whose edge does not have two faces, increasing
+    odd_single: np.ndarray  # (b,) True for those whose edge has one face (the open border)
 
 
 def _topology(F: np.ndarray, n: int) -> _Topology:
     edge_of, _, count, halves = edge_table(F, n)
     man = count == 2
     h1, h2 = halves[man, 0], halves[man, 1]
+    del halves
     flat = F.ravel()
     same = flat[h1] == flat[h2]
-    nbr = np.full(3 * len(F), -1, np.int64)
-    nbr[h1], nbr[h2] = h2 // 3, h1 // 3
-    nbr_same = np.zeros(3 * len(F), np.int8)
-    nbr_same[h1] = nbr_same[h2] = same
-    return _Topology(edge_of, count, h1, h2, same, nbr.reshape(-1, 3), nbr_same.reshape(-1, 3))
+    faces_on = count[edge_of]
+    del edge_of
+    odd = np.flatnonzero(faces_on != 2)
+    return _Topology(count, h1, h2, same, odd, faces_on[odd] == 1)
+
+
+def _orient_components(topo: _Topology, m: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """:func:`propagate_orientation` over the manifold edges of ``topo`` (``m`` faces): the
+    (m, 3) neighbour tables are made here and dropped after."""
+    nbr = np.full(3 * m, -1, np.int64)
+    nbr[topo.h1], nbr[topo.h2] = topo.h2 // 3, topo.h1 // 3
+    nbr_same = np.zeros(3 * m, np.int8)
+    nbr_same[topo.h1] = nbr_same[topo.h2] = topo.same
+    return propagate_orientation(nbr.reshape(-1, 3), nbr_same.reshape(-1, 3))
 
 
 def _corner_fans(F: np.ndarray, topo: _Topology) -> tuple[np.ndarray, int]:
@@ -295,8 +304,7 @@ def _split_nonmanifold(mesh: Mesh, topo: _Topology, apply: bool) -> tuple[Mesh, 
 def _boundary_loops(F: np.ndarray, n: int, topo: _Topology, split: bool) -> tuple[int, int]:
     """Boundary edges and loops of ``F`` (edges with one face; also the non-manifold ones
     when those were split apart)."""
-    count = topo.count[topo.edge_of]
-    hb = np.flatnonzero(count != 2 if split else count == 1)
+    hb = topo.odd if split else topo.odd[topo.odd_single]
     if len(hb) == 0:
         return 0, 0
     flat = F.ravel()
@@ -403,7 +411,7 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
     # stray components, by manifold-edge connectivity
     n = len(mesh.vertices)
     topo = _topology(mesh.faces, n)
-    flip, comp, conflicts = propagate_orientation(topo.nbr, topo.nbr_same)
+    flip, comp, conflicts = _orient_components(topo, len(mesh.faces))
     comp_area = np.bincount(comp, weights=area2)
     n_comp = len(comp_area)
     small = comp_area < min_component_fraction * comp_area.max()
@@ -416,7 +424,7 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
         mesh = _select_faces(mesh, ~drop)
         area2 = area2[~drop]
         topo = _topology(mesh.faces, n)
-        flip, comp, conflicts = propagate_orientation(topo.nbr, topo.nbr_same)
+        flip, comp, conflicts = _orient_components(topo, len(mesh.faces))
     n_nm_edges = int(np.count_nonzero(topo.count > 2))
 
     # non-manifold vertices (split: faces keep their order, so topo's pairs stay valid)
