@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from potflat._kernels.relax_overlap import contact_barrier
 from potflat.distortion import DistortionSummary, summarize, vertex_stress
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
 from potflat.types import FlatMesh, StageOutput
@@ -54,6 +55,10 @@ BARRIER_MU, BARRIER_EPS = 1.0, 0.5
 #: Boundary angle barrier: weight (times k) and activation (radians below 2 pi of a boundary
 #: vertex's flat interior angle sum).
 BOUNDARY_MU, BOUNDARY_GAP = 1.0, 0.5
+#: Boundary contact barrier: weight (times k) and activation distance (mean edge lengths) between
+#: a boundary vertex and a boundary segment that is not its own (active when the start's
+#: boundary does not overlap itself).
+CONTACT_MU, CONTACT_GAP = 1.0, 0.5
 #: Floor of rest areas and spring lengths, in units of the mean edge length (squared).
 AREA_FLOOR, LENGTH_FLOOR = 1e-2, 1e-3
 #: L-BFGS memory, Armijo constant, fraction of the flip-free step taken at most.
@@ -61,8 +66,6 @@ LBFGS_MEMORY, ARMIJO, STEP_FRACTION = 6, 1e-4, 0.9
 #: Weight of the multilevel preconditioner's coarse terms against its Jacobi term (measured:
 #: 1 needs 30-50% more iterations than 2; 4 about as many as 2 but more backtracking).
 PRECOND_THETA = 2.0
-#: Iterations between boundary self-overlap checks of the fold-free solver.
-OVERLAP_CHECK_EVERY = 25
 #: Window (iterations) of the relative-energy-change test: L-BFGS, dynamics.
 WINDOW_LBFGS, WINDOW_DYNAMICS = 5, 100
 
@@ -215,6 +218,9 @@ class _Springs:
         self.isolated = count == 0
         self.bprev, self.bnext = _boundary_neighbours(self.boundary_segments, n)
         self.bguard = np.zeros(n, bool)  # set by guard_boundary()
+        self.contact = False  # set by guard_boundary()
+        seg = self.boundary_segments
+        self._contact_cell = 2.0 * float(np.mean(np.linalg.norm(V[seg[:, 0]] - V[seg[:, 1]], axis=1))) if len(seg) else 1.0
         self.bverts = np.zeros(0, np.int64)
         self.theta = np.zeros(n)
         self._bblocks = np.empty(1)
@@ -240,6 +246,7 @@ class _Springs:
         self.bguard = np.zeros(self.n, bool)
         self.bguard[self.bverts] = True
         self._bblocks = np.empty(max(1, -(-len(self.bverts) // self.ks.BLOCK)))
+        self.contact = len(self.boundary_segments) >= 3 and self.overlap(x) == 0
         return int((~ok).sum())
 
     def evaluate(self, x: np.ndarray, *, barrier: bool = True,
@@ -259,7 +266,11 @@ class _Springs:
             return es, es, g
         eb = float(np.sum(self._eb))
         ef = self.ks.face_barrier(x, self.faces, self._areas, self.a_ref, BARRIER_MU, self.k, BARRIER_EPS, g, self.diag)
-        return es + eb + ef, es, g
+        ec = 0.0
+        if self.contact:
+            ec = contact_barrier(x, self.boundary_segments, self.bprev, self.bnext, CONTACT_GAP,
+                                 CONTACT_MU * self.k, max(CONTACT_GAP, self._contact_cell), g, self.diag)
+        return es + eb + ef + ec, es, g
 
     def spring_energy(self, x: np.ndarray) -> float:
         """Spring energy only (Eq. 1 with the 1/2 per spring)."""
@@ -392,25 +403,25 @@ class _LBFGS:
     Hessian's diagonal bound at the current state (Jacobi, so a squeezed triangle's stiff
     barrier does not shrink everybody's step) plus the additive multilevel correction of
     :class:`potflat.hierarchy.MultilevelPreconditioner` (smooth, long-range moves in one
-    step), scaled by ``s.y / y.H0.y`` of the newest pair. The state (positions, gradient, the
-    last :data:`LBFGS_MEMORY` pairs) persists between calls of :meth:`run`, so the solve can
-    run in chunks with checks in between. The vector algebra runs in fused in-place passes
-    (:mod:`potflat._kernels.lbfgs`) over preallocated buffers.
+    step), scaled by ``s.y / y.H0.y`` of the newest pair. With ``guard_overlap`` a trial point
+    whose boundary overlaps itself is rejected like one of higher energy. The vector algebra
+    runs in fused in-place passes (:mod:`potflat._kernels.lbfgs`) over preallocated buffers.
 
     Attributes
     ----------
     x : (n, 2) float64
-        Current positions (``trial``: the line search's; ``good``: a saved state).
+        Current positions (``trial``: the line search's).
     """
 
-    def __init__(self, sp: _Springs, x: np.ndarray, precond=None):
+    def __init__(self, sp: _Springs, x: np.ndarray, precond=None, *, guard_overlap: bool = False):
         from potflat._kernels import lbfgs as kl
 
         self.kl, self.sp, self.precond = kl, sp, precond
+        self.guard_overlap = guard_overlap
+        self.contacts = 0  # trial points rejected because the boundary would overlap
         size = 2 * sp.n
         self.x = np.array(x, dtype=np.float64, order="C")
         self.trial = np.empty_like(self.x)
-        self.good = np.empty_like(self.x)
         self.grads = [np.empty_like(self.x), np.empty_like(self.x)]
         # one slot more than the memory: a new pair is written before the oldest is dropped
         self.S = np.empty((LBFGS_MEMORY + 1, size))
@@ -500,8 +511,10 @@ class _LBFGS:
                            _NO_VECTOR, self._part)
                 En, _es, gn = sp.evaluate(self.trial, out=trial_grad)
                 if math.isfinite(En) and En <= self.E + ARMIJO * t * gd:
-                    accepted = True
-                    break
+                    if not self.guard_overlap or sp.overlap(self.trial) == 0:
+                        accepted = True
+                        break
+                    self.contacts += 1
                 t *= 0.5
             if not accepted or t == 0.0:
                 converged = True  # no descent possible at machine precision
@@ -522,44 +535,28 @@ class _LBFGS:
 
 
 def _minimise(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, levels_out: list, notes: list):
-    """The fold-free solve: preconditioned L-BFGS on the whole mesh, checked in chunks.
+    """The fold-free solve: preconditioned L-BFGS on the whole mesh.
 
-    The boundary is checked for self-overlap every :data:`OVERLAP_CHECK_EVERY` iterations;
-    if the solve ends with the boundary overlapping itself, it goes back to its last
-    overlap-free state (the undone iterations leave the history, which stays the path of
-    the returned state).
+    When the start's boundary does not overlap itself, no accepted step lets it: a trial
+    point whose boundary segments cross is treated like one of higher energy (the step is
+    halved), so the boundary can touch itself but not pass through.
     """
     from potflat.hierarchy import MultilevelPreconditioner
 
     t0 = time.perf_counter()
     run.level = "fine"
-    overlap_free = sp.overlap(x) == 0
     precond = MultilevelPreconditioner(hier, theta=PRECOND_THETA) if hier.levels else None
-    solver = _LBFGS(sp, x, precond)
+    solver = _LBFGS(sp, x, precond, guard_overlap=sp.overlap(x) == 0)
     del x
-    hist = [solver.E]
-    its, conv, hit = 0, False, False
-    np.copyto(solver.good, solver.x)
-    good = (len(run.history), 0)
-    cap = run.max_iter
-    while its < cap and not conv:
-        conv, k = solver.run(run, max_iter=min(OVERLAP_CHECK_EVERY, cap - its), tol=settings["tol"], hist=hist)
-        its += k
-        if not overlap_free or sp.overlap(solver.x) == 0:
-            np.copyto(solver.good, solver.x)
-            good = (len(run.history), its)
-        if run.stopped or k == 0:
-            break
+    conv, its = solver.run(run, max_iter=run.max_iter, tol=settings["tol"], hist=[solver.E])
+    contacts = solver.contacts
+    if contacts:
+        notes.append(f"the boundary touched itself: {contacts} trial steps that would have made it "
+                     "overlap were shortened")
     x = solver.x
-    if good[1] != its:
-        notes.append(f"ended with the boundary overlapping itself; went back {its - good[1]} iterations "
-                     "to the last overlap-free state")
-        x, hit, conv = solver.good, True, False
-        del run.history[good[0]:]
-        its = good[1]
-    del solver.trial, solver.grads, solver.S, solver.Y
+    del solver
     levels_out.append({"level": run.level, "iterations": its, "energy": sp.spring_energy(x),
-                       "seconds": time.perf_counter() - t0, "boundary_contact": hit})
+                       "seconds": time.perf_counter() - t0, "boundary_contact": contacts > 0})
     return x, conv and not run.stopped
 
 

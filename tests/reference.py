@@ -135,3 +135,21 @@ def boundary_angle_barrier(x: np.ndarray, F: np.ndarray, verts, k: float, mu: fl
         if a < 1:
             total += mu * k * (a - 1 - np.log(a))
     return total
+
+
+def contact_energy(x: np.ndarray, seg: np.ndarray, bprev: np.ndarray, bnext: np.ndarray, dhat: float,
+                   kappa: float) -> float:
+    """Boundary contact barrier by brute force over all (vertex, segment) pairs."""
+    total = 0.0
+    for v in seg[:, 0]:
+        near = {int(v), int(bprev[v]), int(bnext[v])}
+        for a, b in seg:
+            if int(a) in near or int(b) in near:
+                continue
+            e = x[b] - x[a]
+            w = np.clip(np.dot(x[v] - x[a], e) / np.dot(e, e), 0.0, 1.0)
+            d = np.linalg.norm(x[v] - (x[a] + w * e))
+            if d < dhat:
+                r = d / dhat
+                total += kappa * (r - 1 - np.log(r))
+    return total
