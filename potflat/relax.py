@@ -300,10 +300,9 @@ class _Springs:
 
     def signed_areas(self, x: np.ndarray) -> np.ndarray:
         """Signed area of every face at ``x``, shape (m,)."""
-        f = self.faces
-        e1 = x[f[:, 1]] - x[f[:, 0]]
-        e2 = x[f[:, 2]] - x[f[:, 0]]
-        return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+        out = np.empty(self.m)
+        self.ks.face_areas(np.ascontiguousarray(x, dtype=np.float64), self.faces, out)
+        return out
 
     def overlap(self, x: np.ndarray) -> int:
         """Crossing pairs of boundary segments at ``x`` (counting stops at 1000)."""
@@ -598,30 +597,23 @@ def _untangle(sp: _Springs, x: np.ndarray, rounds: int = 200) -> tuple[np.ndarra
     all fixed in 6 rounds).
     Returns the positions and the number of faces that were flipped at the start.
     """
-    import scipy.sparse as sps
-
     bad = sp.signed_areas(x) <= 0
     n_bad = int(bad.sum())
     if n_bad == 0:
         return x, 0
-    n = sp.n
-    f = sp.faces.astype(np.int64)
-    i = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
-    j = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
-    A = sps.csr_matrix((np.ones(2 * len(i)), (np.concatenate([i, j]), np.concatenate([j, i]))), shape=(n, n))
-    A.data[:] = 1.0  # an edge of two faces was summed twice
-    deg = np.maximum(np.asarray(A.sum(axis=1)).ravel(), 1)
     x = x.copy()
-    region = np.zeros(n, bool)
+    region = np.zeros(sp.n, bool)
     for r in range(rounds):
         bad = sp.signed_areas(x) <= 0
         if not bad.any():
             break
         region[sp.faces[bad].ravel()] = True
         if r % 20 == 19:  # widen the region around persistent tangles
-            region |= (A @ region.astype(np.float64)) > 0
-        mean = (A @ x) / deg[:, None]
-        x[region] = mean[region]
+            region[sp.faces[region[sp.faces].any(axis=1)].ravel()] = True
+        verts = np.nonzero(region)[0]
+        mean = np.empty((len(verts), 2))
+        sp.ks.neighbour_means(x, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
+        x[verts] = mean
     return x, n_bad
 
 
