@@ -150,8 +150,10 @@ def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return area
 
 
-def row_blocks(m: int, size: int = BLOCK) -> list[slice]:
-    """Slices of ``size`` rows covering ``range(m)``, to bound the temporaries of per-row work."""
+def row_blocks(m: int, size: int | None = None) -> list[slice]:
+    """Slices of ``size`` rows (default :data:`BLOCK`) covering ``range(m)``, to bound the
+    temporaries of per-row work."""
+    size = size or BLOCK
     return [slice(a, min(a + size, m)) for a in range(0, m, size)]
 
 
