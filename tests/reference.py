@@ -79,8 +79,10 @@ def forces(x: np.ndarray, pairs: np.ndarray, rest: np.ndarray, k: float, relativ
     return out
 
 
-def barrier_energy(x: np.ndarray, F: np.ndarray, a_ref: np.ndarray, k: float, mu: float, eps: float) -> float:
-    """``sum mu k a_ref phi(A / (eps a_ref))`` with ``phi(a) = a - 1 - log a`` below 1."""
+def barrier_energy(x: np.ndarray, F: np.ndarray, a_ref: np.ndarray, k: float, mu: float, eps: float,
+                   relative: bool = False) -> float:
+    """``sum mu k w phi(A / (eps a_ref))`` with ``phi(a) = a - 1 - log a`` below 1 and
+    ``w = 1`` (relative weighting) or ``a_ref``."""
     e1 = x[F[:, 1]] - x[F[:, 0]]
     e2 = x[F[:, 2]] - x[F[:, 0]]
     A = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
@@ -88,7 +90,7 @@ def barrier_energy(x: np.ndarray, F: np.ndarray, a_ref: np.ndarray, k: float, mu
     if np.any(a <= 0):
         return np.inf
     phi = np.where(a < 1, a - 1 - np.log(np.minimum(a, 1)), 0.0)
-    return float(np.sum(mu * k * a_ref * phi))
+    return float(np.sum(mu * k * (1.0 if relative else a_ref) * phi))
 
 
 def numeric_gradient(fun, x: np.ndarray, h: float = 1e-6) -> np.ndarray:

@@ -475,7 +475,7 @@ def test_boundary_angle_barrier_matches_reference():
     E, Es, g = sp.evaluate(x)
     boundary = np.arange(len(V))
     want = ref.boundary_angle_barrier(x, F, boundary, 0.8, BOUNDARY_MU, BOUNDARY_GAP)
-    want += ref.barrier_energy(x, F, sp.a_ref, 0.8, BARRIER_MU, BARRIER_EPS)
+    want += ref.barrier_energy(x, F, sp.a_ref, 0.8, BARRIER_MU, BARRIER_EPS, relative=True)
     want += ref.contact_energy(x, sp.boundary_segments, sp.bprev, sp.bnext, CONTACT_GAP, 0.8 * CONTACT_MU)
     assert want > 0.3
     assert E - Es == pytest.approx(want, rel=1e-10)

@@ -418,7 +418,7 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, bprev, bnext, bguard
 
 
 @leaf
-def face_barrier(x, faces, areas, a_ref, mu, k, eps, grad, diag):
+def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, grad, diag):
     """Add the face barrier to ``grad`` and ``diag``; return its energy.
 
     Serial over the faces in order (deterministic); only faces squeezed below ``eps`` of
@@ -435,13 +435,17 @@ def face_barrier(x, faces, areas, a_ref, mu, k, eps, grad, diag):
         Reference (rest) area of each face, floored.
     mu, k, eps : float
         Barrier weight, stiffness and activation threshold (fraction of ``a_ref``).
+    relative : bool
+        Weight each face's barrier by ``mu k`` (relative spring weighting: the springs'
+        energy is dimensionless) instead of ``mu k a_ref`` (uniform: energy ~ length^2).
     grad, diag : (n, 2), (n,) float64
         Updated in place: gradient and Hessian diagonal bound.
 
     Returns
     -------
     float
-        ``sum mu k a_ref phi(A / (eps a_ref))``; inf when a face has non-positive area.
+        ``sum mu k w phi(A / (eps a_ref))`` (``w = 1`` or ``a_ref``); inf when a face has
+        non-positive area.
     """
     total = 0.0
     for t in range(faces.shape[0]):
@@ -453,7 +457,7 @@ def face_barrier(x, faces, areas, a_ref, mu, k, eps, grad, diag):
             total = np.inf
             continue
         a = area / th
-        scale = mu * k * a_ref[t]
+        scale = mu * k if relative else mu * k * a_ref[t]
         total += scale * (a - 1.0 - math.log(a))
         dphi = scale * (1.0 - 1.0 / a) / th
         h = scale / (area * area)
@@ -470,9 +474,10 @@ def face_barrier(x, faces, areas, a_ref, mu, k, eps, grad, diag):
 
 
 @parallel
-def max_step(x, d, faces, cap, out):
+def max_step(x, d, faces, cap, shrink, out):
     """Per block of faces, the largest ``t <= cap`` for which ``x + t d`` keeps every face's
-    signed area positive (the smallest positive root of a quadratic in ``t``).
+    signed area above ``1 - shrink`` times its area at ``x`` (``shrink = 1``: positive;
+    the smallest positive root of a quadratic in ``t``).
 
     A face whose area polynomial has no root in ``[0, best]`` (tested without a square root
     or a division) is skipped; only the others solve their quadratic.
@@ -483,8 +488,10 @@ def max_step(x, d, faces, cap, out):
     faces : (m, 3) int64
     cap : float
         Upper bound of interest (``inf``: none).
+    shrink : float
+        Largest fraction of its area a face may lose, in (0, 1].
     out : (ceil(m / BLOCK),) float64
-        Output: minimum over each block (``cap`` when no face collapses before it).
+        Output: minimum over each block (``cap`` when no face shrinks that far before it).
     """
     m = faces.shape[0]
     nb = out.shape[0]
@@ -502,7 +509,7 @@ def max_step(x, d, faces, cap, out):
             f1y = d[a1, 1] - d[a0, 1]
             f2x = d[a2, 0] - d[a0, 0]
             f2y = d[a2, 1] - d[a0, 1]
-            c0 = e1x * e2y - e1y * e2x
+            c0 = (e1x * e2y - e1y * e2x) * shrink
             c1 = e1x * f2y - e1y * f2x + f1x * e2y - f1y * e2x
             c2 = f1x * f2y - f1y * f2x
             # no root in [0, best]: positive at both ends and no convex dip below zero in
