@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from potflat._kernels.relax_overlap import contact_barrier
-from potflat.distortion import DistortionSummary, summarize, vertex_stress
+from potflat.distortion import DistortionSummary, face_areas, row_blocks, summarize, vertex_stress
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
 from potflat.types import FlatMesh, StageOutput
 
@@ -80,13 +80,14 @@ class RelaxOptions:
     Attributes
     ----------
     preset : str
-        ``preview``, ``standard`` (default), ``archival`` (fold-free L-BFGS, coarse to fine,
-        increasingly thorough) or ``paper`` (the paper's damped dynamics, may fold).
+        ``preview``, ``standard`` (default), ``archival`` (fold-free preconditioned L-BFGS,
+        increasingly thorough: tolerance 1e-3, 1e-4, 1e-7) or ``paper`` (the paper's damped
+        dynamics, may fold).
     tol : float or None
         Stop when the relative energy decrease per iteration (averaged over a window) falls
         below this. None: the preset's.
     max_iter : int or None
-        Iteration cap (all levels together). None: the preset's.
+        Iteration cap. None: the preset's.
     time_budget : float or None
         Seconds of relaxation after which the best state so far is returned (not converged).
     threads : int or None
@@ -202,19 +203,18 @@ class _Springs:
 
         self.ks = ks
         edges, cross, self.boundary_segments = ks.halfedge_springs(faces, n)
-        r_edge = np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1)
-        r_cross = ks.cross_rest_lengths(V, cross)
+        rest = np.concatenate([np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1),
+                               ks.cross_rest_lengths(V, cross)])
         pairs = np.concatenate([edges, cross[:, :2]])
-        rest = np.concatenate([r_edge, r_cross])
-        self.ptr, self.nbr, self.rst = ks.build_csr(n, np.ascontiguousarray(pairs), rest)
+        del edges, cross  # peak memory: the spring lists are only needed for the CSR
+        self.ptr, self.nbr, self.rst = ks.build_csr(n, pairs, rest)
+        del pairs, rest
         self.vf_ptr, self.vf_tri = ks.vertex_faces(n, faces)
-        p0, p1, p2 = (V[faces[:, c]] for c in range(3))
-        a3 = 0.5 * np.linalg.norm(np.cross(p1 - p0, p2 - p0), axis=1)
-        self.a_ref = np.maximum(a3, AREA_FLOOR)
+        self.a_ref = np.maximum(face_areas(V, faces), AREA_FLOOR)
         self.faces = np.ascontiguousarray(faces, dtype=np.int32)  # half the memory traffic
         self.k, self.relative = float(k), bool(relative)
         self.n, self.m = n, len(faces)
-        self.n_springs = len(pairs)
+        self.n_springs = len(self.nbr) // 2
         count = np.bincount(faces.ravel(), minlength=n) if len(faces) else np.zeros(n, np.int64)
         self.boundary = np.zeros(n, bool)
         self.boundary[self.boundary_segments.ravel()] = True
@@ -672,15 +672,15 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
 
     with numba_threads(options.threads):
         # normalised units: lengths / mean 3D edge length, layout centred on its bounding box
-        el = np.linalg.norm(V[F[:, [1, 2, 0]]] - V[F], axis=2)
-        unit = float(el.mean())
+        unit = sum(float(np.linalg.norm(V[F[s, [1, 2, 0]]] - V[F[s]], axis=2).sum()) for s in row_blocks(len(F)))
+        unit /= 3 * len(F)
         if not unit > 0:
             raise InvalidInputError("all edges of the rollout have zero length; check the scan's units and faces")
         centre = 0.5 * (uv.min(axis=0) + uv.max(axis=0))
         x_in = (uv - centre) / unit
         from potflat.hierarchy import GridHierarchy
 
-        # locality-preserving order (Morton curve of the layout) and the coarse-to-fine grids
+        # locality-preserving order (Morton curve of the layout) and the preconditioner's grids
         hier = GridHierarchy.build(x_in, min_vertices_per_cell=settings.get("cell_vertices", 8.0))
         order = hier.order
         inverse = np.empty(n, np.int64)

@@ -12,7 +12,7 @@ from potflat_cli._options import Json, Name, OutputDir, Quiet
 
 HELP = """Relax a rollout into a fold-free flattening: writes NAME.relaxed.ply (with per-vertex stress) and NAME.relaxed.json (energy history, flips, boundary check, distortion before/after, timings, provenance).
 
-Presets: preview (coarse levels only), standard, archival (run to convergence): fold-free, verified; paper: the paper's damped dynamics (may fold; flips reported). Exit codes: 0 success, 2 bad input or options, or a result that would be folded (nothing is written).
+Presets: preview (stops early), standard, archival (tight convergence): fold-free, verified; paper: the paper's damped dynamics (may fold; flips reported). Exit codes: 0 success, 2 bad input or options, or a result that would be folded (nothing is written).
 
 Example:  potflat relax out/hydria.rollout.ply -o out --preset standard --time-budget 60
 """
@@ -30,7 +30,7 @@ def relax_command(
     tol: Annotated[float | None, typer.Option(
         "--tol", help="Stop when the relative energy change per iteration falls below this \\[default: per preset].")] = None,
     max_iter: Annotated[int | None, typer.Option(
-        "--max-iter", help="Iteration cap, all levels together \\[default: per preset].")] = None,
+        "--max-iter", help="Iteration cap \\[default: per preset].")] = None,
     time_budget: Annotated[float | None, typer.Option(
         "--time-budget", help="Seconds of relaxation at most; the state reached is kept (not converged).")] = None,
     threads: Annotated[int | None, typer.Option("--threads", help="Number of threads \\[default: all cores].")] = None,
