@@ -81,27 +81,7 @@ def count_crossings(x, seg, cell, max_pairs):
     oy = lo[:, 1].min()
     gx = int((hi[:, 0].max() - ox) / cell) + 1
     gy = int((hi[:, 1].max() - oy) / cell) + 1
-    cnt = np.zeros(gx * gy + 1, np.int64)
-    for s in range(nb):
-        x0 = int((lo[s, 0] - ox) / cell)
-        x1 = int((hi[s, 0] - ox) / cell)
-        y0 = int((lo[s, 1] - oy) / cell)
-        y1 = int((hi[s, 1] - oy) / cell)
-        for cy in range(y0, y1 + 1):
-            for cx in range(x0, x1 + 1):
-                cnt[cy * gx + cx + 1] += 1
-    start = np.cumsum(cnt)
-    fill = start[:-1].copy()
-    items = np.empty(start[-1], np.int64)
-    for s in range(nb):
-        x0 = int((lo[s, 0] - ox) / cell)
-        x1 = int((hi[s, 0] - ox) / cell)
-        y0 = int((lo[s, 1] - oy) / cell)
-        y1 = int((hi[s, 1] - oy) / cell)
-        for cy in range(y0, y1 + 1):
-            for cx in range(x0, x1 + 1):
-                items[fill[cy * gx + cx]] = s
-                fill[cy * gx + cx] += 1
+    start, items = _bin_segments(x, seg, 0.0, ox, oy, cell, gx, gy)
     count = 0
     for c in range(gx * gy):
         cx = c % gx
@@ -142,6 +122,28 @@ def _padded_cells(x, seg, s, pad, ox, oy, cell, gx, gy):
     y0 = max(int((min(ay, by) - pad - oy) / cell), 0)
     y1 = min(int((max(ay, by) + pad - oy) / cell), gy - 1)
     return x0, x1, y0, y1
+
+
+@leaf
+def _bin_segments(x, seg, pad, ox, oy, cell, gx, gy):
+    """Segments per cell of a ``gx`` by ``gy`` grid (origin ``ox, oy``), each segment in every
+    cell its bounding box grown by ``pad`` overlaps: CSR ``start`` (gx gy + 1,), ``items``."""
+    cnt = np.zeros(gx * gy + 1, np.int64)
+    for s in range(seg.shape[0]):
+        x0, x1, y0, y1 = _padded_cells(x, seg, s, pad, ox, oy, cell, gx, gy)
+        for cy in range(y0, y1 + 1):
+            for cx in range(x0, x1 + 1):
+                cnt[cy * gx + cx + 1] += 1
+    start = np.cumsum(cnt)
+    fill = start[:-1].copy()
+    items = np.empty(start[-1], np.int64)
+    for s in range(seg.shape[0]):
+        x0, x1, y0, y1 = _padded_cells(x, seg, s, pad, ox, oy, cell, gx, gy)
+        for cy in range(y0, y1 + 1):
+            for cx in range(x0, x1 + 1):
+                items[fill[cy * gx + cx]] = s
+                fill[cy * gx + cx] += 1
+    return start, items
 
 
 @leaf
@@ -191,21 +193,7 @@ def contact_barrier(x, seg, bprev, bnext, dhat, kappa, cell, grad, diag):
     oy -= dhat
     gx = int((mx + dhat - ox) / cell) + 1
     gy = int((my + dhat - oy) / cell) + 1
-    cnt = np.zeros(gx * gy + 1, np.int64)
-    for s in range(nb):
-        x0, x1, y0, y1 = _padded_cells(x, seg, s, dhat, ox, oy, cell, gx, gy)
-        for cy in range(y0, y1 + 1):
-            for cx in range(x0, x1 + 1):
-                cnt[cy * gx + cx + 1] += 1
-    start = np.cumsum(cnt)
-    fill = start[:-1].copy()
-    items = np.empty(start[-1], np.int64)
-    for s in range(nb):
-        x0, x1, y0, y1 = _padded_cells(x, seg, s, dhat, ox, oy, cell, gx, gy)
-        for cy in range(y0, y1 + 1):
-            for cx in range(x0, x1 + 1):
-                items[fill[cy * gx + cx]] = s
-                fill[cy * gx + cx] += 1
+    start, items = _bin_segments(x, seg, dhat, ox, oy, cell, gx, gy)
     total = 0.0
     for t in range(nb):
         v = seg[t, 0]
