@@ -1,0 +1,106 @@
+"""Kernels of the relax solver against plain numpy references: grid transfers, the multilevel
+preconditioner, the fused L-BFGS passes and the untangling average."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from potflat._kernels import lbfgs as kl
+from potflat._kernels import relax_grid
+from potflat._kernels._jit import numba_threads
+from potflat.hierarchy import GridHierarchy, MultilevelPreconditioner
+
+
+@pytest.fixture(scope="module")
+def hier():
+    rng = np.random.default_rng(0)
+    ref = rng.random((3000, 2)) * [3.0, 1.0]
+    return GridHierarchy.build(ref, min_vertices_per_cell=4.0)
+
+
+def test_restrict_is_the_transpose_of_prolong(hier):
+    rng = np.random.default_rng(1)
+    n = len(hier.un)
+    for level in hier.levels:
+        c = rng.normal(size=(hier.n_nodes(level), 2))
+        g = rng.normal(size=(n, 2))
+        lhs = np.sum(g * hier.prolong(level, c))
+        rhs = np.sum(hier.restrict(level, hier.cell_start(level), g) * c)
+        assert lhs == pytest.approx(rhs, rel=1e-12)
+
+
+def test_grid_transfers_are_nested_and_transposed(hier):
+    rng = np.random.default_rng(2)
+    level = hier.levels[-2]
+    c = rng.normal(size=(hier.n_nodes(level), 2))
+    finer = np.zeros((hier.n_nodes(level + 1), 2))
+    relax_grid.grid_prolong_add(c, level, finer)
+    # a coarse bilinear field is the same field on the finer grid
+    np.testing.assert_allclose(hier.prolong(level + 1, finer), hier.prolong(level, c), atol=1e-12)
+    f = rng.normal(size=finer.shape)
+    down = np.empty_like(c)
+    relax_grid.grid_restrict(f, level, down)
+    assert np.sum(f * finer) == pytest.approx(np.sum(down * c), rel=1e-12)
+
+
+def test_preconditioner_is_symmetric_positive_and_matches_its_parts(hier):
+    rng = np.random.default_rng(3)
+    n = len(hier.un)
+    diag = rng.uniform(0.5, 20.0, n)
+    pc = MultilevelPreconditioner(hier, theta=2.0)
+    pc.refresh(diag)
+    a, b = rng.normal(size=(n, 2)), rng.normal(size=(n, 2))
+    ha, hb = np.empty_like(a), np.empty_like(b)
+    pc.apply(a, ha)
+    pc.apply(b, hb)
+    assert np.sum(b * ha) == pytest.approx(np.sum(a * hb), rel=1e-11)
+    aha = np.sum(a * ha)
+    jacobi = np.sum(a * a / diag[:, None])
+    assert aha > jacobi > 0
+    assert pc.coarse_norm(a) == pytest.approx(aha - jacobi, rel=1e-10)
+    # a constant field is a coarse field: the coarse terms dominate it
+    ones = np.ones((n, 2))
+    h1 = np.empty_like(ones)
+    pc.apply(ones, h1)
+    assert np.sum(ones * h1) > 5 * np.sum(1.0 / diag) * 2
+
+
+def test_fused_passes_match_numpy_and_do_not_depend_on_threads():
+    rng = np.random.default_rng(4)
+    N = 2 * (kl.PARALLEL_BLOCKS * kl.BLOCK + 61)  # threaded path, a partial last block
+    q0, y, s, g_old = (rng.normal(size=N) for _ in range(4))
+    diag = rng.uniform(0.1, 5.0, N // 2)
+    parts = np.empty(-(-N // kl.BLOCK))
+    results = []
+    for threads in (1, 2):
+        with numba_threads(threads):
+            q = q0.copy()
+            kl.combine(q, 0.5, q, -1.5, y, diag, 2.0, s, parts)
+            dot = float(np.sum(parts))
+            s_out, y_out = np.empty(N), np.empty(N)
+            p2 = np.empty_like(parts)
+            kl.pair(q, 0.3, y, g_old, diag, s_out, y_out, parts, p2)
+            results.append((q, dot, s_out, y_out, float(np.sum(parts)), float(np.sum(p2))))
+    want_q = (0.5 * q0 - 1.5 * y) * 2.0 / np.repeat(diag, 2)
+    np.testing.assert_allclose(results[0][0], want_q, rtol=1e-14)
+    assert results[0][1] == pytest.approx(np.dot(s, want_q), rel=1e-12)
+    np.testing.assert_allclose(results[0][2], 0.3 * want_q, rtol=1e-15)
+    np.testing.assert_allclose(results[0][3], y - g_old, rtol=1e-15)
+    assert results[0][4] == pytest.approx(np.dot(0.3 * want_q, y - g_old), rel=1e-12)
+    assert results[0][5] == pytest.approx(np.sum((y - g_old) ** 2 / np.repeat(diag, 2)), rel=1e-12)
+    for a, b in zip(results[0], results[1]):
+        assert np.array_equal(a, b)  # bit for bit, whatever the number of threads
+
+
+def test_neighbour_means_count_each_edge_neighbour_once():
+    from potflat._kernels.springs import neighbour_means, vertex_faces
+
+    faces = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1], [1, 4, 5]])
+    x = np.random.default_rng(5).normal(size=(6, 2))
+    ptr, tri = vertex_faces(6, faces)
+    verts = np.arange(6)
+    out = np.empty((6, 2))
+    neighbour_means(x, verts, ptr, tri, faces, out)
+    for v in verts:
+        nbrs = {int(u) for f in faces if v in f for u in f if u != v}
+        np.testing.assert_allclose(out[v], x[sorted(nbrs)].mean(axis=0), rtol=1e-14)
