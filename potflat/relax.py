@@ -25,15 +25,19 @@ import contextlib
 import json
 import math
 import time
-from collections import deque
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from potflat._kernels.relax_overlap import contact_barrier
-from potflat.distortion import DistortionSummary, face_areas, row_blocks, summarize, vertex_stress
+from potflat.distortion import (
+    DistortionSummary,
+    face_areas,
+    row_blocks,
+    summarize,
+    vertex_stress,
+)
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
 from potflat.types import FlatMesh, StageOutput
 
@@ -201,9 +205,10 @@ class _Springs:
     """Spring system and triangles of a mesh in normalised, Morton-sorted form."""
 
     def __init__(self, V: np.ndarray, faces: np.ndarray, n: int, *, k: float, relative: bool):
+        from potflat._kernels import relax_overlap
         from potflat._kernels import springs as ks
 
-        self.ks = ks
+        self.ks, self.ko = ks, relax_overlap
         edges, cross, self.boundary_segments = ks.halfedge_springs(faces, n)
         rest = np.concatenate([np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1),
                                ks.cross_rest_lengths(V, cross)])
@@ -274,7 +279,7 @@ class _Springs:
                                   self.relative, g, self.diag)
         ec = 0.0
         if self.contact:
-            ec = contact_barrier(x, self.boundary_segments, self.bprev, self.bnext, CONTACT_GAP,
+            ec = self.ko.contact_barrier(x, self.boundary_segments, self.bprev, self.bnext, CONTACT_GAP,
                                  CONTACT_MU * self.k, max(CONTACT_GAP, self._contact_cell), g, self.diag)
         return es + eb + ef + ec, es, g
 
@@ -313,15 +318,13 @@ class _Springs:
 
     def overlap(self, x: np.ndarray) -> int:
         """Crossing pairs of boundary segments at ``x`` (counting stops at 1000)."""
-        from potflat._kernels.relax_overlap import count_crossings
-
         seg = self.boundary_segments
         if len(seg) < 2:
             return 0
         lens = np.linalg.norm(x[seg[:, 0]] - x[seg[:, 1]], axis=1)
         extent = float(np.ptp(x[seg.ravel()], axis=0).max()) or 1.0
         cell = max(2.0 * float(np.mean(lens)), extent / 2048.0, 1e-12)
-        count, _ = count_crossings(x, seg, cell, 1000)
+        count, _ = self.ko.count_crossings(x, seg, cell, 1000)
         return int(count)
 
     def largest_eigenvalue(self, iters: int = 30) -> float:
@@ -552,7 +555,7 @@ def _minimise(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, leve
     t0 = time.perf_counter()
     run.level = "fine"
     precond = MultilevelPreconditioner(hier, theta=PRECOND_THETA) if hier.levels else None
-    solver = _LBFGS(sp, x, precond, guard_overlap=sp.overlap(x) == 0)
+    solver = _LBFGS(sp, x, precond, guard_overlap=sp.contact)  # set by sp.guard_boundary(x)
     del x
     conv, its = solver.run(run, max_iter=run.max_iter, tol=settings["tol"], hist=[solver.E])
     contacts = solver.contacts

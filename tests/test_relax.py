@@ -465,7 +465,14 @@ def _angle_sum(uv, F, b=0):
 
 
 def test_boundary_angle_barrier_matches_reference():
-    from potflat.relax import BARRIER_EPS, BARRIER_MU, BOUNDARY_GAP, BOUNDARY_MU, CONTACT_GAP, CONTACT_MU
+    from potflat.relax import (
+        BARRIER_EPS,
+        BARRIER_MU,
+        BOUNDARY_GAP,
+        BOUNDARY_MU,
+        CONTACT_GAP,
+        CONTACT_MU,
+    )
 
     fan = _saddle_fan(flat_gap=0.15)  # the centre's gap 0.15 < BOUNDARY_GAP: its barrier is on
     V, F = fan.mesh.vertices, fan.mesh.faces

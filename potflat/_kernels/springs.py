@@ -302,6 +302,16 @@ def face_areas(x, faces, out):
                         - (x[a1, 1] - x[a0, 1]) * (x[a2, 0] - x[a0, 0]))
 
 
+@leaf
+def _angle_barrier_slope(theta, sb, gap):
+    """Boundary angle barrier at angle sum ``theta``: ``dB / dTheta`` and the factor of its
+    Hessian diagonal bound (both 0 where the barrier is off, i.e. the gap is at least ``gap``)."""
+    a = (2.0 * math.pi - theta) / gap
+    if not 0.0 < a < 1.0:
+        return 0.0, 0.0
+    return -sb * (1.0 - 1.0 / a) / gap, sb / (a * a * gap * gap)
+
+
 @parallel
 def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, bprev, bnext, bguard, theta, mu_b, gap,
                     grad, e_spring, e_barrier, diag):
@@ -370,7 +380,7 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, bprev, bnext, bguard
                     eb = np.inf
                 elif a < 1.0:
                     eb += sb * (a - 1.0 - math.log(a))
-                    cb = -sb * (1.0 - 1.0 / a) / gap  # dB / dTheta
+                    cb, h = _angle_barrier_slope(theta[i], sb, gap)
                     ux = x[bnext[i], 0] - xi
                     uy = x[bnext[i], 1] - yi
                     wx = x[bprev[i], 0] - xi
@@ -381,13 +391,12 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, bprev, bnext, bguard
                     ty = -(-ux / uu + wx / ww)
                     gx += cb * tx
                     gy += cb * ty
-                    hd += sb / (a * a * gap * gap) * (tx * tx + ty * ty)
+                    hd += h * (tx * tx + ty * ty)
             # as the successor of its predecessor p: Theta_p grows with arg(x_i - x_p) decreasing
             pv = bprev[i]
             if pv >= 0 and bguard[pv]:
-                a = (2.0 * math.pi - theta[pv]) / gap
-                if 0.0 < a < 1.0:
-                    cb = -sb * (1.0 - 1.0 / a) / gap
+                cb, h = _angle_barrier_slope(theta[pv], sb, gap)
+                if h > 0.0:
                     ux = xi - x[pv, 0]
                     uy = yi - x[pv, 1]
                     uu = ux * ux + uy * uy
@@ -395,13 +404,12 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, bprev, bnext, bguard
                     ty = -ux / uu
                     gx += cb * tx
                     gy += cb * ty
-                    hd += sb / (a * a * gap * gap) * (tx * tx + ty * ty)
+                    hd += h * (tx * tx + ty * ty)
             # as the predecessor of its successor q
             qv = bnext[i]
             if qv >= 0 and bguard[qv]:
-                a = (2.0 * math.pi - theta[qv]) / gap
-                if 0.0 < a < 1.0:
-                    cb = -sb * (1.0 - 1.0 / a) / gap
+                cb, h = _angle_barrier_slope(theta[qv], sb, gap)
+                if h > 0.0:
                     wx = xi - x[qv, 0]
                     wy = yi - x[qv, 1]
                     ww = wx * wx + wy * wy
@@ -409,7 +417,7 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, bprev, bnext, bguard
                     ty = wx / ww
                     gx += cb * tx
                     gy += cb * ty
-                    hd += sb / (a * a * gap * gap) * (tx * tx + ty * ty)
+                    hd += h * (tx * tx + ty * ty)
         diag[i] = hd
         grad[i, 0] = gx
         grad[i, 1] = gy
