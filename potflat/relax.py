@@ -555,7 +555,7 @@ def _minimise(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, leve
     t0 = time.perf_counter()
     run.level = "fine"
     precond = MultilevelPreconditioner(hier, theta=PRECOND_THETA) if hier.levels else None
-    solver = _LBFGS(sp, x, precond, guard_overlap=sp.contact)  # set by sp.guard_boundary(x)
+    solver = _LBFGS(sp, x, precond, guard_overlap=sp.overlap(x) == 0)
     del x
     conv, its = solver.run(run, max_iter=run.max_iter, tol=settings["tol"], hist=[solver.E])
     contacts = solver.contacts
