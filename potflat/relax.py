@@ -26,7 +26,7 @@ import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -39,20 +39,27 @@ from potflat.distortion import (
     vertex_stress,
 )
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
-from potflat.types import FlatMesh, StageOutput
+from potflat.types import FlatMesh, Mesh, StageOutput
 
 #: Settings of each preset; ``None`` in :class:`RelaxOptions` takes the preset's value.
 PRESETS: dict[str, dict] = {
     "preview": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
-                "tol": 1e-3, "max_iter": 300, "cell_vertices": 8.0},
+                "tol": 1e-3, "max_iter": 300, "cell_vertices": 8.0, "simplify_mm": 0.5,
+                "coarse_start": True},
     "standard": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
-                 "tol": 1e-4, "max_iter": 2000, "cell_vertices": 8.0},
+                 "tol": 1e-4, "max_iter": 2000, "cell_vertices": 8.0, "coarse_start": True},
     "archival": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
-                 "tol": 1e-7, "max_iter": 20000, "cell_vertices": 8.0},
+                 "tol": 1e-7, "max_iter": 20000, "cell_vertices": 8.0, "coarse_start": True},
     "paper": {"solver": "dynamics", "stretch": 2.0, "stiffness": 0.5, "weighting": "uniform",
-              "tol": 1e-7, "max_iter": 100000, "friction_inside": 0.01, "friction_boundary": 1.0},
+              "tol": 1e-7, "max_iter": 100000, "friction_inside": 0.01, "friction_boundary": 1.0,
+              "coarse_start": False},
 }
 WEIGHTINGS = ("uniform", "relative")
+#: Coarse copies (grid clusters of the start layout, :mod:`potflat.simplify`): one is only
+#: relaxed when it has at most SIMPLIFY_WORTH of the mesh's vertices and at least
+#: COARSE_MIN_COPY; meshes of at least COARSE_MIN_VERTICES start their solve from a relaxed
+#: coarse copy with about COARSE_CELL_VERTICES vertices per cell (which nests in turn).
+SIMPLIFY_WORTH, COARSE_MIN_COPY, COARSE_MIN_VERTICES, COARSE_CELL_VERTICES = 0.7, 100, 20_000, 16.0
 
 #: Barrier: weight (times k times the face's rest area) and activation (fraction of rest area).
 BARRIER_MU, BARRIER_EPS = 1.0, 0.5
@@ -105,6 +112,12 @@ class RelaxOptions:
     weighting : str or None
         ``uniform`` (the paper: absolute length errors) or ``relative`` (each spring weighted
         by 1/r^2: relative length errors). None: the preset's.
+    simplify_mm : float or None
+        Relax a coarse copy of the mesh (its start layout clustered in square cells of this
+        side, in mm) and let the full mesh follow it piecewise linearly: no more resolution
+        than the image resolves (0.5 mm is 2 pixels at the default 4 px/mm). Only when the
+        copy has at most 70% of the mesh's vertices. 0: relax the full mesh. None: the
+        preset's (0.5 for ``preview``, 0 for the others).
     """
 
     preset: str = "standard"
@@ -115,6 +128,7 @@ class RelaxOptions:
     stretch: float | None = None
     stiffness: float | None = None
     weighting: str | None = None
+    simplify_mm: float | None = None
 
     def __post_init__(self) -> None:
         if self.preset not in PRESETS:
@@ -127,13 +141,18 @@ class RelaxOptions:
             val = getattr(self, name)
             if val is not None and (isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1):
                 raise InvalidOptionError(f"{name.replace('_', '-')} must be a whole number >= 1, got {val!r}")
+        if self.simplify_mm is not None and not (
+                isinstance(self.simplify_mm, (int, float, np.floating, np.integer)) and not isinstance(self.simplify_mm, bool)
+                and math.isfinite(self.simplify_mm) and self.simplify_mm >= 0):
+            raise InvalidOptionError(f"simplify-mm must be a number >= 0 (0: no simplification), got {self.simplify_mm!r}")
         if self.weighting is not None and self.weighting not in WEIGHTINGS:
             raise InvalidOptionError(f"unknown weighting {self.weighting!r}; use one of {', '.join(WEIGHTINGS)}")
 
     def resolved(self) -> dict:
         """The preset's settings with the options given here applied."""
         out = dict(PRESETS[self.preset])
-        for name in ("tol", "max_iter", "stretch", "stiffness", "weighting"):
+        out.setdefault("simplify_mm", 0.0)
+        for name in ("tol", "max_iter", "stretch", "stiffness", "weighting", "simplify_mm"):
             if getattr(self, name) is not None:
                 out[name] = getattr(self, name)
         out["time_budget"] = self.time_budget
@@ -564,7 +583,7 @@ def _minimise(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, leve
                      "overlap were shortened")
     x = solver.x
     del solver
-    levels_out.append({"level": run.level, "iterations": its, "energy": sp.spring_energy(x),
+    levels_out.append({"level": run.level, "vertices": sp.n, "iterations": its, "energy": sp.spring_energy(x),
                        "seconds": time.perf_counter() - t0, "boundary_contact": contacts > 0})
     return x, conv and not run.stopped
 
@@ -627,6 +646,70 @@ def _untangle(sp: _Springs, x: np.ndarray, rounds: int = 200) -> tuple[np.ndarra
     return x, n_bad
 
 
+@dataclass(frozen=True)
+class _CoarseStart:
+    """A relaxed coarse copy of the rollout and the full mesh's layout following it."""
+
+    result: RelaxResult
+    uv: np.ndarray  # (n, 2) float64: the full mesh's layout following the coarse one
+    final: bool  # the full mesh only follows (preview at the image's resolution), no iterations on it
+    notes: list
+
+
+def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progress: bool, callback,
+                  deadline: float) -> _CoarseStart | None:
+    """Relax a coarse copy of ``flat`` (grid clusters of its start layout, :mod:`potflat.simplify`).
+
+    With ``simplify_mm`` the cells have that side and the full mesh will only follow the
+    coarse result; else, for meshes of at least :data:`COARSE_MIN_VERTICES`, the cells hold
+    about :data:`COARSE_CELL_VERTICES` vertices and the coarse result is the full solve's
+    start. None when neither applies, or when the coarse copy cannot be relaxed fold-free.
+    """
+    from potflat.simplify import cell_side, grid_simplification, interpolate
+
+    V, uv = flat.mesh.vertices, flat.uv
+    n = len(V)
+    spacing = settings["simplify_mm"]
+    simple = None
+    if spacing:  # no more resolution than the image resolves
+        simple = grid_simplification(V, uv, spacing / flat.mesh.mm_per_unit)
+        final = COARSE_MIN_COPY <= len(simple.vertices) <= SIMPLIFY_WORTH * n
+    if (simple is None or not final) and settings["coarse_start"] and n >= COARSE_MIN_VERTICES:
+        simple = grid_simplification(V, uv, cell_side(uv, COARSE_CELL_VERTICES))
+        final = False
+        if not COARSE_MIN_COPY <= len(simple.vertices) <= SIMPLIFY_WORTH * n:
+            return None
+    elif simple is None or not final:
+        return None
+    budget = None if deadline == np.inf else max(deadline - time.perf_counter(), 1e-3)
+    tagged = None if callback is None else (lambda info: callback({**info, "level": "coarse"}))
+    try:
+        sub = relax(FlatMesh(Mesh(simple.vertices, simple.faces, units=flat.mesh.units), simple.uv),
+                    options=replace(options, simplify_mm=0.0, time_budget=budget), progress=progress,
+                    callback=tagged)
+    except FoldedResultError as exc:
+        return _CoarseStart(result=None, uv=None, final=False, notes=[
+            f"the {len(simple.vertices)}-vertex coarse copy could not be relaxed fold-free ({exc}); "
+            "relaxed the full mesh from the rollout"])
+    what = (f"relaxed a coarse copy at {spacing:g} mm resolution ({len(simple.vertices)} vertices); the full mesh "
+            "follows it piecewise linearly" if final else
+            f"started from a relaxed coarse copy ({len(simple.vertices)} vertices)")
+    notes = [what] + [f"coarse copy: {note}" for note in sub.notes]
+    return _CoarseStart(result=sub, uv=interpolate(simple, uv, sub.flat.uv), final=final, notes=notes)
+
+
+def _follow(sp: _Springs, x: np.ndarray, notes: list[str]) -> np.ndarray | None:
+    """The full mesh's layout ``x`` following a relaxed coarse copy, untangled; None (with a
+    note) when it cannot be made fold-free."""
+    x, n_bad = _untangle(sp, x)
+    if n_bad:
+        notes.append(f"untangled {n_bad} triangles flipped by following the coarse copy")
+    if (sp.signed_areas(x) <= 0).any() or sp.overlap(x):
+        notes.append("following the coarse copy folded the full mesh; relaxed the full mesh from the rollout")
+        return None
+    return x
+
+
 def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool = False,
           callback: Callable[[dict], bool | None] | None = None, **kwargs) -> RelaxResult:
     """Relax a rollout's flattening by minimising the paper's spring energy.
@@ -675,6 +758,10 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
 
     from potflat._kernels._jit import numba_threads
 
+    coarse = _coarse_start(flat, options, settings, progress, callback, deadline) if fold_free else None
+    notes: list[str] = list(coarse.notes) if coarse is not None else []
+    if coarse is not None and coarse.result is None:
+        coarse = None
     with numba_threads(options.threads):
         # normalised units: lengths / mean 3D edge length, layout centred on its bounding box
         unit = sum(float(np.linalg.norm(V[F[s, [1, 2, 0]]] - V[F[s]], axis=2).sum()) for s in row_blocks(len(F)))
@@ -695,7 +782,12 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
         sp = _Springs(Vs, Fs, n, k=settings["stiffness"], relative=settings["weighting"] == "relative")
         del Vs, Fs
         x = np.ascontiguousarray(x_in[order]) * settings["stretch"]
-        notes: list[str] = []
+        if coarse is not None:
+            followed = _follow(sp, np.ascontiguousarray(((coarse.uv - centre) / unit)[order]), notes)
+            if followed is None:
+                coarse = None
+            else:
+                x = followed
         if fold_free:
             x, n_bad = _untangle(sp, x)
             if n_bad:
@@ -713,9 +805,17 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
 
         bar = _progress_bar(settings["max_iter"]) if progress else contextlib.nullcontext(None)
         with bar as report:
-            run = _Run(settings["max_iter"], deadline, callback, report)
             levels: list[dict] = []
-            if fold_free:
+            prefix = [] if coarse is None else list(coarse.result.energy_history)
+            run = _Run(settings["max_iter"] + len(prefix), deadline, callback, report)
+            run.history.extend(prefix)
+            if coarse is not None:
+                levels.extend({**level, "level": "coarse"} for level in coarse.result.levels)
+            if coarse is not None and coarse.final:
+                levels.append({"level": "follow", "iterations": 0, "energy": sp.spring_energy(x),
+                               "seconds": time.perf_counter() - t_setup, "vertices": n})
+                converged = coarse.result.converged
+            elif fold_free:
                 x, converged = _minimise(sp, x, hier, settings, run, levels, notes)
             else:
                 x, converged = _dynamics(sp, x, settings, run, levels)

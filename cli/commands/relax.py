@@ -12,7 +12,7 @@ from potflat_cli._options import Json, Name, OutputDir, Quiet
 
 HELP = """Relax a rollout into a fold-free flattening: writes NAME.relaxed.ply (with per-vertex stress) and NAME.relaxed.json (energy history, flips, boundary check, distortion before/after, timings, provenance).
 
-Presets: preview (stops early), standard, archival (tight convergence): fold-free, verified; paper: the paper's damped dynamics (may fold; flips reported). Exit codes: 0 success, 2 bad input or options, or a result that would be folded (nothing is written).
+Presets: preview (relaxes a coarse copy at the image's resolution, stops early), standard, archival (tight convergence): fold-free, verified; paper: the paper's damped dynamics (may fold; flips reported). Exit codes: 0 success, 2 bad input or options, or a result that would be folded (nothing is written).
 
 Example:  potflat relax out/hydria.rollout.ply -o out --preset standard --time-budget 60
 """
@@ -40,6 +40,9 @@ def relax_command(
         "--stiffness", help="Spring stiffness k > 0 \\[default: 0.5 for paper, else 1].")] = None,
     weighting: Annotated[str | None, typer.Option(
         "--weighting", help="uniform (absolute length errors, the paper) | relative (1/r^2) \\[default: per preset].")] = None,
+    simplify_mm: Annotated[float | None, typer.Option(
+        "--simplify-mm", help="Relax a coarse copy with cells of this side (mm) and let the full mesh follow it; "
+        "0: the full mesh \\[default: 0.5 for preview (2 px at 4 px/mm), else 0].")] = None,
     name: Name = None,
     quiet: Quiet = False,
     json: Json = False,
@@ -48,7 +51,7 @@ def relax_command(
     from potflat_cli._stage import run_stage
 
     options = RelaxOptions(preset=preset, tol=tol, max_iter=max_iter, time_budget=time_budget, threads=threads,
-                           stretch=stretch, stiffness=stiffness, weighting=weighting)
+                           stretch=stretch, stiffness=stiffness, weighting=weighting, simplify_mm=simplify_mm)
     show_progress = sys.stderr.isatty() and not (quiet or json)
     out = run_stage(None if show_progress else f"relaxing {rollout_ply.name}",
                     lambda: run_relax_stage(rollout_ply, output if output is not None else rollout_ply.parent,
