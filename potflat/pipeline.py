@@ -270,6 +270,17 @@ def _check_painting_name_is_free(out: Path, name: str) -> None:
                                  "overwritten; give another output folder (-o) or --name")
 
 
+def _preview_at_image_resolution(options: dict) -> dict:
+    """A relax preset that relaxes a coarse copy (``preview``) does so at 2 pixels of the image
+    it is baked into, unless ``simplify_mm`` was given."""
+    relax, bake = options["relax"], options["bake"]
+    if getattr(relax, "simplify_mm", 0.0) is not None:  # given (or a stage stand-in without it, in tests)
+        return options
+    if relax.resolved()["simplify_mm"]:
+        options = {**options, "relax": dataclasses.replace(relax, simplify_mm=2.0 / bake.resolution)}
+    return options
+
+
 def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: str | None = None,
              progress: Callable[[str], None] | None = None) -> ScanResult:
     """Run rollout, relax and bake on one scan, writing every output into ``out_dir``.
@@ -299,7 +310,7 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
     scan = Path(scan_path)
     out = Path(out_dir)
     name = name or scan.stem
-    options = resolve_options(rollout=rollout, relax=relax, bake=bake)
+    options = _preview_at_image_resolution(resolve_options(rollout=rollout, relax=relax, bake=bake))
     _check_painting_name_is_free(out, name)
     stages: dict[str, StageOutput] = {}
     seconds: dict[str, float] = {}

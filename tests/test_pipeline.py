@@ -143,3 +143,16 @@ def test_run_refuses_early_when_the_painting_would_replace_the_scan_texture(tmp_
         run_scan(scan, tmp_path)
     assert texture.read_bytes() == b"texture"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["pot.obj", "pot.png"]
+
+
+@pytest.mark.parametrize("relax, bake, want", [
+    ({"preset": "preview"}, {"px_per_mm": 8.0}, 0.25),
+    ({"preset": "preview"}, {"dpi": 254.0}, 0.2),
+    ({"preset": "preview", "simplify_mm": 1.0}, {"px_per_mm": 8.0}, 1.0),
+    ({"preset": "standard"}, {"px_per_mm": 8.0}, None),
+])
+def test_preview_relaxes_at_two_pixels_of_the_image(relax, bake, want):
+    from potflat.pipeline import _preview_at_image_resolution
+
+    options = _preview_at_image_resolution(resolve_options(relax=relax, bake=bake))
+    assert options["relax"].simplify_mm == pytest.approx(want) if want is not None else options["relax"].simplify_mm is None

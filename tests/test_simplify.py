@@ -1,0 +1,118 @@
+"""Coarse copies of a rollout (potflat.simplify) and relaxation from or at a coarse copy."""
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import potflat.relax as relax_module
+from potflat.relax import relax
+from potflat.simplify import cell_side, grid_simplification, interpolate
+from potflat.types import FlatMesh, Mesh
+
+_spec = importlib.util.spec_from_file_location("_meshes", Path(__file__).parents[1] / "benchmarks" / "_meshes.py")
+meshes = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(meshes)
+
+
+def _signed_areas(uv, F):
+    e1 = uv[F[:, 1]] - uv[F[:, 0]]
+    e2 = uv[F[:, 2]] - uv[F[:, 0]]
+    return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
+@pytest.fixture(scope="module")
+def vessel():
+    """Big enough to start from a coarse copy (relax.COARSE_MIN_VERTICES)."""
+    return meshes.vessel_rollout(30_000, seed=4)
+
+
+def test_grid_simplification_clusters_and_blocks():
+    # two points in each of the cells (0,0) (1,0) (2,0) (0,1) (1,1) of side 1
+    uv = np.array([[0.0, 0.0], [0.7, 0.6], [1.2, 0.1], [1.5, 0.9], [2.5, 0.5], [2.2, 0.2],
+                   [0.4, 1.5], [0.6, 1.2], [1.3, 1.3], [1.8, 1.7]])
+    V = np.c_[uv, np.arange(len(uv)) * 0.1]
+    s = grid_simplification(V, uv, 1.0)
+    assert len(s.vertices) == 5
+    for c in range(5):
+        np.testing.assert_allclose(s.uv[c], uv[s.cluster == c].mean(0))
+        np.testing.assert_allclose(s.vertices[c], V[s.cluster == c].mean(0))
+    cell = [tuple(ij) for ij in np.floor(s.uv).astype(int)]
+    tris = {frozenset(cell[v] for v in f) for f in s.faces}
+    # the full block at (0,0) gives two triangles; the block at (1,0) has three cells: one
+    assert tris == {frozenset({(0, 0), (1, 0), (1, 1)}), frozenset({(0, 0), (1, 1), (0, 1)}),
+                    frozenset({(1, 0), (2, 0), (1, 1)})}
+    assert np.all(_signed_areas(s.uv, s.faces) > 0)
+
+
+def test_cell_side_gives_the_asked_density():
+    uv = np.random.default_rng(0).random((40_000, 2)) * [3.0, 1.0]
+    s = grid_simplification(np.c_[uv, np.zeros(len(uv))], uv, cell_side(uv, 16.0))
+    assert 14 < len(uv) / len(s.vertices) < 18
+
+
+def test_interpolate_reproduces_affine_maps_exactly(vessel):
+    V, uv = vessel.mesh.vertices, vessel.uv
+    s = grid_simplification(V, uv, 8.0)
+    A, t = np.array([[0.8, -0.3], [0.5, 1.1]]), np.array([3.0, -7.0])
+    out = interpolate(s, uv, s.uv @ A.T + t)
+    np.testing.assert_allclose(out, uv @ A.T + t, atol=1e-9 * np.ptp(uv))
+
+
+def test_interpolate_matches_brute_force_location(vessel):
+    V, uv = vessel.mesh.vertices, vessel.uv
+    s = grid_simplification(V, uv, 12.0)
+    target = s.uv + np.random.default_rng(1).normal(0, 2.0, s.uv.shape)  # any coarse layout
+    out = interpolate(s, uv, target)
+    P = s.uv[s.faces]  # (mc, 3, 2)
+    rng = np.random.default_rng(2)
+    checked = 0
+    for i in rng.choice(len(uv), 300, replace=False):
+        d = P[:, 1:] - P[:, :1]  # (mc, 2, 2)
+        det = d[:, 0, 0] * d[:, 1, 1] - d[:, 0, 1] * d[:, 1, 0]
+        p = uv[i] - P[:, 0]
+        lb = (p[:, 0] * d[:, 1, 1] - p[:, 1] * d[:, 1, 0]) / det
+        lc = (d[:, 0, 0] * p[:, 1] - d[:, 0, 1] * p[:, 0]) / det
+        bary = np.stack([1 - lb - lc, lb, lc], axis=1)
+        inside = np.nonzero(bary.min(1) >= 1e-9)[0]
+        if len(inside) != 1:
+            continue  # outside the copy or on a shared edge
+        f = inside[0]
+        np.testing.assert_allclose(out[i], bary[f] @ target[s.faces[f]], atol=1e-9 * np.ptp(uv))
+        checked += 1
+    assert checked > 200
+
+
+def test_standard_starts_from_a_coarse_copy(vessel, monkeypatch):
+    nested = relax(vessel, preset="standard")
+    monkeypatch.setattr(relax_module, "COARSE_MIN_VERTICES", 10**9)
+    plain = relax(vessel, preset="standard")
+    assert [lv["level"] for lv in nested.levels] == ["coarse", "fine"]
+    assert [lv["level"] for lv in plain.levels] == ["fine"]
+    assert nested.levels[0]["vertices"] < len(vessel.uv) / 8
+    for r in (nested, plain):
+        assert r.converged and r.flipped == 0 and r.boundary_overlap == 0
+    assert nested.distortion.edge_rms <= plain.distortion.edge_rms + 2e-3
+    assert nested.levels[-1]["iterations"] < plain.levels[-1]["iterations"]
+
+
+def test_preview_follows_a_coarse_copy_and_scales_with_units(vessel):
+    r = relax(vessel, preset="preview", simplify_mm=6.0)
+    assert [lv["level"] for lv in r.levels] == ["coarse", "follow"]
+    assert r.levels[0]["vertices"] <= 0.7 * len(vessel.uv)
+    assert r.flipped == 0 and r.boundary_overlap == 0 and np.all(_signed_areas(r.flat.uv, vessel.mesh.faces) > 0)
+    assert r.distortion.edge_rms < 0.6 * r.distortion_before.edge_rms
+    assert any("follows it" in note for note in r.notes)
+    again = relax(vessel, preset="preview", simplify_mm=6.0, threads=1)
+    np.testing.assert_array_equal(again.flat.uv, r.flat.uv)
+    metres = FlatMesh(Mesh(vessel.mesh.vertices / 1000.0, vessel.mesh.faces, units="m"), vessel.uv / 1000.0)
+    rm = relax(metres, preset="preview", simplify_mm=6.0)
+    assert [lv["vertices"] for lv in rm.levels] == [lv["vertices"] for lv in r.levels]
+    np.testing.assert_allclose(rm.flat.uv * 1000.0, r.flat.uv, rtol=0, atol=1e-7 * np.ptp(r.flat.uv))
+
+
+def test_too_coarse_a_copy_relaxes_the_full_mesh(vessel):
+    r = relax(vessel, preset="preview", simplify_mm=500.0)  # one cell: nothing to relax at that size
+    assert r.levels[-1]["level"] == "fine" and r.flipped == 0
