@@ -55,11 +55,13 @@ PRESETS: dict[str, dict] = {
               "coarse_start": False},
 }
 WEIGHTINGS = ("uniform", "relative")
-#: Coarse copies (grid clusters of the start layout, :mod:`potflat.simplify`): one is only
-#: relaxed when it has at most SIMPLIFY_WORTH of the mesh's vertices and at least
-#: COARSE_MIN_COPY; meshes of at least COARSE_MIN_VERTICES start their solve from a relaxed
-#: coarse copy with about COARSE_CELL_VERTICES vertices per cell (which nests in turn).
-SIMPLIFY_WORTH, COARSE_MIN_COPY, COARSE_MIN_VERTICES, COARSE_CELL_VERTICES = 0.7, 100, 20_000, 16.0
+#: Coarse copies (grid clusters of the start layout, :mod:`potflat.simplify`): a copy has at
+#: least COARSE_MIN_COPY vertices; the full mesh only follows one (``simplify_mm``) when the
+#: copy covers at least COARSE_MIN_COVERAGE of its vertices (cells much smaller than the edges
+#: leave blocks empty: the goblet scan's copy at 2 mm cells covered 38% of its vertices);
+#: meshes of at least COARSE_MIN_VERTICES start their solve from a relaxed copy with about
+#: COARSE_CELL_VERTICES vertices per cell (which nests in turn).
+COARSE_MIN_COPY, COARSE_MIN_COVERAGE, COARSE_MIN_VERTICES, COARSE_CELL_VERTICES = 100, 0.95, 20_000, 16.0
 
 #: Barrier: weight (times k times the face's rest area) and activation (fraction of rest area).
 BARRIER_MU, BARRIER_EPS = 1.0, 0.5
@@ -116,8 +118,9 @@ class RelaxOptions:
         Relax a coarse copy of the mesh (its start layout clustered in square cells of this
         side, in mm) and let the full mesh follow it piecewise linearly: no more resolution
         than the image resolves (0.5 mm is 2 pixels at the default 4 px/mm). Only when the
-        copy has at most 70% of the mesh's vertices. 0: relax the full mesh. None: the
-        preset's (0.5 for ``preview``, 0 for the others).
+        copy covers 95% of the vertices (cells wider than the mesh's edges); else the full
+        mesh is relaxed. 0: relax the full mesh. None: the preset's (0.5 for ``preview``, 0
+        for the others).
     """
 
     preset: str = "standard"
@@ -656,31 +659,32 @@ class _CoarseStart:
     notes: list
 
 
-def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progress: bool, callback,
-                  deadline: float) -> _CoarseStart | None:
+def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progress: bool,
+                  callback, deadline: float) -> _CoarseStart | None:
     """Relax a coarse copy of ``flat`` (grid clusters of its start layout, :mod:`potflat.simplify`).
 
     With ``simplify_mm`` the cells have that side and the full mesh will only follow the
-    coarse result; else, for meshes of at least :data:`COARSE_MIN_VERTICES`, the cells hold
-    about :data:`COARSE_CELL_VERTICES` vertices and the coarse result is the full solve's
-    start. None when neither applies, or when the coarse copy cannot be relaxed fold-free.
+    coarse result (when the copy covers :data:`COARSE_MIN_COVERAGE` of the vertices); else,
+    for meshes of at least :data:`COARSE_MIN_VERTICES`, the cells hold about
+    :data:`COARSE_CELL_VERTICES` vertices and the coarse result is the full solve's start.
+    None when neither applies; ``result`` None (with a note) when the copy could not be
+    relaxed fold-free.
     """
     from potflat.simplify import cell_side, grid_simplification, interpolate
 
     V, uv = flat.mesh.vertices, flat.uv
-    n = len(V)
     spacing = settings["simplify_mm"]
-    simple = None
+    simple, final = None, False
     if spacing:  # no more resolution than the image resolves
         simple = grid_simplification(V, uv, spacing / flat.mesh.mm_per_unit)
-        final = COARSE_MIN_COPY <= len(simple.vertices) <= SIMPLIFY_WORTH * n
-    if (simple is None or not final) and settings["coarse_start"] and n >= COARSE_MIN_VERTICES:
-        simple = grid_simplification(V, uv, cell_side(uv, COARSE_CELL_VERTICES))
-        final = False
-        if not COARSE_MIN_COPY <= len(simple.vertices) <= SIMPLIFY_WORTH * n:
+        final = (len(simple.vertices) >= COARSE_MIN_COPY
+                 and float(np.mean(interpolate(simple, uv, simple.uv)[1])) >= COARSE_MIN_COVERAGE)
+    if not final:
+        if not (settings["coarse_start"] and len(V) >= COARSE_MIN_VERTICES):
             return None
-    elif simple is None or not final:
-        return None
+        simple = grid_simplification(V, uv, cell_side(uv, COARSE_CELL_VERTICES))
+        if len(simple.vertices) < COARSE_MIN_COPY:
+            return None
     budget = None if deadline == np.inf else max(deadline - time.perf_counter(), 1e-3)
     tagged = None if callback is None else (lambda info: callback({**info, "level": "coarse"}))
     try:
@@ -695,7 +699,7 @@ def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
             "follows it piecewise linearly" if final else
             f"started from a relaxed coarse copy ({len(simple.vertices)} vertices)")
     notes = [what] + [f"coarse copy: {note}" for note in sub.notes]
-    return _CoarseStart(result=sub, uv=interpolate(simple, uv, sub.flat.uv), final=final, notes=notes)
+    return _CoarseStart(result=sub, uv=interpolate(simple, uv, sub.flat.uv)[0], final=final, notes=notes)
 
 
 def _follow(sp: _Springs, x: np.ndarray, notes: list[str]) -> np.ndarray | None:
@@ -758,16 +762,16 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
 
     from potflat._kernels._jit import numba_threads
 
+    # normalised units: lengths / mean 3D edge length, layout centred on its bounding box
+    unit = sum(float(np.linalg.norm(V[F[s, [1, 2, 0]]] - V[F[s]], axis=2).sum()) for s in row_blocks(len(F)))
+    unit /= 3 * len(F)
+    if not unit > 0:
+        raise InvalidInputError("all edges of the rollout have zero length; check the scan's units and faces")
     coarse = _coarse_start(flat, options, settings, progress, callback, deadline) if fold_free else None
     notes: list[str] = list(coarse.notes) if coarse is not None else []
     if coarse is not None and coarse.result is None:
         coarse = None
     with numba_threads(options.threads):
-        # normalised units: lengths / mean 3D edge length, layout centred on its bounding box
-        unit = sum(float(np.linalg.norm(V[F[s, [1, 2, 0]]] - V[F[s]], axis=2).sum()) for s in row_blocks(len(F)))
-        unit /= 3 * len(F)
-        if not unit > 0:
-            raise InvalidInputError("all edges of the rollout have zero length; check the scan's units and faces")
         centre = 0.5 * (uv.min(axis=0) + uv.max(axis=0))
         x_in = (uv - centre) / unit
         from potflat.hierarchy import GridHierarchy

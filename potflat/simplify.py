@@ -90,14 +90,31 @@ def grid_simplification(vertices: np.ndarray, uv: np.ndarray, side: float) -> Si
                           uv=mean(np.asarray(uv, dtype=np.float64)), cluster=cluster.astype(np.int64))
 
 
-def interpolate(s: Simplification, uv: np.ndarray, uv_coarse: np.ndarray) -> np.ndarray:
-    """Fine layout from the relaxed coarse one: ``uv`` (n, 2), the fine start, moved by the
-    piecewise-linear map from ``s.uv`` to ``uv_coarse`` (nc, 2). Returns (n, 2) float64."""
+def interpolate(s: Simplification, uv: np.ndarray, uv_coarse: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Fine layout from the relaxed coarse one.
+
+    Parameters
+    ----------
+    s : Simplification
+    uv : (n, 2) float64
+        The fine start layout.
+    uv_coarse : (nc, 2) float64
+        The coarse layout the fine one is to follow (from ``s.uv``).
+
+    Returns
+    -------
+    moved : (n, 2) float64
+        ``uv`` moved by the piecewise-linear map from ``s.uv`` to ``uv_coarse`` (vertices
+        outside the copy: see :func:`potflat._kernels.simplify.interpolate`).
+    inside : (n,) bool
+        Which fine vertices lie inside the copy.
+    """
     from potflat._kernels.simplify import interpolate as kernel
     from potflat._kernels.springs import vertex_faces
 
     vf_ptr, vf_tri = vertex_faces(len(s.uv), s.faces)
     out = np.empty((len(uv), 2))
+    inside = np.empty(len(uv), bool)
     kernel(np.ascontiguousarray(uv, dtype=np.float64), s.cluster, np.ascontiguousarray(s.uv),
-           np.ascontiguousarray(uv_coarse, dtype=np.float64), s.faces, vf_ptr, vf_tri, out)
-    return out
+           np.ascontiguousarray(uv_coarse, dtype=np.float64), s.faces, vf_ptr, vf_tri, out, inside)
+    return out, inside

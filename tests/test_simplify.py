@@ -57,15 +57,22 @@ def test_interpolate_reproduces_affine_maps_exactly(vessel):
     V, uv = vessel.mesh.vertices, vessel.uv
     s = grid_simplification(V, uv, 8.0)
     A, t = np.array([[0.8, -0.3], [0.5, 1.1]]), np.array([3.0, -7.0])
-    out = interpolate(s, uv, s.uv @ A.T + t)
-    np.testing.assert_allclose(out, uv @ A.T + t, atol=1e-9 * np.ptp(uv))
+    out, inside = interpolate(s, uv, s.uv @ A.T + t)
+    assert 0.9 < inside.mean() < 1.0  # the copy's border is jagged
+    np.testing.assert_allclose(out[inside], uv[inside] @ A.T + t, atol=1e-9 * np.ptp(uv))
+    # outside the copy: moved like the nearest part of a face, within the corners' moves
+    move = out[~inside] - uv[~inside]
+    corner_moves = s.uv @ A.T + t - s.uv
+    assert np.all(move.min(0) >= corner_moves.min(0) - 1e-9) and np.all(move.max(0) <= corner_moves.max(0) + 1e-9)
+    identity, _ = interpolate(s, uv, s.uv)
+    np.testing.assert_array_equal(identity, uv)
 
 
 def test_interpolate_matches_brute_force_location(vessel):
     V, uv = vessel.mesh.vertices, vessel.uv
     s = grid_simplification(V, uv, 12.0)
     target = s.uv + np.random.default_rng(1).normal(0, 2.0, s.uv.shape)  # any coarse layout
-    out = interpolate(s, uv, target)
+    out, inside = interpolate(s, uv, target)
     P = s.uv[s.faces]  # (mc, 3, 2)
     rng = np.random.default_rng(2)
     checked = 0
@@ -76,10 +83,11 @@ def test_interpolate_matches_brute_force_location(vessel):
         lb = (p[:, 0] * d[:, 1, 1] - p[:, 1] * d[:, 1, 0]) / det
         lc = (d[:, 0, 0] * p[:, 1] - d[:, 0, 1] * p[:, 0]) / det
         bary = np.stack([1 - lb - lc, lb, lc], axis=1)
-        inside = np.nonzero(bary.min(1) >= 1e-9)[0]
-        if len(inside) != 1:
+        inside_faces = np.nonzero(bary.min(1) >= 1e-9)[0]
+        if len(inside_faces) != 1:
             continue  # outside the copy or on a shared edge
-        f = inside[0]
+        f = inside_faces[0]
+        assert inside[i]
         np.testing.assert_allclose(out[i], bary[f] @ target[s.faces[f]], atol=1e-9 * np.ptp(uv))
         checked += 1
     assert checked > 200
@@ -113,6 +121,9 @@ def test_preview_follows_a_coarse_copy_and_scales_with_units(vessel):
     np.testing.assert_allclose(rm.flat.uv * 1000.0, r.flat.uv, rtol=0, atol=1e-7 * np.ptp(r.flat.uv))
 
 
-def test_too_coarse_a_copy_relaxes_the_full_mesh(vessel):
-    r = relax(vessel, preset="preview", simplify_mm=500.0)  # one cell: nothing to relax at that size
-    assert r.levels[-1]["level"] == "fine" and r.flipped == 0
+@pytest.mark.parametrize("simplify_mm", [500.0, 1.0])
+def test_a_copy_too_coarse_or_too_fine_is_not_followed(vessel, simplify_mm):
+    # 500 mm: one cell, nothing to relax; 1 mm: cells smaller than the edges (about 2.6 mm),
+    # most fine vertices outside the copy. Both relax the full mesh (from a 16-per-cell copy).
+    r = relax(vessel, preset="preview", simplify_mm=simplify_mm)
+    assert [lv["level"] for lv in r.levels] == ["coarse", "fine"] and r.flipped == 0

@@ -38,13 +38,15 @@ def _scan_fan(p0, p1, v, uv, faces, vf_ptr, vf_tri, best, best_min, b0, b1, b2):
 
 
 @parallel
-def interpolate(points, cluster, uv_from, uv_to, faces, vf_ptr, vf_tri, out):
+def interpolate(points, cluster, uv_from, uv_to, faces, vf_ptr, vf_tri, out, inside):
     """Move every point with the piecewise-linear map of a coarse mesh from ``uv_from`` to ``uv_to``.
 
-    Each point takes the map of the face it lies deepest in (largest smallest barycentric
-    coordinate; the first such face in CSR order) among the faces around its cluster's
-    coarse vertex, or, when it lies in none of those, around that vertex's neighbours too; a
-    point inside none of them is extrapolated linearly from the face it is least outside of.
+    Each point moves with the map of the face it lies deepest in (largest smallest
+    barycentric coordinate; the first such face in CSR order) among the faces around its
+    cluster's coarse vertex, or, when it lies in none of those, around that vertex's
+    neighbours too. A point inside none of them (outside the copy) moves like the face it is
+    least outside of at its negative barycentric coordinates clamped to zero: bounded by the
+    corners' moves, where a linear extrapolation can fling it far away.
 
     Parameters
     ----------
@@ -60,6 +62,8 @@ def interpolate(points, cluster, uv_from, uv_to, faces, vf_ptr, vf_tri, out):
         Incident faces of each coarse vertex (CSR).
     out : (n, 2) float64
         The moved points.
+    inside : (n,) bool
+        Whether each point lies in a face of the copy.
     """
     for i in prange(points.shape[0]):
         p0, p1 = points[i, 0], points[i, 1]
@@ -72,11 +76,18 @@ def interpolate(points, cluster, uv_from, uv_to, faces, vf_ptr, vf_tri, out):
                     if v != c:
                         best, best_min, b0, b1, b2 = _scan_fan(p0, p1, v, uv_from, faces, vf_ptr, vf_tri,
                                                                best, best_min, b0, b1, b2)
+        inside[i] = best_min >= -1e-12
         if best < 0:  # only degenerate faces around: move with the cluster's vertex
             out[i, 0] = p0 + uv_to[c, 0] - uv_from[c, 0]
             out[i, 1] = p1 + uv_to[c, 1] - uv_from[c, 1]
             continue
+        if best_min < 0.0:  # outside the copy: the move of the face's nearest part, not a linear extrapolation
+            b0, b1, b2 = max(b0, 0.0), max(b1, 0.0), max(b2, 0.0)
+            total = b0 + b1 + b2
+            b0, b1, b2 = b0 / total, b1 / total, b2 / total
         a, b, d = faces[best, 0], faces[best, 1], faces[best, 2]
-        out[i, 0] = b0 * uv_to[a, 0] + b1 * uv_to[b, 0] + b2 * uv_to[d, 0]
-        out[i, 1] = b0 * uv_to[a, 1] + b1 * uv_to[b, 1] + b2 * uv_to[d, 1]
+        out[i, 0] = p0 + b0 * (uv_to[a, 0] - uv_from[a, 0]) + b1 * (uv_to[b, 0] - uv_from[b, 0]) + b2 * (
+            uv_to[d, 0] - uv_from[d, 0])
+        out[i, 1] = p1 + b0 * (uv_to[a, 1] - uv_from[a, 1]) + b1 * (uv_to[b, 1] - uv_from[b, 1]) + b2 * (
+            uv_to[d, 1] - uv_from[d, 1])
 
