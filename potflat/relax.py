@@ -17,6 +17,10 @@ all in 2D. Two solvers minimise the same spring energy:
   and 1 on the boundary applied per step, semi-implicit Euler, time step from the spring
   graph's largest eigenvalue), reported with its flip count, whatever it is.
 
+Large meshes first relax coarse copies (grid clusters of the start layout,
+:mod:`potflat.simplify`) and start from them; ``preview`` relaxes only a copy at the image's
+resolution, and the full mesh follows it.
+
 See ``docs/method.md`` for the method and ``docs/performance.md`` for measurements.
 """
 from __future__ import annotations
@@ -181,9 +185,10 @@ class RelaxResult:
         ``stress`` (the paper's Eq. 3 over mesh edges in sqrt(mm), from
         :func:`potflat.distortion.vertex_stress`).
     energy_history : (k,) float64
-        The minimised energy after each iteration, all levels in order (normalised units:
-        lengths divided by the mean 3D edge length): springs plus the barrier for the
-        fold-free presets (never increases), springs only for ``paper``.
+        The minimised energy after each iteration, all levels in order (the coarse copies'
+        first; each level in its own normalised units: lengths divided by its mean 3D edge
+        length): springs plus the barrier for the fold-free presets (never increases within
+        a level), springs only for ``paper``.
     iterations : int
         Iterations (steps) taken, all levels together.
     converged : bool
@@ -201,7 +206,9 @@ class RelaxResult:
         (fold checks, distortion summaries, stress), ``total``.
     preset : str
     levels : tuple of dict
-        Per level: name, iterations, spring energy (without barrier) at its end, seconds.
+        Per level (``coarse`` copies, then ``fine`` for the full mesh, or ``follow`` when it
+        only follows a copy): name, vertices, iterations, spring energy (without barrier) at
+        its end, seconds.
     settings : dict
         The resolved settings (preset values with options applied).
     notes : tuple of str
@@ -653,8 +660,8 @@ def _untangle(sp: _Springs, x: np.ndarray, rounds: int = 200) -> tuple[np.ndarra
 class _CoarseStart:
     """A relaxed coarse copy of the rollout and the full mesh's layout following it."""
 
-    result: RelaxResult
-    uv: np.ndarray  # (n, 2) float64: the full mesh's layout following the coarse one
+    result: RelaxResult | None  # None: the copy could not be relaxed fold-free
+    uv: np.ndarray | None  # (n, 2) float64: the full mesh's layout following the copy's
     final: bool  # the full mesh only follows (preview at the image's resolution), no iterations on it
     notes: list
 
@@ -786,12 +793,14 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
         sp = _Springs(Vs, Fs, n, k=settings["stiffness"], relative=settings["weighting"] == "relative")
         del Vs, Fs
         x = np.ascontiguousarray(x_in[order]) * settings["stretch"]
+        t_follow = time.perf_counter()
         if coarse is not None:
             followed = _follow(sp, np.ascontiguousarray(((coarse.uv - centre) / unit)[order]), notes)
             if followed is None:
                 coarse = None
             else:
                 x = followed
+        t_follow = time.perf_counter() - t_follow
         if fold_free:
             x, n_bad = _untangle(sp, x)
             if n_bad:
@@ -816,8 +825,8 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
             if coarse is not None:
                 levels.extend({**level, "level": "coarse"} for level in coarse.result.levels)
             if coarse is not None and coarse.final:
-                levels.append({"level": "follow", "iterations": 0, "energy": sp.spring_energy(x),
-                               "seconds": time.perf_counter() - t_setup, "vertices": n})
+                levels.append({"level": "follow", "vertices": n, "iterations": 0, "energy": sp.spring_energy(x),
+                               "seconds": t_follow})
                 converged = coarse.result.converged
             elif fold_free:
                 x, converged = _minimise(sp, x, hier, settings, run, levels, notes)
