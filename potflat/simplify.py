@@ -4,9 +4,11 @@ The start layout is cut into square cells of a given side; the fine vertices of 
 occupied cell make one coarse vertex, at their mean 3D position and their mean layout
 position. Coarse triangles join the cells of every 2 x 2 block of the grid: two triangles
 where all four cells are occupied, one where three are. Such a mesh is near-regular (the
-relaxation converges in few iterations on it), fold-free in the start (each coarse vertex
-lies in its own cell), and its springs measure the surface at the cell scale. The fine
-vertices then follow the coarse layout's piecewise-linear map (:func:`interpolate`).
+relaxation converges in few iterations on it), nearly always fold-free in the start (each
+coarse vertex lies in its own cell; a triangle flips only when its vertices sit at extreme
+corners of their cells, which the relaxation's untangling fixes), and its springs measure
+the surface at the cell scale. The fine vertices then follow the coarse layout's
+piecewise-linear map (:func:`interpolate`).
 """
 from __future__ import annotations
 
@@ -39,8 +41,9 @@ class Simplification:
 
 
 def cell_side(uv: np.ndarray, vertices_per_cell: float) -> float:
-    """Cell side giving about ``vertices_per_cell`` fine vertices per occupied cell, from the
-    layout's mean vertex density (bounding-box area is an overestimate, so this is a floor)."""
+    """Cell side giving about ``vertices_per_cell`` fine vertices per cell, from the layout's
+    mean vertex density over its bounding box (occupied cells hold more when the layout
+    fills its box only partly)."""
     lo, hi = uv.min(axis=0), uv.max(axis=0)
     area = float(np.prod(np.maximum(hi - lo, 1e-300)))
     return math.sqrt(vertices_per_cell * area / max(len(uv), 1))
