@@ -58,12 +58,8 @@ def test_interpolate_reproduces_affine_maps_exactly(vessel):
     s = grid_simplification(V, uv, 8.0)
     A, t = np.array([[0.8, -0.3], [0.5, 1.1]]), np.array([3.0, -7.0])
     out, inside = interpolate(s, uv, s.uv @ A.T + t)
-    assert 0.9 < inside.mean() < 1.0  # the copy's border is jagged
-    np.testing.assert_allclose(out[inside], uv[inside] @ A.T + t, atol=1e-9 * np.ptp(uv))
-    # outside the copy: moved like the nearest part of a face, within the corners' moves
-    move = out[~inside] - uv[~inside]
-    corner_moves = s.uv @ A.T + t - s.uv
-    assert np.all(move.min(0) >= corner_moves.min(0) - 1e-9) and np.all(move.max(0) <= corner_moves.max(0) + 1e-9)
+    assert 0.9 < inside.mean() < 1.0  # the copy's border is jagged: some vertices lie outside
+    np.testing.assert_allclose(out, uv @ A.T + t, atol=1e-9 * np.ptp(uv))  # inside and out
     identity, _ = interpolate(s, uv, s.uv)
     np.testing.assert_array_equal(identity, uv)
 

@@ -44,9 +44,8 @@ def interpolate(points, cluster, uv_from, uv_to, faces, vf_ptr, vf_tri, out, ins
     Each point moves with the map of the face it lies deepest in (largest smallest
     barycentric coordinate; the first such face in CSR order) among the faces around its
     cluster's coarse vertex, or, when it lies in none of those, around that vertex's
-    neighbours too. A point inside none of them (outside the copy) moves like the face it is
-    least outside of at its negative barycentric coordinates clamped to zero: bounded by the
-    corners' moves, where a linear extrapolation can fling it far away.
+    neighbours too. A point inside none of them (outside the copy's jagged border) moves with
+    the linear map of the face it is least outside of.
 
     Parameters
     ----------
@@ -81,10 +80,6 @@ def interpolate(points, cluster, uv_from, uv_to, faces, vf_ptr, vf_tri, out, ins
             out[i, 0] = p0 + uv_to[c, 0] - uv_from[c, 0]
             out[i, 1] = p1 + uv_to[c, 1] - uv_from[c, 1]
             continue
-        if best_min < 0.0:  # outside the copy: the move of the face's nearest part, not a linear extrapolation
-            b0, b1, b2 = max(b0, 0.0), max(b1, 0.0), max(b2, 0.0)
-            total = b0 + b1 + b2
-            b0, b1, b2 = b0 / total, b1 / total, b2 / total
         a, b, d = faces[best, 0], faces[best, 1], faces[best, 2]
         out[i, 0] = p0 + b0 * (uv_to[a, 0] - uv_from[a, 0]) + b1 * (uv_to[b, 0] - uv_from[b, 0]) + b2 * (
             uv_to[d, 0] - uv_from[d, 0])
