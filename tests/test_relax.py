@@ -2,7 +2,6 @@
 determinism, scaling, extremes, the paper preset, the stage files and the CLI."""
 from __future__ import annotations
 
-import importlib.util
 import json
 import sys
 from pathlib import Path
@@ -12,21 +11,12 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 import reference as ref
+from _bench_meshes import meshes, signed_areas
 
 from potflat.distortion import summarize
 from potflat.errors import FoldedResultError, InvalidOptionError
 from potflat.relax import RelaxOptions, relax, run_relax_stage
 from potflat.types import FlatMesh, Mesh
-
-_spec = importlib.util.spec_from_file_location("_meshes", Path(__file__).parents[1] / "benchmarks" / "_meshes.py")
-meshes = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(meshes)
-
-
-def _signed_areas(uv, F):
-    e1 = uv[F[:, 1]] - uv[F[:, 0]]
-    e2 = uv[F[:, 2]] - uv[F[:, 0]]
-    return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
 
 
 def _procrustes_error(a, b):
@@ -119,8 +109,8 @@ def test_max_step_matches_reference(bumpy):
         want = ref.max_step(bumpy.uv, d, F)
         assert got == pytest.approx(want, abs=1e-4)
         if np.isfinite(got):
-            assert np.all(_signed_areas(bumpy.uv + 0.999 * got * d, F) > 0)
-            assert np.any(_signed_areas(bumpy.uv + 1.001 * got * d, F) <= 0)
+            assert np.all(signed_areas(bumpy.uv + 0.999 * got * d, F) > 0)
+            assert np.any(signed_areas(bumpy.uv + 1.001 * got * d, F) <= 0)
 
 
 def test_overlap_counts_crossing_boundary():
@@ -142,7 +132,7 @@ def test_default_is_fold_free_on_a_bulgy_vessel(proxy):
     r = relax(flat)
     F = flat.mesh.faces
     assert r.flipped == 0 and r.boundary_overlap == 0
-    assert np.all(_signed_areas(r.flat.uv, F) > 0)
+    assert np.all(signed_areas(r.flat.uv, F) > 0)
     assert summarize(flat.mesh.vertices, r.flat.uv, F).flipped == 0
     assert r.distortion.edge_rms < 0.6 * r.distortion_before.edge_rms
     assert np.all(np.isfinite(r.flat.stress)) and r.flat.stress.shape == (len(flat.uv),)
@@ -159,7 +149,7 @@ def test_fold_free_from_a_deliberately_distorted_start(vessel):
     u, v = vessel.uv.T
     warped = np.stack([u + 25 * np.sin(v / 40), v * 1.6 + 10 * np.sin(u / 50)], axis=1)
     start = vessel.replace(uv=warped)
-    assert np.all(_signed_areas(warped, vessel.mesh.faces) > 0)
+    assert np.all(signed_areas(warped, vessel.mesh.faces) > 0)
     r = relax(start)
     assert r.flipped == 0 and r.boundary_overlap == 0
     assert r.distortion.edge_rms < 0.5 * r.distortion_before.edge_rms
@@ -224,7 +214,7 @@ def test_slivers_stay_unflipped():
         V[i] = 0.5 * (V[j[0]] + V[j[1]]) + 1e-9
     fd = summarize(V, uv, F)
     r = relax(FlatMesh(Mesh(V, F), uv))
-    assert r.flipped == 0 and np.all(_signed_areas(r.flat.uv, F) > 0)
+    assert r.flipped == 0 and np.all(signed_areas(r.flat.uv, F) > 0)
     assert r.distortion.edge_rms < fd.edge_rms
 
 
@@ -302,7 +292,7 @@ def test_time_budget_and_callback_stop_early(vessel):
 def test_paper_preset_reports_flips_honestly(vessel):
     r = relax(vessel, preset="paper", max_iter=3000)
     assert r.settings["stretch"] == 2.0 and r.settings["stiffness"] == 0.5
-    assert r.flipped == int(np.sum(_signed_areas(r.flat.uv, vessel.mesh.faces) <= 0))
+    assert r.flipped == int(np.sum(signed_areas(r.flat.uv, vessel.mesh.faces) <= 0))
     assert r.levels[0]["dt"] > 0 and np.all(np.isfinite(r.flat.uv))
     assert r.energy_history[-1] < r.energy_history[0]
 
@@ -435,10 +425,10 @@ def test_untangle_fixes_flipped_interior_vertices():
         nb = np.unique(F[(F == i).any(1)])
         nb = nb[nb != i]
         uv[i] = 2.0 * uv[nb].mean(0) - uv[i] + 1.6 * (uv[nb[0]] - uv[i])  # pushed over its neighbour
-    n0 = int((_signed_areas(uv, F) <= 0).sum())
+    n0 = int((signed_areas(uv, F) <= 0).sum())
     assert n0 >= 3
     x, n_bad = _untangle(sp, uv, rounds=10)
-    assert n_bad == n0 and int((_signed_areas(x, F) <= 0).sum()) == 0
+    assert n_bad == n0 and int((signed_areas(x, F) <= 0).sum()) == 0
     moved = np.nonzero((x != uv).any(1))[0]
     assert 0 < len(moved) < len(uv) // 4  # only the tangled region moved
 

@@ -1,26 +1,19 @@
 """Coarse copies of a rollout (potflat.simplify) and relaxation from or at a coarse copy."""
 from __future__ import annotations
 
-import importlib.util
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+sys.path.insert(0, str(Path(__file__).parent))
+from _bench_meshes import meshes, signed_areas
+
 import potflat.relax as relax_module
 from potflat.relax import relax
 from potflat.simplify import cell_side, grid_simplification, interpolate
 from potflat.types import FlatMesh, Mesh
-
-_spec = importlib.util.spec_from_file_location("_meshes", Path(__file__).parents[1] / "benchmarks" / "_meshes.py")
-meshes = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(meshes)
-
-
-def _signed_areas(uv, F):
-    e1 = uv[F[:, 1]] - uv[F[:, 0]]
-    e2 = uv[F[:, 2]] - uv[F[:, 0]]
-    return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +37,7 @@ def test_grid_simplification_clusters_and_blocks():
     # the full block at (0,0) gives two triangles; the block at (1,0) has three cells: one
     assert tris == {frozenset({(0, 0), (1, 0), (1, 1)}), frozenset({(0, 0), (1, 1), (0, 1)}),
                     frozenset({(1, 0), (2, 0), (1, 1)})}
-    assert np.all(_signed_areas(s.uv, s.faces) > 0)
+    assert np.all(signed_areas(s.uv, s.faces) > 0)
 
 
 def test_cell_side_gives_the_asked_density():
@@ -106,7 +99,7 @@ def test_preview_follows_a_coarse_copy_and_scales_with_units(vessel):
     r = relax(vessel, preset="preview", simplify_mm=6.0)
     assert [lv["level"] for lv in r.levels] == ["coarse", "follow"]
     assert r.levels[0]["vertices"] <= 0.7 * len(vessel.uv)
-    assert r.flipped == 0 and r.boundary_overlap == 0 and np.all(_signed_areas(r.flat.uv, vessel.mesh.faces) > 0)
+    assert r.flipped == 0 and r.boundary_overlap == 0 and np.all(signed_areas(r.flat.uv, vessel.mesh.faces) > 0)
     assert r.distortion.edge_rms < 0.6 * r.distortion_before.edge_rms
     assert any("follows it" in note for note in r.notes)
     again = relax(vessel, preset="preview", simplify_mm=6.0, threads=1)
