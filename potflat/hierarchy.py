@@ -85,10 +85,23 @@ class GridHierarchy:
         relax_grid.prolong(self.un, level, np.ascontiguousarray(c), out)
         return out
 
-    def restrict(self, level: int, cell_start: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """Transpose of :meth:`prolong` applied to per-vertex values ``g`` (n, k) -> (nodes, k)."""
+    def fractions(self, level: int) -> np.ndarray:
+        """Each (sorted) vertex's position within its cell of ``level``, (n, 2) in ``[0, 1]``."""
+        out = np.empty_like(self.un)
+        relax_grid.cell_fractions(self.un, level, out)
+        return out
+
+    def restrict(self, level: int, cell_start: np.ndarray, g: np.ndarray, *,
+                 frac: np.ndarray | None = None, corners: np.ndarray | None = None) -> np.ndarray:
+        """Transpose of :meth:`prolong` applied to per-vertex values ``g`` (n, k) -> (nodes, k).
+
+        A caller restricting often keeps ``frac`` (:meth:`fractions` of ``level``) and the
+        work space ``corners`` ((4^level, 4, k) float64); None: made here."""
+        frac = self.fractions(level) if frac is None else frac
+        if corners is None:
+            corners = np.empty((1 << (2 * level), 4, g.shape[1]))
         out = np.empty((self.n_nodes(level), g.shape[1]))
-        relax_grid.restrict(self.un, level, cell_start, np.ascontiguousarray(g), out)
+        relax_grid.restrict(frac, level, cell_start, np.ascontiguousarray(g), corners, out)
         return out
 
 
@@ -118,9 +131,18 @@ class MultilevelPreconditioner:
         self.levels = hier.levels  # consecutive, coarse to fine
         self.finest = self.levels[-1]
         self.cell_start = hier.cell_start(self.finest)
+        self.frac = hier.fractions(self.finest)
+        self._corners: dict[int, np.ndarray] = {}  # restriction work space per column count
         n = len(hier.un)
-        self.weight_sums = self._down(hier.restrict(self.finest, self.cell_start, np.ones((n, 1))))
+        self.weight_sums = self._down(self._restrict(np.ones((n, 1))))
         self.inv_mean: list[np.ndarray] = []
+
+    def _restrict(self, g: np.ndarray) -> np.ndarray:
+        """Per-vertex values ``g`` (n, k) restricted to the finest level's nodes."""
+        k = g.shape[1]
+        if k not in self._corners:
+            self._corners[k] = np.empty((1 << (2 * self.finest), 4, k))
+        return self.hier.restrict(self.finest, self.cell_start, g, frac=self.frac, corners=self._corners[k])
 
     def _down(self, finest: np.ndarray) -> list[np.ndarray]:
         """Node values of every level (coarse to fine) from the finest level's by restriction."""
@@ -134,20 +156,20 @@ class MultilevelPreconditioner:
     def refresh(self, diag: np.ndarray) -> None:
         """Take the Hessian diagonal bound ``diag`` (n,) of the current state."""
         self.diag = diag
-        sums = self._down(self.hier.restrict(self.finest, self.cell_start, diag.reshape(-1, 1)))
+        sums = self._down(self._restrict(diag.reshape(-1, 1)))
         self.inv_mean = [np.where(s > 0, self.theta * w / np.where(s > 0, s, 1.0), 0.0)
                          for s, w in zip(sums, self.weight_sums)]
 
     def coarse_norm(self, r: np.ndarray) -> float:
         """``r . (H0 - D^-1) r``, the coarse levels' part of ``r . H0 r``, for ``r`` (n, 2)."""
-        parts = self._down(self.hier.restrict(self.finest, self.cell_start, r))
+        parts = self._down(self._restrict(r))
         return float(sum(np.sum(p * p * inv) for p, inv in zip(parts, self.inv_mean)))
 
     def apply(self, r: np.ndarray, out: np.ndarray) -> None:
         """``out = H0 r`` for per-vertex vectors ``r``, ``out`` (n, 2) (distinct arrays)."""
         from potflat._kernels.lbfgs import add_jacobi
 
-        parts = self._down(self.hier.restrict(self.finest, self.cell_start, r))
+        parts = self._down(self._restrict(r))
         z = parts[0] * self.inv_mean[0]
         for i, level in enumerate(self.levels[:-1]):
             finer = parts[i + 1] * self.inv_mean[i + 1]

@@ -29,6 +29,31 @@ def test_restrict_is_the_transpose_of_prolong(hier):
         assert lhs == pytest.approx(rhs, rel=1e-12)
 
 
+def test_morton_codes_interleave_the_quantised_coordinates():
+    rng = np.random.default_rng(5)
+    un = np.concatenate([rng.random((500, 2)), [[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]]])
+    codes = np.empty(len(un), np.int64)
+    relax_grid.morton_codes(un, codes)
+    top = (1 << relax_grid.QBITS) - 1
+    for (u, v), code in zip(un, codes):
+        qx, qy = (min(max(int(c * (1 << relax_grid.QBITS)), 0), top) for c in (u, v))
+        ref = sum((((qx >> b) & 1) << (2 * b)) | (((qy >> b) & 1) << (2 * b + 1)) for b in range(relax_grid.QBITS))
+        assert code == ref
+
+
+def test_restrict_with_kept_fractions_and_dirty_work_space_is_unchanged(hier):
+    rng = np.random.default_rng(6)
+    level = hier.levels[-1]
+    g = rng.normal(size=(len(hier.un), 2))
+    start = hier.cell_start(level)
+    fresh = hier.restrict(level, start, g)
+    work = rng.normal(size=(1 << (2 * level), 4, 2))  # garbage from an earlier call
+    kept = hier.restrict(level, start, g, frac=hier.fractions(level), corners=work)
+    assert np.array_equal(fresh, kept)
+    frac = hier.fractions(level)
+    assert frac.min() >= 0.0 and frac.max() <= 1.0
+
+
 def test_grid_transfers_are_nested_and_transposed(hier):
     rng = np.random.default_rng(2)
     level = hier.levels[-2]

@@ -17,12 +17,19 @@ QBITS = 16
 
 
 @leaf
-def _interleave(cx, cy, bits):
-    code = 0
-    for b in range(bits):
-        code |= ((cx >> b) & 1) << (2 * b)
-        code |= ((cy >> b) & 1) << (2 * b + 1)
-    return code
+def _spread(v):
+    """The low 16 bits of ``v`` spread to the even bits (bit ``b`` to bit ``2 b``)."""
+    v &= 0xFFFF
+    v = (v | (v << 8)) & 0x00FF00FF
+    v = (v | (v << 4)) & 0x0F0F0F0F
+    v = (v | (v << 2)) & 0x33333333
+    return (v | (v << 1)) & 0x55555555
+
+
+@leaf
+def _interleave(cx, cy):
+    """Morton code of cell ``(cx, cy)`` (each below ``2^QBITS``): x bits even, y bits odd."""
+    return _spread(cx) | (_spread(cy) << 1)
 
 
 @parallel
@@ -38,7 +45,7 @@ def morton_codes(un, out):
     for i in prange(un.shape[0]):
         qx = min(max(int(un[i, 0] * (1 << QBITS)), 0), top)
         qy = min(max(int(un[i, 1] * (1 << QBITS)), 0), top)
-        out[i] = _interleave(qx, qy, QBITS)
+        out[i] = _interleave(qx, qy)
 
 
 @leaf
@@ -81,7 +88,24 @@ def prolong(un, level, c, out):
 
 
 @parallel
-def restrict(un, level, cell_start, g, out):
+def cell_fractions(un, level, out):
+    """Position of every vertex within its cell of ``level``, each coordinate in ``[0, 1]``
+    (the bilinear weights of :func:`prolong` and :func:`restrict`).
+
+    Parameters
+    ----------
+    un : (n, 2) float64
+        Reference positions in ``[0, 1]``.
+    level : int
+    out : (n, 2) float64
+    """
+    for i in prange(un.shape[0]):
+        for d in range(2):
+            _, out[i, d] = _cell_and_frac(un[i, d], level)
+
+
+@parallel
+def restrict(frac, level, cell_start, g, corners, out):
     """Transpose of :func:`prolong`: ``out[node] = sum_i w_node(i) g[i]``, column by column.
 
     Two race-free passes: each cell sums its vertices' weighted values per corner (one read
@@ -89,32 +113,40 @@ def restrict(un, level, cell_start, g, out):
 
     Parameters
     ----------
-    un : (n, 2) float64
-        Reference positions, rows sorted by Morton code.
+    frac : (n, 2) float64
+        Each vertex's position in its cell of ``level`` (:func:`cell_fractions`), rows sorted
+        by Morton code.
     level : int
     cell_start : (4^level + 1,) int64
         First vertex of each cell (in Morton order of the cells).
     g : (n, k) float64
+    corners : (4^level, 4, k) float64
+        Work space (overwritten).
     out : ((2^level + 1)^2, k) float64
     """
     side = 1 << level
     w = side + 1
     k = g.shape[1]
-    corners = np.zeros((side * side, 4, k))
     for code in prange(side * side):
-        for i in range(cell_start[code], cell_start[code + 1]):
-            _, fx = _cell_and_frac(un[i, 0], level)
-            _, fy = _cell_and_frac(un[i, 1], level)
-            w00 = (1.0 - fx) * (1.0 - fy)
-            w10 = fx * (1.0 - fy)
-            w01 = (1.0 - fx) * fy
-            w11 = fx * fy
-            for c in range(k):
+        lo = cell_start[code]
+        hi = cell_start[code + 1]
+        for c in range(k):
+            s00 = 0.0
+            s10 = 0.0
+            s01 = 0.0
+            s11 = 0.0
+            for i in range(lo, hi):
+                fx = frac[i, 0]
+                fy = frac[i, 1]
                 v = g[i, c]
-                corners[code, 0, c] += w00 * v
-                corners[code, 1, c] += w10 * v
-                corners[code, 2, c] += w01 * v
-                corners[code, 3, c] += w11 * v
+                s00 += (1.0 - fx) * (1.0 - fy) * v
+                s10 += fx * (1.0 - fy) * v
+                s01 += (1.0 - fx) * fy * v
+                s11 += fx * fy * v
+            corners[code, 0, c] = s00
+            corners[code, 1, c] = s10
+            corners[code, 2, c] = s01
+            corners[code, 3, c] = s11
     for node in prange(w * w):
         ix = node % w
         iy = node // w
@@ -127,7 +159,7 @@ def restrict(un, level, cell_start, g, out):
                 if cx < 0 or cx >= side:
                     continue
                 corner = (1 if cx == ix - 1 else 0) + (2 if cy == iy - 1 else 0)
-                code = _interleave(cx, cy, level)
+                code = _interleave(cx, cy)
                 for c in range(k):
                     out[node, c] += corners[code, corner, c]
 
