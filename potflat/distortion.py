@@ -142,12 +142,11 @@ def face_distortion(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> 
 
 
 def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """3D area of each face (computed in blocks of :data:`BLOCK` faces). Shape (m,) float64."""
-    area = np.empty(len(faces))
-    for s in row_blocks(len(faces)):
-        d1, d2 = _edge_vectors(vertices, faces[s])
-        area[s] = 0.5 * np.linalg.norm(np.cross(d1, d2), axis=1)
-    return area
+    """3D area of each face (a parallel kernel, no temporaries). Shape (m,) float64."""
+    from potflat._kernels.mesh import triangle_areas
+
+    return triangle_areas(np.ascontiguousarray(vertices, dtype=np.float64),
+                          np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3))
 
 
 def row_blocks(m: int, size: int | None = None) -> list[slice]:
@@ -164,19 +163,16 @@ def _edge_vectors(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np
 
 
 def unique_edges(faces: np.ndarray) -> np.ndarray:
-    """Undirected edges of ``faces``, each once, sorted. Shape (e, 2) int64."""
-    faces = np.asarray(faces)
-    m = len(faces)
-    n = int(faces.max()) + 1 if m else 1
-    # one sorted 1D key per half-edge (np.unique is slow on big arrays), built column pair by
-    # column pair: no (3m, 2) temporaries
-    key = np.empty(3 * m, np.int64)
-    for k in range(3):
-        a, b = faces[:, k].astype(np.int64), faces[:, (k + 1) % 3].astype(np.int64)
-        key[k * m:(k + 1) * m] = np.minimum(a, b) * n + np.maximum(a, b)
-    key.sort()
-    key = key[np.concatenate([[True], key[1:] != key[:-1]])] if len(key) else key
-    return np.stack([key // n, key % n], axis=1)
+    """Undirected edges of ``faces``, each once (``i <= j``), sorted. Shape (e, 2) int64.
+
+    Parallel, without a global sort: each vertex groups the edges to its higher neighbours
+    (:func:`potflat._kernels.springs.halfedge_springs`).
+    """
+    from potflat._kernels.springs import halfedge_springs
+
+    faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    n = int(faces.max()) + 1 if len(faces) else 0
+    return halfedge_springs(faces, n, False)[0]
 
 
 def edge_length_error(vertices: np.ndarray, uv: np.ndarray, edges: np.ndarray) -> np.ndarray:

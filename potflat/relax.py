@@ -242,22 +242,17 @@ class _Springs:
 
         self.ks, self.ko = ks, relax_overlap
         edges, cross, self.boundary_segments = ks.halfedge_springs(faces, n)
-        rest = np.concatenate([np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1),
-                               ks.cross_rest_lengths(V, cross)])
-        pairs = np.concatenate([edges, cross[:, :2]])
+        self.ptr, self.nbr, self.rst = ks.build_csr(V, edges, cross, ks.cross_rest_lengths(V, cross))
         del edges, cross  # peak memory: the spring lists are only needed for the CSR
-        self.ptr, self.nbr, self.rst = ks.build_csr(n, pairs, rest)
-        del pairs, rest
         self.vf_ptr, self.vf_tri = ks.vertex_faces(n, faces)
         self.a_ref = np.maximum(face_areas(V, faces), AREA_FLOOR)
         self.faces = np.ascontiguousarray(faces, dtype=np.int32)  # half the memory traffic
         self.k, self.relative = float(k), bool(relative)
         self.n, self.m = n, len(faces)
         self.n_springs = len(self.nbr) // 2
-        count = np.bincount(faces.ravel(), minlength=n) if len(faces) else np.zeros(n, np.int64)
         self.boundary = np.zeros(n, bool)
         self.boundary[self.boundary_segments.ravel()] = True
-        self.isolated = count == 0
+        self.isolated = np.diff(self.vf_ptr) == 0
         self.bprev, self.bnext = _boundary_neighbours(self.boundary_segments, n)
         self.bguard = np.zeros(n, bool)  # set by guard_boundary()
         self.contact = False  # set by guard_boundary()
@@ -725,6 +720,30 @@ def _follow(sp: _Springs, x: np.ndarray, notes: list[str]) -> np.ndarray | None:
     return x
 
 
+def _mean_edge_length(V: np.ndarray, F: np.ndarray) -> float:
+    """Mean 3D length of the faces' edges (each face's three edges; shared edges count twice).
+
+    The lengths come from a parallel kernel one block of rows at a time; each block is
+    summed by numpy and the block sums are added in order, so the result does not depend on
+    the thread count (and equals the former all-numpy computation bit for bit).
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+    F : (m, 3) int64, m > 0
+    """
+    from potflat._kernels.springs import halfedge_lengths
+
+    blocks = row_blocks(len(F))
+    buf = np.empty((blocks[0].stop, 3))
+    total = 0.0
+    for s in blocks:
+        lengths = buf[:s.stop - s.start]
+        halfedge_lengths(V, F[s], lengths)
+        total += float(lengths.sum())
+    return total / (3 * len(F))
+
+
 def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool = False,
           callback: Callable[[dict], bool | None] | None = None, **kwargs) -> RelaxResult:
     """Relax a rollout's flattening by minimising the paper's spring energy.
@@ -774,8 +793,8 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
     from potflat._kernels._jit import numba_threads
 
     # normalised units: lengths / mean 3D edge length, layout centred on its bounding box
-    unit = sum(float(np.linalg.norm(V[F[s, [1, 2, 0]]] - V[F[s]], axis=2).sum()) for s in row_blocks(len(F)))
-    unit /= 3 * len(F)
+    with numba_threads(options.threads):
+        unit = _mean_edge_length(V, F)
     if not unit > 0:
         raise InvalidInputError("all edges of the rollout have zero length; check the scan's units and faces")
     coarse = _coarse_start(flat, options, settings, progress, callback, deadline) if fold_free else None

@@ -41,6 +41,62 @@ def springs(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.array(out_pairs, np.int64).reshape(-1, 2), np.array(out_rest)
 
 
+def halfedge_springs(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Edges, cross springs and boundary edges by a stable sort of all half-edges by edge
+    (the relax kernel's former algorithm): ``potflat._kernels.springs.halfedge_springs``
+    must return exactly this for every mesh.
+
+    Half-edge ``h = 3 f + c`` runs from ``F[f, c]`` to ``F[f, (c + 1) % 3]``. Per edge, in
+    ``(i, j)`` order: one face: a boundary row ``(a, b)`` as in its face; exactly two faces:
+    a cross row ``(p, q, a, b)`` from the half-edge with the smaller ``h`` (``a -> b``, ``p``
+    opposite it) and the other face's opposite vertex ``q``, unless ``p == q``; three or
+    more faces: only the edge.
+    """
+    F = np.asarray(F, np.int64).reshape(-1, 3)
+    heads = np.roll(F, -1, axis=1).ravel()
+    tails = F.ravel()
+    keys = np.minimum(tails, heads) * n + np.maximum(tails, heads)
+    order = np.argsort(keys, kind="stable")
+    groups: dict[int, list[int]] = {}
+    for h in order:
+        groups.setdefault(int(keys[h]), []).append(int(h))
+    edges, cross, boundary = [], [], []
+    for key, hs in groups.items():  # in key order: dicts keep insertion order
+        edges.append((key // n, key % n))
+        f0, c0 = divmod(hs[0], 3)
+        if len(hs) == 1:
+            boundary.append((F[f0, c0], F[f0, (c0 + 1) % 3]))
+        elif len(hs) == 2:
+            f1, c1 = divmod(hs[1], 3)
+            p, q = F[f0, (c0 + 2) % 3], F[f1, (c1 + 2) % 3]
+            if p != q:
+                cross.append((p, q, F[f0, c0], F[f0, (c0 + 1) % 3]))
+    return (np.array(edges, np.int64).reshape(-1, 2), np.array(cross, np.int64).reshape(-1, 4),
+            np.array(boundary, np.int64).reshape(-1, 2))
+
+
+def spring_csr(V: np.ndarray, edges: np.ndarray, cross: np.ndarray,
+               cross_rest: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-vertex spring adjacency by a stable sort of the springs' endpoints (the relax
+    kernel's former numpy assembly): springs ``edges`` then ``cross[:, :2]``, edge rest
+    lengths by ``np.linalg.norm``; each spring listed at its first, then its second endpoint.
+
+    Returns
+    -------
+    ptr : (n + 1,) int64
+    nbr : (2 s,) int32
+    rst : (2 s,) float64
+    """
+    n = len(V)
+    pairs = np.concatenate([edges, cross[:, :2]])
+    rest = np.concatenate([np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1), cross_rest])
+    owner = pairs.ravel()  # spring s at entries 2 s (first endpoint) and 2 s + 1 (second)
+    other = pairs[:, ::-1].ravel()
+    order = np.argsort(owner, kind="stable")
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=n))]).astype(np.int64)
+    return ptr, other[order].astype(np.int32), np.repeat(rest, 2)[order]
+
+
 def unfolded_distance(a, b, p, q) -> float:
     """Distance of ``p`` and ``q`` after unfolding triangles ``(a, b, p)`` and ``(a, b, q)``
     flat about ``ab`` (``q`` rotated about the edge into the plane of ``abp``, opposite side)."""

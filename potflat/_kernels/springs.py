@@ -3,7 +3,8 @@
 Arrays in, arrays out, no I/O. Parallel kernels only write to per-iteration slots:
 forces are gathered per vertex over a CSR adjacency (each spring stored once per
 endpoint), sums are returned per vertex or per fixed-size block and added up serially,
-so every result is bit-identical run to run and for any thread count.
+the mesh's edges are counted per vertex, then filled at the summed offsets, so every
+result is bit-identical run to run and for any thread count.
 
 Energy (normalised units, ``coef = k`` or ``k / r^2``)::
 
@@ -35,94 +36,201 @@ from potflat._kernels._jit import leaf, parallel, prange
 BLOCK = 4096
 
 
-@leaf
-def halfedge_springs(faces, n):
+#: A vertex's half-edges are sorted by insertion up to this many, by merge sort above (a fan
+#: of thousands of faces stays ``O(d log d)``).
+INSERTION_MAX = 32
+
+
+@parallel
+def halfedge_springs(faces, n, springs=True):
     """Unique edges and cross springs of a triangle mesh.
+
+    Count-then-fill over the vertices (no global sort): each vertex ``i`` groups the
+    half-edges of its faces whose smaller endpoint is ``i`` by the other endpoint. Equal to
+    a stable sort of all half-edges by edge, so the two half-edges of an edge come in the
+    order of their flat index ``3 f + c``.
 
     Parameters
     ----------
-    faces : (m, 3) int64
+    faces : (m, 3) int32 or int64
     n : int
         Number of vertices.
+    springs : bool, optional
+        False: only the edges (``cross`` and ``boundary`` come back empty).
 
     Returns
     -------
     edges : (e, 2) int64
-        Each undirected edge once (``i < j``), ordered by ``(i, j)``.
+        Each undirected edge once (``i < j``; ``i == j`` for a face with a repeated vertex),
+        ordered by ``(i, j)``.
     cross : (c, 4) int64
-        One row ``(p, q, a, b)`` per edge shared by exactly two faces: the opposite
-        vertices ``p`` (of the face where ``a -> b`` runs counter-clockwise) and ``q``, and
-        the shared edge ``a, b``.
+        One row ``(p, q, a, b)`` per edge shared by exactly two faces, in ``edges``' order:
+        the shared edge ``a -> b`` as it runs in the face with the smaller half-edge index,
+        ``p`` its vertex opposite the edge and ``q`` the other face's; rows with ``p == q``
+        (e.g. a duplicate face) are left out.
     boundary : (b, 2) int64
         The edges used by one face only, in ``edges``' order, each oriented as in its face
-        (``a -> b`` counter-clockwise).
+        (``a -> b`` counter-clockwise). Edges of three or more faces are in neither.
     """
-    m = faces.shape[0]
-    keys = np.empty(3 * m, np.int64)
-    for f in range(m):
-        for c in range(3):
-            a = faces[f, c]
-            b = faces[f, (c + 1) % 3]
-            lo = min(a, b)
-            hi = max(a, b)
-            keys[3 * f + c] = lo * n + hi
-    order = np.argsort(keys, kind="mergesort")
-    ne = 0
-    nc = 0
-    nb = 0
-    h = 0
-    while h < 3 * m:
-        g = h
-        while g < 3 * m and keys[order[g]] == keys[order[h]]:
-            g += 1
-        ne += 1
-        if g - h == 2:
-            nc += 1
-        elif g - h == 1:
-            nb += 1
-        h = g
-    edges = np.empty((ne, 2), np.int64)
-    cross = np.empty((nc, 4), np.int64)
-    boundary = np.empty((nb, 2), np.int64)
-    ib = 0
-    ie = 0
-    ic = 0
-    h = 0
-    while h < 3 * m:
-        g = h
-        while g < 3 * m and keys[order[g]] == keys[order[h]]:
-            g += 1
-        k0 = keys[order[h]]
-        edges[ie, 0] = k0 // n
-        edges[ie, 1] = k0 % n
-        ie += 1
-        if g - h == 1:  # oriented as in its face
-            h0 = order[h]
-            boundary[ib, 0] = faces[h0 // 3, h0 % 3]
-            boundary[ib, 1] = faces[h0 // 3, (h0 % 3 + 1) % 3]
-            ib += 1
-        if g - h == 2:
-            h0 = order[h]
-            h1 = order[h + 1]
-            f0 = h0 // 3
-            c0 = h0 % 3
-            f1 = h1 // 3
-            c1 = h1 % 3
-            a = faces[f0, c0]
-            b = faces[f0, (c0 + 1) % 3]
-            p = faces[f0, (c0 + 2) % 3]
-            q = faces[f1, (c1 + 2) % 3]
-            if p != q:
-                cross[ic, 0] = p
-                cross[ic, 1] = q
-                cross[ic, 2] = a
-                cross[ic, 3] = b
-                ic += 1
-        h = g
-    return edges, cross[:ic], boundary
+    vf_ptr, vf_tri = vertex_faces(n, faces)
+    most = 0
+    for i in range(n):
+        most = max(most, vf_ptr[i + 1] - vf_ptr[i])
+    nblk = (n + BLOCK - 1) // BLOCK
+    # offsets of each vertex's edges, cross springs and boundary edges (counted, then summed);
+    # the counting pass writes nothing, so it gets empty outputs
+    start = np.zeros((n + 1, 3), np.int64)
+    edges = np.empty((0, 2), np.int64)
+    cross = np.empty((0, 4), np.int64)
+    boundary = np.empty((0, 2), np.int64)
+    for blk in prange(nblk):
+        hj = np.empty(3 * most, np.int64)
+        hh = np.empty(3 * most, np.int64)
+        for i in range(blk * BLOCK, min(n, (blk + 1) * BLOCK)):
+            k = _lower_halfedges(i, vf_ptr, vf_tri, faces, hj, hh)
+            ne, nc, nb = _vertex_edges(i, faces, hj, hh, k, springs, edges, cross, boundary, 0, 0, 0, False)
+            start[i + 1, 0] = ne
+            start[i + 1, 1] = nc
+            start[i + 1, 2] = nb
+    for i in range(n):
+        for t in range(3):
+            start[i + 1, t] += start[i, t]
+    edges = np.empty((start[n, 0], 2), np.int64)
+    cross = np.empty((start[n, 1], 4), np.int64)
+    boundary = np.empty((start[n, 2], 2), np.int64)
+    for blk in prange(nblk):
+        hj = np.empty(3 * most, np.int64)
+        hh = np.empty(3 * most, np.int64)
+        for i in range(blk * BLOCK, min(n, (blk + 1) * BLOCK)):
+            k = _lower_halfedges(i, vf_ptr, vf_tri, faces, hj, hh)
+            _vertex_edges(i, faces, hj, hh, k, springs, edges, cross, boundary,
+                          start[i, 0], start[i, 1], start[i, 2], True)
+    return edges, cross, boundary
 
 
 @leaf
+def _lower_halfedges(i, vf_ptr, vf_tri, faces, hj, hh):
+    """The half-edges whose smaller endpoint is vertex ``i``, sorted by ``(j, h)``.
+
+    Parameters
+    ----------
+    i : int
+    vf_ptr, vf_tri : CSR from :func:`vertex_faces`
+    faces : (m, 3) int32 or int64
+    hj, hh : (cap,) int64
+        Output in the first ``k`` slots: the other endpoint ``j >= i`` and the half-edge
+        index ``h = 3 f + c`` (from ``faces[f, c]`` to ``faces[f, (c + 1) % 3]``). ``cap``
+        must be at least three times the vertex's number of faces.
+
+    Returns
+    -------
+    k : int
+    """
+    k = 0
+    prev = -1
+    for p in range(vf_ptr[i], vf_ptr[i + 1]):
+        f = vf_tri[p]
+        if f == prev:  # a face with a repeated vertex is listed once per corner
+            continue
+        prev = f
+        for c in range(3):
+            a = faces[f, c]
+            b = faces[f, (c + 1) % 3]
+            if min(a, b) == i:
+                hj[k] = max(a, b)
+                hh[k] = 3 * f + c
+                k += 1
+    # the faces come in increasing order, so h does: a stable sort by j sorts by (j, h)
+    if k > INSERTION_MAX:
+        order = np.argsort(hj[:k], kind="mergesort")
+        hj[:k] = hj[order]
+        hh[:k] = hh[order]
+        return k
+    for s in range(1, k):
+        j = hj[s]
+        h = hh[s]
+        t = s - 1
+        while t >= 0 and hj[t] > j:
+            hj[t + 1] = hj[t]
+            hh[t + 1] = hh[t]
+            t -= 1
+        hj[t + 1] = j
+        hh[t + 1] = h
+    return k
+
+
+@leaf
+def _vertex_edges(i, faces, hj, hh, k, springs, edges, cross, boundary, oe, oc, ob, write):
+    """Count vertex ``i``'s edges, cross springs and boundary edges; with ``write``, also
+    store them from rows ``oe``, ``oc``, ``ob`` of ``edges``, ``cross``, ``boundary``.
+
+    ``hj[:k]``, ``hh[:k]`` are the vertex's half-edges from :func:`_lower_halfedges`; the
+    rows are those of :func:`halfedge_springs` (cross and boundary only with ``springs``).
+
+    Returns
+    -------
+    ne, nc, nb : int
+    """
+    ne = 0
+    nc = 0
+    nb = 0
+    s = 0
+    while s < k:
+        g = s + 1
+        while g < k and hj[g] == hj[s]:
+            g += 1
+        if write:
+            edges[oe + ne, 0] = i
+            edges[oe + ne, 1] = hj[s]
+        ne += 1
+        if springs and g - s <= 2:
+            f0 = hh[s] // 3
+            c0 = hh[s] % 3
+            a = faces[f0, c0]
+            b = faces[f0, (c0 + 1) % 3]
+            if g - s == 1:  # oriented as in its face
+                if write:
+                    boundary[ob + nb, 0] = a
+                    boundary[ob + nb, 1] = b
+                nb += 1
+            else:
+                p = faces[f0, (c0 + 2) % 3]
+                q = faces[hh[s + 1] // 3, (hh[s + 1] % 3 + 2) % 3]
+                if p != q:
+                    if write:
+                        cross[oc + nc, 0] = p
+                        cross[oc + nc, 1] = q
+                        cross[oc + nc, 2] = a
+                        cross[oc + nc, 3] = b
+                    nc += 1
+        s = g
+    return ne, nc, nb
+
+
+@parallel
+def halfedge_lengths(V, faces, out):
+    """Length of every face's three edges.
+
+    Parameters
+    ----------
+    V : (n, d) float64
+    faces : (m, 3) int32 or int64
+    out : (m, 3) float64
+        Output: ``out[f, c] = |V[faces[f, (c + 1) % 3]] - V[faces[f, c]]|``, bit-identical
+        to ``np.linalg.norm(V[faces[:, [1, 2, 0]]] - V[faces], axis=2)``.
+    """
+    for f in prange(faces.shape[0]):
+        for c in range(3):
+            a = faces[f, c]
+            b = faces[f, (c + 1) % 3]
+            acc = 0.0
+            for d in range(V.shape[1]):
+                t = V[b, d] - V[a, d]
+                acc += t * t
+            out[f, c] = math.sqrt(acc)
+
+
+@parallel
 def cross_rest_lengths(V, cross):
     """Intrinsic rest length of each cross spring: the distance of the two opposite
     vertices with the winged pair unfolded flat about the shared edge.
@@ -140,7 +248,7 @@ def cross_rest_lengths(V, cross):
     """
     nc = cross.shape[0]
     out = np.empty(nc)
-    for s in range(nc):
+    for s in prange(nc):
         p, q, a, b = cross[s, 0], cross[s, 1], cross[s, 2], cross[s, 3]
         ab = 0.0
         ap = 0.0
@@ -158,52 +266,75 @@ def cross_rest_lengths(V, cross):
         L = math.sqrt(ab)
         if L <= 0.0:
             out[s] = math.sqrt(pq)
-            continue
-        xp = (ap - bp + ab) / (2.0 * L)
-        xq = (aq - bq + ab) / (2.0 * L)
-        yp = math.sqrt(max(ap - xp * xp, 0.0))
-        yq = -math.sqrt(max(aq - xq * xq, 0.0))
-        out[s] = math.sqrt((xp - xq) ** 2 + (yp - yq) ** 2)
+        else:
+            xp = (ap - bp + ab) / (2.0 * L)
+            xq = (aq - bq + ab) / (2.0 * L)
+            yp = math.sqrt(max(ap - xp * xp, 0.0))
+            yq = -math.sqrt(max(aq - xq * xq, 0.0))
+            out[s] = math.sqrt((xp - xq) ** 2 + (yp - yq) ** 2)
     return out
 
 
 @leaf
-def build_csr(n, pairs, rest):
-    """Per-vertex adjacency of symmetric springs: each spring once per endpoint.
+def build_csr(V, edges, cross, cross_rest):
+    """Per-vertex adjacency of the springs: each spring once per endpoint.
 
     Parameters
     ----------
-    n : int
-    pairs : (s, 2) int64
-    rest : (s,) float64
+    V : (n, d) float64
+        Rest positions: an edge spring's rest length is its length here.
+    edges : (e, 2) int64
+        Edge springs.
+    cross : (c, 4) int64
+        Cross springs: rows ``(p, q, a, b)`` from :func:`halfedge_springs` join ``p`` and ``q``.
+    cross_rest : (c,) float64
+        Their rest lengths (:func:`cross_rest_lengths`).
 
     Returns
     -------
     ptr : (n + 1,) int64
-    nbr : (2 s,) int32
-        The other endpoint, in spring order within each vertex.
-    rst : (2 s,) float64
+    nbr : (2 (e + c),) int32
+        The other endpoint; within each vertex the edge springs in ``edges``' order, then the
+        cross springs in ``cross``' order.
+    rst : (2 (e + c),) float64
         The rest length.
     """
+    n = V.shape[0]
+    ne = edges.shape[0]
+    nc = cross.shape[0]
     deg = np.zeros(n + 1, np.int64)
-    ns = pairs.shape[0]
-    for s in range(ns):
-        deg[pairs[s, 0] + 1] += 1
-        deg[pairs[s, 1] + 1] += 1
+    for s in range(ne):
+        deg[edges[s, 0] + 1] += 1
+        deg[edges[s, 1] + 1] += 1
+    for s in range(nc):
+        deg[cross[s, 0] + 1] += 1
+        deg[cross[s, 1] + 1] += 1
     ptr = np.cumsum(deg)
     fill = ptr[:-1].copy()
-    nbr = np.empty(2 * ns, np.int32)
-    rst = np.empty(2 * ns)
-    for s in range(ns):
-        i = pairs[s, 0]
-        j = pairs[s, 1]
-        nbr[fill[i]] = j
-        rst[fill[i]] = rest[s]
-        fill[i] += 1
-        nbr[fill[j]] = i
-        rst[fill[j]] = rest[s]
-        fill[j] += 1
+    nbr = np.empty(2 * (ne + nc), np.int32)
+    rst = np.empty(2 * (ne + nc))
+    for s in range(ne):
+        i = edges[s, 0]
+        j = edges[s, 1]
+        acc = 0.0
+        for d in range(V.shape[1]):
+            t = V[i, d] - V[j, d]
+            acc += t * t
+        _put_spring(fill, nbr, rst, i, j, math.sqrt(acc))
+    for s in range(nc):
+        _put_spring(fill, nbr, rst, cross[s, 0], cross[s, 1], cross_rest[s])
     return ptr, nbr, rst
+
+
+@leaf
+def _put_spring(fill, nbr, rst, i, j, r):
+    """Store spring ``(i, j)`` of rest length ``r`` at both endpoints' next CSR slots."""
+    nbr[fill[i]] = j
+    rst[fill[i]] = r
+    fill[i] += 1
+    nbr[fill[j]] = i
+    rst[fill[j]] = r
+    fill[j] += 1
 
 
 @leaf
