@@ -86,6 +86,11 @@ AREA_FLOOR, LENGTH_FLOOR = 1e-2, 1e-3
 #: too slowly to stop steps that each go most of the way to collapse: at 2.5M vertices, 19
 #: triangles ended below 1e-11 of their rest area without this limit).
 LBFGS_MEMORY, ARMIJO, STEP_FRACTION, STEP_SHRINK = 6, 1e-4, 0.9, 0.8
+#: Direction smoothing: when a few triangles hold the flip-free step below the natural one
+#: (typically slivers, whose area reacts to the smallest uneven move of their vertices), the
+#: direction at their vertices is replaced by their edge neighbours' mean, SMOOTH_ROUNDS
+#: times, if at most SMOOTH_MAX_FRACTION of the vertices are concerned.
+SMOOTH_ROUNDS, SMOOTH_MAX_FRACTION = 3, 0.01
 #: Weight of the multilevel preconditioner's coarse terms against its Jacobi term (measured:
 #: 1 needs 30-50% more iterations than 2; 4 about as many as 2 but more backtracking).
 PRECOND_THETA = 2.0
@@ -233,6 +238,9 @@ class RelaxResult:
     notes: tuple = ()
 
 
+_NO_FLAGS = np.empty(0, bool)
+
+
 class _Springs:
     """Spring system and triangles of a mesh in normalised, Morton-sorted form."""
 
@@ -314,14 +322,27 @@ class _Springs:
         """Spring energy only (Eq. 1 with the 1/2 per spring)."""
         return self.evaluate(x, barrier=False)[1]
 
-    def max_step(self, x: np.ndarray, d: np.ndarray, cap: float = np.inf, shrink: float = 1.0) -> float:
+    def max_step(self, x: np.ndarray, d: np.ndarray, cap: float = np.inf, shrink: float = 1.0,
+                 limiting: np.ndarray | None = None) -> float:
         """Largest ``t`` (at most ``cap``) keeping every face of ``x + t d`` above ``1 - shrink``
         of its area at ``x`` (``shrink = 1``: positively oriented) and every guarded boundary
-        vertex's angle sum below ``2 pi``."""
+        vertex's angle sum below ``2 pi``. With ``limiting`` ((m,) bool) also flag the faces
+        whose own bound is below ``cap``."""
         if self.m == 0:
             return cap
-        self.ks.max_step(x, d, self.faces, float(cap), float(shrink), self._blocks)
-        t = float(self._blocks.min())
+        self.ks.max_step(x, d, self.faces, float(cap), float(shrink), self._blocks,
+                         _NO_FLAGS if limiting is None else limiting)
+        return self._boundary_step(x, d, float(self._blocks.min()))
+
+    def max_step_near(self, x: np.ndarray, d: np.ndarray, verts: np.ndarray, cap: float, shrink: float) -> float:
+        """:meth:`max_step` for a direction ``d`` changed at ``verts`` only, from one for which
+        no face away from them was limiting (its bound was at least ``cap``): only the faces
+        around ``verts`` and the guarded boundary are tested."""
+        faces = self.ks.incident_faces(verts, self.vf_ptr, self.vf_tri)
+        return self._boundary_step(x, d, self.ks.max_step_of(x, d, self.faces, faces, float(cap), float(shrink)))
+
+    def _boundary_step(self, x: np.ndarray, d: np.ndarray, t: float) -> float:
+        """``t`` limited by the guarded boundary vertices' angle sums along ``x + t d``."""
         if len(self.bverts):
             self.ks.boundary_max_step(x, d, self.bverts, self.bprev, self.bnext, self._bblocks)
             t = min(t, float(self._bblocks.min()))
@@ -455,6 +476,9 @@ class _LBFGS:
         self.kl, self.sp, self.precond = kl, sp, precond
         self.guard_overlap = guard_overlap
         self.contacts = 0  # trial points rejected because the boundary would overlap
+        self.smoothed = 0  # directions smoothed at the vertices of limiting faces
+        self._limiting = np.empty(sp.m, bool)  # faces holding the step below the natural one
+        self._seen = np.zeros(sp.n, bool)  # work space of the smoothing
         size = 2 * sp.n
         self.x = np.array(x, dtype=np.float64, order="C")
         self.trial = np.empty_like(self.x)
@@ -522,6 +546,28 @@ class _LBFGS:
             if len(self.slots) > LBFGS_MEMORY:
                 self.slots.pop(0)
 
+    def _smooth_limiting(self, t: float, gd: float) -> tuple[float, float]:
+        """Smooth the direction ``q`` at the vertices of the limiting faces (those flagged by
+        the step bound ``t``); kept only when it still descends and allows a longer step.
+        Returns the step and ``g . q``."""
+        sp = self.sp
+        verts = sp.ks.flagged_face_vertices(self._limiting, sp.faces, self._seen)
+        if not 0 < len(verts) <= SMOOTH_MAX_FRACTION * sp.n:  # none: the boundary limits the step
+            return t, gd
+        dx = self.q.reshape(-1, 2)
+        before = dx[verts]
+        mean = np.empty_like(before)
+        for _ in range(SMOOTH_ROUNDS):
+            sp.ks.neighbour_means(dx, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
+            dx[verts] = mean
+        gd_smooth = sp.dot(self.g, self.q)
+        t_smooth = STEP_FRACTION * sp.max_step_near(self.x, dx, verts, 1.0 / STEP_FRACTION, STEP_SHRINK)
+        if gd_smooth < 0.0 and t_smooth > t:
+            self.smoothed += 1
+            return t_smooth, gd_smooth
+        dx[verts] = before
+        return t, gd
+
     def run(self, run: _Run, *, max_iter: int, tol: float, hist: list[float]) -> tuple[bool, int]:
         """Up to ``max_iter`` iterations; returns (converged, iterations).
 
@@ -539,7 +585,10 @@ class _LBFGS:
                     converged = True  # zero gradient
                     break
             dx = self.q.reshape(-1, 2)
-            t = STEP_FRACTION * sp.max_step(self.x, dx, cap=1.0 / STEP_FRACTION, shrink=STEP_SHRINK)
+            t = STEP_FRACTION * sp.max_step(self.x, dx, cap=1.0 / STEP_FRACTION, shrink=STEP_SHRINK,
+                                            limiting=self._limiting)
+            if t < 1.0:  # a face or the boundary holds the step below the natural one
+                t, gd = self._smooth_limiting(t, gd)
             trial_grad = self.grads[1 - self.cur]
             accepted = False
             for _ in range(50):
@@ -585,14 +634,15 @@ def _minimise(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, leve
     solver = _LBFGS(sp, x, precond, guard_overlap=sp.overlap(x) == 0)
     del x
     conv, its = solver.run(run, max_iter=run.max_iter, tol=settings["tol"], hist=[solver.E])
-    contacts = solver.contacts
+    contacts, smoothed = solver.contacts, solver.smoothed
     if contacts:
         notes.append(f"the boundary touched itself: {contacts} trial steps that would have made it "
                      "overlap were shortened")
     x = solver.x
     del solver
     levels_out.append({"level": run.level, "vertices": sp.n, "iterations": its, "energy": sp.spring_energy(x),
-                       "seconds": time.perf_counter() - t0, "boundary_contact": contacts > 0})
+                       "seconds": time.perf_counter() - t0, "boundary_contact": contacts > 0,
+                       "smoothed_directions": smoothed})
     return x, conv and not run.stopped
 
 

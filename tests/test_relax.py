@@ -113,6 +113,49 @@ def test_max_step_matches_reference(bumpy):
             assert np.any(signed_areas(bumpy.uv + 1.001 * got * d, F) <= 0)
 
 
+def test_limiting_faces_are_those_whose_own_bound_is_below_the_cap(bumpy):
+    sp = _springs(bumpy.mesh.vertices, bumpy.mesh.faces, k=1.0, relative=False)
+    x = np.ascontiguousarray(bumpy.uv)
+    d = 0.5 * np.random.default_rng(1).normal(size=x.shape)
+    flags = np.empty(sp.m, bool)
+    t = sp.max_step(x, d, cap=1.0, limiting=flags)
+    own = np.array([sp.ks.max_step_of(x, d, sp.faces, np.array([f]), 1.0, 1.0) for f in range(sp.m)])
+    assert 0 < flags.sum() < sp.m  # a real mix
+    assert np.array_equal(flags, own < 1.0)
+    assert t == own.min()
+    assert sp.ks.max_step_of(x, d, sp.faces, np.arange(sp.m), 1.0, 1.0) == t
+
+
+def test_max_step_near_equals_the_full_bound_after_a_local_change(bumpy):
+    sp = _springs(bumpy.mesh.vertices, bumpy.mesh.faces, k=1.0, relative=False)
+    x = np.ascontiguousarray(bumpy.uv)
+    rng = np.random.default_rng(2)
+    for _ in range(5):
+        d = 0.5 * rng.normal(size=x.shape)
+        flags = np.empty(sp.m, bool)
+        sp.max_step(x, d, cap=1.0, limiting=flags)
+        verts = sp.ks.flagged_face_vertices(flags, sp.faces, np.zeros(sp.n, bool))
+        d[verts] = 0.5 * rng.normal(size=(len(verts), 2))  # changed at the limiting faces' vertices only
+        assert sp.max_step_near(x, d, verts, 1.0, 1.0) == sp.max_step(x, d, cap=1.0)
+
+
+def test_flagged_face_vertices_and_incident_faces_match_numpy():
+    from potflat._kernels import springs as ks
+
+    rng = np.random.default_rng(3)
+    F = np.array([rng.choice(40, 3, replace=False) for _ in range(200)], np.int32)
+    flags = rng.random(200) < 0.1
+    seen = np.zeros(40, bool)
+    verts = ks.flagged_face_vertices(flags, F, seen)
+    assert np.array_equal(np.sort(verts), np.unique(F[flags]))
+    assert not seen.any()  # the work space is left clean for the next call
+    assert len(ks.flagged_face_vertices(np.zeros(200, bool), F, seen)) == 0
+    vf_ptr, vf_tri = ks.vertex_faces(40, F)
+    got = ks.incident_faces(verts, vf_ptr, vf_tri)
+    want = np.concatenate([np.nonzero((F == v).any(axis=1))[0] for v in verts])
+    assert np.array_equal(np.sort(got), np.sort(want))
+
+
 def test_overlap_counts_crossing_boundary():
     from potflat._kernels.relax_overlap import count_crossings
 
@@ -216,6 +259,22 @@ def test_slivers_stay_unflipped():
     r = relax(FlatMesh(Mesh(V, F), uv))
     assert r.flipped == 0 and np.all(signed_areas(r.flat.uv, F) > 0)
     assert r.distortion.edge_rms < fd.edge_rms
+
+
+def test_smoothing_the_direction_at_limiting_faces_keeps_every_guarantee(vessel, monkeypatch):
+    import potflat.relax as rx
+
+    smooth = relax(vessel, preset="standard")
+    monkeypatch.setattr(rx, "SMOOTH_MAX_FRACTION", 0.0)
+    plain = relax(vessel, preset="standard")
+    assert sum(lv["smoothed_directions"] for lv in smooth.levels) > 0
+    assert sum(lv["smoothed_directions"] for lv in plain.levels) == 0
+    for r in (smooth, plain):
+        assert r.flipped == 0 and r.boundary_overlap == 0 and r.converged
+        assert np.all(np.diff(r.energy_history) <= 0)
+    # longer steps, no worse result
+    assert smooth.iterations < plain.iterations
+    assert smooth.distortion.edge_rms <= plain.distortion.edge_rms * 1.01
 
 
 def test_high_valence_fan():

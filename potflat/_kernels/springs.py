@@ -612,52 +612,149 @@ def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, grad, diag):
     return total
 
 
+@leaf
+def _area_polynomial(x, d, faces, f, shrink):
+    """Coefficients ``(c0, c1, c2)`` of face ``f``'s signed area (doubled) along ``x + t d``
+    minus ``1 - shrink`` of its area at ``x``: ``c0 + c1 t + c2 t^2``."""
+    a0 = faces[f, 0]
+    a1 = faces[f, 1]
+    a2 = faces[f, 2]
+    e1x = x[a1, 0] - x[a0, 0]
+    e1y = x[a1, 1] - x[a0, 1]
+    e2x = x[a2, 0] - x[a0, 0]
+    e2y = x[a2, 1] - x[a0, 1]
+    f1x = d[a1, 0] - d[a0, 0]
+    f1y = d[a1, 1] - d[a0, 1]
+    f2x = d[a2, 0] - d[a0, 0]
+    f2y = d[a2, 1] - d[a0, 1]
+    c0 = (e1x * e2y - e1y * e2x) * shrink
+    c1 = e1x * f2y - e1y * f2x + f1x * e2y - f1y * e2x
+    c2 = f1x * f2y - f1y * f2x
+    return c0, c1, c2
+
+
+@leaf
+def _no_root_up_to(c0, c1, c2, t):
+    """True when ``c0 + c1 s + c2 s^2`` stays positive for every ``s`` in ``[0, t]``: positive
+    at both ends and no convex dip below zero in between (branch-free, without a division
+    or a square root)."""
+    return (c0 > 0.0) & (c0 + t * (c1 + t * c2) > 0.0) & (
+        (c2 <= 0.0) | (c1 >= 0.0) | (-c1 >= 2.0 * c2 * t) | (4.0 * c0 * c2 > c1 * c1))
+
+
 @parallel
-def max_step(x, d, faces, cap, shrink, out):
+def max_step(x, d, faces, cap, shrink, out, limiting):
     """Per block of faces, the largest ``t <= cap`` for which ``x + t d`` keeps every face's
     signed area above ``1 - shrink`` times its area at ``x`` (``shrink = 1``: positive;
     the smallest positive root of a quadratic in ``t``).
 
-    A face whose area polynomial has no root in ``[0, best]`` (tested without a square root
-    or a division) is skipped; only the others solve their quadratic.
+    A face whose area polynomial has no root in ``[0, best]`` is skipped (most faces); only
+    the others solve their quadratic.
 
     Parameters
     ----------
     x, d : (n, 2) float64
-    faces : (m, 3) int64
+    faces : (m, 3) int32 or int64
     cap : float
         Upper bound of interest (``inf``: none).
     shrink : float
         Largest fraction of its area a face may lose, in (0, 1].
     out : (ceil(m / BLOCK),) float64
         Output: minimum over each block (``cap`` when no face shrinks that far before it).
+    limiting : (m,) or (0,) bool
+        Output unless empty: the faces whose own bound is below ``cap``.
     """
     m = faces.shape[0]
     nb = out.shape[0]
+    flag = limiting.shape[0] > 0
     for b in prange(nb):
         best = cap
         for f in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
-            a0 = faces[f, 0]
-            a1 = faces[f, 1]
-            a2 = faces[f, 2]
-            e1x = x[a1, 0] - x[a0, 0]
-            e1y = x[a1, 1] - x[a0, 1]
-            e2x = x[a2, 0] - x[a0, 0]
-            e2y = x[a2, 1] - x[a0, 1]
-            f1x = d[a1, 0] - d[a0, 0]
-            f1y = d[a1, 1] - d[a0, 1]
-            f2x = d[a2, 0] - d[a0, 0]
-            f2y = d[a2, 1] - d[a0, 1]
-            c0 = (e1x * e2y - e1y * e2x) * shrink
-            c1 = e1x * f2y - e1y * f2x + f1x * e2y - f1y * e2x
-            c2 = f1x * f2y - f1y * f2x
-            # no root in [0, best]: positive at both ends and no convex dip below zero in
-            # between (tested branch-free, without division: most faces stop here)
-            safe = (c0 > 0.0) & (c0 + best * (c1 + best * c2) > 0.0) & (
-                (c2 <= 0.0) | (c1 >= 0.0) | (-c1 >= 2.0 * c2 * best) | (4.0 * c0 * c2 > c1 * c1))
-            if not safe:
+            c0, c1, c2 = _area_polynomial(x, d, faces, f, shrink)
+            if flag:
+                limiting[f] = not _no_root_up_to(c0, c1, c2, cap)
+            if not _no_root_up_to(c0, c1, c2, best):
                 best = min(best, _first_root(c0, c1, c2))
         out[b] = best
+
+
+@leaf
+def max_step_of(x, d, faces, face_list, cap, shrink):
+    """:func:`max_step` over the listed faces only (repeats allowed): the largest ``t <= cap``.
+
+    Parameters
+    ----------
+    x, d : (n, 2) float64
+    faces : (m, 3) int32 or int64
+    face_list : (k,) int64
+    cap, shrink : float
+    """
+    best = cap
+    for p in range(face_list.shape[0]):
+        c0, c1, c2 = _area_polynomial(x, d, faces, face_list[p], shrink)
+        if not _no_root_up_to(c0, c1, c2, best):
+            best = min(best, _first_root(c0, c1, c2))
+    return best
+
+
+@leaf
+def flagged_face_vertices(flags, faces, seen):
+    """The vertices of the flagged faces, each once, in order of first appearance.
+
+    Parameters
+    ----------
+    flags : (m,) bool
+    faces : (m, 3) int32 or int64
+    seen : (n,) bool
+        Work space, all False on entry and on return.
+
+    Returns
+    -------
+    (k,) int64
+    """
+    count = 0
+    for f in range(flags.shape[0]):
+        if flags[f]:
+            count += 3
+    out = np.empty(count, np.int64)
+    k = 0
+    for f in range(flags.shape[0]):
+        if flags[f]:
+            for c in range(3):
+                v = faces[f, c]
+                if not seen[v]:
+                    seen[v] = True
+                    out[k] = v
+                    k += 1
+    for p in range(k):
+        seen[out[p]] = False
+    return out[:k]
+
+
+@leaf
+def incident_faces(verts, vf_ptr, vf_tri):
+    """The faces incident to the listed vertices, concatenated per vertex (a face shared by
+    several listed vertices appears once per vertex).
+
+    Parameters
+    ----------
+    verts : (k,) int64
+    vf_ptr, vf_tri : CSR from :func:`vertex_faces`
+
+    Returns
+    -------
+    (sum of the valences,) int64
+    """
+    total = 0
+    for v in verts:
+        total += vf_ptr[v + 1] - vf_ptr[v]
+    out = np.empty(total, np.int64)
+    k = 0
+    for v in verts:
+        for p in range(vf_ptr[v], vf_ptr[v + 1]):
+            out[k] = vf_tri[p]
+            k += 1
+    return out
 
 
 @leaf
