@@ -216,7 +216,8 @@ class RelaxResult:
     levels : tuple of dict
         Per level (``coarse`` copies, then ``fine`` for the full mesh, or ``follow`` when it
         only follows a copy): name, vertices, iterations, spring energy (without barrier) at
-        its end, seconds.
+        its end, seconds; the solved levels also whether the boundary touched itself and how
+        many search directions were smoothed at faces limiting the step.
     settings : dict
         The resolved settings (preset values with options applied).
     notes : tuple of str
