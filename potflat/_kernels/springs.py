@@ -364,7 +364,8 @@ def vertex_faces(n, faces):
 
 @parallel
 def neighbour_means(x, verts, vf_ptr, vf_tri, faces, out):
-    """Mean position of each listed vertex's edge neighbours (each neighbour counted once).
+    """Mean of ``x`` (positions, or a search direction) over each listed vertex's edge
+    neighbours (each neighbour counted once).
 
     Parameters
     ----------
@@ -373,7 +374,7 @@ def neighbour_means(x, verts, vf_ptr, vf_tri, faces, out):
     vf_ptr, vf_tri : CSR from :func:`vertex_faces`
     faces : (m, 3) int32 or int64
     out : (k, 2) float64
-        Output (the vertex's own position when it has no neighbour).
+        Output (the vertex's own value when it has no neighbour).
     """
     for k in prange(verts.shape[0]):
         i = verts[k]
