@@ -168,11 +168,11 @@ def unique_edges(faces: np.ndarray) -> np.ndarray:
     Parallel, without a global sort: each vertex groups the edges to its higher neighbours
     (:func:`potflat._kernels.springs.halfedge_springs`).
     """
-    from potflat._kernels.springs import halfedge_springs
+    from potflat._kernels.springs import halfedge_springs, vertex_faces
 
     faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
     n = int(faces.max()) + 1 if len(faces) else 0
-    return halfedge_springs(faces, n, False)[0]
+    return halfedge_springs(faces, *vertex_faces(n, faces), False)[0]
 
 
 def edge_length_error(vertices: np.ndarray, uv: np.ndarray, edges: np.ndarray) -> np.ndarray:

@@ -250,10 +250,10 @@ class _Springs:
         from potflat._kernels import springs as ks
 
         self.ks, self.ko = ks, relax_overlap
-        edges, cross, self.boundary_segments = ks.halfedge_springs(faces, n)
+        self.vf_ptr, self.vf_tri = ks.vertex_faces(n, faces)
+        edges, cross, self.boundary_segments = ks.halfedge_springs(faces, self.vf_ptr, self.vf_tri)
         self.ptr, self.nbr, self.rst = ks.build_csr(V, edges, cross, ks.cross_rest_lengths(V, cross))
         del edges, cross  # peak memory: the spring lists are only needed for the CSR
-        self.vf_ptr, self.vf_tri = ks.vertex_faces(n, faces)
         self.a_ref = np.maximum(face_areas(V, faces), AREA_FLOOR)
         self.faces = np.ascontiguousarray(faces, dtype=np.int32)  # half the memory traffic
         self.k, self.relative = float(k), bool(relative)

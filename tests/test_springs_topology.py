@@ -85,9 +85,9 @@ def test_halfedge_springs_equal_the_sorting_reference(name):
     for threads in (1, 2):
         with numba_threads(threads):
             for faces in (np.ascontiguousarray(F, np.int64), np.ascontiguousarray(F, np.int32)):
-                got = ks.halfedge_springs(faces, n)
+                got = ks.halfedge_springs(faces, *ks.vertex_faces(n, faces))
                 assert all(_same(g, w) for g, w in zip(got, want)), name
-                edges, cross, boundary = ks.halfedge_springs(faces, n, False)
+                edges, cross, boundary = ks.halfedge_springs(faces, *ks.vertex_faces(n, faces), False)
                 assert _same(edges, want[0]) and cross.shape == (0, 4) and boundary.shape == (0, 2)
 
 
@@ -96,7 +96,8 @@ def test_halfedge_springs_equal_the_sorting_reference(name):
 def test_spring_csr_equals_the_numpy_assembly(name):
     F, n = MESHES[name]
     V = np.random.default_rng(1).normal(size=(n, 3))
-    edges, cross, _ = ks.halfedge_springs(np.asarray(F, np.int64), n)
+    F = np.asarray(F, np.int64)
+    edges, cross, _ = ks.halfedge_springs(F, *ks.vertex_faces(n, F))
     cross_rest = ks.cross_rest_lengths(V, cross)
     want = ref.spring_csr(V, edges, cross, cross_rest)
     assert all(_same(g, w) for g, w in zip(ks.build_csr(V, edges, cross, cross_rest), want))

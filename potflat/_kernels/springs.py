@@ -42,7 +42,7 @@ INSERTION_MAX = 32
 
 
 @parallel
-def halfedge_springs(faces, n, springs=True):
+def halfedge_springs(faces, vf_ptr, vf_tri, springs=True):
     """Unique edges and cross springs of a triangle mesh.
 
     Count-then-fill over the vertices (no global sort): each vertex ``i`` groups the
@@ -53,8 +53,7 @@ def halfedge_springs(faces, n, springs=True):
     Parameters
     ----------
     faces : (m, 3) int32 or int64
-    n : int
-        Number of vertices.
+    vf_ptr, vf_tri : CSR from :func:`vertex_faces` (its length gives the number of vertices)
     springs : bool, optional
         False: only the edges (``cross`` and ``boundary`` come back empty).
 
@@ -72,7 +71,7 @@ def halfedge_springs(faces, n, springs=True):
         The edges used by one face only, in ``edges``' order, each oriented as in its face
         (``a -> b`` counter-clockwise). Edges of three or more faces are in neither.
     """
-    vf_ptr, vf_tri = vertex_faces(n, faces)
+    n = vf_ptr.shape[0] - 1
     most = 0
     for i in range(n):
         most = max(most, vf_ptr[i + 1] - vf_ptr[i])
