@@ -16,8 +16,78 @@ Example:  potflat run samples/data/amphora.obj -o out/
 """
 
 
+#: Options that take two numbers; ``--band 0.2,0.8`` is read as ``--band 0.2 0.8``.
+PAIR_OPTIONS = ("--band", "--angles")
+
+
+def split_pairs(args: list[str]) -> list[str]:
+    """``--band 0.2,0.8`` and ``--band=0.2,0.8`` as ``--band 0.2 0.8`` (Click's two-value options)."""
+    out: list[str] = []
+    i = 0
+    while i < len(args):
+        arg = args[i]
+        flag, eq, value = arg.partition("=")
+        if flag in PAIR_OPTIONS and (eq or i + 1 < len(args)):
+            if not eq:
+                i += 1
+                value = args[i]
+            parts = [v for v in value.replace(",", " ").split() if v]
+            if len(parts) == 2:
+                out += [flag, *parts]
+                i += 1
+                continue
+            out += [flag, value] if not eq else [arg]
+            i += 1
+            continue
+        out.append(arg)
+        i += 1
+    return out
+
+
+def _terminate_as_interrupt(signum, frame) -> None:
+    """SIGTERM (a cluster's or a service manager's stop) is handled like Ctrl-C: clean up."""
+    raise KeyboardInterrupt
+
+
 class _Group(TyperGroup):
-    """Builds the full ``run`` command (every stage option) only when ``run`` is invoked."""
+    """Builds the full ``run`` command (every stage option) only when ``run`` is invoked.
+
+    Usage errors (a missing argument, a value out of range, a directory given as a file)
+    are one ``error:`` line and exit code 2, like every other bad input; SIGTERM is
+    handled like SIGINT.
+    """
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        import signal
+        import sys
+        import threading
+
+        try:  # Typer 0.29+ carries its own copy of Click
+            from typer import _click as click
+        except ImportError:
+            import click
+
+        from potflat_cli._errors import EXIT_USAGE, fail
+
+        args = split_pairs(list(sys.argv[1:] if args is None else args))
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGTERM, _terminate_as_interrupt)
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode, **extra)
+        try:
+            code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except click.exceptions.NoArgsIsHelpError as exc:
+            exc.show()
+            code = EXIT_USAGE
+        except click.ClickException as exc:
+            command = getattr(getattr(exc, "ctx", None), "command_path", None) or "potflat"
+            message = " ".join(exc.format_message().split()).rstrip(".")
+            fail(f"{message[:1].lower()}{message[1:]}; see '{command} --help'", exc.exit_code)
+            code = exc.exit_code
+        except click.exceptions.Abort:
+            fail("interrupted; outputs already finished are kept, none is half-written", 130)
+            code = 130
+        sys.exit(code or 0)
 
     def resolve_command(self, ctx, args):
         name, command, rest = super().resolve_command(ctx, args)

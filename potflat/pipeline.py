@@ -260,12 +260,20 @@ def resolve_options(**given: Any) -> dict[str, Any]:
     return out
 
 
+def partial_marker(out: Path, name: str) -> Path:
+    """The hidden file :func:`run_scan` keeps in ``out`` while it writes ``NAME.*`` (removed when
+    every stage is done): a later run recognises the files of an interrupted run as potflat's own."""
+    return out / f".{name}.potflat-incomplete"
+
+
 def _check_painting_name_is_free(out: Path, name: str) -> None:
     """Refuse before any work when ``NAME.png`` exists in ``out`` and was not baked by potflat
     (typically the scan's own texture, when the output folder is the scan's folder): the bake
-    would stop there after rollout and relax had run."""
+    would stop there after rollout and relax had run. A painting left by an interrupted potflat
+    run (:func:`partial_marker`) is potflat's own."""
     painting = out / f"{name}.png"
-    if painting.exists() and not (out / f"{name}.bake.json").exists():
+    if (painting.exists() and not (out / f"{name}.bake.json").exists()
+            and not partial_marker(out, name).exists()):
         raise InvalidOptionError(f"{painting} exists and was not made by potflat (the scan's texture?) and would be "
                                  "overwritten; give another output folder (-o) or --name")
 
@@ -307,26 +315,35 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
     PotflatError
         From the stage that failed; outputs of the stages already done are kept.
     """
+    from potflat.io.atomic import check_output_name, output_lock, remove_stale_parts, write_json_atomic
+    from potflat.io.scan import check_scan_file
+
     scan = Path(scan_path)
     out = Path(out_dir)
-    name = name or scan.stem
+    name = check_output_name(name or scan.stem, what="name" if name else f"the name of {scan}")
+    check_scan_file(scan)
     options = _preview_at_image_resolution(resolve_options(rollout=rollout, relax=relax, bake=bake))
     _check_painting_name_is_free(out, name)
     stages: dict[str, StageOutput] = {}
     seconds: dict[str, float] = {}
     start = time.perf_counter()
     source = scan
-    for stage in STAGES:
-        if progress is not None:
-            progress(stage)
-        if stage in _STAGE_INPUT:
-            source = out / f"{name}{_STAGE_INPUT[stage]}"
-            if not source.is_file():
-                raise PotflatError(f"{source}: the previous stage did not write it; "
-                                   "this is a bug in potflat, please report it")
-        _, run = stage_api(stage)
-        t = time.perf_counter()
-        stages[stage] = run(source, out, options[stage], name=name)
-        seconds[stage] = time.perf_counter() - t
+    with output_lock(out):
+        remove_stale_parts(out)  # left by a killed run; no other potflat process writes here now
+        for stage in STAGES:
+            if progress is not None:
+                progress(stage)
+            if stage in _STAGE_INPUT:
+                source = out / f"{name}{_STAGE_INPUT[stage]}"
+                if not source.is_file():
+                    raise PotflatError(f"{source}: the previous stage did not write it; "
+                                       "this is a bug in potflat, please report it")
+            if stage == "bake":  # NAME.png is written before NAME.bake.json: mark it as potflat's own
+                marker = write_json_atomic(partial_marker(out, name), {"potflat": "incomplete", "scan": str(scan)})
+            _, run = stage_api(stage)
+            t = time.perf_counter()
+            stages[stage] = run(source, out, options[stage], name=name)
+            seconds[stage] = time.perf_counter() - t
+        marker.unlink()
     seconds["total"] = time.perf_counter() - start
     return ScanResult(name=name, scan=scan, out_dir=out, stages=stages, seconds=seconds)

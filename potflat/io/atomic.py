@@ -97,3 +97,109 @@ def _json_default(obj: Any) -> Any:
     if isinstance(obj, Path):
         return str(obj)
     raise TypeError(f"cannot store {type(obj).__name__} in JSON")
+
+
+#: The lock file of an output folder (:func:`output_lock`).
+LOCK_NAME = ".potflat.lock"
+#: Names a scan's outputs may not take: the batch summary, manifest and error log live beside or
+#: inside the scan folders (a scan named ``summary.json`` would take the summary's place).
+RESERVED_NAMES = ("summary.json", "summary.csv", "manifest.json", "error.log")
+#: Device names Windows reserves whatever the extension (a share mounted from Windows).
+DEVICE_NAMES = ("con", "prn", "aux", "nul", *(f"com{i}" for i in range(1, 10)), *(f"lpt{i}" for i in range(1, 10)))
+#: Longest output name (file systems allow 255 bytes for a whole file name, suffixes included).
+MAX_NAME_BYTES = 200
+
+
+def check_output_name(name: str, *, what: str = "name") -> str:
+    """Return ``name`` if it is a safe output stem, else raise :class:`InvalidOptionError`.
+
+    Safe: plain text without folder separators, control characters (a newline), a leading dot
+    (``..``, hidden files) or a reserved name (:data:`RESERVED_NAMES`, :data:`DEVICE_NAMES`; without case),
+    at most :data:`MAX_NAME_BYTES` bytes in UTF-8.
+    """
+    from potflat.errors import InvalidOptionError
+
+    shown = repr(name)
+    if not isinstance(name, str) or not name.strip():
+        raise InvalidOptionError(f"{what} {shown} must be a plain file name (text); e.g. 'hydria-a'")
+    if "/" in name or "\\" in name or name.startswith("."):
+        raise InvalidOptionError(f"{what} {shown} must be a plain file name without folders or a leading dot; "
+                                 "e.g. 'hydria-a'")
+    if any(ord(c) < 32 or ord(c) == 127 for c in name):
+        raise InvalidOptionError(f"{what} {shown} contains a control character (a newline?); rename the file "
+                                 "or give a plain name")
+    if name.casefold() in RESERVED_NAMES or name.split(".")[0].casefold() in DEVICE_NAMES:
+        raise InvalidOptionError(f"{what} {shown} is reserved (potflat or the system uses it); give another name")
+    if len(name.encode("utf-8", "surrogateescape")) > MAX_NAME_BYTES:
+        raise InvalidOptionError(f"{what} is {len(name.encode('utf-8', 'surrogateescape'))} bytes long, over "
+                                 f"{MAX_NAME_BYTES}; give a shorter name")
+    return name
+
+
+@contextlib.contextmanager
+def output_lock(folder: str | os.PathLike, *, what: str = "potflat") -> Iterator[Path]:
+    """Hold an exclusive lock on the output ``folder`` (created if needed) while writing.
+
+    A second potflat process writing into the same folder is refused with one line
+    (:class:`InvalidOptionError`). The lock is a ``flock`` on ``.potflat.lock`` in the folder,
+    so a killed run never leaves the folder locked; the file is removed on release (and the
+    folder too if this call created it and nothing was written).
+    """
+    import fcntl
+
+    from potflat.errors import InvalidOptionError
+
+    folder = Path(folder)
+    lock = folder / LOCK_NAME
+    created = not folder.exists()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+    except OSError as exc:
+        raise InvalidInputError(f"cannot write to {folder}: {exc.strerror or exc}; choose a writable output "
+                                "folder (-o)") from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            if os.fstat(fd).st_ino != os.stat(lock).st_ino:  # the holder removed it as we opened it
+                raise OSError("lock file replaced")
+        except OSError:
+            try:
+                holder = os.pread(fd, 64, 0).decode("ascii", "replace").strip()
+            except OSError:
+                holder = ""
+            raise InvalidOptionError(f"{folder} is in use by another potflat run{f' ({holder})' if holder else ''}; "
+                                     "wait for it to finish or choose another output folder (-o)") from None
+        with contextlib.suppress(OSError):
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{what} pid {os.getpid()}".encode(), 0)
+        try:
+            yield folder
+        finally:
+            with contextlib.suppress(OSError):
+                lock.unlink()  # still holding the lock: a process that opened it sees a new inode
+            if created:
+                with contextlib.suppress(OSError):
+                    folder.rmdir()  # only if empty
+    finally:
+        os.close(fd)
+
+
+def remove_stale_parts(folder: str | os.PathLike) -> int:
+    """Remove the hidden ``.NAME.*.part`` temporaries a killed run left in ``folder``.
+
+    Call it only while holding :func:`output_lock` (no other potflat process writes there).
+    Returns how many were removed.
+    """
+    folder = Path(folder)
+    removed = 0
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return 0
+    for entry in entries:
+        if entry.name.startswith(".") and entry.name.endswith(".part") and entry.is_file(follow_symlinks=False):
+            with contextlib.suppress(OSError):
+                os.unlink(entry.path)
+                removed += 1
+    return removed

@@ -33,8 +33,35 @@ PNG_QUEUE = 2
 _PNG_COLOR_TYPE = {1: 0, 2: 4, 3: 2, 4: 6}  # channels -> grey, grey+alpha, RGB, RGBA
 
 
+#: Memory a decoded texture may take (RGB, 8 or 16 bits per channel): 2 GiB, a 26k x 26k
+#: 8-bit image. Larger textures are refused before decoding, with their size and the fix.
+TEXTURE_BUDGET_BYTES = 2 * 1024**3
+
+
+def check_texture_budget(path: str | os.PathLike, width: int, height: int, mode: str) -> None:
+    """Refuse a texture whose decoded RGB image would exceed :data:`TEXTURE_BUDGET_BYTES`.
+
+    Parameters
+    ----------
+    path : path-like
+        The image (for the message).
+    width, height : int
+        Its size in pixels, from the file's header.
+    mode : str
+        Its Pillow mode (``"RGB"``, ``"I;16"``...): 16-bit modes take two bytes per channel.
+    """
+    depth = 2 if ("16" in mode or mode in ("I", "F")) else 1
+    need = width * height * 3 * depth
+    if need > TEXTURE_BUDGET_BYTES:
+        side = int((TEXTURE_BUDGET_BYTES / (3 * depth)) ** 0.5) // 1024 * 1024
+        raise InvalidInputError(
+            f"texture {Path(path).name} is {width} x {height} pixels ({need / 1024**3:.1f} GiB decoded), over the "
+            f"{TEXTURE_BUDGET_BYTES / 1024**3:.0f} GiB memory budget for a texture; downsample it to at most "
+            f"{side} x {side} pixels, or load the scan without it (--no-texture)")
+
+
 def read_texture(path: str | os.PathLike) -> np.ndarray:
-    """Read a texture image as RGB.
+    """Read a texture image as RGB, within :data:`TEXTURE_BUDGET_BYTES`.
 
     Parameters
     ----------
@@ -45,14 +72,27 @@ def read_texture(path: str | os.PathLike) -> np.ndarray:
     -------
     (h, w, 3) uint8 or uint16
         Row 0 is the top of the image. An alpha channel is dropped; grey is expanded to RGB.
+        Decoded straight to three channels: the peak memory is the returned image.
     """
     import cv2
+    from PIL import Image
 
     path = Path(path)
     if not path.is_file():
         raise InvalidInputError(f"texture {path} not found; put the texture image beside the stage PLY")
+    old = Image.MAX_IMAGE_PIXELS
     try:
-        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH)
+        Image.MAX_IMAGE_PIXELS = None  # the budget below is the limit
+        with Image.open(path) as im:
+            width, height, mode = *im.size, im.mode
+    except Exception:  # noqa: BLE001 - not an image Pillow knows: OpenCV may still read it
+        width = height = 0
+        mode = "RGB"
+    finally:
+        Image.MAX_IMAGE_PIXELS = old
+    check_texture_budget(path, width, height, mode)
+    try:
+        img = cv2.imread(str(path), cv2.IMREAD_COLOR | cv2.IMREAD_ANYDEPTH)
     except cv2.error:  # e.g. a header declaring more than CV_IO_MAX_IMAGE_PIXELS (decompression bomb)
         raise InvalidInputError(f"texture {path} declares an absurd size or is corrupt (OpenCV refused it); "
                                 "restore a sane image") from None
@@ -63,8 +103,6 @@ def read_texture(path: str | os.PathLike) -> np.ndarray:
         img = img.astype(np.uint16)
     if img.ndim == 2:
         img = cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)
-    elif img.shape[2] == 4:
-        img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
     else:
         cv2.cvtColor(img, cv2.COLOR_BGR2RGB, dst=img)
     return np.ascontiguousarray(img)

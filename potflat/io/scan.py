@@ -11,8 +11,8 @@ loader splits vertices at seams and is slow on multi-million-vertex scans); STL,
 GLB/glTF go through trimesh.
 
 Several texture images (OBJ materials with different ``map_Kd``, PLY ``texnumber``) are
-packed into one atlas image (a PNG in a per-user ``potflat-textures-USER`` temporary
-folder, made once per set of sources) with the texture coordinates remapped, since a :class:`Mesh` has one texture.
+packed into one atlas image (a PNG in a temporary folder private to the process, removed at its
+end) with the texture coordinates remapped, since a :class:`Mesh` has one texture.
 
 Units: positions are never rescaled. ``units=None`` takes the unit the file declares (a PLY
 ``comment units X``, an STL ``UNITS=`` header, glTF's metres) and millimetres otherwise.
@@ -20,11 +20,12 @@ Units: positions are never rescaled. ``units=None`` takes the unit the file decl
 from __future__ import annotations
 
 import base64
-import getpass
+import errno
 import hashlib
 import json
 import os
 import re
+import stat
 import struct
 import tempfile
 import warnings as _warnings
@@ -138,23 +139,8 @@ def load_scan(path: str | os.PathLike, *, units: str | None = None, clean: bool 
         raise InvalidOptionError(f"min_faces must be a positive integer, got {min_faces!r}")
     check_cleaning_options(weld_tolerance=weld_tolerance, min_component_fraction=min_component_fraction)
 
-    path = Path(path).expanduser()
+    path = check_scan_file(path)
     ext = path.suffix.lower()
-    if not path.exists():
-        raise InvalidInputError(f"{path} does not exist; check the path")
-    if path.is_dir():
-        raise InvalidInputError(f"{path} is a directory; give a scan file ({' '.join(SCAN_EXTENSIONS)})")
-    if ext not in SCAN_EXTENSIONS:
-        raise InvalidInputError(f"{path} has an unknown extension {ext or '(none)'!r}; "
-                                f"potflat reads {' '.join(SCAN_EXTENSIONS)}: convert the scan")
-    try:
-        size = path.stat().st_size
-    except OSError as exc:
-        raise InvalidInputError(f"cannot read {path}: {exc.strerror or exc}; check permissions") from None
-    if size == 0:
-        raise InvalidInputError(f"{path} is empty (0 bytes); export or copy the scan again")
-
-    path = path.resolve()
     reader = {".obj": _read_obj, ".ply": _read_ply, ".stl": _read_trimesh, ".off": _read_trimesh,
               ".glb": _read_gltf, ".gltf": _read_gltf}[ext]
     raw = reader(path, texture, max_texture_pixels)
@@ -179,6 +165,38 @@ def load_scan(path: str | os.PathLike, *, units: str | None = None, clean: bool 
 
 # ---------------------------------------------------------------------------------------
 # shared steps
+
+
+def check_scan_file(path: str | os.PathLike) -> Path:
+    """The absolute path of a scan file that exists, is a regular non-empty file with a scan
+    extension; else an :class:`InvalidInputError` naming the file and the fix.
+
+    A directory named ``x.obj``, a device (``/dev/zero``), a FIFO or a symlink loop is refused
+    here, before anything reads it or any output is written.
+    """
+    path = Path(path).expanduser()
+    ext = path.suffix.lower()
+    try:
+        st = path.stat()
+        path = path.resolve(strict=True)
+    except RuntimeError:  # symlink loop (Python < 3.13)
+        raise InvalidInputError(f"{path} is a symbolic link loop; give the scan file itself") from None
+    except OSError as exc:
+        if isinstance(exc, FileNotFoundError):
+            raise InvalidInputError(f"{path} does not exist; check the path") from None
+        if exc.errno == errno.ELOOP:
+            raise InvalidInputError(f"{path} is a symbolic link loop; give the scan file itself") from None
+        raise InvalidInputError(f"cannot read {path}: {exc.strerror or exc}; check the path and permissions") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise InvalidInputError(f"{path} is a directory; give a scan file ({' '.join(SCAN_EXTENSIONS)})")
+    if not stat.S_ISREG(st.st_mode):
+        raise InvalidInputError(f"{path} is not a regular file (a device or pipe); give a scan file")
+    if ext not in SCAN_EXTENSIONS:
+        raise InvalidInputError(f"{path} has an unknown extension {ext or '(none)'!r}; "
+                                f"potflat reads {' '.join(SCAN_EXTENSIONS)}: convert the scan")
+    if st.st_size == 0:
+        raise InvalidInputError(f"{path} is empty (0 bytes); export or copy the scan again")
+    return path
 
 
 def _validate(raw: _Raw, path: Path, units: str | None, texture: str, max_pixels: int) -> Mesh:
@@ -223,7 +241,13 @@ def _check_texture(tex: Path, source: Path, max_pixels: int) -> tuple[Path, tupl
     its absolute path and its (width, height)."""
     from PIL import Image
 
-    tex = tex.resolve()
+    from potflat.io.images import check_texture_budget
+
+    try:
+        tex = tex.resolve()
+    except RuntimeError:  # a symlink loop (Python < 3.13 raises it here)
+        raise InvalidInputError(f"{source}: texture {tex} is a symbolic link loop; restore the file "
+                                f"{_IGNORE_HINT}") from None
     if not tex.is_file():
         raise InvalidInputError(f"{source}: texture {tex} not found; restore the file {_IGNORE_HINT}")
     old = Image.MAX_IMAGE_PIXELS
@@ -238,6 +262,10 @@ def _check_texture(tex: Path, source: Path, max_pixels: int) -> tuple[Path, tupl
                         f"{source}: texture {tex.name} declares {w} x {h} pixels, over the limit of "
                         f"{max_pixels} (a corrupt file or decompression bomb); restore a sane image, "
                         f"raise max_texture_pixels if it is genuine, {_IGNORE_HINT}")
+                try:
+                    check_texture_budget(tex, w, h, im.mode)
+                except InvalidInputError as exc:
+                    raise InvalidInputError(f"{source}: {exc}") from None
                 if im.format == "PNG":
                     im.verify()  # chunk CRCs, without decoding pixels
     except InvalidInputError:
@@ -251,14 +279,22 @@ def _check_texture(tex: Path, source: Path, max_pixels: int) -> tuple[Path, tupl
     return tex, (w, h)
 
 
+_PRIVATE_CACHE: list[Path] = []
+
+
 def _texture_cache() -> Path:
-    """Folder for generated textures (packed atlases, images extracted from GLB): per user,
-    in the temporary folder; files are named by content so they are made once."""
-    try:
-        user = getpass.getuser()
-    except Exception:  # noqa: BLE001 - no login name in some containers
-        user = "user"
-    return Path(tempfile.gettempdir()) / f"potflat-textures-{re.sub(r'[^A-Za-z0-9_.-]', '_', user)}"
+    """Folder for generated textures (packed atlases, images extracted from GLB): private to this
+    process (made by :func:`tempfile.mkdtemp`: new, mode 0700, never a pre-existing folder or a
+    planted symlink), removed when the process ends. Nothing found there is ever trusted: every
+    file in it was written by this process."""
+    if not _PRIVATE_CACHE or not _PRIVATE_CACHE[0].is_dir():
+        import atexit
+        import shutil
+
+        folder = Path(tempfile.mkdtemp(prefix="potflat-textures-"))
+        atexit.register(shutil.rmtree, folder, ignore_errors=True)
+        _PRIVATE_CACHE[:] = [folder]
+    return _PRIVATE_CACHE[0]
 
 
 def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source: Path,
@@ -278,7 +314,7 @@ def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source
     -------
     atlas : Path
         PNG in :func:`_texture_cache`, named by the sources' paths, sizes
-        and modification times (so it is made once and reused).
+        and modification times (made once per process).
     uv : (m, 3, 2) float64
         Coordinates in the atlas (clipped to each image: tiling cannot be packed).
     note : str
@@ -902,7 +938,7 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
 
 def _gltf_images(path: Path) -> list[Path]:
     """Base-colour texture images of a glTF/GLB as files: external ones as they are, embedded ones
-    extracted (content-addressed, atomically) into :func:`_texture_cache`."""
+    extracted (content-addressed, atomically) into the private :func:`_texture_cache`."""
     try:
         return _gltf_image_files(path)
     except (KeyError, IndexError, TypeError, ValueError, AttributeError, struct.error):
@@ -960,8 +996,7 @@ def _gltf_image_files(path: Path) -> list[Path]:
         if blob:
             ext = {"image/png": ".png", "image/jpeg": ".jpg"}.get(img.get("mimeType", ""), ".png")
             target = _texture_cache() / (hashlib.sha256(blob).hexdigest()[:32] + ext)
-            if not target.exists():
-                target.parent.mkdir(parents=True, exist_ok=True)
+            if not target.exists():  # the private cache holds only what this process wrote
                 write_bytes_atomic(target, blob)
             out.append(target)
     return out

@@ -31,12 +31,15 @@ _PLY_TYPES = {
 def _place_texture(texture: Path, ply_path: Path) -> str:
     """Make ``texture`` available beside ``ply_path`` and return its name there.
 
-    A texture already in that folder is used as it is. Otherwise it is hard-linked (or
-    copied) as ``NAME.texture.EXT`` (NAME the stage name of ``ply_path``): a name no stage
-    writes (a texture ``NAME.png`` would otherwise be replaced by the baked ``NAME.png``) and
-    no other scan's texture can take (one output folder, several scans with a
-    ``texture.jpg``). A stale file of that name is replaced.
+    A texture already in that folder is used as it is. Otherwise it is copied (never linked:
+    editing an output must not edit the scan's texture) as ``NAME.texture.EXT`` (NAME the stage
+    name of ``ply_path``): a name no stage writes (a texture ``NAME.png`` would otherwise be
+    replaced by the baked ``NAME.png``) and no other scan's texture can take (one output
+    folder, several scans with a ``texture.jpg``). A stale file of that name is replaced; an
+    identical copy is kept.
     """
+    import filecmp
+
     out_dir = ply_path.parent
     if os.path.samefile(texture.parent, out_dir):
         return texture.name
@@ -44,25 +47,19 @@ def _place_texture(texture: Path, ply_path: Path) -> str:
     for suffix in (".ply", ".rollout", ".relaxed"):
         stem = stem[: -len(suffix)] if stem.endswith(suffix) else stem
     target = out_dir / f"{stem}.texture{texture.suffix.lower()}"
-    if target.exists() and os.path.samefile(target, texture):
+    if target.is_file() and not target.is_symlink() and os.stat(target).st_nlink == 1 \
+            and filecmp.cmp(target, texture, shallow=False):
         return target.name
-    tmp = out_dir / f".{target.name}.{os.getpid()}.part"
-    try:  # link under a temporary name, then rename (atomic_path would chmod the scan's texture)
-        tmp.unlink(missing_ok=True)
-        os.link(texture, tmp)
-        os.replace(tmp, target)
-    except OSError:
-        tmp.unlink(missing_ok=True)
-        with atomic_path(target) as part:
-            shutil.copyfile(texture, part)
+    with atomic_path(target) as part:
+        shutil.copyfile(texture, part)
     return target.name
 
 
 def write_flat_ply(path: str | os.PathLike, flat: FlatMesh, *, comments: tuple[str, ...] = ()) -> Path:
     """Write ``flat`` as a binary stage PLY at ``path`` (atomically).
 
-    A texture that is not already beside ``path`` is hard-linked (or copied) there, so the
-    output folder is self-contained for baking.
+    A texture that is not already beside ``path`` is copied there, so the output folder is
+    self-contained for baking.
 
     Parameters
     ----------
