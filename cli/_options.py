@@ -19,7 +19,11 @@ from typing import Annotated, Any, Optional
 import typer
 
 OutputDir = Annotated[Optional[Path], typer.Option(
-    "--output", "-o", help="Output folder, created if needed \\[default: the input's folder].",
+    "--output", "-o", help="Output folder, created if needed \\[default: ./NAME/ in the current folder; "
+                           "never the scan's folder unless given].",
+    file_okay=False)]
+StageOutputDir = Annotated[Optional[Path], typer.Option(
+    "--output", "-o", help="Output folder, created if needed \\[default: the folder of the stage file].",
     file_okay=False)]
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing but errors.")]
 Json = Annotated[bool, typer.Option("--json", help="Print a JSON summary to stdout (nothing else).")]

@@ -84,7 +84,7 @@ class _Group(TyperGroup):
             message = " ".join(exc.format_message().split()).rstrip(".")
             fail(f"{message[:1].lower()}{message[1:]}; see '{command} --help'", exc.exit_code)
             code = exc.exit_code
-        except click.exceptions.Abort:
+        except typer.Abort:
             fail("interrupted; outputs already finished are kept, none is half-written", 130)
             code = 130
         sys.exit(code or 0)

@@ -615,11 +615,15 @@ def _attachment_roots(flat_ply: Path, n_faces: int) -> tuple[np.ndarray, Path | 
     stem = flat_ply.name.removesuffix(".ply").removesuffix(".relaxed").removesuffix(".rollout")
     rollout_json = flat_ply.with_name(f"{stem}.rollout.json")
     try:
-        att = json.loads(rollout_json.read_text()).get("attachments", {})
+        data = json.loads(rollout_json.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return np.zeros(0), None
-    roots = np.asarray(att.get("root_faces") or [], dtype=np.int64)
-    if att.get("kept") or not len(roots) or roots.max() >= n_faces:
+    att = data.get("attachments") if isinstance(data, dict) else None
+    roots = att.get("root_faces") if isinstance(att, dict) else None
+    if not isinstance(roots, list) or not all(isinstance(r, int) and not isinstance(r, bool) for r in roots):
+        return np.zeros(0), rollout_json  # a sidecar of another shape (edited, null): no roots to mark
+    roots = np.asarray(roots, dtype=np.int64)
+    if att.get("kept") or not len(roots) or roots.min() < 0 or roots.max() >= n_faces:
         return np.zeros(0), rollout_json
     marks = np.zeros(n_faces)
     marks[roots] = 1.0

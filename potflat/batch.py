@@ -23,9 +23,11 @@ import dataclasses
 import difflib
 import glob
 import io
+import itertools
 import json
 import os
 import re
+import stat
 import time
 import traceback
 from dataclasses import dataclass
@@ -36,6 +38,7 @@ import yaml
 
 from potflat._kernels._jit import numba_threads
 from potflat.errors import InvalidInputError, InvalidOptionError, PotflatError
+from potflat.io.atomic import check_output_name
 
 #: Top-level keys of a batch file.
 TOP_KEYS = ("output", "defaults", "scans")
@@ -44,12 +47,19 @@ SCAN_KEYS = ("path", "name")
 #: File written last into each finished scan folder.
 MANIFEST = "manifest.json"
 #: Statuses of a scan in a batch summary.
-STATUSES = ("done", "skipped", "failed", "interrupted")
+STATUSES = ("done", "skipped", "failed", "interrupted", "cancelled")
 #: Start method of local worker processes: fresh interpreters, so no Numba thread pool or
 #: lock is inherited from the parent (fork is unsafe once threads exist).
 START_METHOD = "spawn"
 #: How long to try reaching a Dask scheduler before giving up.
 CONNECT_TIMEOUT = "20s"
+#: Largest batch file read (characters), values once YAML aliases are expanded, and characters
+#: of one value: a batch file lists scans and options, never data.
+MAX_BATCH_BYTES = 4_000_000
+MAX_YAML_NODES = 1_000_000
+MAX_YAML_SCALAR = 4096
+#: Most files a ``path:`` pattern may match (a pattern over a whole disk is a mistake).
+MAX_GLOB_MATCHES = 100_000
 #: Columns of ``summary.csv``.
 CSV_COLUMNS = ("name", "status", "seconds", "edge_rms", "area_mean_abs_log", "anisotropy_p95",
                "flipped", "error", "scan", "output")
@@ -110,6 +120,46 @@ def _construct_seq(loader: _Loader, node: yaml.SequenceNode) -> _LineList:
 
 _Loader.add_constructor("tag:yaml.org,2002:map", _construct_map)
 _Loader.add_constructor("tag:yaml.org,2002:seq", _construct_seq)
+
+
+class _TooLarge(yaml.MarkedYAMLError):
+    """A batch file value beyond the bounds (:data:`MAX_YAML_NODES`, :data:`MAX_YAML_SCALAR`)."""
+
+
+def _bounded_load(text: str) -> Any:
+    """Parse ``text`` with :class:`_Loader` after checking the size of the document once its
+    aliases are expanded (a "billion laughs" of nested aliases is refused before it is built)
+    and the length of every scalar."""
+    loader = _Loader(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        sizes: dict[int, int] = {}
+
+        def size(n: yaml.Node) -> int:
+            if id(n) in sizes:
+                return sizes[id(n)]
+            sizes[id(n)] = 1  # a recursive alias counts once (the loader refuses it later)
+            if isinstance(n, yaml.ScalarNode):
+                if len(n.value) > MAX_YAML_SCALAR:
+                    raise _TooLarge(problem=f"a value of {len(n.value)} characters is not an option (at most "
+                                    f"{MAX_YAML_SCALAR}); shorten it", problem_mark=n.start_mark)
+                total = 1
+            elif isinstance(n, yaml.MappingNode):
+                total = 1 + sum(size(k) + size(v) for k, v in n.value)
+            else:
+                total = 1 + sum(size(c) for c in n.value)
+            if total > MAX_YAML_NODES:
+                raise _TooLarge(problem=f"this value expands to more than {MAX_YAML_NODES} values (nested "
+                                "aliases?); write the options out without aliases", problem_mark=n.start_mark)
+            sizes[id(n)] = total
+            return total
+
+        size(node)
+        return loader.construct_document(node)
+    finally:
+        loader.dispose()
 
 
 def _line(node: Any, key: Any = None) -> int:
@@ -208,8 +258,13 @@ def load_batch(path: str | os.PathLike, *, output: str | os.PathLike | None = No
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise BatchFileError([f"{path}: cannot read the batch file: {reason}; "
                               "give the path of a readable YAML file"]) from None
+    if len(text) > MAX_BATCH_BYTES:
+        raise BatchFileError([f"{path}: the batch file is {len(text)} characters long, over "
+                              f"{MAX_BATCH_BYTES}; list the scans with patterns (path: scans/*.obj)"])
     try:
-        data = yaml.load(text, Loader=_Loader)  # noqa: S506 - _Loader is a SafeLoader
+        data = _bounded_load(text)
+    except _TooLarge as exc:
+        raise BatchFileError([f"{path}:{exc.problem_mark.line + 1}: {exc.problem}"]) from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = mark.line + 1 if mark else 1
@@ -366,11 +421,12 @@ class _Validator:
             self.check_option_keys(entry, where="scan entry", extra=SCAN_KEYS)
             files = self.scan_files(entry, output)
             name = entry.get("name")
-            if name is not None and (not isinstance(name, str) or not name.strip()
-                                     or Path(name).name != name or name.startswith(".")):
-                self.problem(_line(entry, "name"), f"'name' must be a plain file name, got "
-                             f"{_shown(name)}; e.g. 'name: hydria-a'")
-                name = None
+            if name is not None:
+                try:
+                    check_output_name(name, what="'name'")
+                except InvalidOptionError as exc:
+                    self.problem(_line(entry, "name"), str(exc))
+                    name = None
             if name is not None and len(files) > 1:
                 self.problem(_line(entry, "name"), f"'name' needs a path matching one file, but "
                              f"the pattern matches {len(files)}; remove 'name' or use one file per entry")
@@ -386,6 +442,12 @@ class _Validator:
                 options = built_defaults or None
             for scan in files:
                 scan_name = name or scan.stem
+                if name is None:
+                    try:
+                        check_output_name(scan_name, what=f"the name of {scan}")
+                    except InvalidOptionError as exc:
+                        self.problem(line, f"{exc} (with 'name:')")
+                        continue
                 if scan in seen_files:
                     self.problem(line, f"{scan} is already listed on line {seen_files[scan]}; "
                                  "list each scan once (narrow the pattern)")
@@ -430,8 +492,20 @@ class _Validator:
                              f"({' '.join(SCAN_EXTENSIONS)}); convert it or fix the path")
                 return []
             return [scan]
-        found = sorted(Path(p).resolve() for p in glob.glob(pattern, recursive=True))
-        found = [p for p in found if p.is_file() and not p.is_relative_to(output)]
+        fixed = Path(*[part for part in itertools.takewhile(lambda q: glob.escape(q) == q, Path(pattern).parts)])
+        if not fixed.resolve().is_relative_to(self.base) or ".." in Path(pattern).parts[len(fixed.parts):]:
+            self.problem(line, f"pattern '{value}' reaches outside the batch file's folder {self.base}; "
+                         "move the batch file up or name the files one by one")
+            return []
+        found = []
+        for p in glob.iglob(pattern, recursive=True):
+            if len(found) == MAX_GLOB_MATCHES:
+                self.problem(line, f"pattern '{value}' matches more than {MAX_GLOB_MATCHES} files; "
+                             "narrow it (e.g. scans/*.obj)")
+                return []
+            found.append(Path(p).resolve())
+        found = [p for p in sorted(set(found)) if p.is_file() and p.is_relative_to(self.base)
+                 and not p.is_relative_to(output)]
         matches = [p for p in found if p.suffix.lower() in SCAN_EXTENSIONS]
         if not matches:
             what = (f"{len(found)} files but no scan ({' '.join(SCAN_EXTENSIONS)})" if found
@@ -482,19 +556,39 @@ def is_complete(job: ScanJob, key: str) -> dict | None:
     from potflat.provenance import file_sha256
 
     manifest = read_manifest(job.out_dir)
-    if manifest is None or manifest.get("key") != key:
+    if manifest is None or manifest.get("key") != key or manifest.get("complete") is not True:
         return None
-    for rel, size in manifest.get("outputs", {}).items():
-        target = job.out_dir / rel
-        if not target.is_file() or target.stat().st_size != size:
+    outputs, inputs = manifest.get("outputs"), manifest.get("inputs", [])
+    if not isinstance(outputs, dict) or not isinstance(inputs, list):
+        return None
+    for rel, size in outputs.items():
+        target = output_inside(job.out_dir, rel)
+        if target is None or not target.is_file() or target.stat().st_size != size:
             return None
-    for item in manifest.get("inputs", []):
+    for item in inputs:
         try:
-            if file_sha256(item["path"]) != item["sha256"]:
-                return None
-        except (OSError, KeyError, TypeError):
+            source = Path(item["path"])
+            if not stat.S_ISREG(source.stat().st_mode) or file_sha256(source) != item["sha256"]:
+                return None  # never hash a device or a pipe (/dev/zero would never end)
+        except (OSError, KeyError, TypeError, ValueError, RuntimeError):
             return None
     return manifest
+
+
+def output_inside(out_dir: Path, rel: Any) -> Path | None:
+    """``out_dir / rel`` if ``rel`` (read from a manifest) names a path inside ``out_dir``, else None.
+
+    Nothing read from an output folder may direct potflat to a path outside it: absolute
+    paths, ``..`` and symbolic links leading out are refused.
+    """
+    if not isinstance(rel, str) or not rel or "\0" in rel or Path(rel).is_absolute():
+        return None
+    base = Path(out_dir).resolve()
+    try:
+        target = (base / rel).resolve()
+    except (OSError, RuntimeError):
+        return None
+    return target if target != base and target.is_relative_to(base) else None
 
 
 def _external_inputs(result, job: ScanJob) -> list[dict]:
@@ -539,7 +633,8 @@ class ScanReport:
     output : str
         Scan output folder.
     status : str
-        ``done``, ``skipped`` (already complete), ``failed`` or ``interrupted``.
+        ``done``, ``skipped`` (already complete), ``failed``, ``interrupted`` (stopped while it
+        ran) or ``cancelled`` (the batch was interrupted before it started).
     seconds : float
         Wall time spent on this scan in this run.
     figures : dict
@@ -583,8 +678,9 @@ def _report(job: ScanJob, status: str, seconds: float = 0.0, figures: dict | Non
 def run_job(job: ScanJob, key: str, *, threads: int | None = None) -> ScanReport:
     """Run one scan of a batch; never raises an ``Exception`` (failures become reports).
 
-    The old manifest is removed first; the new one is written last, after every output,
-    so an interrupted or failed scan is never taken as complete. Outputs that an earlier
+    The old manifest is first replaced by a partial one (``complete: false``, the marker of
+    potflat's own unfinished outputs); the new one is written last, after every output, so an
+    interrupted or failed scan is never taken as complete. Outputs that an earlier
     run wrote and this one did not (e.g. a map no longer asked for) are removed.
     ``error.log`` in the scan folder keeps the traceback of a failure.
     """
@@ -594,9 +690,11 @@ def run_job(job: ScanJob, key: str, *, threads: int | None = None) -> ScanReport
 
     start = time.perf_counter()
     old = read_manifest(job.out_dir) or {}
+    old_outputs = old.get("outputs") if isinstance(old.get("outputs"), dict) else {}
     try:
-        with contextlib.suppress(FileNotFoundError):
-            (job.out_dir / MANIFEST).unlink()
+        # marker first: the folder holds potflat's own (partial) outputs until the final manifest
+        write_json_atomic(job.out_dir / MANIFEST, {"complete": False, "name": job.name, "scan": str(job.scan),
+                                                    "potflat": __version__, "outputs": old_outputs})
         with numba_threads(threads):
             result = run_scan(job.scan, job.out_dir, name=job.name, **job.options)
         outputs = {}
@@ -604,16 +702,17 @@ def run_job(job: ScanJob, key: str, *, threads: int | None = None) -> ScanReport
             p = Path(p).resolve()
             rel = p.relative_to(job.out_dir.resolve()).as_posix()
             outputs[rel] = p.stat().st_size
-        for rel in old.get("outputs", {}):
-            if rel not in outputs:
+        for rel in old_outputs:
+            target = output_inside(job.out_dir, rel)
+            if rel not in outputs and target is not None and rel != MANIFEST:
                 with contextlib.suppress(OSError):
-                    (job.out_dir / rel).unlink()
+                    target.unlink()
         with contextlib.suppress(FileNotFoundError):
             (job.out_dir / "error.log").unlink()
         seconds = time.perf_counter() - start
         figures = result.figures
         write_json_atomic(job.out_dir / MANIFEST, {
-            "key": key, "name": job.name, "scan": str(job.scan), "potflat": __version__,
+            "complete": True, "key": key, "name": job.name, "scan": str(job.scan), "potflat": __version__,
             "options": job.options_json(), "outputs": outputs,
             "inputs": _external_inputs(result, job), "figures": figures,
             "seconds": round(seconds, 3)})
@@ -673,7 +772,7 @@ class BatchSummary:
 
     @property
     def exit_code(self) -> int:
-        """0 if every scan is done or skipped, 1 if any failed or was interrupted."""
+        """0 if every scan is done or skipped, 1 if any failed, was interrupted or cancelled."""
         return 0 if all(r.status in ("done", "skipped") for r in self.reports) else 1
 
     def to_dict(self) -> dict[str, Any]:
@@ -728,55 +827,105 @@ def run_batch(batch: Batch, *, workers: int | None = None, scheduler: str | None
         Also written as ``summary.json`` and ``summary.csv`` in ``batch.output``, even
         when interrupted (unfinished scans are then ``interrupted``).
     """
+    from potflat.io.atomic import output_lock
+
     start = time.perf_counter()
+    wall_start = time.time()
     reports: dict[int, ScanReport] = {}
     todo: list[tuple[int, ScanJob, str]] = []
     emit = on_result or (lambda report: None)
     if workers is not None and workers < 1:
         raise InvalidOptionError(f"--workers must be at least 1, got {workers}")
     client = _dask_client(scheduler) if scheduler is not None else None  # fail before any work
-    try:
-        for index, job in enumerate(batch.jobs):
-            try:
-                key = job_key(job)
-            except OSError as exc:  # the scan vanished or became unreadable since validation
-                reports[index] = _report(job, "failed", error=f"{job.scan}: cannot read: "
-                                         f"{exc.strerror or one_line(exc)}; check the file")
-                continue
-            manifest = None if force else is_complete(job, key)
-            if manifest is not None:
-                reports[index] = _report(job, "skipped", figures=manifest.get("figures"))
-            else:
-                todo.append((index, job, key))
-        if on_plan is not None:
-            on_plan(len(todo), len(reports))
-        for index in sorted(reports):
-            emit(reports[index])
+    with output_lock(batch.output, what="potflat batch"):
+        try:
+            for index, job in enumerate(batch.jobs):
+                try:
+                    key = job_key(job)
+                except OSError as exc:  # the scan vanished or became unreadable since validation
+                    reports[index] = _report(job, "failed", error=f"{job.scan}: cannot read: "
+                                             f"{exc.strerror or one_line(exc)}; check the file")
+                    continue
+                manifest = None if force else is_complete(job, key)
+                if manifest is not None:
+                    reports[index] = _report(job, "skipped", figures=manifest.get("figures"))
+                else:
+                    todo.append((index, job, key))
+            if on_plan is not None:
+                on_plan(len(todo), len(reports))
+            for index in sorted(reports):
+                emit(reports[index])
 
-        def record(index: int, report: ScanReport) -> None:
-            reports[index] = report
-            emit(report)
+            def record(index: int, report: ScanReport) -> None:
+                reports[index] = report
+                emit(report)
 
-        if client is not None:
-            _run_dask(todo, client, record)
-        else:
-            n = workers or default_workers(len(todo))
-            if n == 1 or len(todo) <= 1:
-                for index, job, key in todo:
-                    record(index, run_job(job, key))
+            if client is not None:
+                _run_dask(todo, client, record)
             else:
-                _run_pool(todo, n, record)
-    finally:
-        if client is not None:
-            client.close()
-        ordered = tuple(reports.get(i) or _report(job, "interrupted", error="not finished: the batch "
-                                                  "was interrupted; rerun it to resume")
-                        for i, job in enumerate(batch.jobs))
-        summary = BatchSummary(batch=batch.path, output=batch.output, reports=ordered,
-                               seconds=time.perf_counter() - start)
-        with contextlib.suppress(PotflatError, OSError):
-            summary.write()
+                n = workers or default_workers(len(todo))
+                if n == 1 or len(todo) <= 1:
+                    for index, job, key in todo:
+                        record(index, run_job(job, key))
+                else:
+                    _run_pool(todo, n, record)
+        finally:
+            if client is not None:
+                client.close()
+            ordered = tuple(reports.get(i) or _unfinished(job, wall_start) for i, job in enumerate(batch.jobs))
+            summary = BatchSummary(batch=batch.path, output=batch.output, reports=ordered,
+                                   seconds=time.perf_counter() - start)
+            with contextlib.suppress(PotflatError, OSError):
+                summary.write()
     return summary
+
+
+def _unfinished(job: ScanJob, since: float) -> ScanReport:
+    """The report of a scan that has none when the batch stops: ``interrupted`` if it started
+    (its partial manifest was written in this run, at wall time ``since`` or later), with the
+    time it ran, else ``cancelled``."""
+    manifest = job.out_dir / MANIFEST
+    try:
+        started = manifest.stat().st_mtime
+    except OSError:
+        started = None
+    if started is not None and started >= since - 1.0 and (read_manifest(job.out_dir) or {}).get("complete") is False:
+        return _report(job, "interrupted", max(0.0, time.time() - started),
+                       error="interrupted while it ran; rerun the batch to redo it")
+    return _report(job, "cancelled", error="not started: the batch was interrupted; rerun it to resume")
+
+
+def _worker_start(parent: int) -> None:
+    """Set-up of a local worker process: Ctrl-C is the parent's to handle (it ends the workers);
+    SIGTERM interrupts the scan (its temporaries are removed) and ends the worker; the worker is
+    sent SIGTERM when the parent dies, however it dies (Linux)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _interrupt)
+    with contextlib.suppress(Exception):
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    if os.getppid() != parent:  # the parent died before the line above
+        os._exit(130)
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
+def _run_job_in_worker(job: ScanJob, key: str, threads: int) -> ScanReport:
+    """:func:`run_job` in a pool worker; an interrupt (SIGTERM from the parent) ends the worker
+    once the scan's temporaries are removed, so it can never start a queued scan."""
+    try:
+        return run_job(job, key, threads=threads)
+    except KeyboardInterrupt:
+        os._exit(130)
+
+
+#: Seconds the workers get to remove their temporaries after the batch is interrupted.
+WORKER_STOP_SECONDS = 10.0
 
 
 def _run_pool(todo: list, workers: int, record: Callable[[int, ScanReport], None]) -> None:
@@ -787,9 +936,10 @@ def _run_pool(todo: list, workers: int, record: Callable[[int, ScanReport], None
     threads = max(1, _cores() // workers)
     context = multiprocessing.get_context(START_METHOD)
     crashed = []
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+    start = dict(mp_context=context, initializer=_worker_start, initargs=(os.getpid(),))
+    with ProcessPoolExecutor(max_workers=workers, **start) as pool:
         try:
-            futures = {pool.submit(run_job, job, key, threads=threads): (index, job, key)
+            futures = {pool.submit(_run_job_in_worker, job, key, threads): (index, job, key)
                        for index, job, key in todo}
             for future in as_completed(futures):
                 index, job, key = futures[future]
@@ -798,20 +948,39 @@ def _run_pool(todo: list, workers: int, record: Callable[[int, ScanReport], None
                 except BrokenProcessPool:
                     crashed.append((index, job, key))
         except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)
+            _stop_workers(pool)
             raise
     # A worker process died (killed, out of memory, crashed in native code): the pool is
     # broken and every unfinished scan is affected. Retry each alone in a fresh process, so
     # only the scan that kills its process again is reported failed.
     for index, job, key in sorted(crashed, key=lambda item: item[0]):
-        with ProcessPoolExecutor(max_workers=1, mp_context=context) as pool:
+        with ProcessPoolExecutor(max_workers=1, **start) as pool:
             try:
-                report = pool.submit(run_job, job, key).result()
+                report = pool.submit(_run_job_in_worker, job, key, threads).result()
             except BrokenProcessPool:
                 report = _report(job, "failed", error=(
                     "the worker process died (killed, out of memory or crashed); run this scan "
                     f"alone with 'potflat run {job.scan}' to see why"))
+            except BaseException:
+                _stop_workers(pool)
+                raise
         record(index, report)
+
+
+def _stop_workers(pool) -> None:
+    """Cancel the queued scans and end the workers of ``pool`` (SIGTERM: they remove their
+    temporaries), killing those still alive after :data:`WORKER_STOP_SECONDS`."""
+    pool.shutdown(wait=False, cancel_futures=True)
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    for proc in processes:
+        with contextlib.suppress(Exception):
+            proc.terminate()
+    deadline = time.monotonic() + WORKER_STOP_SECONDS
+    for proc in processes:
+        with contextlib.suppress(Exception):
+            proc.join(max(0.0, deadline - time.monotonic()))
+            if proc.is_alive():
+                proc.kill()
 
 
 def _dask_client(address: str):

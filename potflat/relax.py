@@ -14,8 +14,9 @@ all in 2D. Two solvers minimise the same spring energy:
   moves take few iterations. The result is checked for flipped triangles and boundary
   self-overlap; a folded result is never returned.
 * ``paper``: the paper's damped dynamics (stretch 2, k = 0.5, mass 1, friction 0.01 inside
-  and 1 on the boundary applied per step, semi-implicit Euler, time step from the spring
-  graph's largest eigenvalue), reported with its flip count, whatever it is.
+  and 1 on the boundary applied per step, semi-implicit Euler, time step from a bound of the
+  spring graph's largest eigenvalue: stiffness and valence), reported with its flip count,
+  whatever it is; a state that is no longer finite stops it (nothing is written).
 
 Large meshes first relax coarse copies (grid clusters of the start layout,
 :mod:`potflat.simplify`) and start from them; ``preview`` relaxes only a copy at the image's
@@ -376,19 +377,17 @@ class _Springs:
         count, _ = self.ko.count_crossings(x, seg, cell, 1000)
         return int(count)
 
-    def largest_eigenvalue(self, iters: int = 30) -> float:
-        """Largest eigenvalue of the spring graph Laplacian (power iteration, padded 5%)."""
-        y = np.cos(np.arange(self.n) * 0.7071) + 1.1  # fixed, deterministic start
-        out = np.empty(self.n)
-        lam = 0.0
-        for _ in range(iters):
-            y -= y.mean()
-            nrm = math.sqrt(self.dot(y, y)) or 1.0
-            y /= nrm
-            self.ks.laplacian_matvec(y, self.ptr, self.nbr, self.rst, self.k, self.relative, LENGTH_FLOOR, out)
-            lam = self.dot(y, out)
-            y, out = out, y
-        return 1.05 * lam
+    def laplacian_bound(self) -> float:
+        """An upper bound of the spring graph Laplacian's largest eigenvalue from the actual
+        stiffness and valence (Gershgorin: twice the largest sum of a vertex's spring
+        stiffnesses). A power iteration approaches the eigenvalue from below, and a step from
+        its estimate diverged on real scans (plastic and sea vase: positions beyond 1e150)."""
+        if self.relative:
+            coef = self.k / np.maximum(self.rst, LENGTH_FLOOR) ** 2
+            rows = np.bincount(np.repeat(np.arange(self.n), np.diff(self.ptr)), weights=coef, minlength=self.n)
+        else:
+            rows = self.k * np.diff(self.ptr).astype(np.float64)
+        return 2.0 * float(rows.max(initial=0.0))
 
 
 def _boundary_neighbours(segments: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -649,7 +648,7 @@ def _minimise(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, leve
 
 def _dynamics(sp: _Springs, x: np.ndarray, settings: dict, run: _Run, levels_out: list):
     friction = np.where(sp.boundary, settings["friction_boundary"], settings["friction_inside"]).astype(np.float64)
-    lam = sp.largest_eigenvalue()
+    lam = sp.laplacian_bound()
     dt = 1.9 / math.sqrt(lam) if lam > 0 else 1.0
     v = np.zeros_like(x)
     xo, vo = np.empty_like(x), np.empty_like(x)
@@ -665,8 +664,10 @@ def _dynamics(sp: _Springs, x: np.ndarray, settings: dict, run: _Run, levels_out
         it += 1
         e = float(np.sum(es))  # energy before this step
         hist.append(e)
-        if not np.isfinite(e):
-            break
+        if not np.isfinite(e):  # NaN or overflowing positions make the energy non-finite
+            raise FoldedResultError(f"the paper dynamics diverged at iteration {it} (the spring energy is no longer "
+                                    "finite); nothing written: use a fold-free preset (standard) or a smaller "
+                                    "--stiffness")
         if run.record(e):
             break
         if it % WINDOW_DYNAMICS == 0 and _relative_change(hist, WINDOW_DYNAMICS) < settings["tol"]:
@@ -917,7 +918,8 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
             f"relaxation ended with {flipped} flipped triangles and {overlap} boundary crossings; "
             "nothing written: report this mesh, or try --preset preview")
     if not finite:
-        raise FoldedResultError("the paper dynamics diverged (NaN); use the default preset")
+        raise FoldedResultError("the paper dynamics diverged (positions no longer finite); nothing written: use a "
+                                "fold-free preset (standard)")
     uv_out = np.empty_like(x)
     uv_out[order] = x * unit + centre
     before = summarize(V, uv, F)
@@ -1028,8 +1030,10 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     rollout_json = rollout_ply.with_name(f"{stem}.rollout.json")
     if rollout_json.exists():
         try:
-            rj = json.loads(rollout_json.read_text())
+            rj = json.loads(rollout_json.read_text(encoding="utf-8"))
         except (OSError, ValueError):
+            rj = {}
+        if not isinstance(rj, dict):  # a sidecar holding null, a list...: nothing to copy from it
             rj = {}
         for key in ("axis", "proxy", "units"):
             if key in rj:

@@ -6,7 +6,7 @@ from typing import Annotated
 
 import typer
 from potflat_cli._errors import user_errors
-from potflat_cli._options import Json, Name, OutputDir, Quiet
+from potflat_cli._options import Json, Name, Quiet, StageOutputDir
 
 HELP = """Bake a flattening (NAME.relaxed.ply, or NAME.rollout.ply to compare) into true-scale images.
 
@@ -22,7 +22,7 @@ Input = Annotated[Path, typer.Argument(help="NAME.relaxed.ply (or NAME.rollout.p
 @user_errors
 def bake_command(
     flat_ply: Input,
-    output: OutputDir = None,
+    output: StageOutputDir = None,
     px_per_mm: Annotated[float | None, typer.Option(
         "--px-per-mm", help="Resolution in pixels per millimetre \\[default: 4].")] = None,
     dpi: Annotated[float | None, typer.Option(

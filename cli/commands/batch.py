@@ -8,10 +8,12 @@ from typing import Annotated, Optional
 import typer
 
 from potflat_cli._errors import EXIT_USAGE, user_errors
-from potflat_cli._options import Json, OutputDir, Quiet
+from potflat_cli._options import Json, Quiet
 
-BatchFile = Annotated[Path, typer.Argument(help="YAML batch file (schema: docs/cli.md).",
-                                           exists=True, dir_okay=False, readable=True)]
+BatchFile = Annotated[Path, typer.Argument(help="YAML batch file (schema: docs/cli.md).")]
+BatchOutput = Annotated[Optional[Path], typer.Option(
+    "--output", "-o", help="Output folder, one sub-folder per scan \\[default: the batch file's 'output:'].",
+    file_okay=False)]
 Workers = Annotated[Optional[int], typer.Option(
     "--workers", "-w", min=1,
     help="Local worker processes \\[default: one per core, at most one per scan]. "
@@ -25,7 +27,7 @@ Force = Annotated[bool, typer.Option("--force", help="Redo every scan, even thos
 
 @user_errors
 def batch_command(batch_file: BatchFile, workers: Workers = None, scheduler: Scheduler = None,
-                  output: OutputDir = None, force: Force = False, quiet: Quiet = False,
+                  output: BatchOutput = None, force: Force = False, quiet: Quiet = False,
                   json: Json = False) -> None:
     """Run rollout, relax and bake on every scan of a YAML batch file.
 
@@ -99,7 +101,7 @@ def _print_table(summary) -> None:
     for column, justify in (("scan", "left"), ("status", "left"), ("time s", "right"),
                             ("edge RMS", "right"), ("flipped", "right"), ("error", "left")):
         table.add_column(column, justify=justify, overflow="fold")
-    styles = {"done": "green", "skipped": "dim", "failed": "red", "interrupted": "yellow"}
+    styles = {"done": "green", "skipped": "dim", "failed": "red", "interrupted": "yellow", "cancelled": "yellow"}
     for r in summary.reports:
         rms, flips = r.figures.get("edge_rms"), r.figures.get("flipped")
         table.add_row(r.name, f"[{styles[r.status]}]{r.status}[/]",
@@ -111,5 +113,6 @@ def _print_table(summary) -> None:
     c = summary.counts
     out.print(f"{c['done']} done, {c['skipped']} skipped, {c['failed']} failed"
               + (f", {c['interrupted']} interrupted" if c["interrupted"] else "")
+              + (f", {c['cancelled']} cancelled" if c["cancelled"] else "")
               + f" in {summary.seconds:.1f} s; summary.csv and summary.json in {summary.output}",
               highlight=False)

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from potflat_cli._errors import user_errors
-from potflat_cli._options import Json, Name, OutputDir, Quiet
+from potflat_cli._options import Json, Name, Quiet, StageOutputDir
 
 HELP = """Relax a rollout into a fold-free flattening: writes NAME.relaxed.ply (with per-vertex stress) and NAME.relaxed.json (energy history, flips, boundary check, distortion before/after, timings, provenance).
 
@@ -24,7 +24,7 @@ Input = Annotated[Path, typer.Argument(help="NAME.rollout.ply written by 'potfla
 @user_errors
 def relax_command(
     rollout_ply: Input,
-    output: OutputDir = None,
+    output: StageOutputDir = None,
     preset: Annotated[str, typer.Option(
         "--preset", help="preview | standard | archival (fold-free) | paper (the paper's dynamics, may fold).")] = "standard",
     tol: Annotated[float | None, typer.Option(

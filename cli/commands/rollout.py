@@ -15,8 +15,7 @@ Writes NAME.rollout.ply (3D positions + flattened u v, texture coordinates or co
 Example:  potflat rollout scans/amphora.obj -o out --band 0.2 0.7 --proxy cone
 """
 
-Scan = Annotated[Path, typer.Argument(help="The scan: OBJ (+MTL, texture), PLY, STL, OFF, GLB/glTF.",
-                                      exists=True, dir_okay=False, readable=True)]
+Scan = Annotated[Path, typer.Argument(help="The scan: OBJ (+MTL, texture), PLY, STL, OFF, GLB/glTF.")]
 
 
 @user_errors
@@ -81,7 +80,7 @@ def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quie
 
     from potflat.rollout import run_rollout_stage
 
-    result = run_stage(f"rolling out {scan.name}", lambda: run_rollout_stage(scan, output or scan.parent, options, name=name),
+    result = run_stage(f"rolling out {scan.name}", lambda: run_rollout_stage(scan, output or Path(name or scan.stem), options, name=name),
                        quiet=quiet, as_json=as_json)
     if result is None:
         return

@@ -17,8 +17,7 @@ Every option of 'potflat rollout', 'potflat relax' and 'potflat bake' is accepte
 Example:  potflat run samples/data/amphora.obj -o out/ --proxy cone --preset preview --px-per-mm 4
 """
 
-Scan = Annotated[Path, typer.Argument(help="Textured scan (OBJ, PLY, STL, OFF, GLB/glTF).",
-                                      exists=True, dir_okay=False, readable=True)]
+Scan = Annotated[Path, typer.Argument(help="Textured scan (OBJ, PLY, STL, OFF, GLB/glTF).")]
 
 
 def run_command(scan: Scan, output: OutputDir = None, name: Name = None,
@@ -66,7 +65,8 @@ def _run(values: dict[str, Any]) -> None:
     with err.status(f"{scan.name}: starting") as status:
         def progress(stage: str) -> None:
             status.update(f"{scan.name}: {stage}")
-        result = run_scan(scan, values["output"] or scan.parent, name=values["name"], progress=progress, **options)
+        out_dir = values["output"] or Path(values["name"] or scan.stem)  # ./NAME/, never the scan's folder
+        result = run_scan(scan, out_dir, name=values["name"], progress=progress, **options)
     figures = result.figures
     if values["json"]:
         print(json_module.dumps({

@@ -951,30 +951,6 @@ def dynamics_step(x, v, ptr, nbr, rst, k, relative, r_floor, friction, dt, x_out
 
 
 @parallel
-def laplacian_matvec(y, ptr, nbr, rst, k, relative, r_floor, out):
-    """``out = L y`` for the spring graph Laplacian with weights ``coef`` (per coordinate).
-
-    Its largest eigenvalue bounds the spring energy's Hessian (each spring's Hessian is at
-    most ``coef I``), which sets the stable time step of the dynamics.
-
-    Parameters
-    ----------
-    y : (n,) float64
-    out : (n,) float64
-    """
-    n = y.shape[0]
-    for i in prange(n):
-        acc = 0.0
-        for p in range(ptr[i], ptr[i + 1]):
-            c = k
-            if relative:
-                rr = max(rst[p], r_floor)
-                c = k / (rr * rr)
-            acc += c * (y[i] - y[nbr[p]])
-        out[i] = acc
-
-
-@parallel
 def block_dot(a, b, out):
     """Partial dot products of two flat vectors over fixed blocks (sum ``out`` serially).
 

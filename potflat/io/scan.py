@@ -602,7 +602,11 @@ def _ply_header(data: bytes, path: Path):
     nl = data.find(b"\n", end)
     body_start = len(data) if nl < 0 else nl + 1
     fmt, comments, elements = None, [], []
-    for line in data[:end].decode("latin-1").splitlines():
+    try:  # names (TextureFile) in UTF-8, or Latin-1 from older tools
+        text = data[:end].decode("utf-8")
+    except UnicodeDecodeError:
+        text = data[:end].decode("latin-1")
+    for line in text.splitlines():
         parts = line.split()
         if not parts:
             continue
@@ -632,6 +636,17 @@ def _truncated(path: Path, element: str) -> InvalidInputError:
                              "the file is cut short: copy or export it again")
 
 
+def _ply_list_bytes(k: int, item_bytes: int, left: int, path: Path, element: str) -> int:
+    """Bytes of a PLY list of ``k`` items; a negative length or one beyond the ``left`` bytes of
+    the file is an error (a hostile or corrupt header cannot make potflat allocate it)."""
+    if k < 0:
+        raise InvalidInputError(f"{path}: a {element} list has a negative length ({k}); the file is corrupt: "
+                                "export it again")
+    if k * item_bytes > left:
+        raise _truncated(path, element)
+    return k * item_bytes
+
+
 def _ply_binary(body: memoryview, elements: list[_PlyElement], endian: str, path: Path) -> None:
     offset = 0
     for el in elements:
@@ -656,11 +671,13 @@ def _ply_binary(body: memoryview, elements: list[_PlyElement], endian: str, path
                 if len(p) == 3:
                     cdt = np.dtype(endian + p[1])
                     k = int(np.frombuffer(body, cdt, 1, pos)[0])
+                    pos += cdt.itemsize + _ply_list_bytes(k, np.dtype(p[2]).itemsize, len(body) - pos, path, el.name)
                     fields += [(p[0] + "#n", cdt), (p[0], endian + p[2], (k,))]
-                    pos += cdt.itemsize + k * np.dtype(p[2]).itemsize
                 else:
                     fields.append((p[0], endian + p[1]))
                     pos += np.dtype(p[1]).itemsize
+        except InvalidInputError:
+            raise
         except ValueError:
             raise _truncated(path, el.name) from None
         dt = np.dtype(fields)
@@ -688,6 +705,7 @@ def _ply_binary_rows(body: memoryview, offset: int, el: _PlyElement, endian: str
                 if len(p) == 3:
                     (k,) = struct.unpack_from(bo + codes[p[1]], body, offset)
                     offset += struct.calcsize(codes[p[1]])
+                    _ply_list_bytes(k, struct.calcsize(codes[p[2]]), len(body) - offset, path, el.name)
                     cols[p[0]].extend(struct.unpack_from(f"{bo}{k}{codes[p[2]]}", body, offset))
                     offset += k * struct.calcsize(codes[p[2]])
                     lens[p[0]].append(k)
@@ -721,6 +739,7 @@ def _ply_ascii(body: bytes, elements: list[_PlyElement], path: Path) -> None:
                 if pos + w >= len(tok):
                     raise _truncated(path, el.name)
                 k = int(tok[pos + w])
+                _ply_list_bytes(k, 1, len(tok) - pos - w - 1, path, el.name)
                 widths.append((p[0], w, k))
                 w += 1 + k
             else:
@@ -747,8 +766,7 @@ def _ply_ascii(body: bytes, elements: list[_PlyElement], path: Path) -> None:
                     raise _truncated(path, el.name)
                 if len(p) == 3:
                     k = int(tok[pos])
-                    if pos + 1 + k > len(tok):
-                        raise _truncated(path, el.name)
+                    _ply_list_bytes(k, 1, len(tok) - pos - 1, path, el.name)
                     cols[p[0]].append(tok[pos + 1:pos + 1 + k])
                     lens[p[0]].append(k)
                     pos += 1 + k

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -19,14 +20,6 @@ from potflat.distortion import row_blocks
 from potflat.errors import InvalidInputError
 from potflat.io.atomic import atomic_path
 from potflat.types import UNITS_MM, FlatMesh, Mesh
-
-_PLY_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
-    "short": "<i2", "int16": "<i2", "ushort": "<u2", "uint16": "<u2",
-    "int": "<i4", "int32": "<i4", "uint": "<u4", "uint32": "<u4",
-    "float": "<f4", "float32": "<f4", "double": "<f8", "float64": "<f8",
-}
-
 
 def _place_texture(texture: Path, ply_path: Path) -> str:
     """Make ``texture`` available beside ``ply_path`` and return its name there.
@@ -108,7 +101,7 @@ def write_flat_ply(path: str | os.PathLike, flat: FlatMesh, *, comments: tuple[s
     header.append("end_header")
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
-            fh.write(("\n".join(header) + "\n").encode("ascii"))
+            fh.write(("\n".join(header) + "\n").encode("utf-8"))
             for rows in row_blocks(n):  # records built and written in blocks: no copy of the mesh
                 vert = np.empty(rows.stop - rows.start, dtype=vfields)
                 vert["x"], vert["y"], vert["z"] = mesh.vertices[rows].T
@@ -150,61 +143,56 @@ def read_flat_ply(path: str | os.PathLike) -> FlatMesh:
     InvalidInputError
         When the file is missing, truncated, or not a triangle stage PLY.
     """
+    from potflat.io.scan import _ply_header
+
     path = Path(path)
     try:
+        if not stat.S_ISREG(path.stat().st_mode):
+            raise InvalidInputError(f"{path} is not a regular file (a folder, device or pipe); give a stage file "
+                                    "written by potflat")
         data = path.read_bytes()
-    except OSError as exc:
-        raise InvalidInputError(f"cannot read {path}: {exc.strerror or exc}") from None
-    end = data.find(b"end_header\n")
-    if not data.startswith(b"ply") or end < 0:
-        raise InvalidInputError(f"{path} is not a PLY file (no 'ply' header); give a stage file written by potflat")
-    lines = data[:end].decode("ascii", "replace").splitlines()
-    body = memoryview(data)[end + len("end_header\n"):]
-    fmt = next((ln.split()[1] for ln in lines if ln.startswith("format")), "")
+    except (OSError, RuntimeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else "a symbolic link loop"
+        raise InvalidInputError(f"cannot read {path}: {reason}; give a stage file written by potflat") from None
+    fmt, comment_lines, elements, body_start = _ply_header(data, path)
     if fmt != "binary_little_endian":
         raise InvalidInputError(f"{path} is {fmt or 'an unknown'} PLY; stage files are binary_little_endian (rewrite it with potflat)")
+    body = memoryview(data)[body_start:]
 
     units, texture_name, comments = "mm", None, []
-    elements: list[tuple[str, int, list]] = []
-    for ln in lines:
-        parts = ln.split()
-        if not parts:
-            continue
-        if parts[0] == "comment":
-            if len(parts) >= 3 and parts[1] == "units":
-                units = parts[2]
-            elif len(parts) >= 3 and parts[1] == "TextureFile":
-                texture_name = ln.split("TextureFile", 1)[1].strip()
-            else:
-                comments.append(ln[len("comment "):])
-        elif parts[0] == "element":
-            elements.append((parts[1], int(parts[2]), []))
-        elif parts[0] == "property" and elements:
-            elements[-1][2].append(parts[1:])
+    for line in comment_lines:
+        parts = line.split()
+        if len(parts) >= 2 and parts[0] == "units":
+            units = parts[1]
+        elif len(parts) >= 2 and parts[0] == "TextureFile":
+            texture_name = line.split("TextureFile", 1)[1].strip()
+        else:
+            comments.append(line)
     if units not in UNITS_MM:
         raise InvalidInputError(f"{path} declares unknown units {units!r}; use one of {', '.join(UNITS_MM)}")
 
     arrays = {}
     offset = 0
-    for name, count, props in elements:
+    for el in elements:
         fields = []
-        for prop in props:
-            try:
-                if prop[0] == "list":
-                    fields.append((prop[3] + "#n", _PLY_TYPES[prop[1]]))
-                    width = 3 if prop[3] == "vertex_indices" else 6 if prop[3] == "texcoord" else None
-                    if width is None:
-                        raise InvalidInputError(f"{path}: unsupported list property {prop[3]!r} in a stage file")
-                    fields.append((prop[3], _PLY_TYPES[prop[2]], (width,)))
-                else:
-                    fields.append((prop[1], _PLY_TYPES[prop[0]]))
-            except KeyError:
-                raise InvalidInputError(f"{path}: unknown PLY type in property {' '.join(prop)}") from None
-        dtype = np.dtype(fields)
-        nbytes = dtype.itemsize * count
+        for prop in el.props:
+            if len(prop) == 3:
+                width = {"vertex_indices": 3, "texcoord": 6}.get(prop[0])
+                if width is None:
+                    raise InvalidInputError(f"{path}: unsupported list property {prop[0]!r} in a stage file; "
+                                            "give a stage file written by potflat")
+                fields += [(prop[0] + "#n", "<" + prop[1]), (prop[0], "<" + prop[2], (width,))]
+            else:
+                fields.append((prop[0], "<" + prop[1]))
+        try:
+            dtype = np.dtype(fields)
+        except (TypeError, ValueError):  # a property name given twice
+            raise InvalidInputError(f"{path}: malformed {el.name} properties; give a stage file written by "
+                                    "potflat") from None
+        nbytes = dtype.itemsize * el.count
         if offset + nbytes > len(body):
-            raise InvalidInputError(f"{path} is truncated ({name} data incomplete); write it again")
-        arrays[name] = np.frombuffer(body, dtype=dtype, count=count, offset=offset)
+            raise InvalidInputError(f"{path} is truncated ({el.name} data incomplete); write it again")
+        arrays[el.name] = np.frombuffer(body, dtype=dtype, count=el.count, offset=offset)
         offset += nbytes
 
     vert, face = arrays.get("vertex"), arrays.get("face")
