@@ -195,8 +195,8 @@ class ScaleLayer:
         self.grid_font_px = int(np.clip(round(GRID_MM * px_per_mm * 0.3), 9, 48))
         self.thick = int(max(3, round(bar_px / 30)))
         self.margin = max(4, self.font_px // 2)
-        self.label_step = next(s for s in (10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 1e9)
-                               if s * px_per_mm >= 4 * self.grid_font_px)
+        self.label_step = next((s for s in (10, 20, 50, 100, 200, 500, 1000, 2000, 5000)
+                                if s * px_per_mm >= 4 * self.grid_font_px), 1e9)
 
     def _draw_bar(self, draw, x0: float, y0: float) -> None:
         ppm, L = self.px_per_mm, self.bar_mm
@@ -206,7 +206,7 @@ class ScaleLayer:
         for i in range(segments):
             xa = x0 + i * L * ppm / segments
             xb = x0 + (i + 1) * L * ppm / segments
-            draw.rectangle([round(xa), y0, round(xb) - 1, y0 + self.thick - 1],
+            draw.rectangle([round(xa), y0, max(round(xa), round(xb) - 1), y0 + self.thick - 1],
                            fill=(0, 0, 0, 255) if i % 2 == 0 else (255, 255, 255, 255), outline=(0, 0, 0, 255))
         label = f"{L:g} mm"
         draw.text((x0, y0 + self.thick + self.margin // 2), "0", fill=(0, 0, 0, 255), font=self._f)

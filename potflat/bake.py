@@ -38,6 +38,9 @@ MAP_NAMES = ("stress", "area", "anisotropy")
 DEFAULT_PX_PER_MM = 4.0
 #: Transparent border around the mesh, in pixels.
 PAD_PX = 1
+#: Fewest pixels along the painting's longer side: smaller images show nothing (and leave no
+#: room for a scale bar); a resolution that small is a mistyped one, or a scan in metres.
+MIN_PAINTING_PX = 16
 #: Image rows per raster block (the unit of parallel work).
 BLOCK_ROWS = 4
 #: Sub-samples rendered per strip (bounds the strip buffers to ~100 MB).
@@ -286,15 +289,34 @@ def _make_grid(flat: FlatMesh, px_per_mm: float, max_megapixels: float) -> _Grid
         raise InvalidInputError(f"{flat.mesh.source or 'the flattening'} has NaN or infinite uv; flatten it again")
     lo, hi = uv.min(axis=0), uv.max(axis=0)
     scale = px_per_mm * flat.mesh.mm_per_unit
-    width = math.ceil((hi[0] - lo[0]) * scale) + 2 * PAD_PX
-    height = math.ceil((hi[1] - lo[1]) * scale) + 2 * PAD_PX
+    width, height = image_size((hi - lo) * flat.mesh.mm_per_unit, px_per_mm, max_megapixels)
+    origin = np.array([lo[0] - PAD_PX / scale, hi[1] + PAD_PX / scale])
+    return _Grid(px_per_mm, scale, origin, width, height)
+
+
+def image_size(extent_mm, px_per_mm: float, max_megapixels: float) -> tuple[int, int]:
+    """Width and height in pixels of the image of a painting ``extent_mm`` (width, height) wide.
+
+    Raises
+    ------
+    InvalidOptionError
+        When the image would exceed ``max_megapixels`` or the painting would be under
+        :data:`MIN_PAINTING_PX` pixels long; the message gives a resolution that works.
+    """
+    w_mm, h_mm = (float(e) for e in extent_mm)
+    width = math.ceil(w_mm * px_per_mm) + 2 * PAD_PX
+    height = math.ceil(h_mm * px_per_mm) + 2 * PAD_PX
     if width * height > max_megapixels * 1e6:
         suggest = px_per_mm * math.sqrt(max_megapixels * 1e6 / (width * height)) * 0.99
         raise InvalidOptionError(
             f"{px_per_mm:g} px/mm would make a {width} x {height} image ({width * height / 1e6:.0f} megapixels, "
             f"over the {max_megapixels:g} MP limit); use px_per_mm {suggest:.3g} or less")
-    origin = np.array([lo[0] - PAD_PX / scale, hi[1] + PAD_PX / scale])
-    return _Grid(px_per_mm, scale, origin, width, height)
+    longest = max(w_mm, h_mm)
+    if longest * px_per_mm < MIN_PAINTING_PX:
+        raise InvalidOptionError(
+            f"{px_per_mm:g} px/mm would make the {w_mm:.3g} x {h_mm:.3g} mm painting a {width} x {height} pixel "
+            f"image; use px_per_mm {MIN_PAINTING_PX / max(longest, 1e-300):.3g} or more")
+    return width, height
 
 
 class _Renderer:

@@ -289,6 +289,24 @@ def _preview_at_image_resolution(options: dict) -> dict:
     return options
 
 
+def _image_check(bake) -> Callable:
+    """A check of the rollout's flattening: would the baked image be of a sane size? Run before
+    the rollout writes anything, so an absurd resolution (or a scan in the wrong unit) stops the
+    run before any file exists rather than at the bake, after rollout and relax."""
+    def check(flat) -> None:
+        import numpy as np
+
+        from potflat.bake import image_size
+
+        used = np.zeros(len(flat.uv), bool)
+        used[flat.mesh.faces.ravel()] = True
+        if used.any():
+            uv = flat.uv[used]
+            image_size((uv.max(axis=0) - uv.min(axis=0)) * flat.mesh.mm_per_unit, bake.resolution,
+                       bake.max_megapixels)
+    return check
+
+
 def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: str | None = None,
              progress: Callable[[str], None] | None = None) -> ScanResult:
     """Run rollout, relax and bake on one scan, writing every output into ``out_dir``.
@@ -342,7 +360,8 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
                 marker = write_json_atomic(partial_marker(out, name), {"potflat": "incomplete", "scan": str(scan)})
             _, run = stage_api(stage)
             t = time.perf_counter()
-            stages[stage] = run(source, out, options[stage], name=name)
+            extra = {"check": _image_check(options["bake"])} if stage == "rollout" else {}
+            stages[stage] = run(source, out, options[stage], name=name, **extra)
             seconds[stage] = time.perf_counter() - t
         marker.unlink()
     seconds["total"] = time.perf_counter() - start

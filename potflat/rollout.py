@@ -37,7 +37,7 @@ from potflat.attachments import AttachmentSelection, detect_attachments
 from potflat.axis import AxisFit, estimate_axis, manual_axis
 from potflat.distortion import DistortionSummary, face_areas, row_blocks, summarize
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.types import UNITS_MM, FlatMesh, Mesh, StageOutput
+from potflat.types import UNITS_MM, FlatMesh, Mesh, StageOutput, canonical_units
 from potflat.walls import SIDES, FaceGraph, WallSelection, face_adjacency, select_wall
 
 TWO_PI = 2.0 * np.pi
@@ -161,8 +161,10 @@ class RolloutOptions:
             raise InvalidOptionError(f"side {self.side!r} is unknown; use outer or inner")
         if not isinstance(self.keep_attachments, bool):
             raise InvalidOptionError(f"keep_attachments must be true or false, got {self.keep_attachments!r}")
-        if self.units is not None and self.units not in UNITS_MM:
-            raise InvalidOptionError(f"units {self.units!r} is unknown; use one of {', '.join(UNITS_MM)}")
+        if self.units is not None:
+            if canonical_units(self.units) is None:
+                raise InvalidOptionError(f"units {self.units!r} is unknown; use one of {', '.join(UNITS_MM)}")
+            object.__setattr__(self, "units", canonical_units(self.units))
         if not isinstance(self.texture, bool):
             raise InvalidOptionError(f"texture must be true or false, got {self.texture!r}")
         if self.proxy not in ("auto", *_proxy.KINDS):
@@ -1193,7 +1195,7 @@ def _trimmed_summary(result: RolloutResult, mm_per_unit: float) -> dict:
 
 
 def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None, *,
-                      name: str | None = None) -> StageOutput:
+                      name: str | None = None, check=None) -> StageOutput:
     """Read a scan, roll it out, write ``NAME.rollout.ply``, ``NAME.rollout.json`` and its profile.
 
     The profile (:func:`potflat.profile.vessel_profile` of both walls around the rollout's
@@ -1209,6 +1211,9 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     options : RolloutOptions, optional
     name : str, optional
         Output stem; default: the scan's file stem.
+    check : callable, optional
+        Called with the flattening (:class:`FlatMesh`) before anything is written; it may
+        raise to stop the run (``potflat run`` checks the size of the image to come).
 
     Returns
     -------
@@ -1222,17 +1227,15 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
         When an output would overwrite the input, or the name is not a plain file stem.
     """
     from potflat import __version__
-    from potflat.io.atomic import write_json_atomic
-    from potflat.io.scan import load_scan
+    from potflat.io.atomic import check_output_name, write_json_atomic
+    from potflat.io.scan import check_plausible_size, load_scan
     from potflat.io.stage import write_flat_ply
     from potflat.profile import vessel_profile, write_profile_csv, write_profile_svg
     from potflat.provenance import provenance
 
     options = options or RolloutOptions()
     scan_path, out_dir = Path(scan_path), Path(out_dir)
-    name = name or scan_path.stem
-    if not name or Path(name).name != name or name in (".", ".."):
-        raise InvalidOptionError(f"name {name!r} must be a plain file stem without folders")
+    name = check_output_name(name or scan_path.stem, what="name" if name else f"the name of {scan_path}")
     ply_path = out_dir / f"{name}.rollout.ply"
     json_path = out_dir / f"{name}.rollout.json"
     csv_path = out_dir / f"{name}.profile.csv"
@@ -1242,9 +1245,12 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
             raise InvalidOptionError(
                 f"output {out} would overwrite the input scan; choose another output folder or --name")
     loaded = load_scan(scan_path, units=options.units, texture="use" if options.texture else "ignore")
+    check_plausible_size(loaded, scan_path)
     mesh, cleaning = loaded.mesh, loaded.report.as_dict()
     del loaded
     result = rollout(mesh, options=options)
+    if check is not None:
+        check(result.flat)
     mesh = mesh.replace(texcoords=None)  # the rollout has its own; the profile needs none
     body = None if result.attachments_kept or not result.attachments.n_faces else ~result.attachments.face_mask
     profile = vessel_profile(mesh, result.axis.point, result.axis.direction, face_mask=body,

@@ -24,6 +24,23 @@ from potflat.errors import InvalidInputError
 UNITS_MM: dict[str, float] = {"um": 1e-3, "mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 
 
+#: Other names of the units (lower case): "meter", "metre", "millimetres", "µm", "inch"...
+UNIT_ALIASES: dict[str, str] = {
+    **{f"{stem}{end}": unit for unit, stems in (("mm", ("millimeter", "millimetre")), ("cm", ("centimeter", "centimetre")),
+                                                 ("m", ("meter", "metre")), ("um", ("micrometer", "micrometre", "micron")))
+       for stem in stems for end in ("", "s")},
+    "µm": "um", "μm": "um", "inch": "in", "inches": "in", '"': "in",
+}
+
+
+def canonical_units(units: str) -> str | None:
+    """The key of :data:`UNITS_MM` that ``units`` names (``"Metres"`` -> ``"m"``), or None."""
+    if not isinstance(units, str):
+        return None
+    key = units.strip().lower()
+    return key if key in UNITS_MM else UNIT_ALIASES.get(key)
+
+
 def mm_per_unit(units: str) -> float:
     """Millimetres per scan unit for ``units`` (one of :data:`UNITS_MM`)."""
     try:

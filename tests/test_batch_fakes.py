@@ -114,7 +114,7 @@ def _sabotage(name: str, stage: str) -> None:
         raise KeyboardInterrupt
 
 
-def run_rollout_stage(scan_path, out_dir, options, *, name=None):
+def run_rollout_stage(scan_path, out_dir, options, *, name=None, check=None):
     scan, out = Path(scan_path), Path(out_dir)
     name = name or scan.stem
     data = scan.read_bytes()

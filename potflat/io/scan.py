@@ -41,7 +41,7 @@ from potflat.cleaning import (
     weld_vertices,
 )
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.types import UNITS_MM, Mesh
+from potflat.types import UNITS_MM, Mesh, canonical_units
 
 #: File extensions :func:`load_scan` reads.
 SCAN_EXTENSIONS = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
@@ -61,10 +61,48 @@ class LoadedScan:
         Welded, cleaned triangle mesh in the scan's own units.
     report : CleaningReport
         What loading and cleaning did (``report.as_dict()`` for JSON).
+    units_from : str
+        Where ``mesh.units`` came from: ``"given"`` (the ``units`` argument), ``"file"`` (the
+        file declares it) or ``"default"`` (millimetres, nothing said: see
+        :func:`check_plausible_size`).
     """
 
     mesh: Mesh
     report: CleaningReport
+    units_from: str = "default"
+
+
+#: Size range (mm, the longest side of the bounding box) of a vessel or sherd scanned in
+#: millimetres; outside it, a scan with no declared unit is taken for a unit mistake.
+PLAUSIBLE_SIZE_MM = (10.0, 2000.0)
+
+
+def check_plausible_size(loaded: LoadedScan, path: str | os.PathLike) -> None:
+    """Refuse a scan whose size is implausible in the unit it was read in, unless that unit was
+    given or declared by the file: a 45 cm vase in metres would be read as 0.45 mm.
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the size, the unit it most likely is and the option that says so
+        (``looks like metres: add --units m``).
+    """
+    if loaded.units_from != "default":
+        return
+    mesh = loaded.mesh
+    side = float(np.ptp(mesh.vertices, axis=0).max()) if len(mesh.vertices) else 0.0
+    lo, hi = PLAUSIBLE_SIZE_MM
+    size_mm = side * mesh.mm_per_unit
+    if lo <= size_mm <= hi:
+        return
+    names = {"m": "metres", "cm": "centimetres", "um": "micrometres", "in": "inches", "mm": "millimetres"}
+    candidates = ("m", "cm", "in") if size_mm < lo else ("um",)
+    likely = next((u for u in candidates if lo <= side * UNITS_MM[u] <= hi), None)
+    what = "small" if size_mm < lo else "large"
+    hint = (f"it looks like {names[likely]}: add --units {likely}" if likely
+            else f"give its unit with --units ({', '.join(UNITS_MM)})")
+    raise InvalidInputError(f"{path} is {side:.4g} units across: in {names[mesh.units]} a vessel too {what} to be real "
+                            f"({lo:g} to {hi:g} mm); {hint}, or --units {mesh.units} if the size is right")
 
 
 @dataclass
@@ -129,8 +167,10 @@ def load_scan(path: str | os.PathLike, *, units: str | None = None, clean: bool 
     InvalidOptionError
         An option out of range.
     """
-    if units is not None and units not in UNITS_MM:
-        raise InvalidOptionError(f"unknown units {units!r}; use one of {', '.join(UNITS_MM)}")
+    if units is not None:
+        if canonical_units(units) is None:
+            raise InvalidOptionError(f"unknown units {units!r}; use one of {', '.join(UNITS_MM)}")
+        units = canonical_units(units)
     if texture not in _TEXTURE_MODES:
         raise InvalidOptionError(f"texture must be one of {', '.join(_TEXTURE_MODES)}, got {texture!r}")
     if not (isinstance(max_texture_pixels, (int, np.integer)) and max_texture_pixels > 0):
@@ -160,7 +200,8 @@ def load_scan(path: str | os.PathLike, *, units: str | None = None, clean: bool 
                                 cleaned=False)
     report = replace(report, polygons_triangulated=raw.polygons_triangulated,
                      warnings=tuple(raw.warnings) + report.warnings)
-    return LoadedScan(mesh=mesh, report=report)
+    return LoadedScan(mesh=mesh, report=report,
+                      units_from="given" if units is not None else "file" if raw.units else "default")
 
 
 # ---------------------------------------------------------------------------------------
@@ -806,8 +847,8 @@ def _read_ply(path: Path, texture: str, max_pixels: int) -> _Raw:
 
     for c in comments:
         parts = c.split()
-        if len(parts) >= 2 and parts[0] == "units" and parts[1] in UNITS_MM:
-            raw.units = parts[1]
+        if len(parts) >= 2 and parts[0] == "units" and canonical_units(parts[1]):
+            raw.units = canonical_units(parts[1])
     names = [c.split(None, 1)[1].strip() for c in comments
              if c.split(None, 1)[0:1] == ["TextureFile"] and len(c.split(None, 1)) > 1]
 
@@ -893,8 +934,8 @@ def _read_trimesh(path: Path, texture: str, max_pixels: int) -> _Raw:
     if path.suffix.lower() == ".stl":
         head = _read_bytes(path)[:80].decode("latin-1")
         m = re.search(r"UNITS\s*=\s*([A-Za-z]+)", head)
-        if m and m.group(1).lower() in UNITS_MM:
-            raw.units = m.group(1).lower()
+        if m and canonical_units(m.group(1)):
+            raw.units = canonical_units(m.group(1))
     return raw
 
 
