@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 
 import test_batch_fakes as fakes
 from potflat import batch as batch_mod
-from potflat.batch import MANIFEST, BatchFileError, load_batch, run_batch
+from potflat.batch import MANIFEST, BatchFileError, load_batch, read_manifest, run_batch
 from potflat_cli.main import app
 
 
@@ -54,14 +54,14 @@ def test_batch_isolates_the_corrupt_scan(three):
         assert f"{name}.png" in outputs(folder)
         assert (folder / MANIFEST).is_file()
         assert len(outputs(folder)) == 2 + 1 + 3  # two PLYs, the PNG, three maps
-    assert not (res / "hydria" / MANIFEST).exists()
+    assert read_manifest(res / "hydria")["complete"] is False  # the partial marker, never complete
     assert "not a readable mesh" in result.stderr and "hydria" in result.stderr
     summary = json.loads((res / "summary.json").read_text())
     rows = {r["name"]: r for r in summary["scans"]}
     assert [r["status"] for r in summary["scans"]] == ["done", "done", "failed"]
     assert rows["hydria"]["error"].count("\n") == 0 and "hydria.ply" in rows["hydria"]["error"]
     assert rows["amphora-1"]["flipped"] == 0 and rows["amphora-1"]["edge_rms"] > 0
-    assert summary["counts"] == {"done": 2, "skipped": 0, "failed": 1, "interrupted": 0}
+    assert summary["counts"] == {"done": 2, "skipped": 0, "failed": 1, "interrupted": 0, "cancelled": 0}
     with open(res / "summary.csv", newline="") as fh:
         table = list(csv.DictReader(fh))
     assert [r["status"] for r in table] == ["done", "done", "failed"]
@@ -131,7 +131,7 @@ def test_failed_redo_removes_old_manifest_and_stale_outputs(three):
     report = run_batch(load_batch(three), workers=1, force=True)
     assert report.reports[0].status == "failed"
     assert report.reports[0].error == "RuntimeError: bake exploded second line"
-    assert not (folder / MANIFEST).exists()
+    assert read_manifest(folder)["complete"] is False
     assert "Traceback" in (folder / "error.log").read_text()
 
 
@@ -315,10 +315,10 @@ def test_interrupt_keeps_finished_scans_and_writes_the_summary(three):
     assert "interrupted" in result.stderr
     res = three.parent / "results"
     assert (res / "amphora-1" / MANIFEST).is_file()
-    assert not (res / "amphora-2" / MANIFEST).exists()
+    assert (read_manifest(res / "amphora-2") or {}).get("complete") is not True
     assert not [p for p in res.rglob("*") if p.name.endswith(".part")]
     summary = json.loads((res / "summary.json").read_text())
-    assert [r["status"] for r in summary["scans"]] == ["done", "interrupted", "interrupted"]
+    assert [r["status"] for r in summary["scans"]] == ["done", "interrupted", "cancelled"]
     fakes.SABOTAGE.clear()
     again = run_batch(load_batch(three), workers=1)
     assert [r.status for r in again.reports] == ["skipped", "done", "failed"]

@@ -16,7 +16,7 @@ import pytest
 from PIL import Image
 from typer.testing import CliRunner
 
-from potflat.batch import MANIFEST, load_batch, run_batch
+from potflat.batch import MANIFEST, load_batch, read_manifest, run_batch
 from potflat_cli.main import app
 
 KINDS = ("amphora", "lekythos")
@@ -76,7 +76,7 @@ def test_two_finish_the_corrupt_one_fails(collection, serial):
     error = rows["broken"]["error"]
     assert "broken.ply" in error and "\n" not in error and len(error) < 400
     assert "failed  broken: " in serial.stderr
-    assert not (collection / "results" / "broken" / MANIFEST).exists()
+    assert read_manifest(collection / "results" / "broken")["complete"] is False
 
 
 def test_rerun_skips_finished_and_reruns_on_option_change(collection, serial, tmp_path):

@@ -88,11 +88,14 @@ def test_run_writes_everything_and_json(tmp_path, fake_stages):
     assert rollout["provenance"]["options"]["band"] == [0.1, 0.9]
 
 
-def test_run_default_output_is_the_scan_folder(tmp_path, fake_stages):
-    scan = fakes.write_scan(tmp_path / "vase.obj")
+def test_run_default_output_is_name_in_the_current_folder(tmp_path, fake_stages, monkeypatch):
+    """Never the scan's folder (often an archive or read-only) unless asked: ./NAME/."""
+    scan = fakes.write_scan(tmp_path / "archive" / "vase.obj")
+    monkeypatch.chdir(tmp_path)
     result = cli("run", scan, "--quiet")
     assert result.exit_code == 0 and result.stdout == ""
-    assert (tmp_path / "vase.png").is_file()
+    assert (tmp_path / "vase" / "vase.png").is_file()
+    assert sorted(p.name for p in scan.parent.iterdir()) == ["vase.obj"]
 
 
 @pytest.mark.parametrize("args, message", [

@@ -83,7 +83,7 @@ def test_output_may_not_overwrite_the_input(tmp_path):
     mesh, *_ = vase(seed=2)
     path = tmp_path / "pot.rollout.ply"
     trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).export(path)
-    result = runner.invoke(app, ["rollout", str(path), "--name", "pot"])
+    result = runner.invoke(app, ["rollout", str(path), "-o", str(tmp_path), "--name", "pot"])
     assert result.exit_code == 2 and "overwrite the input" in result.output
 
 

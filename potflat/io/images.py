@@ -57,7 +57,7 @@ def check_texture_budget(path: str | os.PathLike, width: int, height: int, mode:
         raise InvalidInputError(
             f"texture {Path(path).name} is {width} x {height} pixels ({need / 1024**3:.1f} GiB decoded), over the "
             f"{TEXTURE_BUDGET_BYTES / 1024**3:.0f} GiB memory budget for a texture; downsample it to at most "
-            f"{side} x {side} pixels, or load the scan without it (--no-texture)")
+            f"{side} x {side} pixels")
 
 
 def read_texture(path: str | os.PathLike) -> np.ndarray:

@@ -306,7 +306,7 @@ def _check_texture(tex: Path, source: Path, max_pixels: int) -> tuple[Path, tupl
                 try:
                     check_texture_budget(tex, w, h, im.mode)
                 except InvalidInputError as exc:
-                    raise InvalidInputError(f"{source}: {exc}") from None
+                    raise InvalidInputError(f"{source}: {exc}, {_IGNORE_HINT}") from None
                 if im.format == "PNG":
                     im.verify()  # chunk CRCs, without decoding pixels
     except InvalidInputError:
