@@ -45,6 +45,9 @@ from potflat.types import UNITS_MM, Mesh, canonical_units
 
 #: File extensions :func:`load_scan` reads.
 SCAN_EXTENSIONS = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+#: Largest coordinate accepted: squares and products of coordinates (areas, distances, moments)
+#: must stay far from the float64 limit (1.8e308). 1e50 is beyond any length unit's scan.
+MAX_COORDINATE = 1e50
 #: Default limit on texture size in pixels (a 32k x 32k atlas).
 MAX_TEXTURE_PIXELS = 32768 * 32768
 _TEXTURE_MODES = ("use", "ignore")
@@ -254,6 +257,11 @@ def _validate(raw: _Raw, path: Path, units: str | None, texture: str, max_pixels
     if not finite.all():
         raise InvalidInputError(f"{path}: {int((~finite).sum())} vertices have NaN or infinite "
                                 "coordinates; repair the scan (e.g. MeshLab) or export it again")
+    largest = float(np.abs(V).max(initial=0.0))
+    if largest > MAX_COORDINATE:
+        raise InvalidInputError(f"{path}: coordinates as large as {largest:.3g} overflow the computations (areas, "
+                                f"distances; at most {MAX_COORDINATE:g}); the file is corrupt or not in a length "
+                                "unit: export it again")
     tc, tex = raw.texcoords, raw.texture
     if texture == "ignore":
         tc, tex = None, None
@@ -446,6 +454,14 @@ def _read_bytes(path: Path) -> bytes:
         raise InvalidInputError(f"cannot read {path}: {exc.strerror or exc}; check permissions") from None
 
 
+def _text(data: bytes) -> str:
+    """Names and lines written by other programs: UTF-8, else Latin-1 (older Windows exports)."""
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        return data.decode("latin-1")
+
+
 def _colors_to_u8(cols: np.ndarray) -> np.ndarray:
     cols = np.asarray(cols, dtype=np.float64)
     if np.issubdtype(cols.dtype, np.floating) and np.nanmax(cols, initial=0.0) <= 1.0:
@@ -485,8 +501,8 @@ def _read_obj(path: Path, texture: str, max_pixels: int) -> _Raw:
     buf = np.frombuffer(data, dtype=np.uint8, offset=3 if data.startswith(b"\xef\xbb\xbf") else 0)  # BOM
     counts = obj_count(buf)
     V6, vcols, VT, cv, cvt, face_ptr, use_spans, lib_spans, bad_line = obj_fill(buf, counts)
-    names = [buf[s:e].tobytes().decode("utf-8", "replace") for s, e, _ in use_spans]
-    libs = [buf[s:e].tobytes().decode("utf-8", "replace") for s, e in lib_spans]
+    names = [_text(buf[s:e].tobytes()) for s, e, _ in use_spans]
+    libs = [_text(buf[s:e].tobytes()) for s, e in lib_spans]
     del buf, data  # the file's bytes are the largest array here
     if bad_line:
         raise InvalidInputError(f"{path} line {bad_line}: not a number; repair the file or export it again")
@@ -512,7 +528,13 @@ def _read_obj(path: Path, texture: str, max_pixels: int) -> _Raw:
                                 f"has {nv} vertices); the file is corrupt or cut short: export it again")
     raw.faces = cv[corners]
     del cv
-    if texture == "ignore" or nvt == 0:
+    if texture == "ignore":
+        return raw
+    if nvt == 0:
+        if (cvt >= 0).any():  # f v/vt ... naming coordinates the file lacks
+            raise InvalidInputError(f"{path}: its faces name texture coordinates (f v/vt) but the file has no 'vt' "
+                                    "lines, so the painting cannot be placed (an export cut short?); export the "
+                                    f"scan again with texture coordinates, {_IGNORE_HINT} (a grey relief)")
         return raw
     badt = (cvt < -1) | (cvt >= nvt)
     if badt.any():
@@ -601,7 +623,7 @@ def _obj_material_textures(obj: Path, libs: list[str]) -> dict[str, Path]:
             raise InvalidInputError(f"{obj}: material library {lib} not found; restore it beside the "
                                     f"OBJ {_IGNORE_HINT}")
         current = None
-        for line in _read_bytes(mtl).decode("utf-8", "replace").splitlines():
+        for line in _text(_read_bytes(mtl)).splitlines():
             parts = line.strip().split(None, 1)
             if not parts:
                 continue
