@@ -17,7 +17,7 @@ Example:  potflat run samples/data/amphora.obj -o out/
 
 
 #: Options that take two numbers; ``--band 0.2,0.8`` is read as ``--band 0.2 0.8``.
-PAIR_OPTIONS = ("--band", "--angles")
+PAIR_OPTIONS = ("--band", "--angles", "--importance-band", "--importance-angles")
 
 
 def split_pairs(args: list[str]) -> list[str]:
@@ -95,7 +95,32 @@ class _Group(TyperGroup):
             mini = typer.Typer(pretty_exceptions_show_locals=False, add_completion=False)
             mini.command("run")(run.full_command())
             command = typer.main.get_command(mini)
+        if "--help" in rest and command is not None:
+            _show_choices(command)
         return name, command, rest
+
+
+def _show_choices(command) -> None:
+    """In ``--help``: the allowed values of the options that take a name (``[auto|cylinder|...]``)
+    instead of ``<str>``, and nothing after on/off flags (instead of ``<bool>``)."""
+    from potflat.bake import MAP_NAMES
+    from potflat.importance import METHODS
+    from potflat.proxy import KINDS
+    from potflat.relax import PRESETS, WEIGHTINGS
+    from potflat.types import UNITS_MM
+    from potflat.walls import SIDES
+
+    choices = {"proxy": ("auto", *KINDS), "units": tuple(UNITS_MM), "preset": tuple(PRESETS),
+               "weighting": WEIGHTINGS, "side": SIDES, "importance": METHODS}
+    for param in getattr(command, "params", ()):
+        if param.name in choices:
+            param.metavar = "[" + "|".join(choices[param.name]) + "]"
+        elif param.name == "maps":
+            param.metavar = ",".join(MAP_NAMES) + "|none"
+        elif getattr(param, "is_flag", False):
+            param.metavar = ""
+        elif param.nargs == 2:  # --band 0.2 0.8 or --band 0.2,0.8 (split_pairs)
+            param.metavar = "A B|A,B"
 
 
 app = typer.Typer(
