@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from potflat.distortion import percent_from_log
+
 from potflat.types import FlatMesh
 
 #: Opacity of the heat map in the stress overlay.
@@ -59,7 +61,7 @@ def map_scale(name: str, values: np.ndarray, *, hi: float | None = None) -> MapS
     Parameters
     ----------
     name : str
-        ``stress`` (sqrt(mm)), ``area`` (log2 area ratio) or ``anisotropy`` (ratio >= 1).
+        ``stress`` (sqrt(mm)), ``area`` (ln area ratio) or ``anisotropy`` (ratio >= 1).
     values : (k,) float64
     hi : float, optional
         Fixed upper end (to share one scale between images).
@@ -75,7 +77,7 @@ def map_scale(name: str, values: np.ndarray, *, hi: float | None = None) -> MapS
         top = hi if hi is not None else max(p99(v), 1e-3)
         return MapScale(name, 0.0, top, "magma", "stress (paper Eq. 3), √mm")
     if name == "area":
-        half = hi if hi is not None else max(p99(np.abs(v)), 0.05)
+        half = hi if hi is not None else max(p99(np.abs(v)), 0.035)
         return MapScale(name, -half, half, "RdBu_r", "area ratio flat / 3D (log scale)")
     if name == "anisotropy":
         top = hi if hi is not None else max(p99(v), 1.05)
@@ -118,11 +120,11 @@ def _colorbar(ax, scale: MapScale, fontsize: float, orientation: str = "horizont
     cb.ax.tick_params(labelsize=fontsize)
     axis = cb.ax.xaxis if orientation == "horizontal" else cb.ax.yaxis
     if scale.name == "area":
-        # ticks at round area ratios, placed on the log2 axis
-        ratios = MaxNLocator(6).tick_values(2.0 ** scale.lo, 2.0 ** scale.hi)
-        ticks = np.log2(ratios[(ratios > 0)])
+        # ticks at round area ratios, placed on the (natural) log axis
+        ratios = MaxNLocator(6).tick_values(math.exp(scale.lo), math.exp(scale.hi))
+        ticks = np.log(ratios[(ratios > 0)])
         axis.set_major_locator(FixedLocator(ticks[(ticks >= scale.lo) & (ticks <= scale.hi)]))
-        axis.set_major_formatter(FuncFormatter(lambda t, _: f"{2.0 ** t:.3g}"))
+        axis.set_major_formatter(FuncFormatter(lambda t, _: f"{math.exp(t):.3g}"))
     else:
         axis.set_major_locator(MaxNLocator(6))
     return cb
@@ -327,8 +329,8 @@ def comparison_sheet(path: str | Path, rollout: FlatMesh, relaxed: FlatMesh, *, 
         heat = colorize(res.maps["stress"], scale, res.image[..., 3] / 255.0)
         ax2 = fig.add_subplot(gs[1, col])
         ax2.imshow(heat, extent=extent, interpolation="antialiased")
-        la = summ.area_mean_abs_log / math.log(2.0)
-        ax2.set_title(f"edge RMS {summ.edge_rms:.4f}   area |log2| mean {la:.4f}\n"
+        ax2.set_title(f"lengths off by {100 * summ.edge_rms:.1f} % RMS   areas by "
+                      f"{percent_from_log(summ.area_mean_abs_log):.1f} % (mean |ln| {summ.area_mean_abs_log:.4f})\n"
                       f"anisotropy p95 {summ.anisotropy_p95:.3f}   flipped {summ.flipped}   "
                       f"stress p95 {np.percentile(stress, 95):.3g} √mm", fontsize=10)
         ax2.set_xlabel("mm")

@@ -128,7 +128,7 @@ class BakeResult:
         The painting, RGBA; alpha is the covered fraction of each pixel (0 outside and in holes).
     maps : dict of str to (h, w) float32
         Distortion values per pixel (NaN outside): ``stress`` in sqrt(mm) (paper Eq. 3,
-        interpolated from the vertices), ``area`` as log2(flat area / 3D area) per face,
+        interpolated from the vertices), ``area`` as ln(flat area / 3D area) per face (the natural log, as every area figure),
         ``anisotropy`` as sigma_max / sigma_min per face.
     position : (h, w, 3) float32 or None
         3D point (scan units) under each pixel, NaN outside.
@@ -334,7 +334,7 @@ class _Renderer:
         self.summary = distortion.summarize(mesh.vertices, flat.uv, self.faces)
         fd = distortion.face_distortion(mesh.vertices, flat.uv, self.faces)
         self.area_3d, self.area_2d, self.valid = fd.area_3d, fd.area_2d, fd.valid
-        self.face_values = {"area": fd.log_area_ratio / math.log(2.0), "anisotropy": np.minimum(fd.anisotropy, 1e6)}
+        self.face_values = {"area": fd.log_area_ratio, "anisotropy": np.minimum(fd.anisotropy, 1e6)}
         del fd
         self.vertex_stress = flat.stress if flat.stress is not None else distortion.vertex_stress(
             mesh.vertices, flat.uv, self.faces, mesh.mm_per_unit)
@@ -527,7 +527,7 @@ def _figures(r: _Renderer, covered_px: float) -> dict:
         "painting": "texture" if r.texture is not None else "vertex colours" if flat.mesh.vertex_colors is not None
         else "shaded relief",
         "stress": {**_stats(r.vertex_stress), "unit": "sqrt(mm)"},
-        "area": {**_stats(np.abs(fv["area"][valid]), w), "unit": "|log2(flat area / 3D area)|"},
+        "area": {**_stats(np.abs(fv["area"][valid]), w), "unit": "|ln(flat area / 3D area)|"},
         "anisotropy": {**_stats(fv["anisotropy"][valid], w), "unit": "sigma_max / sigma_min"},
         "distortion": summary,
         "covered_area_mm2": covered_px / g.px_per_mm ** 2,

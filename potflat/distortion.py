@@ -17,6 +17,7 @@ Faces whose 3D area is (numerically) zero carry no distortion and are excluded.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -89,6 +90,27 @@ class DistortionSummary:
     def as_dict(self) -> dict:
         """The figures as a plain JSON-ready dict."""
         return asdict(self)
+
+
+def percent_from_log(mean_abs_log: float) -> float:
+    """A mean ``|ln(ratio)|`` as the percentage change it stands for (0.1604 -> 17.4 %).
+
+    Every area figure potflat reports is a natural log of the area ratio flat / 3D.
+    """
+    return 100.0 * math.expm1(mean_abs_log)
+
+
+def in_words(figures: dict) -> str:
+    """Distortion figures (:class:`DistortionSummary` fields) as a reader says them:
+    ``lengths off by 14.0 % (RMS), areas by 17.4 % on average, 0 flipped``."""
+    parts = []
+    if figures.get("edge_rms") is not None:
+        parts.append(f"lengths off by {100.0 * figures['edge_rms']:.1f} % (RMS)")
+    if figures.get("area_mean_abs_log") is not None:
+        parts.append(f"areas by {percent_from_log(figures['area_mean_abs_log']):.1f} % on average")
+    if figures.get("flipped") is not None:
+        parts.append(f"{figures['flipped']} flipped")
+    return ", ".join(parts)
 
 
 def face_distortion(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> FaceDistortion:

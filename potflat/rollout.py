@@ -1101,6 +1101,12 @@ def rollout_summary(result: RolloutResult) -> dict:
     }
 
 
+#: Warn when more than this share of the surface is trimmed away as folded border.
+WARN_TRIMMED_FRACTION = 0.05
+#: Warn when the axis' RMS normal-to-meridian angle (degrees) is above this.
+WARN_AXIS_RMS_DEG = 5.0
+
+
 def _notes(result: RolloutResult) -> list[str]:
     """Warnings for the sidecar: what the user should know before relaxing."""
     notes = []
@@ -1117,6 +1123,18 @@ def _notes(result: RolloutResult) -> list[str]:
     if result.other_objects_faces:
         notes.append(f"{result.other_objects_faces} faces of separate objects that do not share the vessel's axis "
                      "(another vessel or fragment in the same file) were left out; split the file or give --axis")
+    if result.trimmed_area:
+        kept = float(face_areas(result.flat.mesh.vertices, result.flat.mesh.faces).sum())
+        share = result.trimmed_area / (result.trimmed_area + kept)
+        if share > WARN_TRIMMED_FRACTION:
+            notes.append(f"{100 * share:.0f} % of the surface was trimmed away as folded border (rim top, base "
+                         "underside, breaks, a foot turned under); if painting is lost there, unroll the painted "
+                         "height only (--band LO HI) or try another --proxy")
+    if result.axis.rms_angle_deg > WARN_AXIS_RMS_DEG:
+        notes.append(f"the axis fits the surface poorly ({result.axis.rms_angle_deg:.0f} deg RMS between the normals "
+                     "and the meridian planes): the vessel is not very round, or a foot, handle or break misleads the "
+                     "fit, so the rollout is distorted; give the axis (--axis px,py,pz,dx,dy,dz) or unroll the "
+                     "painted height only (--band LO HI)")
     return notes
 
 

@@ -61,6 +61,7 @@ def _bake(flat_ply: Path, output: Path | None, options, *, name: str | None, qui
     from rich.console import Console
 
     from potflat.bake import run_bake_stage
+    from potflat.distortion import in_words
 
     result = run_stage(f"baking {flat_ply.name}", lambda: run_bake_stage(flat_ply, output or flat_ply.parent, options, name=name),
                        quiet=quiet, as_json=as_json)
@@ -71,7 +72,7 @@ def _bake(flat_ply: Path, output: Path | None, options, *, name: str | None, qui
     w, h = s["image_px"]
     out.print(f"[bold]{result.paths['png']}[/]: {w} x {h} px = {s['image_mm'][0]:.1f} x {s['image_mm'][1]:.1f} mm "
               f"at {s['px_per_mm']:.4g} px/mm ({s['dpi']:.4g} dpi), painting from {s['painting']}")
-    out.print(f"stress mean {s['stress']['mean']:.3g} / p95 {s['stress']['p95']:.3g} / max {s['stress']['max']:.3g} sqrt(mm); "
-              f"anisotropy p95 {s['anisotropy']['p95']:.3f}; flipped {s['distortion']['flipped']}; "
+    out.print(f"{in_words(s['distortion'])}; stress (paper Eq. 3) mean {s['stress']['mean']:.3g} / p95 "
+              f"{s['stress']['p95']:.3g} / max {s['stress']['max']:.3g} sqrt(mm); anisotropy p95 {s['anisotropy']['p95']:.3f}; "
               f"covered {s['covered_area_mm2']:.0f} of {s['flattened_area_mm2']:.0f} mm2")
     out.print("wrote " + ", ".join(sorted(p.name for p in result.paths.values())))

@@ -86,11 +86,10 @@ def _figures(report) -> str:
     parts = []
     if report.seconds:
         parts.append(f"{report.seconds:.1f} s")
-    if f.get("edge_rms") is not None:
-        parts.append(f"edge RMS {f['edge_rms']:.4f}")
-    if f.get("flipped") is not None:
-        parts.append(f"{f['flipped']} flipped")
-    return ", ".join(parts)
+    from potflat.distortion import in_words
+
+    words = in_words(f)
+    return ", ".join(parts + ([words] if words else []))
 
 
 def _print_table(summary) -> None:

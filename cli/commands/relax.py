@@ -47,6 +47,7 @@ def relax_command(
     quiet: Quiet = False,
     json: Json = False,
 ) -> None:
+    from potflat.distortion import in_words
     from potflat.relax import RelaxOptions, run_relax_stage
     from potflat_cli._stage import run_stage
 
@@ -67,7 +68,8 @@ def relax_command(
     typer.echo(f"{out.paths['ply']}: preset {s['preset']}, {s['iterations']} iterations, {state}, "
                f"{s['timings']['solve']:.1f} s")
     typer.echo(f"  edge-length RMS {before['edge_rms']:.4f} -> {after['edge_rms']:.4f}, "
-               f"mean |log area ratio| {before['area_mean_abs_log']:.4f} -> {after['area_mean_abs_log']:.4f}, {fold}")
+               f"mean |ln area ratio| {before['area_mean_abs_log']:.4f} -> {after['area_mean_abs_log']:.4f}, {fold}")
+    typer.echo(f"  now {in_words({**after, 'flipped': None})}")
 
 
 relax_command.__doc__ = HELP

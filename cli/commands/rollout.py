@@ -78,6 +78,7 @@ def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quie
     from potflat_cli._stage import run_stage
     from rich.console import Console
 
+    from potflat.distortion import in_words
     from potflat.rollout import run_rollout_stage
 
     result = run_stage(f"rolling out {scan.name}", lambda: run_rollout_stage(scan, output or Path(name or scan.stem), options, name=name),
@@ -114,5 +115,5 @@ def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quie
     for note in s["notes"]:
         out.print(f"[yellow]note:[/] {note}")
     flipped = f"[red]{d['flipped']} flipped[/]" if d["flipped"] else "0 flipped"
-    out.print(f"distortion: edge-length RMS {d['edge_rms']:.4f}, mean |log area| {d['area_mean_abs_log']:.4f}, "
-              f"anisotropy mean {d['anisotropy_mean']:.3f}, {flipped}")
+    out.print(f"distortion: {in_words({**d, 'flipped': None})}, {flipped} (edge-length RMS {d['edge_rms']:.4f}, "
+              f"mean |ln area ratio| {d['area_mean_abs_log']:.4f}, anisotropy mean {d['anisotropy_mean']:.3f})")

@@ -56,6 +56,7 @@ def _run(values: dict[str, Any]) -> None:
 
     from rich.console import Console
 
+    from potflat.distortion import in_words
     from potflat.pipeline import STAGES, run_scan
     from potflat_cli._options import options_from_cli
 
@@ -82,6 +83,8 @@ def _run(values: dict[str, Any]) -> None:
     shown = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
                       for k, v in figures.items() if v is not None)
     if shown:
-        out.print(f"  relaxed distortion: {shown}")
+        out.print(f"  relaxed distortion: {in_words(figures)} ({shown}; area figures are natural logs)")
     for key, path in result.paths.items():
         out.print(f"  {key:<16} {path}", highlight=False)
+    for note in result.stages["rollout"].summary.get("notes", []):
+        out.print(f"[yellow]warning:[/] {note}", highlight=False)
