@@ -5,6 +5,14 @@ import json
 from collections.abc import Callable
 
 
+def with_compile_note(status: str) -> str:
+    """``status`` plus a note when this run compiles the kernels (the first run is silent for
+    about a minute otherwise)."""
+    from potflat._kernels._jit import kernels_cached
+
+    return status if kernels_cached() else f"{status} (first run: compiling potflat's kernels, about a minute, once)"
+
+
 def run_stage(status: str | None, call: Callable, *, quiet: bool, as_json: bool):
     """Run ``call()`` (a ``run_<stage>_stage``) under a status spinner on stderr.
 
@@ -23,7 +31,7 @@ def run_stage(status: str | None, call: Callable, *, quiet: bool, as_json: bool)
     if status is None:
         result = call()
     else:
-        with Console(stderr=True, quiet=quiet or as_json).status(status):
+        with Console(stderr=True, quiet=quiet or as_json).status(with_compile_note(status)):
             result = call()
     if as_json:
         print(json.dumps({k: v for k, v in result.summary.items() if k != "provenance"}, indent=2))

@@ -43,6 +43,7 @@ def batch_command(batch_file: BatchFile, workers: Workers = None, scheduler: Sch
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from potflat.batch import BatchFileError, load_batch, run_batch
+    from potflat_cli._stage import with_compile_note
 
     try:
         batch = load_batch(batch_file, output=output)
@@ -59,8 +60,8 @@ def batch_command(batch_file: BatchFile, workers: Workers = None, scheduler: Sch
     def on_plan(to_run: int, skipped: int) -> None:
         if not quiet:
             where = f"on {scheduler}" if scheduler else "locally"
-            err.print(f"{len(batch.jobs)} scans: {skipped} already complete, {to_run} to run "
-                      f"{where}; results in {batch.output}", highlight=False)
+            err.print(with_compile_note(f"{len(batch.jobs)} scans: {skipped} already complete, {to_run} to run "
+                                        f"{where}; results in {batch.output}"), highlight=False)
 
     def on_result(report) -> None:
         progress.advance(task)

@@ -49,11 +49,13 @@ def relax_command(
 ) -> None:
     from potflat.distortion import in_words
     from potflat.relax import RelaxOptions, run_relax_stage
-    from potflat_cli._stage import run_stage
+    from potflat_cli._stage import run_stage, with_compile_note
 
     options = RelaxOptions(preset=preset, tol=tol, max_iter=max_iter, time_budget=time_budget, threads=threads,
                            stretch=stretch, stiffness=stiffness, weighting=weighting, simplify_mm=simplify_mm)
     show_progress = sys.stderr.isatty() and not (quiet or json)
+    if show_progress and with_compile_note("") != "":
+        print(f"note: {with_compile_note('').strip(' ()')}", file=sys.stderr)
     out = run_stage(None if show_progress else f"relaxing {rollout_ply.name}",
                     lambda: run_relax_stage(rollout_ply, output if output is not None else rollout_ply.parent,
                                             options, name=name, progress=show_progress),

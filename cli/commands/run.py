@@ -59,13 +59,14 @@ def _run(values: dict[str, Any]) -> None:
     from potflat.distortion import in_words
     from potflat.pipeline import STAGES, run_scan
     from potflat_cli._options import options_from_cli
+    from potflat_cli._stage import with_compile_note
 
     options = {stage: options_from_cli(stage, values) for stage in STAGES}
     scan = Path(values["scan"])
     err = Console(stderr=True, quiet=values["quiet"] or values["json"])
     with err.status(f"{scan.name}: starting") as status:
         def progress(stage: str) -> None:
-            status.update(f"{scan.name}: {stage}")
+            status.update(with_compile_note(f"{scan.name}: {stage}"))
         out_dir = values["output"] or Path(values["name"] or scan.stem)  # ./NAME/, never the scan's folder
         result = run_scan(scan, out_dir, name=values["name"], progress=progress, **options)
     figures = result.figures

@@ -41,4 +41,16 @@ def numba_threads(n: int | None):
         numba.set_num_threads(old)
 
 
-__all__ = ["leaf", "numba_threads", "parallel", "prange"]
+def kernels_cached() -> bool:
+    """Whether the kernels were compiled and cached by an earlier run (else the first call of
+    each compiles it: about a minute in all, worth telling the user)."""
+    from pathlib import Path
+
+    place = Path(numba.config.CACHE_DIR) if numba.config.CACHE_DIR else Path(__file__).resolve().parent / "__pycache__"
+    try:
+        return place.is_dir() and next(place.rglob("springs.*.nbi"), None) is not None
+    except OSError:
+        return True  # cannot tell: say nothing
+
+
+__all__ = ["kernels_cached", "leaf", "numba_threads", "parallel", "prange"]
