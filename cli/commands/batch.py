@@ -58,6 +58,7 @@ def batch_command(batch_file: BatchFile, workers: Workers = None, scheduler: Sch
     task = progress.add_task("", total=len(batch.jobs))
 
     def on_plan(to_run: int, skipped: int) -> None:
+        progress.start()  # only now: the output folder is locked and the plan made
         if not quiet:
             where = f"on {scheduler}" if scheduler else "locally"
             err.print(with_compile_note(f"{len(batch.jobs)} scans: {skipped} already complete, {to_run} to run "
@@ -72,9 +73,11 @@ def batch_command(batch_file: BatchFile, workers: Workers = None, scheduler: Sch
             err.print(f"[{style}]{report.status:<7}[/] {report.name} {_figures(report)}",
                       highlight=False)
 
-    with progress:
+    try:
         summary = run_batch(batch, workers=workers, scheduler=scheduler, force=force,
                             on_result=on_result, on_plan=on_plan)
+    finally:
+        progress.stop()
     if json:
         print(json_module.dumps(summary.to_dict(), indent=2))
     elif not quiet:

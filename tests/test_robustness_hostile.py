@@ -1,0 +1,546 @@
+"""Hostile inputs and first contact (issue 18; catalogue in docs/robustness.md).
+
+One small negative test per check, each case generated in ``tmp_path``: data safety (a batch
+confined to its output folder, a private texture cache, bounded YAML, confined globs, the
+output-folder lock, unsafe names), one clear line and exit 2 instead of tracebacks, no
+silent wrong results, clean interruptions and the defaults a user expects. The batch and
+pipeline cases run against the fake stages of ``test_batch_fakes`` (fast); the loader and
+stage-file cases against the real readers.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import struct
+import subprocess
+import sys
+import time
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+import test_batch_fakes as fakes
+from potflat.batch import MANIFEST, BatchFileError, is_complete, job_key, load_batch, read_manifest, run_batch
+from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
+from potflat_cli.main import app
+
+runner = CliRunner()
+
+
+def cli(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def one_line_error(result, *words: str) -> str:
+    """Exit 2, exactly one ``error:`` line on stderr with ``words``, no traceback, no box."""
+    assert result.exit_code == 2, (result.exit_code, result.output)
+    assert "Traceback" not in result.output and "╭" not in result.output, result.output
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
+    for word in words:
+        assert word.lower() in lines[0].lower(), (word, lines[0])
+    return lines[0]
+
+
+@pytest.fixture
+def fake_stages(monkeypatch):
+    fakes.install(monkeypatch)
+
+
+def _batch(tmp_path: Path, body: str, n: int = 2) -> Path:
+    for k in range(n):
+        fakes.write_scan(tmp_path / "scans" / f"pot-{k}.obj", k)
+    path = tmp_path / "batch.yaml"
+    path.write_text(f"output: results/\nscans:\n{body}")
+    return path
+
+
+def _png_chunk(kind: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+
+def _png_header_only(path: Path, width: int, height: int) -> Path:
+    """A PNG whose header declares ``width`` x ``height`` RGB pixels (nothing is decoded)."""
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + _png_chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0))
+                     + _png_chunk(b"IDAT", zlib.compress(b"\0" * 100)) + _png_chunk(b"IEND", b""))
+    return path
+
+
+def _tube_obj(path: Path, radius: float = 40.0, height: float = 120.0, scale: float = 1.0, extra: str = "") -> Path:
+    """An open cylinder (a plain vessel wall), coordinates multiplied by ``scale``."""
+    t = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    z = np.linspace(0, height, 12)
+    V = np.array([[radius * np.cos(a), radius * np.sin(a), h] for h in z for a in t]) * scale
+    lines = [f"v {x:.9g} {y:.9g} {w:.9g}" for x, y, w in V]
+    for i in range(len(z) - 1):
+        for j in range(32):
+            p, q = i * 32 + j, i * 32 + (j + 1) % 32
+            lines += [f"f {p + 1} {q + 1} {q + 33}", f"f {p + 1} {q + 33} {p + 33}"]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(extra + "\n".join(lines) + "\n")
+    return path
+
+
+# ---------------------------------------------------------------------------------------
+# data safety
+
+
+def test_a_manifest_never_directs_a_batch_outside_its_folder(tmp_path, fake_stages):
+    """A planted manifest listing ../../victim and /abs/victim: nothing outside is deleted."""
+    batch = _batch(tmp_path, "  - path: scans/*.obj\n")
+    assert run_batch(load_batch(batch), workers=1).exit_code == 0
+    victims = [tmp_path / "victim-rel", tmp_path / "victim-abs"]
+    for v in victims:
+        v.write_text("precious")
+    folder = tmp_path / "results" / "pot-0"
+    manifest = read_manifest(folder)
+    manifest["outputs"].update({"../../victim-rel": 8, str(victims[1]): 8, "../pot-1/pot-1.png": 1})
+    (folder / MANIFEST).write_text(json.dumps(manifest))
+    assert [r.status for r in run_batch(load_batch(batch), workers=1, force=True).reports] == ["done", "done"]
+    assert all(v.read_text() == "precious" for v in victims)
+    assert (tmp_path / "results" / "pot-1" / "pot-1.png").is_file()
+
+
+def test_a_manifest_input_that_is_a_device_is_never_read(tmp_path, fake_stages):
+    """inputs: [/dev/zero] would hash forever; a non-regular file makes the scan incomplete."""
+    batch = _batch(tmp_path, "  - path: scans/pot-0.obj\n", n=1)
+    run_batch(load_batch(batch), workers=1)
+    job = load_batch(batch).jobs[0]
+    manifest = read_manifest(job.out_dir)
+    manifest["inputs"] = [{"path": "/dev/zero", "sha256": "0" * 64}]
+    (job.out_dir / MANIFEST).write_text(json.dumps(manifest))
+    start = time.monotonic()
+    assert is_complete(job, job_key(job)) is None
+    assert time.monotonic() - start < 5
+
+
+def test_the_texture_cache_is_private_and_never_trusted(tmp_path):
+    """An embedded GLB texture is extracted into a new 0700 folder of this process, never into
+    a shared folder where a planted file (or symlink) could replace the painting."""
+    import tempfile
+
+    import trimesh
+    from PIL import Image
+
+    from potflat.io import scan as scan_io
+
+    painting = Image.new("RGB", (16, 16), (200, 30, 40))
+    t = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    V = np.array([[40 * np.cos(a), 40 * np.sin(a), h] for h in (0.0, 60.0, 120.0) for a in t])
+    F = [[i * 24 + j, i * 24 + (j + 1) % 24, (i + 1) * 24 + (j + 1) % 24] for i in range(2) for j in range(24)]
+    F += [[i * 24 + j, (i + 1) * 24 + (j + 1) % 24, (i + 1) * 24 + j] for i in range(2) for j in range(24)]
+    uv = np.column_stack([np.tile(t / (2 * np.pi), 3), np.repeat([0.0, 0.5, 1.0], 24)])
+    mesh = trimesh.Trimesh(V / 1000.0, F, process=False,
+                           visual=trimesh.visual.TextureVisuals(uv=uv, image=painting))
+    glb = tmp_path / "pot.glb"
+    glb.write_bytes(mesh.export(file_type="glb"))
+    # plant files where the shared cache used to be
+    shared = Path(tempfile.gettempdir()) / f"potflat-textures-{os.environ.get('USER', 'root')}"
+    shared.mkdir(exist_ok=True)
+    for name in [p.name for p in shared.glob("*.png")] + ["planted.png"]:
+        Image.new("RGB", (16, 16), (0, 255, 0)).save(shared / name)
+    loaded = scan_io.load_scan(glb)
+    tex = loaded.mesh.texture_path
+    assert shared not in tex.parents
+    assert (tex.parent.stat().st_mode & 0o777) == 0o700
+    assert np.asarray(Image.open(tex).convert("RGB"))[0, 0].tolist() == [200, 30, 40]
+
+
+def test_yaml_alias_bomb_in_an_option_value_is_refused(tmp_path, fake_stages):
+    levels = ["a0: &a0 [lol, lol, lol, lol, lol, lol, lol, lol, lol]"]
+    levels += [f"a{k}: &a{k} [{', '.join([f'*a{k - 1}'] * 9)}]" for k in range(1, 9)]
+    batch = _batch(tmp_path, "  - path: scans/pot-0.obj\n", n=1)
+    text = batch.read_text().replace("scans:\n", "defaults:\n  maps: *a8\nscans:\n")
+    batch.write_text("x-aliases:\n" + "\n".join("  " + lv for lv in levels) + "\n" + text)
+    start = time.monotonic()
+    with pytest.raises(BatchFileError, match="expands to more than"):
+        load_batch(batch)
+    assert time.monotonic() - start < 5
+
+
+@pytest.mark.parametrize("pattern", ["/**/*.ply", "../*.obj", "scans/*/../../../*.obj"])
+def test_a_pattern_outside_the_batch_folder_is_refused(tmp_path, fake_stages, pattern):
+    (tmp_path / "inner").mkdir()
+    batch = _batch(tmp_path / "inner", f"  - path: '{pattern}'\n")
+    with pytest.raises(BatchFileError, match="outside the batch file's folder"):
+        load_batch(batch)
+
+
+def test_a_second_batch_on_the_same_output_folder_is_refused(tmp_path, fake_stages):
+    from potflat.io.atomic import output_lock
+
+    batch = _batch(tmp_path, "  - path: scans/*.obj\n")
+    with output_lock(tmp_path / "results"):
+        one_line_error(cli("batch", batch, "-w", 1), "results", "in use")
+    assert cli("batch", batch, "-w", 1).exit_code == 0
+    assert not (tmp_path / "results" / ".potflat.lock").exists()
+
+
+@pytest.mark.parametrize("entry,words", [
+    ("  - path: scans/pot-0.obj\n    name: summary.json\n", ("summary.json", "reserved")),
+    ("  - path: scans/pot-0.obj\n    name: ../escaped\n", ("../escaped", "plain file name")),
+    ("  - path: scans/...obj\n", ("..", "leading dot")),
+    ("  - path: scans/new*.obj\n", ("control character",)),
+])
+def test_unsafe_scan_names_are_refused_when_the_batch_is_checked(tmp_path, fake_stages, entry, words):
+    fakes.write_scan(tmp_path / "scans" / "...obj")
+    fakes.write_scan(tmp_path / "scans" / "new\nline.obj")
+    batch = _batch(tmp_path, entry)
+    with pytest.raises(BatchFileError) as err:
+        load_batch(batch)
+    assert all(w in str(err.value) for w in words), str(err.value)
+    assert not (tmp_path / "results").exists()
+
+
+@pytest.mark.parametrize("name,words", [("../escaped", ("plain file name",)), ("a\nb", ("control character",)),
+                                        ("summary.csv", ("reserved",))])
+def test_unsafe_name_option_is_exit_2(tmp_path, fake_stages, name, words):
+    scan = fakes.write_scan(tmp_path / "pot.obj")
+    one_line_error(cli("run", scan, "-o", tmp_path / "out", "--name", name), *words)
+    assert not (tmp_path / "out").exists() and not (tmp_path / "escaped").exists()
+
+
+# ---------------------------------------------------------------------------------------
+# one line and exit 2 instead of a traceback
+
+
+@pytest.mark.parametrize("units,likely", [(1e-3, "metres: add --units m"), (1e3, "micrometres: add --units um")])
+def test_a_scan_in_another_unit_is_refused_with_the_likely_unit(tmp_path, units, likely):
+    scan = _tube_obj(tmp_path / "vase.obj", scale=units)
+    one_line_error(cli("run", scan, "-o", tmp_path / "out"), "vase.obj", likely)
+    assert not (tmp_path / "out").exists()
+    # declared, it runs (the rollout alone is enough to show it)
+    assert cli("rollout", scan, "-o", tmp_path / "out", "--units", "m" if units < 1 else "um", "-q").exit_code == 0
+
+
+@pytest.mark.parametrize("px_per_mm,words", [("0.01", ("or more",)), ("1e-9", ("or more",)),
+                                             ("1000", ("megapixels", "or less"))])
+def test_image_size_is_checked_before_any_file_is_written(tmp_path, px_per_mm, words):
+    scan = _tube_obj(tmp_path / "vase.obj")
+    out = tmp_path / "out"
+    one_line_error(cli("run", scan, "-o", out, "--px-per-mm", px_per_mm), *words)
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_a_tiny_image_draws_its_scale_bar_without_crashing():
+    from potflat.annotate import ScaleLayer
+
+    layer = ScaleLayer(20, 12, 0.05)
+    assert layer.rows(0, 12).shape == (12, 20, 4) and layer.bar_image().ndim == 3
+
+
+def test_a_texture_over_the_memory_budget_is_refused_with_its_size(tmp_path):
+    from potflat.io.images import read_texture
+    from potflat.io.scan import load_scan
+
+    scan = _tube_obj(tmp_path / "pot.obj", extra="mtllib pot.mtl\nvt 0 0\nvt 1 0\nvt 1 1\nusemtl m\n")
+    text = scan.read_text().splitlines()
+    scan.write_text("\n".join(ln if not ln.startswith("f ") else
+                              "f " + " ".join(f"{v}/{k + 1}" for k, v in enumerate(ln.split()[1:]))
+                              for ln in text) + "\n")
+    (tmp_path / "pot.mtl").write_text("newmtl m\nmap_Kd big.png\n")
+    _png_header_only(tmp_path / "big.png", 30000, 30000)
+    with pytest.raises(InvalidInputError, match=r"30000 x 30000 pixels \(2\.5 GiB decoded\).*downsample"):
+        load_scan(scan)
+    with pytest.raises(InvalidInputError, match="30000 x 30000"):
+        read_texture(tmp_path / "big.png")
+
+
+def test_utf8_and_latin1_names_in_obj_mtl_and_stage_files(tmp_path):
+    from PIL import Image
+
+    from potflat.io.scan import load_scan
+    from potflat.io.stage import read_flat_ply, write_flat_ply
+    from potflat.types import FlatMesh
+
+    folder = tmp_path / "Fund ü"
+    scan = _tube_obj(folder / "Vase é.obj", extra="mtllib Vase é.mtl\nvt 0 0\nvt 1 0\nvt 1 1\nusemtl m\n")
+    scan.write_text("\n".join(ln if not ln.startswith("f ") else
+                              "f " + " ".join(f"{v}/{k + 1}" for k, v in enumerate(ln.split()[1:]))
+                              for ln in scan.read_text().splitlines()) + "\n")
+    Image.new("RGB", (8, 8), (9, 9, 9)).save(folder / "Bild ä.png")
+    for encoding in ("utf-8", "latin-1"):
+        (folder / "Vase é.mtl").write_bytes("newmtl m\nmap_Kd Bild ä.png\n".encode(encoding))
+        mesh = load_scan(scan).mesh
+        assert mesh.texture_path.name == "Bild ä.png", encoding
+    flat = FlatMesh(mesh, mesh.vertices[:, :2].copy())
+    back = read_flat_ply(write_flat_ply(tmp_path / "out" / "Vase é.rollout.ply", flat))
+    assert back.mesh.texture_path.name == "Vase é.texture.png" and back.mesh.texture_path.is_file()
+
+
+HOSTILE_PLY = {
+    "list count -1": ("element vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\n"
+                      "property list char int vertex_indices\n", struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0)
+                      + struct.pack("<b3i", -1, 0, 1, 2), "negative length"),
+    "uint list of 4e9": ("element vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\n"
+                         "property list uint int vertex_indices\n", struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0)
+                         + struct.pack("<I3i", 4_000_000_000, 0, 1, 2), "truncated"),
+    "element vertex abc": ("element vertex abc\nproperty float x\n", b"", "malformed PLY header"),
+    "element vertex -3": ("element vertex -3\nproperty float x\n", b"", "negative element count"),
+    "list without a name": ("element vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\n"
+                            "property list uchar int\n", struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0)
+                            + struct.pack("<B3i", 3, 0, 1, 2), "malformed PLY header"),
+}
+
+
+@pytest.mark.parametrize("case", list(HOSTILE_PLY))
+@pytest.mark.parametrize("command", ["rollout", "relax", "bake"])
+def test_hostile_ply_headers_are_one_line_in_every_reader(tmp_path, case, command):
+    header, body, words = HOSTILE_PLY[case]
+    name = {"rollout": "pot.ply", "relax": "pot.rollout.ply", "bake": "pot.relaxed.ply"}[command]
+    path = tmp_path / name
+    path.write_bytes(b"ply\nformat binary_little_endian 1.0\n" + header.encode() + b"end_header\n" + body)
+    one_line_error(cli(command, path, "-o", tmp_path / "out"), name)
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("args,words", [
+    (lambda d: ["run", d / "x.obj", "-o", d / "o"], ("x.obj", "directory")),
+    (lambda d: ["batch", d / "x.obj"], ("x.obj", "directory")),
+    (lambda d: ["batch", d / "b.yaml", "--workers", "0"], ("--workers",)),
+    (lambda d: ["run", "/dev/zero", "-o", d / "o"], ("/dev/zero", "not a regular file")),
+    (lambda d: ["relax", "/dev/zero", "-o", d / "o"], ("/dev/zero",)),
+])
+def test_usage_errors_are_one_line_not_a_box(tmp_path, args, words):
+    (tmp_path / "x.obj").mkdir()
+    (tmp_path / "b.yaml").write_text("output: o\nscans: [x.obj]\n")
+    one_line_error(cli(*args(tmp_path)), *words)
+
+
+def test_a_texture_symlink_loop_is_one_line(tmp_path):
+    scan = _tube_obj(tmp_path / "pot.obj", extra="mtllib pot.mtl\nvt 0 0\nvt 1 0\nvt 1 1\nusemtl m\n")
+    scan.write_text("\n".join(ln if not ln.startswith("f ") else
+                              "f " + " ".join(f"{v}/{k + 1}" for k, v in enumerate(ln.split()[1:]))
+                              for ln in scan.read_text().splitlines()) + "\n")
+    (tmp_path / "pot.mtl").write_text("newmtl m\nmap_Kd loop.png\n")
+    os.symlink(tmp_path / "loop.png", tmp_path / "loop.png")
+    one_line_error(cli("rollout", scan, "-o", tmp_path / "out"), "loop.png", "--no-texture")
+
+
+@pytest.mark.parametrize("sidecar", ["null", "[1, 2]", '{"attachments": null}', '{"attachments": {"root_faces": "x"}}'])
+def test_a_sidecar_of_the_wrong_type_does_not_break_the_next_stage(tmp_path, sidecar):
+    from potflat.bake import BakeOptions, run_bake_stage
+    from potflat.io.stage import write_flat_ply
+    from potflat.relax import RelaxOptions, run_relax_stage
+    from potflat.types import FlatMesh, Mesh
+
+    x, y = np.meshgrid(np.linspace(0, 40, 6), np.linspace(0, 30, 5))
+    V = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    F = np.array([[r * 6 + c, r * 6 + c + 1, r * 6 + c + 7] for r in range(4) for c in range(5)]
+                 + [[r * 6 + c, r * 6 + c + 7, r * 6 + c + 6] for r in range(4) for c in range(5)])
+    write_flat_ply(tmp_path / "pot.rollout.ply", FlatMesh(Mesh(V, F), V[:, :2].copy()))
+    (tmp_path / "pot.rollout.json").write_text(sidecar)
+    run_relax_stage(tmp_path / "pot.rollout.ply", tmp_path, RelaxOptions(preset="preview"))
+    out = run_bake_stage(tmp_path / "pot.relaxed.ply", tmp_path, BakeOptions(px_per_mm=1, maps=()))
+    assert out.paths["png"].is_file()
+
+
+def test_a_batch_output_that_cannot_be_written_is_one_line(tmp_path, fake_stages):
+    batch = _batch(tmp_path, "  - path: scans/*.obj\n")
+    (tmp_path / "notes.txt").write_text("x")
+    one_line_error(cli("batch", batch, "-o", tmp_path / "notes.txt" / "out"), "notes.txt")
+
+
+def test_overflowing_coordinates_are_named(tmp_path):
+    path = tmp_path / "big.obj"
+    path.write_text("v 1e302 0 0\nv 0 1e302 0\nv 0 0 1e302\nv 1e302 1e302 1e302\nf 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n")
+    one_line_error(cli("run", path, "-o", tmp_path / "o"), "big.obj", "1e+302", "overflow")
+
+
+def test_paper_dynamics_that_diverge_stop_with_one_line_and_write_nothing(tmp_path, monkeypatch):
+    from potflat import relax as relax_mod
+    from potflat.io.stage import write_flat_ply
+    from potflat.types import FlatMesh, Mesh
+
+    x, y = np.meshgrid(np.linspace(0, 40, 8), np.linspace(0, 30, 7))
+    V = np.column_stack([x.ravel(), y.ravel(), 0.1 * np.sin(x.ravel())])
+    F = np.array([[r * 8 + c, r * 8 + c + 1, r * 8 + c + 9] for r in range(6) for c in range(7)]
+                 + [[r * 8 + c, r * 8 + c + 9, r * 8 + c + 8] for r in range(6) for c in range(7)])
+    write_flat_ply(tmp_path / "pot.rollout.ply", FlatMesh(Mesh(V, F), V[:, :2].copy()))
+    monkeypatch.setattr(relax_mod._Springs, "laplacian_bound", lambda self: 1e-4)  # a step 100x too long
+    with pytest.raises(FoldedResultError, match="diverged"):
+        relax_mod.run_relax_stage(tmp_path / "pot.rollout.ply", tmp_path / "out",
+                                  relax_mod.RelaxOptions(preset="paper"))
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_paper_step_bounds_the_largest_eigenvalue():
+    """dt = 1.9 / sqrt(bound) is stable when bound >= the spring Laplacian's largest
+    eigenvalue; the earlier power-iteration estimate came from below (diverged on real scans)."""
+    from potflat import relax as relax_mod
+    from potflat.types import FlatMesh, Mesh
+
+    rng = np.random.default_rng(1)
+    x, y = np.meshgrid(np.linspace(0, 10, 7), np.linspace(0, 8, 6))
+    V = np.column_stack([x.ravel() + rng.normal(0, 0.2, x.size), y.ravel(), np.zeros(x.size)])
+    F = np.array([[r * 7 + c, r * 7 + c + 1, r * 7 + c + 8] for r in range(5) for c in range(6)]
+                 + [[r * 7 + c, r * 7 + c + 8, r * 7 + c + 7] for r in range(5) for c in range(6)])
+    flat = FlatMesh(Mesh(V, F), V[:, :2].copy())
+    for weighting in ("uniform", "relative"):
+        sp = relax_mod._Springs(flat.mesh.vertices, F, len(V), k=0.5, relative=weighting == "relative")
+        n = sp.n
+        L = np.zeros((n, n))
+        for i in range(n):
+            for p in range(sp.ptr[i], sp.ptr[i + 1]):
+                j = sp.nbr[p]
+                c = sp.k / max(sp.rst[p], relax_mod.LENGTH_FLOOR) ** 2 if sp.relative else sp.k
+                L[i, i] += c
+                L[i, j] -= c
+        assert sp.laplacian_bound() >= np.linalg.eigvalsh(L).max() * (1 - 1e-12)
+
+
+# ---------------------------------------------------------------------------------------
+# silent wrong results
+
+
+def test_obj_faces_naming_missing_texture_coordinates_are_refused(tmp_path):
+    scan = _tube_obj(tmp_path / "pot.obj")
+    scan.write_text("\n".join(ln if not ln.startswith("f ") else "f " + " ".join(f"{v}/{v}" for v in ln.split()[1:])
+                              for ln in scan.read_text().splitlines()) + "\n")
+    one_line_error(cli("rollout", scan, "-o", tmp_path / "out"), "pot.obj", "no 'vt' lines", "--no-texture")
+    assert cli("rollout", scan, "-o", tmp_path / "out", "--no-texture", "-q").exit_code == 0
+
+
+# ---------------------------------------------------------------------------------------
+# interruption and concurrency
+
+
+def test_an_interrupted_batch_records_cancelled_and_interrupted_scans(tmp_path, fake_stages):
+    from potflat.batch import _unfinished
+
+    batch = load_batch(_batch(tmp_path, "  - path: scans/*.obj\n"))
+    started = time.time()
+    first, second = batch.jobs
+    first.out_dir.mkdir(parents=True)
+    (first.out_dir / MANIFEST).write_text(json.dumps({"complete": False, "name": first.name}))
+    assert _unfinished(first, started).status == "interrupted"
+    assert _unfinished(second, started).status == "cancelled"
+
+
+def test_potflats_own_partial_painting_does_not_block_the_rerun(tmp_path, fake_stages):
+    """Killed between NAME.png and NAME.bake.json: the marker says the PNG is potflat's."""
+    from potflat.pipeline import run_scan
+
+    scan = fakes.write_scan(tmp_path / "pot.obj")
+    out = tmp_path / "out"
+    fakes.SABOTAGE["pot"] = ("interrupt", "bake")
+    with pytest.raises(KeyboardInterrupt):
+        run_scan(scan, out)
+    (out / "pot.png").write_bytes(b"half")  # as if the kill came after the painting
+    (out / ".pot.png.abc123.part").write_bytes(b"debris")
+    fakes.SABOTAGE.clear()
+    run_scan(scan, out)
+    assert (out / "pot.bake.json").is_file()
+    assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == []
+
+
+def test_batch_force_redoes_a_scan_interrupted_in_its_bake(tmp_path, fake_stages):
+    batch = _batch(tmp_path, "  - path: scans/pot-0.obj\n", n=1)
+    fakes.SABOTAGE["pot-0"] = ("interrupt", "bake")
+    with pytest.raises(KeyboardInterrupt):
+        run_batch(load_batch(batch), workers=1)
+    folder = tmp_path / "results" / "pot-0"
+    (folder / "pot-0.png").write_bytes(b"half")
+    fakes.SABOTAGE.clear()
+    for force in (False, True):
+        assert [r.status for r in run_batch(load_batch(batch), workers=1, force=force).reports] == ["done"]
+        assert read_manifest(folder)["complete"] is True
+
+
+def test_sigterm_ends_a_run_like_ctrl_c(tmp_path):
+    """SIGTERM mid-run: exit 130, the interrupt message, no .part temporaries left."""
+    scan = _tube_obj(tmp_path / "vase.obj", radius=60, height=200)
+    out = tmp_path / "out"
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "potflat_cli", "run", str(scan), "-o", str(out), "--preset",
+                             "archival"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
+    deadline = time.monotonic() + 120
+    while not (out / "vase.rollout.json").exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode in (0, 130), err  # 0 only if it finished before the signal
+    if proc.returncode == 130:
+        assert "interrupted" in err and "Traceback" not in err
+    assert not list(out.glob(".*.part")) and not (out / ".potflat.lock").exists()
+
+
+# ---------------------------------------------------------------------------------------
+# defaults and help
+
+
+def test_help_shows_the_allowed_values():
+    text = " ".join(runner.invoke(app, ["run", "--help"], env={"COLUMNS": "240"}).stdout.split())
+    for shown in ("[auto|cylinder|cone|sphere|ortho]", "[um|mm|cm|m|in]", "[preview|standard|archival|paper]",
+                  "A B|A,B"):
+        assert shown in text, shown
+    assert "<bool>" not in text.replace("--help <bool>", "")
+    batch_help = " ".join(cli("batch", "--help").stdout.split())
+    assert "the input's folder" not in batch_help and "'output:'" in batch_help
+
+
+def test_band_with_a_comma_and_unit_names(tmp_path, fake_stages):
+    from potflat_cli.main import split_pairs
+
+    assert split_pairs(["run", "x", "--band", "0.2,0.8"]) == ["run", "x", "--band", "0.2", "0.8"]
+    assert split_pairs(["--band=0.2,0.8", "--angles", "-60", "60"]) == ["--band", "0.2", "0.8", "--angles", "-60", "60"]
+    from potflat.types import canonical_units
+
+    assert [canonical_units(u) for u in ("meter", "Metres", "millimetre", "µm", "inch")] == ["m", "m", "mm", "um", "in"]
+
+
+def test_one_log_base_and_figures_in_words():
+    from potflat.distortion import in_words, percent_from_log
+
+    assert percent_from_log(0.1604) == pytest.approx(17.4, abs=0.05)
+    assert in_words({"edge_rms": 0.14, "area_mean_abs_log": 0.1604, "flipped": 0}) == \
+        "lengths off by 14.0 % (RMS), areas by 17.4 % on average, 0 flipped"
+
+
+def test_large_trims_and_poor_axis_fits_are_warned_with_the_option():
+    from types import SimpleNamespace
+
+    from potflat.rollout import _notes
+    from potflat.types import FlatMesh, Mesh
+
+    V = np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0]], float)
+    flat = FlatMesh(Mesh(V, np.array([[0, 1, 2]])), V[:, :2].copy())
+    result = SimpleNamespace(distortion=SimpleNamespace(flipped=0), boundary_overlap=0, other_objects_faces=0,
+                             trimmed_area=20.0, flat=flat, axis=SimpleNamespace(rms_angle_deg=14.0))
+    notes = " ".join(_notes(result))
+    assert "29 % of the surface was trimmed" in notes and "--band" in notes
+    assert "14 deg RMS" in notes and "--axis" in notes
+
+
+def test_compile_note_on_a_first_run(tmp_path, monkeypatch):
+    import numba
+
+    from potflat_cli._stage import with_compile_note
+
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "empty"))
+    assert "first run: compiling" in with_compile_note("rolling out")
+    (tmp_path / "full" / "x").mkdir(parents=True)
+    (tmp_path / "full" / "x" / "springs.f-1.py311.nbi").write_bytes(b"")
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "full"))
+    assert with_compile_note("rolling out") == "rolling out"
+
+
+def test_the_output_texture_is_a_copy_never_a_link(tmp_path):
+    from PIL import Image
+
+    from potflat.io.stage import write_flat_ply
+    from potflat.types import FlatMesh, Mesh
+
+    (tmp_path / "scan").mkdir()
+    texture = tmp_path / "scan" / "pot.png"
+    Image.new("RGB", (4, 4), (1, 2, 3)).save(texture)
+    V = np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0]], float)
+    mesh = Mesh(V, np.array([[0, 1, 2]]), texcoords=np.zeros((1, 3, 2)), texture_path=texture)
+    write_flat_ply(tmp_path / "out" / "pot.rollout.ply", FlatMesh(mesh, V[:, :2].copy()))
+    placed = tmp_path / "out" / "pot.texture.png"
+    assert placed.read_bytes() == texture.read_bytes()
+    assert not os.path.samefile(placed, texture) and os.stat(texture).st_nlink == 1
