@@ -42,6 +42,7 @@ from potflat.distortion import (
     summarize,
     true_scale_factor,
     vertex_stress,
+    zone_summary,
 )
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
 from potflat.types import FlatMesh, Mesh, StageOutput
@@ -49,7 +50,7 @@ from potflat.types import FlatMesh, Mesh, StageOutput
 #: The painted figures' settings of the fold-free presets (measured: docs/performance.md,
 #: "Painted figures"): the shape term's weight, how much stiffer the important zone is than
 #: plain surface, and the final scaling to true scale in the important zone.
-_FIGURES = {"shape": 0.5, "importance_contrast": 20.0, "true_scale": True}
+_FIGURES = {"shape": 0.2, "importance_contrast": 100.0, "true_scale": True}
 #: Settings of each preset; ``None`` in :class:`RelaxOptions` takes the preset's value.
 PRESETS: dict[str, dict] = {
     "preview": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
@@ -139,11 +140,12 @@ class RelaxOptions:
         finer than the cells is relaxed itself). 0: relax the full mesh. None: the preset's
         (0.5 for ``preview``, 0 for the others).
     shape : float or None
-        Weight of the shape term (>= 0): each triangle's conformal energy
-        ``A (sigma_1 - sigma_2)^2 / 2`` per mean triangle area, added to the springs. The
-        springs alone charge shear half as much as area change; the shape term charges
-        shear only, so larger values keep figures rounder and lines straighter at some cost
-        in area. 0: the springs alone. None: the preset's (0 for ``paper``).
+        Weight of the shape term (>= 0): each triangle's symmetric anisotropy energy
+        ``A (sigma_1 / sigma_2 + sigma_2 / sigma_1 - 2)`` per mean triangle area, added to
+        the springs. The springs alone charge shear half as much as area change; the shape
+        term charges shear only (about ``A log(sigma_1 / sigma_2)^2``), so larger values keep
+        figures rounder and lines straighter at some cost in area. 0: the springs alone.
+        None: the preset's (0 for ``paper``).
     importance_contrast : float or None
         How much stiffer the important (painted) zone is than plain surface (>= 1): springs,
         barrier and shape term of plain surface are weighted ``1 / importance_contrast``, so
@@ -1094,6 +1096,10 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         "notes": list(result.notes),
         "distortion_before": result.distortion_before.as_dict(),
         "distortion": result.distortion.as_dict(),
+        "importance": ("none: the whole surface counts alike" if result.flat.importance is None else
+                       f"per vertex in {ply_path.name}; springs, barrier and shape term of plain surface weighted "
+                       f"1/{result.settings['importance_contrast']:g}"),
+        **zone_summary(flat.mesh.vertices, result.flat.uv, flat.mesh.faces, result.flat.importance),
         "timings": result.timings,
         "units": flat.mesh.units,
         "vertices": len(flat.mesh.vertices),
