@@ -257,6 +257,9 @@ class RelaxResult:
         many search directions were smoothed at faces limiting the step.
     settings : dict
         The resolved settings (preset values with options applied).
+    scale_factor : float
+        The uniform factor applied after solving for true scale (``true_scale``; 1 without):
+        the median length scale in the important zone (the whole surface without one) is 1.
     notes : tuple of str
         What the solver had to do beyond the plan (untangling, fallback), for the JSON.
     """
@@ -273,6 +276,7 @@ class RelaxResult:
     preset: str
     levels: tuple = ()
     settings: dict = field(default_factory=dict)
+    scale_factor: float = 1.0
     notes: tuple = ()
 
 
@@ -991,11 +995,10 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
         raise FoldedResultError("the paper dynamics diverged (NaN); use the default preset")
     uv_out = np.empty_like(x)
     uv_out[order] = x * unit + centre
+    factor = 1.0
     if settings["true_scale"]:
         factor = true_scale_factor(V, uv_out, F, flat.importance)
         uv_out = centre + (uv_out - centre) * factor
-        notes.append(f"scaled by {factor:.4f} to true scale (median length scale 1) in the "
-                     + ("important zone" if flat.importance is not None else "whole surface"))
     before = summarize(V, uv, F)
     after = summarize(V, uv_out, F)
     stress = vertex_stress(V, uv_out, F, flat.mesh.mm_per_unit)
@@ -1014,6 +1017,7 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
         preset=options.preset,
         levels=tuple(levels),
         settings=settings,
+        scale_factor=factor,
         notes=tuple(notes + ([f"stopped by {run.stopped}"] if run.stopped else [])),
     )
 
@@ -1100,6 +1104,7 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
                        f"per vertex in {ply_path.name}; springs, barrier and shape term of plain surface weighted "
                        f"1/{result.settings['importance_contrast']:g}"),
         **zone_summary(flat.mesh.vertices, result.flat.uv, flat.mesh.faces, result.flat.importance),
+        "true_scale_factor": result.scale_factor,
         "timings": result.timings,
         "units": flat.mesh.units,
         "vertices": len(flat.mesh.vertices),
