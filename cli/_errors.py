@@ -12,7 +12,8 @@ EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 
 def fail(message: str, code: int = EXIT_USAGE) -> "typer.Exit":
     """Print ``error: message`` to stderr and return the Exit to raise."""
-    print(f"error: {message}", file=sys.stderr)
+    one_line = "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)  # a newline in a file name
+    print(f"error: {one_line}", file=sys.stderr)
     return typer.Exit(code=code)
 
 
