@@ -8,6 +8,15 @@ import typer
 
 #: Exit codes, documented in docs/cli.md.
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+#: Signals received (SIGTERM): checked between stages and at the end, since the
+#: KeyboardInterrupt the handler raises is lost when it lands in a finaliser.
+STOP: list[int] = []
+
+
+def check_stop() -> None:
+    """Raise KeyboardInterrupt if a stop signal arrived (see :data:`STOP`)."""
+    if STOP:
+        raise KeyboardInterrupt
 
 
 def fail(message: str, code: int = EXIT_USAGE) -> "typer.Exit":
@@ -25,7 +34,9 @@ def user_errors(func):
         from potflat.errors import PotflatError
 
         try:
-            return func(*args, **kwargs)
+            result = func(*args, **kwargs)
+            check_stop()
+            return result
         except PotflatError as exc:
             raise fail(str(exc)) from None
         except (FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError) as exc:

@@ -46,6 +46,9 @@ def split_pairs(args: list[str]) -> list[str]:
 
 def _terminate_as_interrupt(signum, frame) -> None:
     """SIGTERM (a cluster's or a service manager's stop) is handled like Ctrl-C: clean up."""
+    from potflat_cli._errors import STOP
+
+    STOP.append(signum)  # remembered: an interrupt raised inside a finaliser is swallowed by Python
     raise KeyboardInterrupt
 
 
@@ -67,8 +70,9 @@ class _Group(TyperGroup):
         except ImportError:
             import click
 
-        from potflat_cli._errors import EXIT_USAGE, fail
+        from potflat_cli._errors import EXIT_USAGE, STOP, fail
 
+        STOP.clear()
         args = split_pairs(list(sys.argv[1:] if args is None else args))
         if threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGTERM, _terminate_as_interrupt)

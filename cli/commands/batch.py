@@ -7,7 +7,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from potflat_cli._errors import EXIT_USAGE, user_errors
+from potflat_cli._errors import EXIT_USAGE, check_stop, user_errors
 from potflat_cli._options import Json, Quiet
 
 BatchFile = Annotated[Path, typer.Argument(help="YAML batch file (schema: docs/cli.md).")]
@@ -65,6 +65,7 @@ def batch_command(batch_file: BatchFile, workers: Workers = None, scheduler: Sch
                                         f"{where}; results in {batch.output}"), highlight=False)
 
     def on_result(report) -> None:
+        check_stop()
         progress.advance(task)
         if report.status == "failed":
             err.print(f"[red]failed[/]  {report.name}: {report.error}", highlight=False)

@@ -7,7 +7,7 @@ from typing import Annotated, Any
 
 import typer
 
-from potflat_cli._errors import user_errors
+from potflat_cli._errors import check_stop, user_errors
 from potflat_cli._options import Json, Name, OutputDir, Quiet
 
 HELP = """Run rollout, relax and bake on one scan: NAME.rollout.ply/.json, NAME.relaxed.ply/.json, NAME.png, NAME.bake.json and the distortion maps, all in OUTDIR.
@@ -66,6 +66,7 @@ def _run(values: dict[str, Any]) -> None:
     err = Console(stderr=True, quiet=values["quiet"] or values["json"])
     with err.status(f"{scan.name}: starting") as status:
         def progress(stage: str) -> None:
+            check_stop()
             status.update(with_compile_note(f"{scan.name}: {stage}"))
         out_dir = values["output"] or Path(values["name"] or scan.stem)  # ./NAME/, never the scan's folder
         result = run_scan(scan, out_dir, name=values["name"], progress=progress, **options)
