@@ -839,7 +839,8 @@ def _importance_weights(importance: np.ndarray, contrast: float) -> np.ndarray:
     """Per-vertex weights from importance (n,) in [0, 1]: ``1 / contrast`` on plain surface,
     1 in the important zone, linear between. Shape (n,) float64."""
     low = 1.0 / contrast
-    return np.ascontiguousarray(low + (1.0 - low) * importance, dtype=np.float64)
+    # exactly 1 where the importance is 1: an all-important mesh is solved as without importance
+    return np.ascontiguousarray(np.where(importance >= 1.0, 1.0, low + (1.0 - low) * importance), dtype=np.float64)
 
 
 def _mean_edge_length(V: np.ndarray, F: np.ndarray) -> float:
