@@ -1,0 +1,251 @@
+"""Distortion measures of a flattening, shared by rollout, relax and bake.
+
+All measures compare each flattened triangle or edge with the same one on the 3D scan:
+
+* **edge-length RMS**: ``sqrt(mean(((l_2d - l_3d) / l_3d)^2))`` over the mesh edges
+  (dimensionless; 0 for an isometric flattening).
+* **area distortion** per face: ``log(A_2d / A_3d)``; summarised as the area-weighted mean
+  of its absolute value.
+* **anisotropy** per face: ``sigma_1 / sigma_2``, the ratio of the singular values of the
+  linear map from the 3D triangle to the flat one (1 = no shear or one-sided stretch).
+* **flipped**: faces whose flat signed area is not positive (folded or mirrored).
+* **stress** per vertex: the paper's Eq. 3, ``sqrt(sum_j (|x_i - x_j| - r_ij)^2 / sum_j r_ij)``
+  over the vertex's mesh edges, evaluated in millimetres (so its unit is sqrt(mm) and it does
+  not depend on the scan's unit).
+
+Faces whose 3D area is (numerically) zero carry no distortion and are excluded.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from potflat.types import FlatMesh
+
+#: Relative 3D area below which a face counts as degenerate (fraction of the mean face area).
+DEGENERATE_AREA_FRACTION = 1e-12
+#: Faces (or edges) per block of the per-face and per-edge figures: bounds their
+#: temporaries on big meshes (the figures do not depend on it).
+BLOCK = 1 << 18
+
+
+@dataclass(frozen=True)
+class FaceDistortion:
+    """Per-face distortion of a flattening.
+
+    Attributes
+    ----------
+    area_3d : (m,) float64
+        Triangle area on the scan, scan units squared.
+    area_2d : (m,) float64
+        Signed flattened area (negative when flipped).
+    sigma_max, sigma_min : (m,) float64
+        Singular values of the 3D-to-flat linear map (``sigma_min`` is signed: negative when flipped).
+    valid : (m,) bool
+        Non-degenerate faces (positive 3D area).
+    """
+
+    area_3d: np.ndarray
+    area_2d: np.ndarray
+    sigma_max: np.ndarray
+    sigma_min: np.ndarray
+    valid: np.ndarray
+
+    @property
+    def log_area_ratio(self) -> np.ndarray:
+        """``log(|A_2d| / A_3d)`` per face, 0 for degenerate faces. Shape (m,)."""
+        out = np.zeros_like(self.area_3d)
+        v = self.valid & (self.area_2d != 0)
+        out[v] = np.log(np.abs(self.area_2d[v]) / self.area_3d[v])
+        return out
+
+    @property
+    def anisotropy(self) -> np.ndarray:
+        """``sigma_max / |sigma_min|`` per face (inf for collapsed faces, 1 for degenerate ones). Shape (m,)."""
+        out = np.ones_like(self.area_3d)
+        v = self.valid
+        with np.errstate(divide="ignore"):
+            out[v] = self.sigma_max[v] / np.abs(self.sigma_min[v])
+        return out
+
+
+@dataclass(frozen=True)
+class DistortionSummary:
+    """Scalar distortion figures of a flattening (all dimensionless)."""
+
+    edge_rms: float
+    edge_max: float
+    area_mean_abs_log: float
+    area_p95_abs_log: float
+    area_max_abs_log: float
+    anisotropy_mean: float
+    anisotropy_p95: float
+    anisotropy_max: float
+    scale: float
+    flipped: int
+    degenerate: int
+
+    def as_dict(self) -> dict:
+        """The figures as a plain JSON-ready dict."""
+        return asdict(self)
+
+
+def face_distortion(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> FaceDistortion:
+    """Per-face distortion of the map from ``vertices`` to ``uv``.
+
+    Computed in blocks of :data:`BLOCK` faces, so the temporaries stay small on big
+    meshes (every figure is per face; the result does not depend on the blocks).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        3D positions.
+    uv : (n, 2) float64
+        Flattened positions, same units.
+    faces : (m, 3) int64
+        Triangles, counter-clockwise seen from outside.
+
+    Returns
+    -------
+    FaceDistortion
+    """
+    m = len(faces)
+    area_3d = face_areas(vertices, faces)
+    mean_area = area_3d.mean() if m else 0.0
+    valid = area_3d > DEGENERATE_AREA_FRACTION * max(mean_area, np.finfo(float).tiny)
+    area_2d, sigma_max, sigma_min = np.empty(m), np.empty(m), np.empty(m)
+    for s in row_blocks(m):
+        f, v = faces[s], valid[s]
+        d1, d2 = _edge_vectors(vertices, f)
+        len1 = np.linalg.norm(d1, axis=1)
+        safe = np.where(v, 1.0, 0.0)
+        len1s = np.where(v & (len1 > 0), len1, 1.0)
+        e1 = d1 / len1s[:, None]
+        q2x = np.einsum("ij,ij->i", d2, e1)
+        q2y = np.where(v, 2.0 * area_3d[s] / len1s, 1.0)
+        w1, w2 = _edge_vectors(uv, f)
+        area_2d[s] = 0.5 * (w1[:, 0] * w2[:, 1] - w1[:, 1] * w2[:, 0])
+        # J = W Q^-1 with Q = [[len1, q2x], [0, q2y]]
+        inv11, inv12, inv22 = 1.0 / len1s, -q2x / (len1s * q2y), 1.0 / q2y
+        a = w1[:, 0] * inv11
+        b = w1[:, 0] * inv12 + w2[:, 0] * inv22
+        c = w1[:, 1] * inv11
+        d = w1[:, 1] * inv12 + w2[:, 1] * inv22
+        # stable closed-form 2x2 SVD: sigma = hypot(E, H) +- hypot(F, G); the smaller one is
+        # signed (negative when the map reverses orientation)
+        q = np.hypot(0.5 * (a + d), 0.5 * (c - b))
+        r = np.hypot(0.5 * (a - d), 0.5 * (c + b))
+        sigma_max[s] = (q + r) * safe
+        sigma_min[s] = (q - r) * safe
+    return FaceDistortion(area_3d, area_2d, sigma_max, sigma_min, valid)
+
+
+def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """3D area of each face (a parallel kernel, no temporaries). Shape (m,) float64."""
+    from potflat.mesh._kernels import triangle_areas
+
+    return triangle_areas(np.ascontiguousarray(vertices, dtype=np.float64),
+                          np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3))
+
+
+def row_blocks(m: int, size: int | None = None) -> list[slice]:
+    """Slices of ``size`` rows (default :data:`BLOCK`) covering ``range(m)``, to bound the
+    temporaries of per-row work."""
+    size = size or BLOCK
+    return [slice(a, min(a + size, m)) for a in range(0, m, size)]
+
+
+def _edge_vectors(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``p1 - p0`` and ``p2 - p0`` of each face ((k, d) float64 each)."""
+    p0 = points[faces[:, 0]]
+    return points[faces[:, 1]] - p0, points[faces[:, 2]] - p0
+
+
+def unique_edges(faces: np.ndarray) -> np.ndarray:
+    """Undirected edges of ``faces``, each once (``i <= j``), sorted. Shape (e, 2) int64.
+
+    Parallel, without a global sort: each vertex groups the edges to its higher neighbours
+    (:func:`potflat.relax._kernels.springs.halfedge_springs`).
+    """
+    from potflat.relax._kernels.springs import halfedge_springs, vertex_faces
+
+    faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    n = int(faces.max()) + 1 if len(faces) else 0
+    return halfedge_springs(faces, *vertex_faces(n, faces), False)[0]
+
+
+def edge_length_error(vertices: np.ndarray, uv: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Relative edge-length error ``(l_2d - l_3d) / l_3d`` per edge (0 for zero-length edges). Shape (e,)."""
+    out = np.zeros(len(edges))
+    for s in row_blocks(len(edges)):
+        e = edges[s]
+        l3 = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)
+        l2 = np.linalg.norm(uv[e[:, 0]] - uv[e[:, 1]], axis=1)
+        ok = l3 > 0
+        out[s][ok] = (l2[ok] - l3[ok]) / l3[ok]
+    return out
+
+
+def vertex_stress(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, mm_per_unit: float = 1.0) -> np.ndarray:
+    """The paper's per-vertex residual stress (Eq. 3) over mesh edges, in sqrt(mm).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    uv : (n, 2) float64
+    faces : (m, 3) int64
+    mm_per_unit : float
+        Millimetres per unit of ``vertices`` and ``uv``.
+
+    Returns
+    -------
+    (n,) float64
+        0 for isolated vertices.
+    """
+    edges = unique_edges(faces)
+    n = len(vertices)
+    r, l = np.empty(len(edges)), np.empty(len(edges))
+    for s in row_blocks(len(edges)):
+        e = edges[s]
+        r[s] = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1) * mm_per_unit
+        l[s] = np.linalg.norm(uv[e[:, 0]] - uv[e[:, 1]], axis=1) * mm_per_unit
+    sq = (l - r) ** 2
+    num = np.bincount(edges[:, 0], sq, n) + np.bincount(edges[:, 1], sq, n)
+    den = np.bincount(edges[:, 0], r, n) + np.bincount(edges[:, 1], r, n)
+    out = np.zeros(n)
+    ok = den > 0
+    out[ok] = np.sqrt(num[ok] / den[ok])
+    return out
+
+
+def summarize(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> DistortionSummary:
+    """Scalar distortion figures of the map from ``vertices`` to ``uv`` (see module docs)."""
+    fd = face_distortion(vertices, uv, faces)
+    err = edge_length_error(vertices, uv, unique_edges(faces)) if len(faces) else np.zeros(1)
+    v = fd.valid
+    w = fd.area_3d[v]
+    la = np.abs(fd.log_area_ratio[v])
+    an = fd.anisotropy[v]
+    if not v.any():
+        la = an = w = np.ones(1)
+    total3 = fd.area_3d[v].sum()
+    return DistortionSummary(
+        edge_rms=float(np.sqrt(np.mean(err**2))),
+        edge_max=float(np.max(np.abs(err))),
+        area_mean_abs_log=float(np.average(la, weights=w)),
+        area_p95_abs_log=float(np.percentile(la, 95)),
+        area_max_abs_log=float(np.max(la)),
+        anisotropy_mean=float(np.average(an, weights=w)) if np.isfinite(an).all() else float("inf"),
+        # no interpolation across infinite values (inf - inf is NaN): collapsed faces give inf
+        anisotropy_p95=float(np.percentile(an, 95, method="linear" if np.isfinite(an).all() else "higher")),
+        anisotropy_max=float(np.max(an)),
+        scale=float(fd.area_2d[v].sum() / total3) if total3 > 0 else 0.0,
+        flipped=int(np.count_nonzero(v & (fd.area_2d <= 0))),
+        degenerate=int(np.count_nonzero(~v)),
+    )
+
+
+def summarize_flat(flat: FlatMesh) -> DistortionSummary:
+    """:func:`summarize` for a :class:`FlatMesh`."""
+    return summarize(flat.mesh.vertices, flat.uv, flat.mesh.faces)
