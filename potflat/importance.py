@@ -88,7 +88,7 @@ class Importance:
 
 
 def _zone_fraction(flat: FlatMesh, values: np.ndarray) -> float:
-    from potflat.distortion import face_areas, important_faces
+    from potflat.mesh.distortion import face_areas, important_faces
 
     area = face_areas(flat.mesh.vertices, flat.mesh.faces)
     total = float(area.sum())
@@ -360,7 +360,7 @@ def image_mask_importance(flat: FlatMesh, mask_path: str | Path, reference: str 
     """
     from scipy.spatial import cKDTree
 
-    from potflat.io.stage import read_flat_ply
+    from potflat.io.flat_ply import read_flat_ply
 
     mask_path = Path(mask_path)
     mask = read_mask(mask_path)

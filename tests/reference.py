@@ -43,7 +43,7 @@ def springs(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def halfedge_springs(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Edges, cross springs and boundary edges by a stable sort of all half-edges by edge
-    (the relax kernel's former algorithm): ``potflat._kernels.springs.halfedge_springs``
+    (the relax kernel's former algorithm): ``potflat.relax._kernels.springs.halfedge_springs``
     must return exactly this for every mesh.
 
     Half-edge ``h = 3 f + c`` runs from ``F[f, c]`` to ``F[f, (c + 1) % 3]``. Per edge, in

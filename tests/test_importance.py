@@ -15,14 +15,14 @@ import reference as ref
 from _bench_meshes import meshes, signed_areas
 
 from potflat import importance as imp
-from potflat.distortion import face_distortion, important_faces, true_scale_factor, zone_figures
+from potflat.mesh.distortion import face_distortion, important_faces, true_scale_factor, zone_figures
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.relax import relax
 from potflat.types import FlatMesh, Mesh
 
 
 def _springs(V, F, **kw):
-    from potflat.relax import _Springs
+    from potflat.relax.solver import _Springs
 
     return _Springs(np.ascontiguousarray(V, float), np.ascontiguousarray(F, np.int64), len(V), **kw)
 
@@ -45,7 +45,7 @@ def test_weighted_springs_and_shape_term_match_reference(bumpy, relative):
     sp = _springs(V, F, k=0.7, relative=relative, weight=weight, shape=0.3)
     x = np.ascontiguousarray(bumpy.uv * np.array([1.1, 0.93]))
     E, Es, g = sp.evaluate(x, barrier=False)
-    from potflat.distortion import face_areas
+    from potflat.mesh.distortion import face_areas
 
     scale = 0.3 / float(np.mean(face_areas(V, F)))
     want = ref.weighted_spring_energy(x, pairs, rest, 0.7, relative, weight) + ref.shape_energy(V, F, x, weight, scale)
@@ -207,7 +207,7 @@ def _textured(vessel, folder: Path) -> Mesh:
 
 def test_auto_importance_on_a_generated_vessel_covers_the_frieze_not_the_plain_body(tmp_path):
     from potflat.rollout import rollout
-    from potflat.synthetic import make_vessel
+    from potflat_synthetic.vessels import make_vessel
 
     vessel = make_vessel("hydria", n_vertices=6000, seed=2)
     ro = rollout(_textured(vessel, tmp_path))
@@ -224,7 +224,7 @@ def test_auto_importance_on_a_generated_vessel_covers_the_frieze_not_the_plain_b
 
 def test_rollout_without_colours_has_no_importance():
     from potflat.rollout import rollout
-    from potflat.synthetic import make_vessel
+    from potflat_synthetic.vessels import make_vessel
 
     vessel = make_vessel("cylinder", n_vertices=2000, seed=1)
     ro = rollout(vessel.mesh.replace(texcoords=None, texture_path=None))
@@ -239,9 +239,9 @@ def test_image_mask_round_trip_is_exact_on_a_developable_vessel(tmp_path):
     import cv2
 
     from potflat.bake import BakeOptions, run_bake_stage
-    from potflat.io.stage import write_flat_ply
+    from potflat.io.flat_ply import write_flat_ply
     from potflat.rollout import rollout
-    from potflat.synthetic import make_vessel
+    from potflat_synthetic.vessels import make_vessel
 
     mesh = _textured(make_vessel("cylinder", n_vertices=3000, seed=4), tmp_path)
     first = relax(rollout(mesh, importance="none").flat)
@@ -276,7 +276,7 @@ def test_image_mask_round_trip_is_exact_on_a_developable_vessel(tmp_path):
 
 def test_band_importance_selects_heights_and_angles():
     from potflat.rollout import rollout
-    from potflat.synthetic import make_vessel
+    from potflat_synthetic.vessels import make_vessel
 
     vessel = make_vessel("cylinder", n_vertices=3000, seed=1)
     ro = rollout(vessel.mesh, importance="band", importance_band=(0.25, 0.75), importance_angles=(0.0, 180.0))
