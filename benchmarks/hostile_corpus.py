@@ -92,7 +92,7 @@ def potflat(args: list, cwd: Path, cap: int, timeout: float, *, stop: tuple | No
 # --------------------------------------------------------------------------------- inputs
 def vessel_obj(folder: Path, name: str = "pot", scale: float = 1.0) -> Path:
     """A painted amphora (2000 vertices) as OBJ + MTL + PNG, coordinates times ``scale``."""
-    from potflat.synthetic import make_vessel, write_obj
+    from potflat_synthetic.vessels import make_vessel, write_obj
 
     path = write_obj(make_vessel("amphora", n_vertices=2000, seed=3, texture_size=64, pose=False),
                      folder / f"{name}.obj")

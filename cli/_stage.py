@@ -8,7 +8,7 @@ from collections.abc import Callable
 def with_compile_note(status: str) -> str:
     """``status`` plus a note when this run compiles the kernels (the first run is silent for
     about a minute otherwise)."""
-    from potflat._kernels._jit import kernels_cached
+    from potflat._jit import kernels_cached
 
     return status if kernels_cached() else f"{status} (first run: compiling potflat's kernels, about a minute, once)"
 

@@ -109,10 +109,10 @@ def _show_choices(command) -> None:
     instead of ``<str>``, and nothing after on/off flags (instead of ``<bool>``)."""
     from potflat.bake import MAP_NAMES
     from potflat.importance import METHODS
-    from potflat.proxy import KINDS
-    from potflat.relax import PRESETS, WEIGHTINGS
+    from potflat.rollout.proxy import KINDS
+    from potflat.relax.solver import PRESETS, WEIGHTINGS
     from potflat.types import UNITS_MM
-    from potflat.walls import SIDES
+    from potflat.rollout.walls import SIDES
 
     choices = {"proxy": ("auto", *KINDS), "units": tuple(UNITS_MM), "preset": tuple(PRESETS),
                "weighting": WEIGHTINGS, "side": SIDES, "importance": METHODS}

@@ -24,7 +24,7 @@ import pytest
 from typer.testing import CliRunner
 
 import test_batch_fakes as fakes
-from potflat.batch import MANIFEST, BatchFileError, is_complete, job_key, load_batch, read_manifest, run_batch
+from potflat.stages.batch import MANIFEST, BatchFileError, is_complete, job_key, load_batch, read_manifest, run_batch
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
 from potflat_cli.main import app
 
@@ -227,7 +227,7 @@ def test_image_size_is_checked_before_any_file_is_written(tmp_path, px_per_mm, w
 
 
 def test_a_tiny_image_draws_its_scale_bar_without_crashing():
-    from potflat.annotate import ScaleLayer
+    from potflat.bake.annotate import ScaleLayer
 
     layer = ScaleLayer(20, 12, 0.05)
     assert layer.rows(0, 12).shape == (12, 20, 4) and layer.bar_image().ndim == 3
@@ -254,7 +254,7 @@ def test_utf8_and_latin1_names_in_obj_mtl_and_stage_files(tmp_path):
     from PIL import Image
 
     from potflat.io.scan import load_scan
-    from potflat.io.stage import read_flat_ply, write_flat_ply
+    from potflat.io.flat_ply import read_flat_ply, write_flat_ply
     from potflat.types import FlatMesh
 
     folder = tmp_path / "Fund ü"
@@ -324,7 +324,7 @@ def test_a_texture_symlink_loop_is_one_line(tmp_path):
 @pytest.mark.parametrize("sidecar", ["null", "[1, 2]", '{"attachments": null}', '{"attachments": {"root_faces": "x"}}'])
 def test_a_sidecar_of_the_wrong_type_does_not_break_the_next_stage(tmp_path, sidecar):
     from potflat.bake import BakeOptions, run_bake_stage
-    from potflat.io.stage import write_flat_ply
+    from potflat.io.flat_ply import write_flat_ply
     from potflat.relax import RelaxOptions, run_relax_stage
     from potflat.types import FlatMesh, Mesh
 
@@ -352,8 +352,8 @@ def test_overflowing_coordinates_are_named(tmp_path):
 
 
 def test_paper_dynamics_that_diverge_stop_with_one_line_and_write_nothing(tmp_path, monkeypatch):
-    from potflat import relax as relax_mod
-    from potflat.io.stage import write_flat_ply
+    from potflat.relax import solver as relax_mod
+    from potflat.io.flat_ply import write_flat_ply
     from potflat.types import FlatMesh, Mesh
 
     x, y = np.meshgrid(np.linspace(0, 40, 8), np.linspace(0, 30, 7))
@@ -371,7 +371,7 @@ def test_paper_dynamics_that_diverge_stop_with_one_line_and_write_nothing(tmp_pa
 def test_the_paper_step_bounds_the_largest_eigenvalue():
     """dt = 1.9 / sqrt(bound) is stable when bound >= the spring Laplacian's largest
     eigenvalue; the earlier power-iteration estimate came from below (diverged on real scans)."""
-    from potflat import relax as relax_mod
+    from potflat.relax import solver as relax_mod
     from potflat.types import FlatMesh, Mesh
 
     rng = np.random.default_rng(1)
@@ -410,7 +410,7 @@ def test_obj_faces_naming_missing_texture_coordinates_are_refused(tmp_path):
 
 
 def test_an_interrupted_batch_records_cancelled_and_interrupted_scans(tmp_path, fake_stages):
-    from potflat.batch import _unfinished
+    from potflat.stages.batch import _unfinished
 
     batch = load_batch(_batch(tmp_path, "  - path: scans/*.obj\n"))
     started = time.time()
@@ -423,7 +423,7 @@ def test_an_interrupted_batch_records_cancelled_and_interrupted_scans(tmp_path, 
 
 def test_potflats_own_partial_painting_does_not_block_the_rerun(tmp_path, fake_stages):
     """Killed between NAME.png and NAME.bake.json: the marker says the PNG is potflat's."""
-    from potflat.pipeline import run_scan
+    from potflat.stages.pipeline import run_scan
 
     scan = fakes.write_scan(tmp_path / "pot.obj")
     out = tmp_path / "out"
@@ -494,7 +494,7 @@ def test_band_with_a_comma_and_unit_names(tmp_path, fake_stages):
 
 
 def test_one_log_base_and_figures_in_words():
-    from potflat.distortion import in_words, percent_from_log
+    from potflat.mesh.distortion import in_words, percent_from_log
 
     assert percent_from_log(0.1604) == pytest.approx(17.4, abs=0.05)
     assert in_words({"edge_rms": 0.14, "area_mean_abs_log": 0.1604, "flipped": 0}) == \
@@ -504,7 +504,7 @@ def test_one_log_base_and_figures_in_words():
 def test_large_trims_and_poor_axis_fits_are_warned_with_the_option():
     from types import SimpleNamespace
 
-    from potflat.rollout import _notes
+    from potflat.rollout.unroll import _notes
     from potflat.types import FlatMesh, Mesh
 
     V = np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0]], float)
@@ -532,7 +532,7 @@ def test_compile_note_on_a_first_run(tmp_path, monkeypatch):
 def test_the_output_texture_is_a_copy_never_a_link(tmp_path):
     from PIL import Image
 
-    from potflat.io.stage import write_flat_ply
+    from potflat.io.flat_ply import write_flat_ply
     from potflat.types import FlatMesh, Mesh
 
     (tmp_path / "scan").mkdir()

@@ -61,7 +61,7 @@ def _bake(flat_ply: Path, output: Path | None, options, *, name: str | None, qui
     from rich.console import Console
 
     from potflat.bake import run_bake_stage
-    from potflat.distortion import in_words
+    from potflat.mesh.distortion import in_words
 
     result = run_stage(f"baking {flat_ply.name}", lambda: run_bake_stage(flat_ply, output or flat_ply.parent, options, name=name),
                        quiet=quiet, as_json=as_json)

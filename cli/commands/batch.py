@@ -42,7 +42,7 @@ def batch_command(batch_file: BatchFile, workers: Workers = None, scheduler: Sch
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from potflat.batch import BatchFileError, load_batch, run_batch
+    from potflat.stages.batch import BatchFileError, load_batch, run_batch
     from potflat_cli._stage import with_compile_note
 
     try:
@@ -91,7 +91,7 @@ def _figures(report) -> str:
     parts = []
     if report.seconds:
         parts.append(f"{report.seconds:.1f} s")
-    from potflat.distortion import in_words
+    from potflat.mesh.distortion import in_words
 
     words = in_words(f)
     return ", ".join(parts + ([words] if words else []))

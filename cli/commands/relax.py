@@ -56,7 +56,7 @@ def relax_command(
     quiet: Quiet = False,
     json: Json = False,
 ) -> None:
-    from potflat.distortion import in_words
+    from potflat.mesh.distortion import in_words
     from potflat.relax import RelaxOptions, run_relax_stage
     from potflat_cli._stage import run_stage, with_compile_note
 

@@ -95,7 +95,7 @@ def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quie
     from potflat_cli._stage import run_stage
     from rich.console import Console
 
-    from potflat.distortion import in_words
+    from potflat.mesh.distortion import in_words
     from potflat.rollout import run_rollout_stage
 
     result = run_stage(f"rolling out {scan.name}", lambda: run_rollout_stage(scan, output or Path(name or scan.stem), options, name=name),

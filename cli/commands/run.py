@@ -30,7 +30,7 @@ def run_command(scan: Scan, output: OutputDir = None, name: Name = None,
 
 def full_command():
     """``run`` with one option per stage option field (see potflat_cli._options)."""
-    from potflat.pipeline import STAGES
+    from potflat.stages.pipeline import STAGES
     from potflat_cli._options import stage_parameters
 
     base = list(inspect.signature(run_command, eval_str=True).parameters.values())
@@ -56,8 +56,8 @@ def _run(values: dict[str, Any]) -> None:
 
     from rich.console import Console
 
-    from potflat.distortion import in_words
-    from potflat.pipeline import STAGES, run_scan
+    from potflat.mesh.distortion import in_words
+    from potflat.stages.pipeline import STAGES, run_scan
     from potflat_cli._options import options_from_cli
     from potflat_cli._stage import with_compile_note
 

@@ -1,0 +1,56 @@
+"""The one place where Numba JIT options are chosen.
+
+Use these decorators instead of calling :func:`numba.njit` with options elsewhere:
+
+* :data:`leaf` - serial kernels, cached on disk.
+* :data:`parallel` - kernels using ``prange``; cached (safe in current Numba).
+
+``fastmath`` is off everywhere: solver loops must not produce NaN or depend on
+reassociation (see umap #1228). Results must be bit-for-bit deterministic run to run,
+so parallel kernels only write to per-iteration slots (gather, never scatter ``+=``).
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+
+# Before any parallel kernel starts its OpenMP thread pool: the solvers run many short
+# parallel regions per iteration, and OpenMP's default busy-waiting between them made the
+# relax solver up to 20x slower on a machine shared with other jobs (docs/performance.md).
+# An explicit setting by the user wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import numba
+
+leaf = numba.njit(cache=True, nogil=True, fastmath=False)
+parallel = numba.njit(cache=True, nogil=True, parallel=True, fastmath=False)
+prange = numba.prange
+
+
+@contextlib.contextmanager
+def numba_threads(n: int | None):
+    """Run the block with at most ``n`` Numba threads (restored afterwards, also on error); None: unchanged."""
+    if n is None:
+        yield
+        return
+    old = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(old)
+
+
+def kernels_cached() -> bool:
+    """Whether the kernels were compiled and cached by an earlier run (else the first call of
+    each compiles it: about a minute in all, worth telling the user)."""
+    from pathlib import Path
+
+    place = Path(numba.config.CACHE_DIR) if numba.config.CACHE_DIR else Path(__file__).resolve().parent
+    try:  # the spring kernels' index files (in the package's __pycache__ folders, or NUMBA_CACHE_DIR)
+        return place.is_dir() and next(place.rglob("springs.*.nbi"), None) is not None
+    except OSError:
+        return True  # cannot tell: say nothing
+
+
+__all__ = ["kernels_cached", "leaf", "numba_threads", "parallel", "prange"]
