@@ -104,23 +104,38 @@ class _Group(TyperGroup):
         return name, command, rest
 
 
+#: Options that take a name, and where their allowed values are defined (module, constant).
+CHOICES = {"proxy": ("potflat.rollout.proxy", "KINDS"), "units": ("potflat.types", "UNITS_MM"),
+           "preset": ("potflat.relax.solver", "PRESETS"), "weighting": ("potflat.relax.solver", "WEIGHTINGS"),
+           "side": ("potflat.rollout.walls", "SIDES"), "importance": ("potflat.importance", "METHODS"),
+           "maps": ("potflat.bake.render", "MAP_NAMES")}
+
+
+#: Longest list of allowed values shown as the metavar (longer ones go into the help text).
+MAX_METAVAR = 15
+
+
 def _show_choices(command) -> None:
     """In ``--help``: the allowed values of the options that take a name (``[auto|cylinder|...]``)
     instead of ``<str>``, and nothing after on/off flags (instead of ``<bool>``)."""
-    from potflat.bake import MAP_NAMES
-    from potflat.importance import METHODS
-    from potflat.rollout.proxy import KINDS
-    from potflat.relax.solver import PRESETS, WEIGHTINGS
-    from potflat.types import UNITS_MM
-    from potflat.rollout.walls import SIDES
+    import importlib
 
-    choices = {"proxy": ("auto", *KINDS), "units": tuple(UNITS_MM), "preset": tuple(PRESETS),
-               "weighting": WEIGHTINGS, "side": SIDES, "importance": METHODS}
     for param in getattr(command, "params", ()):
-        if param.name in choices:
-            param.metavar = "[" + "|".join(choices[param.name]) + "]"
-        elif param.name == "maps":
-            param.metavar = ",".join(MAP_NAMES) + "|none"
+        if param.name in CHOICES:
+            module, constant = CHOICES[param.name]
+            try:
+                values = tuple(getattr(importlib.import_module(module), constant))
+            except (ImportError, AttributeError):  # a stage replaced (tests' fake stages)
+                continue
+            if param.name == "proxy":
+                values = ("auto", *values)
+            shown = "[" + "|".join(values) + "]"
+            if len(shown) <= MAX_METAVAR:
+                param.metavar = shown
+            else:  # a long list would squeeze the help's columns: name it, and list it in the help text
+                param.metavar = "NAME"
+                if not all(v in (param.help or "") for v in values):
+                    param.help = f"{param.help or ''} One of: {', '.join(values)}.".strip()
         elif getattr(param, "is_flag", False):
             param.metavar = ""
         elif param.nargs == 2:  # --band 0.2 0.8 or --band 0.2,0.8 (split_pairs)
