@@ -17,10 +17,14 @@ REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real"
 
 @pytest.fixture(autouse=True)
 def _private_tempdir(tmp_path, monkeypatch):
-    """Packed atlases and extracted GLB textures go to the temp folder: keep them in tmp_path."""
+    """Packed atlases and extracted GLB textures go to the process's private folder in the temp
+    folder: make a new one per test, in tmp_path."""
     import tempfile
 
+    from potflat.io import scan as scan_io
+
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    monkeypatch.setattr(scan_io, "_PRIVATE_CACHE", [])
 
 
 # ------------------------------------------------------------------ helpers
