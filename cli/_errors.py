@@ -20,10 +20,14 @@ def check_stop() -> None:
 
 
 def fail(message: str, code: int = EXIT_USAGE) -> "typer.Exit":
-    """Print ``error: message`` to stderr and return the Exit to raise."""
-    one_line = "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)  # a newline in a file name
-    print(f"error: {one_line}", file=sys.stderr)
+    """Print ``error: message`` to stderr (on one line) and return the Exit to raise."""
+    print(f"error: {one_line(message)}", file=sys.stderr)
     return typer.Exit(code=code)
+
+
+def one_line(message: str) -> str:
+    """``message`` with control characters escaped (a newline in a file name stays ``\\n``)."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)
 
 
 def user_errors(func):

@@ -162,6 +162,16 @@ def test_yaml_alias_bomb_in_an_option_value_is_refused(tmp_path, fake_stages):
     assert time.monotonic() - start < 5
 
 
+def test_yaml_nested_too_deeply_or_too_long_is_one_problem(tmp_path, fake_stages):
+    path = tmp_path / "deep.yaml"
+    path.write_text("output: o\nscans: " + "[" * 5000 + "]" * 5000 + "\n")
+    with pytest.raises(BatchFileError, match="nested too deeply"):
+        load_batch(path)
+    path.write_text("output: o\nscans:\n  - path: " + "x" * 5000 + ".obj\n")
+    with pytest.raises(BatchFileError, match="5004 characters"):
+        load_batch(path)
+
+
 @pytest.mark.parametrize("pattern", ["/**/*.ply", "../*.obj", "scans/*/../../../*.obj"])
 def test_a_pattern_outside_the_batch_folder_is_refused(tmp_path, fake_stages, pattern):
     (tmp_path / "inner").mkdir()

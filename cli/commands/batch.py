@@ -7,7 +7,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from potflat_cli._errors import EXIT_USAGE, check_stop, user_errors
+from potflat_cli._errors import EXIT_USAGE, check_stop, one_line, user_errors
 from potflat_cli._options import Json, Quiet
 
 BatchFile = Annotated[Path, typer.Argument(help="YAML batch file (schema: docs/cli.md).")]
@@ -49,7 +49,7 @@ def batch_command(batch_file: BatchFile, workers: Workers = None, scheduler: Sch
         batch = load_batch(batch_file, output=output)
     except BatchFileError as exc:
         for problem in exc.problems:
-            print(f"error: {problem}", file=sys.stderr)
+            print(f"error: {one_line(problem)}", file=sys.stderr)
         raise typer.Exit(EXIT_USAGE) from None
     err = Console(stderr=True)
     progress = Progress(TextColumn("[bold]batch"), BarColumn(), MofNCompleteColumn(),

@@ -265,6 +265,9 @@ def load_batch(path: str | os.PathLike, *, output: str | os.PathLike | None = No
         data = _bounded_load(text)
     except _TooLarge as exc:
         raise BatchFileError([f"{path}:{exc.problem_mark.line + 1}: {exc.problem}"]) from None
+    except RecursionError:
+        raise BatchFileError([f"{path}: values nested too deeply to be options; write a flat list of "
+                              "scans and options"]) from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = mark.line + 1 if mark else 1
