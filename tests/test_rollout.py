@@ -340,7 +340,7 @@ def test_run_rollout_stage_refuses_to_overwrite_its_input(tmp_path):
     with pytest.raises(InvalidOptionError, match="overwrite the input"):
         run_rollout_stage(scan, tmp_path, name="pot")
     assert scan.read_bytes() == before
-    with pytest.raises(InvalidOptionError, match="plain file stem"):
+    with pytest.raises(InvalidOptionError, match="plain file name"):
         run_rollout_stage(scan, tmp_path, name="a/b")
 
 
