@@ -431,6 +431,26 @@ def test_an_interrupted_batch_records_cancelled_and_interrupted_scans(tmp_path, 
     assert _unfinished(second, started).status == "cancelled"
 
 
+def test_stopping_the_pool_ends_its_workers_and_cancels_the_queue():
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    from potflat.stages.batch import START_METHOD, _stop_workers, _worker_start
+
+    pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context(START_METHOD),
+                               initializer=_worker_start, initargs=(os.getpid(),))
+    running = pool.submit(time.sleep, 60)
+    queued = [pool.submit(time.sleep, 60) for _ in range(3)]
+    while not running.running():
+        time.sleep(0.05)
+    processes = list(pool._processes.values())
+    start = time.monotonic()
+    _stop_workers(pool)
+    assert time.monotonic() - start < 15
+    assert not any(p.is_alive() for p in processes)
+    assert all(f.cancelled() for f in queued[1:])  # one may already sit in the call queue
+
+
 def test_potflats_own_partial_painting_does_not_block_the_rerun(tmp_path, fake_stages):
     """Killed between NAME.png and NAME.bake.json: the marker says the PNG is potflat's."""
     from potflat.stages.pipeline import run_scan

@@ -973,8 +973,8 @@ def _run_pool(todo: list, workers: int, record: Callable[[int, ScanReport], None
 def _stop_workers(pool) -> None:
     """Cancel the queued scans and end the workers of ``pool`` (SIGTERM: they remove their
     temporaries), killing those still alive after :data:`WORKER_STOP_SECONDS`."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())  # shutdown() forgets them
     pool.shutdown(wait=False, cancel_futures=True)
-    processes = list((getattr(pool, "_processes", None) or {}).values())
     for proc in processes:
         with contextlib.suppress(Exception):
             proc.terminate()
