@@ -23,24 +23,14 @@ PAIR_OPTIONS = ("--band", "--angles", "--importance-band", "--importance-angles"
 def split_pairs(args: list[str]) -> list[str]:
     """``--band 0.2,0.8`` and ``--band=0.2,0.8`` as ``--band 0.2 0.8`` (Click's two-value options)."""
     out: list[str] = []
-    i = 0
-    while i < len(args):
-        arg = args[i]
+    tokens = iter(args)
+    for arg in tokens:
         flag, eq, value = arg.partition("=")
-        if flag in PAIR_OPTIONS and (eq or i + 1 < len(args)):
-            if not eq:
-                i += 1
-                value = args[i]
-            parts = [v for v in value.replace(",", " ").split() if v]
-            if len(parts) == 2:
-                out += [flag, *parts]
-                i += 1
-                continue
-            out += [flag, value] if not eq else [arg]
-            i += 1
+        if flag not in PAIR_OPTIONS or (not eq and (value := next(tokens, None)) is None):
+            out.append(arg)
             continue
-        out.append(arg)
-        i += 1
+        parts = value.replace(",", " ").split()
+        out += [flag, *parts] if len(parts) == 2 else [flag, value]
     return out
 
 
