@@ -8,8 +8,8 @@ import typer
 
 #: Exit codes, documented in docs/cli.md.
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
-#: Signals received (SIGTERM): checked between stages and at the end, since the
-#: KeyboardInterrupt the handler raises is lost when it lands in a finaliser.
+#: Signals received (SIGINT, SIGTERM): checked between stages, between a batch's results and
+#: at the end, since the KeyboardInterrupt the handler raises is lost when it lands in a finaliser.
 STOP: list[int] = []
 
 

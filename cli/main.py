@@ -34,8 +34,8 @@ def split_pairs(args: list[str]) -> list[str]:
     return out
 
 
-def _terminate_as_interrupt(signum, frame) -> None:
-    """SIGTERM (a cluster's or a service manager's stop) is handled like Ctrl-C: clean up."""
+def _interrupt(signum, frame) -> None:
+    """Ctrl-C and SIGTERM (a cluster's or a service manager's stop): clean up and stop."""
     from potflat_cli._errors import STOP
 
     STOP.append(signum)  # remembered: an interrupt raised inside a finaliser is swallowed by Python
@@ -65,7 +65,8 @@ class _Group(TyperGroup):
         STOP.clear()
         args = split_pairs(list(sys.argv[1:] if args is None else args))
         if threading.current_thread() is threading.main_thread():
-            signal.signal(signal.SIGTERM, _terminate_as_interrupt)
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(sig, _interrupt)
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         try:

@@ -481,6 +481,25 @@ def test_batch_force_redoes_a_scan_interrupted_in_its_bake(tmp_path, fake_stages
         assert read_manifest(folder)["complete"] is True
 
 
+def test_an_interrupt_python_swallowed_still_stops_with_130(capsys):
+    """A KeyboardInterrupt raised inside a finaliser is only printed by Python; the signal is
+    remembered and the command still ends as interrupted."""
+    import typer
+
+    from potflat_cli._errors import STOP, user_errors
+
+    @user_errors
+    def command():
+        STOP.append(signal.SIGTERM)  # the handler ran, its KeyboardInterrupt was lost
+
+    try:
+        with pytest.raises(typer.Exit) as exit_:
+            command()
+    finally:
+        STOP.clear()
+    assert exit_.value.exit_code == 130 and "interrupted" in capsys.readouterr().err
+
+
 def test_sigterm_ends_a_run_like_ctrl_c(tmp_path):
     """SIGTERM mid-run: exit 130, the interrupt message, no .part temporaries left."""
     scan = _tube_obj(tmp_path / "vase.obj", radius=60, height=200)
