@@ -765,6 +765,58 @@ def _untangle(sp: _Springs, x: np.ndarray, rounds: int = 200) -> tuple[np.ndarra
     return x, n_bad
 
 
+def _fold_free_start(sp: _Springs, x: np.ndarray, n_bad: int, notes: list[str]) -> tuple[np.ndarray, bool]:
+    """A fold-free start from a layout ``x`` that untangling left folded: each folded cluster
+    re-embedded inside its fixed surroundings (:func:`potflat.mesh.embedding.repair_folds`),
+    else Tutte's embedding of the whole mesh (:func:`potflat.mesh.embedding.tutte_embedding`).
+    Returns the start and whether it is Tutte's disc (whose orientation is arbitrary).
+
+    Raises
+    ------
+    FoldedResultError
+        When neither gives a fold-free layout (the mesh is not disk-like), with the fix.
+    """
+    from potflat.mesh.embedding import repair_folds, tutte_embedding
+
+    areas = sp.signed_areas(x)
+    if np.abs(areas[areas < 0]).sum() > np.abs(areas[areas > 0]).sum():
+        raise FoldedResultError(
+            "the rollout is mirrored (most of its area faces the other way): it shows the surface from the wrong "
+            "side; run the rollout again (--side inner for a vessel's inside)")
+    faces = sp.faces.astype(np.int64)
+    y, repaired, left = repair_folds(faces, x)
+    if not left:
+        notes.append(f"the rollout had {n_bad} flipped or degenerate triangles; untangling left "
+                     f"{repaired}, re-embedded inside their surroundings (a harmonic map of each folded cluster)")
+        return np.ascontiguousarray(y), False
+    disc = tutte_embedding(faces, sp.n)
+    if disc is None or (sp.signed_areas(disc) <= 0).any():
+        raise FoldedResultError(
+            f"the rollout has {left} folded triangles that no fold-free layout of this mesh removes: it is not a "
+            "disk (a closed part, or faces joined at a single edge by three or more); run the rollout with "
+            "--band or --angles to leave that part out, or clean the scan (remove the duplicated sheet)")
+    notes.append(f"the rollout had {n_bad} flipped or degenerate triangles and {left} stayed folded after a local "
+                 "repair; relaxed from Tutte's embedding of the whole mesh into a disc, then turned to the rollout's "
+                 "orientation")
+    return np.ascontiguousarray(disc), True
+
+
+def _turned_like(x: np.ndarray, reference: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``x`` (n, 2) rotated and moved (no mirroring) to fit ``reference`` best over the
+    vertices of ``reference``'s unflipped faces: a layout relaxed from a disc keeps the
+    rollout's orientation (mouth up)."""
+    e1 = reference[faces[:, 1]] - reference[faces[:, 0]]
+    e2 = reference[faces[:, 2]] - reference[faces[:, 0]]
+    good = np.zeros(len(x), bool)
+    good[faces[(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) > 0].ravel()] = True
+    a, b = x[good], reference[good]
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    h = (a - ca).T @ (b - cb)
+    angle = math.atan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1])
+    rot = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+    return np.ascontiguousarray((x - ca) @ rot.T + cb)
+
+
 @dataclass(frozen=True)
 class _CoarseStart:
     """A relaxed coarse copy of the rollout and the full mesh's layout following it."""
@@ -952,15 +1004,17 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
             else:
                 x = followed
         t_follow = time.perf_counter() - t_follow
+        folded_start = None
         if fold_free:
             x, n_bad = _untangle(sp, x)
             if n_bad:
-                left = int((sp.signed_areas(x) <= 0).sum())
-                if left:
-                    raise FoldedResultError(
-                        f"the rollout has {n_bad} flipped or degenerate triangles and {left} could not be "
-                        "untangled; run the rollout again (another seam or proxy) or use --preset paper")
-                notes.append(f"untangled {n_bad} flipped or degenerate triangles of the rollout before relaxing")
+                if (sp.signed_areas(x) <= 0).any():
+                    folded_start = x
+                    x, from_disc = _fold_free_start(sp, x, n_bad, notes)
+                    if not from_disc:
+                        folded_start = None
+                else:
+                    notes.append(f"untangled {n_bad} flipped or degenerate triangles of the rollout before relaxing")
             wrapped = sp.guard_boundary(x)
             if wrapped:
                 notes.append(f"{wrapped} boundary vertices already wrap past 2 pi in the start; their angle "
@@ -985,6 +1039,8 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
                 x, converged = _dynamics(sp, x, settings, run, levels)
         t_solve = time.perf_counter()
 
+        if folded_start is not None:  # relaxed from Tutte's disc: back to the rollout's orientation
+            x = _turned_like(x, folded_start, sp.faces)
         finite = bool(np.isfinite(x).all())
         flipped = int((sp.signed_areas(x) <= 0).sum()) if finite else len(F)
         overlap = sp.overlap(x) if finite else 1

@@ -107,7 +107,7 @@ class RolloutOptions:
         colours or painted all over), ``none`` (the whole surface alike), ``mask`` (a PNG
         painted over a potflat image, ``importance_mask``), ``texture-mask`` (a PNG in the
         texture's space, ``importance_mask``) or ``band`` (``importance_band`` and/or
-        ``importance_angles``).
+        ``importance_arc``).
     importance_mask : str or None
         The mask image (white = important) for ``mask`` and ``texture-mask``.
     importance_image : str or None
@@ -115,7 +115,7 @@ class RolloutOptions:
         the one beside the mask whose image has the mask's size).
     importance_band : (float, float) or None
         For ``band``: heights as fractions of the axial extent (0 foot, 1 mouth).
-    importance_angles : (float, float) or None
+    importance_arc : (float, float) or None
         For ``band``: angle range in degrees from the seam.
     """
 
@@ -134,7 +134,7 @@ class RolloutOptions:
     importance_mask: str | None = None
     importance_image: str | None = None
     importance_band: tuple[float, float] | None = None
-    importance_angles: tuple[float, float] | None = None
+    importance_arc: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         _importance.check_method(self.importance)
@@ -143,12 +143,12 @@ class RolloutOptions:
                                      "texture-mask, and only then")
         if self.importance_image is not None and self.importance != "mask":
             raise InvalidOptionError("importance_image (--importance-image) goes with importance mask")
-        for name in ("band", "angles", "importance_band", "importance_angles"):
+        for name in ("band", "angles", "importance_band", "importance_arc"):
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, _height_band(name, getattr(self, name)) if name.endswith("band")
                                    else _angle_range(name, getattr(self, name)))
-        if (self.importance == "band") != (self.importance_band is not None or self.importance_angles is not None):
-            raise InvalidOptionError("give importance_band and/or importance_angles with importance band, and only then")
+        if (self.importance == "band") != (self.importance_band is not None or self.importance_arc is not None):
+            raise InvalidOptionError("give importance_band and/or importance_arc with importance band, and only then")
         if self.side not in SIDES:
             raise InvalidOptionError(f"side {self.side!r} is unknown; use outer or inner")
         if not isinstance(self.keep_attachments, bool):
@@ -1066,7 +1066,7 @@ def _find_importance(flat: FlatMesh, options: RolloutOptions, axis: AxisFit, the
         return _importance.texture_mask_importance(flat, options.importance_mask)
     h = axis.cylindrical(flat.mesh.vertices)[0]
     return _importance.band_importance(flat, h / max(axis.height, np.finfo(float).tiny), theta_deg,
-                                       options.importance_band, options.importance_angles)
+                                       options.importance_band, options.importance_arc)
 
 
 def rollout_summary(result: RolloutResult) -> dict:
