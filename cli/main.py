@@ -16,17 +16,14 @@ Example:  potflat run samples/data/amphora.obj -o out/
 """
 
 
-#: Options that take two numbers; ``--band 0.2,0.8`` is read as ``--band 0.2 0.8``.
-PAIR_OPTIONS = ("--band", "--angles", "--importance-band", "--importance-angles")
-
-
-def split_pairs(args: list[str]) -> list[str]:
-    """``--band 0.2,0.8`` and ``--band=0.2,0.8`` as ``--band 0.2 0.8`` (Click's two-value options)."""
+def split_pairs(args: list[str], pair_options) -> list[str]:
+    """``--band 0.2,0.8`` and ``--band=0.2,0.8`` as ``--band 0.2 0.8`` for the options in
+    ``pair_options`` (Click's two-value options)."""
     out: list[str] = []
     tokens = iter(args)
     for arg in tokens:
         flag, eq, value = arg.partition("=")
-        if flag not in PAIR_OPTIONS or (not eq and (value := next(tokens, None)) is None):
+        if flag not in pair_options or (not eq and (value := next(tokens, None)) is None):
             out.append(arg)
             continue
         parts = value.replace(",", " ").split()
@@ -63,7 +60,7 @@ class _Group(TyperGroup):
         from potflat_cli._errors import EXIT_USAGE, STOP, fail
 
         STOP.clear()
-        args = split_pairs(list(sys.argv[1:] if args is None else args))
+        args = list(sys.argv[1:] if args is None else args)
         if threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(sig, _interrupt)
@@ -90,8 +87,11 @@ class _Group(TyperGroup):
             mini = typer.Typer(pretty_exceptions_show_locals=False, add_completion=False)
             mini.command("run")(run.full_command())
             command = typer.main.get_command(mini)
-        if "--help" in rest and command is not None:
-            _show_choices(command)
+        if command is not None:
+            pairs = {opt for p in command.params if p.nargs == 2 for opt in p.opts}
+            rest = split_pairs(rest, pairs)  # --band 0.2,0.8 as --band 0.2 0.8
+            if "--help" in rest:
+                _show_choices(command)
         return name, command, rest
 
 

@@ -535,8 +535,14 @@ def test_help_shows_the_allowed_values():
 def test_band_with_a_comma_and_unit_names(tmp_path, fake_stages):
     from potflat_cli.main import split_pairs
 
-    assert split_pairs(["run", "x", "--band", "0.2,0.8"]) == ["run", "x", "--band", "0.2", "0.8"]
-    assert split_pairs(["--band=0.2,0.8", "--angles", "-60", "60"]) == ["--band", "0.2", "0.8", "--angles", "-60", "60"]
+    pairs = ("--band", "--angles")
+    assert split_pairs(["x", "--band", "0.2,0.8"], pairs) == ["x", "--band", "0.2", "0.8"]
+    assert split_pairs(["--band=0.2,0.8", "--angles", "-60", "60"], pairs) == ["--band", "0.2", "0.8", "--angles",
+                                                                              "-60", "60"]
+    scan = fakes.write_scan(tmp_path / "vase.obj")
+    assert cli("run", scan, "-o", tmp_path / "out", "--band", "0.2,0.8", "-q").exit_code == 0
+    rollout = json.loads((tmp_path / "out" / "vase.rollout.json").read_text())
+    assert rollout["provenance"]["options"]["band"] == [0.2, 0.8]
     from potflat.types import canonical_units
 
     assert [canonical_units(u) for u in ("meter", "Metres", "millimetre", "µm", "inch")] == ["m", "m", "mm", "um", "in"]
