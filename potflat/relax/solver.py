@@ -800,17 +800,14 @@ def _fold_free_start(sp: _Springs, x: np.ndarray, n_bad: int, notes: list[str]) 
     return np.ascontiguousarray(disc), True
 
 
-def _turned_like(x: np.ndarray, reference: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """``x`` (n, 2) rotated and moved (no mirroring) to fit ``reference`` best over the
-    vertices of ``reference``'s unflipped faces: a layout relaxed from a disc keeps the
-    rollout's orientation (mouth up)."""
-    e1 = reference[faces[:, 1]] - reference[faces[:, 0]]
-    e2 = reference[faces[:, 2]] - reference[faces[:, 0]]
-    good = np.zeros(len(x), bool)
-    good[faces[(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) > 0].ravel()] = True
-    a, b = x[good], reference[good]
-    ca, cb = a.mean(axis=0), b.mean(axis=0)
-    h = (a - ca).T @ (b - cb)
+def _turned_like(x: np.ndarray, reference: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """``x`` (n, 2) rotated and moved (no mirroring) to fit ``reference`` (n, 2) best, each
+    vertex counting with ``weight`` (n,): the relaxed layout keeps the rollout's orientation
+    (axis vertical, mouth up) however the solver turned it on the way (the energy does not
+    care; a weak plain surface lets it drift)."""
+    w = weight / weight.sum()
+    ca, cb = w @ x, w @ reference
+    h = ((x - ca) * w[:, None]).T @ (reference - cb)
     angle = math.atan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1])
     rot = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
     return np.ascontiguousarray((x - ca) @ rot.T + cb)
@@ -1004,6 +1001,7 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
                 x = followed
         t_follow = time.perf_counter() - t_follow
         folded_start = None
+        start = x_in[order]  # the rollout's layout: its orientation is the result's
         if fold_free:
             x, n_bad = _untangle(sp, x)
             if n_bad:
@@ -1038,8 +1036,11 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
                 x, converged = _dynamics(sp, x, settings, run, levels)
         t_solve = time.perf_counter()
 
-        if folded_start is not None:  # relaxed from Tutte's disc: back to the rollout's orientation
-            x = _turned_like(x, folded_start, sp.faces)
+        if fold_free:  # back to the rollout's orientation, the painting counting most
+            turn = np.ones(n) if weight is None else weight.copy()
+            if folded_start is not None:  # relaxed from Tutte's disc: only what was not folded counts
+                turn[sp.faces[sp.signed_areas(folded_start) <= 0].ravel()] = 0.0
+            x = _turned_like(x, folded_start if folded_start is not None else start, turn)
         finite = bool(np.isfinite(x).all())
         flipped = int((sp.signed_areas(x) <= 0).sum()) if finite else len(F)
         overlap = sp.overlap(x) if finite else 1
