@@ -32,6 +32,20 @@ FIGURES: tuple[str, ...] = ("edge_rms", "area_mean_abs_log", "anisotropy_p95", "
 _STAGE_INPUT = {"relax": ".rollout.ply", "bake": ".relaxed.ply"}
 
 
+def options_class(stage: str) -> type:
+    """The options dataclass of ``stage`` (``RolloutOptions``...), without importing the
+    stage's algorithm (the command line builds its options and help from it).
+
+    Parameters
+    ----------
+    stage : str
+        ``"rollout"``, ``"relax"`` or ``"bake"``.
+    """
+    if stage not in STAGES:
+        raise ValueError(f"unknown stage {stage!r}; one of {', '.join(STAGES)}")
+    return getattr(importlib.import_module(f"potflat.{stage}"), f"{stage.capitalize()}Options")
+
+
 def stage_api(stage: str) -> tuple[type, Callable[..., StageOutput]]:
     """The options dataclass and the file-level function of ``stage``.
 
@@ -47,10 +61,8 @@ def stage_api(stage: str) -> tuple[type, Callable[..., StageOutput]]:
     run : callable
         ``run_<stage>_stage(input_path, out_dir, options, *, name=None) -> StageOutput``.
     """
-    if stage not in STAGES:
-        raise ValueError(f"unknown stage {stage!r}; one of {', '.join(STAGES)}")
-    module = importlib.import_module(f"potflat.{stage}")
-    return getattr(module, f"{stage.capitalize()}Options"), getattr(module, f"run_{stage}_stage")
+    cls = options_class(stage)
+    return cls, getattr(importlib.import_module(f"potflat.{stage}"), f"run_{stage}_stage")
 
 
 def options_dict(options: Any) -> dict[str, Any]:
@@ -119,10 +131,10 @@ def _find_figures(node: Any) -> dict | None:
     return None
 
 
-def option_types(options_class: type) -> dict[str, Any]:
-    """Field name to resolved type hint of a stage options dataclass (fields only)."""
-    hints = typing.get_type_hints(options_class)
-    return {f.name: hints.get(f.name, Any) for f in dataclasses.fields(options_class) if f.init}
+def option_types(cls: type) -> dict[str, Any]:
+    """Field name to resolved type hint of a stage options dataclass ``cls`` (fields only)."""
+    hints = typing.get_type_hints(cls)
+    return {f.name: hints.get(f.name, Any) for f in dataclasses.fields(cls) if f.init}
 
 
 def describe_type(tp: Any) -> str:
@@ -247,7 +259,7 @@ def resolve_options(**given: Any) -> dict[str, Any]:
     """
     out = {}
     for stage in STAGES:
-        cls, _ = stage_api(stage)
+        cls = options_class(stage)
         value = given.get(stage)
         if value is None:
             value = cls()

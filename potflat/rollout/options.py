@@ -1,0 +1,120 @@
+"""Options of the rollout stage: light (no scipy, trimesh or Numba), so the command line
+builds its options and ``--help`` without importing the algorithm."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+from potflat.errors import InvalidOptionError
+from potflat.rollout.proxy import KINDS as PROXY_KINDS
+from potflat.types import UNITS_MM
+
+#: Sides accepted by :func:`potflat.rollout.walls.select_wall`.
+SIDES = ("outer", "inner")
+
+
+@dataclass(frozen=True, kw_only=True)
+class RolloutOptions:
+    """Options of the rollout stage (names equal the CLI options, ``_`` for ``-``).
+
+    Attributes
+    ----------
+    units : str or None
+        Length unit of the scan file (``mm``, ``cm``, ``m``, ``um``, ``in``); None: the unit
+        the file declares (a PLY ``comment units``, an STL header, glTF's metres), else mm.
+        Used when reading the file; :func:`rollout` itself uses :attr:`Mesh.units`.
+    texture : bool
+        Use the scan's texture image; False loads the geometry (and vertex colours) only,
+        e.g. when the texture file is missing or corrupt. Used when reading the file.
+    proxy : str
+        ``auto``, ``cylinder``, ``cone``, ``sphere`` or ``ortho``.
+    axis : tuple of 6 float or None
+        Manual axis ``(px, py, pz, dx, dy, dz)``: a point and a direction from foot to mouth.
+    flip : bool
+        Reverse the axis direction (mouth and foot swapped).
+    seam : float or None
+        Seam angle in degrees from the axis' reference direction; chosen automatically when
+        None (0 when ``angles`` is given).
+    band : (float, float) or None
+        Height band as fractions of the axial extent, 0 = foot, 1 = mouth.
+    angles : (float, float) or None
+        Angle range in degrees relative to the seam, e.g. ``(-60, 60)``; at most 360 wide.
+    view : tuple of 3 float or None
+        For ``proxy="ortho"``: direction from the vessel to the viewer (``x,y,z``, scan
+        coordinates); default: from the axis towards the region's centre (from the region
+        towards the axis for the inner side).
+    side : str
+        Painted side to unroll: ``outer`` (the outside, default) or ``inner`` (the inside
+        seen from within: a cup's interior, a kylix tondo). Two-walled scans are split at
+        the rim (:func:`potflat.rollout.walls.select_wall`).
+    keep_attachments : bool
+        Keep handles, spouts and knobs (parts off the surface of revolution, found by
+        :func:`potflat.rollout.attachments.detect_attachments`) in the rollout; by default they are
+        left out and reported, and the painting around their roots stays.
+    """
+
+    units: str | None = None
+    texture: bool = True
+    proxy: str = "auto"
+    axis: tuple[float, ...] | None = None
+    flip: bool = False
+    seam: float | None = None
+    band: tuple[float, float] | None = None
+    angles: tuple[float, float] | None = None
+    view: tuple[float, ...] | None = None
+    side: str = "outer"
+    keep_attachments: bool = False
+
+    def __post_init__(self) -> None:
+        if self.side not in SIDES:
+            raise InvalidOptionError(f"side {self.side!r} is unknown; use outer or inner")
+        if not isinstance(self.keep_attachments, bool):
+            raise InvalidOptionError(f"keep_attachments must be true or false, got {self.keep_attachments!r}")
+        if self.units is not None and self.units not in UNITS_MM:
+            raise InvalidOptionError(f"units {self.units!r} is unknown; use one of {', '.join(UNITS_MM)}")
+        if not isinstance(self.texture, bool):
+            raise InvalidOptionError(f"texture must be true or false, got {self.texture!r}")
+        if self.proxy not in ("auto", *PROXY_KINDS):
+            raise InvalidOptionError(
+                f"proxy {self.proxy!r} is unknown; use auto, {', '.join(PROXY_KINDS)}")
+        if self.axis is not None:
+            ax = _floats("axis", self.axis, 6, "px,py,pz,dx,dy,dz")
+            if not any(ax[3:]):
+                raise InvalidOptionError("axis direction is zero; give dx,dy,dz not all 0")
+            object.__setattr__(self, "axis", ax)
+        if self.seam is not None:
+            object.__setattr__(self, "seam", _floats("seam", (self.seam,), 1, "DEG")[0])
+        if self.band is not None:
+            lo, hi = _floats("band", self.band, 2, "LO HI")
+            if not 0.0 <= lo < hi <= 1.0:
+                raise InvalidOptionError(
+                    f"band {lo:g} {hi:g} is invalid; give fractions of the height with 0 <= LO < HI <= 1")
+            object.__setattr__(self, "band", (lo, hi))
+        if self.angles is not None:
+            a0, a1 = _floats("angles", self.angles, 2, "A0 A1")
+            if not a0 < a1 <= a0 + 360.0:
+                raise InvalidOptionError(
+                    f"angles {a0:g} {a1:g} are invalid; give A0 < A1 <= A0 + 360 (degrees from the seam)")
+            object.__setattr__(self, "angles", (a0, a1))
+        if self.view is not None:
+            view = _floats("view", self.view, 3, "x,y,z")
+            if not any(view):
+                raise InvalidOptionError("view direction is zero; give x,y,z not all 0")
+            if self.proxy != "ortho":
+                raise InvalidOptionError("view applies only to proxy ortho; add --proxy ortho or drop --view")
+            object.__setattr__(self, "view", view)
+
+    def as_dict(self) -> dict:
+        """The options as a JSON-ready dict."""
+        return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v)
+                for f in fields(self)}
+
+
+def _floats(name: str, values, count: int, form: str) -> tuple[float, ...]:
+    try:
+        out = tuple(float(x) for x in values)
+    except (TypeError, ValueError):
+        raise InvalidOptionError(f"{name} needs {count} numbers ({form})") from None
+    if len(out) != count or not all(math.isfinite(x) for x in out):
+        raise InvalidOptionError(f"{name} needs {count} finite numbers ({form}), got {len(out)}")
+    return out
