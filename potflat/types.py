@@ -42,6 +42,20 @@ def _as_array(name: str, arr, dtype, shape_tail: tuple[int, ...]) -> np.ndarray:
     return out
 
 
+def _check_face_indices(faces: np.ndarray, n_vertices: int, source: Path | None) -> None:
+    """Every index of ``faces`` (m, 3) names one of ``n_vertices`` vertices (the kernels index
+    unchecked)."""
+    if not len(faces):
+        return
+    lo, hi = int(faces.min()), int(faces.max())
+    if lo < 0 or hi >= n_vertices:
+        where = f"{source}: " if source is not None else ""
+        bad = lo if lo < 0 else hi
+        raise InvalidInputError(
+            f"{where}a face names vertex {bad}, but there are {n_vertices} vertices (0 to {n_vertices - 1}); "
+            "the file is corrupt or truncated: export the scan again")
+
+
 @dataclass(frozen=True, eq=False)
 class Mesh:
     """A triangle mesh in 3D with optional texture or vertex colours.
@@ -75,6 +89,7 @@ class Mesh:
     def __post_init__(self) -> None:
         object.__setattr__(self, "vertices", _as_array("vertices", self.vertices, np.float64, (3,)))
         object.__setattr__(self, "faces", _as_array("faces", self.faces, np.int64, (3,)))
+        _check_face_indices(self.faces, len(self.vertices), self.source)
         if self.texcoords is not None:
             tc = _as_array("texcoords", self.texcoords, np.float64, (3, 2))
             if len(tc) != len(self.faces):
