@@ -519,37 +519,39 @@ def _figures(r: _Renderer, covered_px: float) -> dict:
 # library entry point
 
 
-def bake(flat: FlatMesh, *, px_per_mm: float | None = None, dpi: float | None = None,
-         maps: tuple[str, ...] = MAP_NAMES, position_map: bool = False, supersample: int = 0,
-         max_megapixels: float = 1000.0) -> BakeResult:
+def bake(flat: FlatMesh, *, options: BakeOptions | None = None, **option_fields) -> BakeResult:
     """Bake a flattening into a true-scale RGBA image and distortion maps, in memory.
 
     Parameters
     ----------
     flat : FlatMesh
         The flattening (``uv`` in scan units, u right, v up).
-    px_per_mm, dpi : float, optional
-        Resolution (give at most one; default 4 px/mm).
-    maps : tuple of str
-        Distortion maps to compute, from :data:`MAP_NAMES`.
-    position_map : bool
-        Also return the 3D point under each pixel.
-    supersample : int
-        Sub-samples per pixel side (0: automatic).
-    max_megapixels : float
-        Refuse larger images.
+    options : BakeOptions, optional
+        The stage's options; or give its fields as keywords (not both). Used here:
+        ``px_per_mm`` or ``dpi`` (default 4 px/mm), ``maps`` (from :data:`MAP_NAMES`),
+        ``position_map`` (also return the 3D point under each pixel), ``supersample``
+        (sub-samples per pixel side, 0: automatic), ``max_megapixels`` (refuse larger
+        images); the other fields concern the files :func:`run_bake_stage` writes.
 
     Returns
     -------
     BakeResult
+
+    Raises
+    ------
+    InvalidOptionError
+        When an option is invalid, or both ``options`` and option keywords are given.
 
     Notes
     -----
     Everything is held in memory; for very large images use :func:`run_bake_stage`,
     which streams the same strips to disk.
     """
-    opts = BakeOptions(px_per_mm=px_per_mm, dpi=dpi, maps=maps, position_map=position_map,
-                       supersample=supersample, max_megapixels=max_megapixels)
+    if options is None:
+        options = BakeOptions(**option_fields)
+    elif option_fields:
+        raise InvalidOptionError("give either options= or option keywords to bake(), not both")
+    opts = options
     r = _Renderer(flat, opts.resolution, supersample=opts.supersample, max_megapixels=opts.max_megapixels)
     g = r.grid
     image = np.zeros((g.height, g.width, 4), np.uint8)
@@ -566,6 +568,16 @@ def bake(flat: FlatMesh, *, px_per_mm: float | None = None, dpi: float | None = 
             position[r0:r1] = r.position(r0, r1)
     return BakeResult(image=image, maps=values, position=position, px_per_mm=g.px_per_mm,
                       origin=g.origin.copy(), figures=_figures(r, covered))
+
+
+def comparison_sheet(path: str | os.PathLike, rollout: FlatMesh, relaxed: FlatMesh, *, title: str = "") -> Path:
+    """Bake the proxy rollout and the relaxed flattening and draw them side by side
+    (:func:`potflat.bake.annotate.comparison_sheet`); written atomically as PNG."""
+    from potflat.bake import annotate
+
+    panels = [(label, flat, bake(flat, px_per_mm=annotate.sheet_px_per_mm(flat), maps=("stress",)))
+              for label, flat in (("proxy rollout", rollout), ("relaxed", relaxed))]
+    return annotate.comparison_sheet(path, panels, title=title)
 
 
 def _attachment_rows(share: np.ndarray) -> np.ndarray:
@@ -737,8 +749,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
                                             photometric="rgb")
     figures = _figures(r, covered)
     if rollout_ply is not None:
-        paths["sheet"] = annotate.comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat,
-                                                   title=name)
+        paths["sheet"] = comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat, title=name)
     inputs = ([flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else [])
               + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else []))
     summary = {
