@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -154,15 +155,23 @@ class FlatMesh:
 
 @dataclass(frozen=True)
 class StageOutput:
-    """What a stage wrote: its files and the content of its JSON sidecar.
+    """What a stage wrote: its files and the content of its JSON sidecar, and what the next
+    stage takes in memory.
 
     Attributes
     ----------
     paths : dict of str to Path
         Role (``"ply"``, ``"json"``, ``"png"``, ...) to the file written.
     summary : dict
-        The JSON sidecar's content (figures used in batch summaries).
+        The JSON sidecar's content.
+    flat : FlatMesh or None
+        The flattening exactly as the stage's PLY holds it (rollout, relax), which
+        :func:`potflat.run_scan` hands to the next stage instead of reading the file.
+    distortion : DistortionSummary or None
+        Distortion figures of that flattening (:class:`potflat.mesh.distortion.DistortionSummary`).
     """
 
     paths: dict
     summary: dict
+    flat: FlatMesh | None = None
+    distortion: Any = None

@@ -156,3 +156,25 @@ def test_preview_relaxes_at_two_pixels_of_the_image(relax, bake, want):
 
     options = _preview_at_image_resolution(resolve_options(relax=relax, bake=bake))
     assert options["relax"].simplify_mm == pytest.approx(want) if want is not None else options["relax"].simplify_mm is None
+
+
+def test_run_scan_hands_the_flattening_on_in_memory(tmp_path, monkeypatch):
+    """Relax and bake take the previous stage's flattening from memory (its file is the record),
+    exactly as the file holds it; the figures come typed from the relax stage."""
+    import potflat.io.flat_ply
+    from potflat_synthetic.vessels import make_vessel, write_obj
+
+    scan = write_obj(make_vessel("amphora", n_vertices=3000, seed=2, texture_size=64), tmp_path / "in" / "a.obj")
+
+    def no_reading(path):
+        raise AssertionError(f"run_scan read {path} back")
+
+    monkeypatch.setattr(potflat.io.flat_ply, "read_flat_ply", no_reading)
+    result = run_scan(scan, tmp_path / "out", relax={"preset": "preview"}, bake={"px_per_mm": 1.0, "maps": ()})
+    monkeypatch.undo()
+    relaxed = result.stages["relax"]
+    assert result.figures == {k: relaxed.summary["distortion"][k] for k in FIGURES}
+    back = potflat.io.flat_ply.read_flat_ply(result.paths["relax.ply"])
+    assert back.uv.tobytes() == relaxed.flat.uv.tobytes()
+    assert back.mesh.texcoords.tobytes() == relaxed.flat.mesh.texcoords.tobytes()
+    assert back.mesh.texture_path == relaxed.flat.mesh.texture_path

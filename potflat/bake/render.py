@@ -652,7 +652,7 @@ def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: li
 
 
 def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, options: BakeOptions | None = None, *,
-                   name: str | None = None) -> StageOutput:
+                   name: str | None = None, flat: FlatMesh | None = None) -> StageOutput:
     """Bake ``NAME.relaxed.ply`` (or a rollout) into images and ``NAME.bake.json``.
 
     Files (in ``out_dir``): ``NAME.png`` (painting, RGBA, resolution in the file),
@@ -674,6 +674,9 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     options : BakeOptions, optional
     name : str, optional
         Output NAME; default: the input stem without ``.relaxed``.
+    flat : FlatMesh, optional
+        The content of ``flat_ply`` already in memory (:func:`potflat.run_scan`); read from
+        the file when not given.
 
     Returns
     -------
@@ -690,7 +693,8 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     flat_ply = Path(flat_ply)
     out_dir = Path(out_dir)
     name = name or stage_name(flat_ply)
-    flat = read_flat_ply(flat_ply)
+    if flat is None:
+        flat = read_flat_ply(flat_ply)
     rollout_ply = None
     if options.sheet:
         if not flat_ply.name.endswith(".relaxed.ply"):

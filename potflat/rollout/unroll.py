@@ -1055,7 +1055,7 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     from potflat import __version__
     from potflat.io.atomic import write_json_atomic
     from potflat.io.scan import load_scan
-    from potflat.io.flat_ply import write_flat_ply
+    from potflat.io.flat_ply import as_stored, write_flat_ply
     from potflat.rollout.profile import vessel_profile, write_profile_csv, write_profile_svg
     from potflat.stages.provenance import provenance
 
@@ -1087,9 +1087,11 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
                "files": {"ply": ply_path.name, "json": json_path.name, "profile_csv": csv_path.name,
                          "profile_svg": svg_path.name}}
     summary["provenance"] = provenance(stage="rollout", inputs=[scan_path], options=options.as_dict())
-    write_flat_ply(ply_path, result.flat, comments=(f"potflat {__version__} rollout of {scan_path.name}",))
+    comments = (f"potflat {__version__} rollout of {scan_path.name}",)
+    write_flat_ply(ply_path, result.flat, comments=comments)
     write_profile_csv(profile, csv_path)
     write_profile_svg(profile, svg_path, title=f"{name}: profile ({profile.units})")
     write_json_atomic(json_path, summary)
     return StageOutput({"ply": ply_path, "json": json_path, "profile_csv": csv_path, "profile_svg": svg_path},
-                       summary)
+                       summary, flat=as_stored(result.flat, ply_path, comments=comments),
+                       distortion=result.distortion)

@@ -105,7 +105,10 @@ class ScanResult:
     @property
     def figures(self) -> dict[str, Any]:
         """Distortion figures of the final flattening (:data:`FIGURES`, from the relax stage)."""
-        return distortion_figures(self.stages["relax"].summary)
+        relaxed = self.stages["relax"]
+        if relaxed.distortion is None:  # a stage that hands on no typed figures
+            return distortion_figures(relaxed.summary)
+        return {k: getattr(relaxed.distortion, k) for k in FIGURES}
 
 
 def distortion_figures(summary: dict) -> dict[str, Any]:
@@ -327,7 +330,7 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
     stages: dict[str, StageOutput] = {}
     seconds: dict[str, float] = {}
     start = time.perf_counter()
-    source = scan
+    source, handed = scan, {}
     for stage in STAGES:
         if progress is not None:
             progress(stage)
@@ -338,7 +341,9 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
                                    "this is a bug in potflat, please report it")
         _, run = stage_api(stage)
         t = time.perf_counter()
-        stages[stage] = run(source, out, options[stage], name=name)
+        stages[stage] = run(source, out, options[stage], name=name, **handed)
+        # the flattening goes on in memory; its file is the record (and the stage commands' input)
+        handed = {"flat": stages[stage].flat} if stages[stage].flat is not None else {}
         seconds[stage] = time.perf_counter() - t
     seconds["total"] = time.perf_counter() - start
     return ScanResult(name=name, scan=scan, out_dir=out, stages=stages, seconds=seconds)
