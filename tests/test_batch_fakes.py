@@ -67,6 +67,7 @@ class RelaxOptions:
     tol: float = 1e-6
     max_iter: int = 10000
     threads: int | None = None
+    simplify_mm: float | None = 0.0  # given: run_scan leaves it (it never reads the real default)
 
     def __post_init__(self):
         if self.max_iter < 1:

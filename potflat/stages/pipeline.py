@@ -289,7 +289,7 @@ def _preview_at_image_resolution(options: dict) -> dict:
     """A relax preset that relaxes a coarse copy (``preview``) does so at 2 pixels of the image
     it is baked into, unless ``simplify_mm`` was given."""
     relax, bake = options["relax"], options["bake"]
-    if getattr(relax, "simplify_mm", 0.0) is not None:  # given (or a stage stand-in without it, in tests)
+    if relax.simplify_mm is not None:  # given
         return options
     if relax.resolved()["simplify_mm"]:
         options = {**options, "relax": dataclasses.replace(relax, simplify_mm=2.0 / bake.resolution)}
