@@ -143,18 +143,6 @@ def table(info: dict, result: dict, image: str, *, command: str, preset: str, px
     return "\n".join(lines)
 
 
-def write_section(doc: Path, section: str) -> None:
-    """Replace this benchmark's section of ``doc`` (or append it); other sections are untouched."""
-    text = doc.read_text() if doc.exists() else "# Performance\n"
-    start = text.find(SECTION)
-    if start < 0:
-        text = text.rstrip("\n") + "\n\n" + section
-    else:
-        nxt = text.find("\n## ", start + len(SECTION))
-        text = text[:start] + section + ("\n" + text[nxt + 1:] if nxt >= 0 else "")
-    doc.write_text(text.rstrip("\n") + "\n")
-
-
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--vertices", type=float, default=3e6)
@@ -181,9 +169,11 @@ def main(argv: list[str] | None = None) -> None:
                         preset=args.preset, px_per_mm=args.px_per_mm)
     print(section)
     if args.write:
-        doc = Path(__file__).resolve().parent.parent / "docs" / "performance.md"
-        write_section(doc, section)
-        print(f"updated {doc}")
+        sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+        from benchmarks._docs import PERFORMANCE_MD, write_section
+
+        write_section(section)
+        print(f"updated {PERFORMANCE_MD}")
 
 
 if __name__ == "__main__":

@@ -46,6 +46,20 @@ CREAM = (232, 214, 178)
 CLAY = (176, 120, 88)
 ATLAS_BACKGROUND = (127, 127, 127)
 
+#: Paintings accepted by :func:`make_vessel` (see its ``painting`` parameter).
+PAINTINGS = ("frieze", "belt", "panel", "allover")
+#: Widths (degrees about the axis) a ``panel`` may take; the one holding most whole circles wins.
+PANEL_WIDTHS_DEG = (120.0, 110.0, 130.0, 100.0, 140.0)
+#: Lighting factor range of ``shading=True`` (darkest, brightest) and the per-texel noise
+#: (standard deviation in grey levels).
+SHADING_RANGE = (0.7, 1.1)
+SHADING_NOISE = 2.0
+#: Pitch of the ``allover`` circle lattice (centre spacing, in circle radii) and of its lines (mm).
+LATTICE_PITCH = 2.6
+LATTICE_LINES_MM = 8.0
+#: Clearance (mm) kept between a feature circle and the edge of the painted zone or a handle root.
+ZONE_MARGIN = 3.0
+
 #: Radius (mm) of the painted frieze circles.
 CIRCLE_RADIUS = 10.0
 #: Width (mm, arc length about the axis) of the painted vertical bars.
@@ -179,6 +193,13 @@ class Painting:
         ``line_width`` mm wide.
     tondo : tuple or None
         ``(centre_z, radius, rgb)``: a disc on the inner floor around the axis (two walls).
+    kind : str
+        One of :data:`PAINTINGS`.
+    zone : tuple or None
+        ``(z_low, z_high, angle, half_width)``: the painted zone of the outer wall, heights
+        along the axis and, for a panel, the angles within ``half_width`` (rad) of ``angle``
+        (None for a belt); the rest of the outer wall is black glaze. None: the whole outer
+        wall is painted.
     """
 
     circles: tuple
@@ -186,6 +207,8 @@ class Painting:
     bars: tuple
     grid: tuple | None
     tondo: tuple | None
+    kind: str = "frieze"
+    zone: tuple | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -264,14 +287,32 @@ class SyntheticVessel:
         return _paint(self.painting, self._geometry, self.to_canonical(points))
 
     def vertex_colors(self) -> np.ndarray:
-        """Painting colour of every mesh vertex, ``(n, 3)`` uint8.
+        """Colour of every mesh vertex as a scan shows it, ``(n, 3)`` uint8.
 
-        Handles are black; a thick sherd's back and break faces plain clay (:data:`CLAY`).
+        The painting (:meth:`paint`); handles are black, a thick sherd's back and break
+        faces plain clay (:data:`CLAY`); with ``shading`` lit and noisy like the texture.
         """
         col = self.paint(self.mesh.vertices)
         for part, rgb in _plain_colours(self._geometry).items():
             col[self.vertex_part == part] = rgb
+        if self.options.get("shading", False):
+            col = _shade(col, self.to_canonical(self.mesh.vertices), self._geometry,
+                         _shading_rng(self.options["seed"], 1))
         return col
+
+    def painted_zone(self, points) -> np.ndarray:
+        """Whether world points ``(n, 3)`` on the body lie in the painted zone, ``(n,)`` bool.
+
+        The zone is the part of the outer wall that carries the painting (the whole outer
+        wall for ``frieze`` and ``allover``; the belt or the panel, see
+        :attr:`Painting.zone`); the inner wall and handles are not in it.
+        """
+        return _in_zone(self.painting, self._geometry, self.to_canonical(points))
+
+    def zone_faces(self) -> np.ndarray:
+        """Faces of the outer wall whose centroid lies in the painted zone, ``(m,)`` bool."""
+        F = self.mesh.faces
+        return (self.face_part == PART_OUTER) & self.painted_zone(self.mesh.vertices[F].mean(axis=1))
 
 
 # --------------------------------------------------------------------------- geometry
@@ -676,7 +717,9 @@ def _weld_handles(V, F, arrays, face_arrays, ends, h):
 # --------------------------------------------------------------------------- painting
 
 
-def _layout_painting(g: _Generatrix, spec: _Spec, walls: int, rng) -> Painting:
+def _layout_painting(g: _Generatrix, spec: _Spec, walls: int, rng, painting: str = "frieze") -> Painting:
+    """The painting of kind ``painting`` (:data:`PAINTINGS`); draws the same random numbers
+    for every kind, so the mesh does not depend on the painting."""
     z_lo = float(np.interp(g.s_outer[0], g.s, g.z))
     z_hi = float(np.interp(g.s_outer[1], g.s, g.z))
     H = z_hi - z_lo
@@ -716,7 +759,139 @@ def _layout_painting(g: _Generatrix, spec: _Spec, walls: int, rng) -> Painting:
         rt = min(30.0, 0.9 * floor_r)
         tondo = (spec.floor, rt, TERRACOTTA)
         circles.append(PaintedCircle(np.array([0.0, 0.0, spec.floor]), rc, BLACK, "inner", spec.floor, 0.0))
-    return Painting(tuple(circles), tuple(bands), tuple(bars), grid, tondo)
+    if painting == "frieze":
+        return Painting(tuple(circles), tuple(bands), tuple(bars), grid, tondo)
+    inner = [c for c in circles if c.side == "inner"]
+    frieze = [c for c in circles if c.side == "outer"]
+    if painting == "allover":
+        n_mer = max(8, int(round(2 * math.pi * float(prof_r.max()) / LATTICE_LINES_MM)))
+        lines = (foot_top, z_hi - 3.0, LATTICE_LINES_MM, n_mer, 1.0, BLACK)
+        lattice = _lattice_circles(g, spec, phase)
+        return Painting(tuple(lattice + inner), (bands[0], bands[-1]), (), lines, tondo, kind=painting)
+    # belt: the frieze between its frame bands; panel: from the bars below to the grid above
+    zone = (zf - rc - 7.0, zf + rc + 7.0, None, math.pi)
+    if painting == "panel":
+        zone = _panel_zone(g, spec, frieze, min(zone[0], b0 if bars else math.inf),
+                           max(zone[1], g1 if grid is not None else -math.inf))
+        frieze = [c for c in frieze if _circle_in_zone(g, zone, c)]
+        frieze.sort(key=lambda c: abs(float(_wrap(c.angle - zone[2]))))  # the central one first
+    return Painting(tuple(frieze + inner), tuple(bands), tuple(bars), grid, tondo, kind=painting, zone=zone)
+
+
+def _handle_roots(g: _Generatrix, spec: _Spec) -> list:
+    """Where the profile's handles meet the wall: (canonical point, tube radius) per end."""
+    _, pr, pz = _outer_polyline(g)
+    out = []
+    for hd in spec.handles:
+        for z, dth in ((hd.z0, hd.dtheta0), (hd.z1, hd.dtheta1)):
+            r, th = float(np.interp(z, pz, pr)), hd.theta + dth
+            out.append((np.array([r * math.cos(th), r * math.sin(th), z]), hd.radius))
+    return out
+
+
+def _circle_outline(g: _Generatrix, c: PaintedCircle, k: int = 48) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(z, theta, r)`` of ``k`` points about the outline of an outer-wall circle (first order
+    in its radius: arc length along the profile and along the parallel)."""
+    sc = float(_project_to_generatrix(g, np.array([math.hypot(*c.centre[:2])]), np.array([c.centre[2]]))[0])
+    a = np.linspace(0.0, 2 * math.pi, k, endpoint=False)
+    s = sc + c.radius * np.sin(a)
+    r = np.interp(s, g.s, g.r)
+    return np.interp(s, g.s, g.z), c.angle + c.radius * np.cos(a) / r, r
+
+
+def _circle_in_zone(g: _Generatrix, zone: tuple, c: PaintedCircle) -> bool:
+    """Whether circle ``c`` lies in ``zone`` with :data:`ZONE_MARGIN` to spare."""
+    z, th, r = _circle_outline(g, c)
+    z_lo, z_hi, centre, half = zone
+    ok = (z >= z_lo + ZONE_MARGIN) & (z <= z_hi - ZONE_MARGIN)
+    if centre is not None:
+        ok &= np.abs(_wrap(th - centre)) * r <= half * r - ZONE_MARGIN
+    return bool(np.all(ok))
+
+
+def _panel_zone(g: _Generatrix, spec: _Spec, circles: list, z_lo: float, z_hi: float) -> tuple:
+    """A panel of one of :data:`PANEL_WIDTHS_DEG` centred on a frieze circle or between two,
+    holding the most whole circles (then: far from the handles, the first width listed)."""
+    roots = [math.atan2(p[1], p[0]) for p, _ in _handle_roots(g, spec)]
+    angles = [c.angle for c in circles]
+    n = len(angles)
+    centres = angles + [a + 0.5 * float(_wrap(angles[(i + 1) % n] - a)) for i, a in enumerate(angles)]
+    best, best_key = None, None
+    for w_deg in PANEL_WIDTHS_DEG:
+        for th in centres:
+            zone = (z_lo, z_hi, th % (2 * math.pi), math.radians(w_deg) / 2)
+            count = sum(_circle_in_zone(g, zone, c) for c in circles)
+            clear = min((abs(float(_wrap(th - a))) for a in roots), default=math.pi)
+            key = (count, round(clear, 6))
+            if best_key is None or key > best_key:
+                best, best_key = zone, key
+    return best
+
+
+def _lattice_circles(g: _Generatrix, spec: _Spec, phase: float) -> list:
+    """Circles of radius :data:`CIRCLE_RADIUS` in staggered rows over the whole outer wall:
+    rows :data:`LATTICE_PITCH` radii apart along the profile where the wall's radius is at
+    least 2.5 circle radii, clear of the wall's ends and of the handle roots."""
+    rc = CIRCLE_RADIUS
+    pitch = LATTICE_PITCH * rc
+    s0, s1 = g.s_outer
+    n_rows = int((s1 - s0 - 2 * (rc + 4.0)) // pitch) + 1
+    first = 0.5 * (s0 + s1) - 0.5 * (n_rows - 1) * pitch
+    roots = _handle_roots(g, spec)
+    out = []
+    for k in range(max(n_rows, 0)):
+        s = first + k * pitch
+        r, z = float(np.interp(s, g.s, g.r)), float(np.interp(s, g.s, g.z))
+        n = int(2 * math.pi * r // pitch)
+        if r < 2.5 * rc or n < 3:
+            continue
+        for j in range(n):
+            th = (phase + 2 * math.pi * (j + 0.5 * (k % 2)) / n) % (2 * math.pi)
+            centre = np.array([r * math.cos(th), r * math.sin(th), z])
+            if any(np.linalg.norm(centre - p) < rc + a + 8.0 for p, a in roots):
+                continue
+            out.append(PaintedCircle(centre, rc, BLACK if len(out) % 2 == 0 else CREAM, "outer", z, th))
+    return out
+
+
+def _in_zone(p: Painting, g: _Generatrix, P) -> np.ndarray:
+    """Canonical points ``P`` in the painting's zone of the outer wall, ``(n,)`` bool."""
+    P = np.asarray(P, float).reshape(-1, 3)
+    if not math.isfinite(g.s_inner):
+        return _zone_mask(p.zone, P)
+    s = _project_to_generatrix(g, np.hypot(P[:, 0], P[:, 1]), P[:, 2])
+    return (s <= 0.5 * (g.s_outer[1] + g.s_inner)) & _zone_mask(p.zone, P)
+
+
+def _zone_mask(zone: tuple | None, P: np.ndarray) -> np.ndarray:
+    """Canonical points ``P`` within the heights and angles of ``zone`` (:attr:`Painting.zone`)."""
+    ok = np.ones(len(P), bool)
+    if zone is not None:
+        z_lo, z_hi, centre, half = zone
+        ok &= (P[:, 2] >= z_lo) & (P[:, 2] <= z_hi)
+        if centre is not None:
+            ok &= np.abs(_wrap(np.arctan2(P[:, 1], P[:, 0]) - centre)) <= half
+    return ok
+
+
+def _shading_rng(seed: int, stream: int) -> np.random.Generator:
+    """The random numbers of the lighting and noise of ``shading=True`` (apart from the mesh's)."""
+    return np.random.default_rng([seed, 0x5EAD, stream])
+
+
+def _shade(colours: np.ndarray, P, g: _Generatrix, rng) -> np.ndarray:
+    """Colours lit by a smooth gradient (factor :data:`SHADING_RANGE` across the vessel: a side
+    light about the axis and a vertical fall-off) plus per-sample noise (:data:`SHADING_NOISE`
+    grey levels), as a scan's texture shows them. ``P`` canonical points, ``(n, 3)``."""
+    light = float(rng.uniform(0.0, 2 * math.pi))
+    P = np.asarray(P, float).reshape(-1, 3)
+    z0, z1 = float(g.z.min()), float(g.z.max())
+    t = 0.7 * np.cos(np.arctan2(P[:, 1], P[:, 0]) - light) \
+        + 0.3 * np.clip(2.0 * (P[:, 2] - z0) / max(z1 - z0, 1e-9) - 1.0, -1.0, 1.0)
+    lo, hi = SHADING_RANGE
+    factor = 0.5 * (lo + hi) + 0.5 * (hi - lo) * t
+    out = colours * factor[:, None] + rng.normal(0.0, SHADING_NOISE, colours.shape)
+    return np.clip(np.rint(out), 0, 255).astype(np.uint8)
 
 
 def _paint(p: Painting, g: _Generatrix, P) -> np.ndarray:
@@ -750,6 +925,8 @@ def _paint(p: Painting, g: _Generatrix, P) -> np.ndarray:
     for c in p.circles:
         side = outer if c.side == "outer" else inner
         col[side & (np.linalg.norm(P - c.centre, axis=1) <= c.radius)] = c.colour
+    if p.zone is not None:
+        col[outer & ~_zone_mask(p.zone, P)] = BLACK
     return col
 
 
@@ -989,12 +1166,13 @@ def _chart_layouts(V, F, vs, vth, face_part, face_handle, handle_radii, g: _Gene
     return chart, uv
 
 
-def _render_atlas(vessel_paint, plain, V_world, F, face_part, texcoords, size) -> np.ndarray:
+def _render_atlas(vessel_paint, plain, V_world, F, face_part, texcoords, size, shade=None) -> np.ndarray:
     """Texture atlas: every texel painted at its 3D point, with gutters around the charts.
 
     Texels whose centre lies within :data:`_GUTTER_PX` pixels outside a chart take the
     painting at the nearest point of the nearest triangle, so bilinear sampling at chart
-    borders never reads the background.
+    borders never reads the background. ``shade(colours, world_points)``, when given,
+    lights the texels' colours.
     """
     from potflat_synthetic._kernels import rasterize_faces
 
@@ -1012,6 +1190,8 @@ def _render_atlas(vessel_paint, plain, V_world, F, face_part, texcoords, size) -
         colours[part == p] = rgb
         painted &= part != p
     colours[painted] = vessel_paint(P[painted])
+    if shade is not None:
+        colours = shade(colours, P)
     img = np.empty((size, size, 3), np.uint8)
     img[:] = ATLAS_BACKGROUND
     img[cov] = colours
@@ -1064,6 +1244,8 @@ def make_vessel(
     sherd_of: str = "hydria",
     sherd_span: float = 80.0,
     sherd_thickness: float = 0.0,
+    painting: str = "frieze",
+    shading: bool = False,
 ) -> SyntheticVessel:
     """Build a synthetic painted vessel with known axis, profile, painting and pose.
 
@@ -1106,6 +1288,23 @@ def make_vessel(
         0 = the sherd's painted outer surface only; otherwise (1 to 15 mm) a closed
         fragment: the back is the outer surface offset inwards along the section normal,
         joined by break faces (:data:`PART_BREAK`); back and breaks are plain clay.
+    painting : str
+        One of :data:`PAINTINGS`. ``frieze``: a frieze of circles between black bands, a
+        hatched grid above and bars below on terracotta. ``belt``: the frieze between its
+        bands, lustrous black glaze on the rest of the outer wall. ``panel``: a panel of
+        100-140 degrees around a group of the frieze's circles, from the bars to the grid,
+        black glaze elsewhere (also on the rest of the frieze). ``allover``: staggered rows of circles
+        over the whole outer wall (where it is wide enough) on a lattice of thin lines, no
+        large plain area. The painted zone is :meth:`SyntheticVessel.painted_zone`; the
+        feature circles are those inside it.
+    shading : bool
+        Light the texture (and vertex colours) like a scan: a smooth gradient (factor
+        :data:`SHADING_RANGE` across the vessel) and per-texel noise (:data:`SHADING_NOISE`
+        grey levels). :meth:`SyntheticVessel.paint` stays the unlit painting. The mesh and
+        painting do not depend on it.
+
+    The options ``painting`` and ``shading`` are recorded in :attr:`SyntheticVessel.options`
+    only when they are not the defaults, so existing vessels' files stay byte-identical.
 
     Returns
     -------
@@ -1128,6 +1327,10 @@ def make_vessel(
     if handles not in (False, True, "intersecting", "welded") or not isinstance(handles, (bool, str)):
         raise InvalidOptionError(f"handles must be False, True, 'intersecting' or 'welded', got {handles!r}")
     handles = "intersecting" if handles is True else handles
+    if painting not in PAINTINGS:
+        raise InvalidOptionError(f"unknown painting {painting!r}; use one of {', '.join(PAINTINGS)}")
+    if not isinstance(shading, bool):
+        raise InvalidOptionError(f"shading must be True or False, got {shading!r}")
     if base is not None and not isinstance(base, bool):
         raise InvalidOptionError(f"base must be True, False or None, got {base!r}")
     parent = kind
@@ -1152,10 +1355,14 @@ def make_vessel(
                    sherd_of=sherd_of if kind == "sherd" else None,
                    sherd_span=sherd_span if kind == "sherd" else None,
                    sherd_thickness=float(sherd_thickness) if kind == "sherd" else None)
+    if painting != "frieze":
+        options["painting"] = painting
+    if shading:
+        options["shading"] = True
 
     rng = np.random.default_rng(seed)
     g = _build_generatrix(spec, walls=walls, base=base, thickness=thickness)
-    painting = _layout_painting(g, spec, walls, rng)
+    painting = _layout_painting(g, spec, walls, rng, painting)
 
     region = None
     n_body = n_vertices
@@ -1240,7 +1447,11 @@ def make_vessel(
         face_part=face_part, vertex_part=vertex_part, face_chart=face_chart, options=options,
         _geometry=g,
     )
-    texture = _render_atlas(vessel.paint, _plain_colours(g), Vw, F, face_part, texcoords, texture_size)
+    shade = None
+    if shading:
+        def shade(colours, P):
+            return _shade(colours, vessel.to_canonical(P), g, _shading_rng(seed, 0))
+    texture = _render_atlas(vessel.paint, _plain_colours(g), Vw, F, face_part, texcoords, texture_size, shade)
     object.__setattr__(vessel, "texture", texture)
     return vessel
 

@@ -1,3 +1,5 @@
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -47,7 +49,8 @@ def test_round_trip(tmp_path, with_texture, with_colors, stress):
 @pytest.mark.parametrize("with_texture,with_colors,stress", [(True, False, False), (False, True, True)])
 def test_as_stored_is_what_the_file_reads_back(tmp_path, with_texture, with_colors, stress):
     flat = _flat(tmp_path, with_texture, with_colors, stress)
-    flat = flat.replace(comments=("from the scan", ""))
+    importance = np.linspace(0.0, 1.0, len(flat.uv)) if stress else None
+    flat = flat.replace(comments=("from the scan", ""), importance=importance)
     out = tmp_path / "out" / "x.rollout.ply"
     write_flat_ply(out, flat, comments=("made by test", "two\nlines"))
     back, stored = read_flat_ply(out), as_stored(flat, out, comments=("made by test", "two\nlines"))
@@ -58,6 +61,9 @@ def test_as_stored_is_what_the_file_reads_back(tmp_path, with_texture, with_colo
     assert (back.stress is None) == (stored.stress is None)
     if stress:
         assert back.stress.tobytes() == stored.stress.tobytes()
+        assert back.importance.tobytes() == stored.importance.tobytes()
+    assert (back.importance is None) == (stored.importance is None)
+    assert {f.name for f in dataclasses.fields(FlatMesh)} == {"mesh", "uv", "stress", "comments", "importance"}
     assert (back.mesh.texture_path, back.mesh.units, back.mesh.source) == (
         stored.mesh.texture_path, stored.mesh.units, stored.mesh.source)
     assert back.comments == stored.comments == ("from the scan", "", "made by test")

@@ -108,6 +108,18 @@ def overlay(rgb: np.ndarray, values: np.ndarray, scale: MapScale, coverage: np.n
     return out
 
 
+#: Colour of the important zone's outline on the maps (RGBA).
+OUTLINE_RGBA = (255, 255, 255, 255)
+
+
+def draw_outline(rows: np.ndarray, outline: np.ndarray | None) -> np.ndarray:
+    """Map rows (k, w, 4) uint8 with the important zone's outline (k, w) bool drawn in
+    :data:`OUTLINE_RGBA` (in place; returned). ``None``: unchanged."""
+    if outline is not None:
+        rows[outline] = OUTLINE_RGBA
+    return rows
+
+
 def _colorbar(ax, scale: MapScale, fontsize: float, orientation: str = "horizontal"):
     import matplotlib
     from matplotlib.cm import ScalarMappable
@@ -272,6 +284,21 @@ class ScaleLayer:
         return np.asarray(img)
 
 
+def _zone_line(flat: FlatMesh) -> str:
+    """The distortion inside the important zone and outside it, in one line for a sheet."""
+    from potflat.mesh import distortion
+
+    zones = distortion.zone_figures(flat.mesh.vertices, flat.uv, flat.mesh.faces, flat.importance)
+    parts = []
+    for key, name in (("important", "painted zone" if flat.importance is not None else "whole surface"),
+                      ("rest", "plain surface")):
+        z = zones[key]
+        if z.distortion is not None:
+            parts.append(f"{name}: lengths off {z.length_error_median_pct:.1f}% (median), "
+                         f"{z.length_error_p95_pct:.1f}% (p95), anisotropy p95 {z.distortion.anisotropy_p95:.2f}")
+    return "\n".join(parts)
+
+
 def comparison_sheet(path: str | Path, panels, *, title: str = "") -> Path:
     """Side-by-side sheet: proxy rollout vs relaxed, painting and stress map with figures.
 
@@ -295,8 +322,8 @@ def comparison_sheet(path: str | Path, panels, *, title: str = "") -> Path:
     from potflat.io.atomic import write_bytes_atomic
     from potflat.mesh import distortion
 
-    panels = [(label, res, _vertex_stress(flat), distortion.summarize(flat.mesh.vertices, flat.uv, flat.mesh.faces))
-              for label, flat, res in panels]
+    panels = [(label, res, _vertex_stress(flat), distortion.summarize(flat.mesh.vertices, flat.uv, flat.mesh.faces),
+               _zone_line(flat)) for label, flat, res in panels]
     hi = max(map_scale("stress", p[2]).hi for p in panels)
     scale = map_scale("stress", np.zeros(1), hi=hi)
     aspect = max(p[1].image.shape[0] / p[1].px_per_mm for p in panels) / max(
@@ -311,12 +338,12 @@ def comparison_sheet(path: str | Path, panels, *, title: str = "") -> Path:
     # one millimetre scale for all panels, so the two flattenings compare at true relative size
     max_w = max(p[1].image.shape[1] / p[1].px_per_mm for p in panels)
     max_h = max(p[1].image.shape[0] / p[1].px_per_mm for p in panels)
-    for col, (label, res, stress, summ) in enumerate(panels):
+    for col, (label, res, stress, summ, zones) in enumerate(panels):
         h, w = res.image.shape[:2]
         extent = [0, w / res.px_per_mm, h / res.px_per_mm, 0]
         ax = fig.add_subplot(gs[0, col])
         ax.imshow(res.image, extent=extent, interpolation="antialiased")
-        ax.set_title(label, fontsize=13)
+        ax.set_title(f"{label}\n{zones}", fontsize=10)
         ax.set_xlabel("mm")
         heat = colorize(res.maps["stress"], scale, res.image[..., 3] / 255.0)
         ax2 = fig.add_subplot(gs[1, col])

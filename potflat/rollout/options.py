@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
+from potflat import importance as _importance
 from potflat.errors import InvalidOptionError
 from potflat.rollout.proxy import KINDS as PROXY_KINDS
 from potflat.types import UNITS_MM
@@ -51,6 +52,22 @@ class RolloutOptions:
         Keep handles, spouts and knobs (parts off the surface of revolution, found by
         :func:`potflat.rollout.attachments.detect_attachments`) in the rollout; by default they are
         left out and reported, and the painting around their roots stays.
+    importance : str
+        Where the painting is, which the relax stage keeps true and the bake stage reports
+        (:mod:`potflat.importance`): ``auto`` (found in the colours; none for a scan without
+        colours or painted all over), ``none`` (the whole surface alike), ``mask`` (a PNG
+        painted over a potflat image, ``importance_mask``), ``texture-mask`` (a PNG in the
+        texture's space, ``importance_mask``) or ``band`` (``importance_band`` and/or
+        ``importance_angles``).
+    importance_mask : str or None
+        The mask image (white = important) for ``mask`` and ``texture-mask``.
+    importance_image : str or None
+        For ``mask``: the ``NAME.bake.json`` of the image the mask was painted over (default:
+        the one beside the mask whose image has the mask's size).
+    importance_band : (float, float) or None
+        For ``band``: heights as fractions of the axial extent (0 foot, 1 mouth).
+    importance_angles : (float, float) or None
+        For ``band``: angle range in degrees from the seam.
     """
 
     units: str | None = None
@@ -64,8 +81,33 @@ class RolloutOptions:
     view: tuple[float, ...] | None = None
     side: str = "outer"
     keep_attachments: bool = False
+    importance: str = "auto"
+    importance_mask: str | None = None
+    importance_image: str | None = None
+    importance_band: tuple[float, float] | None = None
+    importance_angles: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
+        _importance.check_method(self.importance)
+        if (self.importance in ("mask", "texture-mask")) != (self.importance_mask is not None):
+            raise InvalidOptionError("give importance_mask (--importance-mask PNG) with importance mask or "
+                                     "texture-mask, and only then")
+        if self.importance_image is not None and self.importance != "mask":
+            raise InvalidOptionError("importance_image (--importance-image) goes with importance mask")
+        if self.importance_band is not None:
+            lo, hi = _floats("importance_band", self.importance_band, 2, "LO HI")
+            if not 0.0 <= lo < hi <= 1.0:
+                raise InvalidOptionError(
+                    f"importance band {lo:g} {hi:g} is invalid; give fractions of the height with 0 <= LO < HI <= 1")
+            object.__setattr__(self, "importance_band", (lo, hi))
+        if self.importance_angles is not None:
+            a0, a1 = _floats("importance_angles", self.importance_angles, 2, "A0 A1")
+            if not a0 < a1 <= a0 + 360.0:
+                raise InvalidOptionError(
+                    f"importance angles {a0:g} {a1:g} are invalid; give A0 < A1 <= A0 + 360 (degrees from the seam)")
+            object.__setattr__(self, "importance_angles", (a0, a1))
+        if (self.importance == "band") != (self.importance_band is not None or self.importance_angles is not None):
+            raise InvalidOptionError("give importance_band and/or importance_angles with importance band, and only then")
         if self.side not in SIDES:
             raise InvalidOptionError(f"side {self.side!r} is unknown; use outer or inner")
         if not isinstance(self.keep_attachments, bool):

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -30,13 +30,14 @@ import scipy.sparse
 import scipy.sparse.csgraph
 from scipy.spatial import cKDTree
 
+from potflat import importance as _importance
 from potflat.rollout import proxy as _proxy
 from potflat.mesh._kernels import union_find
 from potflat.rollout.attachments import AttachmentSelection, detect_attachments
 from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
 from potflat.mesh.distortion import DistortionSummary, face_areas, row_blocks, summarize
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.types import UNITS_MM, FlatMesh, Mesh, StageOutput
+from potflat.types import FlatMesh, Mesh, StageOutput
 from potflat.rollout.options import RolloutOptions
 from potflat.rollout.walls import FaceGraph, WallSelection, face_adjacency, select_wall
 
@@ -170,6 +171,7 @@ class RolloutResult:
     untangled_vertices: int
     boundary_overlap: int
     other_objects_faces: int = 0
+    importance: _importance.Importance | None = None
 
     @property
     def side(self) -> str:
@@ -471,8 +473,10 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
     cut = un.flat.mesh
     if mesh.texcoords is not None:  # attached once, to the final faces (see _unroll)
         cut = cut.replace(texcoords=mesh.texcoords[un.face_index])
+    flat = un.flat.replace(mesh=cut, uv=uv)
+    importance = _find_importance(flat, options, axis, theta_deg)
     return RolloutResult(
-        flat=un.flat.replace(mesh=cut, uv=uv), axis=axis, proxy=un.proxy,
+        flat=flat.replace(importance=importance.values), importance=importance, axis=axis, proxy=un.proxy,
         seam_angle=float(math.degrees(un.seam) % 360.0), seam_method=un.seam_method, region=region,
         distortion=distortion, face_index=un.face_index, vertex_index=un.vertex_index,
         seam_vertices=un.seam_vertices, split_vertices=un.split_vertices, walls=walls,
@@ -901,6 +905,23 @@ def _gap_middle(covered: np.ndarray) -> float | None:
     return (_longest_min_run(covered.astype(np.float64)) + 0.5) / SEAM_BINS * TWO_PI
 
 
+def _find_importance(flat: FlatMesh, options: RolloutOptions, axis: AxisFit, theta_deg: np.ndarray
+                     ) -> _importance.Importance:
+    """The importance of the rollout's vertices as ``options.importance`` asks."""
+    method = options.importance
+    if method == "none":
+        return _importance.Importance(None, "none", 1.0, "importance off: the whole surface counts alike")
+    if method == "auto":
+        return _importance.auto_importance(flat)
+    if method == "mask":
+        return _importance.image_mask_importance(flat, options.importance_mask, options.importance_image)
+    if method == "texture-mask":
+        return _importance.texture_mask_importance(flat, options.importance_mask)
+    h = axis.cylindrical(flat.mesh.vertices)[0]
+    return _importance.band_importance(flat, h / max(axis.height, np.finfo(float).tiny), theta_deg,
+                                       options.importance_band, options.importance_angles)
+
+
 def rollout_summary(result: RolloutResult) -> dict:
     """The JSON-ready figures of a rollout (the sidecar without file and provenance fields)."""
     mesh = result.flat.mesh
@@ -919,6 +940,7 @@ def rollout_summary(result: RolloutResult) -> dict:
             "nonmanifold_vertices_split": result.split_vertices,
         },
         "distortion": result.distortion.as_dict(),
+        "importance": result.importance.as_dict() if result.importance is not None else None,
         "boundary_overlap": result.boundary_overlap,
         "walls": result.walls.summary(),
         "attachments": _attachments_summary(result),
