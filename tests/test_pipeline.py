@@ -8,7 +8,7 @@ import pytest
 
 import test_batch_fakes as fakes
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.stages.pipeline import (FIGURES, coerce_option, describe_type, distortion_figures, option_types,
+from potflat.stages.pipeline import (FIGURES, coerce_option, describe_type, option_types,
                               resolve_options, run_scan, stage_api)
 
 
@@ -117,14 +117,6 @@ def test_coerce_option_rejects(tp, value, message):
 def test_describe_type():
     assert describe_type(tuple[str, ...]) == "a list of names"
     assert describe_type(typing.Literal["a", "b"]) == "one of a, b"
-
-
-def test_distortion_figures_prefers_distortion_key():
-    summary = {"aaa": {"edge_rms": 9.0}, "distortion": {"edge_rms": 0.1, "flipped": 2}}
-    figures = distortion_figures(summary)
-    assert figures["edge_rms"] == 0.1 and figures["flipped"] == 2
-    assert set(figures) == set(FIGURES) and figures["anisotropy_p95"] is None
-    assert distortion_figures({}) == dict.fromkeys(FIGURES)
 
 
 def test_run_refuses_early_when_the_painting_would_replace_the_scan_texture(tmp_path):

@@ -105,33 +105,7 @@ class ScanResult:
     @property
     def figures(self) -> dict[str, Any]:
         """Distortion figures of the final flattening (:data:`FIGURES`, from the relax stage)."""
-        relaxed = self.stages["relax"]
-        if relaxed.distortion is None:  # a stage that hands on no typed figures
-            return distortion_figures(relaxed.summary)
-        return {k: getattr(relaxed.distortion, k) for k in FIGURES}
-
-
-def distortion_figures(summary: dict) -> dict[str, Any]:
-    """The :data:`FIGURES` found in a stage's JSON summary (``None`` where absent).
-
-    The figures are looked up in the first nested dict holding ``edge_rms`` (a
-    :class:`potflat.mesh.distortion.DistortionSummary`), preferring one under a key named
-    ``distortion``.
-    """
-    found = _find_figures(summary)
-    return {k: (found or {}).get(k) for k in FIGURES}
-
-
-def _find_figures(node: Any) -> dict | None:
-    if isinstance(node, dict):
-        if "edge_rms" in node:
-            return node
-        keys = sorted(node, key=lambda k: (k != "distortion", str(k)))
-        for key in keys:
-            hit = _find_figures(node[key])
-            if hit is not None:
-                return hit
-    return None
+        return {k: getattr(self.stages["relax"].distortion, k) for k in FIGURES}
 
 
 def option_types(cls: type) -> dict[str, Any]:
