@@ -633,16 +633,19 @@ def stage_name(path: Path) -> str:
 ATTACHMENT_COLOUR = (230, 0, 160, 220)
 
 
-def _attachment_roots(flat_ply: Path, n_faces: int) -> tuple[np.ndarray, Path | None]:
-    """Faces where the rollout left out an attachment, from ``NAME.rollout.json`` beside the input.
+def _attachment_roots(flat_ply: Path, n_faces: int, rollout_summary: dict | None = None
+                      ) -> tuple[np.ndarray, Path | None]:
+    """Faces where the rollout left out an attachment, from its summary (``rollout_summary``,
+    else ``NAME.rollout.json`` beside the input).
 
     Returns a per-face indicator (n_faces,) float64 (empty when there is nothing to show) and
-    the JSON read (for provenance), or ``None``.
+    the rollout JSON (for provenance), or ``None``.
     """
     stem = flat_ply.name.removesuffix(".ply").removesuffix(".relaxed").removesuffix(".rollout")
     rollout_json = flat_ply.with_name(f"{stem}.rollout.json")
     try:
-        att = json.loads(rollout_json.read_text()).get("attachments", {})
+        summary = rollout_summary if rollout_summary is not None else json.loads(rollout_json.read_text())
+        att = summary.get("attachments", {})
     except (OSError, ValueError):
         return np.zeros(0), None
     roots = np.asarray(att.get("root_faces") or [], dtype=np.int64)
@@ -667,7 +670,8 @@ def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: li
 
 
 def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, options: BakeOptions | None = None, *,
-                   name: str | None = None, flat: FlatMesh | None = None) -> StageOutput:
+                   name: str | None = None, flat: FlatMesh | None = None,
+                   rollout_summary: dict | None = None) -> StageOutput:
     """Bake ``NAME.relaxed.ply`` (or a rollout) into images and ``NAME.bake.json``.
 
     Files (in ``out_dir``): ``NAME.png`` (painting, RGBA, resolution in the file),
@@ -692,6 +696,9 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     flat : FlatMesh, optional
         The content of ``flat_ply`` already in memory (:func:`potflat.run_scan`); read from
         the file when not given.
+    rollout_summary : dict, optional
+        The rollout stage's summary in memory (where attachments met the wall); read from
+        ``NAME.rollout.json`` beside the input when not given.
 
     Returns
     -------
@@ -718,7 +725,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
         if not rollout_ply.is_file():
             raise InvalidInputError(f"--sheet needs {rollout_ply.name} beside {flat_ply}; copy it there or drop --sheet")
     _check_not_inputs(out_dir, name, options, [flat_ply, flat.mesh.texture_path, rollout_ply])
-    attachment_marks, rollout_json = _attachment_roots(flat_ply, len(flat.mesh.faces))
+    attachment_marks, rollout_json = _attachment_roots(flat_ply, len(flat.mesh.faces), rollout_summary)
     ppm = options.resolution
     r = _Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels)
     g = r.grid

@@ -1048,7 +1048,8 @@ def _history_for_json(h: np.ndarray, limit: int = 1000) -> list[float]:
 
 
 def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: RelaxOptions | None = None, *,
-                    name: str | None = None, progress: bool = False, flat: FlatMesh | None = None) -> StageOutput:
+                    name: str | None = None, progress: bool = False, flat: FlatMesh | None = None,
+                    rollout_summary: dict | None = None) -> StageOutput:
     """Relax ``NAME.rollout.ply`` and write ``NAME.relaxed.ply`` and ``NAME.relaxed.json``.
 
     Parameters
@@ -1065,6 +1066,9 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     flat : FlatMesh, optional
         The content of ``rollout_ply`` already in memory (:func:`potflat.run_scan`); read
         from the file when not given.
+    rollout_summary : dict, optional
+        The rollout stage's summary in memory (its axis, proxy and units go into the JSON);
+        read from ``NAME.rollout.json`` beside the input when not given.
 
     Returns
     -------
@@ -1117,9 +1121,9 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         "faces": len(flat.mesh.faces),
     }
     rollout_json = rollout_ply.with_name(f"{stem}.rollout.json")
-    if rollout_json.exists():
+    if rollout_summary is not None or rollout_json.exists():
         try:
-            rj = json.loads(rollout_json.read_text())
+            rj = rollout_summary if rollout_summary is not None else json.loads(rollout_json.read_text())
         except (OSError, ValueError):
             rj = {}
         for key in ("axis", "proxy", "units"):

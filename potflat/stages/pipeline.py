@@ -316,8 +316,10 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
         _, run = stage_api(stage)
         t = time.perf_counter()
         stages[stage] = run(source, out, options[stage], name=name, **handed)
-        # the flattening goes on in memory; its file is the record (and the stage commands' input)
-        handed = {"flat": stages[stage].flat} if stages[stage].flat is not None else {}
+        # the flattening and the rollout's summary go on in memory; the files are the record
+        # (and the stage commands' input)
+        handed = ({"flat": stages[stage].flat, "rollout_summary": stages["rollout"].summary}
+                  if stages[stage].flat is not None else {})
         seconds[stage] = time.perf_counter() - t
     seconds["total"] = time.perf_counter() - start
     return ScanResult(name=name, scan=scan, out_dir=out, stages=stages, seconds=seconds)
