@@ -1105,7 +1105,8 @@ def _history_for_json(h: np.ndarray, limit: int = 1000) -> list[float]:
 
 
 def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: RelaxOptions | None = None, *,
-                    name: str | None = None, progress: bool = False) -> StageOutput:
+                    name: str | None = None, progress: bool = False, flat: FlatMesh | None = None,
+                    rollout_summary: dict | None = None) -> StageOutput:
     """Relax ``NAME.rollout.ply`` and write ``NAME.relaxed.ply`` and ``NAME.relaxed.json``.
 
     Parameters
@@ -1119,14 +1120,21 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         Output stem (default: the input's name without ``.rollout.ply``).
     progress : bool
         Show a progress bar.
+    flat : FlatMesh, optional
+        The content of ``rollout_ply`` already in memory (:func:`potflat.run_scan`); read
+        from the file when not given.
+    rollout_summary : dict, optional
+        The rollout stage's summary in memory (its axis, proxy and units go into the JSON);
+        read from ``NAME.rollout.json`` beside the input when not given.
 
     Returns
     -------
     StageOutput
-        ``paths`` with ``ply`` and ``json``; ``summary`` the JSON content.
+        ``paths`` with ``ply`` and ``json``; ``summary`` the JSON content; the relaxed
+        ``flat`` as written and its ``distortion``.
     """
     from potflat.io.atomic import write_json_atomic
-    from potflat.io.flat_ply import read_flat_ply, write_flat_ply
+    from potflat.io.flat_ply import as_stored, read_flat_ply, write_flat_ply
     from potflat.stages.provenance import provenance
 
     options = options or RelaxOptions()
@@ -1136,7 +1144,8 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     for suffix in (".ply", ".rollout"):
         stem = stem.removesuffix(suffix)
     name = name or stem
-    flat = read_flat_ply(rollout_ply)
+    if flat is None:
+        flat = read_flat_ply(rollout_ply)
     result = relax(flat, options=options, progress=progress)
     ply_path = out_dir / f"{name}.relaxed.ply"
     json_path = out_dir / f"{name}.relaxed.json"
@@ -1169,9 +1178,9 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         "faces": len(flat.mesh.faces),
     }
     rollout_json = rollout_ply.with_name(f"{stem}.rollout.json")
-    if rollout_json.exists():
+    if rollout_summary is not None or rollout_json.exists():
         try:
-            rj = json.loads(rollout_json.read_text())
+            rj = rollout_summary if rollout_summary is not None else json.loads(rollout_json.read_text())
         except (OSError, ValueError):
             rj = {}
         for key in ("axis", "proxy", "units"):
@@ -1179,6 +1188,8 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
                 summary[key] = rj[key]
     inputs = [rollout_ply] + ([rollout_json] if rollout_json.exists() else [])
     summary["provenance"] = provenance(stage="relax", inputs=inputs, options=asdict(options))
-    write_flat_ply(ply_path, result.flat, comments=(f"potflat relax preset {result.preset}",))
+    comments = (f"potflat relax preset {result.preset}",)
+    write_flat_ply(ply_path, result.flat, comments=comments)
     write_json_atomic(json_path, summary)
-    return StageOutput(paths={"ply": ply_path, "json": json_path}, summary=summary)
+    return StageOutput(paths={"ply": ply_path, "json": json_path}, summary=summary,
+                       flat=as_stored(result.flat, ply_path, comments=comments), distortion=result.distortion)
