@@ -77,6 +77,15 @@ class BakeOptions:
         Sub-samples per pixel side (1-8); 0 chooses from the texture density (2-4).
     max_megapixels : float
         Refuse images larger than this (protects laptops from a mistyped resolution).
+    scale_on_image : bool
+        Draw the scale bar (and the grid, with ``grid``) into ``NAME.png`` itself, where it
+        covers no painting (in a band added below the image when no such place is free).
+    plate : bool
+        Also write the archaeological plate ``NAME.plate.svg/.pdf/.png``
+        (:mod:`potflat.plate`; needs the rollout's and relaxation's files beside the input).
+    plate_scale : str or None
+        Print scale of the plate, e.g. ``1:2``; None: the largest of 1:1, 1:2, 1:3, 1:4, 1:5,
+        1:10, 1:20, 1:50 at which it fits an A4 page.
     """
 
     px_per_mm: float | None = None
@@ -88,8 +97,19 @@ class BakeOptions:
     tiff: bool = False
     supersample: int = 0
     max_megapixels: float = 1000.0
+    scale_on_image: bool = False
+    plate: bool = False
+    plate_scale: str | None = None
 
     def __post_init__(self) -> None:
+        from potflat.plate import parse_scale
+
+        for name in ("scale_on_image", "plate"):
+            if not isinstance(getattr(self, name), bool):
+                raise InvalidOptionError(f"{name} must be true or false, got {getattr(self, name)!r}")
+        if self.plate_scale is not None:
+            parse_scale(self.plate_scale)
+            object.__setattr__(self, "plate_scale", str(self.plate_scale))
         if self.px_per_mm is not None and self.dpi is not None:
             raise InvalidOptionError("give either px_per_mm (--px-per-mm) or dpi (--dpi), not both")
         for name in ("px_per_mm", "dpi", "max_megapixels"):
@@ -626,6 +646,39 @@ def _attachment_roots(flat_ply: Path, n_faces: int) -> tuple[np.ndarray, Path | 
     return marks, rollout_json
 
 
+def _scale_on_image(r: _Renderer, grid: bool):
+    """The scale layer to draw into ``NAME.png``, placed where it covers no painting.
+
+    The painting's footprint is rasterised on a grid of at most
+    :data:`potflat.annotate.FREE_SPOT_MASK_PX` pixels a side and the free place nearest the
+    bottom-left corner is taken; when there is none, a band is added below the image.
+
+    Returns
+    -------
+    layer : ScaleLayer
+    band : int
+        Rows added below the image (0 when the bar fits beside the painting).
+    """
+    from potflat import annotate
+
+    g = r.grid
+    probe = annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid)
+    bw, bh = probe.box_size
+    f = max(1, math.ceil(max(g.width, g.height) / annotate.FREE_SPOT_MASK_PX))
+    wc, hc = math.ceil(g.width / f), math.ceil(g.height / f)
+    uv = r.flat.uv[r.faces]  # (m, 3, 2)
+    tex = np.empty_like(uv)
+    tex[..., 0] = (uv[..., 0] - g.origin[0]) * g.scale / f / wc
+    tex[..., 1] = 1.0 - (g.origin[1] - uv[..., 1]) * g.scale / f / hc
+    covered = _chart_mask(tex, hc, wc)
+    spot = annotate.free_spot(covered, (math.ceil(bw / f) + 1, math.ceil(bh / f) + 1), math.ceil(probe.margin / f))
+    if spot is not None:
+        return annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid, at=(spot[0] * f, spot[1] * f)), 0
+    band = bh + 2 * probe.margin
+    return annotate.ScaleLayer(g.width, g.height + band, g.px_per_mm, grid=grid,
+                               at=(probe.margin, g.height + probe.margin)), band
+
+
 def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: list) -> None:
     """Refuse to bake when an output name is an input file (e.g. the scan's texture ``NAME.png``
     when baking into the scan's own folder): the input would be replaced."""
@@ -686,6 +739,8 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
         rollout_ply = flat_ply.with_name(flat_ply.name[: -len(".relaxed.ply")] + ".rollout.ply")
         if not rollout_ply.is_file():
             raise InvalidInputError(f"--sheet needs {rollout_ply.name} beside {flat_ply}; copy it there or drop --sheet")
+    if options.plate and not flat_ply.name.endswith(".relaxed.ply"):
+        raise InvalidOptionError(f"the plate is made from NAME.relaxed.ply; bake the relaxed file, not {flat_ply.name}")
     _check_not_inputs(out_dir, name, options, [flat_ply, flat.mesh.texture_path, rollout_ply])
     attachment_marks, rollout_json = _attachment_roots(flat_ply, len(flat.mesh.faces))
     ppm = options.resolution
@@ -699,13 +754,15 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     if "stress" in options.maps:
         legends["overlay"] = legends["stress"]
     layer = annotate.ScaleLayer(g.width, g.height, ppm, grid=options.grid)
+    on_image, band = _scale_on_image(r, options.grid) if options.scale_on_image else (None, 0)
     covered = 0.0
     with ExitStack() as stack:
-        png = stack.enter_context(PngWriter(paths["png"], g.width, g.height, 4, px_per_mm=ppm))
+        png = stack.enter_context(PngWriter(paths["png"], g.width, g.height + band, 4, px_per_mm=ppm))
         writers = {}
-        for key, band in legends.items():
+        for key, legend in legends.items():
             paths[key] = out_dir / f"{name}.{key}.png"
-            writers[key] = stack.enter_context(PngWriter(paths[key], g.width, g.height + len(band), 4, px_per_mm=ppm))
+            writers[key] = stack.enter_context(PngWriter(paths[key], g.width, g.height + len(legend), 4,
+                                                         px_per_mm=ppm))
         paths["scale_layer"] = out_dir / f"{name}.scale-layer.png"
         layer_png = stack.enter_context(PngWriter(paths["scale_layer"], g.width, g.height, 4, px_per_mm=ppm))
         if len(attachment_marks):
@@ -715,7 +772,8 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
             cov = r.coverage(r0, r1)
             covered += float(cov.sum(dtype=np.float64))
             rgb = r.painting(r0, r1)
-            png.write(_rgba8(rgb, cov))
+            rgba = _rgba8(rgb, cov)
+            png.write(rgba if on_image is None else annotate.over(on_image.rows(r0, r1), rgba))
             for m in options.maps:
                 values = r.scalar(m, r0, r1)
                 writers[m].write(annotate.colorize(values, scales[m], cov))
@@ -724,8 +782,10 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
             layer_png.write(layer.rows(r0, r1))
             if len(attachment_marks):
                 mask_png.write(_attachment_rows(r.scalar("attachments", r0, r1)))
-        for key, band in legends.items():
-            writers[key].write(band)
+        if band:
+            png.write(on_image.rows(g.height, g.height + band))
+        for key, legend in legends.items():
+            writers[key].write(legend)
     paths["scalebar"] = write_png(out_dir / f"{name}.scalebar.png", layer.bar_image(), px_per_mm=ppm)
     if options.tiff:
         paths["tiff"] = write_tiff_rows(out_dir / f"{name}.tif",
@@ -744,6 +804,9 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     summary = {
         **figures,
         "scale_bar_mm": layer.bar_mm,
+        "scale_on_image": None if on_image is None else {
+            "at_px": list(on_image.at), "box_px": list(on_image.box_size), "band_below_px": band,
+            "grid": options.grid},
         "maps": {m: {"range": [scales[m].lo, scales[m].hi], "label": scales[m].label} for m in options.maps},
         "files": {k: p.name for k, p in paths.items()},
         "provenance": provenance(stage="bake", inputs=inputs,
@@ -752,4 +815,12 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     paths["json"] = out_dir / f"{name}.bake.json"
     summary["files"]["json"] = paths["json"].name
     write_json_atomic(paths["json"], summary)
+    if options.plate:
+        from potflat.plate import make_plate
+
+        plate = make_plate(flat_ply, out_dir, scale=options.plate_scale, name=name)
+        paths.update({f"plate_{k}": p for k, p in plate.paths.items()})
+        summary["files"].update({f"plate_{k}": p.name for k, p in plate.paths.items()})
+        summary["plate"] = {k: v for k, v in plate.summary.items() if k not in ("files", "inputs")}
+        write_json_atomic(paths["json"], summary)
     return StageOutput(paths=paths, summary=summary)

@@ -100,6 +100,9 @@ class RolloutOptions:
         Keep handles, spouts and knobs (parts off the surface of revolution, found by
         :func:`potflat.attachments.detect_attachments`) in the rollout; by default they are
         left out and reported, and the painting around their roots stays.
+    profile_mm : float or None
+        Height step of the profile (``NAME.profile.csv/.svg``, the plate's section), mm;
+        None: one median edge length of the scan, as fine as its edges.
     """
 
     units: str | None = None
@@ -113,8 +116,14 @@ class RolloutOptions:
     view: tuple[float, ...] | None = None
     side: str = "outer"
     keep_attachments: bool = False
+    profile_mm: float | None = None
 
     def __post_init__(self) -> None:
+        if self.profile_mm is not None:
+            step = _floats("profile_mm", (self.profile_mm,), 1, "MM")[0]
+            if step <= 0:
+                raise InvalidOptionError(f"profile_mm must be a positive height step in mm, got {step:g}")
+            object.__setattr__(self, "profile_mm", step)
         if self.side not in SIDES:
             raise InvalidOptionError(f"side {self.side!r} is unknown; use outer or inner")
         if not isinstance(self.keep_attachments, bool):
@@ -1184,8 +1193,11 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     result = rollout(mesh, options=options)
     mesh = mesh.replace(texcoords=None)  # the rollout has its own; the profile needs none
     body = None if result.attachments_kept or not result.attachments.n_faces else ~result.attachments.face_mask
+    bins = None
+    if options.profile_mm is not None:
+        bins = max(1, math.ceil(result.axis.height * mesh.mm_per_unit / options.profile_mm))
     profile = vessel_profile(mesh, result.axis.point, result.axis.direction, face_mask=body,
-                             labels=result.walls.labels)
+                             labels=result.walls.labels, bins=bins)
     del mesh
     summary = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_summary(result),
                "profile": profile.summary(),

@@ -48,6 +48,9 @@ def rollout_command(
     keep_attachments: Annotated[bool, typer.Option(
         "--keep-attachments", help="Keep handles, spouts and knobs in the rollout (by default they are "
                                    "left out and reported; the painting around their roots stays).")] = False,
+    profile_mm: Annotated[Optional[float], typer.Option(
+        "--profile-mm", metavar="MM", help="Height step of the profile (NAME.profile.csv/.svg, the plate's "
+                                           "section), mm \\[default: one edge length of the scan].")] = None,
     units: Annotated[Optional[str], typer.Option(
         "--units", help="Length unit of the scan: mm, cm, m, um, in \\[default: as the file "
                         "declares (PLY comment, STL header, glTF metres), else mm].")] = None,
@@ -67,7 +70,7 @@ def rollout_command(
         raise InvalidOptionError(f"--output {output} is a file; give a folder")
     values = {"proxy": proxy, "axis": axis, "flip": flip or None, "seam": seam, "band": band,
               "angles": angles, "view": view, "units": units, "texture": None if texture else False,
-              "side": side, "keep_attachments": keep_attachments or None}
+              "side": side, "keep_attachments": keep_attachments or None, "profile_mm": profile_mm}
     options = options_from_cli("rollout", values)
     _rollout(scan, output, options, name=name, quiet=quiet, as_json=json)
 
