@@ -379,10 +379,14 @@ def read_profile_csv(path, summary: dict) -> Profile:
     InvalidInputError
         When the file is missing, unreadable or has no rows.
     """
+    import warnings
+
     path = Path(path)
     try:
-        rows = np.genfromtxt(path, delimiter=",", skip_header=1, dtype=np.float64, ndmin=2, missing_values="",
-                             filling_values=np.nan)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # an empty file: reported below
+            rows = np.genfromtxt(path, delimiter=",", skip_header=1, dtype=np.float64, ndmin=2, missing_values="",
+                                 filling_values=np.nan)
     except (OSError, ValueError) as exc:
         raise InvalidInputError(f"{path}: cannot read the profile ({exc}); run potflat rollout again") from None
     if rows.size == 0 or rows.shape[1] != 3 or not np.isfinite(rows[:, 0]).all():
