@@ -626,24 +626,56 @@ def stage_name(path: Path) -> str:
 ATTACHMENT_COLOUR = (230, 0, 160, 220)
 
 
-def _attachment_roots(flat_ply: Path, n_faces: int) -> tuple[np.ndarray, Path | None]:
-    """Faces where the rollout left out an attachment, from ``NAME.rollout.json`` beside the input.
+#: Colour (RGBA) of the dashed line where a rollout's repeat past 360 degrees (``overlap``) starts.
+REPEAT_COLOUR = (255, 0, 200, 255)
+#: Dash length of that line, pixels.
+REPEAT_DASH_PX = 6
 
-    Returns a per-face indicator (n_faces,) float64 (empty when there is nothing to show) and
-    the JSON read (for provenance), or ``None``.
-    """
+
+def _rollout_sidecar(flat_ply: Path) -> tuple[dict, Path | None]:
+    """``NAME.rollout.json`` beside the input (empty dict and None when absent or unreadable)."""
     stem = flat_ply.name.removesuffix(".ply").removesuffix(".relaxed").removesuffix(".rollout")
     rollout_json = flat_ply.with_name(f"{stem}.rollout.json")
     try:
-        att = json.loads(rollout_json.read_text()).get("attachments", {})
+        return json.loads(rollout_json.read_text()), rollout_json
     except (OSError, ValueError):
-        return np.zeros(0), None
+        return {}, None
+
+
+def _attachment_roots(sidecar: dict, n_faces: int) -> np.ndarray:
+    """Faces where the rollout left out an attachment, from ``NAME.rollout.json``: a per-face
+    indicator (n_faces,) float64, empty when there is nothing to show."""
+    att = sidecar.get("attachments", {})
     roots = np.asarray(att.get("root_faces") or [], dtype=np.int64)
     if att.get("kept") or not len(roots) or roots.max() >= n_faces:
-        return np.zeros(0), rollout_json
+        return np.zeros(0)
     marks = np.zeros(n_faces)
     marks[roots] = 1.0
-    return marks, rollout_json
+    return marks
+
+
+def _repeated_faces(sidecar: dict, n_faces: int) -> np.ndarray:
+    """Faces that repeat the start of the rollout past 360 degrees (``overlap``), from
+    ``NAME.rollout.json``: a per-face indicator (n_faces,) float64, empty when none."""
+    region = sidecar.get("region", {})
+    start = region.get("repeated_from")
+    if start is None or region.get("faces") != n_faces or not 0 < start < n_faces:
+        return np.zeros(0)
+    marks = np.zeros(n_faces)
+    marks[int(start):] = 1.0
+    return marks
+
+
+def _repeat_line(share: np.ndarray, r0: int) -> np.ndarray:
+    """Pixels (k, w) bool of a dashed line where the repeated part starts: where the share of
+    repeated faces crosses one half from left to right (the line runs from foot to mouth)."""
+    rep = np.nan_to_num(share, nan=-1.0)
+    inside = rep >= 0.5
+    edge = np.zeros_like(inside)
+    edge[:, 1:] = inside[:, 1:] & (rep[:, :-1] >= 0) & ~inside[:, :-1]
+    edge[:, :-1] |= edge[:, 1:].copy()  # two pixels wide
+    rows = (np.arange(r0, r0 + len(rep)) // REPEAT_DASH_PX) % 2 == 0
+    return edge & rows[:, None]
 
 
 def _scale_on_image(r: _Renderer, grid: bool):
@@ -742,12 +774,16 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     if options.plate and not flat_ply.name.endswith(".relaxed.ply"):
         raise InvalidOptionError(f"the plate is made from NAME.relaxed.ply; bake the relaxed file, not {flat_ply.name}")
     _check_not_inputs(out_dir, name, options, [flat_ply, flat.mesh.texture_path, rollout_ply])
-    attachment_marks, rollout_json = _attachment_roots(flat_ply, len(flat.mesh.faces))
+    sidecar, rollout_json = _rollout_sidecar(flat_ply)
+    attachment_marks = _attachment_roots(sidecar, len(flat.mesh.faces))
+    repeated = _repeated_faces(sidecar, len(flat.mesh.faces))
     ppm = options.resolution
     r = _Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels)
     g = r.grid
     if len(attachment_marks):
         r.face_values["attachments"] = attachment_marks
+    if len(repeated):
+        r.face_values["repeated"] = repeated
     paths: dict[str, Path] = {"png": out_dir / f"{name}.png"}
     scales = {m: annotate.map_scale(m, r.vertex_stress if m == "stress" else r.face_values[m]) for m in options.maps}
     legends = {m: annotate.legend_band(scales[m], g.width) for m in options.maps}
@@ -773,6 +809,8 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
             covered += float(cov.sum(dtype=np.float64))
             rgb = r.painting(r0, r1)
             rgba = _rgba8(rgb, cov)
+            if len(repeated):
+                rgba[_repeat_line(r.scalar("repeated", r0, r1), r0)] = REPEAT_COLOUR
             png.write(rgba if on_image is None else annotate.over(on_image.rows(r0, r1), rgba))
             for m in options.maps:
                 values = r.scalar(m, r0, r1)
@@ -803,6 +841,9 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
               + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else []))
     summary = {
         **figures,
+        "overlap": None if not len(repeated) else {
+            "deg": sidecar["region"].get("overlap_deg"), "repeated_faces": int(repeated.sum()),
+            "mark": f"dashed line {REPEAT_COLOUR[:3]} where the repeat past 360 degrees starts"},
         "scale_bar_mm": layer.bar_mm,
         "scale_on_image": None if on_image is None else {
             "at_px": list(on_image.at), "box_px": list(on_image.box_size), "band_below_px": band,

@@ -186,15 +186,17 @@ def _sources(relaxed_ply: Path, name: str | None, bake_dir: Path) -> _Sources:
 def view_direction(rollout_summary: dict) -> np.ndarray:
     """Unit direction from the axis towards the viewer of the outside view: the rollout's centre.
 
-    The centre angle is the middle of the angles the rollout covers (measured from the seam),
-    turned from the axis' reference direction by the seam angle, counter-clockwise about
-    the axis (mouth up). Shape (3,) float64.
+    The centre angle is the middle of the angles the rollout covers (measured from the seam,
+    or from the landmark of a window), turned from the axis' reference direction,
+    counter-clockwise about the axis (mouth up). Shape (3,) float64.
     """
     ax = rollout_summary["axis"]
     a = np.asarray(ax["direction"], np.float64)
     ref = np.asarray(ax["reference_direction"], np.float64)
     lo, hi = rollout_summary.get("region", {}).get("theta_range_deg") or (0.0, 360.0)
-    phi = math.radians(rollout_summary["seam"]["angle_deg"] + 0.5 * (lo + hi))
+    seam = rollout_summary["seam"]
+    origin = seam.get("theta_origin_deg", seam["angle_deg"])  # angles of a window start at its landmark
+    phi = math.radians(origin + 0.5 * (lo + hi))
     d = math.cos(phi) * ref + math.sin(phi) * np.cross(a, ref)
     return d / np.linalg.norm(d)
 

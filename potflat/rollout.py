@@ -82,12 +82,14 @@ class RolloutOptions:
     flip : bool
         Reverse the axis direction (mouth and foot swapped).
     seam : float or None
-        Seam angle in degrees from the axis' reference direction; chosen automatically when
-        None (0 when ``angles`` is given).
+        Seam angle in degrees from the landmark (``seam_at`` or ``landmark``), else from the
+        axis' reference direction; chosen automatically when None.
     band : (float, float) or None
         Height band as fractions of the axial extent, 0 = foot, 1 = mouth.
     angles : (float, float) or None
-        Angle range in degrees relative to the seam, e.g. ``(-60, 60)``; at most 360 wide.
+        Angle range in degrees, e.g. ``(-60, 60)``, at most 360 wide: from the landmark when
+        one is named, else from ``seam`` when given, else from the painted zone's centre (the
+        window is centred on the painting; the seam stays automatic).
     view : tuple of 3 float or None
         For ``proxy="ortho"``: direction from the vessel to the viewer (``x,y,z``, scan
         coordinates); default: from the axis towards the region's centre (from the region
@@ -100,6 +102,15 @@ class RolloutOptions:
         Keep handles, spouts and knobs (parts off the surface of revolution, found by
         :func:`potflat.attachments.detect_attachments`) in the rollout; by default they are
         left out and reported, and the painting around their roots stays.
+    seam_at : tuple of 3 float or None
+        A point on the surface (scan coordinates, e.g. picked in MeshLab): the landmark; the
+        seam goes through it (or ``seam`` degrees from it).
+    landmark : str or None
+        ``painted``: the seam goes opposite the centre of the painted zone; ``handle``: through
+        the largest handle (:mod:`potflat.landmarks`). ``seam`` and ``angles`` are measured from it.
+    overlap : float
+        Degrees of surface repeated past 360 at the end of an all-round rollout, so a motif
+        crossing the seam is seen whole once (the bake marks where the repeat starts).
     profile_mm : float or None
         Height step of the profile (``NAME.profile.csv/.svg``, the plate's section), mm;
         None: one median edge length of the scan, as fine as its edges.
@@ -116,9 +127,27 @@ class RolloutOptions:
     view: tuple[float, ...] | None = None
     side: str = "outer"
     keep_attachments: bool = False
+    seam_at: tuple[float, float, float] | None = None
+    landmark: str | None = None
+    overlap: float = 0.0
     profile_mm: float | None = None
 
     def __post_init__(self) -> None:
+        from potflat.landmarks import LANDMARKS
+
+        if self.seam_at is not None:
+            object.__setattr__(self, "seam_at", _floats("seam_at", self.seam_at, 3, "X Y Z"))
+        if self.landmark is not None and self.landmark not in LANDMARKS:
+            raise InvalidOptionError(f"landmark {self.landmark!r} is unknown; use {' or '.join(LANDMARKS)}, or give "
+                                     "a point with seam_at")
+        if self.seam_at is not None and self.landmark is not None:
+            raise InvalidOptionError("give either seam_at (a point) or landmark, not both")
+        over = _floats("overlap", (self.overlap,), 1, "DEG")[0]
+        if not 0.0 <= over <= 180.0:
+            raise InvalidOptionError(f"overlap must be 0 to 180 degrees, got {over:g}")
+        if over and self.angles is not None:
+            raise InvalidOptionError("overlap repeats an all-round rollout past 360 degrees; drop --angles or --overlap")
+        object.__setattr__(self, "overlap", over)
         if self.profile_mm is not None:
             step = _floats("profile_mm", (self.profile_mm,), 1, "MM")[0]
             if step <= 0:
@@ -191,11 +220,17 @@ class Region:
     height_range : (float, float)
         Heights above the foot covered by the selected faces, scan units.
     theta_range_deg : (float, float)
-        Angles from the seam covered by the output vertices, degrees.
+        Angles covered by the output vertices, degrees from :attr:`RolloutResult.theta_origin`
+        (the seam, or the origin of ``angles``).
     faces, faces_total : int
         Faces selected, faces in the scan.
     cut : bool
         Whether the region went all the way round and had to be cut open.
+    overlap_deg : float
+        Degrees repeated past 360 (0: none).
+    repeated_from : int or None
+        With an overlap, the first output face of the repeat: faces from it on repeat the
+        first ``overlap_deg`` degrees after the seam.
     """
 
     band: tuple[float, float]
@@ -205,6 +240,8 @@ class Region:
     faces: int
     faces_total: int
     cut: bool
+    overlap_deg: float = 0.0
+    repeated_from: int | None = None
 
     def as_dict(self) -> dict:
         """JSON-ready description."""
@@ -262,6 +299,15 @@ class RolloutResult:
     boundary_overlap : int
         Crossing pairs of boundary segments left in the development (0: its outline and
         holes do not overlap).
+    other_objects_faces : int
+        Faces of separate objects left out.
+    landmark : Landmark or None
+        What ``seam`` and ``angles`` were measured from (:mod:`potflat.landmarks`).
+    theta_origin : float
+        Degrees from the reference direction that the output angles (:attr:`Region.theta_range_deg`)
+        are measured from: the seam, or the origin of ``angles``.
+    landmark_notes : tuple of str
+        What was used where a named landmark is missing.
     """
 
     flat: FlatMesh
@@ -285,6 +331,9 @@ class RolloutResult:
     untangled_vertices: int
     boundary_overlap: int
     other_objects_faces: int = 0
+    landmark: object = None
+    theta_origin: float = 0.0
+    landmark_notes: tuple = ()
 
     @property
     def side(self) -> str:
@@ -427,14 +476,19 @@ def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, n
     corner_v = faces.ravel()
     th = corner_theta.ravel()
     # half-edge h runs from corner h to the next corner of its face; half-edges on the same
-    # edge are neighbours when sorted by (lower vertex, higher vertex) (stable: by h on ties)
+    # edge are neighbours when sorted by (lower vertex, higher vertex, turn of the angle at the
+    # lower vertex) (stable: by h on ties). The turn puts the faces of an edge listed twice (a
+    # rollout repeated past 360 degrees) next to those they join: 0+, 2 pi-, 2 pi+.
     nxt = faces[:, [1, 2, 0]].ravel()
     swap = corner_v > nxt
     n = int(corner_v.max()) + 1 if m else 1
-    key = np.minimum(corner_v, nxt) * n + np.maximum(corner_v, nxt)
-    del nxt
+    lower = np.arange(3 * m)
+    lower[swap] = lower[swap] - lower[swap] % 3 + (lower[swap] + 1) % 3
+    turn = np.clip(np.floor(th[lower] / TWO_PI + 0.5), -4, 3).astype(np.int64) + 4
+    key = (np.minimum(corner_v, nxt) * n + np.maximum(corner_v, nxt)) * 8 + turn
+    del nxt, lower, turn
     order = np.argsort(key, kind="stable")
-    key = key[order]
+    key = key[order] // 8
     pair = np.flatnonzero(key[1:] == key[:-1])
     del key
     h1, h2 = order[pair], order[pair + 1]
@@ -547,8 +601,9 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
     h_c, _, theta_c = axis.cylindrical(centroid)
     del centroid
     band = options.band or (0.0, 1.0)
+    landmark, landmark_notes = _find_landmark(mesh, axis, options, attachments, allowed, band, h_c, theta_c, area)
     trimmed = np.zeros(len(F), bool)
-    un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, area)
+    un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, area, landmark=landmark)
     for rnd in range(TRIM_ROUNDS):
         fold = border_folds(un.flat.mesh.faces, un.flat.uv, area[un.face_index])
         if not fold.any() or fold.all():
@@ -556,7 +611,7 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         trimmed[un.face_index[fold]] = True
         if rnd < TRIM_ROUNDS - 1:
             un = _unroll(mesh, axis, options, allowed & ~trimmed, band, h_c, theta_c, area,
-                         seam=(un.seam, un.seam_method))
+                         seam=(un.seam, un.seam_method), landmark=landmark)
         else:
             un = _without(un, ~fold)
     uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv)
@@ -578,11 +633,15 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         roots = np.flatnonzero(attachments.root_faces(F)[un.face_index]).astype(np.int64)
 
     theta_deg = np.degrees(un.theta)
+    first = np.zeros(len(un.face_index), bool)
+    first[np.unique(un.face_index, return_index=True)[1]] = True  # repeats come last
+    repeated_from = int(np.argmin(first)) if not first.all() else None
     region = Region(
         band=tuple(band), angles_deg=options.angles,
         height_range=(float(h_c[un.face_index].min()), float(h_c[un.face_index].max())),
         theta_range_deg=(float(theta_deg.min()), float(theta_deg.max())),
-        faces=len(un.face_index), faces_total=len(F), cut=un.seam_vertices > 0)
+        faces=len(un.face_index), faces_total=len(F), cut=un.seam_vertices > 0,
+        overlap_deg=options.overlap if repeated_from is not None else 0.0, repeated_from=repeated_from)
     cut = un.flat.mesh
     if mesh.texcoords is not None:  # attached once, to the final faces (see _unroll)
         cut = cut.replace(texcoords=mesh.texcoords[un.face_index])
@@ -594,7 +653,8 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         attachments=attachments, attachments_kept=options.keep_attachments, attachment_roots=roots,
         trimmed=np.flatnonzero(trimmed).astype(np.int64), trimmed_area=float(area[trimmed].sum()),
         untangled_faces=n_untangled, untangled_vertices=moved, boundary_overlap=overlap,
-        other_objects_faces=int(other_objects.sum()))
+        other_objects_faces=int(other_objects.sum()), landmark=landmark,
+        theta_origin=float(math.degrees(un.origin) % 360.0), landmark_notes=tuple(landmark_notes))
 
 
 @dataclass(frozen=True, eq=False)
@@ -611,15 +671,17 @@ class _Unrolled:
     seam_method: str
     seam_vertices: int
     split_vertices: int
+    origin: float
 
 
 def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndarray, band, h_c, theta_c,
-            area, seam: tuple[float, str] | None = None) -> _Unrolled:
+            area, seam: tuple[float, str] | None = None, landmark=None) -> _Unrolled:
     """Select the region within ``allowed``, cut it open and develop it on the proxy (with
-    ``seam`` = (radians, method) from an earlier unrolling, or a seam chosen here)."""
+    ``seam`` = (radians, method) from an earlier unrolling, or a seam chosen here; angles
+    measured from ``landmark``)."""
     V = mesh.vertices
-    face_index, seam, seam_method, corner_theta = _select(
-        mesh, axis, options, allowed, band, h_c, theta_c, area, seam)
+    face_index, seam, seam_method, corner_theta, origin = _select(
+        mesh, axis, options, allowed, band, h_c, theta_c, area, seam, landmark)
     sub_f = mesh.faces[face_index]
     inner = options.side == "inner"
 
@@ -664,7 +726,7 @@ def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndar
         uv = _proxy.develop(prox, h, r, dev_theta)
         summary = summarize(cut_mesh.vertices, uv, new_faces)
     return _Unrolled(FlatMesh(cut_mesh, uv), prox, summary, face_index, vertex_index, theta_new, seam,
-                     seam_method, n_seam, n_split)
+                     seam_method, n_seam, n_split, origin)
 
 
 def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
@@ -681,7 +743,7 @@ def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
     copies = len(used) - len(np.unique(vertex_index))
     seam = min(un.seam_vertices, copies)
     return _Unrolled(FlatMesh(cut, uv), un.proxy, summarize(cut.vertices, uv, cut.faces), un.face_index[keep],
-                     vertex_index, un.theta[used], un.seam, un.seam_method, seam, copies - seam)
+                     vertex_index, un.theta[used], un.seam, un.seam_method, seam, copies - seam, un.origin)
 
 
 def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.ndarray:
@@ -924,44 +986,90 @@ def untangle(faces: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, int, int]:
     return x, n_bad, int(np.count_nonzero(np.any(x != uv, axis=1)))
 
 
+#: Seam methods of a seam placed by the user (an angle, a point, a landmark), not chosen here.
+_PLACED_SEAMS = ("user", "point", "handle", "opposite painted zone")
+
+
+def _find_landmark(mesh: Mesh, axis: AxisFit, options: RolloutOptions, attachments, face_mask, band, h_c,
+                   theta_c, area):
+    """The landmark the options name (:func:`potflat.landmarks.find_landmark`), or None when
+    seam and angles are measured as before (from the reference direction, angles from the seam)."""
+    from potflat.landmarks import find_landmark
+
+    if options.seam_at is None and options.landmark is None and (options.angles is None or options.seam is not None):
+        return None, []
+    keep = np.flatnonzero(_in_band(axis, band, h_c) & face_mask)
+    if len(keep) == 0:
+        raise InvalidOptionError(f"band {band[0]:g} {band[1]:g} selects no faces; widen it")
+    auto = lambda: _auto_seam(mesh, axis, keep, theta_c, area)[0]  # noqa: E731
+    return find_landmark(mesh, axis, seam_at=options.seam_at, landmark=options.landmark, faces=keep,
+                         theta_c=theta_c[keep], area=area[keep], attachments=attachments, auto_seam=auto)
+
+
+def _in_band(axis: AxisFit, band, h_c) -> np.ndarray:
+    frac = h_c / axis.height if axis.height > 0 else np.zeros(len(h_c))
+    return (frac >= band[0]) & (frac <= band[1])
+
+
+def _auto_seam(mesh: Mesh, axis: AxisFit, sel: np.ndarray, theta_c, area) -> tuple[float, str]:
+    theta_v = axis.cylindrical(mesh.vertices)[2]
+    corners = _corner_angles(theta_v, mesh.faces, sel, theta_c[sel])
+    return choose_seam(mesh, sel, theta_c[sel], area[sel], _covered(theta_c[sel], corners))
+
+
 def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c, area,
-            seam_given: tuple[float, str] | None = None):
-    """Faces of the region, the seam (radians, and how it was chosen) and the corners' unwrapped angles."""
+            seam_given: tuple[float, str] | None = None, landmark=None):
+    """Faces of the region, the seam (radians, and how it was chosen), the corners' unwrapped
+    angles and the angle (radians) they are measured from.
+
+    With an overlap the faces within ``overlap`` degrees after the seam are listed twice, the
+    repeats last, their angles one turn on."""
     V, F = mesh.vertices, mesh.faces
     theta_v = axis.cylindrical(V)[2]
-    frac = h_c / axis.height if axis.height > 0 else np.zeros(len(F))
-    keep = (frac >= band[0]) & (frac <= band[1]) & face_mask
+    keep = _in_band(axis, band, h_c) & face_mask
+    placed = landmark is not None and landmark.kind in ("point", "handle", "painted zone") and (
+        options.seam_at is not None or options.landmark is not None)
     if seam_given is not None:
         seam, seam_method = seam_given
+    elif options.angles is not None and landmark is not None and options.angles[1] - options.angles[0] >= 360.0:
+        seam, seam_method = landmark.angle + math.radians(options.angles[0]), "window edge"
     elif options.seam is not None:
-        seam, seam_method = math.radians(options.seam % 360.0), "user"
-    elif options.angles is not None:
-        seam, seam_method = 0.0, "user"
+        seam, seam_method = (landmark.angle if placed else 0.0) + math.radians(options.seam % 360.0), "user"
+    elif placed:
+        seam = landmark.angle + (math.pi if landmark.kind == "painted zone" else 0.0)
+        seam_method = {"point": "point", "handle": "handle"}.get(landmark.kind, "opposite painted zone")
     else:
         sel = np.flatnonzero(keep)
         if len(sel) == 0:
             raise InvalidOptionError(f"band {band[0]:g} {band[1]:g} selects no faces; widen it")
-        corners = _corner_angles(theta_v, F, sel, theta_c[sel])
-        seam, seam_method = choose_seam(mesh, sel, theta_c[sel], area[sel],
-                                        _covered(theta_c[sel], corners))
+        seam, seam_method = _auto_seam(mesh, axis, sel, theta_c, area)
+    seam %= TWO_PI
+    # angles are measured from the landmark, else from the seam
+    origin = landmark.angle if options.angles is not None and landmark is not None else seam
 
-    # centroid angle from the seam, in [lo, lo + 2 pi): faces are unwrapped around it
+    # centroid angle from the origin, in [lo, lo + 2 pi): faces are unwrapped around it
     lo = math.radians(options.angles[0]) if options.angles is not None else 0.0
-    rel_c = (theta_c - seam - lo) % TWO_PI + lo
+    rel_c = (theta_c - origin - lo) % TWO_PI + lo
     if options.angles is not None:
         keep &= rel_c <= math.radians(options.angles[1])
     face_index = np.flatnonzero(keep)
     if len(face_index) == 0:
         raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
-    if options.angles is None and seam_method == "user":
+    gap = None
+    if options.angles is None and seam_method in _PLACED_SEAMS:
         # a region that does not go round is not cut: unwrap from the middle of its gap
-        corners = _corner_angles(theta_v, F, face_index, rel_c[face_index], seam)
+        corners = _corner_angles(theta_v, F, face_index, rel_c[face_index], origin)
         gap = _gap_middle(_covered(rel_c[face_index], corners))
         if gap is not None:
-            rel_c = (theta_c - seam - gap) % TWO_PI + gap
+            rel_c = (theta_c - origin - gap) % TWO_PI + gap
             rel_c -= TWO_PI * np.round(np.average(rel_c[face_index], weights=area[face_index]) / TWO_PI)
-    corner_theta = _corner_angles(theta_v, F, face_index, rel_c[face_index], seam)
-    return face_index, seam, seam_method, corner_theta
+    centre = rel_c[face_index]
+    if options.overlap and gap is None and seam_method != "gap":
+        again = face_index[rel_c[face_index] < math.radians(options.overlap)]
+        face_index = np.concatenate([face_index, again])
+        centre = np.concatenate([centre, rel_c[again] + TWO_PI])
+    corner_theta = _corner_angles(theta_v, F, face_index, centre, origin)
+    return face_index, seam, seam_method, corner_theta, origin
 
 
 def _corner_angles(theta_v: np.ndarray, F: np.ndarray, idx: np.ndarray, centre: np.ndarray,
@@ -1024,7 +1132,9 @@ def rollout_summary(result: RolloutResult) -> dict:
         "mm_per_unit": mesh.mm_per_unit,
         "axis": result.axis.as_dict(),
         "proxy": result.proxy.as_dict(),
-        "seam": {"angle_deg": result.seam_angle, "method": result.seam_method, "cut": result.region.cut},
+        "seam": {"angle_deg": result.seam_angle, "method": result.seam_method, "cut": result.region.cut,
+                 "landmark": result.landmark.as_dict() if result.landmark is not None else None,
+                 "theta_origin_deg": result.theta_origin},
         "region": result.region.as_dict(),
         "counts": {
             "vertices": len(mesh.vertices), "faces": len(mesh.faces),
@@ -1047,7 +1157,11 @@ def rollout_summary(result: RolloutResult) -> dict:
 
 def _notes(result: RolloutResult) -> list[str]:
     """Warnings for the sidecar: what the user should know before relaxing."""
-    notes = []
+    notes = list(result.landmark_notes)
+    if result.region.repeated_from is not None:
+        notes.append(f"{len(result.flat.mesh.faces) - result.region.repeated_from} faces repeat the first "
+                     f"{result.region.overlap_deg:g} degrees after the seam past 360 degrees (their distortion is "
+                     "counted twice in the figures)")
     if result.distortion.flipped:
         why = (" (kept attachments: a handle cannot be unrolled without folds; leave them out)"
                if result.attachments_kept and result.attachments.n_faces else "")
