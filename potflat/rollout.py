@@ -1000,7 +1000,7 @@ def _find_landmark(mesh: Mesh, axis: AxisFit, options: RolloutOptions, attachmen
         return None, []
     keep = np.flatnonzero(_in_band(axis, band, h_c) & face_mask)
     if len(keep) == 0:
-        raise InvalidOptionError(f"band {band[0]:g} {band[1]:g} selects no faces; widen it")
+        raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
     auto = lambda: _auto_seam(mesh, axis, keep, theta_c, area)[0]  # noqa: E731
     return find_landmark(mesh, axis, seam_at=options.seam_at, landmark=options.landmark, faces=keep,
                          theta_c=theta_c[keep], area=area[keep], attachments=attachments, auto_seam=auto)
