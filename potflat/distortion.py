@@ -249,3 +249,135 @@ def summarize(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> Distor
 def summarize_flat(flat: FlatMesh) -> DistortionSummary:
     """:func:`summarize` for a :class:`FlatMesh`."""
     return summarize(flat.mesh.vertices, flat.uv, flat.mesh.faces)
+
+
+#: A face belongs to the important zone when the mean importance of its corners reaches this.
+ZONE_THRESHOLD = 0.5
+
+
+def important_faces(faces: np.ndarray, importance: np.ndarray | None) -> np.ndarray:
+    """Faces of the important zone (mean corner importance >= :data:`ZONE_THRESHOLD`).
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+    importance : (n,) float64 in [0, 1] or None
+        None: the whole surface is the zone.
+
+    Returns
+    -------
+    (m,) bool
+    """
+    if importance is None:
+        return np.ones(len(faces), bool)
+    return importance[faces].mean(axis=1) >= ZONE_THRESHOLD
+
+
+def weighted_percentile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
+    """The ``q``-th percentile (0-100) of ``values`` where each counts with its weight (the
+    smallest value at or above ``q`` % of the total weight). NaN for no positive weight."""
+    values, weights = np.asarray(values, float), np.asarray(weights, float)
+    keep = weights > 0
+    if not keep.any():
+        return float("nan")
+    order = np.argsort(values[keep], kind="stable")
+    v, cum = values[keep][order], np.cumsum(weights[keep][order])
+    return float(v[min(np.searchsorted(cum, q / 100.0 * cum[-1]), len(v) - 1)])
+
+
+def length_scale(fd: FaceDistortion) -> np.ndarray:
+    """Linear scale of each face, ``sqrt(|A_2d| / A_3d)`` (1 for degenerate faces). Shape (m,)."""
+    out = np.ones_like(fd.area_3d)
+    v = fd.valid
+    out[v] = np.sqrt(np.abs(fd.area_2d[v]) / fd.area_3d[v])
+    return out
+
+
+def length_error(fd: FaceDistortion) -> np.ndarray:
+    """Largest relative error of a length through each face: ``max(sigma_max - 1, 1 - sigma_min)``
+    (0.05: some length there is 5% too long or too short; flipped faces count > 1). Shape (m,)."""
+    return np.where(fd.valid, np.maximum(fd.sigma_max - 1.0, 1.0 - fd.sigma_min), 0.0)
+
+
+@dataclass(frozen=True)
+class ZoneFigures:
+    """How true the image is in one zone of the surface (the important zone or the rest).
+
+    Attributes
+    ----------
+    area_fraction : float
+        Share of the surface's 3D area in the zone.
+    faces : int
+    scale_median : float
+        Area-weighted median of the faces' linear scale (1: true scale).
+    length_error_median_pct, length_error_p95_pct : float
+        Area-weighted median and 95th percentile of the largest length error through a face,
+        in percent (:func:`length_error`).
+    distortion : DistortionSummary or None
+        The usual figures over the zone's faces (None for an empty zone).
+    """
+
+    area_fraction: float
+    faces: int
+    scale_median: float
+    length_error_median_pct: float
+    length_error_p95_pct: float
+    distortion: DistortionSummary | None
+
+    def as_dict(self) -> dict:
+        """JSON-ready dict (the distortion nested)."""
+        out = asdict(self)
+        out["distortion"] = self.distortion.as_dict() if self.distortion is not None else None
+        return out
+
+
+def zone_figures(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, importance: np.ndarray | None,
+                 ) -> dict[str, ZoneFigures]:
+    """:class:`ZoneFigures` of the important zone (``"important"``) and of the rest (``"rest"``).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    uv : (n, 2) float64
+    faces : (m, 3) int64
+    importance : (n,) float64 or None
+        None: the whole surface is the important zone and the rest is empty.
+    """
+    fd = face_distortion(vertices, uv, faces)
+    zone = important_faces(faces, importance)
+    scale, err = length_scale(fd), length_error(fd)
+    total = float(fd.area_3d[fd.valid].sum()) or 1.0
+    out = {}
+    for key, sel in (("important", zone), ("rest", ~zone)):
+        w = np.where(sel & fd.valid, fd.area_3d, 0.0)
+        if not sel.any() or w.sum() <= 0:
+            out[key] = ZoneFigures(0.0, int(sel.sum()), float("nan"), float("nan"), float("nan"), None)
+            continue
+        out[key] = ZoneFigures(
+            area_fraction=float(w.sum()) / total,
+            faces=int(sel.sum()),
+            scale_median=weighted_percentile(scale, w, 50.0),
+            length_error_median_pct=100.0 * weighted_percentile(err, w, 50.0),
+            length_error_p95_pct=100.0 * weighted_percentile(err, w, 95.0),
+            distortion=summarize(vertices, uv, faces[sel]),
+        )
+    return out
+
+
+def true_scale_factor(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, importance: np.ndarray | None) -> float:
+    """The uniform factor that brings the area-weighted median linear scale of the important
+    zone (the whole surface when ``importance`` is None) to 1; 1 when it is undefined.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    uv : (n, 2) float64
+    faces : (m, 3) int64
+    importance : (n,) float64 or None
+    """
+    fd = face_distortion(vertices, uv, faces)
+    zone = important_faces(faces, importance) & fd.valid
+    if not zone.any():
+        zone = fd.valid
+    median = weighted_percentile(length_scale(fd), np.where(zone, fd.area_3d, 0.0), 50.0)
+    return 1.0 / median if np.isfinite(median) and median > 0 else 1.0

@@ -6,10 +6,10 @@ MeshLab), the centre of the painted zone (the seam goes opposite it) or the larg
 (the seam goes through it). ``--seam DEG`` and ``--angles A0 A1`` are then measured from
 the landmark; ``--angles`` alone centres the window on the painted zone.
 
-The painted zone's centre is the area-weighted circular mean angle of the painting's
-contrast (the spread of brightness over each face, as the automatic seam measures it). When
-the painting goes round evenly the mean has no direction; the centre is then taken opposite
-the least painted place (the automatic seam) and the JSON says so.
+The painted zone is the rollout's importance zone (:mod:`potflat.importance`: found in the
+colours, or given as a mask or a band); its centre is the area-weighted circular mean angle
+of the zone. Without a zone (no colours, ``importance none``) or when it goes round evenly,
+the centre is taken opposite the least painted place (the automatic seam) and the JSON says so.
 """
 from __future__ import annotations
 
@@ -69,37 +69,29 @@ def _circular_mean(theta: np.ndarray, weight: np.ndarray) -> tuple[float, float]
     return math.atan2(s, c) % (2 * math.pi), math.hypot(c, s) / total
 
 
-def painted_centre(mesh, faces: np.ndarray, theta_c: np.ndarray, area: np.ndarray) -> tuple[float | None, str]:
-    """Angle of the painted zone's centre, or None, and how it was found.
+def zone_centre(theta: np.ndarray, weight: np.ndarray) -> tuple[float | None, float]:
+    """Angle of the centre of a zone on the vessel, or None when it goes round evenly.
 
     Parameters
     ----------
-    mesh : Mesh
-    faces : (k,) int64
-        The region's faces.
-    theta_c : (k,) float64
-        Their centroid angles, radians from the reference.
-    area : (k,) float64
+    theta : (n,) float64
+        Angles of the surface's points, radians from the reference.
+    weight : (n,) float64
+        How much each point belongs to the zone (importance times area).
 
     Returns
     -------
     angle : float or None
-        Radians in ``[0, 2 pi)``; None when the scan has no painting or it goes round evenly.
-    detail : str
+        Radians in ``[0, 2 pi)``; None when the weighted circular mean is shorter than
+        :data:`MIN_PAINTED_RESULTANT`.
+    resultant : float
     """
-    from potflat.rollout import _luminance_variation
-
-    var, source = _luminance_variation(mesh, faces)
-    if var is None:
-        return None, "the scan has no texture or vertex colours: no painted zone"
-    angle, length = _circular_mean(theta_c, area * var)
-    if length < MIN_PAINTED_RESULTANT:
-        return None, f"the painting ({source}) goes round evenly (resultant {length:.3f}): no single centre"
-    return angle, f"centre of the painting's contrast ({source}), resultant {length:.2f}"
+    angle, length = _circular_mean(theta, weight)
+    return (angle if length >= MIN_PAINTED_RESULTANT else None), length
 
 
-def find_landmark(mesh, axis, *, seam_at, landmark: str | None, faces: np.ndarray, theta_c: np.ndarray,
-                  area: np.ndarray, attachments=None, auto_seam=None) -> tuple[Landmark, list[str]]:
+def find_landmark(mesh, axis, *, seam_at, landmark: str | None, painted_zone, auto_seam,
+                  attachments=None) -> tuple[Landmark, list[str]]:
     """The landmark named by the options, and notes on what was used instead where it is missing.
 
     Parameters
@@ -109,17 +101,16 @@ def find_landmark(mesh, axis, *, seam_at, landmark: str | None, faces: np.ndarra
     seam_at : (3,) float or None
         A point on the surface, scan coordinates.
     landmark : str or None
-        ``painted`` or ``handle`` (:data:`LANDMARKS`), or None: the painted zone when a
-        window is centred on it, else the reference direction.
-    faces : (k,) int64
-        The region's faces (where the painting is looked for).
-    theta_c, area : (k,) float64
-        Their centroid angles (radians from the reference) and areas.
+        ``painted`` or ``handle`` (:data:`LANDMARKS`), or None: the painted zone (a window
+        centred on it).
+    painted_zone : callable
+        ``() -> (radians or None, str)``: the centre of the painted (importance) zone and how
+        it was found, or None and why there is none.
+    auto_seam : callable
+        ``() -> radians``: the automatic seam (the least painted place); without a painted
+        zone its opposite is taken.
     attachments : AttachmentSelection, optional
         Handles found on the scan (largest first).
-    auto_seam : callable, optional
-        ``() -> radians``: the automatic seam, used when the painting has no centre (its
-        opposite is taken).
 
     Returns
     -------
@@ -149,12 +140,10 @@ def find_landmark(mesh, axis, *, seam_at, landmark: str | None, faces: np.ndarra
                             f"centre of the largest of {len(attachments.components)} handles/attachments",
                             tuple(c)), notes
         notes.append("no handle was found on the scan: angles are measured from the painted zone's centre instead")
-    angle, detail = painted_centre(mesh, faces, theta_c, area)
+    angle, detail = painted_zone()
     if angle is None:
-        if auto_seam is None:
-            notes.append(f"{detail}; angles are measured from the axis' reference direction")
-            return REFERENCE, notes
         angle = (auto_seam() + math.pi) % (2 * math.pi)
-        notes.append(f"{detail}; the centre is taken opposite the least painted place")
-        detail = f"{detail}: opposite the least painted place"
+        notes.append(f"no painted zone to centre on ({detail}); its centre is taken opposite the least painted "
+                     "place (the automatic seam)")
+        detail = f"opposite the least painted place: {detail}"
     return Landmark("painted zone", angle, detail), notes

@@ -40,23 +40,28 @@ from potflat.distortion import (
     face_areas,
     row_blocks,
     summarize,
+    true_scale_factor,
     vertex_stress,
 )
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
 from potflat.types import FlatMesh, Mesh, StageOutput
 
+#: The painted figures' settings of the fold-free presets (measured: docs/performance.md,
+#: "Painted figures"): the shape term's weight, how much stiffer the important zone is than
+#: plain surface, and the final scaling to true scale in the important zone.
+_FIGURES = {"shape": 0.5, "importance_contrast": 20.0, "true_scale": True}
 #: Settings of each preset; ``None`` in :class:`RelaxOptions` takes the preset's value.
 PRESETS: dict[str, dict] = {
     "preview": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
                 "tol": 1e-3, "max_iter": 300, "cell_vertices": 8.0, "simplify_mm": 0.5,
-                "coarse_start": True},
+                "coarse_start": True, **_FIGURES},
     "standard": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
-                 "tol": 1e-4, "max_iter": 2000, "cell_vertices": 8.0, "coarse_start": True},
+                 "tol": 1e-4, "max_iter": 2000, "cell_vertices": 8.0, "coarse_start": True, **_FIGURES},
     "archival": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
-                 "tol": 1e-7, "max_iter": 20000, "cell_vertices": 8.0, "coarse_start": True},
+                 "tol": 1e-7, "max_iter": 20000, "cell_vertices": 8.0, "coarse_start": True, **_FIGURES},
     "paper": {"solver": "dynamics", "stretch": 2.0, "stiffness": 0.5, "weighting": "uniform",
               "tol": 1e-7, "max_iter": 100000, "friction_inside": 0.01, "friction_boundary": 1.0,
-              "coarse_start": False},
+              "coarse_start": False, "shape": 0.0, "importance_contrast": 1.0, "true_scale": False},
 }
 WEIGHTINGS = ("uniform", "relative")
 #: Coarse copies (grid clusters of the start layout, :mod:`potflat.simplify`): a copy has at
@@ -133,6 +138,21 @@ class RelaxOptions:
         copy has at most a third of the vertices and covers 95% of them (a mesh not that much
         finer than the cells is relaxed itself). 0: relax the full mesh. None: the preset's
         (0.5 for ``preview``, 0 for the others).
+    shape : float or None
+        Weight of the shape term (>= 0): each triangle's conformal energy
+        ``A (sigma_1 - sigma_2)^2 / 2`` per mean triangle area, added to the springs. The
+        springs alone charge shear half as much as area change; the shape term charges
+        shear only, so larger values keep figures rounder and lines straighter at some cost
+        in area. 0: the springs alone. None: the preset's (0 for ``paper``).
+    importance_contrast : float or None
+        How much stiffer the important (painted) zone is than plain surface (>= 1): springs,
+        barrier and shape term of plain surface are weighted ``1 / importance_contrast``, so
+        the distortion goes there. 1: the whole surface alike. Used when the flattening
+        carries an importance (:attr:`potflat.types.FlatMesh.importance`). None: the preset's.
+    true_scale : bool or None
+        Scale the result uniformly so that the median length scale in the important zone
+        (the whole surface without one) is exactly 1: lengths read off the image with its
+        scale bar are right where the painting is. None: the preset's (off for ``paper``).
     """
 
     preset: str = "standard"
@@ -144,6 +164,9 @@ class RelaxOptions:
     stiffness: float | None = None
     weighting: str | None = None
     simplify_mm: float | None = None
+    shape: float | None = None
+    importance_contrast: float | None = None
+    true_scale: bool | None = None
 
     def __post_init__(self) -> None:
         if self.preset not in PRESETS:
@@ -160,6 +183,17 @@ class RelaxOptions:
                 isinstance(self.simplify_mm, (int, float, np.floating, np.integer)) and not isinstance(self.simplify_mm, bool)
                 and math.isfinite(self.simplify_mm) and self.simplify_mm >= 0):
             raise InvalidOptionError(f"simplify-mm must be a number >= 0 (0: no simplification), got {self.simplify_mm!r}")
+        if self.shape is not None and (isinstance(self.shape, bool) or not isinstance(self.shape, (int, float, np.floating, np.integer))
+                                       or not (math.isfinite(self.shape) and self.shape >= 0)):
+            raise InvalidOptionError(f"shape must be a number >= 0 (0: springs only), got {self.shape!r}")
+        if self.importance_contrast is not None and (
+                isinstance(self.importance_contrast, bool)
+                or not isinstance(self.importance_contrast, (int, float, np.floating, np.integer))
+                or not (math.isfinite(self.importance_contrast) and self.importance_contrast >= 1)):
+            raise InvalidOptionError(
+                f"importance-contrast must be a number >= 1 (1: the whole surface alike), got {self.importance_contrast!r}")
+        if self.true_scale is not None and not isinstance(self.true_scale, (bool, np.bool_)):
+            raise InvalidOptionError(f"true-scale must be true or false, got {self.true_scale!r}")
         if self.weighting is not None and self.weighting not in WEIGHTINGS:
             raise InvalidOptionError(f"unknown weighting {self.weighting!r}; use one of {', '.join(WEIGHTINGS)}")
 
@@ -167,7 +201,8 @@ class RelaxOptions:
         """The preset's settings with the options given here applied."""
         out = dict(PRESETS[self.preset])
         out.setdefault("simplify_mm", 0.0)
-        for name in ("tol", "max_iter", "stretch", "stiffness", "weighting", "simplify_mm"):
+        for name in ("tol", "max_iter", "stretch", "stiffness", "weighting", "simplify_mm", "shape",
+                     "importance_contrast", "true_scale"):
             if getattr(self, name) is not None:
                 out[name] = getattr(self, name)
         out["time_budget"] = self.time_budget
@@ -240,12 +275,18 @@ class RelaxResult:
 
 
 _NO_FLAGS = np.empty(0, bool)
+_NO_WEIGHTS = np.empty(0)
+_NO_SHAPE = np.empty((0, 4))
 
 
 class _Springs:
     """Spring system and triangles of a mesh in normalised, Morton-sorted form."""
 
-    def __init__(self, V: np.ndarray, faces: np.ndarray, n: int, *, k: float, relative: bool):
+    def __init__(self, V: np.ndarray, faces: np.ndarray, n: int, *, k: float, relative: bool,
+                 weight: np.ndarray | None = None, shape: float = 0.0):
+        """``V`` (n, 3) rest positions and ``faces`` (m, 3) in normalised units; ``weight``
+        (n,) the vertices' importance weights (None: all 1), ``shape`` the shape term's
+        weight (0: none)."""
         from potflat._kernels import relax_overlap
         from potflat._kernels import springs as ks
 
@@ -254,8 +295,17 @@ class _Springs:
         edges, cross, self.boundary_segments = ks.halfedge_springs(faces, self.vf_ptr, self.vf_tri)
         self.ptr, self.nbr, self.rst = ks.build_csr(V, edges, cross, ks.cross_rest_lengths(V, cross))
         del edges, cross  # peak memory: the spring lists are only needed for the CSR
-        self.a_ref = np.maximum(face_areas(V, faces), AREA_FLOOR)
+        areas = face_areas(V, faces)
+        self.a_ref = np.maximum(areas, AREA_FLOOR)
         self.faces = np.ascontiguousarray(faces, dtype=np.int32)  # half the memory traffic
+        self.weight = _NO_WEIGHTS if weight is None else np.ascontiguousarray(weight, dtype=np.float64)
+        self.shape = _NO_SHAPE
+        if shape > 0 and len(faces):
+            # per unit rest area: a triangle of mean area weighs ``shape`` against its springs
+            self.shape = np.empty((len(faces), 4))
+            ks.shape_coefficients(V, self.faces, self.weight, float(shape) / float(np.mean(areas)),
+                                  AREA_FLOOR, self.shape)
+        del areas
         self.k, self.relative = float(k), bool(relative)
         self.n, self.m = n, len(faces)
         self.n_springs = len(self.nbr) // 2
@@ -297,22 +347,24 @@ class _Springs:
 
     def evaluate(self, x: np.ndarray, *, barrier: bool = True,
                  out: np.ndarray | None = None) -> tuple[float, float, np.ndarray]:
-        """Total energy, spring energy and gradient at ``x`` (written into ``out`` (n, 2) when
-        given, else a fresh array). Also sets ``diag``, the Hessian diagonal bound at ``x``."""
+        """Total energy, elastic energy (springs and shape term) and gradient at ``x``
+        (written into ``out`` (n, 2) when given, else a fresh array). Also sets ``diag``,
+        the Hessian diagonal bound at ``x``."""
         g = np.empty((self.n, 2)) if out is None else out
         if barrier:
             self.ks.face_areas(x, self.faces, self._areas)
             if len(self.bverts):
                 self.ks.boundary_angle_sums(x, self.bverts, self.vf_ptr, self.vf_tri, self.faces, self.theta)
         self.ks.energy_gradient(x, self.ptr, self.nbr, self.rst, self.k, self.relative, LENGTH_FLOOR,
-                                self.bprev, self.bnext, self.bguard, self.theta, BOUNDARY_MU if barrier else 0.0,
+                                self.weight, self.vf_ptr, self.vf_tri, self.faces,
+                                self.shape, self.bprev, self.bnext, self.bguard, self.theta, BOUNDARY_MU if barrier else 0.0,
                                 BOUNDARY_GAP, g, self._es, self._eb, self.diag)
         es = float(np.sum(self._es))
         if not barrier:
             return es, es, g
         eb = float(np.sum(self._eb))
         ef = self.ks.face_barrier(x, self.faces, self._areas, self.a_ref, BARRIER_MU, self.k, BARRIER_EPS,
-                                  self.relative, g, self.diag)
+                                  self.relative, self.weight, g, self.diag)
         ec = 0.0
         if self.contact:
             ec = self.ko.contact_barrier(x, self.boundary_segments, self.bprev, self.bnext, CONTACT_GAP,
@@ -320,7 +372,8 @@ class _Springs:
         return es + eb + ef + ec, es, g
 
     def spring_energy(self, x: np.ndarray) -> float:
-        """Spring energy only (Eq. 1 with the 1/2 per spring)."""
+        """Elastic energy without the barriers: the springs (Eq. 1 with the 1/2 per spring,
+        importance-weighted) plus the shape term."""
         return self.evaluate(x, barrier=False)[1]
 
     def max_step(self, x: np.ndarray, d: np.ndarray, cap: float = np.inf, shrink: float = 1.0,
@@ -745,8 +798,13 @@ def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
     budget = None if deadline == np.inf else max(deadline - time.perf_counter(), 1e-3)
     tagged = None if callback is None else (lambda info: callback({**info, "level": "coarse"}))
     try:
-        sub = relax(FlatMesh(Mesh(simple.vertices, simple.faces, units=flat.mesh.units), simple.uv),
-                    options=replace(options, simplify_mm=0.0, time_budget=budget), progress=progress,
+        importance = None
+        if flat.importance is not None:  # a coarse vertex is as important as its cluster on average
+            count = np.bincount(simple.cluster, minlength=len(simple.vertices))
+            importance = np.bincount(simple.cluster, flat.importance, len(simple.vertices)) / np.maximum(count, 1)
+        sub = relax(FlatMesh(Mesh(simple.vertices, simple.faces, units=flat.mesh.units), simple.uv,
+                             importance=importance),
+                    options=replace(options, simplify_mm=0.0, time_budget=budget, true_scale=False), progress=progress,
                     callback=tagged)
     except FoldedResultError as exc:
         return _CoarseStart(result=None, uv=None, final=False, notes=[
@@ -769,6 +827,13 @@ def _follow(sp: _Springs, x: np.ndarray, notes: list[str]) -> np.ndarray | None:
         notes.append("following the coarse copy folded the full mesh; relaxed the full mesh from the rollout")
         return None
     return x
+
+
+def _importance_weights(importance: np.ndarray, contrast: float) -> np.ndarray:
+    """Per-vertex weights from importance (n,) in [0, 1]: ``1 / contrast`` on plain surface,
+    1 in the important zone, linear between. Shape (n,) float64."""
+    low = 1.0 / contrast
+    return np.ascontiguousarray(low + (1.0 - low) * importance, dtype=np.float64)
 
 
 def _mean_edge_length(V: np.ndarray, F: np.ndarray) -> float:
@@ -864,7 +929,11 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
         inverse[order] = np.arange(n)
         Vs = np.ascontiguousarray(V[order] / unit)
         Fs = np.ascontiguousarray(inverse[F])
-        sp = _Springs(Vs, Fs, n, k=settings["stiffness"], relative=settings["weighting"] == "relative")
+        weight = None
+        if fold_free and flat.importance is not None and settings["importance_contrast"] > 1:
+            weight = _importance_weights(flat.importance[order], settings["importance_contrast"])
+        sp = _Springs(Vs, Fs, n, k=settings["stiffness"], relative=settings["weighting"] == "relative",
+                      weight=weight, shape=settings["shape"] if fold_free else 0.0)
         del Vs, Fs
         x = np.ascontiguousarray(x_in[order]) * settings["stretch"]
         t_follow = time.perf_counter()
@@ -920,6 +989,11 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
         raise FoldedResultError("the paper dynamics diverged (NaN); use the default preset")
     uv_out = np.empty_like(x)
     uv_out[order] = x * unit + centre
+    if settings["true_scale"]:
+        factor = true_scale_factor(V, uv_out, F, flat.importance)
+        uv_out = centre + (uv_out - centre) * factor
+        notes.append(f"scaled by {factor:.4f} to true scale (median length scale 1) in the "
+                     + ("important zone" if flat.importance is not None else "whole surface"))
     before = summarize(V, uv, F)
     after = summarize(V, uv_out, F)
     stress = vertex_stress(V, uv_out, F, flat.mesh.mm_per_unit)

@@ -30,6 +30,7 @@ import scipy.sparse
 import scipy.sparse.csgraph
 from scipy.spatial import cKDTree
 
+from potflat import importance as _importance
 from potflat import proxy as _proxy
 from potflat._kernels.mesh import union_find
 from potflat.attachments import AttachmentSelection, detect_attachments
@@ -114,6 +115,22 @@ class RolloutOptions:
     profile_mm : float or None
         Height step of the profile (``NAME.profile.csv/.svg``, the plate's section), mm;
         None: one median edge length of the scan, as fine as its edges.
+    importance : str
+        Where the painting is, which the relax stage keeps true and the bake stage reports
+        (:mod:`potflat.importance`): ``auto`` (found in the colours; none for a scan without
+        colours or painted all over), ``none`` (the whole surface alike), ``mask`` (a PNG
+        painted over a potflat image, ``importance_mask``), ``texture-mask`` (a PNG in the
+        texture's space, ``importance_mask``) or ``band`` (``importance_band`` and/or
+        ``importance_angles``).
+    importance_mask : str or None
+        The mask image (white = important) for ``mask`` and ``texture-mask``.
+    importance_image : str or None
+        For ``mask``: the ``NAME.bake.json`` of the image the mask was painted over (default:
+        the one beside the mask whose image has the mask's size).
+    importance_band : (float, float) or None
+        For ``band``: heights as fractions of the axial extent (0 foot, 1 mouth).
+    importance_angles : (float, float) or None
+        For ``band``: angle range in degrees from the seam.
     """
 
     units: str | None = None
@@ -131,10 +148,35 @@ class RolloutOptions:
     landmark: str | None = None
     overlap: float = 0.0
     profile_mm: float | None = None
+    importance: str = "auto"
+    importance_mask: str | None = None
+    importance_image: str | None = None
+    importance_band: tuple[float, float] | None = None
+    importance_angles: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         from potflat.landmarks import LANDMARKS
 
+        _importance.check_method(self.importance)
+        if (self.importance in ("mask", "texture-mask")) != (self.importance_mask is not None):
+            raise InvalidOptionError("give importance_mask (--importance-mask PNG) with importance mask or "
+                                     "texture-mask, and only then")
+        if self.importance_image is not None and self.importance != "mask":
+            raise InvalidOptionError("importance_image (--importance-image) goes with importance mask")
+        if self.importance_band is not None:
+            lo, hi = _floats("importance_band", self.importance_band, 2, "LO HI")
+            if not 0.0 <= lo < hi <= 1.0:
+                raise InvalidOptionError(
+                    f"importance band {lo:g} {hi:g} is invalid; give fractions of the height with 0 <= LO < HI <= 1")
+            object.__setattr__(self, "importance_band", (lo, hi))
+        if self.importance_angles is not None:
+            a0, a1 = _floats("importance_angles", self.importance_angles, 2, "A0 A1")
+            if not a0 < a1 <= a0 + 360.0:
+                raise InvalidOptionError(
+                    f"importance angles {a0:g} {a1:g} are invalid; give A0 < A1 <= A0 + 360 (degrees from the seam)")
+            object.__setattr__(self, "importance_angles", (a0, a1))
+        if (self.importance == "band") != (self.importance_band is not None or self.importance_angles is not None):
+            raise InvalidOptionError("give importance_band and/or importance_angles with importance band, and only then")
         if self.seam_at is not None:
             object.__setattr__(self, "seam_at", _floats("seam_at", self.seam_at, 3, "X Y Z"))
         if self.landmark is not None and self.landmark not in LANDMARKS:
@@ -334,6 +376,7 @@ class RolloutResult:
     landmark: object = None
     theta_origin: float = 0.0
     landmark_notes: tuple = ()
+    importance: _importance.Importance | None = None
 
     @property
     def side(self) -> str:
@@ -645,8 +688,10 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
     cut = un.flat.mesh
     if mesh.texcoords is not None:  # attached once, to the final faces (see _unroll)
         cut = cut.replace(texcoords=mesh.texcoords[un.face_index])
+    flat = un.flat.replace(mesh=cut, uv=uv)
+    importance = _find_importance(flat, options, axis, theta_deg)
     return RolloutResult(
-        flat=un.flat.replace(mesh=cut, uv=uv), axis=axis, proxy=un.proxy,
+        flat=flat.replace(importance=importance.values), importance=importance, axis=axis, proxy=un.proxy,
         seam_angle=float(math.degrees(un.seam) % 360.0), seam_method=un.seam_method, region=region,
         distortion=distortion, face_index=un.face_index, vertex_index=un.vertex_index,
         seam_vertices=un.seam_vertices, split_vertices=un.split_vertices, walls=walls,
@@ -1001,9 +1046,31 @@ def _find_landmark(mesh: Mesh, axis: AxisFit, options: RolloutOptions, attachmen
     keep = np.flatnonzero(_in_band(axis, band, h_c) & face_mask)
     if len(keep) == 0:
         raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
-    auto = lambda: _auto_seam(mesh, axis, keep, theta_c, area)[0]  # noqa: E731
-    return find_landmark(mesh, axis, seam_at=options.seam_at, landmark=options.landmark, faces=keep,
-                         theta_c=theta_c[keep], area=area[keep], attachments=attachments, auto_seam=auto)
+    return find_landmark(
+        mesh, axis, seam_at=options.seam_at, landmark=options.landmark, attachments=attachments,
+        painted_zone=lambda: _painted_zone_centre(mesh, axis, options, face_mask, band, h_c, theta_c, area),
+        auto_seam=lambda: _auto_seam(mesh, axis, keep, theta_c, area)[0])
+
+
+def _painted_zone_centre(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c,
+                         area) -> tuple[float | None, str]:
+    """Centre angle of the importance zone (:func:`_find_importance` on an all-round unrolling
+    with the automatic seam), or None and why."""
+    from potflat.landmarks import zone_centre
+
+    plain = dataclasses.replace(options, seam=None, angles=None, seam_at=None, landmark=None, overlap=0.0)
+    un = _unroll(mesh, axis, plain, face_mask, band, h_c, theta_c, area)
+    flat = un.flat
+    if mesh.texcoords is not None:
+        flat = flat.replace(mesh=flat.mesh.replace(texcoords=mesh.texcoords[un.face_index]))
+    importance = _find_importance(flat, options, axis, np.degrees(un.theta))
+    if importance.values is None:
+        return None, importance.reason
+    vertex_area = np.bincount(flat.mesh.faces.ravel(), np.repeat(area[un.face_index] / 3.0, 3), len(flat.uv))
+    angle, length = zone_centre(axis.cylindrical(flat.mesh.vertices)[2], importance.values * vertex_area)
+    if angle is None:
+        return None, f"the importance zone goes round evenly (resultant {length:.3f})"
+    return angle, f"centre of the importance zone ({importance.method}: {importance.reason}), resultant {length:.2f}"
 
 
 def _in_band(axis: AxisFit, band, h_c) -> np.ndarray:
@@ -1124,6 +1191,23 @@ def _gap_middle(covered: np.ndarray) -> float | None:
     return (_longest_min_run(covered.astype(np.float64)) + 0.5) / SEAM_BINS * TWO_PI
 
 
+def _find_importance(flat: FlatMesh, options: RolloutOptions, axis: AxisFit, theta_deg: np.ndarray
+                     ) -> _importance.Importance:
+    """The importance of the rollout's vertices as ``options.importance`` asks."""
+    method = options.importance
+    if method == "none":
+        return _importance.Importance(None, "none", 1.0, "importance off: the whole surface counts alike")
+    if method == "auto":
+        return _importance.auto_importance(flat)
+    if method == "mask":
+        return _importance.image_mask_importance(flat, options.importance_mask, options.importance_image)
+    if method == "texture-mask":
+        return _importance.texture_mask_importance(flat, options.importance_mask)
+    h = axis.cylindrical(flat.mesh.vertices)[0]
+    return _importance.band_importance(flat, h / max(axis.height, np.finfo(float).tiny), theta_deg,
+                                       options.importance_band, options.importance_angles)
+
+
 def rollout_summary(result: RolloutResult) -> dict:
     """The JSON-ready figures of a rollout (the sidecar without file and provenance fields)."""
     mesh = result.flat.mesh
@@ -1144,6 +1228,7 @@ def rollout_summary(result: RolloutResult) -> dict:
             "nonmanifold_vertices_split": result.split_vertices,
         },
         "distortion": result.distortion.as_dict(),
+        "importance": result.importance.as_dict() if result.importance is not None else None,
         "boundary_overlap": result.boundary_overlap,
         "walls": result.walls.summary(),
         "attachments": _attachments_summary(result),

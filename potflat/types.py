@@ -114,12 +114,19 @@ class FlatMesh:
         Flattened position of each vertex, in the units of ``mesh``.
     stress : (n,) float64 or None
         Per-vertex residual stress (the paper's Eq. 3), when known.
+    comments : tuple of str
+        Provenance lines carried into stage files.
+    importance : (n,) float64 or None
+        How much each vertex belongs to the important (painted) zone, from 0 (plain surface,
+        may take the distortion) to 1 (painting, kept true); None: the whole surface matters
+        alike (:mod:`potflat.importance`).
     """
 
     mesh: Mesh
     uv: np.ndarray
     stress: np.ndarray | None = None
     comments: tuple[str, ...] = field(default_factory=tuple)
+    importance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         uv = _as_array("uv", self.uv, np.float64, (2,))
@@ -131,6 +138,13 @@ class FlatMesh:
             if st.shape != (len(uv),):
                 raise InvalidInputError("stress must have one value per vertex")
             object.__setattr__(self, "stress", st)
+        if self.importance is not None:
+            imp = np.ascontiguousarray(self.importance, dtype=np.float64)
+            if imp.shape != (len(uv),):
+                raise InvalidInputError("importance must have one value per vertex")
+            if not (np.isfinite(imp).all() and imp.min(initial=0.0) >= 0.0 and imp.max(initial=0.0) <= 1.0):
+                raise InvalidInputError("importance must be finite and between 0 and 1")
+            object.__setattr__(self, "importance", imp)
 
     def replace(self, **changes) -> "FlatMesh":
         """A copy with some fields replaced (validated again)."""

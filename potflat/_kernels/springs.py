@@ -444,11 +444,14 @@ def _angle_barrier_slope(theta, sb, gap):
 
 
 @parallel
-def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, bprev, bnext, bguard, theta, mu_b, gap,
-                    grad, e_spring, e_barrier, diag):
-    """Spring + boundary angle barrier energy per vertex and the gradient, gathered per vertex.
+def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_tri, faces, shape,
+                    bprev, bnext, bguard, theta, mu_b, gap, grad, e_spring, e_barrier, diag):
+    """Spring + shape term + boundary angle barrier energy per vertex and the gradient,
+    gathered per vertex.
 
     The face barrier is added afterwards by :func:`face_barrier` (it acts on few faces).
+    The shape term of each face (:func:`shape_coefficients`) is gathered from its three
+    corners, each taking a third of its energy.
 
     Parameters
     ----------
@@ -460,6 +463,13 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, bprev, bnext, bguard
     relative : bool
         Weight each spring by ``1 / max(r, r_floor)^2`` (relative length error).
     r_floor : float
+    weight : (n,) or (0,) float64
+        Importance weight of each vertex (:mod:`potflat.importance`): a spring's coefficient
+        is multiplied by the mean of its endpoints' weights. Empty: every weight is 1.
+    vf_ptr, vf_tri : CSR from :func:`vertex_faces`
+    faces : (m, 3) int32 or int64
+    shape : (m, 4) or (0, 4) float64
+        Shape term coefficients (:func:`shape_coefficients`). Empty: no shape term.
     bprev, bnext : (n,) int32
         Each vertex's unique boundary predecessor and successor (-1: none or not unique).
     bguard : (n,) bool
@@ -477,6 +487,8 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, bprev, bnext, bguard
         the barrier's curvature), the Jacobi preconditioner of the fine-level solve.
     """
     n = x.shape[0]
+    weighted = weight.shape[0] > 0
+    shaped = shape.shape[0] > 0
     for i in prange(n):
         gx = 0.0
         gy = 0.0
@@ -494,6 +506,8 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, bprev, bnext, bguard
             if relative:
                 rr = max(r, r_floor)
                 c = k / (rr * rr)
+            if weighted:
+                c *= 0.5 * (weight[i] + weight[j])
             hd += c
             dl = ln - r
             es += 0.25 * c * dl * dl
@@ -501,6 +515,33 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, bprev, bnext, bguard
                 f = c * dl / ln
                 gx += f * dx
                 gy += f * dy
+        if shaped:
+            for q in range(vf_ptr[i], vf_ptr[i + 1]):
+                t = vf_tri[q]
+                ci = 0
+                if faces[t, 1] == i:
+                    ci = 1
+                elif faces[t, 2] == i:
+                    ci = 2
+                j = faces[t, (ci + 1) % 3]
+                l = faces[t, (ci + 2) % 3]
+                # cotangent weights of the angles at i, j, l (scaled), and the area weight
+                ct_i = shape[t, ci]
+                ct_j = shape[t, (ci + 1) % 3]
+                ct_l = shape[t, (ci + 2) % 3]
+                wa = shape[t, 3]
+                ax = xi - x[j, 0]
+                ay = yi - x[j, 1]
+                bx = xi - x[l, 0]
+                by = yi - x[l, 1]
+                cx = x[j, 0] - x[l, 0]
+                cy = x[j, 1] - x[l, 1]
+                area = 0.5 * (ax * by - ay * bx)
+                ef = 0.25 * (ct_l * (ax * ax + ay * ay) + ct_j * (bx * bx + by * by) + ct_i * (cx * cx + cy * cy)) - wa * area
+                es += ef / 3.0
+                gx += 0.5 * (ct_l * ax + ct_j * bx) - 0.5 * wa * (x[j, 1] - x[l, 1])
+                gy += 0.5 * (ct_l * ay + ct_j * by) - 0.5 * wa * (x[l, 0] - x[j, 0])
+                hd += 0.5 * (ct_l + ct_j)
         eb = 0.0
         if mu_b > 0.0 and (bprev[i] >= 0 or bnext[i] >= 0):
             sb = mu_b * k
@@ -556,8 +597,63 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, bprev, bnext, bguard
         e_barrier[i] = eb
 
 
+@parallel
+def shape_coefficients(V, faces, weight, scale, area_floor, out):
+    """Coefficients of the shape term: each face's conformal energy on its rest triangle.
+
+    For a face with rest (3D) triangle of area ``A`` and the linear map ``J`` from it to
+    the flat triangle, the term is ``s w A (|J|^2 / 2 - det J) = s w A (sigma_1 - sigma_2)^2 / 2``
+    (zero for a similarity, so it charges shear but neither scale nor rotation). As a
+    function of the flat corners it is ``1/4 sum_edges c_o |x_a - x_b|^2 - c_A A_flat(x)``,
+    with ``c_o = s w cot(angle opposite the edge)`` and ``c_A = s w``: a convex quadratic.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+        Rest positions.
+    faces : (m, 3) int32 or int64
+    weight : (n,) or (0,) float64
+        Importance weight per vertex (a face takes its corners' mean); empty: 1.
+    scale : float
+        ``s``: the term's weight per unit rest area.
+    area_floor : float
+        Faces with a smaller rest area (degenerate, their angles meaningless) get no term.
+    out : (m, 4) float64
+        Output: ``s w cot`` of the angles at corners 0, 1, 2 and ``s w``.
+    """
+    for t in prange(faces.shape[0]):
+        a0 = faces[t, 0]
+        a1 = faces[t, 1]
+        a2 = faces[t, 2]
+        e1x = V[a1, 0] - V[a0, 0]
+        e1y = V[a1, 1] - V[a0, 1]
+        e1z = V[a1, 2] - V[a0, 2]
+        e2x = V[a2, 0] - V[a0, 0]
+        e2y = V[a2, 1] - V[a0, 1]
+        e2z = V[a2, 2] - V[a0, 2]
+        nx = e1y * e2z - e1z * e2y
+        ny = e1z * e2x - e1x * e2z
+        nz = e1x * e2y - e1y * e2x
+        twice = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if 0.5 * twice <= area_floor:
+            for c in range(4):
+                out[t, c] = 0.0
+            continue
+        w = scale
+        if weight.shape[0] > 0:
+            w *= (weight[a0] + weight[a1] + weight[a2]) / 3.0
+        e3x = V[a2, 0] - V[a1, 0]
+        e3y = V[a2, 1] - V[a1, 1]
+        e3z = V[a2, 2] - V[a1, 2]
+        # cot of the angle at a corner = (dot of its two edges) / (twice the area)
+        out[t, 0] = w * (e1x * e2x + e1y * e2y + e1z * e2z) / twice
+        out[t, 1] = w * (-e1x * e3x - e1y * e3y - e1z * e3z) / twice
+        out[t, 2] = w * (e2x * e3x + e2y * e3y + e2z * e3z) / twice
+        out[t, 3] = w
+
+
 @leaf
-def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, grad, diag):
+def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, weight, grad, diag):
     """Add the face barrier to ``grad`` and ``diag``; return its energy.
 
     Serial over the faces in order (deterministic); only faces squeezed below ``eps`` of
@@ -577,6 +673,9 @@ def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, grad, diag):
     relative : bool
         Weight each face's barrier by ``mu k`` (relative spring weighting: the springs'
         energy is dimensionless) instead of ``mu k a_ref`` (uniform: energy ~ length^2).
+    weight : (n,) or (0,) float64
+        Importance weight of each vertex: a face's barrier is multiplied by the mean of its
+        corners' weights, like its springs. Empty: every weight is 1.
     grad, diag : (n, 2), (n,) float64
         Updated in place: gradient and Hessian diagonal bound.
 
@@ -597,6 +696,8 @@ def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, grad, diag):
             continue
         a = area / th
         scale = mu * k if relative else mu * k * a_ref[t]
+        if weight.shape[0] > 0:
+            scale *= (weight[faces[t, 0]] + weight[faces[t, 1]] + weight[faces[t, 2]]) / 3.0
         total += scale * (a - 1.0 - math.log(a))
         dphi = scale * (1.0 - 1.0 / a) / th
         h = scale / (area * area)

@@ -1,7 +1,8 @@
 """Stage files: ``NAME.rollout.ply`` / ``NAME.relaxed.ply`` and their JSON sidecars.
 
 The PLY is binary little-endian with vertex properties ``x y z u v`` (double), optional
-``red green blue alpha`` (uchar) and ``stress`` (double); faces carry
+``red green blue alpha`` (uchar), ``stress`` and ``importance`` (double, 0 plain to 1
+painted: :attr:`potflat.types.FlatMesh.importance`); faces carry
 ``vertex_indices`` (uchar count, int indices) and optionally ``texcoord`` (uchar count,
 6 floats: MeshLab's convention), with ``comment TextureFile NAME`` naming the texture
 image relative to the PLY. ``comment units mm`` records the length unit. See
@@ -91,6 +92,8 @@ def write_flat_ply(path: str | os.PathLike, flat: FlatMesh, *, comments: tuple[s
         vfields += [("red", "u1"), ("green", "u1"), ("blue", "u1"), ("alpha", "u1")]
     if flat.stress is not None:
         vfields.append(("stress", "<f8"))
+    if flat.importance is not None:
+        vfields.append(("importance", "<f8"))
     ffields = [("n", "u1"), ("idx", "<i4", (3,))]
     if texture_name is not None:
         ffields += [("nt", "u1"), ("tc", "<f4", (6,))]
@@ -121,6 +124,8 @@ def write_flat_ply(path: str | os.PathLike, flat: FlatMesh, *, comments: tuple[s
                         vert[name] = mesh.vertex_colors[rows, k]
                 if flat.stress is not None:
                     vert["stress"] = flat.stress[rows]
+                if flat.importance is not None:
+                    vert["importance"] = flat.importance[rows]
                 fh.write(vert.data)
             for rows in row_blocks(m):
                 face = np.empty(rows.stop - rows.start, dtype=ffields)
@@ -231,6 +236,11 @@ def read_flat_ply(path: str | os.PathLike) -> FlatMesh:
         texcoords = face["texcoord"].reshape(-1, 3, 2).astype(np.float64)
         texture_path = (path.parent / texture_name).resolve()
     stress = np.asarray(vert["stress"], dtype=np.float64) if "stress" in vert.dtype.names else None
+    importance = None
+    if "importance" in vert.dtype.names:
+        importance = np.asarray(vert["importance"], dtype=np.float64)
+        if not (np.isfinite(importance).all() and importance.min(initial=0.0) >= 0 and importance.max(initial=0.0) <= 1):
+            raise InvalidInputError(f"{path} has importance values outside 0..1; write it again")
     mesh = Mesh(xyz, faces, texcoords=texcoords, texture_path=texture_path,
                 vertex_colors=colors, units=units, source=path)
-    return FlatMesh(mesh, uv, stress=stress, comments=tuple(comments))
+    return FlatMesh(mesh, uv, stress=stress, comments=tuple(comments), importance=importance)

@@ -1,0 +1,444 @@
+"""Importance: where the painting is, so that the relaxation keeps it true to scale and shape
+and lets plain surface take the distortion.
+
+The importance of a vertex is a number from 0 (plain surface) to 1 (painting). The relax
+stage weights springs, barrier and shape term by it (:attr:`RelaxOptions.importance_contrast`)
+and the bake stage reports the distortion inside the important zone and outside it, and
+draws the zone's outline on the maps. Ways to obtain it:
+
+* ``auto`` (the default for scans with a texture or vertex colours): the painting is found
+  in its own colours. The rollout's start layout is rendered at :data:`DETECT_PX_PER_MM`;
+  a pixel shows *detail* where the colour's local standard deviation (CIELAB, within
+  :data:`DETAIL_MM`) is well above the surface's noise floor (its median, times
+  :data:`DETAIL_OVER_NOISE`, and at least :data:`DETAIL_MIN_DELTA_E`): brush strokes,
+  figure outlines and bands have it; glaze, clay, a lighting gradient across the vessel and
+  scanner noise do not. Detail closer than :data:`GAP_MM` is joined into one zone, enclosed
+  plain areas are filled, specks below :data:`MIN_ZONE_MM` across are dropped, and the zone
+  is grown by :data:`MARGIN_MM` and softened. Rendering on the surface's own layout makes it
+  blind to texture-atlas seams. A scan painted nearly all over
+  (:data:`ALL_OVER_FRACTION`) or showing no painting gets no importance: the whole surface
+  counts alike, exactly as without importance.
+* a mask painted over an image potflat made (white = important), mapped back to the surface
+  through the flattening that made that image (:func:`image_mask_importance`);
+* a mask in the texture's own space (:func:`texture_mask_importance`);
+* a height band and angle range (:func:`band_importance`).
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.types import FlatMesh
+
+#: Ways to obtain the importance (:attr:`potflat.rollout.RolloutOptions.importance`).
+METHODS = ("auto", "none", "mask", "texture-mask", "band")
+#: Resolution of the auto detection's rendering (px/mm of the start layout).
+DETECT_PX_PER_MM = 2.0
+#: Radius (Gaussian sigma, mm) of the colour statistics that measure detail.
+DETAIL_MM = 1.5
+#: A pixel shows detail when its local colour deviation exceeds this many times the surface's
+#: median deviation (its noise floor) ...
+DETAIL_OVER_NOISE = 4.0
+#: ... and this many CIELAB units (about twice a just-noticeable difference).
+DETAIL_MIN_DELTA_E = 5.0
+#: Detail closer than this (mm) is one painted zone (the background between figures of a frieze).
+GAP_MM = 25.0
+#: Painted zones smaller than a disc of this diameter (mm) are dropped (specks, scratches, noise).
+MIN_ZONE_MM = 12.0
+#: The zone is grown by this margin (mm), so figures at its edge lie well inside.
+MARGIN_MM = 4.0
+#: Width (Gaussian sigma, mm) of the zone's soft edge.
+SOFT_EDGE_MM = 2.0
+#: A zone covering at least this share of the surface means: painted all over (no importance).
+ALL_OVER_FRACTION = 0.8
+
+
+@dataclass(frozen=True)
+class Importance:
+    """Importance of each vertex of a flattening and how it was found.
+
+    Attributes
+    ----------
+    values : (n,) float64 or None
+        0 (plain) to 1 (painting) per vertex; None: the whole surface counts alike.
+    method : str
+        One of :data:`METHODS`.
+    zone_fraction : float
+        Share of the surface's area in the important zone (1 when ``values`` is None).
+    reason : str
+        One sentence for the JSON and the console: what was found.
+    """
+
+    values: np.ndarray | None
+    method: str
+    zone_fraction: float
+    reason: str
+
+    def as_dict(self) -> dict:
+        """JSON-ready description (without the values)."""
+        return {"method": self.method, "zone_fraction": self.zone_fraction, "reason": self.reason,
+                "uniform": self.values is None}
+
+
+def _zone_fraction(flat: FlatMesh, values: np.ndarray) -> float:
+    from potflat.distortion import face_areas, important_faces
+
+    area = face_areas(flat.mesh.vertices, flat.mesh.faces)
+    total = float(area.sum())
+    return float(area[important_faces(flat.mesh.faces, values)].sum()) / total if total > 0 else 0.0
+
+
+def _result(flat: FlatMesh, values: np.ndarray, method: str, what: str) -> Importance:
+    values = np.clip(np.ascontiguousarray(values, dtype=np.float64), 0.0, 1.0)
+    frac = _zone_fraction(flat, values)
+    return Importance(values, method, frac, f"{what}: {100 * frac:.0f}% of the surface is important")
+
+
+def _gaussian(img: np.ndarray, sigma_px: float) -> np.ndarray:
+    import cv2
+
+    return cv2.GaussianBlur(img, (0, 0), sigmaX=max(sigma_px, 0.3), borderType=cv2.BORDER_REPLICATE)
+
+
+def _disc(radius_px: float) -> np.ndarray:
+    import cv2
+
+    r = max(1, int(round(radius_px)))
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+
+
+def detail_map(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """Local colour deviation of an image of the painting, and the covered pixels.
+
+    Parameters
+    ----------
+    rgba : (h, w, 4) uint8
+        The painting (alpha: covered fraction).
+    px_per_mm : float
+
+    Returns
+    -------
+    deviation : (h, w) float32
+        Standard deviation of the CIELAB colour within :data:`DETAIL_MM` (Gaussian window,
+        normalised over the covered pixels only, so the outline adds none).
+    covered : (h, w) bool
+    """
+    import cv2
+
+    alpha = rgba[..., 3].astype(np.float32) / 255.0
+    covered = alpha > 0.5
+    lab = cv2.cvtColor(rgba[..., :3].astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
+    w = covered.astype(np.float32)
+    sigma = DETAIL_MM * px_per_mm
+    norm = np.maximum(_gaussian(w, sigma), 1e-6)
+    mean = _gaussian(lab * w[..., None], sigma) / norm[..., None]
+    mean_sq = _gaussian((lab * lab) * w[..., None], sigma) / norm[..., None]
+    var = np.maximum(mean_sq - mean * mean, 0.0).sum(axis=2)
+    return np.sqrt(var).astype(np.float32), covered
+
+
+def painted_zone_image(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray | None, str]:
+    """The painted zone of an image of the painting (see the module notes).
+
+    Parameters
+    ----------
+    rgba : (h, w, 4) uint8
+    px_per_mm : float
+
+    Returns
+    -------
+    zone : (h, w) float32 in [0, 1] or None
+        Soft-edged zone; None when the image shows no painting or is painted nearly all over.
+    reason : str
+    """
+    import cv2
+
+    deviation, covered = detail_map(rgba, px_per_mm)
+    if covered.sum() < 16:
+        return None, "too little surface to look for a painting"
+    noise = float(np.median(deviation[covered]))
+    threshold = max(DETAIL_OVER_NOISE * noise, DETAIL_MIN_DELTA_E)
+    detail = ((deviation > threshold) & covered).astype(np.uint8)
+    if not detail.any():
+        return None, f"no painting found (no colour detail above {threshold:.1f} CIELAB units)"
+    # join detail into zones, fill enclosed plain areas, drop specks, add a margin
+    zone = cv2.morphologyEx(detail, cv2.MORPH_CLOSE, _disc(0.5 * GAP_MM * px_per_mm))
+    zone &= covered.astype(np.uint8)
+    outside = np.zeros((zone.shape[0] + 2, zone.shape[1] + 2), np.uint8)
+    outside[1:-1, 1:-1] = zone
+    cv2.floodFill(outside, None, (0, 0), 2)
+    zone = (outside[1:-1, 1:-1] != 2).astype(np.uint8)  # zone and what it encloses
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(zone, connectivity=8)
+    min_area = math.pi * (0.5 * MIN_ZONE_MM * px_per_mm) ** 2
+    keep = np.zeros(count, bool)
+    keep[1:] = stats[1:, cv2.CC_STAT_AREA] >= min_area
+    zone = keep[labels].astype(np.uint8)
+    if not zone.any():
+        return None, "no painted zone found (only specks of colour detail)"
+    zone = cv2.dilate(zone, _disc(MARGIN_MM * px_per_mm)) & covered.astype(np.uint8)
+    fraction = float(zone.sum()) / float(covered.sum())
+    if fraction >= ALL_OVER_FRACTION:
+        return None, f"painted all over ({100 * fraction:.0f}% of the surface): the whole surface counts alike"
+    soft = np.clip(_gaussian(zone.astype(np.float32), SOFT_EDGE_MM * px_per_mm), 0.0, 1.0)
+    return soft, f"painted zone found in the colours (detail above {threshold:.1f} CIELAB units)"
+
+
+def sample_image(image: np.ndarray, px: np.ndarray) -> np.ndarray:
+    """Bilinear samples of a one-channel image at pixel positions (pixel centres at +0.5).
+
+    Parameters
+    ----------
+    image : (h, w) float
+    px : (k, 2) float64
+        (column, row) positions in pixels, (0, 0) the top-left corner of the image.
+
+    Returns
+    -------
+    (k,) float64
+        Edge pixels extend outwards.
+    """
+    h, w = image.shape
+    x = np.clip(px[:, 0] - 0.5, 0.0, w - 1.0)
+    y = np.clip(px[:, 1] - 0.5, 0.0, h - 1.0)
+    x0 = np.minimum(np.floor(x).astype(np.int64), w - 2) if w > 1 else np.zeros(len(x), np.int64)
+    y0 = np.minimum(np.floor(y).astype(np.int64), h - 2) if h > 1 else np.zeros(len(y), np.int64)
+    x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+    fx, fy = x - x0, y - y0
+    img = image.astype(np.float64)
+    top = img[y0, x0] * (1 - fx) + img[y0, x1] * fx
+    bottom = img[y1, x0] * (1 - fx) + img[y1, x1] * fx
+    return top * (1 - fy) + bottom * fy
+
+
+def _pixels(uv: np.ndarray, origin: np.ndarray, px_per_unit: float) -> np.ndarray:
+    """Pixel positions (column, row) of flat points in an image with the bake's grid."""
+    out = np.empty_like(uv)
+    out[:, 0] = (uv[:, 0] - origin[0]) * px_per_unit
+    out[:, 1] = (origin[1] - uv[:, 1]) * px_per_unit
+    return out
+
+
+def auto_importance(flat: FlatMesh) -> Importance:
+    """Find the painted zone in the scan's colours (see the module notes).
+
+    Parameters
+    ----------
+    flat : FlatMesh
+        A flattening whose mesh has a texture or vertex colours (else: no importance).
+    """
+    mesh = flat.mesh
+    if (mesh.texcoords is None or mesh.texture_path is None) and mesh.vertex_colors is None:
+        return Importance(None, "auto", 1.0, "no texture or vertex colours: the whole surface counts alike")
+    from potflat.bake import bake
+
+    px_per_mm = DETECT_PX_PER_MM
+    baked = bake(flat, px_per_mm=px_per_mm, maps=(), supersample=2)
+    zone, reason = painted_zone_image(baked.image, px_per_mm)
+    if zone is None:
+        return Importance(None, "auto", 1.0, reason)
+    values = sample_image(zone, _pixels(flat.uv, baked.origin, px_per_mm * mesh.mm_per_unit))
+    return _result(flat, values, "auto", reason)
+
+
+def read_mask(path: str | Path) -> np.ndarray:
+    """A mask image as importance in [0, 1]: grey level times alpha (white opaque = 1).
+
+    Returns
+    -------
+    (h, w) float32
+    """
+    import cv2
+
+    path = Path(path)
+    if not path.is_file():
+        raise InvalidInputError(f"importance mask {path} not found; give the PNG you painted (white = important)")
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH)
+    if img is None:
+        raise InvalidInputError(f"cannot read importance mask {path}; save it as PNG")
+    scale = 65535.0 if img.dtype == np.uint16 else 255.0 if img.dtype == np.uint8 else 1.0
+    img = img.astype(np.float32) / scale
+    if img.ndim == 2:
+        return np.clip(img, 0.0, 1.0)
+    grey = img[..., :3].mean(axis=2)
+    if img.shape[2] == 4:
+        grey = grey * img[..., 3]
+    return np.clip(grey, 0.0, 1.0)
+
+
+def _reference_for(mask_path: Path, shape: tuple[int, int], reference: Path | None) -> Path:
+    """The ``NAME.bake.json`` of the image a mask was painted over."""
+    if reference is not None:
+        return Path(reference)
+    found = []
+    for candidate in sorted(mask_path.parent.glob("*.bake.json")):
+        try:
+            px = json.loads(candidate.read_text()).get("image_px")
+        except (OSError, ValueError, AttributeError):
+            continue
+        if px == [shape[1], shape[0]]:
+            found.append(candidate)
+    if len(found) != 1:
+        what = "no" if not found else "several"
+        raise InvalidInputError(
+            f"{what} potflat image of the mask's size ({shape[1]} x {shape[0]} px) beside {mask_path}; "
+            "keep the mask in the folder of the image you painted it over, or name that image's "
+            "NAME.bake.json with --importance-image")
+    return found[0]
+
+
+def _closest_on_faces(points: np.ndarray, V: np.ndarray, F: np.ndarray, candidates: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """For each point the closest of its candidate faces and the barycentric coordinates of
+    the closest point on it.
+
+    Parameters
+    ----------
+    points : (k, 3) float64
+    V : (n, 3) float64
+    F : (m, 3) int64
+    candidates : (k, c) int64
+        Candidate faces of each point.
+
+    Returns
+    -------
+    face : (k,) int64
+    bary : (k, 3) float64
+    """
+    k, c = candidates.shape
+    best_d = np.full(k, np.inf)
+    face = candidates[:, 0].copy()
+    bary = np.full((k, 3), 1.0 / 3.0)
+    for j in range(c):
+        f = F[candidates[:, j]]
+        a, b, cc = V[f[:, 0]], V[f[:, 1]], V[f[:, 2]]
+        e0, e1, d = b - a, cc - a, points - a
+        d00 = np.einsum("ij,ij->i", e0, e0)
+        d01 = np.einsum("ij,ij->i", e0, e1)
+        d11 = np.einsum("ij,ij->i", e1, e1)
+        d20 = np.einsum("ij,ij->i", d, e0)
+        d21 = np.einsum("ij,ij->i", d, e1)
+        den = d00 * d11 - d01 * d01
+        den = np.where(np.abs(den) > 0, den, 1.0)
+        v = (d11 * d20 - d01 * d21) / den
+        w = (d00 * d21 - d01 * d20) / den
+        lam = np.stack([1.0 - v - w, v, w], axis=1)
+        lam = np.clip(lam, 0.0, None)
+        lam /= np.maximum(lam.sum(axis=1, keepdims=True), 1e-300)
+        q = lam[:, :1] * a + lam[:, 1:2] * b + lam[:, 2:] * cc
+        dist = np.einsum("ij,ij->i", q - points, q - points)
+        better = dist < best_d
+        best_d[better], face[better], bary[better] = dist[better], candidates[better, j], lam[better]
+    return face, bary
+
+
+def image_mask_importance(flat: FlatMesh, mask_path: str | Path, reference: str | Path | None = None) -> Importance:
+    """Importance from a mask painted over an image potflat made (white = important).
+
+    The image's ``NAME.bake.json`` (``reference``; default: the one beside the mask whose
+    image has the mask's size) gives its pixel grid and the flattening it was baked from.
+    Each vertex of ``flat`` is located on that flattening's 3D surface (the closest point of
+    the nearest faces) and reads the mask where that point lies in the image. On the same
+    scan this is exact: a vertex finds itself.
+
+    Parameters
+    ----------
+    flat : FlatMesh
+    mask_path : path-like
+        Same size as the image it was painted over.
+    reference : path-like, optional
+        ``NAME.bake.json`` of that image.
+    """
+    from scipy.spatial import cKDTree
+
+    from potflat.io.stage import read_flat_ply
+
+    mask_path = Path(mask_path)
+    mask = read_mask(mask_path)
+    ref_json = _reference_for(mask_path, mask.shape, None if reference is None else Path(reference))
+    try:
+        meta = json.loads(ref_json.read_text())
+        origin = np.asarray(meta["origin_uv"], dtype=np.float64)
+        px_per_unit = float(meta["px_per_unit"])
+        ply = Path(meta["provenance"]["inputs"][0]["path"])
+    except (OSError, ValueError, KeyError, IndexError, TypeError):
+        raise InvalidInputError(f"{ref_json} is not a potflat bake JSON; name the NAME.bake.json of the image "
+                                "the mask was painted over") from None
+    if meta.get("image_px") != [mask.shape[1], mask.shape[0]]:
+        raise InvalidInputError(f"the mask {mask_path} is {mask.shape[1]} x {mask.shape[0]} px but the image of "
+                                f"{ref_json} is {meta.get('image_px')}; paint the mask over that image at its size")
+    if not ply.is_file():
+        ply = ref_json.parent / ply.name
+    if not ply.is_file():
+        raise InvalidInputError(f"the flattening {ply.name} named by {ref_json} is missing; keep it beside the image")
+    ref = read_flat_ply(ply)
+    RV, RF = ref.mesh.vertices, ref.mesh.faces
+    centroids = RV[RF].mean(axis=1)
+    points = flat.mesh.vertices
+    k = min(8, len(RF))
+    _, cand = cKDTree(centroids).query(points, k=k)
+    cand = np.asarray(cand, np.int64).reshape(len(points), k)
+    # a vertex of the same scan finds itself: take its own position where it is a corner
+    face, bary = _closest_on_faces(points, RV, RF, cand)
+    uv = np.einsum("ij,ijk->ik", bary, ref.uv[RF[face]])
+    values = sample_image(mask, _pixels(uv, origin, px_per_unit))
+    return _result(flat, values, "mask", f"mask {mask_path.name} over the image of {ref_json.name}")
+
+
+def texture_mask_importance(flat: FlatMesh, mask_path: str | Path) -> Importance:
+    """Importance from a mask in the texture's own space (white = important, any size).
+
+    Each vertex takes the mean of the mask at its face corners' texture coordinates.
+    """
+    mesh = flat.mesh
+    if mesh.texcoords is None:
+        raise InvalidInputError(f"{mesh.source or 'the scan'} has no texture coordinates, so a texture-space mask "
+                                "cannot be placed; paint the mask over a potflat image instead (--importance PNG)")
+    mask = read_mask(mask_path)
+    h, w = mask.shape
+    tc = mesh.texcoords.reshape(-1, 2)
+    px = np.stack([tc[:, 0] % 1.0 * w, (1.0 - tc[:, 1] % 1.0) * h], axis=1)
+    corner = sample_image(mask, px)
+    idx = mesh.faces.ravel()
+    count = np.bincount(idx, minlength=len(mesh.vertices))
+    values = np.bincount(idx, corner, len(mesh.vertices)) / np.maximum(count, 1)
+    return _result(flat, values, "texture-mask", f"texture-space mask {Path(mask_path).name}")
+
+
+def band_importance(flat: FlatMesh, height_fraction: np.ndarray, angle_deg: np.ndarray,
+                    band: tuple[float, float] | None, angles: tuple[float, float] | None) -> Importance:
+    """Importance 1 inside a height band and angle range, 0 outside.
+
+    Parameters
+    ----------
+    flat : FlatMesh
+    height_fraction : (n,) float64
+        Each vertex's height as a fraction of the scan's axial extent (0 foot, 1 mouth).
+    angle_deg : (n,) float64
+        Each vertex's angle from the seam, degrees.
+    band : (float, float) or None
+        None: all heights.
+    angles : (float, float) or None
+        Degrees from the seam; None: all the way round.
+    """
+    inside = np.ones(len(flat.uv), bool)
+    if band is not None:
+        inside &= (height_fraction >= band[0]) & (height_fraction <= band[1])
+    if angles is not None:
+        rel = (angle_deg - angles[0]) % 360.0
+        inside &= rel <= (angles[1] - angles[0])
+    what = " and ".join(p for p in (f"heights {band[0]:g}-{band[1]:g}" if band else "",
+                                    f"angles {angles[0]:g} to {angles[1]:g} deg" if angles else "") if p)
+    if not inside.any():
+        raise InvalidOptionError(f"the importance band ({what}) holds no part of the rollout; widen it")
+    return _result(flat, inside.astype(np.float64), "band", f"band {what}")
+
+
+def check_method(method: str) -> None:
+    """Refuse an unknown importance method with one line."""
+    if method not in METHODS:
+        raise InvalidOptionError(f"unknown importance {method!r}; use one of {', '.join(METHODS)}")
