@@ -86,6 +86,10 @@ class BakeOptions:
     plate_scale : str or None
         Print scale of the plate, e.g. ``1:2``; None: the largest of 1:1, 1:2, 1:3, 1:4, 1:5,
         1:10, 1:20, 1:50 at which it fits an A4 page.
+    obj : bool
+        Also write ``NAME.flat.obj`` + ``NAME.flat.mtl``: the scan's surface (3D, scan units)
+        with the flat coordinates as texture coordinates into ``NAME.png`` (the painting
+        re-baked in the flat layout), for MeshLab and Blender.
     """
 
     px_per_mm: float | None = None
@@ -100,11 +104,12 @@ class BakeOptions:
     scale_on_image: bool = False
     plate: bool = False
     plate_scale: str | None = None
+    obj: bool = False
 
     def __post_init__(self) -> None:
         from potflat.plate import parse_scale
 
-        for name in ("scale_on_image", "plate"):
+        for name in ("scale_on_image", "plate", "obj"):
             if not isinstance(getattr(self, name), bool):
                 raise InvalidOptionError(f"{name} must be true or false, got {getattr(self, name)!r}")
         if self.plate_scale is not None:
@@ -711,11 +716,28 @@ def _scale_on_image(r: _Renderer, grid: bool):
                                at=(probe.margin, g.height + probe.margin)), band
 
 
+def _write_flat_obj(path: Path, flat: FlatMesh, g: _Grid, band: int, texture_name: str) -> Path:
+    """The flattened surface as a textured OBJ: 3D positions, texture coordinates = the flat
+    coordinates in the pixel grid of ``NAME.png`` (``band`` rows added below it)."""
+    from potflat import __version__
+    from potflat.io.obj import write_textured_obj
+
+    height = g.height + band
+    vt = np.empty_like(flat.uv)
+    vt[:, 0] = (flat.uv[:, 0] - g.origin[0]) * g.scale / g.width
+    vt[:, 1] = 1.0 - (g.origin[1] - flat.uv[:, 1]) * g.scale / height
+    header = (f"potflat {__version__}: {flat.mesh.source.name if flat.mesh.source else 'flattening'}, "
+              f"units {flat.mesh.units}; texture coordinates = the flat layout in {texture_name} "
+              f"({g.px_per_mm:g} px/mm)")
+    return write_textured_obj(path, flat.mesh.vertices, flat.mesh.faces, vt, flat.mesh.faces, texture_name,
+                              header=header)
+
+
 def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: list) -> None:
     """Refuse to bake when an output name is an input file (e.g. the scan's texture ``NAME.png``
     when baking into the scan's own folder): the input would be replaced."""
     suffixes = (".png", ".tif", ".position.tif", ".sheet.png", ".bake.json", ".overlay.png", ".scale-layer.png",
-                ".attachments.png",
+                ".attachments.png", ".flat.obj", ".flat.mtl", ".plate.svg", ".plate.pdf", ".plate.png",
                 ".scalebar.png", *(f".{m}.png" for m in options.maps))
     for src in (Path(p) for p in inputs if p is not None):
         for out in (out_dir / f"{name}{s}" for s in suffixes):
@@ -834,6 +856,9 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
                                             shape=(g.height, g.width, 3), dtype=np.float32, px_per_mm=ppm,
                                             photometric="rgb")
     figures = _figures(r, covered)
+    if options.obj:
+        paths["obj"] = _write_flat_obj(out_dir / f"{name}.flat.obj", flat, g, band, paths["png"].name)
+        paths["mtl"] = paths["obj"].with_suffix(".mtl")
     if rollout_ply is not None:
         paths["sheet"] = annotate.comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat,
                                                    title=name)

@@ -96,6 +96,8 @@ def _relax_summary(folder: Path, name: str) -> dict:
 
 
 def _card(report, base: Path) -> str:
+    from potflat.batch import MANIFEST
+
     folder = Path(report.output)
     name = report.name
     relax = _relax_summary(folder, name)
@@ -113,7 +115,7 @@ def _card(report, base: Path) -> str:
     seconds, when = report.seconds, ""
     if report.status == "skipped":  # made by an earlier run: its time is in the manifest
         try:
-            seconds, when = float(json.loads((folder / "manifest.json").read_text())["seconds"]), " (earlier run)"
+            seconds, when = float(json.loads((folder / MANIFEST).read_text())["seconds"]), " (earlier run)"
         except (OSError, ValueError, KeyError, TypeError):
             seconds = 0.0
     rows = [("status", f'<span class="status {html.escape(report.status)}">{html.escape(report.status)}</span>'),
