@@ -188,12 +188,14 @@ class ScaleLayer:
 
     at : (int, int), optional
         Top-left pixel ``(x, y)`` of the bar's box; default: the bottom-left corner of the image.
+    bar_mm : float, optional
+        Bar length; default: the round length nearest below a quarter of the image width.
     """
 
     def __init__(self, width: int, height: int, px_per_mm: float, *, grid: bool = False,
-                 at: tuple[int, int] | None = None):
+                 at: tuple[int, int] | None = None, bar_mm: float | None = None):
         self.width, self.height, self.px_per_mm, self.grid = width, height, px_per_mm, grid
-        self.bar_mm = nice_length(0.25 * width / px_per_mm)
+        self.bar_mm = bar_mm if bar_mm is not None else nice_length(0.25 * width / px_per_mm)
         bar_px = self.bar_mm * px_per_mm
         self.font_px = int(np.clip(round(bar_px / 9), 10, 96))
         self.grid_font_px = int(np.clip(round(GRID_MM * px_per_mm * 0.3), 9, 48))

@@ -683,12 +683,18 @@ def _repeat_line(share: np.ndarray, r0: int) -> np.ndarray:
     return edge & rows[:, None]
 
 
+#: Shortest scale bar drawn into ``NAME.png``, as a fraction of the default (a quarter of the width).
+MIN_BAR_FRACTION = 0.1
+
+
 def _scale_on_image(r: _Renderer, grid: bool):
     """The scale layer to draw into ``NAME.png``, placed where it covers no painting.
 
     The painting's footprint is rasterised on a grid of at most
     :data:`potflat.annotate.FREE_SPOT_MASK_PX` pixels a side and the free place nearest the
-    bottom-left corner is taken; when there is none, a band is added below the image.
+    bottom-left corner is taken, for the longest round bar (from a quarter of the image width
+    down to :data:`MIN_BAR_FRACTION` of that) that has one; when none has, a band is added
+    below the image with the default bar.
 
     Returns
     -------
@@ -699,8 +705,6 @@ def _scale_on_image(r: _Renderer, grid: bool):
     from potflat import annotate
 
     g = r.grid
-    probe = annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid)
-    bw, bh = probe.box_size
     f = max(1, math.ceil(max(g.width, g.height) / annotate.FREE_SPOT_MASK_PX))
     wc, hc = math.ceil(g.width / f), math.ceil(g.height / f)
     uv = r.flat.uv[r.faces]  # (m, 3, 2)
@@ -708,12 +712,20 @@ def _scale_on_image(r: _Renderer, grid: bool):
     tex[..., 0] = (uv[..., 0] - g.origin[0]) * g.scale / f / wc
     tex[..., 1] = 1.0 - (g.origin[1] - uv[..., 1]) * g.scale / f / hc
     covered = _chart_mask(tex, hc, wc)
-    spot = annotate.free_spot(covered, (math.ceil(bw / f) + 1, math.ceil(bh / f) + 1), math.ceil(probe.margin / f))
-    if spot is not None:
-        return annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid, at=(spot[0] * f, spot[1] * f)), 0
-    band = bh + 2 * probe.margin
-    return annotate.ScaleLayer(g.width, g.height + band, g.px_per_mm, grid=grid,
-                               at=(probe.margin, g.height + probe.margin)), band
+    default = annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid)
+    bar = default.bar_mm
+    while bar >= MIN_BAR_FRACTION * default.bar_mm * (1 - 1e-9):
+        probe = annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid, bar_mm=bar)
+        bw, bh = probe.box_size
+        spot = annotate.free_spot(covered, (math.ceil(bw / f) + 1, math.ceil(bh / f) + 1), math.ceil(probe.margin / f))
+        if spot is not None:
+            return annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid, bar_mm=bar,
+                                       at=(spot[0] * f, spot[1] * f)), 0
+        bar = annotate.nice_length(bar * 0.99)
+    bw, bh = default.box_size
+    band = bh + 2 * default.margin
+    return annotate.ScaleLayer(g.width, g.height + band, g.px_per_mm, grid=grid, bar_mm=default.bar_mm,
+                               at=(default.margin, g.height + default.margin)), band
 
 
 def _write_flat_obj(path: Path, flat: FlatMesh, g: _Grid, band: int, texture_name: str) -> Path:
@@ -871,8 +883,8 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
             "mark": f"dashed line {REPEAT_COLOUR[:3]} where the repeat past 360 degrees starts"},
         "scale_bar_mm": layer.bar_mm,
         "scale_on_image": None if on_image is None else {
-            "at_px": list(on_image.at), "box_px": list(on_image.box_size), "band_below_px": band,
-            "grid": options.grid},
+            "bar_mm": on_image.bar_mm, "at_px": list(on_image.at), "box_px": list(on_image.box_size),
+            "band_below_px": band, "grid": options.grid},
         "maps": {m: {"range": [scales[m].lo, scales[m].hi], "label": scales[m].label} for m in options.maps},
         "files": {k: p.name for k, p in paths.items()},
         "provenance": provenance(stage="bake", inputs=inputs,

@@ -110,11 +110,14 @@ def painted_zone_distortion(relax_summary: dict) -> tuple[dict, str]:
 
 def distortion_words(figures: dict) -> str:
     """Distortion figures as a reader quotes them (% length and area error, folded triangles)."""
+    def pct(x: float) -> str:
+        return f"{100 * x:.1f}" if 100 * abs(x) >= 1 else f"{100 * x:.2g}"
+
     parts = []
     if figures.get("edge_rms") is not None:
-        parts.append(f"length error {100 * figures['edge_rms']:.1f} % RMS")
+        parts.append(f"length error {pct(figures['edge_rms'])} % RMS")
     if figures.get("area_mean_abs_log") is not None:
-        parts.append(f"area error {100 * math.expm1(figures['area_mean_abs_log']):.1f} % mean")
+        parts.append(f"area error {pct(math.expm1(figures['area_mean_abs_log']))} % mean")
     if figures.get("flipped") is not None:
         parts.append(f"{figures['flipped']} folded triangles")
     return ", ".join(parts) or "not measured"
