@@ -105,6 +105,18 @@ def overlay(rgb: np.ndarray, values: np.ndarray, scale: MapScale, coverage: np.n
     return out
 
 
+#: Colour of the important zone's outline on the maps (RGBA).
+OUTLINE_RGBA = (255, 255, 255, 255)
+
+
+def draw_outline(rows: np.ndarray, outline: np.ndarray | None) -> np.ndarray:
+    """Map rows (k, w, 4) uint8 with the important zone's outline (k, w) bool drawn in
+    :data:`OUTLINE_RGBA` (in place; returned). ``None``: unchanged."""
+    if outline is not None:
+        rows[outline] = OUTLINE_RGBA
+    return rows
+
+
 def _colorbar(ax, scale: MapScale, fontsize: float, orientation: str = "horizontal"):
     import matplotlib
     from matplotlib.cm import ScalarMappable

@@ -23,7 +23,7 @@ import math
 import os
 from collections.abc import Iterator
 from contextlib import ExitStack
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -488,6 +488,20 @@ class _Renderer:
         self._raster_mod.face_values(face, np.ascontiguousarray(self.face_values[name], dtype=np.float64), self.n, out)
         return out
 
+    def zone_outline(self, r0: int, r1: int) -> np.ndarray | None:
+        """Pixels on the outline of the important zone (importance crossing
+        :data:`potflat.distortion.ZONE_THRESHOLD`), shape (k, w) bool; None without importance."""
+        if self.flat.importance is None:
+            return None
+        import cv2
+
+        field = self._vertex_field(self.flat.importance, r0, r1)[..., 0]
+        inside = (np.nan_to_num(field, nan=0.0) >= distortion.ZONE_THRESHOLD).astype(np.uint8)
+        ring = np.ones((3, 3), np.uint8)
+        edge = cv2.dilate(inside, ring, borderType=cv2.BORDER_REPLICATE) & ~cv2.erode(
+            inside, ring, borderType=cv2.BORDER_REPLICATE)
+        return edge.astype(bool) & np.isfinite(field)
+
     def position(self, r0: int, r1: int) -> np.ndarray:
         """3D point under each pixel, scan units (NaN outside). Shape (k, w, 3) float32."""
         return self._vertex_field(self.flat.mesh.vertices, r0, r1)
@@ -533,6 +547,7 @@ def _figures(r: _Renderer, covered_px: float) -> dict:
         "area": {**_stats(np.abs(fv["area"][valid]), w), "unit": "|log2(flat area / 3D area)|"},
         "anisotropy": {**_stats(fv["anisotropy"][valid], w), "unit": "sigma_max / sigma_min"},
         "distortion": summary,
+        **distortion.zone_summary(flat.mesh.vertices, flat.uv, flat.mesh.faces, flat.importance),
         "covered_area_mm2": covered_px / g.px_per_mm ** 2,
         "flattened_area_mm2": float(np.abs(r.area_2d).sum()) * mpu ** 2,
         "surface_area_mm2": float(r.area_3d.sum()) * mpu ** 2,
@@ -820,6 +835,8 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
         r.face_values["repeated"] = repeated
     paths: dict[str, Path] = {"png": out_dir / f"{name}.png"}
     scales = {m: annotate.map_scale(m, r.vertex_stress if m == "stress" else r.face_values[m]) for m in options.maps}
+    if flat.importance is not None:
+        scales = {m: replace(sc, label=f"{sc.label}; white line: painted zone") for m, sc in scales.items()}
     legends = {m: annotate.legend_band(scales[m], g.width) for m in options.maps}
     if "stress" in options.maps:
         legends["overlay"] = legends["stress"]
@@ -846,11 +863,12 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
             if len(repeated):
                 rgba[_repeat_line(r.scalar("repeated", r0, r1), r0)] = REPEAT_COLOUR
             png.write(rgba if on_image is None else annotate.over(on_image.rows(r0, r1), rgba))
+            outline = r.zone_outline(r0, r1) if options.maps else None
             for m in options.maps:
                 values = r.scalar(m, r0, r1)
-                writers[m].write(annotate.colorize(values, scales[m], cov))
+                writers[m].write(annotate.draw_outline(annotate.colorize(values, scales[m], cov), outline))
                 if m == "stress":
-                    writers["overlay"].write(annotate.overlay(rgb, values, scales[m], cov))
+                    writers["overlay"].write(annotate.draw_outline(annotate.overlay(rgb, values, scales[m], cov), outline))
             layer_png.write(layer.rows(r0, r1))
             if len(attachment_marks):
                 mask_png.write(_attachment_rows(r.scalar("attachments", r0, r1)))

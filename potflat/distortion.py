@@ -17,6 +17,7 @@ Faces whose 3D area is (numerically) zero carry no distortion and are excluded.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -381,3 +382,39 @@ def true_scale_factor(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, i
         zone = fd.valid
     median = weighted_percentile(length_scale(fd), np.where(zone, fd.area_3d, 0.0), 50.0)
     return 1.0 / median if np.isfinite(median) and median > 0 else 1.0
+
+
+def zone_summary(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, importance: np.ndarray | None) -> dict:
+    """How true the flattening is inside the important zone and outside it, for the JSON.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    uv : (n, 2) float64
+    faces : (m, 3) int64
+    importance : (n,) float64 or None
+
+    Returns
+    -------
+    dict
+        ``important_zone`` and ``rest`` (:class:`potflat.distortion.ZoneFigures` as dicts,
+        NaN as null) and ``lengths``: one sentence on how far lengths read off the image
+        are off where the painting is.
+    """
+    zones = zone_figures(vertices, uv, faces, importance)
+    imp = zones["important"]
+    where = "in the painted zone" if importance is not None else "on the surface"
+    words = (f"lengths measured on the image {where} are off by {imp.length_error_median_pct:.1f}% "
+             f"(median) and by at most {imp.length_error_p95_pct:.1f}% over 95% of it; "
+             f"median scale {imp.scale_median:.3f}")
+    return {"important_zone": _json_safe(imp.as_dict()), "rest": _json_safe(zones["rest"].as_dict()),
+            "lengths": words}
+
+
+def _json_safe(node):
+    """NaN and infinity as None (JSON has neither), recursively."""
+    if isinstance(node, dict):
+        return {k: _json_safe(v) for k, v in node.items()}
+    if isinstance(node, float) and not math.isfinite(node):
+        return None
+    return node

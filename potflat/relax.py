@@ -42,6 +42,7 @@ from potflat.distortion import (
     summarize,
     true_scale_factor,
     vertex_stress,
+    zone_summary,
 )
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
 from potflat.types import FlatMesh, Mesh, StageOutput
@@ -49,7 +50,7 @@ from potflat.types import FlatMesh, Mesh, StageOutput
 #: The painted figures' settings of the fold-free presets (measured: docs/performance.md,
 #: "Painted figures"): the shape term's weight, how much stiffer the important zone is than
 #: plain surface, and the final scaling to true scale in the important zone.
-_FIGURES = {"shape": 0.5, "importance_contrast": 20.0, "true_scale": True}
+_FIGURES = {"shape": 0.2, "importance_contrast": 100.0, "true_scale": True}
 #: Settings of each preset; ``None`` in :class:`RelaxOptions` takes the preset's value.
 PRESETS: dict[str, dict] = {
     "preview": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
@@ -139,11 +140,12 @@ class RelaxOptions:
         finer than the cells is relaxed itself). 0: relax the full mesh. None: the preset's
         (0.5 for ``preview``, 0 for the others).
     shape : float or None
-        Weight of the shape term (>= 0): each triangle's conformal energy
-        ``A (sigma_1 - sigma_2)^2 / 2`` per mean triangle area, added to the springs. The
-        springs alone charge shear half as much as area change; the shape term charges
-        shear only, so larger values keep figures rounder and lines straighter at some cost
-        in area. 0: the springs alone. None: the preset's (0 for ``paper``).
+        Weight of the shape term (>= 0): each triangle's symmetric anisotropy energy
+        ``A (sigma_1 / sigma_2 + sigma_2 / sigma_1 - 2)`` per mean triangle area, added to
+        the springs. The springs alone charge shear half as much as area change; the shape
+        term charges shear only (about ``A log(sigma_1 / sigma_2)^2``), so larger values keep
+        figures rounder and lines straighter at some cost in area. 0: the springs alone.
+        None: the preset's (0 for ``paper``).
     importance_contrast : float or None
         How much stiffer the important (painted) zone is than plain surface (>= 1): springs,
         barrier and shape term of plain surface are weighted ``1 / importance_contrast``, so
@@ -255,6 +257,9 @@ class RelaxResult:
         many search directions were smoothed at faces limiting the step.
     settings : dict
         The resolved settings (preset values with options applied).
+    scale_factor : float
+        The uniform factor applied after solving for true scale (``true_scale``; 1 without):
+        the median length scale in the important zone (the whole surface without one) is 1.
     notes : tuple of str
         What the solver had to do beyond the plan (untangling, fallback), for the JSON.
     """
@@ -271,6 +276,7 @@ class RelaxResult:
     preset: str
     levels: tuple = ()
     settings: dict = field(default_factory=dict)
+    scale_factor: float = 1.0
     notes: tuple = ()
 
 
@@ -989,11 +995,10 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
         raise FoldedResultError("the paper dynamics diverged (NaN); use the default preset")
     uv_out = np.empty_like(x)
     uv_out[order] = x * unit + centre
+    factor = 1.0
     if settings["true_scale"]:
         factor = true_scale_factor(V, uv_out, F, flat.importance)
         uv_out = centre + (uv_out - centre) * factor
-        notes.append(f"scaled by {factor:.4f} to true scale (median length scale 1) in the "
-                     + ("important zone" if flat.importance is not None else "whole surface"))
     before = summarize(V, uv, F)
     after = summarize(V, uv_out, F)
     stress = vertex_stress(V, uv_out, F, flat.mesh.mm_per_unit)
@@ -1012,6 +1017,7 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
         preset=options.preset,
         levels=tuple(levels),
         settings=settings,
+        scale_factor=factor,
         notes=tuple(notes + ([f"stopped by {run.stopped}"] if run.stopped else [])),
     )
 
@@ -1094,6 +1100,11 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         "notes": list(result.notes),
         "distortion_before": result.distortion_before.as_dict(),
         "distortion": result.distortion.as_dict(),
+        "importance": ("none: the whole surface counts alike" if result.flat.importance is None else
+                       f"per vertex in {ply_path.name}; springs, barrier and shape term of plain surface weighted "
+                       f"1/{result.settings['importance_contrast']:g}"),
+        **zone_summary(flat.mesh.vertices, result.flat.uv, flat.mesh.faces, result.flat.importance),
+        "true_scale_factor": result.scale_factor,
         "timings": result.timings,
         "units": flat.mesh.units,
         "vertices": len(flat.mesh.vertices),

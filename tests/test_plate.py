@@ -15,6 +15,7 @@ from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.plate import (
     PAINTED_ZONE_KEY,
     PREVIEW_DPI,
+    distortion_words,
     make_plate,
     painted_zone_distortion,
     parse_scale,
@@ -132,8 +133,14 @@ def test_scale_label():
 def test_painted_zone_figures_are_preferred():
     whole = {"edge_rms": 0.2, "flipped": 0}
     assert painted_zone_distortion({"distortion": whole}) == (whole, "whole surface")
-    zone = {"edge_rms": 0.05, "flipped": 0}
-    assert painted_zone_distortion({"distortion": whole, PAINTED_ZONE_KEY: zone}) == (zone, "painted zone")
+    zone = {"area_fraction": 0.3, "length_error_median_pct": 1.5, "length_error_p95_pct": 4.0,
+            "distortion": {"edge_rms": 0.05, "flipped": 0}}
+    figures, where = painted_zone_distortion({"distortion": whole, PAINTED_ZONE_KEY: zone})
+    assert where == "painted zone" and figures["edge_rms"] == 0.05
+    assert distortion_words(figures).startswith("lengths off by 1.5 % (median), at most 4.0 % over 95 %")
+    everywhere = {**zone, "area_fraction": 1.0}
+    assert painted_zone_distortion({"distortion": whole, PAINTED_ZONE_KEY: everywhere})[1] == "whole surface"
+    assert distortion_words(whole) == "length error 20.0 % RMS, 0 folded triangles"
 
 
 def test_scale_on_image_covers_no_painting(cup_run, tmp_path):

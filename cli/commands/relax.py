@@ -43,6 +43,15 @@ def relax_command(
     simplify_mm: Annotated[float | None, typer.Option(
         "--simplify-mm", help="Relax a coarse copy with cells of this side (mm) and let the full mesh follow it; "
         "0: the full mesh \\[default: 0.5 for preview (2 px at 4 px/mm), else 0].")] = None,
+    shape: Annotated[float | None, typer.Option(
+        "--shape", help="Weight of the shape term (>= 0): rounder figures and straighter lines at some cost in "
+                        "area; 0: the springs alone \\[default: 0.2, 0 for paper].")] = None,
+    importance_contrast: Annotated[float | None, typer.Option(
+        "--importance-contrast", help="How much stiffer the painted zone is than plain surface (>= 1; 1: the whole "
+                                      "surface alike) \\[default: 100, 1 for paper].")] = None,
+    true_scale: Annotated[bool | None, typer.Option(
+        "--true-scale/--no-true-scale", help="Scale the result so that the median length scale in the painted zone "
+                                             "is 1 \\[default: on, off for paper].")] = None,
     name: Name = None,
     quiet: Quiet = False,
     json: Json = False,
@@ -51,7 +60,8 @@ def relax_command(
     from potflat_cli._stage import run_stage
 
     options = RelaxOptions(preset=preset, tol=tol, max_iter=max_iter, time_budget=time_budget, threads=threads,
-                           stretch=stretch, stiffness=stiffness, weighting=weighting, simplify_mm=simplify_mm)
+                           stretch=stretch, stiffness=stiffness, weighting=weighting, simplify_mm=simplify_mm,
+                           shape=shape, importance_contrast=importance_contrast, true_scale=true_scale)
     show_progress = sys.stderr.isatty() and not (quiet or json)
     out = run_stage(None if show_progress else f"relaxing {rollout_ply.name}",
                     lambda: run_relax_stage(rollout_ply, output if output is not None else rollout_ply.parent,
@@ -68,6 +78,7 @@ def relax_command(
                f"{s['timings']['solve']:.1f} s")
     typer.echo(f"  edge-length RMS {before['edge_rms']:.4f} -> {after['edge_rms']:.4f}, "
                f"mean |log area ratio| {before['area_mean_abs_log']:.4f} -> {after['area_mean_abs_log']:.4f}, {fold}")
+    typer.echo(f"  {s['lengths']}")
 
 
 relax_command.__doc__ = HELP

@@ -66,6 +66,21 @@ def rollout_command(
     texture: Annotated[bool, typer.Option(
         "--texture/--no-texture", help="Use the scan's texture image; --no-texture loads the geometry "
                                        "(and vertex colours) only, e.g. when the texture is missing or corrupt.")] = True,
+    importance: Annotated[Optional[str], typer.Option(
+        "--importance", help="Where the painting is (kept true by relax, reported by bake): auto (found in the "
+                             "colours), none (the whole surface alike), mask (--importance-mask painted over a "
+                             "potflat image), texture-mask (--importance-mask in the texture's space), band "
+                             "(--importance-band / --importance-angles) \\[default: auto].")] = None,
+    importance_mask: Annotated[Optional[str], typer.Option(
+        "--importance-mask", help="PNG mask, white = important: painted over a potflat image (--importance mask) "
+                                  "or in texture space (--importance texture-mask).")] = None,
+    importance_image: Annotated[Optional[str], typer.Option(
+        "--importance-image", help="NAME.bake.json of the image the mask was painted over \\[default: the one "
+                                   "beside the mask with the mask's size].")] = None,
+    importance_band: Annotated[Optional[tuple[float, float]], typer.Option(
+        "--importance-band", help="With --importance band: heights LO HI as fractions, 0 = foot, 1 = mouth.")] = None,
+    importance_angles: Annotated[Optional[tuple[float, float]], typer.Option(
+        "--importance-angles", help="With --importance band: angles A0 A1 in degrees from the seam.")] = None,
     name: Name = None,
     quiet: Quiet = False,
     json: Json = False,
@@ -80,7 +95,9 @@ def rollout_command(
     values = {"proxy": proxy, "axis": axis, "flip": flip or None, "seam": seam, "band": band,
               "angles": angles, "view": view, "units": units, "texture": None if texture else False,
               "side": side, "keep_attachments": keep_attachments or None, "profile_mm": profile_mm,
-              "seam_at": seam_at, "landmark": landmark, "overlap": overlap}
+              "seam_at": seam_at, "landmark": landmark, "overlap": overlap, "importance": importance,
+              "importance_mask": importance_mask, "importance_image": importance_image,
+              "importance_band": importance_band, "importance_angles": importance_angles}
     options = options_from_cli("rollout", values)
     _rollout(scan, output, options, name=name, quiet=quiet, as_json=json)
 
@@ -130,6 +147,8 @@ def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quie
     out.print(f"profile: {result.paths['profile_csv'].name}, {result.paths['profile_svg'].name}")
     for note in s["notes"]:
         out.print(f"[yellow]note:[/] {note}")
+    if s.get("importance"):
+        out.print(f"importance ({s['importance']['method']}): {s['importance']['reason']}")
     flipped = f"[red]{d['flipped']} flipped[/]" if d["flipped"] else "0 flipped"
     out.print(f"distortion: edge-length RMS {d['edge_rms']:.4f}, mean |log area| {d['area_mean_abs_log']:.4f}, "
               f"anisotropy mean {d['anisotropy_mean']:.3f}, {flipped}")

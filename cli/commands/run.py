@@ -82,6 +82,9 @@ def _run(values: dict[str, Any]) -> None:
     shown = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
                       for k, v in figures.items() if v is not None)
     if shown:
-        out.print(f"  relaxed distortion: {shown}")
+        out.print(f"  whole-surface distortion: {shown}")
+    relaxed = result.stages["relax"].summary
+    if relaxed.get("lengths"):
+        out.print(f"  {relaxed['lengths']}")
     for key, path in result.paths.items():
         out.print(f"  {key:<16} {path}", highlight=False)

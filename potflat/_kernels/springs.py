@@ -469,7 +469,8 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
     vf_ptr, vf_tri : CSR from :func:`vertex_faces`
     faces : (m, 3) int32 or int64
     shape : (m, 4) or (0, 4) float64
-        Shape term coefficients (:func:`shape_coefficients`). Empty: no shape term.
+        Shape term coefficients (:func:`shape_coefficients`). Empty: no shape term. A face
+        with non-positive flat area makes the energy infinite.
     bprev, bnext : (n,) int32
         Each vertex's unique boundary predecessor and successor (-1: none or not unique).
     bguard : (n,) bool
@@ -525,7 +526,7 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
                     ci = 2
                 j = faces[t, (ci + 1) % 3]
                 l = faces[t, (ci + 2) % 3]
-                # cotangent weights of the angles at i, j, l (scaled), and the area weight
+                # cotangents of the rest angles at i, j, l, and 2 s w A_rest
                 ct_i = shape[t, ci]
                 ct_j = shape[t, (ci + 1) % 3]
                 ct_l = shape[t, (ci + 2) % 3]
@@ -537,11 +538,20 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
                 cx = x[j, 0] - x[l, 0]
                 cy = x[j, 1] - x[l, 1]
                 area = 0.5 * (ax * by - ay * bx)
-                ef = 0.25 * (ct_l * (ax * ax + ay * ay) + ct_j * (bx * bx + by * by) + ct_i * (cx * cx + cy * cy)) - wa * area
-                es += ef / 3.0
-                gx += 0.5 * (ct_l * ax + ct_j * bx) - 0.5 * wa * (x[j, 1] - x[l, 1])
-                gy += 0.5 * (ct_l * ay + ct_j * by) - 0.5 * wa * (x[l, 0] - x[j, 0])
-                hd += 0.5 * (ct_l + ct_j)
+                if area <= 0.0:
+                    es = np.inf
+                    continue
+                # Dirichlet energy of the face's map, and its gradient at i
+                dir_ = 0.25 * (ct_l * (ax * ax + ay * ay) + ct_j * (bx * bx + by * by) + ct_i * (cx * cx + cy * cy))
+                dgx = 0.5 * (ct_l * ax + ct_j * bx)
+                dgy = 0.5 * (ct_l * ay + ct_j * by)
+                # the flat area's gradient at i
+                agx = 0.5 * (x[j, 1] - x[l, 1])
+                agy = 0.5 * (x[l, 0] - x[j, 0])
+                es += wa * (dir_ / area - 1.0) / 3.0
+                gx += wa * (dgx * area - dir_ * agx) / (area * area)
+                gy += wa * (dgy * area - dir_ * agy) / (area * area)
+                hd += wa * 0.5 * (ct_l + ct_j) / area
         eb = 0.0
         if mu_b > 0.0 and (bprev[i] >= 0 or bnext[i] >= 0):
             sb = mu_b * k
@@ -599,13 +609,16 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
 
 @parallel
 def shape_coefficients(V, faces, weight, scale, area_floor, out):
-    """Coefficients of the shape term: each face's conformal energy on its rest triangle.
+    """Coefficients of the shape term: each face's symmetric anisotropy energy.
 
     For a face with rest (3D) triangle of area ``A`` and the linear map ``J`` from it to
-    the flat triangle, the term is ``s w A (|J|^2 / 2 - det J) = s w A (sigma_1 - sigma_2)^2 / 2``
-    (zero for a similarity, so it charges shear but neither scale nor rotation). As a
-    function of the flat corners it is ``1/4 sum_edges c_o |x_a - x_b|^2 - c_A A_flat(x)``,
-    with ``c_o = s w cot(angle opposite the edge)`` and ``c_A = s w``: a convex quadratic.
+    the flat triangle (singular values ``sigma_1 >= sigma_2 > 0``), the term is
+    ``s w A (sigma_1 / sigma_2 + sigma_2 / sigma_1 - 2)`` (the MIPS energy): zero for a
+    similarity, so it charges shear but neither scale nor rotation, about ``s w A S^2`` for
+    a small ``S = log(sigma_1 / sigma_2)`` (the anisotropy the maps show) and infinite for a
+    collapsed triangle. With ``|J|^2 / det J = 2 D / A_flat``, ``D = 1/4 sum_edges
+    cot(opposite angle) |x_a - x_b|^2`` the map's Dirichlet energy, it is
+    ``2 s w A (D / A_flat - 1)``.
 
     Parameters
     ----------
@@ -619,7 +632,7 @@ def shape_coefficients(V, faces, weight, scale, area_floor, out):
     area_floor : float
         Faces with a smaller rest area (degenerate, their angles meaningless) get no term.
     out : (m, 4) float64
-        Output: ``s w cot`` of the angles at corners 0, 1, 2 and ``s w``.
+        Output: the cotangents of the rest angles at corners 0, 1, 2 and ``2 s w A``.
     """
     for t in prange(faces.shape[0]):
         a0 = faces[t, 0]
@@ -646,10 +659,10 @@ def shape_coefficients(V, faces, weight, scale, area_floor, out):
         e3y = V[a2, 1] - V[a1, 1]
         e3z = V[a2, 2] - V[a1, 2]
         # cot of the angle at a corner = (dot of its two edges) / (twice the area)
-        out[t, 0] = w * (e1x * e2x + e1y * e2y + e1z * e2z) / twice
-        out[t, 1] = w * (-e1x * e3x - e1y * e3y - e1z * e3z) / twice
-        out[t, 2] = w * (e2x * e3x + e2y * e3y + e2z * e3z) / twice
-        out[t, 3] = w
+        out[t, 0] = (e1x * e2x + e1y * e2y + e1z * e2z) / twice
+        out[t, 1] = (-e1x * e3x - e1y * e3y - e1z * e3z) / twice
+        out[t, 2] = (e2x * e3x + e2y * e3y + e2z * e3z) / twice
+        out[t, 3] = w * twice
 
 
 @leaf
