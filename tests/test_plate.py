@@ -73,7 +73,7 @@ def test_plate_svg_text_caption_and_vector_profile(cup_run):
     svg = (cup_run.out_dir / "cup.plate.svg").read_text()
     texts = " ".join(re.findall(r"<text[^>]*>([^<]*)</text>", svg))
     for words in ("cup", "computed from a 3D scan", f"potflat {__version__}", "proxy", "preset preview",
-                  "Distortion in the whole surface", "length error", "Scale 1:2", "10 cm"):
+                  "Distortion in the whole surface", "lengths off by", "Scale 1:2", "10 cm"):
         assert words in texts, words
     assert "data:image/png;base64," in svg
     assert len(re.findall(r"<path ", svg)) >= 6  # section, outer lines, axis, scale bar blocks

@@ -57,7 +57,7 @@ def test_report_has_a_card_per_scan_with_figures_status_and_files(batch_out):
     by_name = {html.unescape(re.search(r"<h2>(.*?)</h2>", c)[1]): c for c in cards}
     assert set(by_name) == {"cup", "amph ora", "broken"}
     cup = by_name["cup"]
-    assert 'data-status="done"' in cup and "length error" in cup and "folded triangles" in cup
+    assert 'data-status="done"' in cup and "lengths off by" in cup and "folded triangles" in cup
     assert "cup.plate.pdf" in cup and "cup.stress.png" in cup and "cup.relaxed.json" in cup
     assert cup.count("<img ") == 2  # painting and stress map
     broken = by_name["broken"]
