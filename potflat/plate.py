@@ -206,7 +206,9 @@ def view_direction(rollout_summary: dict) -> np.ndarray:
     ax = rollout_summary["axis"]
     a = np.asarray(ax["direction"], np.float64)
     ref = np.asarray(ax["reference_direction"], np.float64)
-    lo, hi = rollout_summary.get("region", {}).get("theta_range_deg") or (0.0, 360.0)
+    region = rollout_summary.get("region", {})
+    lo, hi = region.get("theta_range_deg") or (0.0, 360.0)
+    hi -= region.get("overlap_deg") or 0.0  # the repeat past 360 degrees is not part of the view
     seam = rollout_summary["seam"]
     origin = seam.get("theta_origin_deg", seam["angle_deg"])  # angles of a window start at its landmark
     phi = math.radians(origin + 0.5 * (lo + hi))

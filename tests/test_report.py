@@ -18,6 +18,7 @@ import pytest
 from PIL import Image
 
 from potflat.batch import load_batch, run_batch
+from potflat.plate import painted_zone_distortion
 from potflat.report import REPORT_NAME
 
 #: Browsers tried, in order (Debian's package is chromium; .ci/run installs it when missing).
@@ -65,7 +66,7 @@ def test_report_has_a_card_per_scan_with_figures_status_and_files(batch_out):
     # figures agree with the relax stage's JSON
     relaxed = json.loads((batch_out / "cup" / "cup.relaxed.json").read_text())
     edge = float(re.search(r'data-distortion="([^"]+)"', cup)[1])
-    assert edge == pytest.approx(relaxed["distortion"]["edge_rms"], rel=1e-5)
+    assert edge == pytest.approx(painted_zone_distortion(relaxed)[0]["edge_rms"], rel=1e-5)
     assert "summary.csv" in page and "http" not in re.sub(r'"data:[^"]*"', "", page).replace(
         'name="viewport"', "")  # no network
 
