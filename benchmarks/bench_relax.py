@@ -49,7 +49,7 @@ def _paper_energy(flat, uv) -> float:
     """Paper Eq. 1 (k = 1, uniform, edge and cross springs) in normalised units, per spring."""
     import numpy as np
 
-    from potflat.relax import _Springs
+    from potflat.relax.solver import _Springs
 
     V, F = flat.mesh.vertices, flat.mesh.faces
     unit = float(np.linalg.norm(V[F[:, [1, 2, 0]]] - V[F], axis=2).mean())
@@ -61,24 +61,16 @@ def _worker(size_m: float, method: str, budget: float, target: float | None) -> 
     """One run in this process; returns the figures."""
     import numpy as np
 
-    from potflat.distortion import summarize
+    from potflat.mesh.distortion import summarize
 
     flat = _mesh(size_m)
     V, F = flat.mesh.vertices, flat.mesh.faces
     out: dict = {"size": size_m, "method": method, "vertices": len(V)}
     if method == "arap":
-        import igl
+        from benchmarks._arap import ARAP_ITERATIONS, libigl_arap
 
-        t0 = time.perf_counter()
-        data = igl.ARAPData()
-        data.energy = igl.ARAP_ENERGY_TYPE_ELEMENTS
-        data.max_iter = 10
-        # one pinned vertex: without any, the global solve's system is singular and fails at times
-        igl.arap_precomputation(V, F, 2, np.zeros(1, np.int32), data)
-        t1 = time.perf_counter()
-        uv = igl.arap_solve(flat.uv[:1].copy(), data, flat.uv.copy())
-        t2 = time.perf_counter()
-        out.update(seconds=t2 - t0, precompute=t1 - t0, iterations=10, converged=None)
+        uv, precompute, seconds = libigl_arap(flat)
+        out.update(seconds=seconds, precompute=precompute, iterations=ARAP_ITERATIONS, converged=None)
     else:
         from benchmarks._meshes import vessel_rollout
         from potflat.relax import relax
@@ -101,7 +93,7 @@ def _worker(size_m: float, method: str, budget: float, target: float | None) -> 
                    levels=[(lv["level"], lv["iterations"]) for lv in r.levels], notes=list(r.notes))
         if preset == "paper" and target is not None and trace:
             # time at which the dynamics first reached the target energy (its own, per spring)
-            from potflat.relax import _Springs
+            from potflat.relax.solver import _Springs
 
             unit = float(np.linalg.norm(V[F[:, [1, 2, 0]]] - V[F], axis=2).mean())
             nspr = _Springs(np.ascontiguousarray(V / unit), F, len(V), k=1.0, relative=False).n_springs
@@ -176,18 +168,6 @@ def _plot(rows: list[dict], path: Path) -> None:
     fig.savefig(path, dpi=110)
 
 
-def _write_docs(text: str) -> None:
-    doc = ROOT / "docs" / "performance.md"
-    old = doc.read_text() if doc.exists() else "# Performance\n"
-    start = old.find("## Relax")
-    if start < 0:
-        new = old.rstrip() + "\n\n" + text
-    else:
-        end = old.find("\n## ", start + 1)
-        new = old[:start] + text + (old[end + 1:] if end >= 0 else "")
-    doc.write_text(new)
-
-
 def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "--worker":
         print(json.dumps(_worker(float(sys.argv[2]), sys.argv[3], float(sys.argv[4]), json.loads(sys.argv[5]))))
@@ -257,7 +237,10 @@ def main() -> None:
                 "times.\n\n" + table + "\n![time vs energy and edge RMS](relax_performance.png)\n\n"
                 + ("Paper dynamics against the default solver on the same energy:\n\n" + "\n".join(extra) + "\n\n"
                    if extra else ""))
-        _write_docs(text)
+        sys.path.insert(0, str(ROOT))
+        from benchmarks._docs import write_section
+
+        write_section(text)
 
 
 if __name__ == "__main__":

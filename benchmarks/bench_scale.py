@@ -1,6 +1,6 @@
 """End-to-end benchmark at scale: a 3M-vertex synthetic scan through ``potflat run``.
 
-A painted amphora (:func:`potflat.synthetic.make_vessel`, random pose, multi-chart texture
+A painted amphora (:func:`potflat_synthetic.vessels.make_vessel`, random pose, multi-chart texture
 atlas) is written as OBJ + MTL + PNG, then ``python -m potflat_cli run`` processes it in one
 child process, exactly as a user would run it. The benchmark samples the child's resident
 memory (``VmRSS`` in ``/proc/PID/status``) every 0.1 s and its high-water mark
@@ -41,7 +41,7 @@ SECTION = "## End to end at scale"
 
 def make_scan(n_vertices: int, folder: Path, *, texture_size: int, seed: int = 0) -> tuple[Path, dict]:
     """Write the synthetic amphora into ``folder``; return the OBJ path and its figures."""
-    from potflat.synthetic import make_vessel, write_obj
+    from potflat_synthetic.vessels import make_vessel, write_obj
 
     t = time.perf_counter()
     vessel = make_vessel("amphora", n_vertices=n_vertices, seed=seed, texture_size=texture_size)
@@ -143,18 +143,6 @@ def table(info: dict, result: dict, image: str, *, command: str, preset: str, px
     return "\n".join(lines)
 
 
-def write_section(doc: Path, section: str) -> None:
-    """Replace this benchmark's section of ``doc`` (or append it); other sections are untouched."""
-    text = doc.read_text() if doc.exists() else "# Performance\n"
-    start = text.find(SECTION)
-    if start < 0:
-        text = text.rstrip("\n") + "\n\n" + section
-    else:
-        nxt = text.find("\n## ", start + len(SECTION))
-        text = text[:start] + section + ("\n" + text[nxt + 1:] if nxt >= 0 else "")
-    doc.write_text(text.rstrip("\n") + "\n")
-
-
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--vertices", type=float, default=3e6)
@@ -181,9 +169,11 @@ def main(argv: list[str] | None = None) -> None:
                         preset=args.preset, px_per_mm=args.px_per_mm)
     print(section)
     if args.write:
-        doc = Path(__file__).resolve().parent.parent / "docs" / "performance.md"
-        write_section(doc, section)
-        print(f"updated {doc}")
+        sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+        from benchmarks._docs import PERFORMANCE_MD, write_section
+
+        write_section(section)
+        print(f"updated {PERFORMANCE_MD}")
 
 
 if __name__ == "__main__":

@@ -9,9 +9,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from potflat.errors import InvalidOptionError
-from potflat.synthetic import (
-    ATLAS_BACKGROUND, BLACK, CREAM, PART_HANDLE, PART_INNER, PART_OUTER, TERRACOTTA,
-    make_vessel, write_obj, write_ply_colored,
+from potflat_synthetic.vessels import (
+    ATLAS_BACKGROUND, BLACK, CIRCLE_RADIUS, CREAM, PAINTINGS, PART_HANDLE, PART_INNER, PART_OUTER,
+    SHADING_RANGE, TERRACOTTA, make_vessel, write_obj, write_ply_colored,
 )
 
 SMALL = dict(n_vertices=3000, texture_size=256)
@@ -371,7 +371,7 @@ def test_sherd_is_one_patch_of_the_requested_width():
 
 
 def test_thick_sherd_is_a_closed_fragment_with_a_plain_back():
-    from potflat.synthetic import CLAY, PART_BREAK
+    from potflat_synthetic.vessels import CLAY, PART_BREAK
 
     v = make_vessel("sherd", sherd_thickness=6.0, holes=1, seed=1, n_vertices=3000, texture_size=256)
     V, F = v.mesh.vertices, v.mesh.faces
@@ -412,6 +412,8 @@ def test_thick_sherd_is_a_closed_fragment_with_a_plain_back():
     ("sherd", {"handles": True}),
     ("sherd", {"sherd_thickness": 0.5}),
     ("amphora", {"sherd_thickness": 5.0}),
+    ("amphora", {"painting": "metope"}),
+    ("amphora", {"shading": 1}),
 ])
 def test_invalid_options(kind, kw):
     with pytest.raises(InvalidOptionError):
@@ -457,7 +459,7 @@ def _reference_raster(tri, h, w, pad):
 
 
 def test_raster_kernel_matches_reference():
-    from potflat._kernels.raster_atlas import rasterize_faces
+    from potflat_synthetic._kernels import rasterize_faces
 
     rng = np.random.default_rng(0)
     tri = rng.uniform(2, 22, (6, 3, 2))
@@ -495,3 +497,145 @@ def test_generate_script_writes_obj_and_truth(tmp_path):
                                truth["profile"]["radius"], atol=1e-5)
     assert len(truth["circles"]) == len(v.features)
     assert mod.main(["--kind", "cone", "--vertices", "10", "-o", str(tmp_path)]) == 2
+
+
+# --------------------------------------------------------------------------- paintings, shading
+
+
+def _wall_points(v, step=0.5):
+    """World points on the outer wall every ``step`` mm of height and of arc length about the
+    axis (between 2 mm above the foot and 2 mm below the mouth, off whole millimetres), and their
+    (height, angle)."""
+    h0, h1 = v.profile[0, 0] + 2.0 + step / 7, v.profile[-1, 0] - 2.0
+    pts, hs, ths = [], [], []
+    for h in np.arange(h0, h1, step):
+        r = float(v.radius_at(h))
+        th = np.arange(0.0, 2 * math.pi, step / r)
+        pts.append(np.stack([r * np.cos(th), r * np.sin(th), np.full(len(th), h)], axis=1))
+        hs.append(np.full(len(th), h))
+        ths.append(th)
+    P = np.concatenate(pts)
+    return P @ v.pose[:3, :3].T + v.pose[:3, 3], np.concatenate(hs), np.concatenate(ths)
+
+
+def test_default_painting_reproduces_the_bundled_sample():
+    """The bundled cone was generated before paintings existed: same texture, same options."""
+    import json
+    from pathlib import Path
+
+    import cv2
+
+    data = Path(__file__).resolve().parents[1] / "samples" / "data"
+    truth = json.loads((data / "cone.truth.json").read_text())
+    opts = {k: val for k, val in truth["options"].items() if val is not None}
+    v = make_vessel(opts.pop("kind"), **opts)
+    np.testing.assert_array_equal(v.texture, cv2.imread(str(data / "cone.png"))[:, :, ::-1])
+    assert v.options == truth["options"]
+    assert v.painting.kind == "frieze" and v.painting.zone is None
+
+
+def test_painting_and_shading_leave_the_mesh_alone():
+    ref = make_vessel("hydria", seed=4, handles=True, **SMALL)
+    for painting in PAINTINGS:
+        v = make_vessel("hydria", seed=4, handles=True, painting=painting, shading=True, **SMALL)
+        np.testing.assert_array_equal(v.mesh.vertices, ref.mesh.vertices)
+        np.testing.assert_array_equal(v.mesh.faces, ref.mesh.faces)
+        np.testing.assert_array_equal(v.mesh.texcoords, ref.mesh.texcoords)
+        assert v.options["painting" if painting != "frieze" else "shading"] == (
+            painting if painting != "frieze" else True)
+
+
+@pytest.mark.parametrize("kind,kw", [("hydria", {"handles": True}), ("aryballos", {}), ("cone", {}),
+                                     ("lekythos", {"handles": "welded"})])
+@pytest.mark.parametrize("painting", ["belt", "panel"])
+def test_belt_and_panel_are_painted_in_their_zone_only(kind, kw, painting):
+    v = make_vessel(kind, seed=1, painting=painting, **SMALL, **kw)
+    P, h, th = _wall_points(v, step=0.8)
+    col = v.paint(P)
+    zone = v.painted_zone(P)
+    black = np.all(col == BLACK, axis=1)
+    assert 0.02 < zone.mean() < 0.6
+    assert np.all(black[~zone])  # glaze everywhere else
+    assert np.mean(np.all(col[zone] == TERRACOTTA, axis=1)) > 0.3
+    z_lo, z_hi, centre, half = v.painting.zone
+    belt = (h >= z_lo) & (h <= z_hi)  # canonical heights: along the axis from the foot
+    if painting == "belt":
+        assert centre is None
+        np.testing.assert_array_equal(zone, belt)
+    else:
+        assert 100 <= math.degrees(2 * half) <= 140
+        around = np.abs((th - centre + math.pi) % (2 * math.pi) - math.pi) <= half
+        np.testing.assert_array_equal(zone, belt & around)
+        # the rest of the frieze (the circles' height) is glaze
+        zf = v.features[0].height
+        assert np.all(black[(np.abs(h - zf) < 2.0) & ~around])
+    # the faces of the zone are outer-wall faces whose centroids are in it
+    zf_ = v.zone_faces()
+    assert zf_.any() and np.all(v.face_part[zf_] == PART_OUTER)
+
+
+@pytest.mark.parametrize("kind,kw", [("hydria", {"handles": True}), ("aryballos", {}), ("alabastron", {}),
+                                     ("cup", {})])
+@pytest.mark.parametrize("painting", PAINTINGS)
+def test_feature_circles_lie_inside_the_painted_zone(kind, kw, painting):
+    v = make_vessel(kind, seed=2, painting=painting, **SMALL, **kw)
+    outer = [c for c in v.features if c.side == "outer"]
+    assert len(outer) >= (2 if painting == "panel" else 3)
+    from scipy.spatial import cKDTree
+
+    P, _, _ = _wall_points(v, step=0.8)
+    col = v.paint(P)
+    zone = v.painted_zone(P)
+    tree = cKDTree(P)
+    for c in outer:
+        assert c.radius == CIRCLE_RADIUS
+        disc = tree.query_ball_point(c.centre, c.radius)
+        assert len(disc) > 100
+        assert np.all(col[disc] == c.colour)  # whole, not covered by glaze or another circle
+        assert np.all(zone[tree.query_ball_point(c.centre, c.radius + 2.0)])  # a margin inside the zone
+    if painting == "panel":  # one group: within the panel's width
+        ang = np.array([c.angle for c in outer])
+        spread = np.abs((ang - v.painting.zone[2] + math.pi) % (2 * math.pi) - math.pi)
+        assert np.all(spread < math.radians(70))
+
+
+@pytest.mark.parametrize("kind", ["aryballos", "alabastron"])
+def test_allover_painting_leaves_no_large_plain_area(kind):
+    from scipy.spatial import cKDTree
+
+    v = make_vessel(kind, seed=0, painting="allover", **SMALL)
+    P, _, _ = _wall_points(v, step=0.5)
+    col = v.paint(P)
+    plain = np.all(col == TERRACOTTA, axis=1)
+    assert 0.2 < plain.mean() < 0.9
+    dist, _ = cKDTree(P[~plain]).query(P[plain])
+    assert dist.max() < 8.0  # every plain point is within 8 mm of a line or a figure
+    assert np.all(v.painted_zone(P))
+    circles = np.array([c.centre for c in v.features])
+    assert len(circles) >= 10
+    gaps = np.linalg.norm(circles[:, None] - circles[None], axis=2) + np.eye(len(circles)) * 1e9
+    assert gaps.min() > 2 * CIRCLE_RADIUS  # the circles do not touch
+
+
+def test_shading_is_a_smooth_gradient_with_mild_noise():
+    plain_v = make_vessel("hydria", seed=3, **SMALL)
+    lit_v = make_vessel("hydria", seed=3, shading=True, **SMALL)
+    np.testing.assert_array_equal(lit_v.paint(lit_v.mesh.vertices), plain_v.paint(plain_v.mesh.vertices))
+    base, lit = plain_v.texture.astype(float), lit_v.texture.astype(float)
+    covered = np.any(plain_v.texture != ATLAS_BACKGROUND, axis=2)
+    np.testing.assert_array_equal(lit[~covered], base[~covered])
+    bright = covered & (base.min(axis=2) >= 50)
+    ratio = lit[bright] / base[bright]
+    lo, hi = SHADING_RANGE
+    q = np.percentile(ratio, [0.5, 99.5])
+    assert lo - 0.06 < q[0] < lo + 0.1 and hi - 0.1 < q[1] < hi + 0.06  # the whole range, about
+    # noise: neighbouring texels of the same plain colour differ by a few grey levels
+    same = bright[:, 1:] & bright[:, :-1] & np.all(plain_v.texture[:, 1:] == plain_v.texture[:, :-1], axis=2)
+    step = (lit[:, 1:] - lit[:, :-1])[same]
+    assert 1.5 < step.std() < 5.0
+    # the vertex colours are lit as well (the same lighting), the painting stays unlit
+    vc = lit_v.vertex_colors().astype(float)
+    vb = plain_v.vertex_colors().astype(float)
+    ok = vb.min(axis=1) >= 50
+    r = vc[ok].sum(axis=1) / vb[ok].sum(axis=1)
+    assert lo - 0.03 < r.min() and r.max() < hi + 0.03 and np.ptp(r) > 0.3
