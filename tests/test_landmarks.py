@@ -1,4 +1,4 @@
-"""Seams and windows measured from landmarks (potflat.landmarks), and the overlap past 360 degrees."""
+"""Seams and windows measured from landmarks (potflat.rollout.landmarks), and the overlap past 360 degrees."""
 from __future__ import annotations
 
 import numpy as np
@@ -8,7 +8,7 @@ import scipy.sparse.csgraph
 
 from _vessel_meshes import cylinder_with_handle
 from potflat.errors import InvalidOptionError
-from potflat.rollout import RolloutOptions, rollout, rollout_summary
+from potflat.rollout.unroll import RolloutOptions, rollout, rollout_summary
 from potflat.types import Mesh
 
 #: Azimuth (degrees, about +z from +x) of the painted sector of the test vessel.
@@ -122,9 +122,9 @@ def test_overlap_repeats_the_start_past_360(vessel):
 def test_overlap_is_marked_in_the_baked_image(vessel, tmp_path):
     from PIL import Image
 
-    from potflat.bake import REPEAT_COLOUR, BakeOptions, run_bake_stage
+    from potflat.bake.render import REPEAT_COLOUR, BakeOptions, run_bake_stage
     from potflat.io.atomic import write_json_atomic
-    from potflat.io.stage import write_flat_ply
+    from potflat.io.flat_ply import write_flat_ply
 
     res = rollout(vessel, proxy="cylinder", overlap=45.0)
     write_flat_ply(tmp_path / "v.rollout.ply", res.flat)

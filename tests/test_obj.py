@@ -12,8 +12,8 @@ from potflat.io.obj import write_textured_obj
 
 @pytest.fixture(scope="module")
 def baked(tmp_path_factory):
-    from potflat.pipeline import run_scan
-    from potflat.synthetic import make_vessel, write_obj
+    from potflat.stages.pipeline import run_scan
+    from potflat_synthetic import make_vessel, write_obj
 
     root = tmp_path_factory.mktemp("obj")
     write_obj(make_vessel("cylinder", n_vertices=1500, texture_size=256, seed=2), root / "scan" / "pot.obj")
@@ -33,7 +33,7 @@ def _sample(img: np.ndarray, tc: np.ndarray) -> np.ndarray:
 
 
 def test_flat_obj_loads_with_its_texture(baked):
-    from potflat.io.stage import read_flat_ply
+    from potflat.io.flat_ply import read_flat_ply
 
     out = baked.out_dir
     paths = baked.stages["bake"].paths
@@ -54,7 +54,7 @@ def test_flat_obj_loads_with_its_texture(baked):
 
 def test_flat_obj_shows_the_scan_texture(baked):
     """At every face centre the re-baked texture shows the colour of the scan's own texture there."""
-    from potflat.io.stage import read_flat_ply
+    from potflat.io.flat_ply import read_flat_ply
 
     out = baked.out_dir
     flat = read_flat_ply(out / "pot.relaxed.ply")

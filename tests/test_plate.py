@@ -1,4 +1,4 @@
-"""The archaeological plate (potflat.plate), the scale bar on the image and the profile step."""
+"""The archaeological plate (potflat.bake.plate), the scale bar on the image and the profile step."""
 from __future__ import annotations
 
 import json
@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 
 from potflat import __version__
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.plate import (
+from potflat.bake.plate import (
     PAINTED_ZONE_KEY,
     PREVIEW_DPI,
     distortion_words,
@@ -29,8 +29,8 @@ PT_PER_MM = 72 / 25.4
 @pytest.fixture(scope="module")
 def cup_run(tmp_path_factory):
     """A small two-walled cup run through every stage, with the plate at 1:2 and the bar on the image."""
-    from potflat.pipeline import run_scan
-    from potflat.synthetic import make_vessel, write_obj
+    from potflat.stages.pipeline import run_scan
+    from potflat_synthetic import make_vessel, write_obj
 
     root = tmp_path_factory.mktemp("plate")
     write_obj(make_vessel("cup", n_vertices=1500, texture_size=128, seed=3), root / "scans" / "cup.obj")
@@ -160,7 +160,7 @@ def test_scale_on_image_covers_no_painting(cup_run, tmp_path):
 
 def test_scale_on_image_adds_a_band_when_the_painting_fills_the_image(tmp_path):
     from potflat.bake import BakeOptions, run_bake_stage
-    from potflat.io.stage import write_flat_ply
+    from potflat.io.flat_ply import write_flat_ply
     from potflat.types import FlatMesh, Mesh
 
     xs, ys = np.meshgrid(np.linspace(0, 60, 13), np.linspace(0, 30, 7))
@@ -181,7 +181,7 @@ def test_scale_on_image_adds_a_band_when_the_painting_fills_the_image(tmp_path):
 
 
 def test_profile_step_follows_the_edges_or_the_option(cup_run, tmp_path):
-    from potflat.profile import read_profile_csv
+    from potflat.rollout.profile import read_profile_csv
     from potflat.rollout import RolloutOptions, run_rollout_stage
 
     summary = cup_run.stages["rollout"].summary["profile"]

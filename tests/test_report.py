@@ -1,4 +1,4 @@
-"""The batch report index.html (potflat.report): cards, links, thumbnails, sorting, in a real browser."""
+"""The batch report index.html (potflat.stages.report): cards, links, thumbnails, sorting, in a real browser."""
 from __future__ import annotations
 
 import base64
@@ -17,9 +17,9 @@ from urllib.parse import unquote
 import pytest
 from PIL import Image
 
-from potflat.batch import load_batch, run_batch
-from potflat.plate import painted_zone_distortion
-from potflat.report import REPORT_NAME
+from potflat.stages.batch import load_batch, run_batch
+from potflat.bake.plate import painted_zone_distortion
+from potflat.stages.report import REPORT_NAME
 
 #: Browsers tried, in order (Debian's package is chromium; .ci/run installs it when missing).
 BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable", "chrome")
@@ -28,7 +28,7 @@ BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stab
 @pytest.fixture(scope="module")
 def batch_out(tmp_path_factory):
     """Two small vessels (one with the plate) and a broken file, run as a batch."""
-    from potflat.synthetic import make_vessel, write_obj
+    from potflat_synthetic import make_vessel, write_obj
 
     root = tmp_path_factory.mktemp("report")
     write_obj(make_vessel("cup", n_vertices=1200, texture_size=128, seed=3), root / "scans" / "cup.obj")

@@ -34,7 +34,7 @@ def plate_command(
     from potflat_cli._stage import run_stage
     from rich.console import Console
 
-    from potflat.plate import make_plate
+    from potflat.bake.plate import make_plate
 
     result = run_stage(f"composing the plate of {relaxed_ply.name}",
                        lambda: make_plate(relaxed_ply, output, scale=scale, name=name), quiet=quiet, as_json=json)

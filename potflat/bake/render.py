@@ -82,7 +82,7 @@ class BakeOptions:
         covers no painting (in a band added below the image when no such place is free).
     plate : bool
         Also write the archaeological plate ``NAME.plate.svg/.pdf/.png``
-        (:mod:`potflat.plate`; needs the rollout's and relaxation's files beside the input).
+        (:mod:`potflat.bake.plate`; needs the rollout's and relaxation's files beside the input).
     plate_scale : str or None
         Print scale of the plate, e.g. ``1:2``; None: the largest of 1:1, 1:2, 1:3, 1:4, 1:5,
         1:10, 1:20, 1:50 at which it fits an A4 page.
@@ -107,7 +107,7 @@ class BakeOptions:
     obj: bool = False
 
     def __post_init__(self) -> None:
-        from potflat.plate import parse_scale
+        from potflat.bake.plate import parse_scale
 
         for name in ("scale_on_image", "plate", "obj"):
             if not isinstance(getattr(self, name), bool):
@@ -706,7 +706,7 @@ def _scale_on_image(r: _Renderer, grid: bool):
     """The scale layer to draw into ``NAME.png``, placed where it covers no painting.
 
     The painting's footprint is rasterised on a grid of at most
-    :data:`potflat.annotate.FREE_SPOT_MASK_PX` pixels a side and the free place nearest the
+    :data:`potflat.bake.annotate.FREE_SPOT_MASK_PX` pixels a side and the free place nearest the
     bottom-left corner is taken, for the longest round bar (from a quarter of the image width
     down to :data:`MIN_BAR_FRACTION` of that) that has one; when none has, a band is added
     below the image with the default bar.
@@ -717,7 +717,7 @@ def _scale_on_image(r: _Renderer, grid: bool):
     band : int
         Rows added below the image (0 when the bar fits beside the painting).
     """
-    from potflat import annotate
+    from potflat.bake import annotate
 
     g = r.grid
     f = max(1, math.ceil(max(g.width, g.height) / annotate.FREE_SPOT_MASK_PX))
@@ -912,7 +912,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     summary["files"]["json"] = paths["json"].name
     write_json_atomic(paths["json"], summary)
     if options.plate:
-        from potflat.plate import make_plate
+        from potflat.bake.plate import make_plate
 
         plate = make_plate(flat_ply, out_dir, scale=options.plate_scale, name=name)
         paths.update({f"plate_{k}": p for k, p in plate.paths.items()})

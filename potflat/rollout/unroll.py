@@ -108,7 +108,7 @@ class RolloutOptions:
         seam goes through it (or ``seam`` degrees from it).
     landmark : str or None
         ``painted``: the seam goes opposite the centre of the painted zone; ``handle``: through
-        the largest handle (:mod:`potflat.landmarks`). ``seam`` and ``angles`` are measured from it.
+        the largest handle (:mod:`potflat.rollout.landmarks`). ``seam`` and ``angles`` are measured from it.
     overlap : float
         Degrees of surface repeated past 360 at the end of an all-round rollout, so a motif
         crossing the seam is seen whole once (the bake marks where the repeat starts).
@@ -155,7 +155,7 @@ class RolloutOptions:
     importance_angles: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
-        from potflat.landmarks import LANDMARKS
+        from potflat.rollout.landmarks import LANDMARKS
 
         _importance.check_method(self.importance)
         if (self.importance in ("mask", "texture-mask")) != (self.importance_mask is not None):
@@ -344,7 +344,7 @@ class RolloutResult:
     other_objects_faces : int
         Faces of separate objects left out.
     landmark : Landmark or None
-        What ``seam`` and ``angles`` were measured from (:mod:`potflat.landmarks`).
+        What ``seam`` and ``angles`` were measured from (:mod:`potflat.rollout.landmarks`).
     theta_origin : float
         Degrees from the reference direction that the output angles (:attr:`Region.theta_range_deg`)
         are measured from: the seam, or the origin of ``angles``.
@@ -1037,9 +1037,9 @@ _PLACED_SEAMS = ("user", "point", "handle", "opposite painted zone")
 
 def _find_landmark(mesh: Mesh, axis: AxisFit, options: RolloutOptions, attachments, face_mask, band, h_c,
                    theta_c, area):
-    """The landmark the options name (:func:`potflat.landmarks.find_landmark`), or None when
+    """The landmark the options name (:func:`potflat.rollout.landmarks.find_landmark`), or None when
     seam and angles are measured as before (from the reference direction, angles from the seam)."""
-    from potflat.landmarks import find_landmark
+    from potflat.rollout.landmarks import find_landmark
 
     if options.seam_at is None and options.landmark is None and (options.angles is None or options.seam is not None):
         return None, []
@@ -1056,7 +1056,7 @@ def _painted_zone_centre(mesh: Mesh, axis: AxisFit, options: RolloutOptions, fac
                          area) -> tuple[float | None, str]:
     """Centre angle of the importance zone (:func:`_find_importance` on an all-round unrolling
     with the automatic seam), or None and why."""
-    from potflat.landmarks import zone_centre
+    from potflat.rollout.landmarks import zone_centre
 
     plain = dataclasses.replace(options, seam=None, angles=None, seam_at=None, landmark=None, overlap=0.0)
     un = _unroll(mesh, axis, plain, face_mask, band, h_c, theta_c, area)

@@ -726,7 +726,7 @@ def run_batch(batch: Batch, *, workers: int | None = None, scheduler: str | None
     -------
     BatchSummary
         Also written as ``summary.json``, ``summary.csv`` and the report ``index.html``
-        (:mod:`potflat.report`) in ``batch.output``, even when interrupted (unfinished scans are
+        (:mod:`potflat.stages.report`) in ``batch.output``, even when interrupted (unfinished scans are
         then ``interrupted``).
     """
     start = time.perf_counter()
@@ -777,7 +777,7 @@ def run_batch(batch: Batch, *, workers: int | None = None, scheduler: str | None
                                seconds=time.perf_counter() - start)
         with contextlib.suppress(PotflatError, OSError):
             summary.write()
-            from potflat.report import write_report
+            from potflat.stages.report import write_report
 
             write_report(summary)
     return summary

@@ -18,7 +18,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from urllib.parse import quote
 
-from potflat.plate import distortion_words, painted_zone_distortion
+from potflat.bake.plate import distortion_words, painted_zone_distortion
 
 #: File name of the report in the batch output folder.
 REPORT_NAME = "index.html"
@@ -96,7 +96,7 @@ def _relax_summary(folder: Path, name: str) -> dict:
 
 
 def _card(report, base: Path) -> str:
-    from potflat.batch import MANIFEST
+    from potflat.stages.batch import MANIFEST
 
     folder = Path(report.output)
     name = report.name
@@ -144,7 +144,7 @@ def write_report(summary) -> Path:
     Parameters
     ----------
     summary : BatchSummary
-        The batch's outcome (:func:`potflat.batch.run_batch`).
+        The batch's outcome (:func:`potflat.stages.batch.run_batch`).
 
     Returns
     -------

@@ -41,7 +41,7 @@ CHAR_EM = 0.56
 #: Resolution of the PNG preview, and of the outside view on paper, dots per inch.
 PREVIEW_DPI, VIEW_DPI = 150.0, 300.0
 #: Key of the relax stage's JSON holding the figures of the painted (important) zone
-#: (:func:`potflat.distortion.zone_summary`).
+#: (:func:`potflat.mesh.distortion.zone_summary`).
 PAINTED_ZONE_KEY = "important_zone"
 
 
@@ -170,9 +170,9 @@ def _read_rgba(path: Path) -> np.ndarray:
 
 
 def _sources(relaxed_ply: Path, name: str | None, bake_dir: Path) -> _Sources:
-    from potflat.bake import stage_name
-    from potflat.io.stage import read_flat_ply
-    from potflat.profile import read_profile_csv
+    from potflat.bake.render import stage_name
+    from potflat.io.flat_ply import read_flat_ply
+    from potflat.rollout.profile import read_profile_csv
 
     if not relaxed_ply.name.endswith(".relaxed.ply"):
         raise InvalidInputError(f"{relaxed_ply.name}: the plate is made from NAME.relaxed.ply (with the rollout, "
@@ -277,7 +277,7 @@ def _scale_bar(ax, x0: float, y0: float, scale: float, max_paper_mm: float) -> f
     """Draw a bar of alternating blocks at paper ``(x0, y0)`` (mm, bottom left); returns its paper length."""
     from matplotlib.patches import Rectangle
 
-    from potflat.annotate import nice_length
+    from potflat.bake.annotate import nice_length
 
     length = nice_length(max_paper_mm / scale)  # vessel mm
     lead = round(length / 10 ** math.floor(math.log10(length)))
@@ -297,7 +297,7 @@ def compose_plate(src: _Sources, scale: float | None):
     from matplotlib.figure import Figure
 
     from potflat import __version__
-    from potflat.profile import _runs, section_polygon
+    from potflat.rollout.profile import _runs, section_polygon
 
     prof = src.profile
     ro = prof.outer_radius
