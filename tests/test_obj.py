@@ -13,7 +13,7 @@ from potflat.io.obj import write_textured_obj
 @pytest.fixture(scope="module")
 def baked(tmp_path_factory):
     from potflat.stages.pipeline import run_scan
-    from potflat_synthetic import make_vessel, write_obj
+    from potflat_synthetic.vessels import make_vessel, write_obj
 
     root = tmp_path_factory.mktemp("obj")
     write_obj(make_vessel("cylinder", n_vertices=1500, texture_size=256, seed=2), root / "scan" / "pot.obj")

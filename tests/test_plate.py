@@ -30,7 +30,7 @@ PT_PER_MM = 72 / 25.4
 def cup_run(tmp_path_factory):
     """A small two-walled cup run through every stage, with the plate at 1:2 and the bar on the image."""
     from potflat.stages.pipeline import run_scan
-    from potflat_synthetic import make_vessel, write_obj
+    from potflat_synthetic.vessels import make_vessel, write_obj
 
     root = tmp_path_factory.mktemp("plate")
     write_obj(make_vessel("cup", n_vertices=1500, texture_size=128, seed=3), root / "scans" / "cup.obj")

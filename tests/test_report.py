@@ -28,7 +28,7 @@ BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stab
 @pytest.fixture(scope="module")
 def batch_out(tmp_path_factory):
     """Two small vessels (one with the plate) and a broken file, run as a batch."""
-    from potflat_synthetic import make_vessel, write_obj
+    from potflat_synthetic.vessels import make_vessel, write_obj
 
     root = tmp_path_factory.mktemp("report")
     write_obj(make_vessel("cup", n_vertices=1200, texture_size=128, seed=3), root / "scans" / "cup.obj")
