@@ -37,7 +37,7 @@ class Landmark:
     Attributes
     ----------
     kind : str
-        ``reference`` (the axis' reference direction), ``point``, ``painted zone`` or ``handle``.
+        ``point``, ``painted zone`` or ``handle``.
     angle : float
         Radians counter-clockwise about the axis from its reference direction, in ``[0, 2 pi)``.
     detail : str
@@ -55,9 +55,6 @@ class Landmark:
         """JSON-ready description (angle in degrees)."""
         return {"kind": self.kind, "angle_deg": math.degrees(self.angle), "detail": self.detail,
                 "point": None if self.point is None else [float(x) for x in self.point]}
-
-
-REFERENCE = Landmark("reference", 0.0, "the axis' reference direction")
 
 
 def _circular_mean(theta: np.ndarray, weight: np.ndarray) -> tuple[float, float]:

@@ -1094,8 +1094,7 @@ def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band,
     V, F = mesh.vertices, mesh.faces
     theta_v = axis.cylindrical(V)[2]
     keep = _in_band(axis, band, h_c) & face_mask
-    placed = landmark is not None and landmark.kind in ("point", "handle", "painted zone") and (
-        options.seam_at is not None or options.landmark is not None)
+    placed = landmark is not None and (options.seam_at is not None or options.landmark is not None)
     if seam_given is not None:
         seam, seam_method = seam_given
     elif options.angles is not None and landmark is not None and options.angles[1] - options.angles[0] >= 360.0:
