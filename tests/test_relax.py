@@ -313,7 +313,9 @@ def test_stretch_factors_never_nan(vessel, stretch, preset):
 @pytest.mark.parametrize("bad", [{"stiffness": 0.0}, {"stiffness": -1.0}, {"stretch": 0.0}, {"tol": -1e-3},
                                  {"max_iter": 0}, {"threads": 0}, {"time_budget": -1.0}, {"preset": "fast"},
                                  {"weighting": "cubic"}, {"stiffness": float("nan")}, {"max_iter": 2.5},
-                                 {"simplify_mm": -0.5}, {"simplify_mm": float("inf")}])
+                                 {"simplify_mm": -0.5}, {"simplify_mm": float("inf")}, {"shape": -0.1},
+                                 {"shape": float("nan")}, {"importance_contrast": 0.5}, {"importance_contrast": True},
+                                 {"true_scale": "yes"}])
 def test_invalid_options_raise_one_line_errors(bad):
     with pytest.raises(InvalidOptionError) as err:
         RelaxOptions(**bad)

@@ -344,6 +344,21 @@ def free_spot(covered: np.ndarray, box: tuple[int, int], margin: int) -> tuple[i
     return int(xs[best]), int(ys[best])
 
 
+def _zone_line(flat: FlatMesh) -> str:
+    """The distortion inside the important zone and outside it, in one line for a sheet."""
+    from potflat.mesh import distortion
+
+    zones = distortion.zone_figures(flat.mesh.vertices, flat.uv, flat.mesh.faces, flat.importance)
+    parts = []
+    for key, name in (("important", "painted zone" if flat.importance is not None else "whole surface"),
+                      ("rest", "plain surface")):
+        z = zones[key]
+        if z.distortion is not None:
+            parts.append(f"{name}: lengths off {z.length_error_median_pct:.1f}% (median), "
+                         f"{z.length_error_p95_pct:.1f}% (p95), anisotropy p95 {z.distortion.anisotropy_p95:.2f}")
+    return "\n".join(parts)
+
+
 def comparison_sheet(path: str | Path, rollout: FlatMesh, relaxed: FlatMesh, *, title: str = "",
                      max_px: int = 900) -> Path:
     """Side-by-side sheet: proxy rollout vs relaxed, painting and stress map with figures.
@@ -377,7 +392,8 @@ def comparison_sheet(path: str | Path, rollout: FlatMesh, relaxed: FlatMesh, *, 
         res = bake(flat, px_per_mm=ppm, maps=("stress",))
         stress = flat.stress if flat.stress is not None else distortion.vertex_stress(
             flat.mesh.vertices, flat.uv, flat.mesh.faces, mpu)
-        panels.append((label, res, stress, distortion.summarize(flat.mesh.vertices, flat.uv, flat.mesh.faces)))
+        panels.append((label, res, stress, distortion.summarize(flat.mesh.vertices, flat.uv, flat.mesh.faces),
+                       _zone_line(flat)))
     hi = max(map_scale("stress", p[2]).hi for p in panels)
     scale = map_scale("stress", np.zeros(1), hi=hi)
     aspect = max(p[1].image.shape[0] / p[1].px_per_mm for p in panels) / max(
@@ -392,12 +408,12 @@ def comparison_sheet(path: str | Path, rollout: FlatMesh, relaxed: FlatMesh, *, 
     # one millimetre scale for all panels, so the two flattenings compare at true relative size
     max_w = max(p[1].image.shape[1] / p[1].px_per_mm for p in panels)
     max_h = max(p[1].image.shape[0] / p[1].px_per_mm for p in panels)
-    for col, (label, res, stress, summ) in enumerate(panels):
+    for col, (label, res, stress, summ, zones) in enumerate(panels):
         h, w = res.image.shape[:2]
         extent = [0, w / res.px_per_mm, h / res.px_per_mm, 0]
         ax = fig.add_subplot(gs[0, col])
         ax.imshow(res.image, extent=extent, interpolation="antialiased")
-        ax.set_title(label, fontsize=13)
+        ax.set_title(f"{label}\n{zones}", fontsize=10)
         ax.set_xlabel("mm")
         heat = colorize(res.maps["stress"], scale, res.image[..., 3] / 255.0)
         ax2 = fig.add_subplot(gs[1, col])
