@@ -120,7 +120,7 @@ def test_parse_scale(value, expected):
     assert parse_scale(value) == expected
 
 
-@pytest.mark.parametrize("value", ["1:0", "half", "-1:2", "0", "nan"])
+@pytest.mark.parametrize("value", ["1:0", "half", "-1:2", "0", "nan", 65])
 def test_parse_scale_rejects(value):
     with pytest.raises(InvalidOptionError):
         parse_scale(value)

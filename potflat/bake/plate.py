@@ -30,6 +30,8 @@ import numpy as np
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import StageOutput
 
+#: Largest print scale accepted (drawing mm per vessel mm): 10:1, for small sherds.
+MAX_SCALE = 10.0
 #: Scales tried when none is given, largest first (drawing mm per vessel mm).
 PLATE_SCALES = (1.0, 1 / 2, 1 / 3, 1 / 4, 1 / 5, 1 / 10, 1 / 20, 1 / 50)
 #: The automatic scale keeps drawing and rollout within this area (A4 portrait minus margins), mm.
@@ -75,6 +77,10 @@ def parse_scale(value) -> float | None:
         raise InvalidOptionError(f"plate scale {value!r} is not a scale; give e.g. 1:1, 1:2, 1:5 or auto") from None
     if not math.isfinite(scale) or scale <= 0:
         raise InvalidOptionError(f"plate scale {value!r} must be positive, e.g. 1:2")
+    if scale > MAX_SCALE:
+        raise InvalidOptionError(
+            f"plate scale {value!r} would draw the vessel {scale:g} times its size; give e.g. 1:2 (in a YAML file "
+            "in quotes, '1:5': unquoted, YAML reads 1:5 as the number 65)")
     return scale
 
 

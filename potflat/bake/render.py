@@ -83,8 +83,8 @@ class BakeOptions:
     plate : bool
         Also write the archaeological plate ``NAME.plate.svg/.pdf/.png``
         (:mod:`potflat.bake.plate`; needs the rollout's and relaxation's files beside the input).
-    plate_scale : str or None
-        Print scale of the plate, e.g. ``1:2``; None: the largest of 1:1, 1:2, 1:3, 1:4, 1:5,
+    plate_scale : str, float or None
+        Print scale of the plate, e.g. ``1:2`` or 0.5; None: the largest of 1:1, 1:2, 1:3, 1:4, 1:5,
         1:10, 1:20, 1:50 at which it fits an A4 page.
     obj : bool
         Also write ``NAME.flat.obj`` + ``NAME.flat.mtl``: the scan's surface (3D, scan units)
@@ -103,7 +103,7 @@ class BakeOptions:
     max_megapixels: float = 1000.0
     scale_on_image: bool = False
     plate: bool = False
-    plate_scale: str | None = None
+    plate_scale: str | float | None = None
     obj: bool = False
 
     def __post_init__(self) -> None:
@@ -114,7 +114,6 @@ class BakeOptions:
                 raise InvalidOptionError(f"{name} must be true or false, got {getattr(self, name)!r}")
         if self.plate_scale is not None:
             parse_scale(self.plate_scale)
-            object.__setattr__(self, "plate_scale", str(self.plate_scale))
         if self.px_per_mm is not None and self.dpi is not None:
             raise InvalidOptionError("give either px_per_mm (--px-per-mm) or dpi (--dpi), not both")
         for name in ("px_per_mm", "dpi", "max_megapixels"):
