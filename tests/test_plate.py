@@ -12,15 +12,8 @@ from typer.testing import CliRunner
 
 from potflat import __version__
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.bake.plate import (
-    PAINTED_ZONE_KEY,
-    PREVIEW_DPI,
-    distortion_words,
-    make_plate,
-    painted_zone_distortion,
-    parse_scale,
-    scale_label,
-)
+from potflat.bake.plate import PREVIEW_DPI, make_plate, parse_scale, scale_label
+from potflat.mesh.distortion import PAINTED_ZONE_KEY, distortion_words, painted_zone_distortion
 from potflat_cli.main import app
 
 PT_PER_MM = 72 / 25.4

@@ -17,7 +17,7 @@ import pytest
 from PIL import Image
 
 from potflat.stages.batch import load_batch, run_batch
-from potflat.bake.plate import painted_zone_distortion
+from potflat.mesh.distortion import painted_zone_distortion
 from potflat.stages.report import REPORT_NAME
 
 #: Browsers tried, in order (Debian's package is chromium; .ci/run installs it when missing).

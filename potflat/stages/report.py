@@ -18,7 +18,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from urllib.parse import quote
 
-from potflat.bake.plate import distortion_words, painted_zone_distortion
+from potflat.mesh.distortion import distortion_words, painted_zone_distortion
 
 #: File name of the report in the batch output folder.
 REPORT_NAME = "index.html"
