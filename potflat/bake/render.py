@@ -77,6 +77,19 @@ class BakeOptions:
         Sub-samples per pixel side (1-8); 0 chooses from the texture density (2-4).
     max_megapixels : float
         Refuse images larger than this (protects laptops from a mistyped resolution).
+    scale_on_image : bool
+        Draw the scale bar (and the grid, with ``grid``) into ``NAME.png`` itself, where it
+        covers no painting (in a band added below the image when no such place is free).
+    plate : bool
+        Also write the archaeological plate ``NAME.plate.svg/.pdf/.png``
+        (:mod:`potflat.bake.plate`; needs the rollout's and relaxation's files beside the input).
+    plate_scale : str, float or None
+        Print scale of the plate, e.g. ``1:2`` or 0.5; None: the largest of 1:1, 1:2, 1:3, 1:4, 1:5,
+        1:10, 1:20, 1:50 at which it fits an A4 page.
+    obj : bool
+        Also write ``NAME.flat.obj`` + ``NAME.flat.mtl``: the scan's surface (3D, scan units)
+        with the flat coordinates as texture coordinates into ``NAME.png`` (the painting
+        re-baked in the flat layout), for MeshLab and Blender.
     """
 
     px_per_mm: float | None = None
@@ -88,8 +101,19 @@ class BakeOptions:
     tiff: bool = False
     supersample: int = 0
     max_megapixels: float = 1000.0
+    scale_on_image: bool = False
+    plate: bool = False
+    plate_scale: str | float | None = None
+    obj: bool = False
 
     def __post_init__(self) -> None:
+        from potflat.bake.plate import parse_scale
+
+        for name in ("scale_on_image", "plate", "obj"):
+            if not isinstance(getattr(self, name), bool):
+                raise InvalidOptionError(f"{name} must be true or false, got {getattr(self, name)!r}")
+        if self.plate_scale is not None:
+            parse_scale(self.plate_scale)
         if self.px_per_mm is not None and self.dpi is not None:
             raise InvalidOptionError("give either px_per_mm (--px-per-mm) or dpi (--dpi), not both")
         for name in ("px_per_mm", "dpi", "max_megapixels"):
@@ -633,34 +657,129 @@ def stage_name(path: Path) -> str:
 ATTACHMENT_COLOUR = (230, 0, 160, 220)
 
 
-def _attachment_roots(flat_ply: Path, n_faces: int, rollout_summary: dict | None = None
-                      ) -> tuple[np.ndarray, Path | None]:
-    """Faces where the rollout left out an attachment, from its summary (``rollout_summary``,
-    else ``NAME.rollout.json`` beside the input).
+#: Colour (RGBA) of the dashed line where a rollout's repeat past 360 degrees (``overlap``) starts.
+REPEAT_COLOUR = (255, 0, 200, 255)
+#: Dash length of that line, pixels.
+REPEAT_DASH_PX = 6
 
-    Returns a per-face indicator (n_faces,) float64 (empty when there is nothing to show) and
-    the rollout JSON (for provenance), or ``None``.
-    """
+
+def _rollout_sidecar(flat_ply: Path, rollout_summary: dict | None = None) -> tuple[dict, Path | None]:
+    """The rollout's summary (``rollout_summary`` when handed over in memory, else
+    ``NAME.rollout.json`` beside the input; an empty dict when absent or unreadable) and that
+    JSON file (for provenance) or None."""
     stem = flat_ply.name.removesuffix(".ply").removesuffix(".relaxed").removesuffix(".rollout")
     rollout_json = flat_ply.with_name(f"{stem}.rollout.json")
+    if rollout_summary is not None:
+        return rollout_summary, rollout_json if rollout_json.is_file() else None
     try:
-        summary = rollout_summary if rollout_summary is not None else json.loads(rollout_json.read_text())
-        att = summary.get("attachments", {})
+        return json.loads(rollout_json.read_text()), rollout_json
     except (OSError, ValueError):
-        return np.zeros(0), None
+        return {}, None
+
+
+def _attachment_roots(sidecar: dict, n_faces: int) -> np.ndarray:
+    """Faces where the rollout left out an attachment, from ``NAME.rollout.json``: a per-face
+    indicator (n_faces,) float64, empty when there is nothing to show."""
+    att = sidecar.get("attachments", {})
     roots = np.asarray(att.get("root_faces") or [], dtype=np.int64)
     if att.get("kept") or not len(roots) or roots.max() >= n_faces:
-        return np.zeros(0), rollout_json
+        return np.zeros(0)
     marks = np.zeros(n_faces)
     marks[roots] = 1.0
-    return marks, rollout_json
+    return marks
+
+
+def _repeated_faces(sidecar: dict, n_faces: int) -> np.ndarray:
+    """Faces that repeat the start of the rollout past 360 degrees (``overlap``), from
+    ``NAME.rollout.json``: a per-face indicator (n_faces,) float64, empty when none."""
+    region = sidecar.get("region", {})
+    start = region.get("repeated_from")
+    if start is None or region.get("faces") != n_faces or not 0 < start < n_faces:
+        return np.zeros(0)
+    marks = np.zeros(n_faces)
+    marks[int(start):] = 1.0
+    return marks
+
+
+def _repeat_line(share: np.ndarray, r0: int) -> np.ndarray:
+    """Pixels (k, w) bool of a dashed line where the repeated part starts: where the share of
+    repeated faces crosses one half from left to right (the line runs from foot to mouth)."""
+    rep = np.nan_to_num(share, nan=-1.0)
+    inside = rep >= 0.5
+    edge = np.zeros_like(inside)
+    edge[:, 1:] = inside[:, 1:] & (rep[:, :-1] >= 0) & ~inside[:, :-1]
+    edge[:, :-1] |= edge[:, 1:].copy()  # two pixels wide
+    rows = (np.arange(r0, r0 + len(rep)) // REPEAT_DASH_PX) % 2 == 0
+    return edge & rows[:, None]
+
+
+#: Shortest scale bar drawn into ``NAME.png``, as a fraction of the default (a quarter of the width).
+MIN_BAR_FRACTION = 0.1
+
+
+def _scale_on_image(r: _Renderer, grid: bool):
+    """The scale layer to draw into ``NAME.png``, placed where it covers no painting.
+
+    The painting's footprint is rasterised on a grid of at most
+    :data:`potflat.bake.annotate.FREE_SPOT_MASK_PX` pixels a side and the free place nearest the
+    bottom-left corner is taken, for the longest round bar (from a quarter of the image width
+    down to :data:`MIN_BAR_FRACTION` of that) that has one; when none has, a band is added
+    below the image with the default bar.
+
+    Returns
+    -------
+    layer : ScaleLayer
+    band : int
+        Rows added below the image (0 when the bar fits beside the painting).
+    """
+    from potflat.bake import annotate
+
+    g = r.grid
+    f = max(1, math.ceil(max(g.width, g.height) / annotate.FREE_SPOT_MASK_PX))
+    wc, hc = math.ceil(g.width / f), math.ceil(g.height / f)
+    uv = r.flat.uv[r.faces]  # (m, 3, 2)
+    tex = np.empty_like(uv)
+    tex[..., 0] = (uv[..., 0] - g.origin[0]) * g.scale / f / wc
+    tex[..., 1] = 1.0 - (g.origin[1] - uv[..., 1]) * g.scale / f / hc
+    covered = _chart_mask(tex, hc, wc)
+    default = annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid)
+    bar = default.bar_mm
+    while bar >= MIN_BAR_FRACTION * default.bar_mm * (1 - 1e-9):
+        probe = annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid, bar_mm=bar)
+        bw, bh = probe.box_size
+        spot = annotate.free_spot(covered, (math.ceil(bw / f) + 1, math.ceil(bh / f) + 1), math.ceil(probe.margin / f))
+        if spot is not None:
+            return annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid, bar_mm=bar,
+                                       at=(spot[0] * f, spot[1] * f)), 0
+        bar = annotate.nice_length(bar * 0.99)
+    bw, bh = default.box_size
+    band = bh + 2 * default.margin
+    return annotate.ScaleLayer(g.width, g.height + band, g.px_per_mm, grid=grid, bar_mm=default.bar_mm,
+                               at=(default.margin, g.height + default.margin)), band
+
+
+def _write_flat_obj(path: Path, flat: FlatMesh, g: _Grid, band: int, texture_name: str) -> Path:
+    """The flattened surface as a textured OBJ: 3D positions, texture coordinates = the flat
+    coordinates in the pixel grid of ``NAME.png`` (``band`` rows added below it)."""
+    from potflat import __version__
+    from potflat.io.obj import write_textured_obj
+
+    height = g.height + band
+    vt = np.empty_like(flat.uv)
+    vt[:, 0] = (flat.uv[:, 0] - g.origin[0]) * g.scale / g.width
+    vt[:, 1] = 1.0 - (g.origin[1] - flat.uv[:, 1]) * g.scale / height
+    header = (f"potflat {__version__}: {flat.mesh.source.name if flat.mesh.source else 'flattening'}, "
+              f"units {flat.mesh.units}; texture coordinates = the flat layout in {texture_name} "
+              f"({g.px_per_mm:g} px/mm)")
+    return write_textured_obj(path, flat.mesh.vertices, flat.mesh.faces, vt, flat.mesh.faces, texture_name,
+                              header=header)
 
 
 def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: list) -> None:
     """Refuse to bake when an output name is an input file (e.g. the scan's texture ``NAME.png``
     when baking into the scan's own folder): the input would be replaced."""
     suffixes = (".png", ".tif", ".position.tif", ".sheet.png", ".bake.json", ".overlay.png", ".scale-layer.png",
-                ".attachments.png",
+                ".attachments.png", ".flat.obj", ".flat.mtl", ".plate.svg", ".plate.pdf", ".plate.png",
                 ".scalebar.png", *(f".{m}.png" for m in options.maps))
     for src in (Path(p) for p in inputs if p is not None):
         for out in (out_dir / f"{name}{s}" for s in suffixes):
@@ -724,13 +843,19 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
         rollout_ply = flat_ply.with_name(flat_ply.name[: -len(".relaxed.ply")] + ".rollout.ply")
         if not rollout_ply.is_file():
             raise InvalidInputError(f"--sheet needs {rollout_ply.name} beside {flat_ply}; copy it there or drop --sheet")
+    if options.plate and not flat_ply.name.endswith(".relaxed.ply"):
+        raise InvalidOptionError(f"the plate is made from NAME.relaxed.ply; bake the relaxed file, not {flat_ply.name}")
     _check_not_inputs(out_dir, name, options, [flat_ply, flat.mesh.texture_path, rollout_ply])
-    attachment_marks, rollout_json = _attachment_roots(flat_ply, len(flat.mesh.faces), rollout_summary)
+    sidecar, rollout_json = _rollout_sidecar(flat_ply, rollout_summary)
+    attachment_marks = _attachment_roots(sidecar, len(flat.mesh.faces))
+    repeated = _repeated_faces(sidecar, len(flat.mesh.faces))
     ppm = options.resolution
     r = _Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels)
     g = r.grid
     if len(attachment_marks):
         r.face_values["attachments"] = attachment_marks
+    if len(repeated):
+        r.face_values["repeated"] = repeated
     paths: dict[str, Path] = {"png": out_dir / f"{name}.png"}
     scales = {m: annotate.map_scale(m, r.vertex_stress if m == "stress" else r.face_values[m]) for m in options.maps}
     if flat.importance is not None:
@@ -739,13 +864,15 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     if "stress" in options.maps:
         legends["overlay"] = legends["stress"]
     layer = annotate.ScaleLayer(g.width, g.height, ppm, grid=options.grid)
+    on_image, band = _scale_on_image(r, options.grid) if options.scale_on_image else (None, 0)
     covered = 0.0
     with ExitStack() as stack:
-        png = stack.enter_context(PngWriter(paths["png"], g.width, g.height, 4, px_per_mm=ppm))
+        png = stack.enter_context(PngWriter(paths["png"], g.width, g.height + band, 4, px_per_mm=ppm))
         writers = {}
-        for key, band in legends.items():
+        for key, legend in legends.items():
             paths[key] = out_dir / f"{name}.{key}.png"
-            writers[key] = stack.enter_context(PngWriter(paths[key], g.width, g.height + len(band), 4, px_per_mm=ppm))
+            writers[key] = stack.enter_context(PngWriter(paths[key], g.width, g.height + len(legend), 4,
+                                                         px_per_mm=ppm))
         paths["scale_layer"] = out_dir / f"{name}.scale-layer.png"
         layer_png = stack.enter_context(PngWriter(paths["scale_layer"], g.width, g.height, 4, px_per_mm=ppm))
         if len(attachment_marks):
@@ -755,7 +882,10 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
             cov = r.coverage(r0, r1)
             covered += float(cov.sum(dtype=np.float64))
             rgb = r.painting(r0, r1)
-            png.write(_rgba8(rgb, cov))
+            rgba = _rgba8(rgb, cov)
+            if len(repeated):
+                rgba[_repeat_line(r.scalar("repeated", r0, r1), r0)] = REPEAT_COLOUR
+            png.write(rgba if on_image is None else annotate.over(on_image.rows(r0, r1), rgba))
             outline = r.zone_outline(r0, r1) if options.maps else None
             for m in options.maps:
                 values = r.scalar(m, r0, r1)
@@ -765,8 +895,10 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
             layer_png.write(layer.rows(r0, r1))
             if len(attachment_marks):
                 mask_png.write(_attachment_rows(r.scalar("attachments", r0, r1)))
-        for key, band in legends.items():
-            writers[key].write(band)
+        if band:
+            png.write(on_image.rows(g.height, g.height + band))
+        for key, legend in legends.items():
+            writers[key].write(legend)
     paths["scalebar"] = write_png(out_dir / f"{name}.scalebar.png", layer.bar_image(), px_per_mm=ppm)
     if options.tiff:
         paths["tiff"] = write_tiff_rows(out_dir / f"{name}.tif",
@@ -777,13 +909,22 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
                                             shape=(g.height, g.width, 3), dtype=np.float32, px_per_mm=ppm,
                                             photometric="rgb")
     figures = _figures(r, covered)
+    if options.obj:
+        paths["obj"] = _write_flat_obj(out_dir / f"{name}.flat.obj", flat, g, band, paths["png"].name)
+        paths["mtl"] = paths["obj"].with_suffix(".mtl")
     if rollout_ply is not None:
         paths["sheet"] = comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat, title=name)
     inputs = ([flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else [])
               + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else []))
     summary = {
         **figures,
+        "overlap": None if not len(repeated) else {
+            "deg": sidecar["region"].get("overlap_deg"), "repeated_faces": int(repeated.sum()),
+            "mark": f"dashed line {REPEAT_COLOUR[:3]} where the repeat past 360 degrees starts"},
         "scale_bar_mm": layer.bar_mm,
+        "scale_on_image": None if on_image is None else {
+            "bar_mm": on_image.bar_mm, "at_px": list(on_image.at), "box_px": list(on_image.box_size),
+            "band_below_px": band, "grid": options.grid},
         "maps": {m: {"range": [scales[m].lo, scales[m].hi], "label": scales[m].label} for m in options.maps},
         "files": {k: p.name for k, p in paths.items()},
         "provenance": provenance(stage="bake", inputs=inputs,
@@ -792,4 +933,12 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     paths["json"] = out_dir / f"{name}.bake.json"
     summary["files"]["json"] = paths["json"].name
     write_json_atomic(paths["json"], summary)
+    if options.plate:
+        from potflat.bake.plate import make_plate
+
+        plate = make_plate(flat_ply, out_dir, scale=options.plate_scale, name=name)
+        paths.update({f"plate_{k}": p for k, p in plate.paths.items()})
+        summary["files"].update({f"plate_{k}": p.name for k, p in plate.paths.items()})
+        summary["plate"] = {k: v for k, v in plate.summary.items() if k not in ("files", "inputs")}
+        write_json_atomic(paths["json"], summary)
     return StageOutput(paths=paths, summary=summary)

@@ -12,6 +12,8 @@ from potflat.types import UNITS_MM
 
 #: Sides accepted by :func:`potflat.rollout.walls.select_wall`.
 SIDES = ("outer", "inner")
+#: Landmark names a user can give (``RolloutOptions.landmark``; :mod:`potflat.rollout.landmarks`).
+LANDMARKS = ("painted", "handle")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -34,12 +36,14 @@ class RolloutOptions:
     flip : bool
         Reverse the axis direction (mouth and foot swapped).
     seam : float or None
-        Seam angle in degrees from the axis' reference direction; chosen automatically when
-        None (0 when ``angles`` is given).
+        Seam angle in degrees from the landmark (``seam_at`` or ``landmark``), else from the
+        axis' reference direction; chosen automatically when None.
     band : (float, float) or None
         Height band as fractions of the axial extent, 0 = foot, 1 = mouth.
     angles : (float, float) or None
-        Angle range in degrees relative to the seam, e.g. ``(-60, 60)``; at most 360 wide.
+        Angle range in degrees, e.g. ``(-60, 60)``, at most 360 wide: from the landmark when
+        one is named, else from ``seam`` when given, else from the painted zone's centre (the
+        window is centred on the painting; the seam stays automatic).
     view : tuple of 3 float or None
         For ``proxy="ortho"``: direction from the vessel to the viewer (``x,y,z``, scan
         coordinates); default: from the axis towards the region's centre (from the region
@@ -52,6 +56,18 @@ class RolloutOptions:
         Keep handles, spouts and knobs (parts off the surface of revolution, found by
         :func:`potflat.rollout.attachments.detect_attachments`) in the rollout; by default they are
         left out and reported, and the painting around their roots stays.
+    seam_at : tuple of 3 float or None
+        A point on the surface (scan coordinates, e.g. picked in MeshLab): the landmark; the
+        seam goes through it (or ``seam`` degrees from it).
+    landmark : str or None
+        ``painted``: the seam goes opposite the centre of the painted zone; ``handle``: through
+        the largest handle (:mod:`potflat.rollout.landmarks`). ``seam`` and ``angles`` are measured from it.
+    overlap : float
+        Degrees of surface repeated past 360 at the end of an all-round rollout, so a motif
+        crossing the seam is seen whole once (the bake marks where the repeat starts).
+    profile_mm : float or None
+        Height step of the profile (``NAME.profile.csv/.svg``, the plate's section), mm;
+        None: one median edge length of the scan, as fine as its edges.
     importance : str
         Where the painting is, which the relax stage keeps true and the bake stage reports
         (:mod:`potflat.importance`): ``auto`` (found in the colours; none for a scan without
@@ -81,6 +97,10 @@ class RolloutOptions:
     view: tuple[float, ...] | None = None
     side: str = "outer"
     keep_attachments: bool = False
+    seam_at: tuple[float, float, float] | None = None
+    landmark: str | None = None
+    overlap: float = 0.0
+    profile_mm: float | None = None
     importance: str = "auto"
     importance_mask: str | None = None
     importance_image: str | None = None
@@ -100,6 +120,24 @@ class RolloutOptions:
                                    else _angle_range(name, getattr(self, name)))
         if (self.importance == "band") != (self.importance_band is not None or self.importance_arc is not None):
             raise InvalidOptionError("give importance_band and/or importance_arc with importance band, and only then")
+        if self.seam_at is not None:
+            object.__setattr__(self, "seam_at", _floats("seam_at", self.seam_at, 3, "X Y Z"))
+        if self.landmark is not None and self.landmark not in LANDMARKS:
+            raise InvalidOptionError(f"landmark {self.landmark!r} is unknown; use {' or '.join(LANDMARKS)}, or give "
+                                     "a point with seam_at")
+        if self.seam_at is not None and self.landmark is not None:
+            raise InvalidOptionError("give either seam_at (a point) or landmark, not both")
+        over = _floats("overlap", (self.overlap,), 1, "DEG")[0]
+        if not 0.0 <= over <= 180.0:
+            raise InvalidOptionError(f"overlap must be 0 to 180 degrees, got {over:g}")
+        if over and self.angles is not None:
+            raise InvalidOptionError("overlap repeats an all-round rollout past 360 degrees; drop --angles or --overlap")
+        object.__setattr__(self, "overlap", over)
+        if self.profile_mm is not None:
+            step = _floats("profile_mm", (self.profile_mm,), 1, "MM")[0]
+            if step <= 0:
+                raise InvalidOptionError(f"profile_mm must be a positive height step in mm, got {step:g}")
+            object.__setattr__(self, "profile_mm", step)
         if self.side not in SIDES:
             raise InvalidOptionError(f"side {self.side!r} is unknown; use outer or inner")
         if not isinstance(self.keep_attachments, bool):

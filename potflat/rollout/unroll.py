@@ -77,11 +77,17 @@ class Region:
     height_range : (float, float)
         Heights above the foot covered by the selected faces, scan units.
     theta_range_deg : (float, float)
-        Angles from the seam covered by the output vertices, degrees.
+        Angles covered by the output vertices, degrees from :attr:`RolloutResult.theta_origin`
+        (the seam, or the origin of ``angles``).
     faces, faces_total : int
         Faces selected, faces in the scan.
     cut : bool
         Whether the region went all the way round and had to be cut open.
+    overlap_deg : float
+        Degrees repeated past 360 (0: none).
+    repeated_from : int or None
+        With an overlap, the first output face of the repeat: faces from it on repeat the
+        first ``overlap_deg`` degrees after the seam.
     """
 
     band: tuple[float, float]
@@ -91,6 +97,8 @@ class Region:
     faces: int
     faces_total: int
     cut: bool
+    overlap_deg: float = 0.0
+    repeated_from: int | None = None
 
     def as_dict(self) -> dict:
         """JSON-ready description."""
@@ -148,6 +156,15 @@ class RolloutResult:
     boundary_overlap : int
         Crossing pairs of boundary segments left in the development (0: its outline and
         holes do not overlap).
+    other_objects_faces : int
+        Faces of separate objects left out.
+    landmark : Landmark or None
+        What ``seam`` and ``angles`` were measured from (:mod:`potflat.rollout.landmarks`).
+    theta_origin : float
+        Degrees from the reference direction that the output angles (:attr:`Region.theta_range_deg`)
+        are measured from: the seam, or the origin of ``angles``.
+    landmark_notes : tuple of str
+        What was used where a named landmark is missing.
     """
 
     flat: FlatMesh
@@ -171,6 +188,9 @@ class RolloutResult:
     untangled_vertices: int
     boundary_overlap: int
     other_objects_faces: int = 0
+    landmark: object = None
+    theta_origin: float = 0.0
+    landmark_notes: tuple = ()
     importance: _importance.Importance | None = None
 
     @property
@@ -314,14 +334,19 @@ def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, n
     corner_v = faces.ravel()
     th = corner_theta.ravel()
     # half-edge h runs from corner h to the next corner of its face; half-edges on the same
-    # edge are neighbours when sorted by (lower vertex, higher vertex) (stable: by h on ties)
+    # edge are neighbours when sorted by (lower vertex, higher vertex, turn of the angle at the
+    # lower vertex) (stable: by h on ties). The turn puts the faces of an edge listed twice (a
+    # rollout repeated past 360 degrees) next to those they join: 0+, 2 pi-, 2 pi+.
     nxt = faces[:, [1, 2, 0]].ravel()
     swap = corner_v > nxt
     n = int(corner_v.max()) + 1 if m else 1
-    key = np.minimum(corner_v, nxt) * n + np.maximum(corner_v, nxt)
-    del nxt
+    lower = np.arange(3 * m)
+    lower[swap] = lower[swap] - lower[swap] % 3 + (lower[swap] + 1) % 3
+    turn = np.clip(np.floor(th[lower] / TWO_PI + 0.5), -4, 3).astype(np.int64) + 4
+    key = (np.minimum(corner_v, nxt) * n + np.maximum(corner_v, nxt)) * 8 + turn
+    del nxt, lower, turn
     order = np.argsort(key, kind="stable")
-    key = key[order]
+    key = key[order] // 8
     pair = np.flatnonzero(key[1:] == key[:-1])
     del key
     h1, h2 = order[pair], order[pair + 1]
@@ -434,8 +459,9 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
     h_c, _, theta_c = axis.cylindrical(centroid)
     del centroid
     band = options.band or (0.0, 1.0)
+    landmark, landmark_notes = _find_landmark(mesh, axis, options, attachments, allowed, band, h_c, theta_c, area)
     trimmed = np.zeros(len(F), bool)
-    un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, area)
+    un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, area, landmark=landmark)
     for rnd in range(TRIM_ROUNDS):
         fold = border_folds(un.flat.mesh.faces, un.flat.uv, area[un.face_index])
         if not fold.any() or fold.all():
@@ -443,7 +469,7 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         trimmed[un.face_index[fold]] = True
         if rnd < TRIM_ROUNDS - 1:
             un = _unroll(mesh, axis, options, allowed & ~trimmed, band, h_c, theta_c, area,
-                         seam=(un.seam, un.seam_method))
+                         seam=(un.seam, un.seam_method), landmark=landmark)
         else:
             un = _without(un, ~fold)
     uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv)
@@ -465,11 +491,15 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         roots = np.flatnonzero(attachments.root_faces(F)[un.face_index]).astype(np.int64)
 
     theta_deg = np.degrees(un.theta)
+    first = np.zeros(len(un.face_index), bool)
+    first[np.unique(un.face_index, return_index=True)[1]] = True  # repeats come last
+    repeated_from = int(np.argmin(first)) if not first.all() else None
     region = Region(
         band=tuple(band), angles_deg=options.angles,
         height_range=(float(h_c[un.face_index].min()), float(h_c[un.face_index].max())),
         theta_range_deg=(float(theta_deg.min()), float(theta_deg.max())),
-        faces=len(un.face_index), faces_total=len(F), cut=un.seam_vertices > 0)
+        faces=len(un.face_index), faces_total=len(F), cut=un.seam_vertices > 0,
+        overlap_deg=options.overlap if repeated_from is not None else 0.0, repeated_from=repeated_from)
     cut = un.flat.mesh
     if mesh.texcoords is not None:  # attached once, to the final faces (see _unroll)
         cut = cut.replace(texcoords=mesh.texcoords[un.face_index])
@@ -483,7 +513,8 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         attachments=attachments, attachments_kept=options.keep_attachments, attachment_roots=roots,
         trimmed=np.flatnonzero(trimmed).astype(np.int64), trimmed_area=float(area[trimmed].sum()),
         untangled_faces=n_untangled, untangled_vertices=moved, boundary_overlap=overlap,
-        other_objects_faces=int(other_objects.sum()))
+        other_objects_faces=int(other_objects.sum()), landmark=landmark,
+        theta_origin=float(math.degrees(un.origin) % 360.0), landmark_notes=tuple(landmark_notes))
 
 
 @dataclass(frozen=True, eq=False)
@@ -500,15 +531,17 @@ class _Unrolled:
     seam_method: str
     seam_vertices: int
     split_vertices: int
+    origin: float
 
 
 def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndarray, band, h_c, theta_c,
-            area, seam: tuple[float, str] | None = None) -> _Unrolled:
+            area, seam: tuple[float, str] | None = None, landmark=None) -> _Unrolled:
     """Select the region within ``allowed``, cut it open and develop it on the proxy (with
-    ``seam`` = (radians, method) from an earlier unrolling, or a seam chosen here)."""
+    ``seam`` = (radians, method) from an earlier unrolling, or a seam chosen here; angles
+    measured from ``landmark``)."""
     V = mesh.vertices
-    face_index, seam, seam_method, corner_theta = _select(
-        mesh, axis, options, allowed, band, h_c, theta_c, area, seam)
+    face_index, seam, seam_method, corner_theta, origin = _select(
+        mesh, axis, options, allowed, band, h_c, theta_c, area, seam, landmark)
     sub_f = mesh.faces[face_index]
     inner = options.side == "inner"
 
@@ -553,7 +586,7 @@ def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndar
         uv = _proxy.develop(prox, h, r, dev_theta)
         summary = summarize(cut_mesh.vertices, uv, new_faces)
     return _Unrolled(FlatMesh(cut_mesh, uv), prox, summary, face_index, vertex_index, theta_new, seam,
-                     seam_method, n_seam, n_split)
+                     seam_method, n_seam, n_split, origin)
 
 
 def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
@@ -570,7 +603,7 @@ def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
     copies = len(used) - len(np.unique(vertex_index))
     seam = min(un.seam_vertices, copies)
     return _Unrolled(FlatMesh(cut, uv), un.proxy, summarize(cut.vertices, uv, cut.faces), un.face_index[keep],
-                     vertex_index, un.theta[used], un.seam, un.seam_method, seam, copies - seam)
+                     vertex_index, un.theta[used], un.seam, un.seam_method, seam, copies - seam, un.origin)
 
 
 def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.ndarray:
@@ -813,44 +846,111 @@ def untangle(faces: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, int, int]:
     return x, n_bad, int(np.count_nonzero(np.any(x != uv, axis=1)))
 
 
+#: Seam methods of a seam placed by the user (an angle, a point, a landmark), not chosen here.
+_PLACED_SEAMS = ("user", "point", "handle", "opposite painted zone")
+
+
+def _find_landmark(mesh: Mesh, axis: AxisFit, options: RolloutOptions, attachments, face_mask, band, h_c,
+                   theta_c, area):
+    """The landmark the options name (:func:`potflat.rollout.landmarks.find_landmark`), or None when
+    seam and angles are measured as before (from the reference direction, angles from the seam)."""
+    from potflat.rollout.landmarks import find_landmark
+
+    if options.seam_at is None and options.landmark is None and (options.angles is None or options.seam is not None):
+        return None, []
+    keep = np.flatnonzero(_in_band(axis, band, h_c) & face_mask)
+    if len(keep) == 0:
+        raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
+    return find_landmark(
+        mesh, axis, seam_at=options.seam_at, landmark=options.landmark, attachments=attachments,
+        painted_zone=lambda: _painted_zone_centre(mesh, axis, options, face_mask, band, h_c, theta_c, area),
+        auto_seam=lambda: _auto_seam(mesh, axis, keep, theta_c, area)[0])
+
+
+def _painted_zone_centre(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c,
+                         area) -> tuple[float | None, str]:
+    """Centre angle of the importance zone (:func:`_find_importance` on an all-round unrolling
+    with the automatic seam), or None and why."""
+    from potflat.rollout.landmarks import zone_centre
+
+    plain = dataclasses.replace(options, seam=None, angles=None, seam_at=None, landmark=None, overlap=0.0)
+    un = _unroll(mesh, axis, plain, face_mask, band, h_c, theta_c, area)
+    flat = un.flat
+    if mesh.texcoords is not None:
+        flat = flat.replace(mesh=flat.mesh.replace(texcoords=mesh.texcoords[un.face_index]))
+    importance = _find_importance(flat, options, axis, np.degrees(un.theta))
+    if importance.values is None:
+        return None, importance.reason
+    vertex_area = np.bincount(flat.mesh.faces.ravel(), np.repeat(area[un.face_index] / 3.0, 3), len(flat.uv))
+    angle, length = zone_centre(axis.cylindrical(flat.mesh.vertices)[2], importance.values * vertex_area)
+    if angle is None:
+        return None, f"the importance zone goes round evenly (resultant {length:.3f})"
+    return angle, f"centre of the importance zone ({importance.method}: {importance.reason}), resultant {length:.2f}"
+
+
+def _in_band(axis: AxisFit, band, h_c) -> np.ndarray:
+    frac = h_c / axis.height if axis.height > 0 else np.zeros(len(h_c))
+    return (frac >= band[0]) & (frac <= band[1])
+
+
+def _auto_seam(mesh: Mesh, axis: AxisFit, sel: np.ndarray, theta_c, area) -> tuple[float, str]:
+    theta_v = axis.cylindrical(mesh.vertices)[2]
+    corners = _corner_angles(theta_v, mesh.faces, sel, theta_c[sel])
+    return choose_seam(mesh, sel, theta_c[sel], area[sel], _covered(theta_c[sel], corners))
+
+
 def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c, area,
-            seam_given: tuple[float, str] | None = None):
-    """Faces of the region, the seam (radians, and how it was chosen) and the corners' unwrapped angles."""
+            seam_given: tuple[float, str] | None = None, landmark=None):
+    """Faces of the region, the seam (radians, and how it was chosen), the corners' unwrapped
+    angles and the angle (radians) they are measured from.
+
+    With an overlap the faces within ``overlap`` degrees after the seam are listed twice, the
+    repeats last, their angles one turn on."""
     V, F = mesh.vertices, mesh.faces
     theta_v = axis.cylindrical(V)[2]
-    frac = h_c / axis.height if axis.height > 0 else np.zeros(len(F))
-    keep = (frac >= band[0]) & (frac <= band[1]) & face_mask
+    keep = _in_band(axis, band, h_c) & face_mask
+    placed = landmark is not None and (options.seam_at is not None or options.landmark is not None)
     if seam_given is not None:
         seam, seam_method = seam_given
+    elif options.angles is not None and landmark is not None and options.angles[1] - options.angles[0] >= 360.0:
+        seam, seam_method = landmark.angle + math.radians(options.angles[0]), "window edge"
     elif options.seam is not None:
-        seam, seam_method = math.radians(options.seam % 360.0), "user"
-    elif options.angles is not None:
-        seam, seam_method = 0.0, "user"
+        seam, seam_method = (landmark.angle if placed else 0.0) + math.radians(options.seam % 360.0), "user"
+    elif placed:
+        seam = landmark.angle + (math.pi if landmark.kind == "painted zone" else 0.0)
+        seam_method = {"point": "point", "handle": "handle"}.get(landmark.kind, "opposite painted zone")
     else:
         sel = np.flatnonzero(keep)
         if len(sel) == 0:
             raise InvalidOptionError(f"band {band[0]:g} {band[1]:g} selects no faces; widen it")
-        corners = _corner_angles(theta_v, F, sel, theta_c[sel])
-        seam, seam_method = choose_seam(mesh, sel, theta_c[sel], area[sel],
-                                        _covered(theta_c[sel], corners))
+        seam, seam_method = _auto_seam(mesh, axis, sel, theta_c, area)
+    seam %= TWO_PI
+    # angles are measured from the landmark, else from the seam
+    origin = landmark.angle if options.angles is not None and landmark is not None else seam
 
-    # centroid angle from the seam, in [lo, lo + 2 pi): faces are unwrapped around it
+    # centroid angle from the origin, in [lo, lo + 2 pi): faces are unwrapped around it
     lo = math.radians(options.angles[0]) if options.angles is not None else 0.0
-    rel_c = (theta_c - seam - lo) % TWO_PI + lo
+    rel_c = (theta_c - origin - lo) % TWO_PI + lo
     if options.angles is not None:
         keep &= rel_c <= math.radians(options.angles[1])
     face_index = np.flatnonzero(keep)
     if len(face_index) == 0:
         raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
-    if options.angles is None and seam_method == "user":
+    gap = None
+    if options.angles is None and seam_method in _PLACED_SEAMS:
         # a region that does not go round is not cut: unwrap from the middle of its gap
-        corners = _corner_angles(theta_v, F, face_index, rel_c[face_index], seam)
+        corners = _corner_angles(theta_v, F, face_index, rel_c[face_index], origin)
         gap = _gap_middle(_covered(rel_c[face_index], corners))
         if gap is not None:
-            rel_c = (theta_c - seam - gap) % TWO_PI + gap
+            rel_c = (theta_c - origin - gap) % TWO_PI + gap
             rel_c -= TWO_PI * np.round(np.average(rel_c[face_index], weights=area[face_index]) / TWO_PI)
-    corner_theta = _corner_angles(theta_v, F, face_index, rel_c[face_index], seam)
-    return face_index, seam, seam_method, corner_theta
+    centre = rel_c[face_index]
+    if options.overlap and gap is None and seam_method != "gap":
+        again = face_index[rel_c[face_index] < math.radians(options.overlap)]
+        face_index = np.concatenate([face_index, again])
+        centre = np.concatenate([centre, rel_c[again] + TWO_PI])
+    corner_theta = _corner_angles(theta_v, F, face_index, centre, origin)
+    return face_index, seam, seam_method, corner_theta, origin
 
 
 def _corner_angles(theta_v: np.ndarray, F: np.ndarray, idx: np.ndarray, centre: np.ndarray,
@@ -930,7 +1030,9 @@ def rollout_summary(result: RolloutResult) -> dict:
         "mm_per_unit": mesh.mm_per_unit,
         "axis": result.axis.as_dict(),
         "proxy": result.proxy.as_dict(),
-        "seam": {"angle_deg": result.seam_angle, "method": result.seam_method, "cut": result.region.cut},
+        "seam": {"angle_deg": result.seam_angle, "method": result.seam_method, "cut": result.region.cut,
+                 "landmark": result.landmark.as_dict() if result.landmark is not None else None,
+                 "theta_origin_deg": result.theta_origin},
         "region": result.region.as_dict(),
         "counts": {
             "vertices": len(mesh.vertices), "faces": len(mesh.faces),
@@ -954,7 +1056,11 @@ def rollout_summary(result: RolloutResult) -> dict:
 
 def _notes(result: RolloutResult) -> list[str]:
     """Warnings for the sidecar: what the user should know before relaxing."""
-    notes = []
+    notes = list(result.landmark_notes)
+    if result.region.repeated_from is not None:
+        notes.append(f"{len(result.flat.mesh.faces) - result.region.repeated_from} faces repeat the first "
+                     f"{result.region.overlap_deg:g} degrees after the seam past 360 degrees (their distortion is "
+                     "counted twice in the figures)")
     if result.distortion.flipped:
         why = (" (kept attachments: a handle cannot be unrolled without folds; leave them out)"
                if result.attachments_kept and result.attachments.n_faces else "")
@@ -1100,8 +1206,11 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     result = rollout(mesh, options=options)
     mesh = mesh.replace(texcoords=None)  # the rollout has its own; the profile needs none
     body = None if result.attachments_kept or not result.attachments.n_faces else ~result.attachments.face_mask
+    bins = None
+    if options.profile_mm is not None:
+        bins = max(1, math.ceil(result.axis.height * mesh.mm_per_unit / options.profile_mm))
     profile = vessel_profile(mesh, result.axis.point, result.axis.direction, face_mask=body,
-                             labels=result.walls.labels)
+                             labels=result.walls.labels, bins=bins)
     del mesh
     summary = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_summary(result),
                "profile": profile.summary(),

@@ -725,8 +725,9 @@ def run_batch(batch: Batch, *, workers: int | None = None, scheduler: str | None
     Returns
     -------
     BatchSummary
-        Also written as ``summary.json`` and ``summary.csv`` in ``batch.output``, even
-        when interrupted (unfinished scans are then ``interrupted``).
+        Also written as ``summary.json``, ``summary.csv`` and the report ``index.html``
+        (:mod:`potflat.stages.report`) in ``batch.output``, even when interrupted (unfinished scans are
+        then ``interrupted``).
     """
     start = time.perf_counter()
     reports: dict[int, ScanReport] = {}
@@ -776,6 +777,9 @@ def run_batch(batch: Batch, *, workers: int | None = None, scheduler: str | None
                                seconds=time.perf_counter() - start)
         with contextlib.suppress(PotflatError, OSError):
             summary.write()
+            from potflat.stages.report import write_report
+
+            write_report(summary)
     return summary
 
 
