@@ -1536,12 +1536,6 @@ def _place_holes(g: _Generatrix, painting: Painting, n: int, rng, region, avoid)
 # --------------------------------------------------------------------------- writers
 
 
-def _format_rows(fh, fmt: str, rows: np.ndarray, chunk: int = 200_000) -> None:
-    for i in range(0, len(rows), chunk):
-        part = rows[i:i + chunk]
-        fh.write((fmt * len(part)) % tuple(part.ravel().tolist()))
-
-
 def obj_texcoord_indices(vessel: SyntheticVessel) -> tuple[np.ndarray, np.ndarray]:
     """The OBJ ``vt`` table: one entry per (vertex, chart) pair.
 
@@ -1581,34 +1575,21 @@ def write_obj(vessel: SyntheticVessel, path: str | os.PathLike) -> Path:
     """
     import cv2
 
-    from potflat.io.atomic import atomic_path, write_bytes_atomic
+    from potflat.io.atomic import write_bytes_atomic
+    from potflat.io.obj import write_textured_obj
 
     path = Path(path)
     if path.suffix.lower() != ".obj":
         raise InvalidOptionError(f"{path} does not end in .obj; give an .obj output path")
-    png, mtl = path.with_suffix(".png"), path.with_suffix(".mtl")
+    png = path.with_suffix(".png")
     ok, buf = cv2.imencode(".png", vessel.texture[:, :, ::-1], [cv2.IMWRITE_PNG_COMPRESSION, 9])
     if not ok:
         raise RuntimeError("PNG encoding failed")
     write_bytes_atomic(png, buf.tobytes())
-    write_bytes_atomic(mtl, (
-        "# potflat synthetic vessel material\n"
-        "newmtl painted\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\n"
-        f"map_Kd {png.name}\n").encode())
     vt, corner_vt = obj_texcoord_indices(vessel)
-    F = vessel.mesh.faces
-    o = vessel.options
-    with atomic_path(path) as tmp:
-        with open(tmp, "w", encoding="ascii", newline="\n") as fh:
-            fh.write(f"# potflat synthetic {vessel.kind} seed {o['seed']}, units mm\n")
-            fh.write(f"mtllib {mtl.name}\nusemtl painted\n")
-            _format_rows(fh, "v %.4f %.4f %.4f\n", vessel.mesh.vertices)
-            _format_rows(fh, "vt %.7f %.7f\n", vt)
-            idx = np.stack([F + 1, corner_vt + 1], axis=2).reshape(-1, 6)
-            _format_rows(fh, "f %d/%d %d/%d %d/%d\n", idx)
-            fh.flush()
-            os.fsync(fh.fileno())
-    return path
+    return write_textured_obj(path, vessel.mesh.vertices, vessel.mesh.faces, vt, corner_vt, png.name,
+                              header=f"potflat synthetic {vessel.kind} seed {vessel.options['seed']}, units mm",
+                              vertex_format="%.4f")
 
 
 def write_ply_colored(vessel: SyntheticVessel, path: str | os.PathLike) -> Path:

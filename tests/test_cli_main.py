@@ -16,7 +16,8 @@ COMMANDS = ("rollout", "relax", "bake", "run", "batch")
 
 
 def cli(*args):
-    return CliRunner().invoke(app, [str(a) for a in args])
+    # a wide terminal, so that help tables do not cut long option names ("--importance-angl…")
+    return CliRunner().invoke(app, [str(a) for a in args], env={"COLUMNS": "200"})
 
 
 @pytest.fixture

@@ -104,8 +104,9 @@ def test_face_mask_limits_the_profile():
 def test_auto_bins():
     mesh, p, a = _vase()
     prof = vessel_profile(mesh, p, a)
-    # about two median edge lengths per bin: edges here are ~1.3-2 mm on an 80 mm vase
-    assert 15 <= len(prof.heights) <= 40
+    # one median edge length per bin (as fine as the scan's edges): edges here are ~1.3-2 mm on an 80 mm vase
+    assert 30 <= len(prof.heights) <= 80
+    assert prof.summary()["bin_mm"] == pytest.approx(80.0 / len(prof.heights), rel=0.1)
     json.dumps(prof.summary())
 
 

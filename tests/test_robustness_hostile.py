@@ -549,11 +549,11 @@ def test_band_with_a_comma_and_unit_names(tmp_path, fake_stages):
 
 
 def test_one_log_base_and_figures_in_words():
-    from potflat.mesh.distortion import in_words, percent_from_log
+    from potflat.mesh.distortion import distortion_words, percent_from_log
 
-    assert percent_from_log(0.1604) == pytest.approx(17.4, abs=0.05)
-    assert in_words({"edge_rms": 0.14, "area_mean_abs_log": 0.1604, "flipped": 0}) == \
-        "lengths off by 14.0 % (RMS), areas by 17.4 % on average, 0 flipped"
+    assert percent_from_log(0.1604) == pytest.approx(17.4, abs=0.05)  # the natural log, as every area figure
+    assert distortion_words({"edge_rms": 0.14, "area_mean_abs_log": 0.1604, "flipped": 0}) == \
+        "length error 14.0 % RMS, area error 17.4 % mean, 0 folded triangles"
 
 
 def test_large_trims_and_poor_axis_fits_are_warned_with_the_option():

@@ -91,10 +91,9 @@ def _figures(report) -> str:
     parts = []
     if report.seconds:
         parts.append(f"{report.seconds:.1f} s")
-    from potflat.mesh.distortion import in_words
+    from potflat.mesh.distortion import distortion_words
 
-    words = in_words(f)
-    return ", ".join(parts + ([words] if words else []))
+    return ", ".join(parts + [distortion_words(f)])
 
 
 def _print_table(summary) -> None:

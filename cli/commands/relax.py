@@ -56,13 +56,15 @@ def relax_command(
     quiet: Quiet = False,
     json: Json = False,
 ) -> None:
-    from potflat.mesh.distortion import in_words
-    from potflat.relax import RelaxOptions, run_relax_stage
+    from potflat.mesh.distortion import distortion_words
+    from potflat.relax import run_relax_stage
+    from potflat_cli._options import options_from_cli
     from potflat_cli._stage import run_stage, with_compile_note
 
-    options = RelaxOptions(preset=preset, tol=tol, max_iter=max_iter, time_budget=time_budget, threads=threads,
-                           stretch=stretch, stiffness=stiffness, weighting=weighting, simplify_mm=simplify_mm,
-                           shape=shape, importance_contrast=importance_contrast, true_scale=true_scale)
+    options = options_from_cli("relax", {
+        "preset": preset, "tol": tol, "max_iter": max_iter, "time_budget": time_budget, "threads": threads,
+        "stretch": stretch, "stiffness": stiffness, "weighting": weighting, "simplify_mm": simplify_mm,
+        "shape": shape, "importance_contrast": importance_contrast, "true_scale": true_scale})
     show_progress = sys.stderr.isatty() and not (quiet or json)
     if show_progress and with_compile_note("") != "":
         print(f"note: {with_compile_note('').strip(' ()')}", file=sys.stderr)
@@ -81,7 +83,7 @@ def relax_command(
                f"{s['timings']['solve']:.1f} s")
     typer.echo(f"  edge-length RMS {before['edge_rms']:.4f} -> {after['edge_rms']:.4f}, "
                f"mean |ln area ratio| {before['area_mean_abs_log']:.4f} -> {after['area_mean_abs_log']:.4f}, {fold}")
-    typer.echo(f"  whole surface now: {in_words({**after, 'flipped': None})}")
+    typer.echo(f"  whole surface now: {distortion_words({**after, 'flipped': None})}")
     typer.echo(f"  {s['lengths']}")
 
 

@@ -10,7 +10,7 @@ from potflat_cli._options import Json, Name, OutputDir, Quiet
 
 HELP = """Unroll a vessel scan: find its rotation axis, fit a cylinder/cone/sphere, cut a seam, develop it.
 
-Writes NAME.rollout.ply (3D positions + flattened u v, texture coordinates or colours; the input of 'potflat relax'), NAME.rollout.json (axis, proxy, seam, region, walls, attachments left out, trimmed border, counts, cleaning report, distortion) and the profile NAME.profile.csv / NAME.profile.svg. The outer wall is unrolled (--side inner: the inside); handles are left out unless --keep-attachments. Angles are degrees counter-clockwise about the axis (mouth up): the seam from the axis' reference direction (printed), --angles from the seam. Exit codes: 0 success, 2 bad input or options (e.g. no rotational symmetry: give --axis).
+Writes NAME.rollout.ply (3D positions + flattened u v, texture coordinates or colours; the input of 'potflat relax'), NAME.rollout.json (axis, proxy, seam, region, walls, attachments left out, trimmed border, counts, cleaning report, distortion) and the profile NAME.profile.csv / NAME.profile.svg. The outer wall is unrolled (--side inner: the inside); handles are left out unless --keep-attachments. Angles are degrees counter-clockwise about the axis (mouth up), measured from a landmark when one is named (--seam-at X Y Z, --landmark painted|handle), else: the seam from the axis' reference direction (printed), --angles from the seam, or centred on the painted zone when --angles comes alone. Exit codes: 0 success, 2 bad input or options (e.g. no rotational symmetry: give --axis).
 
 Example:  potflat rollout scans/amphora.obj -o out --band 0.2 0.7 --proxy cone
 """
@@ -30,14 +30,23 @@ def rollout_command(
                        "scan coordinates) \\[default: estimated from the normals].")] = None,
     flip: Annotated[bool, typer.Option("--flip", help="Reverse the axis (swap mouth and foot).")] = False,
     seam: Annotated[Optional[float], typer.Option(
-        "--seam", help="Seam angle, degrees from the reference direction \\[default: where the "
-                       "painting is least dense, or a gap].")] = None,
+        "--seam", help="Seam angle, degrees from the landmark (--seam-at, --landmark), else from the reference "
+                       "direction \\[default: where the painting is least dense, or a gap].")] = None,
+    seam_at: Annotated[Optional[tuple[float, float, float]], typer.Option(
+        "--seam-at", metavar="X Y Z", help="A point on the surface (scan coordinates, e.g. picked in MeshLab): "
+                                           "the seam goes through it; --seam and --angles are measured from it.")] = None,
+    landmark: Annotated[Optional[str], typer.Option(
+        "--landmark", help="painted: the seam goes opposite the centre of the painted zone; handle: through the "
+                           "largest handle. --seam and --angles are measured from it.")] = None,
+    overlap: Annotated[Optional[float], typer.Option(
+        "--overlap", metavar="DEG", help="Repeat the surface past 360 degrees by DEG, so a motif crossing the seam "
+                                         "is seen whole once; the bake marks where the repeat starts.")] = None,
     band: Annotated[Optional[tuple[float, float]], typer.Option(
         "--band", help="Height band LO HI as fractions of the height, 0 = foot, 1 = mouth "
                        "\\[default: 0 1].")] = None,
     angles: Annotated[Optional[tuple[float, float]], typer.Option(
-        "--angles", help="Angle range A0 A1 in degrees from the seam, e.g. -60 60 \\[default: all "
-                         "round].")] = None,
+        "--angles", help="Angle range A0 A1 in degrees, e.g. -60 60: from the landmark, else from --seam, else "
+                         "centred on the painted zone (the seam stays automatic) \\[default: all round].")] = None,
     view: Annotated[Optional[str], typer.Option(
         "--view", help="With --proxy ortho: direction x,y,z from the vessel to the viewer "
                        "\\[default: towards the region's centre].")] = None,
@@ -47,6 +56,9 @@ def rollout_command(
     keep_attachments: Annotated[bool, typer.Option(
         "--keep-attachments", help="Keep handles, spouts and knobs in the rollout (by default they are "
                                    "left out and reported; the painting around their roots stays).")] = False,
+    profile_mm: Annotated[Optional[float], typer.Option(
+        "--profile-mm", metavar="MM", help="Height step of the profile (NAME.profile.csv/.svg, the plate's "
+                                           "section), mm \\[default: one edge length of the scan].")] = None,
     units: Annotated[Optional[str], typer.Option(
         "--units", help="Length unit of the scan: mm, cm, m, um, in \\[default: as the file "
                         "declares (PLY comment, STL header, glTF metres), else mm].")] = None,
@@ -81,7 +93,8 @@ def rollout_command(
         raise InvalidOptionError(f"--output {output} is a file; give a folder")
     values = {"proxy": proxy, "axis": axis, "flip": flip or None, "seam": seam, "band": band,
               "angles": angles, "view": view, "units": units, "texture": None if texture else False,
-              "side": side, "keep_attachments": keep_attachments or None, "importance": importance,
+              "side": side, "keep_attachments": keep_attachments or None, "profile_mm": profile_mm,
+              "seam_at": seam_at, "landmark": landmark, "overlap": overlap, "importance": importance,
               "importance_mask": importance_mask, "importance_image": importance_image,
               "importance_band": importance_band, "importance_arc": importance_arc}
     options = options_from_cli("rollout", values)
@@ -95,7 +108,7 @@ def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quie
     from potflat_cli._stage import run_stage
     from rich.console import Console
 
-    from potflat.mesh.distortion import in_words
+    from potflat.mesh.distortion import distortion_words
     from potflat.rollout import run_rollout_stage
 
     result = run_stage(f"rolling out {scan.name}", lambda: run_rollout_stage(scan, output or Path(name or scan.stem), options, name=name),
@@ -114,6 +127,9 @@ def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quie
         out.print(f"[yellow]note:[/] {ax['note']}")
     params = ", ".join(f"{k} {v:.4g}" for k, v in px["params"].items() if isinstance(v, float))
     out.print(f"proxy {px['type']} ({params}): {px['reason']}")
+    if s["seam"].get("landmark"):
+        lm = s["seam"]["landmark"]
+        out.print(f"landmark: {lm['kind']} at {lm['angle_deg']:.1f} deg ({lm['detail']})")
     out.print(f"seam {s['seam']['angle_deg']:.1f} deg ({s['seam']['method']}) from reference "
               f"{fmt(f'{x:.4f}' for x in ax['reference_direction'])}; {c['faces']} faces, "
               f"{c['vertices']} vertices, {c['seam_vertices_duplicated']} seam vertices duplicated")
@@ -134,5 +150,5 @@ def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quie
     if s.get("importance"):
         out.print(f"importance ({s['importance']['method']}): {s['importance']['reason']}")
     flipped = f"[red]{d['flipped']} flipped[/]" if d["flipped"] else "0 flipped"
-    out.print(f"distortion: {in_words({**d, 'flipped': None})}, {flipped} (edge-length RMS {d['edge_rms']:.4f}, "
+    out.print(f"distortion: {distortion_words({**d, 'flipped': None})}, {flipped} (edge-length RMS {d['edge_rms']:.4f}, "
               f"mean |ln area ratio| {d['area_mean_abs_log']:.4f}, anisotropy mean {d['anisotropy_mean']:.3f})")

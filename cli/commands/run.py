@@ -56,7 +56,7 @@ def _run(values: dict[str, Any]) -> None:
 
     from rich.console import Console
 
-    from potflat.mesh.distortion import in_words
+    from potflat.mesh.distortion import distortion_words
     from potflat.stages.pipeline import STAGES, run_scan
     from potflat_cli._options import options_from_cli
     from potflat_cli._stage import with_compile_note
@@ -85,7 +85,7 @@ def _run(values: dict[str, Any]) -> None:
     shown = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
                       for k, v in figures.items() if v is not None)
     if shown:
-        out.print(f"  whole-surface distortion: {in_words(figures)} ({shown}; area figures are natural logs)")
+        out.print(f"  whole-surface distortion: {distortion_words(figures)} ({shown}; area figures are natural logs)")
     relaxed = result.stages["relax"].summary
     if relaxed.get("lengths"):
         out.print(f"  {relaxed['lengths']}")

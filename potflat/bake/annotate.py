@@ -16,6 +16,9 @@ from potflat.mesh.distortion import percent_from_log
 
 from potflat.types import FlatMesh
 
+#: Longest side in pixels of each baked panel of the comparison sheet.
+SHEET_PANEL_PX = 900
+
 #: Opacity of the heat map in the stress overlay.
 OVERLAY_ALPHA = 0.6
 #: Grid spacing in millimetres.
@@ -199,11 +202,17 @@ class ScaleLayer:
     px_per_mm : float
     grid : bool
         Draw grid lines every :data:`GRID_MM` from the top-left image corner, labelled in mm.
+
+    at : (int, int), optional
+        Top-left pixel ``(x, y)`` of the bar's box; default: the bottom-left corner of the image.
+    bar_mm : float, optional
+        Bar length; default: the round length nearest below a quarter of the image width.
     """
 
-    def __init__(self, width: int, height: int, px_per_mm: float, *, grid: bool = False):
+    def __init__(self, width: int, height: int, px_per_mm: float, *, grid: bool = False,
+                 at: tuple[int, int] | None = None, bar_mm: float | None = None):
         self.width, self.height, self.px_per_mm, self.grid = width, height, px_per_mm, grid
-        self.bar_mm = nice_length(0.25 * width / px_per_mm)
+        self.bar_mm = bar_mm if bar_mm is not None else nice_length(0.25 * width / px_per_mm)
         bar_px = self.bar_mm * px_per_mm
         self.font_px = int(np.clip(round(bar_px / 9), 10, 96))
         self.grid_font_px = int(np.clip(round(GRID_MM * px_per_mm * 0.3), 9, 48))
@@ -211,6 +220,8 @@ class ScaleLayer:
         self.margin = max(4, self.font_px // 2)
         self.label_step = next((s for s in (10, 20, 50, 100, 200, 500, 1000, 2000, 5000)
                                 if s * px_per_mm >= 4 * self.grid_font_px), 1e9)
+        bw, bh = self.box_size
+        self.at = at if at is not None else (self.margin, self.height - bh - self.margin)
 
     def _draw_bar(self, draw, x0: float, y0: float) -> None:
         ppm, L = self.px_per_mm, self.bar_mm
@@ -237,7 +248,9 @@ class ScaleLayer:
         self._f  # noqa: B018 - fills the cache
         return self._font_cache[1]
 
-    def _box_size(self) -> tuple[int, int]:
+    @property
+    def box_size(self) -> tuple[int, int]:
+        """Width and height in pixels of the bar's white box."""
         return (math.ceil(self.bar_mm * self.px_per_mm) + 2 * self.margin,
                 self.thick + self.font_px + 3 * self.margin)
 
@@ -245,7 +258,7 @@ class ScaleLayer:
         """The scale bar alone on white, at true scale. Shape (h, w, 4) uint8."""
         from PIL import Image, ImageDraw
 
-        w, h = self._box_size()
+        w, h = self.box_size
         img = Image.new("RGBA", (w, h), (255, 255, 255, 255))
         self._draw_bar(ImageDraw.Draw(img), self.margin, self.margin)
         return np.asarray(img)
@@ -275,12 +288,65 @@ class ScaleLayer:
                 if r0 - 2 * self.grid_font_px <= y <= r1 + 2 * self.grid_font_px:
                     draw.text((2, y + 2 - r0), f"{i * GRID_MM:g}", fill=(0, 0, 0, 255), font=self._gf)
             draw.text((2, 2 - r0), "mm", fill=(0, 0, 0, 255), font=self._gf)
-        bw, bh = self._box_size()
-        bx, by = self.margin, self.height - bh - self.margin
+        bw, bh = self.box_size
+        bx, by = self.at
         if by + bh >= r0 and by <= r1:
             draw.rectangle([bx, by - r0, bx + bw, by + bh - r0], fill=(255, 255, 255, 210))
             self._draw_bar(draw, bx + self.margin, by + self.margin - r0)
         return np.asarray(img)
+
+
+def over(top: np.ndarray, bottom: np.ndarray) -> np.ndarray:
+    """Alpha-composite RGBA rows ``top`` over ``bottom`` (both (k, w, 4) uint8, straight alpha)."""
+    ta = top[..., 3:4].astype(np.float32) / 255.0
+    ba = bottom[..., 3:4].astype(np.float32) / 255.0
+    alpha = ta + ba * (1.0 - ta)
+    rgb = (top[..., :3] * ta + bottom[..., :3] * ba * (1.0 - ta)) / np.maximum(alpha, 1e-6)
+    return np.concatenate([np.rint(np.clip(rgb, 0, 255)), np.rint(alpha * 255.0)], axis=-1).astype(np.uint8)
+
+
+#: Longest side of the coverage mask searched for a free place for the scale bar, pixels.
+FREE_SPOT_MASK_PX = 2048
+
+
+def free_spot(covered: np.ndarray, box: tuple[int, int], margin: int) -> tuple[int, int] | None:
+    """Top-left ``(x, y)`` of a ``box`` (w, h) that covers no True pixel of ``covered``.
+
+    Of the free places ``margin`` away from the image border, the one nearest the bottom-left
+    corner (where a scale bar is looked for) is taken.
+
+    Parameters
+    ----------
+    covered : (h, w) bool
+        Pixels that must stay clear (the painting, grown by a pixel).
+    box : (int, int)
+        Box width and height in pixels.
+    margin : int
+        Distance kept from the image border, pixels.
+
+    Returns
+    -------
+    (int, int) or None
+        None when no place is free.
+    """
+    import cv2
+
+    h, w = covered.shape
+    bw, bh = box
+    if bw + 2 * margin > w or bh + 2 * margin > h:
+        return None
+    integral = cv2.integral(covered.astype(np.uint8))  # (h + 1, w + 1)
+    sums = (integral[bh:, bw:] - integral[:-bh, bw:] - integral[bh:, :-bw] + integral[:-bh, :-bw])
+    free = sums == 0  # free[y, x]: box with top-left (x, y) is clear
+    free[:margin] = False
+    free[:, :margin] = False
+    free[h - bh - margin + 1:] = False
+    free[:, w - bw - margin + 1:] = False
+    ys, xs = np.nonzero(free)
+    if not len(ys):
+        return None
+    best = int(np.argmin(xs.astype(np.float64) ** 2 + (h - bh - ys).astype(np.float64) ** 2))
+    return int(xs[best]), int(ys[best])
 
 
 def _zone_line(flat: FlatMesh) -> str:
@@ -298,19 +364,18 @@ def _zone_line(flat: FlatMesh) -> str:
     return "\n".join(parts)
 
 
-def comparison_sheet(path: str | Path, rollout: FlatMesh, relaxed: FlatMesh, *, title: str = "",
-                     max_px: int = 900) -> Path:
+def comparison_sheet(path: str | Path, panels, *, title: str = "") -> Path:
     """Side-by-side sheet: proxy rollout vs relaxed, painting and stress map with figures.
 
-    Both stress maps use one colour scale. Written atomically as PNG.
+    Both stress maps use one colour scale. Written atomically as PNG. The panels are baked
+    by the caller (:func:`potflat.bake.render.comparison_sheet`), so this module draws only.
 
     Parameters
     ----------
     path : path-like
-    rollout, relaxed : FlatMesh
+    panels : sequence of (str, FlatMesh, BakeResult)
+        Label, flattening and its bake (with the ``stress`` map) of each column.
     title : str
-    max_px : int
-        Longest side of each baked panel in pixels.
 
     Returns
     -------
@@ -319,20 +384,11 @@ def comparison_sheet(path: str | Path, rollout: FlatMesh, relaxed: FlatMesh, *, 
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from potflat.mesh import distortion
-    from potflat.bake import bake
     from potflat.io.atomic import write_bytes_atomic
+    from potflat.mesh import distortion
 
-    panels = []
-    for label, flat in (("proxy rollout", rollout), ("relaxed", relaxed)):
-        mpu = flat.mesh.mm_per_unit
-        ext = (flat.uv.max(axis=0) - flat.uv.min(axis=0)) * mpu
-        ppm = max(1e-3, max_px / max(ext.max(), 1e-9))
-        res = bake(flat, px_per_mm=ppm, maps=("stress",))
-        stress = flat.stress if flat.stress is not None else distortion.vertex_stress(
-            flat.mesh.vertices, flat.uv, flat.mesh.faces, mpu)
-        panels.append((label, res, stress, distortion.summarize(flat.mesh.vertices, flat.uv, flat.mesh.faces),
-                       _zone_line(flat)))
+    panels = [(label, res, _vertex_stress(flat), distortion.summarize(flat.mesh.vertices, flat.uv, flat.mesh.faces),
+               _zone_line(flat)) for label, flat, res in panels]
     hi = max(map_scale("stress", p[2]).hi for p in panels)
     scale = map_scale("stress", np.zeros(1), hi=hi)
     aspect = max(p[1].image.shape[0] / p[1].px_per_mm for p in panels) / max(
@@ -370,3 +426,17 @@ def comparison_sheet(path: str | Path, rollout: FlatMesh, relaxed: FlatMesh, *, 
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=100)
     return write_bytes_atomic(path, buf.getvalue())
+
+
+def _vertex_stress(flat: FlatMesh) -> np.ndarray:
+    from potflat.mesh import distortion
+
+    if flat.stress is not None:
+        return flat.stress
+    return distortion.vertex_stress(flat.mesh.vertices, flat.uv, flat.mesh.faces, flat.mesh.mm_per_unit)
+
+
+def sheet_px_per_mm(flat: FlatMesh, max_px: int = SHEET_PANEL_PX) -> float:
+    """Resolution of a comparison-sheet panel: its longest side ``max_px`` pixels."""
+    ext = (flat.uv.max(axis=0) - flat.uv.min(axis=0)) * flat.mesh.mm_per_unit
+    return max(1e-3, max_px / max(ext.max(), 1e-9))

@@ -80,6 +80,19 @@ class BakeOptions:
         Sub-samples per pixel side (1-8); 0 chooses from the texture density (2-4).
     max_megapixels : float
         Refuse images larger than this (protects laptops from a mistyped resolution).
+    scale_on_image : bool
+        Draw the scale bar (and the grid, with ``grid``) into ``NAME.png`` itself, where it
+        covers no painting (in a band added below the image when no such place is free).
+    plate : bool
+        Also write the archaeological plate ``NAME.plate.svg/.pdf/.png``
+        (:mod:`potflat.bake.plate`; needs the rollout's and relaxation's files beside the input).
+    plate_scale : str, float or None
+        Print scale of the plate, e.g. ``1:2`` or 0.5; None: the largest of 1:1, 1:2, 1:3, 1:4, 1:5,
+        1:10, 1:20, 1:50 at which it fits an A4 page.
+    obj : bool
+        Also write ``NAME.flat.obj`` + ``NAME.flat.mtl``: the scan's surface (3D, scan units)
+        with the flat coordinates as texture coordinates into ``NAME.png`` (the painting
+        re-baked in the flat layout), for MeshLab and Blender.
     """
 
     px_per_mm: float | None = None
@@ -91,8 +104,19 @@ class BakeOptions:
     tiff: bool = False
     supersample: int = 0
     max_megapixels: float = 1000.0
+    scale_on_image: bool = False
+    plate: bool = False
+    plate_scale: str | float | None = None
+    obj: bool = False
 
     def __post_init__(self) -> None:
+        from potflat.bake.plate import parse_scale
+
+        for name in ("scale_on_image", "plate", "obj"):
+            if not isinstance(getattr(self, name), bool):
+                raise InvalidOptionError(f"{name} must be true or false, got {getattr(self, name)!r}")
+        if self.plate_scale is not None:
+            parse_scale(self.plate_scale)
         if self.px_per_mm is not None and self.dpi is not None:
             raise InvalidOptionError("give either px_per_mm (--px-per-mm) or dpi (--dpi), not both")
         for name in ("px_per_mm", "dpi", "max_megapixels"):
@@ -556,37 +580,39 @@ def _figures(r: _Renderer, covered_px: float) -> dict:
 # library entry point
 
 
-def bake(flat: FlatMesh, *, px_per_mm: float | None = None, dpi: float | None = None,
-         maps: tuple[str, ...] = MAP_NAMES, position_map: bool = False, supersample: int = 0,
-         max_megapixels: float = 1000.0) -> BakeResult:
+def bake(flat: FlatMesh, *, options: BakeOptions | None = None, **option_fields) -> BakeResult:
     """Bake a flattening into a true-scale RGBA image and distortion maps, in memory.
 
     Parameters
     ----------
     flat : FlatMesh
         The flattening (``uv`` in scan units, u right, v up).
-    px_per_mm, dpi : float, optional
-        Resolution (give at most one; default 4 px/mm).
-    maps : tuple of str
-        Distortion maps to compute, from :data:`MAP_NAMES`.
-    position_map : bool
-        Also return the 3D point under each pixel.
-    supersample : int
-        Sub-samples per pixel side (0: automatic).
-    max_megapixels : float
-        Refuse larger images.
+    options : BakeOptions, optional
+        The stage's options; or give its fields as keywords (not both). Used here:
+        ``px_per_mm`` or ``dpi`` (default 4 px/mm), ``maps`` (from :data:`MAP_NAMES`),
+        ``position_map`` (also return the 3D point under each pixel), ``supersample``
+        (sub-samples per pixel side, 0: automatic), ``max_megapixels`` (refuse larger
+        images); the other fields concern the files :func:`run_bake_stage` writes.
 
     Returns
     -------
     BakeResult
+
+    Raises
+    ------
+    InvalidOptionError
+        When an option is invalid, or both ``options`` and option keywords are given.
 
     Notes
     -----
     Everything is held in memory; for very large images use :func:`run_bake_stage`,
     which streams the same strips to disk.
     """
-    opts = BakeOptions(px_per_mm=px_per_mm, dpi=dpi, maps=maps, position_map=position_map,
-                       supersample=supersample, max_megapixels=max_megapixels)
+    if options is None:
+        options = BakeOptions(**option_fields)
+    elif option_fields:
+        raise InvalidOptionError("give either options= or option keywords to bake(), not both")
+    opts = options
     r = _Renderer(flat, opts.resolution, supersample=opts.supersample, max_megapixels=opts.max_megapixels)
     g = r.grid
     image = np.zeros((g.height, g.width, 4), np.uint8)
@@ -603,6 +629,16 @@ def bake(flat: FlatMesh, *, px_per_mm: float | None = None, dpi: float | None = 
             position[r0:r1] = r.position(r0, r1)
     return BakeResult(image=image, maps=values, position=position, px_per_mm=g.px_per_mm,
                       origin=g.origin.copy(), figures=_figures(r, covered))
+
+
+def comparison_sheet(path: str | os.PathLike, rollout: FlatMesh, relaxed: FlatMesh, *, title: str = "") -> Path:
+    """Bake the proxy rollout and the relaxed flattening and draw them side by side
+    (:func:`potflat.bake.annotate.comparison_sheet`); written atomically as PNG."""
+    from potflat.bake import annotate
+
+    panels = [(label, flat, bake(flat, px_per_mm=annotate.sheet_px_per_mm(flat), maps=("stress",)))
+              for label, flat in (("proxy rollout", rollout), ("relaxed", relaxed))]
+    return annotate.comparison_sheet(path, panels, title=title)
 
 
 def _attachment_rows(share: np.ndarray) -> np.ndarray:
@@ -643,35 +679,134 @@ def stage_name(path: Path) -> str:
 ATTACHMENT_COLOUR = (230, 0, 160, 220)
 
 
-def _attachment_roots(flat_ply: Path, n_faces: int) -> tuple[np.ndarray, Path | None]:
-    """Faces where the rollout left out an attachment, from ``NAME.rollout.json`` beside the input.
+#: Colour (RGBA) of the dashed line where a rollout's repeat past 360 degrees (``overlap``) starts.
+REPEAT_COLOUR = (255, 0, 200, 255)
+#: Dash length of that line, pixels.
+REPEAT_DASH_PX = 6
 
-    Returns a per-face indicator (n_faces,) float64 (empty when there is nothing to show) and
-    the JSON read (for provenance), or ``None``.
-    """
+
+def _rollout_sidecar(flat_ply: Path, rollout_summary: dict | None = None) -> tuple[dict, Path | None]:
+    """The rollout's summary (``rollout_summary`` when handed over in memory, else
+    ``NAME.rollout.json`` beside the input; an empty dict when absent or unreadable) and that
+    JSON file (for provenance) or None."""
     stem = flat_ply.name.removesuffix(".ply").removesuffix(".relaxed").removesuffix(".rollout")
     rollout_json = flat_ply.with_name(f"{stem}.rollout.json")
+    if rollout_summary is not None:
+        return rollout_summary, rollout_json if rollout_json.is_file() else None
     try:
         data = json.loads(rollout_json.read_text(encoding="utf-8"))
     except (OSError, ValueError):
-        return np.zeros(0), None
-    att = data.get("attachments") if isinstance(data, dict) else None
+        return {}, None
+    # a sidecar of another shape (null, a list: edited by hand) has nothing to mark
+    return (data if isinstance(data, dict) else {}), rollout_json
+
+
+def _attachment_roots(sidecar: dict, n_faces: int) -> np.ndarray:
+    """Faces where the rollout left out an attachment, from ``NAME.rollout.json``: a per-face
+    indicator (n_faces,) float64, empty when there is nothing to show."""
+    att = sidecar.get("attachments")
     roots = att.get("root_faces") if isinstance(att, dict) else None
     if not isinstance(roots, list) or not all(isinstance(r, int) and not isinstance(r, bool) for r in roots):
-        return np.zeros(0), rollout_json  # a sidecar of another shape (edited, null): no roots to mark
+        return np.zeros(0)
     roots = np.asarray(roots, dtype=np.int64)
     if att.get("kept") or not len(roots) or roots.min() < 0 or roots.max() >= n_faces:
-        return np.zeros(0), rollout_json
+        return np.zeros(0)
     marks = np.zeros(n_faces)
     marks[roots] = 1.0
-    return marks, rollout_json
+    return marks
+
+
+def _repeated_faces(sidecar: dict, n_faces: int) -> np.ndarray:
+    """Faces that repeat the start of the rollout past 360 degrees (``overlap``), from
+    ``NAME.rollout.json``: a per-face indicator (n_faces,) float64, empty when none."""
+    region = sidecar.get("region")
+    start = region.get("repeated_from") if isinstance(region, dict) else None
+    if not isinstance(start, int) or region.get("faces") != n_faces or not 0 < start < n_faces:
+        return np.zeros(0)
+    marks = np.zeros(n_faces)
+    marks[int(start):] = 1.0
+    return marks
+
+
+def _repeat_line(share: np.ndarray, r0: int) -> np.ndarray:
+    """Pixels (k, w) bool of a dashed line where the repeated part starts: where the share of
+    repeated faces crosses one half from left to right (the line runs from foot to mouth)."""
+    rep = np.nan_to_num(share, nan=-1.0)
+    inside = rep >= 0.5
+    edge = np.zeros_like(inside)
+    edge[:, 1:] = inside[:, 1:] & (rep[:, :-1] >= 0) & ~inside[:, :-1]
+    edge[:, :-1] |= edge[:, 1:].copy()  # two pixels wide
+    rows = (np.arange(r0, r0 + len(rep)) // REPEAT_DASH_PX) % 2 == 0
+    return edge & rows[:, None]
+
+
+#: Shortest scale bar drawn into ``NAME.png``, as a fraction of the default (a quarter of the width).
+MIN_BAR_FRACTION = 0.1
+
+
+def _scale_on_image(r: _Renderer, grid: bool):
+    """The scale layer to draw into ``NAME.png``, placed where it covers no painting.
+
+    The painting's footprint is rasterised on a grid of at most
+    :data:`potflat.bake.annotate.FREE_SPOT_MASK_PX` pixels a side and the free place nearest the
+    bottom-left corner is taken, for the longest round bar (from a quarter of the image width
+    down to :data:`MIN_BAR_FRACTION` of that) that has one; when none has, a band is added
+    below the image with the default bar.
+
+    Returns
+    -------
+    layer : ScaleLayer
+    band : int
+        Rows added below the image (0 when the bar fits beside the painting).
+    """
+    from potflat.bake import annotate
+
+    g = r.grid
+    f = max(1, math.ceil(max(g.width, g.height) / annotate.FREE_SPOT_MASK_PX))
+    wc, hc = math.ceil(g.width / f), math.ceil(g.height / f)
+    uv = r.flat.uv[r.faces]  # (m, 3, 2)
+    tex = np.empty_like(uv)
+    tex[..., 0] = (uv[..., 0] - g.origin[0]) * g.scale / f / wc
+    tex[..., 1] = 1.0 - (g.origin[1] - uv[..., 1]) * g.scale / f / hc
+    covered = _chart_mask(tex, hc, wc)
+    default = annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid)
+    bar = default.bar_mm
+    while bar >= MIN_BAR_FRACTION * default.bar_mm * (1 - 1e-9):
+        probe = annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid, bar_mm=bar)
+        bw, bh = probe.box_size
+        spot = annotate.free_spot(covered, (math.ceil(bw / f) + 1, math.ceil(bh / f) + 1), math.ceil(probe.margin / f))
+        if spot is not None:
+            return annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid, bar_mm=bar,
+                                       at=(spot[0] * f, spot[1] * f)), 0
+        bar = annotate.nice_length(bar * 0.99)
+    bw, bh = default.box_size
+    band = bh + 2 * default.margin
+    return annotate.ScaleLayer(g.width, g.height + band, g.px_per_mm, grid=grid, bar_mm=default.bar_mm,
+                               at=(default.margin, g.height + default.margin)), band
+
+
+def _write_flat_obj(path: Path, flat: FlatMesh, g: _Grid, band: int, texture_name: str) -> Path:
+    """The flattened surface as a textured OBJ: 3D positions, texture coordinates = the flat
+    coordinates in the pixel grid of ``NAME.png`` (``band`` rows added below it)."""
+    from potflat import __version__
+    from potflat.io.obj import write_textured_obj
+
+    height = g.height + band
+    vt = np.empty_like(flat.uv)
+    vt[:, 0] = (flat.uv[:, 0] - g.origin[0]) * g.scale / g.width
+    vt[:, 1] = 1.0 - (g.origin[1] - flat.uv[:, 1]) * g.scale / height
+    header = (f"potflat {__version__}: {flat.mesh.source.name if flat.mesh.source else 'flattening'}, "
+              f"units {flat.mesh.units}; texture coordinates = the flat layout in {texture_name} "
+              f"({g.px_per_mm:g} px/mm)")
+    return write_textured_obj(path, flat.mesh.vertices, flat.mesh.faces, vt, flat.mesh.faces, texture_name,
+                              header=header)
 
 
 def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: list) -> None:
     """Refuse to bake when an output name is an input file (e.g. the scan's texture ``NAME.png``
     when baking into the scan's own folder): the input would be replaced."""
     suffixes = (".png", ".tif", ".position.tif", ".sheet.png", ".bake.json", ".overlay.png", ".scale-layer.png",
-                ".attachments.png",
+                ".attachments.png", ".flat.obj", ".flat.mtl", ".plate.svg", ".plate.pdf", ".plate.png",
                 ".scalebar.png", *(f".{m}.png" for m in options.maps))
     for src in (Path(p) for p in inputs if p is not None):
         for out in (out_dir / f"{name}{s}" for s in suffixes):
@@ -681,7 +816,8 @@ def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: li
 
 
 def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, options: BakeOptions | None = None, *,
-                   name: str | None = None) -> StageOutput:
+                   name: str | None = None, flat: FlatMesh | None = None,
+                   rollout_summary: dict | None = None) -> StageOutput:
     """Bake ``NAME.relaxed.ply`` (or a rollout) into images and ``NAME.bake.json``.
 
     Files (in ``out_dir``): ``NAME.png`` (painting, RGBA, resolution in the file),
@@ -703,6 +839,12 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     options : BakeOptions, optional
     name : str, optional
         Output NAME; default: the input stem without ``.relaxed``.
+    flat : FlatMesh, optional
+        The content of ``flat_ply`` already in memory (:func:`potflat.run_scan`); read from
+        the file when not given.
+    rollout_summary : dict, optional
+        The rollout stage's summary in memory (where attachments met the wall); read from
+        ``NAME.rollout.json`` beside the input when not given.
 
     Returns
     -------
@@ -719,7 +861,8 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     flat_ply = Path(flat_ply)
     out_dir = Path(out_dir)
     name = name or stage_name(flat_ply)
-    flat = read_flat_ply(flat_ply)
+    if flat is None:
+        flat = read_flat_ply(flat_ply)
     rollout_ply = None
     if options.sheet:
         if not flat_ply.name.endswith(".relaxed.ply"):
@@ -727,13 +870,19 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
         rollout_ply = flat_ply.with_name(flat_ply.name[: -len(".relaxed.ply")] + ".rollout.ply")
         if not rollout_ply.is_file():
             raise InvalidInputError(f"--sheet needs {rollout_ply.name} beside {flat_ply}; copy it there or drop --sheet")
+    if options.plate and not flat_ply.name.endswith(".relaxed.ply"):
+        raise InvalidOptionError(f"the plate is made from NAME.relaxed.ply; bake the relaxed file, not {flat_ply.name}")
     _check_not_inputs(out_dir, name, options, [flat_ply, flat.mesh.texture_path, rollout_ply])
-    attachment_marks, rollout_json = _attachment_roots(flat_ply, len(flat.mesh.faces))
+    sidecar, rollout_json = _rollout_sidecar(flat_ply, rollout_summary)
+    attachment_marks = _attachment_roots(sidecar, len(flat.mesh.faces))
+    repeated = _repeated_faces(sidecar, len(flat.mesh.faces))
     ppm = options.resolution
     r = _Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels)
     g = r.grid
     if len(attachment_marks):
         r.face_values["attachments"] = attachment_marks
+    if len(repeated):
+        r.face_values["repeated"] = repeated
     paths: dict[str, Path] = {"png": out_dir / f"{name}.png"}
     scales = {m: annotate.map_scale(m, r.vertex_stress if m == "stress" else r.face_values[m]) for m in options.maps}
     if flat.importance is not None:
@@ -742,13 +891,15 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     if "stress" in options.maps:
         legends["overlay"] = legends["stress"]
     layer = annotate.ScaleLayer(g.width, g.height, ppm, grid=options.grid)
+    on_image, band = _scale_on_image(r, options.grid) if options.scale_on_image else (None, 0)
     covered = 0.0
     with ExitStack() as stack:
-        png = stack.enter_context(PngWriter(paths["png"], g.width, g.height, 4, px_per_mm=ppm))
+        png = stack.enter_context(PngWriter(paths["png"], g.width, g.height + band, 4, px_per_mm=ppm))
         writers = {}
-        for key, band in legends.items():
+        for key, legend in legends.items():
             paths[key] = out_dir / f"{name}.{key}.png"
-            writers[key] = stack.enter_context(PngWriter(paths[key], g.width, g.height + len(band), 4, px_per_mm=ppm))
+            writers[key] = stack.enter_context(PngWriter(paths[key], g.width, g.height + len(legend), 4,
+                                                         px_per_mm=ppm))
         paths["scale_layer"] = out_dir / f"{name}.scale-layer.png"
         layer_png = stack.enter_context(PngWriter(paths["scale_layer"], g.width, g.height, 4, px_per_mm=ppm))
         if len(attachment_marks):
@@ -758,7 +909,10 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
             cov = r.coverage(r0, r1)
             covered += float(cov.sum(dtype=np.float64))
             rgb = r.painting(r0, r1)
-            png.write(_rgba8(rgb, cov))
+            rgba = _rgba8(rgb, cov)
+            if len(repeated):
+                rgba[_repeat_line(r.scalar("repeated", r0, r1), r0)] = REPEAT_COLOUR
+            png.write(rgba if on_image is None else annotate.over(on_image.rows(r0, r1), rgba))
             outline = r.zone_outline(r0, r1) if options.maps else None
             for m in options.maps:
                 values = r.scalar(m, r0, r1)
@@ -768,8 +922,10 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
             layer_png.write(layer.rows(r0, r1))
             if len(attachment_marks):
                 mask_png.write(_attachment_rows(r.scalar("attachments", r0, r1)))
-        for key, band in legends.items():
-            writers[key].write(band)
+        if band:
+            png.write(on_image.rows(g.height, g.height + band))
+        for key, legend in legends.items():
+            writers[key].write(legend)
     paths["scalebar"] = write_png(out_dir / f"{name}.scalebar.png", layer.bar_image(), px_per_mm=ppm)
     if options.tiff:
         paths["tiff"] = write_tiff_rows(out_dir / f"{name}.tif",
@@ -780,14 +936,22 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
                                             shape=(g.height, g.width, 3), dtype=np.float32, px_per_mm=ppm,
                                             photometric="rgb")
     figures = _figures(r, covered)
+    if options.obj:
+        paths["obj"] = _write_flat_obj(out_dir / f"{name}.flat.obj", flat, g, band, paths["png"].name)
+        paths["mtl"] = paths["obj"].with_suffix(".mtl")
     if rollout_ply is not None:
-        paths["sheet"] = annotate.comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat,
-                                                   title=name)
+        paths["sheet"] = comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat, title=name)
     inputs = ([flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else [])
               + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else []))
     summary = {
         **figures,
+        "overlap": None if not len(repeated) else {
+            "deg": sidecar["region"].get("overlap_deg"), "repeated_faces": int(repeated.sum()),
+            "mark": f"dashed line {REPEAT_COLOUR[:3]} where the repeat past 360 degrees starts"},
         "scale_bar_mm": layer.bar_mm,
+        "scale_on_image": None if on_image is None else {
+            "bar_mm": on_image.bar_mm, "at_px": list(on_image.at), "box_px": list(on_image.box_size),
+            "band_below_px": band, "grid": options.grid},
         "maps": {m: {"range": [scales[m].lo, scales[m].hi], "label": scales[m].label} for m in options.maps},
         "files": {k: p.name for k, p in paths.items()},
         "provenance": provenance(stage="bake", inputs=inputs,
@@ -796,4 +960,12 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     paths["json"] = out_dir / f"{name}.bake.json"
     summary["files"]["json"] = paths["json"].name
     write_json_atomic(paths["json"], summary)
+    if options.plate:
+        from potflat.bake.plate import make_plate
+
+        plate = make_plate(flat_ply, out_dir, scale=options.plate_scale, name=name)
+        paths.update({f"plate_{k}": p for k, p in plate.paths.items()})
+        summary["files"].update({f"plate_{k}": p.name for k, p in plate.paths.items()})
+        summary["plate"] = {k: v for k, v in plate.summary.items() if k not in ("files", "inputs")}
+        write_json_atomic(paths["json"], summary)
     return StageOutput(paths=paths, summary=summary)

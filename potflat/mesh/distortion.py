@@ -100,19 +100,6 @@ def percent_from_log(mean_abs_log: float) -> float:
     return 100.0 * math.expm1(mean_abs_log)
 
 
-def in_words(figures: dict) -> str:
-    """Distortion figures (:class:`DistortionSummary` fields) as a reader says them:
-    ``lengths off by 14.0 % (RMS), areas by 17.4 % on average, 0 flipped``."""
-    parts = []
-    if figures.get("edge_rms") is not None:
-        parts.append(f"lengths off by {100.0 * figures['edge_rms']:.1f} % (RMS)")
-    if figures.get("area_mean_abs_log") is not None:
-        parts.append(f"areas by {percent_from_log(figures['area_mean_abs_log']):.1f} % on average")
-    if figures.get("flipped") is not None:
-        parts.append(f"{figures['flipped']} flipped")
-    return ", ".join(parts)
-
-
 def face_distortion(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> FaceDistortion:
     """Per-face distortion of the map from ``vertices`` to ``uv``.
 
@@ -439,3 +426,56 @@ def _json_safe(node):
     if isinstance(node, float) and not math.isfinite(node):
         return None
     return node
+
+
+#: Key of the relax stage's JSON holding the figures of the painted (important) zone
+#: (:func:`zone_summary`).
+PAINTED_ZONE_KEY = "important_zone"
+
+
+def painted_zone_distortion(relax_summary: dict) -> tuple[dict, str]:
+    """The distortion figures to quote, and where they were measured.
+
+    The relax stage's figures of the painted (important) zone (:data:`PAINTED_ZONE_KEY`: its
+    ``distortion`` with its ``length_error_median_pct`` and ``length_error_p95_pct``) when it
+    reports them, else those of the whole surface (``distortion``). A zone covering the whole
+    surface (no importance) is reported as the whole surface.
+
+    Parameters
+    ----------
+    relax_summary : dict
+        Content of ``NAME.relaxed.json``.
+
+    Returns
+    -------
+    figures : dict
+        ``edge_rms``, ``area_mean_abs_log``, ``flipped``... and, from the zone,
+        ``length_error_median_pct``, ``length_error_p95_pct`` (may be empty).
+    where : str
+        ``"painted zone"`` or ``"whole surface"``.
+    """
+    zone = relax_summary.get(PAINTED_ZONE_KEY)
+    if isinstance(zone, dict) and isinstance(zone.get("distortion"), dict):
+        figures = {**zone["distortion"], **{k: zone.get(k) for k in ("length_error_median_pct",
+                                                                      "length_error_p95_pct", "area_fraction")}}
+        whole = (zone.get("area_fraction") or 0.0) >= 1.0 - 1e-9
+        return figures, "whole surface" if whole else "painted zone"
+    return relax_summary.get("distortion") or {}, "whole surface"
+
+
+def distortion_words(figures: dict) -> str:
+    """Distortion figures as a reader quotes them (% length and area error, folded triangles)."""
+    def pct(x: float) -> str:
+        return f"{x:.1f}" if abs(x) >= 1 else f"{x:.2g}"
+
+    parts = []
+    if figures.get("length_error_median_pct") is not None and figures.get("length_error_p95_pct") is not None:
+        parts.append(f"lengths off by {pct(figures['length_error_median_pct'])} % (median), at most "
+                     f"{pct(figures['length_error_p95_pct'])} % over 95 % of it")
+    elif figures.get("edge_rms") is not None:
+        parts.append(f"length error {pct(100 * figures['edge_rms'])} % RMS")
+    if figures.get("area_mean_abs_log") is not None:
+        parts.append(f"area error {pct(percent_from_log(figures['area_mean_abs_log']))} % mean")
+    if figures.get("flipped") is not None:
+        parts.append(f"{figures['flipped']} folded triangles")
+    return ", ".join(parts) or "not measured"

@@ -801,17 +801,14 @@ def _fold_free_start(sp: _Springs, x: np.ndarray, n_bad: int, notes: list[str]) 
     return np.ascontiguousarray(disc), True
 
 
-def _turned_like(x: np.ndarray, reference: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """``x`` (n, 2) rotated and moved (no mirroring) to fit ``reference`` best over the
-    vertices of ``reference``'s unflipped faces: a layout relaxed from a disc keeps the
-    rollout's orientation (mouth up)."""
-    e1 = reference[faces[:, 1]] - reference[faces[:, 0]]
-    e2 = reference[faces[:, 2]] - reference[faces[:, 0]]
-    good = np.zeros(len(x), bool)
-    good[faces[(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) > 0].ravel()] = True
-    a, b = x[good], reference[good]
-    ca, cb = a.mean(axis=0), b.mean(axis=0)
-    h = (a - ca).T @ (b - cb)
+def _turned_like(x: np.ndarray, reference: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """``x`` (n, 2) rotated and moved (no mirroring) to fit ``reference`` (n, 2) best, each
+    vertex counting with ``weight`` (n,): the relaxed layout keeps the rollout's orientation
+    (axis vertical, mouth up) however the solver turned it on the way (the energy does not
+    care; a weak plain surface lets it drift)."""
+    w = weight / weight.sum()
+    ca, cb = w @ x, w @ reference
+    h = ((x - ca) * w[:, None]).T @ (reference - cb)
     angle = math.atan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1])
     rot = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
     return np.ascontiguousarray((x - ca) @ rot.T + cb)
@@ -1005,6 +1002,7 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
                 x = followed
         t_follow = time.perf_counter() - t_follow
         folded_start = None
+        start = x_in[order]  # the rollout's layout: its orientation is the result's
         if fold_free:
             x, n_bad = _untangle(sp, x)
             if n_bad:
@@ -1039,8 +1037,11 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
                 x, converged = _dynamics(sp, x, settings, run, levels)
         t_solve = time.perf_counter()
 
-        if folded_start is not None:  # relaxed from Tutte's disc: back to the rollout's orientation
-            x = _turned_like(x, folded_start, sp.faces)
+        if fold_free:  # back to the rollout's orientation, the painting counting most
+            turn = np.ones(n) if weight is None else weight.copy()
+            if folded_start is not None:  # relaxed from Tutte's disc: only what was not folded counts
+                turn[sp.faces[sp.signed_areas(folded_start) <= 0].ravel()] = 0.0
+            x = _turned_like(x, folded_start if folded_start is not None else start, turn)
         finite = bool(np.isfinite(x).all())
         flipped = int((sp.signed_areas(x) <= 0).sum()) if finite else len(F)
         overlap = sp.overlap(x) if finite else 1
@@ -1106,7 +1107,8 @@ def _history_for_json(h: np.ndarray, limit: int = 1000) -> list[float]:
 
 
 def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: RelaxOptions | None = None, *,
-                    name: str | None = None, progress: bool = False) -> StageOutput:
+                    name: str | None = None, progress: bool = False, flat: FlatMesh | None = None,
+                    rollout_summary: dict | None = None) -> StageOutput:
     """Relax ``NAME.rollout.ply`` and write ``NAME.relaxed.ply`` and ``NAME.relaxed.json``.
 
     Parameters
@@ -1120,14 +1122,21 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         Output stem (default: the input's name without ``.rollout.ply``).
     progress : bool
         Show a progress bar.
+    flat : FlatMesh, optional
+        The content of ``rollout_ply`` already in memory (:func:`potflat.run_scan`); read
+        from the file when not given.
+    rollout_summary : dict, optional
+        The rollout stage's summary in memory (its axis, proxy and units go into the JSON);
+        read from ``NAME.rollout.json`` beside the input when not given.
 
     Returns
     -------
     StageOutput
-        ``paths`` with ``ply`` and ``json``; ``summary`` the JSON content.
+        ``paths`` with ``ply`` and ``json``; ``summary`` the JSON content; the relaxed
+        ``flat`` as written and its ``distortion``.
     """
     from potflat.io.atomic import write_json_atomic
-    from potflat.io.flat_ply import read_flat_ply, write_flat_ply
+    from potflat.io.flat_ply import as_stored, read_flat_ply, write_flat_ply
     from potflat.stages.provenance import provenance
 
     options = options or RelaxOptions()
@@ -1137,7 +1146,8 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     for suffix in (".ply", ".rollout"):
         stem = stem.removesuffix(suffix)
     name = name or stem
-    flat = read_flat_ply(rollout_ply)
+    if flat is None:
+        flat = read_flat_ply(rollout_ply)
     result = relax(flat, options=options, progress=progress)
     ply_path = out_dir / f"{name}.relaxed.ply"
     json_path = out_dir / f"{name}.relaxed.json"
@@ -1170,9 +1180,10 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         "faces": len(flat.mesh.faces),
     }
     rollout_json = rollout_ply.with_name(f"{stem}.rollout.json")
-    if rollout_json.exists():
+    if rollout_summary is not None or rollout_json.exists():
         try:
-            rj = json.loads(rollout_json.read_text(encoding="utf-8"))
+            rj = rollout_summary if rollout_summary is not None else json.loads(
+                rollout_json.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             rj = {}
         if not isinstance(rj, dict):  # a sidecar holding null, a list...: nothing to copy from it
@@ -1182,6 +1193,8 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
                 summary[key] = rj[key]
     inputs = [rollout_ply] + ([rollout_json] if rollout_json.exists() else [])
     summary["provenance"] = provenance(stage="relax", inputs=inputs, options=asdict(options))
-    write_flat_ply(ply_path, result.flat, comments=(f"potflat relax preset {result.preset}",))
+    comments = (f"potflat relax preset {result.preset}",)
+    write_flat_ply(ply_path, result.flat, comments=comments)
     write_json_atomic(json_path, summary)
-    return StageOutput(paths={"ply": ply_path, "json": json_path}, summary=summary)
+    return StageOutput(paths={"ply": ply_path, "json": json_path}, summary=summary,
+                       flat=as_stored(result.flat, ply_path, comments=comments), distortion=result.distortion)

@@ -39,9 +39,9 @@ from potflat.rollout.walls import (
 
 #: Bins whose weight is below this fraction of the side's median bin weight get no radius.
 _MIN_BIN_WEIGHT_FRACTION = 0.01
-#: Automatic bin width in median edge lengths, and the bin count limits.
-_AUTO_BIN_EDGES = 2.0
-_AUTO_BINS_MIN, _AUTO_BINS_MAX = 8, 1000
+#: Automatic bin width in median edge lengths (as fine as the scan's edges), and the bin count limits.
+_AUTO_BIN_EDGES = 1.0
+_AUTO_BINS_MIN, _AUTO_BINS_MAX = 8, 5000
 #: Runs of at most this many empty bins between measured ones are interpolated.
 _MAX_GAP_BINS = 2
 #: Faces reaching closer to the axis than this fraction of the largest radius count as base/floor.
@@ -123,6 +123,9 @@ class Profile:
             "two_walled": self.two_walled,
             "origin": self.origin.tolist(),
             "axis_direction": self.axis_direction.tolist(),
+            "bin_mm": float((self.bin_edges[1] - self.bin_edges[0]) * s) if len(self.heights) else None,
+            "base_height_mm": float(self.base_height * s) if np.isfinite(self.base_height) else None,
+            "floor_height_mm": float(self.floor_height * s) if np.isfinite(self.floor_height) else None,
         }
 
 
@@ -146,8 +149,8 @@ def vessel_profile(mesh: Mesh, axis_point, axis_direction, *, bins: int | None =
     axis_direction : (3,) array_like
         Axis direction, foot to mouth.
     bins : int, optional
-        Number of height bins. Default: bins about two median edge lengths high
-        (between 8 and 1000).
+        Number of height bins. Default: bins one median edge length high, as fine as the
+        scan's edges (between 8 and 5000).
     face_mask : (m,) bool, optional
         Faces to measure (e.g. without attachments); default all.
     labels : (m,) int8, optional
@@ -318,6 +321,91 @@ def _check_profile(profile) -> None:
         raise InvalidInputError(f"expected a Profile from vessel_profile, got {type(profile).__name__}")
 
 
+def section_polygon(profile: Profile) -> tuple[np.ndarray, np.ndarray] | None:
+    """The wall section as a closed polygon, right of the axis (radius >= 0).
+
+    It runs up the outer wall and down the inner wall over the longest stretch where both
+    were scanned; when the inner wall reaches the floor of a closed vessel it continues
+    through the base to the axis. ``None`` when the scan has no inner wall (the drawing
+    then shows the outer line only).
+
+    Parameters
+    ----------
+    profile : Profile
+
+    Returns
+    -------
+    radius, height : (p,) float64 and (p,) float64, or None
+        Polygon corners, scan units (height in the profile's frame).
+    """
+    ro, ri, hs = profile.outer_radius, profile.inner_radius, profile.heights
+    ok_o = np.isfinite(ro)
+    ok_i = np.isfinite(ri) & ok_o
+    if not ok_i.any():
+        return None
+    i0, i1 = max(_runs(ok_i), key=lambda r: r[1] - r[0])
+    rs = np.r_[ro[i0:i1], ri[i0:i1][::-1]]
+    ys = np.r_[hs[i0:i1], hs[i0:i1][::-1]]
+    fh, bh = profile.floor_height, profile.base_height
+    if np.isfinite(fh) and np.isfinite(bh) and fh > bh:
+        # closed vessel: the section runs through the base, from the foot to the floor
+        below = np.flatnonzero(ok_o[:i0] & (hs[:i0] > bh))
+        r_bh = float(np.interp(bh, hs[ok_o], ro[ok_o]))
+        rs = np.r_[0.0, r_bh, ro[below], rs, 0.0]
+        ys = np.r_[bh, bh, hs[below], ys, fh]
+    return rs.astype(np.float64), ys.astype(np.float64)
+
+
+def read_profile_csv(path, summary: dict) -> Profile:
+    """Read ``NAME.profile.csv`` back as a :class:`Profile` in millimetres.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV written by :func:`write_profile_csv`.
+    summary : dict
+        The ``profile`` entry of ``NAME.rollout.json`` (:meth:`Profile.summary`): axis,
+        base and floor heights.
+
+    Returns
+    -------
+    Profile
+        Heights and radii in millimetres (units ``mm``); ``origin`` and ``axis_direction``
+        are copied from ``summary`` (scan coordinates); spreads NaN and counts 0 (the CSV
+        does not hold them).
+
+    Raises
+    ------
+    InvalidInputError
+        When the file is missing, unreadable or has no rows.
+    """
+    import warnings
+
+    path = Path(path)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # an empty file: reported below
+            rows = np.genfromtxt(path, delimiter=",", skip_header=1, dtype=np.float64, ndmin=2, missing_values="",
+                                 filling_values=np.nan)
+    except (OSError, ValueError) as exc:
+        raise InvalidInputError(f"{path}: cannot read the profile ({exc}); run potflat rollout again") from None
+    if rows.size == 0 or rows.shape[1] != 3 or not np.isfinite(rows[:, 0]).all():
+        raise InvalidInputError(f"{path}: not a potflat profile (height_mm,outer_radius_mm,inner_radius_mm); "
+                                "run potflat rollout again")
+    h = rows[:, 0]
+    step = float(summary.get("bin_mm") or (np.median(np.diff(h)) if len(h) > 1 else 1.0))
+    edges = np.r_[h - 0.5 * step, h[-1] + 0.5 * step]
+    nan = np.full(len(h), np.nan)
+    zero = np.zeros(len(h), np.int64)
+    get = lambda key: float(summary[key]) if summary.get(key) is not None else float("nan")  # noqa: E731
+    return Profile(heights=h, bin_edges=edges, outer_radius=rows[:, 1], inner_radius=rows[:, 2],
+                   outer_spread=nan, inner_spread=nan, outer_count=zero, inner_count=zero,
+                   origin=np.asarray(summary.get("origin", (0.0, 0.0, 0.0)), np.float64),
+                   axis_direction=np.asarray(summary.get("axis_direction", (0.0, 0.0, 1.0)), np.float64),
+                   units="mm", mm_per_unit=1.0, two_walled=bool(np.isfinite(rows[:, 2]).any()),
+                   base_height=get("base_height_mm"), floor_height=get("floor_height_mm"))
+
+
 def _runs(ok: np.ndarray) -> list[tuple[int, int]]:
     """Index ranges ``[i, j)`` of consecutive True values."""
     d = np.diff(np.r_[0, ok.astype(np.int8), 0])
@@ -419,21 +507,9 @@ def write_profile_svg(profile: Profile, path, *, scale: float | None = None, tit
         parts.append(f'<line x1="{X(-ro[k]):.3f}" y1="{Y(hs[k]):.3f}" x2="{cx:.3f}" y2="{Y(hs[k]):.3f}" '
                      f'stroke="black" stroke-width="{thin}"/>')
     # section (right)
-    ok_i = np.isfinite(ri) & ok_o
-    if ok_i.any():
-        i0, i1 = max(_runs(ok_i), key=lambda r: r[1] - r[0])
-        xs = list(X(ro[i0:i1]))
-        ys = list(Y(hs[i0:i1]))
-        xs += list(X(ri[i0:i1][::-1]))
-        ys += list(Y(hs[i0:i1][::-1]))
-        fh, bh = profile.floor_height, profile.base_height
-        if np.isfinite(fh) and np.isfinite(bh) and fh > bh:
-            # closed vessel: the section runs through the base, from the foot to the floor
-            below = np.flatnonzero(ok_o[:i0] & (hs[:i0] > bh))
-            r_bh = float(np.interp(bh, hs[ok_o], ro[ok_o]))
-            xs = [cx, X(r_bh), *X(ro[below]), *xs, cx]
-            ys = [Y(bh), Y(bh), *Y(hs[below]), *ys, Y(fh)]
-        parts.append(f'<polygon points="{pts(xs, ys)}" fill="black" stroke="black" '
+    section = section_polygon(profile)
+    if section is not None:
+        parts.append(f'<polygon points="{pts(X(section[0]), Y(section[1]))}" fill="black" stroke="black" '
                      f'stroke-width="{thin}" stroke-linejoin="round"/>')
     for i, j in _runs(ok_o):
         parts.append(f'<polyline points="{pts(X(ro[i:j]), Y(hs[i:j]))}" fill="none" stroke="black" '

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -37,8 +37,9 @@ from potflat.rollout.attachments import AttachmentSelection, detect_attachments
 from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
 from potflat.mesh.distortion import DistortionSummary, face_areas, row_blocks, summarize
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.types import UNITS_MM, FlatMesh, Mesh, StageOutput, canonical_units
-from potflat.rollout.walls import SIDES, FaceGraph, WallSelection, face_adjacency, select_wall
+from potflat.types import FlatMesh, Mesh, StageOutput
+from potflat.rollout.options import RolloutOptions
+from potflat.rollout.walls import FaceGraph, WallSelection, face_adjacency, select_wall
 
 TWO_PI = 2.0 * np.pi
 #: A connected piece with at least this fraction of the largest piece's area is an object of
@@ -63,154 +64,6 @@ BORDER_PASSES = 50
 UNTANGLE_ROUNDS, UNTANGLE_WIDEN = 200, 20
 
 
-@dataclass(frozen=True, kw_only=True)
-class RolloutOptions:
-    """Options of the rollout stage (names equal the CLI options, ``_`` for ``-``).
-
-    Attributes
-    ----------
-    units : str or None
-        Length unit of the scan file (``mm``, ``cm``, ``m``, ``um``, ``in``); None: the unit
-        the file declares (a PLY ``comment units``, an STL header, glTF's metres), else mm.
-        Used when reading the file; :func:`rollout` itself uses :attr:`Mesh.units`.
-    texture : bool
-        Use the scan's texture image; False loads the geometry (and vertex colours) only,
-        e.g. when the texture file is missing or corrupt. Used when reading the file.
-    proxy : str
-        ``auto``, ``cylinder``, ``cone``, ``sphere`` or ``ortho``.
-    axis : tuple of 6 float or None
-        Manual axis ``(px, py, pz, dx, dy, dz)``: a point and a direction from foot to mouth.
-    flip : bool
-        Reverse the axis direction (mouth and foot swapped).
-    seam : float or None
-        Seam angle in degrees from the axis' reference direction; chosen automatically when
-        None (0 when ``angles`` is given).
-    band : (float, float) or None
-        Height band as fractions of the axial extent, 0 = foot, 1 = mouth.
-    angles : (float, float) or None
-        Angle range in degrees relative to the seam, e.g. ``(-60, 60)``; at most 360 wide.
-    view : tuple of 3 float or None
-        For ``proxy="ortho"``: direction from the vessel to the viewer (``x,y,z``, scan
-        coordinates); default: from the axis towards the region's centre (from the region
-        towards the axis for the inner side).
-    side : str
-        Painted side to unroll: ``outer`` (the outside, default) or ``inner`` (the inside
-        seen from within: a cup's interior, a kylix tondo). Two-walled scans are split at
-        the rim (:func:`potflat.rollout.walls.select_wall`).
-    keep_attachments : bool
-        Keep handles, spouts and knobs (parts off the surface of revolution, found by
-        :func:`potflat.rollout.attachments.detect_attachments`) in the rollout; by default they are
-        left out and reported, and the painting around their roots stays.
-    importance : str
-        Where the painting is, which the relax stage keeps true and the bake stage reports
-        (:mod:`potflat.importance`): ``auto`` (found in the colours; none for a scan without
-        colours or painted all over), ``none`` (the whole surface alike), ``mask`` (a PNG
-        painted over a potflat image, ``importance_mask``), ``texture-mask`` (a PNG in the
-        texture's space, ``importance_mask``) or ``band`` (``importance_band`` and/or
-        ``importance_arc``).
-    importance_mask : str or None
-        The mask image (white = important) for ``mask`` and ``texture-mask``.
-    importance_image : str or None
-        For ``mask``: the ``NAME.bake.json`` of the image the mask was painted over (default:
-        the one beside the mask whose image has the mask's size).
-    importance_band : (float, float) or None
-        For ``band``: heights as fractions of the axial extent (0 foot, 1 mouth).
-    importance_arc : (float, float) or None
-        For ``band``: angle range in degrees from the seam.
-    """
-
-    units: str | None = None
-    texture: bool = True
-    proxy: str = "auto"
-    axis: tuple[float, ...] | None = None
-    flip: bool = False
-    seam: float | None = None
-    band: tuple[float, float] | None = None
-    angles: tuple[float, float] | None = None
-    view: tuple[float, ...] | None = None
-    side: str = "outer"
-    keep_attachments: bool = False
-    importance: str = "auto"
-    importance_mask: str | None = None
-    importance_image: str | None = None
-    importance_band: tuple[float, float] | None = None
-    importance_arc: tuple[float, float] | None = None
-
-    def __post_init__(self) -> None:
-        _importance.check_method(self.importance)
-        if (self.importance in ("mask", "texture-mask")) != (self.importance_mask is not None):
-            raise InvalidOptionError("give importance_mask (--importance-mask PNG) with importance mask or "
-                                     "texture-mask, and only then")
-        if self.importance_image is not None and self.importance != "mask":
-            raise InvalidOptionError("importance_image (--importance-image) goes with importance mask")
-        for name in ("band", "angles", "importance_band", "importance_arc"):
-            if getattr(self, name) is not None:
-                object.__setattr__(self, name, _height_band(name, getattr(self, name)) if name.endswith("band")
-                                   else _angle_range(name, getattr(self, name)))
-        if (self.importance == "band") != (self.importance_band is not None or self.importance_arc is not None):
-            raise InvalidOptionError("give importance_band and/or importance_arc with importance band, and only then")
-        if self.side not in SIDES:
-            raise InvalidOptionError(f"side {self.side!r} is unknown; use outer or inner")
-        if not isinstance(self.keep_attachments, bool):
-            raise InvalidOptionError(f"keep_attachments must be true or false, got {self.keep_attachments!r}")
-        if self.units is not None:
-            if canonical_units(self.units) is None:
-                raise InvalidOptionError(f"units {self.units!r} is unknown; use one of {', '.join(UNITS_MM)}")
-            object.__setattr__(self, "units", canonical_units(self.units))
-        if not isinstance(self.texture, bool):
-            raise InvalidOptionError(f"texture must be true or false, got {self.texture!r}")
-        if self.proxy not in ("auto", *_proxy.KINDS):
-            raise InvalidOptionError(
-                f"proxy {self.proxy!r} is unknown; use auto, {', '.join(_proxy.KINDS)}")
-        if self.axis is not None:
-            ax = _floats("axis", self.axis, 6, "px,py,pz,dx,dy,dz")
-            if not any(ax[3:]):
-                raise InvalidOptionError("axis direction is zero; give dx,dy,dz not all 0")
-            object.__setattr__(self, "axis", ax)
-        if self.seam is not None:
-            object.__setattr__(self, "seam", _floats("seam", (self.seam,), 1, "DEG")[0])
-        if self.view is not None:
-            view = _floats("view", self.view, 3, "x,y,z")
-            if not any(view):
-                raise InvalidOptionError("view direction is zero; give x,y,z not all 0")
-            if self.proxy != "ortho":
-                raise InvalidOptionError("view applies only to proxy ortho; add --proxy ortho or drop --view")
-            object.__setattr__(self, "view", view)
-
-    def as_dict(self) -> dict:
-        """The options as a JSON-ready dict."""
-        return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v)
-                for f in fields(self)}
-
-
-def _floats(name: str, values, count: int, form: str) -> tuple[float, ...]:
-    try:
-        out = tuple(float(x) for x in values)
-    except (TypeError, ValueError):
-        raise InvalidOptionError(f"{name} needs {count} numbers ({form})") from None
-    if len(out) != count or not all(math.isfinite(x) for x in out):
-        raise InvalidOptionError(f"{name} needs {count} finite numbers ({form}), got {len(out)}")
-    return out
-
-
-def _height_band(name: str, value) -> tuple[float, float]:
-    """A height band ``(LO, HI)``, fractions with ``0 <= LO < HI <= 1``, or one error line."""
-    lo, hi = _floats(name, value, 2, "LO HI")
-    if not 0.0 <= lo < hi <= 1.0:
-        raise InvalidOptionError(f"{name.replace('_', ' ')} {lo:g} {hi:g} is invalid; give fractions of the height "
-                                 "with 0 <= LO < HI <= 1")
-    return lo, hi
-
-
-def _angle_range(name: str, value) -> tuple[float, float]:
-    """An angle range ``(A0, A1)`` in degrees from the seam, at most 360 wide, or one error line."""
-    a0, a1 = _floats(name, value, 2, "A0 A1")
-    if not a0 < a1 <= a0 + 360.0:
-        raise InvalidOptionError(f"{name.replace('_', ' ')} {a0:g} {a1:g} are invalid; give A0 < A1 <= A0 + 360 "
-                                 "(degrees from the seam)")
-    return a0, a1
-
-
 @dataclass(frozen=True)
 class Region:
     """The part of the scan that was unrolled.
@@ -224,11 +77,17 @@ class Region:
     height_range : (float, float)
         Heights above the foot covered by the selected faces, scan units.
     theta_range_deg : (float, float)
-        Angles from the seam covered by the output vertices, degrees.
+        Angles covered by the output vertices, degrees from :attr:`RolloutResult.theta_origin`
+        (the seam, or the origin of ``angles``).
     faces, faces_total : int
         Faces selected, faces in the scan.
     cut : bool
         Whether the region went all the way round and had to be cut open.
+    overlap_deg : float
+        Degrees repeated past 360 (0: none).
+    repeated_from : int or None
+        With an overlap, the first output face of the repeat: faces from it on repeat the
+        first ``overlap_deg`` degrees after the seam.
     """
 
     band: tuple[float, float]
@@ -238,6 +97,8 @@ class Region:
     faces: int
     faces_total: int
     cut: bool
+    overlap_deg: float = 0.0
+    repeated_from: int | None = None
 
     def as_dict(self) -> dict:
         """JSON-ready description."""
@@ -295,6 +156,15 @@ class RolloutResult:
     boundary_overlap : int
         Crossing pairs of boundary segments left in the development (0: its outline and
         holes do not overlap).
+    other_objects_faces : int
+        Faces of separate objects left out.
+    landmark : Landmark or None
+        What ``seam`` and ``angles`` were measured from (:mod:`potflat.rollout.landmarks`).
+    theta_origin : float
+        Degrees from the reference direction that the output angles (:attr:`Region.theta_range_deg`)
+        are measured from: the seam, or the origin of ``angles``.
+    landmark_notes : tuple of str
+        What was used where a named landmark is missing.
     """
 
     flat: FlatMesh
@@ -318,6 +188,9 @@ class RolloutResult:
     untangled_vertices: int
     boundary_overlap: int
     other_objects_faces: int = 0
+    landmark: object = None
+    theta_origin: float = 0.0
+    landmark_notes: tuple = ()
     importance: _importance.Importance | None = None
 
     @property
@@ -461,14 +334,19 @@ def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, n
     corner_v = faces.ravel()
     th = corner_theta.ravel()
     # half-edge h runs from corner h to the next corner of its face; half-edges on the same
-    # edge are neighbours when sorted by (lower vertex, higher vertex) (stable: by h on ties)
+    # edge are neighbours when sorted by (lower vertex, higher vertex, turn of the angle at the
+    # lower vertex) (stable: by h on ties). The turn puts the faces of an edge listed twice (a
+    # rollout repeated past 360 degrees) next to those they join: 0+, 2 pi-, 2 pi+.
     nxt = faces[:, [1, 2, 0]].ravel()
     swap = corner_v > nxt
     n = int(corner_v.max()) + 1 if m else 1
-    key = np.minimum(corner_v, nxt) * n + np.maximum(corner_v, nxt)
-    del nxt
+    lower = np.arange(3 * m)
+    lower[swap] = lower[swap] - lower[swap] % 3 + (lower[swap] + 1) % 3
+    turn = np.clip(np.floor(th[lower] / TWO_PI + 0.5), -4, 3).astype(np.int64) + 4
+    key = (np.minimum(corner_v, nxt) * n + np.maximum(corner_v, nxt)) * 8 + turn
+    del nxt, lower, turn
     order = np.argsort(key, kind="stable")
-    key = key[order]
+    key = key[order] // 8
     pair = np.flatnonzero(key[1:] == key[:-1])
     del key
     h1, h2 = order[pair], order[pair + 1]
@@ -581,8 +459,9 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
     h_c, _, theta_c = axis.cylindrical(centroid)
     del centroid
     band = options.band or (0.0, 1.0)
+    landmark, landmark_notes = _find_landmark(mesh, axis, options, attachments, allowed, band, h_c, theta_c, area)
     trimmed = np.zeros(len(F), bool)
-    un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, area)
+    un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, area, landmark=landmark)
     for rnd in range(TRIM_ROUNDS):
         fold = border_folds(un.flat.mesh.faces, un.flat.uv, area[un.face_index])
         if not fold.any() or fold.all():
@@ -590,7 +469,7 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         trimmed[un.face_index[fold]] = True
         if rnd < TRIM_ROUNDS - 1:
             un = _unroll(mesh, axis, options, allowed & ~trimmed, band, h_c, theta_c, area,
-                         seam=(un.seam, un.seam_method))
+                         seam=(un.seam, un.seam_method), landmark=landmark)
         else:
             un = _without(un, ~fold)
     uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv)
@@ -612,11 +491,15 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         roots = np.flatnonzero(attachments.root_faces(F)[un.face_index]).astype(np.int64)
 
     theta_deg = np.degrees(un.theta)
+    first = np.zeros(len(un.face_index), bool)
+    first[np.unique(un.face_index, return_index=True)[1]] = True  # repeats come last
+    repeated_from = int(np.argmin(first)) if not first.all() else None
     region = Region(
         band=tuple(band), angles_deg=options.angles,
         height_range=(float(h_c[un.face_index].min()), float(h_c[un.face_index].max())),
         theta_range_deg=(float(theta_deg.min()), float(theta_deg.max())),
-        faces=len(un.face_index), faces_total=len(F), cut=un.seam_vertices > 0)
+        faces=len(un.face_index), faces_total=len(F), cut=un.seam_vertices > 0,
+        overlap_deg=options.overlap if repeated_from is not None else 0.0, repeated_from=repeated_from)
     cut = un.flat.mesh
     if mesh.texcoords is not None:  # attached once, to the final faces (see _unroll)
         cut = cut.replace(texcoords=mesh.texcoords[un.face_index])
@@ -630,7 +513,8 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         attachments=attachments, attachments_kept=options.keep_attachments, attachment_roots=roots,
         trimmed=np.flatnonzero(trimmed).astype(np.int64), trimmed_area=float(area[trimmed].sum()),
         untangled_faces=n_untangled, untangled_vertices=moved, boundary_overlap=overlap,
-        other_objects_faces=int(other_objects.sum()))
+        other_objects_faces=int(other_objects.sum()), landmark=landmark,
+        theta_origin=float(math.degrees(un.origin) % 360.0), landmark_notes=tuple(landmark_notes))
 
 
 @dataclass(frozen=True, eq=False)
@@ -647,15 +531,17 @@ class _Unrolled:
     seam_method: str
     seam_vertices: int
     split_vertices: int
+    origin: float
 
 
 def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndarray, band, h_c, theta_c,
-            area, seam: tuple[float, str] | None = None) -> _Unrolled:
+            area, seam: tuple[float, str] | None = None, landmark=None) -> _Unrolled:
     """Select the region within ``allowed``, cut it open and develop it on the proxy (with
-    ``seam`` = (radians, method) from an earlier unrolling, or a seam chosen here)."""
+    ``seam`` = (radians, method) from an earlier unrolling, or a seam chosen here; angles
+    measured from ``landmark``)."""
     V = mesh.vertices
-    face_index, seam, seam_method, corner_theta = _select(
-        mesh, axis, options, allowed, band, h_c, theta_c, area, seam)
+    face_index, seam, seam_method, corner_theta, origin = _select(
+        mesh, axis, options, allowed, band, h_c, theta_c, area, seam, landmark)
     sub_f = mesh.faces[face_index]
     inner = options.side == "inner"
 
@@ -700,7 +586,7 @@ def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndar
         uv = _proxy.develop(prox, h, r, dev_theta)
         summary = summarize(cut_mesh.vertices, uv, new_faces)
     return _Unrolled(FlatMesh(cut_mesh, uv), prox, summary, face_index, vertex_index, theta_new, seam,
-                     seam_method, n_seam, n_split)
+                     seam_method, n_seam, n_split, origin)
 
 
 def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
@@ -717,7 +603,7 @@ def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
     copies = len(used) - len(np.unique(vertex_index))
     seam = min(un.seam_vertices, copies)
     return _Unrolled(FlatMesh(cut, uv), un.proxy, summarize(cut.vertices, uv, cut.faces), un.face_index[keep],
-                     vertex_index, un.theta[used], un.seam, un.seam_method, seam, copies - seam)
+                     vertex_index, un.theta[used], un.seam, un.seam_method, seam, copies - seam, un.origin)
 
 
 def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.ndarray:
@@ -960,44 +846,111 @@ def untangle(faces: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, int, int]:
     return x, n_bad, int(np.count_nonzero(np.any(x != uv, axis=1)))
 
 
+#: Seam methods of a seam placed by the user (an angle, a point, a landmark), not chosen here.
+_PLACED_SEAMS = ("user", "point", "handle", "opposite painted zone")
+
+
+def _find_landmark(mesh: Mesh, axis: AxisFit, options: RolloutOptions, attachments, face_mask, band, h_c,
+                   theta_c, area):
+    """The landmark the options name (:func:`potflat.rollout.landmarks.find_landmark`), or None when
+    seam and angles are measured as before (from the reference direction, angles from the seam)."""
+    from potflat.rollout.landmarks import find_landmark
+
+    if options.seam_at is None and options.landmark is None and (options.angles is None or options.seam is not None):
+        return None, []
+    keep = np.flatnonzero(_in_band(axis, band, h_c) & face_mask)
+    if len(keep) == 0:
+        raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
+    return find_landmark(
+        mesh, axis, seam_at=options.seam_at, landmark=options.landmark, attachments=attachments,
+        painted_zone=lambda: _painted_zone_centre(mesh, axis, options, face_mask, band, h_c, theta_c, area),
+        auto_seam=lambda: _auto_seam(mesh, axis, keep, theta_c, area)[0])
+
+
+def _painted_zone_centre(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c,
+                         area) -> tuple[float | None, str]:
+    """Centre angle of the importance zone (:func:`_find_importance` on an all-round unrolling
+    with the automatic seam), or None and why."""
+    from potflat.rollout.landmarks import zone_centre
+
+    plain = dataclasses.replace(options, seam=None, angles=None, seam_at=None, landmark=None, overlap=0.0)
+    un = _unroll(mesh, axis, plain, face_mask, band, h_c, theta_c, area)
+    flat = un.flat
+    if mesh.texcoords is not None:
+        flat = flat.replace(mesh=flat.mesh.replace(texcoords=mesh.texcoords[un.face_index]))
+    importance = _find_importance(flat, options, axis, np.degrees(un.theta))
+    if importance.values is None:
+        return None, importance.reason
+    vertex_area = np.bincount(flat.mesh.faces.ravel(), np.repeat(area[un.face_index] / 3.0, 3), len(flat.uv))
+    angle, length = zone_centre(axis.cylindrical(flat.mesh.vertices)[2], importance.values * vertex_area)
+    if angle is None:
+        return None, f"the importance zone goes round evenly (resultant {length:.3f})"
+    return angle, f"centre of the importance zone ({importance.method}: {importance.reason}), resultant {length:.2f}"
+
+
+def _in_band(axis: AxisFit, band, h_c) -> np.ndarray:
+    frac = h_c / axis.height if axis.height > 0 else np.zeros(len(h_c))
+    return (frac >= band[0]) & (frac <= band[1])
+
+
+def _auto_seam(mesh: Mesh, axis: AxisFit, sel: np.ndarray, theta_c, area) -> tuple[float, str]:
+    theta_v = axis.cylindrical(mesh.vertices)[2]
+    corners = _corner_angles(theta_v, mesh.faces, sel, theta_c[sel])
+    return choose_seam(mesh, sel, theta_c[sel], area[sel], _covered(theta_c[sel], corners))
+
+
 def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c, area,
-            seam_given: tuple[float, str] | None = None):
-    """Faces of the region, the seam (radians, and how it was chosen) and the corners' unwrapped angles."""
+            seam_given: tuple[float, str] | None = None, landmark=None):
+    """Faces of the region, the seam (radians, and how it was chosen), the corners' unwrapped
+    angles and the angle (radians) they are measured from.
+
+    With an overlap the faces within ``overlap`` degrees after the seam are listed twice, the
+    repeats last, their angles one turn on."""
     V, F = mesh.vertices, mesh.faces
     theta_v = axis.cylindrical(V)[2]
-    frac = h_c / axis.height if axis.height > 0 else np.zeros(len(F))
-    keep = (frac >= band[0]) & (frac <= band[1]) & face_mask
+    keep = _in_band(axis, band, h_c) & face_mask
+    placed = landmark is not None and (options.seam_at is not None or options.landmark is not None)
     if seam_given is not None:
         seam, seam_method = seam_given
+    elif options.angles is not None and landmark is not None and options.angles[1] - options.angles[0] >= 360.0:
+        seam, seam_method = landmark.angle + math.radians(options.angles[0]), "window edge"
     elif options.seam is not None:
-        seam, seam_method = math.radians(options.seam % 360.0), "user"
-    elif options.angles is not None:
-        seam, seam_method = 0.0, "user"
+        seam, seam_method = (landmark.angle if placed else 0.0) + math.radians(options.seam % 360.0), "user"
+    elif placed:
+        seam = landmark.angle + (math.pi if landmark.kind == "painted zone" else 0.0)
+        seam_method = {"point": "point", "handle": "handle"}.get(landmark.kind, "opposite painted zone")
     else:
         sel = np.flatnonzero(keep)
         if len(sel) == 0:
             raise InvalidOptionError(f"band {band[0]:g} {band[1]:g} selects no faces; widen it")
-        corners = _corner_angles(theta_v, F, sel, theta_c[sel])
-        seam, seam_method = choose_seam(mesh, sel, theta_c[sel], area[sel],
-                                        _covered(theta_c[sel], corners))
+        seam, seam_method = _auto_seam(mesh, axis, sel, theta_c, area)
+    seam %= TWO_PI
+    # angles are measured from the landmark, else from the seam
+    origin = landmark.angle if options.angles is not None and landmark is not None else seam
 
-    # centroid angle from the seam, in [lo, lo + 2 pi): faces are unwrapped around it
+    # centroid angle from the origin, in [lo, lo + 2 pi): faces are unwrapped around it
     lo = math.radians(options.angles[0]) if options.angles is not None else 0.0
-    rel_c = (theta_c - seam - lo) % TWO_PI + lo
+    rel_c = (theta_c - origin - lo) % TWO_PI + lo
     if options.angles is not None:
         keep &= rel_c <= math.radians(options.angles[1])
     face_index = np.flatnonzero(keep)
     if len(face_index) == 0:
         raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
-    if options.angles is None and seam_method == "user":
+    gap = None
+    if options.angles is None and seam_method in _PLACED_SEAMS:
         # a region that does not go round is not cut: unwrap from the middle of its gap
-        corners = _corner_angles(theta_v, F, face_index, rel_c[face_index], seam)
+        corners = _corner_angles(theta_v, F, face_index, rel_c[face_index], origin)
         gap = _gap_middle(_covered(rel_c[face_index], corners))
         if gap is not None:
-            rel_c = (theta_c - seam - gap) % TWO_PI + gap
+            rel_c = (theta_c - origin - gap) % TWO_PI + gap
             rel_c -= TWO_PI * np.round(np.average(rel_c[face_index], weights=area[face_index]) / TWO_PI)
-    corner_theta = _corner_angles(theta_v, F, face_index, rel_c[face_index], seam)
-    return face_index, seam, seam_method, corner_theta
+    centre = rel_c[face_index]
+    if options.overlap and gap is None and seam_method != "gap":
+        again = face_index[rel_c[face_index] < math.radians(options.overlap)]
+        face_index = np.concatenate([face_index, again])
+        centre = np.concatenate([centre, rel_c[again] + TWO_PI])
+    corner_theta = _corner_angles(theta_v, F, face_index, centre, origin)
+    return face_index, seam, seam_method, corner_theta, origin
 
 
 def _corner_angles(theta_v: np.ndarray, F: np.ndarray, idx: np.ndarray, centre: np.ndarray,
@@ -1077,7 +1030,9 @@ def rollout_summary(result: RolloutResult) -> dict:
         "mm_per_unit": mesh.mm_per_unit,
         "axis": result.axis.as_dict(),
         "proxy": result.proxy.as_dict(),
-        "seam": {"angle_deg": result.seam_angle, "method": result.seam_method, "cut": result.region.cut},
+        "seam": {"angle_deg": result.seam_angle, "method": result.seam_method, "cut": result.region.cut,
+                 "landmark": result.landmark.as_dict() if result.landmark is not None else None,
+                 "theta_origin_deg": result.theta_origin},
         "region": result.region.as_dict(),
         "counts": {
             "vertices": len(mesh.vertices), "faces": len(mesh.faces),
@@ -1107,7 +1062,11 @@ WARN_AXIS_RMS_DEG = 5.0
 
 def _notes(result: RolloutResult) -> list[str]:
     """Warnings for the sidecar: what the user should know before relaxing."""
-    notes = []
+    notes = list(result.landmark_notes)
+    if result.region.repeated_from is not None:
+        notes.append(f"{len(result.flat.mesh.faces) - result.region.repeated_from} faces repeat the first "
+                     f"{result.region.overlap_deg:g} degrees after the seam past 360 degrees (their distortion is "
+                     "counted twice in the figures)")
     if result.distortion.flipped:
         why = (" (kept attachments: a handle cannot be unrolled without folds; leave them out)"
                if result.attachments_kept and result.attachments.n_faces else "")
@@ -1245,7 +1204,7 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     from potflat import __version__
     from potflat.io.atomic import check_output_name, write_json_atomic
     from potflat.io.scan import check_plausible_size, load_scan
-    from potflat.io.flat_ply import write_flat_ply
+    from potflat.io.flat_ply import as_stored, write_flat_ply
     from potflat.rollout.profile import vessel_profile, write_profile_csv, write_profile_svg
     from potflat.stages.provenance import provenance
 
@@ -1269,8 +1228,11 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
         check(result.flat)
     mesh = mesh.replace(texcoords=None)  # the rollout has its own; the profile needs none
     body = None if result.attachments_kept or not result.attachments.n_faces else ~result.attachments.face_mask
+    bins = None
+    if options.profile_mm is not None:
+        bins = max(1, math.ceil(result.axis.height * mesh.mm_per_unit / options.profile_mm))
     profile = vessel_profile(mesh, result.axis.point, result.axis.direction, face_mask=body,
-                             labels=result.walls.labels)
+                             labels=result.walls.labels, bins=bins)
     del mesh
     summary = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_summary(result),
                "profile": profile.summary(),
@@ -1278,9 +1240,11 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
                "files": {"ply": ply_path.name, "json": json_path.name, "profile_csv": csv_path.name,
                          "profile_svg": svg_path.name}}
     summary["provenance"] = provenance(stage="rollout", inputs=[scan_path], options=options.as_dict())
-    write_flat_ply(ply_path, result.flat, comments=(f"potflat {__version__} rollout of {scan_path.name}",))
+    comments = (f"potflat {__version__} rollout of {scan_path.name}",)
+    write_flat_ply(ply_path, result.flat, comments=comments)
     write_profile_csv(profile, csv_path)
     write_profile_svg(profile, svg_path, title=f"{name}: profile ({profile.units})")
     write_json_atomic(json_path, summary)
     return StageOutput({"ply": ply_path, "json": json_path, "profile_csv": csv_path, "profile_svg": svg_path},
-                       summary)
+                       summary, flat=as_stored(result.flat, ply_path, comments=comments),
+                       distortion=result.distortion)

@@ -223,11 +223,11 @@ class Batch:
 
 def option_stages() -> dict[str, list[tuple[str, Any]]]:
     """Every stage option name to the (stage, type hint) pairs that use it."""
-    from potflat.stages.pipeline import STAGES, option_types, stage_api
+    from potflat.stages.pipeline import STAGES, option_types, options_class
 
     out: dict[str, list[tuple[str, Any]]] = {}
     for stage in STAGES:
-        for name, tp in option_types(stage_api(stage)[0]).items():
+        for name, tp in option_types(options_class(stage)).items():
             out.setdefault(name, []).append((stage, tp))
     return out
 
@@ -380,11 +380,11 @@ class _Validator:
         return out
 
     def build_options(self, values: dict[str, dict[str, tuple[Any, int]]], line: int) -> dict | None:
-        from potflat.stages.pipeline import STAGES, stage_api
+        from potflat.stages.pipeline import STAGES, options_class
 
         built = {}
         for stage in STAGES:
-            cls = stage_api(stage)[0]
+            cls = options_class(stage)
             given = values.get(stage, {})
             try:
                 built[stage] = cls(**{k: v for k, (v, _) in given.items()})
@@ -827,8 +827,9 @@ def run_batch(batch: Batch, *, workers: int | None = None, scheduler: str | None
     Returns
     -------
     BatchSummary
-        Also written as ``summary.json`` and ``summary.csv`` in ``batch.output``, even
-        when interrupted (unfinished scans are then ``interrupted``).
+        Also written as ``summary.json``, ``summary.csv`` and the report ``index.html``
+        (:mod:`potflat.stages.report`) in ``batch.output``, even when interrupted (unfinished scans are
+        then ``interrupted``).
     """
     from potflat.io.atomic import output_lock
 
@@ -880,6 +881,9 @@ def run_batch(batch: Batch, *, workers: int | None = None, scheduler: str | None
                                    seconds=time.perf_counter() - start)
             with contextlib.suppress(PotflatError, OSError):
                 summary.write()
+                from potflat.stages.report import write_report
+
+                write_report(summary)
     return summary
 
 

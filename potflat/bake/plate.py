@@ -1,0 +1,393 @@
+"""The archaeological plate: profile section and outside view, the rollout below, at a stated scale.
+
+:func:`make_plate` composes, from the files of one flattened scan, the vessel drawing as it is
+published: left of the axis the outside view (the scan's painted surface seen from the
+rollout's centre, orthographic), right of it the wall section (the profile), the rollout
+below at the same stated scale (1:1, 1:2, ...), a scale bar and a caption. It writes
+
+* ``NAME.plate.svg``: text as text, the profile and scale bar as vector paths, the outside
+  view and the rollout as embedded images (editable in Inkscape or Illustrator);
+* ``NAME.plate.pdf``: the same;
+* ``NAME.plate.png``: a preview at :data:`PREVIEW_DPI`.
+
+SVG and PDF pages are sized in millimetres so that printing at 100 % gives the stated
+scale. The rollout is ``NAME.png`` as baked (its pixels embedded unchanged); the outside
+view is rendered at :data:`VIEW_DPI` on paper.
+"""
+from __future__ import annotations
+
+import io
+import math
+import os
+import textwrap
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.mesh.distortion import distortion_words, painted_zone_distortion
+from potflat.types import StageOutput
+
+#: Largest print scale accepted (drawing mm per vessel mm): 10:1, for small sherds.
+MAX_SCALE = 10.0
+#: Scales tried when none is given, largest first (drawing mm per vessel mm).
+PLATE_SCALES = (1.0, 1 / 2, 1 / 3, 1 / 4, 1 / 5, 1 / 10, 1 / 20, 1 / 50)
+#: The automatic scale keeps drawing and rollout within this area (A4 portrait minus margins), mm.
+CONTENT_MM = (180.0, 240.0)
+#: Page margin, gap between the parts, caption font size (pt) and line height, mm.
+MARGIN_MM, GAP_MM, FONT_PT, LINE_MM = 12.0, 8.0, 7.5, 4.2
+#: Mean width of a caption character in ems (for wrapping the caption to the page).
+CHAR_EM = 0.56
+#: Resolution of the PNG preview, and of the outside view on paper, dots per inch.
+PREVIEW_DPI, VIEW_DPI = 150.0, 300.0
+
+
+def parse_scale(value) -> float | None:
+    """A print scale as drawing mm per vessel mm.
+
+    Parameters
+    ----------
+    value : str, float or None
+        ``"1:5"``, ``"1/5"``, ``0.2``, ``"auto"`` or None (automatic).
+
+    Returns
+    -------
+    float or None
+        None for automatic.
+
+    Raises
+    ------
+    InvalidOptionError
+        Not a positive ratio.
+    """
+    if value is None or (isinstance(value, str) and value.strip().lower() in ("", "auto")):
+        return None
+    try:
+        if isinstance(value, str) and (":" in value or "/" in value):
+            a, b = value.replace("/", ":").split(":")
+            scale = float(a) / float(b)
+        else:
+            scale = float(value)
+    except (TypeError, ValueError, ZeroDivisionError):
+        raise InvalidOptionError(f"plate scale {value!r} is not a scale; give e.g. 1:1, 1:2, 1:5 or auto") from None
+    if not math.isfinite(scale) or scale <= 0:
+        raise InvalidOptionError(f"plate scale {value!r} must be positive, e.g. 1:2")
+    if scale > MAX_SCALE:
+        raise InvalidOptionError(
+            f"plate scale {value!r} would draw the vessel {scale:g} times its size; give e.g. 1:2 (in a YAML file "
+            "in quotes, '1:5': unquoted, YAML reads 1:5 as the number 65)")
+    return scale
+
+
+def scale_label(scale: float) -> str:
+    """``1:5`` for 0.2, ``2:1`` for 2, ``1:2.5`` for 0.4."""
+    if scale >= 1:
+        return f"{scale:.3g}:1"
+    return f"1:{1 / scale:.3g}"
+
+
+@dataclass(frozen=True)
+class _Sources:
+    """What the plate is made of, read from the files beside ``NAME.relaxed.ply``."""
+
+    name: str
+    flat: object  # FlatMesh
+    rollout: dict
+    relax: dict
+    bake: dict
+    profile: object  # Profile in mm
+    painting: np.ndarray  # NAME.png, (h, w, 4) uint8
+    inputs: tuple
+
+
+def _read_json(path: Path, hint: str) -> dict:
+    import json
+
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise InvalidInputError(f"{path} is missing; {hint}") from None
+    except (OSError, ValueError) as exc:
+        raise InvalidInputError(f"{path}: unreadable ({exc}); {hint}") from None
+
+
+def _read_rgba(path: Path) -> np.ndarray:
+    """A baked ``NAME.png`` as (h, w, 4) uint8 (with its alpha, which the texture reader drops)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as img:
+            return np.asarray(img.convert("RGBA"))
+    except (OSError, ValueError, Image.DecompressionBombError) as exc:
+        raise InvalidInputError(f"{path}: unreadable image ({exc}); bake it again") from None
+
+
+def _sources(relaxed_ply: Path, name: str | None, bake_dir: Path) -> _Sources:
+    from potflat.bake.render import stage_name
+    from potflat.io.flat_ply import read_flat_ply
+    from potflat.rollout.profile import read_profile_csv
+
+    if not relaxed_ply.name.endswith(".relaxed.ply"):
+        raise InvalidInputError(f"{relaxed_ply.name}: the plate is made from NAME.relaxed.ply (with the rollout, "
+                                "relax and bake files beside it); give that file")
+    stem = stage_name(relaxed_ply)
+    folder = relaxed_ply.parent
+    rerun = "run potflat run (or rollout, relax and bake) into this folder first"
+    rollout = _read_json(folder / f"{stem}.rollout.json", rerun)
+    relax = _read_json(folder / f"{stem}.relaxed.json", rerun)
+    bake_json = bake_dir / f"{name or stem}.bake.json"
+    bake = _read_json(bake_json, f"bake it first: potflat bake {relaxed_ply}")
+    png = bake_dir / bake.get("files", {}).get("png", f"{name or stem}.png")
+    csv = folder / rollout.get("files", {}).get("profile_csv", f"{stem}.profile.csv")
+    if not png.is_file():
+        raise InvalidInputError(f"{png} is missing; bake it first: potflat bake {relaxed_ply}")
+    profile = read_profile_csv(csv, rollout.get("profile", {}))
+    painting = _read_rgba(png)
+    return _Sources(name=name or stem, flat=read_flat_ply(relaxed_ply), rollout=rollout, relax=relax, bake=bake,
+                    profile=profile, painting=painting,
+                    inputs=(relaxed_ply, folder / f"{stem}.rollout.json", folder / f"{stem}.relaxed.json",
+                            bake_json, png, csv))
+
+
+def view_direction(rollout_summary: dict) -> np.ndarray:
+    """Unit direction from the axis towards the viewer of the outside view: the rollout's centre.
+
+    The centre angle is the middle of the angles the rollout covers (measured from the seam,
+    or from the landmark of a window), turned from the axis' reference direction,
+    counter-clockwise about the axis (mouth up). Shape (3,) float64.
+    """
+    ax = rollout_summary["axis"]
+    a = np.asarray(ax["direction"], np.float64)
+    ref = np.asarray(ax["reference_direction"], np.float64)
+    region = rollout_summary.get("region", {})
+    lo, hi = region.get("theta_range_deg") or (0.0, 360.0)
+    hi -= region.get("overlap_deg") or 0.0  # the repeat past 360 degrees is not part of the view
+    seam = rollout_summary["seam"]
+    origin = seam.get("theta_origin_deg", seam["angle_deg"])  # angles of a window start at its landmark
+    phi = math.radians(origin + 0.5 * (lo + hi))
+    d = math.cos(phi) * ref + math.sin(phi) * np.cross(a, ref)
+    return d / np.linalg.norm(d)
+
+
+def outside_view(flat, rollout_summary: dict, px_per_mm: float):
+    """Orthographic outside view of the flattened surface from the rollout's centre.
+
+    The faces turned towards the viewer (:func:`view_direction`) are projected onto the plane
+    of the axis (``x`` to the right of the axis, ``y`` up the axis from the profile's
+    origin) and baked with the painting, as :func:`potflat.bake.bake` bakes a flattening.
+
+    Parameters
+    ----------
+    flat : FlatMesh
+        ``NAME.relaxed.ply`` (its 3D vertices, faces and painting).
+    rollout_summary : dict
+        ``NAME.rollout.json`` (axis, seam, profile origin).
+    px_per_mm : float
+        Resolution of the view, pixels per vessel millimetre.
+
+    Returns
+    -------
+    BakeResult
+        ``uv`` frame: scan units, ``x`` from the axis, ``y`` from the profile's origin.
+    """
+    from potflat.bake import bake
+    from potflat.types import FlatMesh
+
+    mesh = flat.mesh
+    a = np.asarray(rollout_summary["axis"]["direction"], np.float64)
+    a /= np.linalg.norm(a)
+    origin = np.asarray(rollout_summary.get("profile", {}).get("origin") or rollout_summary["axis"]["point"], np.float64)
+    d = view_direction(rollout_summary)
+    right = np.cross(a, d)
+    V, F = mesh.vertices, mesh.faces
+    normal = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    front = np.flatnonzero(normal @ d > 0)
+    if len(front) == 0:
+        raise InvalidInputError(f"{mesh.source or 'the flattening'} shows no face towards the viewer; "
+                                "cannot draw its outside view")
+    sub = mesh.replace(faces=F[front], texcoords=None if mesh.texcoords is None else mesh.texcoords[front])
+    rel = V - origin
+    uv = np.stack([rel @ right, rel @ a], axis=1)
+    return bake(FlatMesh(sub, uv), px_per_mm=px_per_mm, maps=(), max_megapixels=200.0)
+
+
+def _auto_scale(drawing_mm: tuple[float, float], rollout_mm: tuple[float, float]) -> float:
+    for s in PLATE_SCALES:
+        if (max(drawing_mm[0], rollout_mm[0]) * s <= CONTENT_MM[0]
+                and (drawing_mm[1] + rollout_mm[1]) * s + GAP_MM <= CONTENT_MM[1]):
+            return s
+    return PLATE_SCALES[-1]
+
+
+def _plate_date() -> str:
+    """Today (UTC), or the date of ``SOURCE_DATE_EPOCH`` when set (reproducible outputs)."""
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    stamp = float(epoch) if epoch and epoch.strip().isdigit() else time.time()
+    return datetime.fromtimestamp(stamp, tz=timezone.utc).date().isoformat()
+
+
+def _scale_bar(ax, x0: float, y0: float, scale: float, max_paper_mm: float) -> float:
+    """Draw a bar of alternating blocks at paper ``(x0, y0)`` (mm, bottom left); returns its paper length."""
+    from matplotlib.patches import Rectangle
+
+    from potflat.bake.annotate import nice_length
+
+    length = nice_length(max_paper_mm / scale)  # vessel mm
+    lead = round(length / 10 ** math.floor(math.log10(length)))
+    blocks = 4 if lead == 2 else 5
+    paper = length * scale
+    for k in range(blocks):
+        ax.add_patch(Rectangle((x0 + k * paper / blocks, y0), paper / blocks, 1.5, facecolor="black" if k % 2 == 0
+                               else "white", edgecolor="black", linewidth=0.4))
+    unit, value = ("cm", length / 10) if length >= 10 else ("mm", length)
+    ax.text(x0, y0 - 1.2, "0", ha="center", va="top", fontsize=FONT_PT)
+    ax.text(x0 + paper, y0 - 1.2, f"{value:g} {unit}", ha="center", va="top", fontsize=FONT_PT)
+    return paper
+
+
+def compose_plate(src: _Sources, scale: float | None):
+    """The plate as a matplotlib figure sized in millimetres; returns ``(figure, facts)``."""
+    from matplotlib.figure import Figure
+
+    from potflat import __version__
+    from potflat.rollout.profile import _runs, section_polygon
+
+    prof = src.profile
+    ro = prof.outer_radius
+    ok = np.isfinite(ro)
+    if not ok.any():
+        raise InvalidInputError(f"{src.name}: the profile has no outer wall radius; run potflat rollout again")
+    rmax = float(np.nanmax(np.r_[ro[ok], prof.inner_radius[np.isfinite(prof.inner_radius)]]))
+    h_lo, h_hi = prof.height_range
+    roll_ppm = float(src.bake["px_per_mm"])
+    roll_w, roll_h = src.painting.shape[1] / roll_ppm, src.painting.shape[0] / roll_ppm
+    if scale is None:
+        scale = _auto_scale((2 * rmax, h_hi - h_lo), (roll_w, roll_h))
+    mpu = src.flat.mesh.mm_per_unit
+    view = outside_view(src.flat, src.rollout, min(VIEW_DPI / 25.4 * scale, 40.0))
+    s_px = view.px_per_mm * mpu  # view pixels per scan unit
+    vx0, vy1 = view.origin * mpu  # mm: left edge, top edge
+    vh, vw = view.image.shape[:2]
+    vx1, vy0 = vx0 + vw / view.px_per_mm, vy1 - vh / view.px_per_mm
+    y_lo, y_hi = min(h_lo, vy0), max(h_hi, vy1)
+    half = max(rmax, -vx0)
+    draw_w, draw_h = 2 * half * scale, (y_hi - y_lo) * scale
+    paper_roll = (roll_w * scale, roll_h * scale)
+    page_w = max(draw_w, paper_roll[0], 120.0) + 2 * MARGIN_MM
+    figures, where = painted_zone_distortion(src.relax)
+    proxy = src.rollout.get("proxy", {}).get("type", "?")
+    preset = src.relax.get("preset") or src.relax.get("options", {}).get("preset", "?")
+    date = _plate_date()
+    label = scale_label(scale)
+    caption = [
+        (src.name, "bold"),
+        (f"Rollout computed from a 3D scan by potflat {__version__} on {date}: proxy {proxy}, relaxation preset "
+         f"{preset}.", "normal"),
+        (f"Distortion in the {where}: {distortion_words(figures)}.", "normal"),
+        (f"Scale {label} when printed at 100 %. Left of the axis the outside view, right of it the section; "
+         "the rollout below, seen from outside, mouth up.", "normal"),
+    ]
+    chars = max(40, int((page_w - 2 * MARGIN_MM) / (FONT_PT * 25.4 / 72 * CHAR_EM)))
+    lines = [(piece, weight) for text, weight in caption for piece in textwrap.wrap(text, chars)]
+    caption_lines = len(lines)
+    page_h = (2 * MARGIN_MM + draw_h + GAP_MM + paper_roll[1] + GAP_MM + 8.0 + caption_lines * LINE_MM)
+    fig = Figure(figsize=(page_w / 25.4, page_h / 25.4), facecolor="white")
+    paper = fig.add_axes((0, 0, 1, 1))
+    paper.set_xlim(0, page_w)
+    paper.set_ylim(0, page_h)
+    paper.set_axis_off()
+
+    # vessel drawing: outside view left of the axis, section right of it
+    cx = page_w / 2
+    top = page_h - MARGIN_MM
+    vessel = fig.add_axes(((cx - half * scale) / page_w, (top - draw_h) / page_h, draw_w / page_w, draw_h / page_h))
+    vessel.set_xlim(-half, half)
+    vessel.set_ylim(y_lo, y_hi)
+    vessel.set_axis_off()
+    axis_col = int(round(-view.origin[0] * s_px))
+    if axis_col > 0:
+        vessel.imshow(view.image[:, :axis_col], extent=(vx0, vx0 + axis_col / view.px_per_mm, vy0, vy1),
+                      interpolation="none", aspect="auto")
+    hs = prof.heights
+    for i, j in _runs(ok):
+        vessel.plot(-ro[i:j], hs[i:j], color="black", linewidth=0.4, solid_joinstyle="round")
+    section = section_polygon(prof)
+    if section is not None:
+        vessel.fill(section[0], section[1], facecolor="black", edgecolor="black", linewidth=0.3)
+    for i, j in _runs(ok):
+        vessel.plot(ro[i:j], hs[i:j], color="black", linewidth=1.2, solid_joinstyle="round", solid_capstyle="round")
+    k_top, k_bot = np.flatnonzero(ok)[[-1, 0]]
+    for k in (k_top, k_bot):
+        vessel.plot([-ro[k], ro[k]], [hs[k], hs[k]], color="black", linewidth=0.4)
+    vessel.plot([0, 0], [y_lo, y_hi], color="black", linewidth=0.4, linestyle=(0, (8, 2, 1.5, 2)))
+
+    # rollout below, same scale
+    roll_top = top - draw_h - GAP_MM
+    rx = cx - paper_roll[0] / 2
+    roll = fig.add_axes((rx / page_w, (roll_top - paper_roll[1]) / page_h, paper_roll[0] / page_w,
+                         paper_roll[1] / page_h))
+    roll.imshow(src.painting, extent=(0, roll_w, 0, roll_h), interpolation="none", aspect="auto")
+    roll.set_xlim(0, roll_w)
+    roll.set_ylim(0, roll_h)
+    roll.set_axis_off()
+
+    # scale bar and caption
+    bar_y = roll_top - paper_roll[1] - GAP_MM + 2.0
+    bar_paper = _scale_bar(paper, MARGIN_MM, bar_y, scale, min(60.0, page_w - 2 * MARGIN_MM - 30.0))
+    paper.text(MARGIN_MM + bar_paper + 6.0, bar_y + 0.75, f"scale {label}", va="center", fontsize=FONT_PT)
+    y = bar_y - 6.0
+    for text, weight in lines:
+        paper.text(MARGIN_MM, y, text, fontsize=FONT_PT, fontweight=weight, va="top", wrap=False)
+        y -= LINE_MM
+    facts = {"scale": scale, "scale_label": label, "page_mm": [page_w, page_h], "drawing_mm": [draw_w, draw_h],
+             "rollout_mm": list(paper_roll), "distortion_where": where, "distortion": figures, "date": date,
+             "proxy": proxy, "preset": preset, "profile_rows": int(ok.sum()),
+             "profile_step_mm": float(np.median(np.diff(hs))) if len(hs) > 1 else None}
+    return fig, facts
+
+
+def make_plate(relaxed_ply: str | os.PathLike, out_dir: str | os.PathLike | None = None, *,
+               scale: float | str | None = None, name: str | None = None) -> StageOutput:
+    """Write ``NAME.plate.svg``, ``NAME.plate.pdf`` and ``NAME.plate.png`` for a flattened scan.
+
+    Parameters
+    ----------
+    relaxed_ply : path-like
+        ``NAME.relaxed.ply``; ``NAME.rollout.json``, ``NAME.profile.csv`` and
+        ``NAME.relaxed.json`` must lie beside it.
+    out_dir : path-like, optional
+        Folder holding the bake's ``NAME.bake.json`` and ``NAME.png``, where the plate is
+        written; default: the folder of ``relaxed_ply``.
+    scale : float or str, optional
+        Print scale (``"1:2"``, ``0.5``); default: the largest of :data:`PLATE_SCALES` at
+        which drawing and rollout fit an A4 page.
+    name : str, optional
+        Output NAME and caption title; default the stage name.
+
+    Returns
+    -------
+    StageOutput
+        ``paths`` (``svg``, ``pdf``, ``png``) and ``summary`` (scale, page size in mm,
+        figures quoted).
+    """
+    import matplotlib
+
+    from potflat.io.atomic import write_bytes_atomic
+
+    relaxed_ply = Path(relaxed_ply)
+    out = Path(out_dir) if out_dir is not None else relaxed_ply.parent
+    src = _sources(relaxed_ply, name, out)
+    fig, facts = compose_plate(src, parse_scale(scale))
+    paths = {}
+    rc = {"svg.fonttype": "none", "pdf.fonttype": 42, "svg.hashsalt": src.name}
+    with matplotlib.rc_context(rc):
+        for fmt, meta in (("svg", {"Date": None}), ("pdf", {"CreationDate": None, "ModDate": None}), ("png", None)):
+            buf = io.BytesIO()
+            kwargs = {"dpi": PREVIEW_DPI} if fmt == "png" else {"metadata": {**meta, "Title": f"{src.name}: plate"}}
+            fig.savefig(buf, format=fmt, facecolor="white", **kwargs)
+            paths[fmt] = write_bytes_atomic(out / f"{src.name}.plate.{fmt}", buf.getvalue())
+    return StageOutput(paths=paths, summary={**facts, "files": {k: p.name for k, p in paths.items()},
+                                              "inputs": [str(p) for p in src.inputs]})
