@@ -173,18 +173,23 @@ def run_case(case: Case, variants: dict[str, dict], log=print) -> list[dict]:
                          zone_fraction=None if imp is None or imp.values is None else imp.zone_fraction,
                          keywords=keywords, **extra))
 
+    def arap(name: str, face_mask=None, **extra):
+        r, _ = rolled(none_kw, face_mask)
+        try:
+            uv, _, secs = libigl_arap(r.flat)
+        except RuntimeError as exc:
+            log(f"  {case.name} {case.painting}: {name} failed: {exc}")
+            return
+        rows.append(_row(case, name, r.flat.replace(uv=uv), secs, **extra))
+
     springs = _springs_alone()
     none_kw = {k: v for k, v in springs.items() if k == "importance"}
     if case.zone is not None:
         F = mesh.faces
         cut = case.zone(mesh.vertices[F].mean(axis=1))
-        r, _ = rolled(none_kw, cut)
-        uv, _, secs = libigl_arap(r.flat)
-        rows.append(_row(case, "cut-out ARAP", r.flat.replace(uv=uv), secs, cut_out=True))
+        arap("cut-out ARAP", cut, cut_out=True)
         relaxed("cut-out relax", springs, cut, cut_out=True)
-    r, _ = rolled(none_kw)
-    uv, _, secs = libigl_arap(r.flat)
-    rows.append(_row(case, "ARAP", r.flat.replace(uv=uv), secs))
+    arap("ARAP")
     relaxed("relax (springs)", springs)
     for name, kw in variants.items():
         relaxed(name, kw)
