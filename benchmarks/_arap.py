@@ -17,8 +17,9 @@ def libigl_arap(flat: FlatMesh, iterations: int = ARAP_ITERATIONS) -> tuple[np.n
     ARAP fits rotations, so it needs a start that is not mirrored (a mirrored start folds
     most triangles in the first iteration): a start with negative total signed area is
     mirrored in ``u`` for the solve and the result mirrored back. One vertex of each
-    connected piece is pinned at its start (a piece without one makes the global system
-    singular: the precomputation or the solve fails).
+    connected piece, and every vertex of no face, is pinned at its start (a piece or a
+    vertex without one makes the global system singular: the precomputation or the solve
+    fails).
 
     Parameters
     ----------
@@ -43,7 +44,7 @@ def libigl_arap(flat: FlatMesh, iterations: int = ARAP_ITERATIONS) -> tuple[np.n
     mirror = np.array([-1.0, 1.0]) if (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum() < 0 else np.ones(2)
     start = np.ascontiguousarray(flat.uv * mirror)
     t0 = time.perf_counter()
-    pinned = _one_vertex_per_piece(F, len(V))
+    pinned = _pinned_vertices(F, len(V))
     data = igl.ARAPData()
     data.energy = igl.ARAP_ENERGY_TYPE_ELEMENTS
     data.max_iter = iterations
@@ -53,9 +54,9 @@ def libigl_arap(flat: FlatMesh, iterations: int = ARAP_ITERATIONS) -> tuple[np.n
     return np.asarray(uv, np.float64) * mirror, t1 - t0, time.perf_counter() - t0
 
 
-def _one_vertex_per_piece(faces: np.ndarray, n: int) -> np.ndarray:
+def _pinned_vertices(faces: np.ndarray, n: int) -> np.ndarray:
     """The lowest vertex index of each connected piece of ``faces`` (pieces joined by shared
-    vertices), ``(k,)`` int64."""
+    vertices) and every vertex of no face, sorted, ``(k,)`` int64."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -65,4 +66,4 @@ def _one_vertex_per_piece(faces: np.ndarray, n: int) -> np.ndarray:
     used = np.zeros(n, bool)
     used[faces.ravel()] = True
     _, first = np.unique(label[used], return_index=True)
-    return np.flatnonzero(used)[first]
+    return np.sort(np.concatenate([np.flatnonzero(used)[first], np.flatnonzero(~used)]))

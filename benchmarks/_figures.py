@@ -3,7 +3,7 @@
 Used by ``benchmarks/bench_figures.py`` and the tests (``tests/_bench_meshes.py`` loads it).
 
 A painted circle is the part of the surface within a 3D distance ``radius`` of its centre
-(:class:`potflat.synthetic.PaintedCircle`, the circles of a ``*.truth.json``). It is measured
+(:class:`potflat_synthetic.vessels.PaintedCircle`, the circles of a ``*.truth.json``). It is measured
 on a fine sample of the surface, so the result does not depend on how the mesh's triangles
 meet the circle's outline: every face near the circle is cut into ``subdivisions**2`` equal
 sub-triangles whose centroids (3D) are kept when they lie within the radius; the same
@@ -15,7 +15,7 @@ barycentric points in the flattening give the circle's image. Per circle:
   :data:`MIN_COVERAGE` the circle is not whole in the flattening (cut away, under a handle);
 * ``area_ratio``: its flat area over its 3D area;
 * ``anisotropy_p95``: the 95th percentile, weighted by 3D area inside the circle, of the
-  per-face ``sigma_max / sigma_min`` (:func:`potflat.distortion.face_distortion`);
+  per-face ``sigma_max / sigma_min`` (:func:`potflat.mesh.distortion.face_distortion`);
 * ``width_mm``, ``height_mm``: ``4 sigma`` of the image region along ``u`` and along ``v``
   (``sigma`` its standard deviation for uniform density; a uniform disc of diameter ``d`` has
   ``sigma = d / 4``), in mm; ``elongation``: its long over short principal axis;
@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from potflat.distortion import face_distortion, summarize, weighted_percentile
+from potflat.mesh.distortion import face_distortion, summarize, weighted_percentile
 from potflat.types import FlatMesh
 
 #: A circle whose sampled 3D area is below this share of ``pi r^2`` is not whole in the flattening.
@@ -120,7 +120,7 @@ def _sub_barycentric(n: int) -> np.ndarray:
 
 def circle_list(circles) -> list[tuple[np.ndarray, float]]:
     """``(centre (3,), radius)`` of each circle given as objects with ``centre`` and ``radius``
-    (:class:`potflat.synthetic.PaintedCircle`), dicts with those keys (a truth file's
+    (:class:`potflat_synthetic.vessels.PaintedCircle`), dicts with those keys (a truth file's
     ``circles``) or pairs."""
     out = []
     for c in circles:

@@ -32,7 +32,7 @@ def make_frieze(n_vertices: float, out: Path, *, seed: int = 0) -> Path:
     """Write ``frieze.relaxed.ply`` (and its atlas) into ``out`` and return the PLY path."""
     import cv2
 
-    from potflat.io.stage import write_flat_ply
+    from potflat.io.flat_ply import write_flat_ply
     from potflat.types import FlatMesh, Mesh
 
     rng = np.random.default_rng(seed)
@@ -111,7 +111,7 @@ def main() -> None:
     proc = subprocess.run([sys.executable, __file__, "--child", str(ply), str(work / "out"), json.dumps(options)],
                           check=True, capture_output=True, text=True, env={**os.environ})
     r = json.loads(proc.stdout.strip().splitlines()[-1])
-    from potflat.io.stage import read_flat_ply
+    from potflat.io.flat_ply import read_flat_ply
 
     flat = read_flat_ply(ply)
     w, h = r["image_px"]

@@ -49,7 +49,7 @@ def _paper_energy(flat, uv) -> float:
     """Paper Eq. 1 (k = 1, uniform, edge and cross springs) in normalised units, per spring."""
     import numpy as np
 
-    from potflat.relax import _Springs
+    from potflat.relax.solver import _Springs
 
     V, F = flat.mesh.vertices, flat.mesh.faces
     unit = float(np.linalg.norm(V[F[:, [1, 2, 0]]] - V[F], axis=2).mean())
@@ -61,7 +61,7 @@ def _worker(size_m: float, method: str, budget: float, target: float | None) -> 
     """One run in this process; returns the figures."""
     import numpy as np
 
-    from potflat.distortion import summarize
+    from potflat.mesh.distortion import summarize
 
     flat = _mesh(size_m)
     V, F = flat.mesh.vertices, flat.mesh.faces
@@ -93,7 +93,7 @@ def _worker(size_m: float, method: str, budget: float, target: float | None) -> 
                    levels=[(lv["level"], lv["iterations"]) for lv in r.levels], notes=list(r.notes))
         if preset == "paper" and target is not None and trace:
             # time at which the dynamics first reached the target energy (its own, per spring)
-            from potflat.relax import _Springs
+            from potflat.relax.solver import _Springs
 
             unit = float(np.linalg.norm(V[F[:, [1, 2, 0]]] - V[F], axis=2).mean())
             nspr = _Springs(np.ascontiguousarray(V / unit), F, len(V), k=1.0, relative=False).n_springs

@@ -1,6 +1,6 @@
 """End-to-end benchmark at scale: a 3M-vertex synthetic scan through ``potflat run``.
 
-A painted amphora (:func:`potflat.synthetic.make_vessel`, random pose, multi-chart texture
+A painted amphora (:func:`potflat_synthetic.vessels.make_vessel`, random pose, multi-chart texture
 atlas) is written as OBJ + MTL + PNG, then ``python -m potflat_cli run`` processes it in one
 child process, exactly as a user would run it. The benchmark samples the child's resident
 memory (``VmRSS`` in ``/proc/PID/status``) every 0.1 s and its high-water mark
@@ -41,7 +41,7 @@ SECTION = "## End to end at scale"
 
 def make_scan(n_vertices: int, folder: Path, *, texture_size: int, seed: int = 0) -> tuple[Path, dict]:
     """Write the synthetic amphora into ``folder``; return the OBJ path and its figures."""
-    from potflat.synthetic import make_vessel, write_obj
+    from potflat_synthetic.vessels import make_vessel, write_obj
 
     t = time.perf_counter()
     vessel = make_vessel("amphora", n_vertices=n_vertices, seed=seed, texture_size=texture_size)

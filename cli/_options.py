@@ -83,7 +83,7 @@ def stage_parameters(stage: str) -> list[inspect.Parameter]:
     tuples take that many values (``--band 0.2 0.6``), variable-length ones a
     comma-separated list.
     """
-    from potflat.pipeline import option_types, stage_api
+    from potflat.stages.pipeline import option_types, stage_api
 
     cls, _ = stage_api(stage)
     helps = {**_docstring_help(cls), **_command_help(stage)}
@@ -124,7 +124,7 @@ def options_from_cli(stage: str, values: dict[str, Any]):
         Naming the option (``--px-per-mm ...``) and what is wrong.
     """
     from potflat.errors import InvalidOptionError
-    from potflat.pipeline import coerce_option, option_types, stage_api
+    from potflat.stages.pipeline import coerce_option, option_types, stage_api
 
     cls, _ = stage_api(stage)
     kwargs = {}

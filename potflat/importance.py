@@ -9,7 +9,7 @@ draws the zone's outline on the maps. Ways to obtain it:
 * ``auto`` (the default for scans with a texture or vertex colours): the painting is found
   in its own colours. The rollout's start layout is rendered at :data:`DETECT_PX_PER_MM`;
   a pixel shows *detail* where the colour's local standard deviation (CIELAB, within
-  :data:`DETAIL_MM`) is well above the surface's noise floor (its median, times
+  :data:`DETAIL_MM`) is well above the surface's noise floor (a low percentile of it, times
   :data:`DETAIL_OVER_NOISE`, and at least :data:`DETAIL_MIN_DELTA_E`): brush strokes,
   figure outlines and bands have it; glaze, clay, a lighting gradient across the vessel and
   scanner noise do not. Detail closer than :data:`GAP_MM` is joined into one zone, enclosed
@@ -42,8 +42,10 @@ DETECT_PX_PER_MM = 2.0
 #: Radius (Gaussian sigma, mm) of the colour statistics that measure detail.
 DETAIL_MM = 1.5
 #: A pixel shows detail when its local colour deviation exceeds this many times the surface's
-#: median deviation (its noise floor) ...
+#: noise floor (the deviation's :data:`NOISE_PERCENTILE`-th percentile: plain surface and the
+#: flat colour inside figures, present even on a vessel painted all over) ...
 DETAIL_OVER_NOISE = 4.0
+NOISE_PERCENTILE = 10.0
 #: ... and this many CIELAB units (about twice a just-noticeable difference).
 DETAIL_MIN_DELTA_E = 5.0
 #: Detail closer than this (mm) is one painted zone (the background between figures of a frieze).
@@ -86,7 +88,7 @@ class Importance:
 
 
 def _zone_fraction(flat: FlatMesh, values: np.ndarray) -> float:
-    from potflat.distortion import face_areas, important_faces
+    from potflat.mesh.distortion import face_areas, important_faces
 
     area = face_areas(flat.mesh.vertices, flat.mesh.faces)
     total = float(area.sum())
@@ -95,6 +97,9 @@ def _zone_fraction(flat: FlatMesh, values: np.ndarray) -> float:
 
 def _result(flat: FlatMesh, values: np.ndarray, method: str, what: str) -> Importance:
     values = np.clip(np.ascontiguousarray(values, dtype=np.float64), 0.0, 1.0)
+    if values.min(initial=1.0) >= 1.0 or values.max(initial=0.0) <= 0.0:
+        which = "everything" if values.min(initial=1.0) >= 1.0 else "nothing"
+        return Importance(None, method, 1.0, f"{what} marks {which} as important: the whole surface counts alike")
     frac = _zone_fraction(flat, values)
     return Importance(values, method, frac, f"{what}: {100 * frac:.0f}% of the surface is important")
 
@@ -161,7 +166,7 @@ def painted_zone_image(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray |
     deviation, covered = detail_map(rgba, px_per_mm)
     if covered.sum() < 16:
         return None, "too little surface to look for a painting"
-    noise = float(np.median(deviation[covered]))
+    noise = float(np.percentile(deviation[covered], NOISE_PERCENTILE))
     threshold = max(DETAIL_OVER_NOISE * noise, DETAIL_MIN_DELTA_E)
     detail = ((deviation > threshold) & covered).astype(np.uint8)
     if not detail.any():
@@ -355,7 +360,7 @@ def image_mask_importance(flat: FlatMesh, mask_path: str | Path, reference: str 
     """
     from scipy.spatial import cKDTree
 
-    from potflat.io.stage import read_flat_ply
+    from potflat.io.flat_ply import read_flat_ply
 
     mask_path = Path(mask_path)
     mask = read_mask(mask_path)
@@ -401,7 +406,8 @@ def texture_mask_importance(flat: FlatMesh, mask_path: str | Path) -> Importance
     mask = read_mask(mask_path)
     h, w = mask.shape
     tc = mesh.texcoords.reshape(-1, 2)
-    px = np.stack([tc[:, 0] % 1.0 * w, (1.0 - tc[:, 1] % 1.0) * h], axis=1)
+    tc = np.where((tc < 0.0) | (tc > 1.0), tc % 1.0, tc)  # repeating textures wrap; 1.0 stays the edge
+    px = np.stack([tc[:, 0] * w, (1.0 - tc[:, 1]) * h], axis=1)
     corner = sample_image(mask, px)
     idx = mesh.faces.ravel()
     count = np.bincount(idx, minlength=len(mesh.vertices))

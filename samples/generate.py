@@ -6,7 +6,7 @@ Example::
 
 writes ``amphora.obj``, ``amphora.mtl``, ``amphora.png`` and ``amphora.truth.json``
 (axis, pose, profile, painted circles, holes) into the output folder. See
-``samples/README.md`` and :func:`potflat.synthetic.make_vessel` for every option.
+``samples/README.md`` and :func:`potflat_synthetic.vessels.make_vessel` for every option.
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from pathlib import Path
 
 
 def main(argv: list[str] | None = None) -> int:
-    from potflat.synthetic import KINDS, PAINTINGS
+    from potflat_synthetic.vessels import KINDS, PAINTINGS
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     from potflat.errors import PotflatError
-    from potflat.synthetic import make_vessel, write_obj, write_ply_colored, write_truth
+    from potflat_synthetic.vessels import make_vessel, write_obj, write_ply_colored, write_truth
 
     try:
         vessel = make_vessel(

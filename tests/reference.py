@@ -43,7 +43,7 @@ def springs(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def halfedge_springs(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Edges, cross springs and boundary edges by a stable sort of all half-edges by edge
-    (the relax kernel's former algorithm): ``potflat._kernels.springs.halfedge_springs``
+    (the relax kernel's former algorithm): ``potflat.relax._kernels.springs.halfedge_springs``
     must return exactly this for every mesh.
 
     Half-edge ``h = 3 f + c`` runs from ``F[f, c]`` to ``F[f, (c + 1) % 3]``. Per edge, in
@@ -211,3 +211,34 @@ def contact_energy(x: np.ndarray, seg: np.ndarray, bprev: np.ndarray, bnext: np.
                 r = d / dhat
                 total += kappa * (r - 1 - np.log(r))
     return total
+
+
+def weighted_spring_energy(x: np.ndarray, pairs: np.ndarray, rest: np.ndarray, k: float, relative: bool,
+                           weight: np.ndarray, r_floor: float = 1e-3) -> float:
+    """Paper Eq. 1 with each spring weighted by the mean of its endpoints' importance weights."""
+    l = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1)
+    coef = k / np.maximum(rest, r_floor) ** 2 if relative else np.full(len(rest), k)
+    coef = coef * 0.5 * (weight[pairs[:, 0]] + weight[pairs[:, 1]])
+    return float(0.5 * np.sum(coef * (l - rest) ** 2))
+
+
+def shape_energy(V: np.ndarray, F: np.ndarray, x: np.ndarray, weight: np.ndarray, scale: float) -> float:
+    """``sum_f s w_f A_f (sigma_1 / sigma_2 + sigma_2 / sigma_1 - 2)`` by an SVD of each face's
+    map from its rest triangle (in a 2D frame of its plane) to the flat one; ``w_f`` the mean
+    of the corners' weights."""
+    total = 0.0
+    for f in F:
+        p0, p1, p2 = V[f]
+        e1, e2 = p1 - p0, p2 - p0
+        a = np.linalg.norm(e1)
+        n = np.cross(e1, e2)
+        area = 0.5 * np.linalg.norm(n)
+        b1 = e1 / a
+        b2 = np.cross(n / np.linalg.norm(n), b1)
+        rest = np.array([[a, e2 @ b1], [0.0, e2 @ b2]])
+        flat = np.column_stack([x[f[1]] - x[f[0]], x[f[2]] - x[f[0]]])
+        s = np.linalg.svd(flat @ np.linalg.inv(rest), compute_uv=False)
+        if np.linalg.det(flat) <= 0:
+            return np.inf
+        total += scale * weight[f].mean() * area * (s[0] / s[1] + s[1] / s[0] - 2.0)
+    return float(total)

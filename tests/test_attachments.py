@@ -1,4 +1,4 @@
-"""Attachment detection (potflat.attachments): handles flagged, clean vessels untouched."""
+"""Attachment detection (potflat.rollout.attachments): handles flagged, clean vessels untouched."""
 from __future__ import annotations
 
 import json
@@ -7,7 +7,7 @@ import _vessel_meshes as vm
 import numpy as np
 import pytest
 
-from potflat.attachments import detect_attachments
+from potflat.rollout.attachments import detect_attachments
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
 
@@ -126,7 +126,7 @@ def test_bad_axis():
 
 
 def test_synthetic_handles_if_available():
-    synthetic = pytest.importorskip("potflat.synthetic")
+    synthetic = pytest.importorskip("potflat_synthetic.vessels")
     v = synthetic.make_vessel("amphora", n_vertices=8000, texture_size=64, handles=True)
     att = detect_attachments(v.mesh, v.axis_point, v.axis_direction)
     handle = v.face_part == synthetic.PART_HANDLE

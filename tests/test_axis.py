@@ -5,7 +5,7 @@ import pytest
 import trimesh
 
 from _revolve import cone, cylinder, revolve, vase
-from potflat.axis import (AxisFit, axis_residuals, cylindrical, estimate_axis, manual_axis, orient,
+from potflat.rollout.axis import (AxisFit, axis_residuals, cylindrical, estimate_axis, manual_axis, orient,
                           reference_direction)
 from potflat.errors import AxisNotFoundError, InvalidInputError, InvalidOptionError
 from potflat.types import Mesh

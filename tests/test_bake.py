@@ -11,7 +11,7 @@ from PIL import Image
 
 from potflat.bake import BakeOptions, bake, run_bake_stage
 from potflat.errors import InvalidOptionError
-from potflat.io.stage import write_flat_ply
+from potflat.io.flat_ply import write_flat_ply
 from potflat.types import FlatMesh, Mesh
 
 # ---------------------------------------------------------------------------- fixtures
@@ -241,7 +241,7 @@ def test_untextured_relief_lit_from_upper_left():
 def test_rasterizer_matches_reference():
     from scipy.spatial import Delaunay
 
-    from potflat._kernels import raster
+    from potflat.bake import _kernels as raster
 
     rng = np.random.default_rng(3)
     pts = rng.uniform(0.3, 29.7, (40, 2))
@@ -271,7 +271,7 @@ def test_rasterizer_matches_reference():
 def test_strips_threads_and_reruns_give_identical_images(painted_plane, monkeypatch):
     import numba
 
-    import potflat.bake as bake_mod
+    import potflat.bake.render as bake_mod
 
     whole = bake(painted_plane, px_per_mm=4, maps=("stress",))
     monkeypatch.setattr(bake_mod, "STRIP_SAMPLES", 4096)  # many small strips
@@ -381,7 +381,7 @@ def test_stage_writes_files_with_resolution(stage_dir, tmp_path):
 
 
 def _flat(stage_dir):
-    from potflat.io.stage import read_flat_ply
+    from potflat.io.flat_ply import read_flat_ply
 
     return read_flat_ply(stage_dir / "vase.relaxed.ply")
 
@@ -446,7 +446,7 @@ def test_cli(stage_dir, tmp_path):
 
 
 def test_masked_halving_matches_reference():
-    from potflat.bake import _halve_masked
+    from potflat.bake.render import _halve_masked
 
     rng = np.random.default_rng(5)
     img = rng.integers(0, 256, (7, 9, 3), dtype=np.uint8)

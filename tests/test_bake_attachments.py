@@ -5,7 +5,7 @@ import numpy as np
 from PIL import Image
 
 from potflat.bake import BakeOptions, run_bake_stage
-from potflat.io.stage import write_flat_ply
+from potflat.io.flat_ply import write_flat_ply
 from potflat.types import FlatMesh, Mesh
 
 

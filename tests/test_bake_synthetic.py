@@ -8,7 +8,7 @@ import pytest
 
 from potflat.types import FlatMesh
 
-synthetic = pytest.importorskip("potflat.synthetic")
+synthetic = pytest.importorskip("potflat_synthetic.vessels")
 
 
 @pytest.fixture(scope="module")

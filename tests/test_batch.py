@@ -9,8 +9,8 @@ import pytest
 from typer.testing import CliRunner
 
 import test_batch_fakes as fakes
-from potflat import batch as batch_mod
-from potflat.batch import MANIFEST, BatchFileError, load_batch, run_batch
+from potflat.stages import batch as batch_mod
+from potflat.stages.batch import MANIFEST, BatchFileError, load_batch, run_batch
 from potflat_cli.main import app
 
 
@@ -283,7 +283,7 @@ def test_glob_skips_the_output_folder(tmp_path, fake_stages):
 
 
 def test_one_line_strips_newlines_and_colour_codes():
-    from potflat.batch import one_line
+    from potflat.stages.batch import one_line
     from potflat.errors import InvalidInputError
 
     assert one_line(RuntimeError("\x1b[1mIllegal IR\x1b[0m\n  at x")) == "RuntimeError: Illegal IR at x"
@@ -293,7 +293,7 @@ def test_one_line_strips_newlines_and_colour_codes():
 
 
 def test_sample_batch_file_is_valid():
-    from potflat.pipeline import STAGES, stage_api
+    from potflat.stages.pipeline import STAGES, stage_api
 
     try:
         [stage_api(stage) for stage in STAGES]

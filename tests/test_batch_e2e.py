@@ -16,7 +16,7 @@ import pytest
 from PIL import Image
 from typer.testing import CliRunner
 
-from potflat.batch import MANIFEST, load_batch, run_batch
+from potflat.stages.batch import MANIFEST, load_batch, run_batch
 from potflat_cli.main import app
 
 KINDS = ("amphora", "lekythos")
@@ -24,7 +24,7 @@ KINDS = ("amphora", "lekythos")
 
 @pytest.fixture(scope="module")
 def collection(tmp_path_factory):
-    from potflat.synthetic import make_vessel, write_obj
+    from potflat_synthetic.vessels import make_vessel, write_obj
 
     root = tmp_path_factory.mktemp("collection")
     for seed, kind in enumerate(KINDS):

@@ -21,7 +21,7 @@ import pytest
 
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.atomic import write_bytes_atomic, write_json_atomic
-from potflat.provenance import provenance
+from potflat.stages.provenance import provenance
 from potflat.types import StageOutput
 
 MAPS = ("stress", "area", "anisotropy")

@@ -1,6 +1,6 @@
 """Work done in blocks of faces (to bound memory on big scans) gives the same bits as one block.
 
-``potflat.distortion.row_blocks`` cuts per-face and per-edge work into blocks of
+``potflat.mesh.distortion.row_blocks`` cuts per-face and per-edge work into blocks of
 ``distortion.BLOCK`` rows. Here BLOCK is set to a few rows, so every blocked loop runs
 many uneven blocks (including a last block of one row), and the results are compared bit
 for bit with the same computation in a single block, and with plain references.
@@ -10,12 +10,12 @@ import pytest
 import scipy.sparse
 import scipy.sparse.csgraph
 
-from potflat import distortion
-from potflat.cleaning import clean_mesh
-from potflat.io.stage import read_flat_ply, write_flat_ply
-from potflat.profile import vessel_profile
-from potflat.rollout import cut_open, rollout, signed_areas
-from potflat.synthetic import make_vessel
+from potflat.mesh import distortion
+from potflat.mesh.cleaning import clean_mesh
+from potflat.io.flat_ply import read_flat_ply, write_flat_ply
+from potflat.rollout.profile import vessel_profile
+from potflat.rollout.unroll import cut_open, rollout, signed_areas
+from potflat_synthetic.vessels import make_vessel
 
 
 def _same(a, b):

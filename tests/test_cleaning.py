@@ -6,8 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from potflat._kernels.mesh import edge_table, union_find
-from potflat.cleaning import CleaningReport, clean_mesh, weld_vertices
+from potflat.mesh._kernels import edge_table, union_find
+from potflat.mesh.cleaning import CleaningReport, clean_mesh, weld_vertices
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
 

@@ -63,7 +63,7 @@ def test_run_help_lists_every_stage_option(fake_stages):
 
 
 def test_run_help_with_the_real_stages():
-    from potflat.pipeline import STAGES, stage_api
+    from potflat.stages.pipeline import STAGES, stage_api
 
     try:
         classes = [stage_api(stage)[0] for stage in STAGES]
@@ -127,7 +127,7 @@ def test_run_corrupt_scan_one_line_error(tmp_path, fake_stages):
 @pytest.mark.parametrize("stage", ["rollout", "relax", "bake"])
 def test_stage_commands_use_the_shared_option_names(stage):
     """Every options field is --field-name on its stage command, with -o/--output and --name."""
-    from potflat.pipeline import stage_api
+    from potflat.stages.pipeline import stage_api
 
     try:
         cls = stage_api(stage)[0]

@@ -94,7 +94,7 @@ def test_help_shows_an_example():
 
 
 def test_side_and_keep_attachments_reach_the_stage(tmp_path):
-    from potflat.synthetic import make_vessel, write_ply_colored
+    from potflat_synthetic.vessels import make_vessel, write_ply_colored
 
     scan = write_ply_colored(make_vessel("cup", n_vertices=2000, seed=1, texture_size=64), tmp_path / "cup.ply")
     result = runner.invoke(app, ["rollout", str(scan), "-o", str(tmp_path), "--side", "inner",

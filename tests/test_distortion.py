@@ -1,6 +1,6 @@
 import numpy as np
 
-from potflat.distortion import face_distortion, summarize, vertex_stress
+from potflat.mesh.distortion import face_distortion, summarize, vertex_stress
 
 
 def _grid(nx=4, ny=3):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from potflat.rollout import rollout
-from potflat.synthetic import make_vessel
+from potflat_synthetic.vessels import make_vessel
 
 from _bench_meshes import figures
 
@@ -65,7 +65,7 @@ def test_a_cut_or_missing_circle_is_left_out_of_the_aggregates():
 
 
 def test_circles_from_a_truth_file_and_bad_circles(tmp_path):
-    from potflat.synthetic import write_truth
+    from potflat_synthetic.vessels import write_truth
 
     v = make_vessel("cylinder", n_vertices=2000, texture_size=64)
     path = write_truth(v, tmp_path / "cyl.truth.json")

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from potflat.pipeline import run_scan
-from potflat.synthetic import make_vessel, write_obj
+from potflat.stages.pipeline import run_scan
+from potflat_synthetic.vessels import make_vessel, write_obj
 
 PX_PER_MM = 2.0
 SEED = 7

@@ -1,4 +1,4 @@
-"""potflat.pipeline: run_scan over the three stages, option coercion and resolution."""
+"""potflat.stages.pipeline: run_scan over the three stages, option coercion and resolution."""
 from __future__ import annotations
 
 import typing
@@ -8,7 +8,7 @@ import pytest
 
 import test_batch_fakes as fakes
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.pipeline import (FIGURES, coerce_option, describe_type, distortion_figures, option_types,
+from potflat.stages.pipeline import (FIGURES, coerce_option, describe_type, distortion_figures, option_types,
                               resolve_options, run_scan, stage_api)
 
 
@@ -133,7 +133,7 @@ def test_run_refuses_early_when_the_painting_would_replace_the_scan_texture(tmp_
     import pytest
 
     from potflat.errors import InvalidOptionError
-    from potflat.pipeline import run_scan
+    from potflat.stages.pipeline import run_scan
 
     scan = tmp_path / "pot.obj"
     scan.write_text("v 0 0 0\n")
@@ -152,7 +152,7 @@ def test_run_refuses_early_when_the_painting_would_replace_the_scan_texture(tmp_
     ({"preset": "standard"}, {"px_per_mm": 8.0}, None),
 ])
 def test_preview_relaxes_at_two_pixels_of_the_image(relax, bake, want):
-    from potflat.pipeline import _preview_at_image_resolution
+    from potflat.stages.pipeline import _preview_at_image_resolution
 
     options = _preview_at_image_resolution(resolve_options(relax=relax, bake=bake))
     assert options["relax"].simplify_mm == pytest.approx(want) if want is not None else options["relax"].simplify_mm is None

@@ -1,4 +1,4 @@
-"""Vessel profile (potflat.profile): radii against known radius functions, CSV, SVG."""
+"""Vessel profile (potflat.rollout.profile): radii against known radius functions, CSV, SVG."""
 from __future__ import annotations
 
 import csv
@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.profile import (
+from potflat.rollout.profile import (
     Profile,
     vessel_profile,
     write_profile_csv,
     write_profile_svg,
 )
 from potflat.types import Mesh
-from potflat.walls import select_wall
+from potflat.rollout.walls import select_wall
 
 SVG = "{http://www.w3.org/2000/svg}"
 
@@ -159,7 +159,7 @@ def test_svg_true_scale(tmp_path, scale):
 
 
 def test_svg_automatic_scale(tmp_path):
-    from potflat.profile import auto_scale
+    from potflat.rollout.profile import auto_scale
 
     mesh, p, a = _vase()  # 80 mm high, 76 mm wide: fits A4 at 1:1
     prof = vessel_profile(mesh, p, a, bins=20)

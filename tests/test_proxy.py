@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from _revolve import cone, cylinder
-from potflat.proxy import (choose, develop, fit, fit_cone, fit_cylinder, fit_sphere, ortho_proxy,
+from potflat.rollout.proxy import (choose, develop, fit, fit_cone, fit_cylinder, fit_sphere, ortho_proxy,
                            project_ortho)
 from potflat.rollout import rollout
 

@@ -13,7 +13,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 import reference as ref
 from _bench_meshes import meshes, signed_areas
 
-from potflat.distortion import summarize
+from potflat.mesh.distortion import summarize
 from potflat.errors import FoldedResultError, InvalidOptionError
 from potflat.relax import RelaxOptions, relax, run_relax_stage
 from potflat.types import FlatMesh, Mesh
@@ -29,7 +29,7 @@ def _procrustes_error(a, b):
 
 
 def _springs(V, F, **kw):
-    from potflat.relax import _Springs
+    from potflat.relax.solver import _Springs
 
     return _Springs(np.ascontiguousarray(V, float), np.ascontiguousarray(F, np.int64), len(V), **kw)
 
@@ -51,7 +51,7 @@ def vessel():
 # --- kernels against the references ---------------------------------------------------------
 
 def test_springs_and_cross_rest_lengths_match_reference(bumpy):
-    from potflat._kernels.springs import cross_rest_lengths, halfedge_springs, vertex_faces
+    from potflat.relax._kernels.springs import cross_rest_lengths, halfedge_springs, vertex_faces
 
     V, F = bumpy.mesh.vertices, bumpy.mesh.faces
     edges, cross, boundary = halfedge_springs(F, *vertex_faces(len(V), F))
@@ -83,7 +83,7 @@ def test_energy_and_gradient_match_reference(bumpy, relative):
 
 
 def test_barrier_energy_and_gradient_match_reference(bumpy):
-    from potflat.relax import BARRIER_EPS, BARRIER_MU
+    from potflat.relax.solver import BARRIER_EPS, BARRIER_MU
 
     V, F = bumpy.mesh.vertices, bumpy.mesh.faces
     sp = _springs(V, F, k=1.0, relative=False)
@@ -140,7 +140,7 @@ def test_max_step_near_equals_the_full_bound_after_a_local_change(bumpy):
 
 
 def test_flagged_face_vertices_and_incident_faces_match_numpy():
-    from potflat._kernels import springs as ks
+    from potflat.relax._kernels import springs as ks
 
     rng = np.random.default_rng(3)
     F = np.array([rng.choice(40, 3, replace=False) for _ in range(200)], np.int32)
@@ -157,7 +157,7 @@ def test_flagged_face_vertices_and_incident_faces_match_numpy():
 
 
 def test_overlap_counts_crossing_boundary():
-    from potflat._kernels.relax_overlap import count_crossings
+    from potflat.relax._kernels.overlap import count_crossings
 
     x = np.array([[0, 0], [2, 0], [1, -1], [1, 1], [5, 5], [6, 5]], float)
     seg = np.array([[0, 1], [2, 3], [4, 5], [1, 2]])
@@ -267,7 +267,7 @@ def test_slivers_stay_unflipped():
 
 
 def test_smoothing_the_direction_at_limiting_faces_keeps_every_guarantee(vessel, monkeypatch):
-    import potflat.relax as rx
+    import potflat.relax.solver as rx
 
     smooth = relax(vessel, preset="standard", **SPRINGS_ONLY)
     monkeypatch.setattr(rx, "SMOOTH_MAX_FRACTION", 0.0)
@@ -364,7 +364,7 @@ def test_paper_preset_reports_flips_honestly(vessel):
 # --- stage files and CLI ---------------------------------------------------------------------------
 
 def _write_rollout(tmp_path, flat, name="pot"):
-    from potflat.io.stage import write_flat_ply
+    from potflat.io.flat_ply import write_flat_ply
 
     path = tmp_path / f"{name}.rollout.ply"
     write_flat_ply(path, flat)
@@ -373,7 +373,7 @@ def _write_rollout(tmp_path, flat, name="pot"):
 
 
 def test_run_relax_stage_writes_ply_and_json(tmp_path, vessel):
-    from potflat.io.stage import read_flat_ply
+    from potflat.io.flat_ply import read_flat_ply
 
     src = _write_rollout(tmp_path, vessel)
     out = run_relax_stage(src, tmp_path / "out", RelaxOptions(preset="preview"))
@@ -425,7 +425,7 @@ def _notched_strip(gap):
 
 
 def test_contact_barrier_matches_reference():
-    from potflat.relax import CONTACT_GAP, CONTACT_MU
+    from potflat.relax.solver import CONTACT_GAP, CONTACT_MU
 
     strip = _notched_strip(0.3)
     sp = _springs(strip.mesh.vertices, strip.mesh.faces, k=1.0, relative=True)
@@ -448,7 +448,7 @@ def test_contact_barrier_matches_reference():
 def test_line_search_never_accepts_an_overlapping_boundary(vessel, monkeypatch):
     """A trial point the overlap test rejects is never accepted: here a virtual wall stops
     the vertex that moves most to the left halfway."""
-    from potflat import relax as relax_module
+    from potflat.relax import solver as relax_module
 
     real = relax_module._Springs.overlap
     seen = []
@@ -478,7 +478,7 @@ def test_line_search_never_accepts_an_overlapping_boundary(vessel, monkeypatch):
 
 
 def test_untangle_fixes_flipped_interior_vertices():
-    from potflat.relax import _untangle
+    from potflat.relax.solver import _untangle
 
     flat, _ = meshes.cylinder_patch(12, 10, seed=4)
     F = flat.mesh.faces
@@ -520,7 +520,7 @@ def _angle_sum(uv, F, b=0):
 
 
 def test_boundary_angle_barrier_matches_reference():
-    from potflat.relax import (
+    from potflat.relax.solver import (
         BARRIER_EPS,
         BARRIER_MU,
         BOUNDARY_GAP,
@@ -562,7 +562,7 @@ def test_boundary_max_step_stops_before_the_fan_wraps():
 
 
 def test_boundary_vertex_with_a_large_angle_sum_does_not_wrap(monkeypatch):
-    from potflat import relax as relax_module
+    from potflat.relax import solver as relax_module
 
     fan = _saddle_fan()
     r = relax(fan, preset="standard")

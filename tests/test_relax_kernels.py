@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from potflat._kernels import lbfgs as kl
-from potflat._kernels import relax_grid
-from potflat._kernels._jit import numba_threads
-from potflat.hierarchy import GridHierarchy, MultilevelPreconditioner
+from potflat.relax._kernels import lbfgs as kl
+from potflat.relax._kernels import grid as relax_grid
+from potflat._jit import numba_threads
+from potflat.relax.hierarchy import GridHierarchy, MultilevelPreconditioner
 
 
 @pytest.fixture(scope="module")
@@ -118,7 +118,7 @@ def test_fused_passes_match_numpy_and_do_not_depend_on_threads():
 
 
 def test_neighbour_means_count_each_edge_neighbour_once():
-    from potflat._kernels.springs import neighbour_means, vertex_faces
+    from potflat.relax._kernels.springs import neighbour_means, vertex_faces
 
     faces = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1], [1, 4, 5]])
     x = np.random.default_rng(5).normal(size=(6, 2))

@@ -21,8 +21,8 @@ from pathlib import Path
 import pytest
 from PIL import Image
 
-from potflat.io.stage import read_flat_ply
-from potflat.synthetic import make_vessel, write_obj
+from potflat.io.flat_ply import read_flat_ply
+from potflat_synthetic.vessels import make_vessel, write_obj
 
 TIMEOUT = 240.0
 

@@ -22,8 +22,8 @@ import pytest
 from potflat_cli.main import app
 from typer.testing import CliRunner
 
-from potflat.io.stage import read_flat_ply
-from potflat.synthetic import make_vessel, write_obj, write_ply_colored
+from potflat.io.flat_ply import read_flat_ply
+from potflat_synthetic.vessels import make_vessel, write_obj, write_ply_colored
 
 runner = CliRunner()
 
@@ -251,7 +251,7 @@ def test_a_box_with_an_axis_unrolls_without_a_traceback(tmp_path):
 def test_infinite_figures_are_written_as_null(tmp_path):
     """A flattening with a face collapsed to a segment has infinite anisotropy: the JSON
     sidecar stays strict JSON (null), instead of a traceback after the PLY was written."""
-    from potflat.distortion import summarize
+    from potflat.mesh.distortion import summarize
     from potflat.io.atomic import write_json_atomic
 
     V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], float)
@@ -406,7 +406,7 @@ def test_relax_and_bake_never_write_over_their_input(tmp_path, scan):
 @pytest.mark.parametrize("command,name", [("relax", "pot.rollout.ply"), ("bake", "pot.relaxed.ply")])
 def test_truncated_or_foreign_stage_file_is_one_clear_line(tmp_path, command, name):
     """A stage file cut short (a copy interrupted) or an ascii PLY from another tool."""
-    from potflat.io.stage import write_flat_ply
+    from potflat.io.flat_ply import write_flat_ply
     from potflat.types import FlatMesh, Mesh
 
     V = np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0], [10, 10, 0]], float)
@@ -422,7 +422,7 @@ def test_truncated_or_foreign_stage_file_is_one_clear_line(tmp_path, command, na
 @pytest.mark.parametrize("value,words", [("1000", ("1000 px/mm", "megapixels", "or less")),
                                          ("0", ("px_per_mm", "positive")), ("nan", ("px_per_mm", "positive"))])
 def test_absurd_resolution_is_refused_before_rendering(tmp_path, value, words):
-    from potflat.io.stage import write_flat_ply
+    from potflat.io.flat_ply import write_flat_ply
     from potflat.types import FlatMesh, Mesh
 
     V = np.array([[0, 0, 0], [600, 0, 0], [0, 500, 0], [600, 500, 0]], float)  # 600 x 500 mm
@@ -441,7 +441,7 @@ def test_bad_texture_at_bake_time_is_one_clear_line(tmp_path, spoil, words):
     between rollout and bake."""
     from PIL import Image
 
-    from potflat.io.stage import write_flat_ply
+    from potflat.io.flat_ply import write_flat_ply
     from potflat.types import FlatMesh, Mesh
 
     src = tmp_path / "src" / "pot.png"
@@ -465,7 +465,7 @@ def test_two_scans_with_the_same_texture_name_into_one_folder(tmp_path):
     one folder each keep their own (was: the second failed or silently used the first's)."""
     from PIL import Image
 
-    from potflat.io.stage import read_flat_ply, write_flat_ply
+    from potflat.io.flat_ply import read_flat_ply, write_flat_ply
     from potflat.types import FlatMesh, Mesh
 
     V = np.array([[0, 0, 0], [60, 0, 0], [0, 50, 0], [60, 50, 0]], float)

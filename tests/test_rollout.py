@@ -6,11 +6,11 @@ import pytest
 import trimesh
 
 from _revolve import cone, cylinder, vase
-from potflat.axis import _boundary_loops
-from potflat.distortion import face_distortion
+from potflat.rollout.axis import _boundary_loops
+from potflat.mesh.distortion import face_distortion
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.io.stage import read_flat_ply
-from potflat.rollout import RolloutOptions, cut_open, rollout, run_rollout_stage
+from potflat.io.flat_ply import read_flat_ply
+from potflat.rollout.unroll import RolloutOptions, cut_open, rollout, run_rollout_stage
 
 #: The shared real scans (CI has ../shared beside the repository).
 REAL = Path(__file__).resolve().parents[2] / "shared/data/real"
@@ -357,7 +357,7 @@ def test_real_goblet_band_rolls_out(tmp_path):
 
 
 def test_synthetic_samples_from_the_generator():
-    synthetic = pytest.importorskip("potflat.synthetic")
+    synthetic = pytest.importorskip("potflat_synthetic.vessels")
     for kind in ("cylinder", "cone", "sherd"):
         sv = synthetic.make_vessel(kind, n_vertices=2000, seed=3, texture_size=64)
         res = rollout(sv.mesh)

@@ -8,8 +8,8 @@ from _vessel_meshes import revolve
 from typer.testing import CliRunner
 
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.io.stage import read_flat_ply
-from potflat.rollout import (
+from potflat.io.flat_ply import read_flat_ply
+from potflat.rollout.unroll import (
     RolloutOptions,
     border_folds,
     boundary_segments,
@@ -19,7 +19,7 @@ from potflat.rollout import (
     signed_areas,
     untangle,
 )
-from potflat.synthetic import (
+from potflat_synthetic.vessels import (
     PART_BASE,
     PART_HANDLE,
     PART_INNER,
@@ -28,7 +28,7 @@ from potflat.synthetic import (
     write_ply_colored,
 )
 from potflat.types import Mesh
-from potflat.walls import OUTER
+from potflat.rollout.walls import OUTER
 
 #: The shared real scans (CI has ../shared beside the repository).
 REAL = Path(__file__).resolve().parents[2] / "shared/data/real"
@@ -253,7 +253,7 @@ def test_a_separate_inner_wall_is_kept_but_a_second_vessel_is_left_out():
     """Pieces sharing the vessel's axis stay (an inner wall scanned apart); a second vessel
     beside it is left out, with a note."""
     from potflat.rollout import rollout
-    from potflat.synthetic import make_vessel
+    from potflat_synthetic.vessels import make_vessel
     from potflat.types import Mesh
 
     a = make_vessel("amphora", n_vertices=3000, seed=1, texture_size=64, pose=False)
@@ -271,4 +271,4 @@ def test_a_separate_inner_wall_is_kept_but_a_second_vessel_is_left_out():
     x = res2.flat.mesh.vertices[:, 0]
     assert x.max() < 300.0 or x.min() > 300.0
     assert abs(res2.axis.direction[2]) > np.cos(np.radians(1.0))
-    assert any("separate objects" in n for n in __import__("potflat.rollout").rollout._notes(res2))
+    assert any("separate objects" in n for n in __import__("potflat.rollout.unroll").rollout.unroll._notes(res2))

@@ -245,7 +245,7 @@ def test_obj_same_texture_in_two_materials_is_one_atlas(tmp_path):
 
 
 def test_obj_float_parser_matches_python(tmp_path):
-    from potflat._kernels.mesh import obj_count, obj_fill
+    from potflat.mesh._kernels import obj_count, obj_fill
 
     rng = np.random.default_rng(3)
     vals = np.concatenate([rng.normal(0, 1e3, 60), rng.normal(0, 1e-4, 30), [0.0, -0.0, 1e-300, 123456789.0]])

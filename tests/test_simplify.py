@@ -1,4 +1,4 @@
-"""Coarse copies of a rollout (potflat.simplify) and relaxation from or at a coarse copy."""
+"""Coarse copies of a rollout (potflat.relax.simplify) and relaxation from or at a coarse copy."""
 from __future__ import annotations
 
 import sys
@@ -10,9 +10,9 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from _bench_meshes import meshes, signed_areas
 
-import potflat.relax as relax_module
+import potflat.relax.solver as relax_module
 from potflat.relax import relax
-from potflat.simplify import cell_side, grid_simplification, interpolate
+from potflat.relax.simplify import cell_side, grid_simplification, interpolate
 from potflat.types import FlatMesh, Mesh
 
 

@@ -1,6 +1,6 @@
 """Mesh topology of the relax stage against the plain references in tests/reference.py:
-:func:`potflat._kernels.springs.halfedge_springs` (edges, cross springs, boundary) on awkward
-meshes, the spring CSR, the mean edge length and :func:`potflat.distortion.unique_edges`;
+:func:`potflat.relax._kernels.springs.halfedge_springs` (edges, cross springs, boundary) on awkward
+meshes, the spring CSR, the mean edge length and :func:`potflat.mesh.distortion.unique_edges`;
 all bit-identical to the references and for any thread count."""
 from __future__ import annotations
 
@@ -14,9 +14,9 @@ sys.path.insert(0, str(Path(__file__).parent))
 import reference as ref
 from _bench_meshes import meshes
 
-from potflat import distortion
-from potflat._kernels import springs as ks
-from potflat._kernels._jit import numba_threads
+from potflat.mesh import distortion
+from potflat.relax._kernels import springs as ks
+from potflat._jit import numba_threads
 
 
 def _fan(k: int) -> tuple[np.ndarray, int]:
@@ -106,7 +106,7 @@ def test_spring_csr_equals_the_numpy_assembly(name):
 
 
 def test_mean_edge_length_equals_numpy_and_ignores_blocks_and_threads(monkeypatch):
-    from potflat.relax import _mean_edge_length
+    from potflat.relax.solver import _mean_edge_length
 
     flat = meshes.vessel_rollout(1500, seed=2)
     V, F = flat.mesh.vertices, flat.mesh.faces

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from potflat.errors import InvalidInputError
-from potflat.io.stage import read_flat_ply, write_flat_ply
+from potflat.io.flat_ply import read_flat_ply, write_flat_ply
 from potflat.types import FlatMesh, Mesh
 
 

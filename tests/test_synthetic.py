@@ -9,7 +9,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from potflat.errors import InvalidOptionError
-from potflat.synthetic import (
+from potflat_synthetic.vessels import (
     ATLAS_BACKGROUND, BLACK, CIRCLE_RADIUS, CREAM, PAINTINGS, PART_HANDLE, PART_INNER, PART_OUTER,
     SHADING_RANGE, TERRACOTTA, make_vessel, write_obj, write_ply_colored,
 )
@@ -371,7 +371,7 @@ def test_sherd_is_one_patch_of_the_requested_width():
 
 
 def test_thick_sherd_is_a_closed_fragment_with_a_plain_back():
-    from potflat.synthetic import CLAY, PART_BREAK
+    from potflat_synthetic.vessels import CLAY, PART_BREAK
 
     v = make_vessel("sherd", sherd_thickness=6.0, holes=1, seed=1, n_vertices=3000, texture_size=256)
     V, F = v.mesh.vertices, v.mesh.faces
@@ -459,7 +459,7 @@ def _reference_raster(tri, h, w, pad):
 
 
 def test_raster_kernel_matches_reference():
-    from potflat._kernels.raster_atlas import rasterize_faces
+    from potflat_synthetic._kernels import rasterize_faces
 
     rng = np.random.default_rng(0)
     tri = rng.uniform(2, 22, (6, 3, 2))

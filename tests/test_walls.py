@@ -1,4 +1,4 @@
-"""Outer/inner wall separation (potflat.walls) on analytic shells with construction labels."""
+"""Outer/inner wall separation (potflat.rollout.walls) on analytic shells with construction labels."""
 from __future__ import annotations
 
 import json
@@ -9,7 +9,7 @@ import pytest
 
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
-from potflat.walls import INNER, OUTER, check_axis, largest_component, select_wall
+from potflat.rollout.walls import INNER, OUTER, check_axis, largest_component, select_wall
 
 
 def _posed(V, F, seed=1, units="mm"):
@@ -134,7 +134,7 @@ def test_handle_inner_side_belongs_to_outer():
 
 
 def test_exclude_attachments():
-    from potflat.attachments import detect_attachments
+    from potflat.rollout.attachments import detect_attachments
 
     # a knob pushed out of the wall is part of the same surface: only the exclusion removes it
     V, F, _ = vm.cylinder_with_knob()
@@ -206,7 +206,7 @@ def test_bad_mesh():
 
 
 def test_synthetic_vessels_if_available():
-    synthetic = pytest.importorskip("potflat.synthetic")
+    synthetic = pytest.importorskip("potflat_synthetic.vessels")
     v = synthetic.make_vessel("cup", n_vertices=6000, texture_size=64)
     outer = select_wall(v.mesh, v.axis_point, v.axis_direction)
     inner = select_wall(v.mesh, v.axis_point, v.axis_direction, side="inner")

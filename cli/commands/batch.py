@@ -40,7 +40,7 @@ def batch_command(batch_file: BatchFile, workers: Workers = None, scheduler: Sch
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from potflat.batch import BatchFileError, load_batch, run_batch
+    from potflat.stages.batch import BatchFileError, load_batch, run_batch
 
     try:
         batch = load_batch(batch_file, output=output)

@@ -31,7 +31,7 @@ def run_command(scan: Scan, output: OutputDir = None, name: Name = None,
 
 def full_command():
     """``run`` with one option per stage option field (see potflat_cli._options)."""
-    from potflat.pipeline import STAGES
+    from potflat.stages.pipeline import STAGES
     from potflat_cli._options import stage_parameters
 
     base = list(inspect.signature(run_command, eval_str=True).parameters.values())
@@ -57,7 +57,7 @@ def _run(values: dict[str, Any]) -> None:
 
     from rich.console import Console
 
-    from potflat.pipeline import STAGES, run_scan
+    from potflat.stages.pipeline import STAGES, run_scan
     from potflat_cli._options import options_from_cli
 
     options = {stage: options_from_cli(stage, values) for stage in STAGES}

@@ -133,7 +133,7 @@ class PngWriter:
         raw = rows.reshape(len(rows), -1)
         if self.bits == 16:
             raw = raw.astype(">u2").view(np.uint8).reshape(len(rows), -1)
-        from potflat._kernels.png import paeth_filter
+        from potflat.io._kernels import paeth_filter
 
         raw = np.ascontiguousarray(raw)
         filtered = np.empty((raw.shape[0], raw.shape[1] + 1), np.uint8)

@@ -4,7 +4,7 @@
 texture coordinates kept per face corner), checks the texture image (header only, with a
 decompression-bomb limit), validates everything a user can get wrong with one-line
 :class:`~potflat.errors.InvalidInputError` messages, and cleans the mesh with
-:func:`potflat.cleaning.clean_mesh`.
+:func:`potflat.mesh.cleaning.clean_mesh`.
 
 OBJ and PLY are read by potflat's own parsers (OBJ by a Numba tokenizer: trimesh's OBJ
 loader splits vertices at seams and is slow on multi-million-vertex scans); STL, OFF and
@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from potflat.cleaning import (
+from potflat.mesh.cleaning import (
     CleaningReport,
     check_cleaning_options,
     clean_mesh,
@@ -97,7 +97,7 @@ def load_scan(path: str | os.PathLike, *, units: str | None = None, clean: bool 
         ``None``: the unit the file declares, else ``mm``. Coordinates are never rescaled;
         the unit is recorded in ``Mesh.units``.
     clean : bool
-        Run :func:`potflat.cleaning.clean_mesh`; if False only exact welding and checks run.
+        Run :func:`potflat.mesh.cleaning.clean_mesh`; if False only exact welding and checks run.
     texture : {"use", "ignore"}
         ``"use"``: a declared texture must exist and be a readable image of sane size
         (else an error); several images are packed into one atlas; ``"ignore"``: load
@@ -402,7 +402,7 @@ def _find_file(name: str, *dirs: Path) -> Path:
 
 
 def _read_obj(path: Path, texture: str, max_pixels: int) -> _Raw:
-    from potflat._kernels.mesh import obj_count, obj_fill
+    from potflat.mesh._kernels import obj_count, obj_fill
 
     data = _read_bytes(path)
     buf = np.frombuffer(data, dtype=np.uint8, offset=3 if data.startswith(b"\xef\xbb\xbf") else 0)  # BOM

@@ -1,0 +1,384 @@
+"""Triangle rasterisation and barycentric sampling kernels for the bake stage.
+
+Raster coordinates: ``x`` to the right, ``y`` down, in samples; sample ``(r, c)`` has its
+centre at ``(c + 0.5, r + 0.5)``. Triangles are binned into blocks of rows; a parallel
+loop runs over blocks, so every thread writes only its own rows (no races) and, within a
+block, triangles are visited in increasing face index: where triangles overlap (a fold)
+the lowest face index wins, whatever the number of threads.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from potflat._jit import leaf, parallel, prange
+
+
+@leaf
+def bin_triangles(pix: np.ndarray, faces: np.ndarray, block_rows: float, nblocks: int):
+    """Bin triangles into horizontal blocks of ``block_rows`` raster rows.
+
+    Parameters
+    ----------
+    pix : (n, 2) float64
+        Vertex positions in raster coordinates.
+    faces : (m, 3) int64
+    block_rows : float
+        Rows per block (in the units of ``pix``).
+    nblocks : int
+
+    Returns
+    -------
+    ptr : (nblocks + 1,) int64
+        Block ``b`` holds ``idx[ptr[b]:ptr[b + 1]]``.
+    idx : (k,) int64
+        Face indices, ascending within each block.
+    """
+    m = faces.shape[0]
+    b0 = np.empty(m, np.int64)
+    b1 = np.empty(m, np.int64)
+    counts = np.zeros(nblocks + 1, np.int64)
+    for f in range(m):
+        y0 = pix[faces[f, 0], 1]
+        y1 = pix[faces[f, 1], 1]
+        y2 = pix[faces[f, 2], 1]
+        lo = min(y0, min(y1, y2))
+        hi = max(y0, max(y1, y2))
+        a = int(np.floor(lo / block_rows))
+        b = int(np.floor(hi / block_rows))
+        a = min(max(a, 0), nblocks - 1)
+        b = min(max(b, 0), nblocks - 1)
+        b0[f] = a
+        b1[f] = b
+        for k in range(a, b + 1):
+            counts[k + 1] += 1
+    ptr = np.cumsum(counts)
+    fill = ptr[:-1].copy()
+    idx = np.empty(ptr[-1], np.int64)
+    for f in range(m):
+        for k in range(b0[f], b1[f] + 1):
+            idx[fill[k]] = f
+            fill[k] += 1
+    return ptr, idx
+
+
+@parallel
+def rasterize_rows(pix, faces, ptr, idx, block_rows, row0, nrows, width, eps, face_out, bary_out):
+    """Find the triangle under each sample of raster rows ``[row0, row0 + nrows)``.
+
+    Parameters
+    ----------
+    pix : (n, 2) float64
+        Vertex positions in raster coordinates.
+    faces : (m, 3) int64
+    ptr, idx : int64 arrays
+        Row-block bins from :func:`bin_triangles` (blocks of ``block_rows`` rows).
+    block_rows : int
+        Raster rows per block; ``row0`` must be a multiple of it.
+    row0, nrows, width : int
+        The rows to rasterise and the raster width.
+    eps : float
+        Barycentric tolerance, so samples exactly on a shared edge are never lost.
+    face_out : (nrows, width) int32
+        Output: face index under each sample, -1 where none (must be filled with -1).
+    bary_out : (nrows, width, 2) float64
+        Output: barycentric weights of corners 1 and 2 (clamped into the triangle).
+    """
+    nblk = (nrows + block_rows - 1) // block_rows
+    first = row0 // block_rows
+    for bi in prange(nblk):
+        b = first + bi
+        ylo = b * block_rows
+        yhi = min(ylo + block_rows, row0 + nrows)
+        for k in range(ptr[b], ptr[b + 1]):
+            f = idx[k]
+            x0 = pix[faces[f, 0], 0]
+            y0 = pix[faces[f, 0], 1]
+            x1 = pix[faces[f, 1], 0]
+            y1 = pix[faces[f, 1], 1]
+            x2 = pix[faces[f, 2], 0]
+            y2 = pix[faces[f, 2], 1]
+            d = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+            if d == 0.0:
+                continue
+            rlo = max(ylo, int(np.ceil(min(y0, min(y1, y2)) - 0.5 - eps)))
+            rhi = min(yhi - 1, int(np.floor(max(y0, max(y1, y2)) - 0.5 + eps)))
+            clo = max(0, int(np.ceil(min(x0, min(x1, x2)) - 0.5 - eps)))
+            chi = min(width - 1, int(np.floor(max(x0, max(x1, x2)) - 0.5 + eps)))
+            for r in range(rlo, rhi + 1):
+                py = r + 0.5
+                rr = r - row0
+                for c in range(clo, chi + 1):
+                    if face_out[rr, c] >= 0:
+                        continue
+                    px = c + 0.5
+                    w1 = ((px - x0) * (y2 - y0) - (x2 - x0) * (py - y0)) / d
+                    w2 = ((x1 - x0) * (py - y0) - (px - x0) * (y1 - y0)) / d
+                    w0 = 1.0 - w1 - w2
+                    if w0 >= -eps and w1 >= -eps and w2 >= -eps:
+                        w1 = min(max(w1, 0.0), 1.0)
+                        w2 = min(max(w2, 0.0), 1.0 - w1)
+                        face_out[rr, c] = f
+                        bary_out[rr, c, 0] = w1
+                        bary_out[rr, c, 1] = w2
+
+
+@parallel
+def coverage(face, n, out):
+    """Covered fraction of each pixel from its ``n x n`` sub-samples.
+
+    Parameters
+    ----------
+    face : (k n, w n) int32
+        Face under each sub-sample (-1: none).
+    n : int
+    out : (k, w) float32
+        Output.
+    """
+    k, w = out.shape
+    inv = 1.0 / (n * n)
+    for r in prange(k):
+        for c in range(w):
+            cnt = 0
+            for i in range(r * n, r * n + n):
+                for j in range(c * n, c * n + n):
+                    if face[i, j] >= 0:
+                        cnt += 1
+            out[r, c] = cnt * inv
+
+
+@parallel
+def interpolate_vertex_attr(face, bary, faces, attr, n, out):
+    """Barycentric interpolation of a per-vertex attribute, averaged over each pixel's sub-samples.
+
+    Parameters
+    ----------
+    face : (k n, w n) int32
+        Face under each sub-sample (-1: none).
+    bary : (k n, w n, 2) float64
+    faces : (m, 3) int64
+    attr : (v, d) float64
+    n : int
+        Sub-samples per pixel side.
+    out : (k, w, d) float32
+        Mean over the covered sub-samples; NaN where none is covered.
+    """
+    k, w, d = out.shape
+    acc = np.empty((k, d))
+    for r in prange(k):
+        for c in range(w):
+            for j in range(d):
+                acc[r, j] = 0.0
+            cnt = 0
+            for i in range(r * n, r * n + n):
+                for q in range(c * n, c * n + n):
+                    f = face[i, q]
+                    if f < 0:
+                        continue
+                    cnt += 1
+                    w1 = bary[i, q, 0]
+                    w2 = bary[i, q, 1]
+                    w0 = 1.0 - w1 - w2
+                    a = faces[f, 0]
+                    b = faces[f, 1]
+                    e = faces[f, 2]
+                    for j in range(d):
+                        acc[r, j] += w0 * attr[a, j] + w1 * attr[b, j] + w2 * attr[e, j]
+            for j in range(d):
+                out[r, c, j] = acc[r, j] / cnt if cnt > 0 else np.nan
+
+
+@parallel
+def face_values(face, values, n, out):
+    """Per-face values averaged over each pixel's covered sub-samples.
+
+    Parameters
+    ----------
+    face : (k n, w n) int32
+    values : (m,) float64
+    n : int
+    out : (k, w) float32
+        NaN where no sub-sample is covered.
+    """
+    k, w = out.shape
+    for r in prange(k):
+        for c in range(w):
+            acc = 0.0
+            cnt = 0
+            for i in range(r * n, r * n + n):
+                for q in range(c * n, c * n + n):
+                    f = face[i, q]
+                    if f >= 0:
+                        acc += values[f]
+                        cnt += 1
+            out[r, c] = acc / cnt if cnt > 0 else np.nan
+
+
+@leaf
+def _bilinear_taps(x, y, h, w):
+    """Indices and weights of the bilinear taps at continuous texel position (x, y), edges clamped."""
+    fx = x - 0.5
+    fy = y - 0.5
+    i0 = int(np.floor(fx))
+    j0 = int(np.floor(fy))
+    tx = fx - i0
+    ty = fy - j0
+    i1 = min(max(i0 + 1, 0), w - 1)
+    j1 = min(max(j0 + 1, 0), h - 1)
+    i0 = min(max(i0, 0), w - 1)
+    j0 = min(max(j0, 0), h - 1)
+    return i0, i1, j0, j1, tx, ty
+
+
+@leaf
+def _tap(buf, off, h, w, nch, x, y, weight, acc):
+    """Add ``weight`` x the bilinear sample of the level stored at ``buf[off:]`` ((h, w, nch), row-major) to ``acc``."""
+    i0, i1, j0, j1, tx, ty = _bilinear_taps(x, y, h, w)
+    w00 = (1.0 - tx) * (1.0 - ty) * weight
+    w01 = tx * (1.0 - ty) * weight
+    w10 = (1.0 - tx) * ty * weight
+    w11 = tx * ty * weight
+    p00 = off + (j0 * w + i0) * nch
+    p01 = off + (j0 * w + i1) * nch
+    p10 = off + (j1 * w + i0) * nch
+    p11 = off + (j1 * w + i1) * nch
+    for ch in range(acc.shape[0]):
+        acc[ch] += w00 * buf[p00 + ch] + w01 * buf[p01 + ch] + w10 * buf[p10 + ch] + w11 * buf[p11 + ch]
+
+
+@parallel
+def sample_texture(face, bary, texcoords, lod, tex0, mips, mip_offsets, mip_shapes, n, out):
+    """Trilinear texture sampling through per-corner texture coordinates, averaged per pixel.
+
+    Parameters
+    ----------
+    face : (k n, w n) int32
+        Face under each sub-sample (-1: none).
+    bary : (k n, w n, 2) float64
+    texcoords : (m, 3, 2) float64
+        Per-corner texture coordinates, OBJ convention ((0, 0) bottom-left, v up).
+    lod : (m,) float64
+        Mip level of detail per face (0: full resolution; fractions blend two levels).
+    tex0 : (H * W * C,) uint8 or uint16
+        Level 0 (the texture, row 0 at the top), flattened.
+    mips : (t,) same dtype
+        Levels 1, 2, ... flattened one after the other.
+    mip_offsets : (L,) int64
+        Start of each level: level 0 in ``tex0`` (offset 0), the others in ``mips``.
+    mip_shapes : (L, 2) int64
+        ``(height, width)`` of each level.
+    n : int
+        Sub-samples per pixel side.
+    out : (k, w, C) float32
+        Mean over the covered sub-samples, in the texture's value range; NaN where none.
+    """
+    k, w, nch = out.shape
+    top = mip_shapes.shape[0] - 1
+    H0 = mip_shapes[0, 0]
+    W0 = mip_shapes[0, 1]
+    acc = np.empty((k, nch))
+    for r in prange(k):
+        a = acc[r]
+        for c in range(w):
+            for j in range(nch):
+                a[j] = 0.0
+            cnt = 0
+            for i in range(r * n, r * n + n):
+                for q in range(c * n, c * n + n):
+                    f = face[i, q]
+                    if f < 0:
+                        continue
+                    cnt += 1
+                    w1 = bary[i, q, 0]
+                    w2 = bary[i, q, 1]
+                    w0 = 1.0 - w1 - w2
+                    s = w0 * texcoords[f, 0, 0] + w1 * texcoords[f, 1, 0] + w2 * texcoords[f, 2, 0]
+                    t = w0 * texcoords[f, 0, 1] + w1 * texcoords[f, 1, 1] + w2 * texcoords[f, 2, 1]
+                    x = s * W0
+                    y = (1.0 - t) * H0
+                    lv = min(max(lod[f], 0.0), float(top))
+                    l0 = int(np.floor(lv))
+                    frac = lv - l0
+                    for li in range(2):
+                        level = l0 + li
+                        weight = 1.0 - frac if li == 0 else frac
+                        if weight <= 0.0 or level > top:
+                            continue
+                        h = mip_shapes[level, 0]
+                        wl = mip_shapes[level, 1]
+                        xs = x * wl / W0
+                        ys = y * h / H0
+                        if level == 0:
+                            _tap(tex0, 0, h, wl, nch, xs, ys, weight, a)
+                        else:
+                            _tap(mips, mip_offsets[level], h, wl, nch, xs, ys, weight, a)
+            for j in range(nch):
+                out[r, c, j] = a[j] / cnt if cnt > 0 else np.nan
+
+
+@parallel
+def halve_masked(img, valid, out, out_valid):
+    """2 x 2 box average of the valid texels only (one mip level of a chart-masked atlas).
+
+    Parameters
+    ----------
+    img : (H, W, C) uint8 or uint16
+    valid : (H, W) bool
+    out : ((H + 1) // 2, (W + 1) // 2, C), dtype of ``img``
+        Output: the mean of the valid texels of each block, rounded; 0 where none.
+    out_valid : ((H + 1) // 2, (W + 1) // 2) bool
+        Output: whether the block has a valid texel.
+    """
+    H, W, C = img.shape
+    h, w = out_valid.shape
+    acc = np.empty((h, C))
+    for r in prange(h):
+        a = acc[r]
+        for c in range(w):
+            for ch in range(C):
+                a[ch] = 0.0
+            cnt = 0
+            for i in range(2 * r, min(2 * r + 2, H)):
+                for j in range(2 * c, min(2 * c + 2, W)):
+                    if valid[i, j]:
+                        cnt += 1
+                        for ch in range(C):
+                            a[ch] += img[i, j, ch]
+            out_valid[r, c] = cnt > 0
+            for ch in range(C):
+                out[r, c, ch] = int(a[ch] / cnt + 0.5) if cnt > 0 else 0
+
+
+@parallel
+def heat_rgba(values, lo, hi, lut, coverage, grey, mix, out):
+    """Colour-map values into RGBA rows, optionally blended over a greyscale painting.
+
+    Parameters
+    ----------
+    values : (k, w) float32
+        NaN where nothing is covered.
+    lo, hi : float
+        Values mapped to the first and last colour (clipped beyond).
+    lut : (256, 3) uint8
+        Colour table.
+    coverage : (k, w) float32
+        Alpha in [0, 1].
+    grey : (k, w) float32
+        Painting luminance in [0, 1] (used when ``mix`` < 1).
+    mix : float
+        Opacity of the heat colour over ``grey`` (1: plain heat map).
+    out : (k, w, 4) uint8
+    """
+    k, w = values.shape
+    scale = 255.0 / (hi - lo)
+    for r in prange(k):
+        for c in range(w):
+            v = values[r, c]
+            t = 0.0 if np.isnan(v) else min(max((v - lo) * scale, 0.0), 255.0)
+            idx = int(t + 0.5)
+            g = grey[r, c] * 255.0 if mix < 1.0 else 0.0
+            if np.isnan(g):
+                g = 0.0
+            for ch in range(3):
+                x = mix * lut[idx, ch] + (1.0 - mix) * g
+                out[r, c, ch] = int(min(max(x, 0.0), 255.0) + 0.5)
+            out[r, c, 3] = int(coverage[r, c] * 255.0 + 0.5)

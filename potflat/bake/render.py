@@ -1,0 +1,773 @@
+"""Bake stage: true-scale images of the painting and of the flattening's distortion.
+
+For every output pixel the flat triangle under it is found (a binned, parallel
+rasteriser, :mod:`potflat.bake._kernels`), the per-corner texture coordinates are
+interpolated barycentrically and the texture is sampled bilinearly. Anti-aliasing:
+each pixel averages ``n x n`` sub-samples (``supersample``; also anti-aliases the
+outline, alpha = covered fraction) and, where the texture is still finer than a
+sub-sample, a mip level chosen per triangle from its texture-coordinate Jacobian
+(trilinear). Sampling per face through its own texture coordinates keeps atlas chart
+borders seamless. Vertex-coloured scans bake their colours; untextured scans bake a
+shaded relief.
+
+The pixel grid: ``px_per_mm`` pixels per millimetre, row 0 at the largest ``v`` (the
+mouth up), column 0 at the smallest ``u`` (not mirrored); :attr:`BakeResult.origin`
+is the ``uv`` of the top-left pixel corner. Images are rendered in horizontal strips,
+so large outputs (hundreds of megapixels) are streamed to disk by
+:func:`run_bake_stage` with a bounded memory footprint.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Iterator
+from contextlib import ExitStack
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from potflat.mesh import distortion
+from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.types import FlatMesh, StageOutput
+
+#: Distortion maps :func:`bake` can make.
+MAP_NAMES = ("stress", "area", "anisotropy")
+#: px/mm used when neither ``px_per_mm`` nor ``dpi`` is given.
+DEFAULT_PX_PER_MM = 4.0
+#: Transparent border around the mesh, in pixels.
+PAD_PX = 1
+#: Image rows per raster block (the unit of parallel work).
+BLOCK_ROWS = 4
+#: Sub-samples rendered per strip (bounds the strip buffers to ~100 MB).
+STRIP_SAMPLES = 1 << 21
+#: Largest automatic supersampling factor (mip levels take over beyond it).
+MAX_AUTO_SUPERSAMPLE = 4
+#: Automatic supersampling stays below this many sub-samples in the whole image.
+AUTO_SUPERSAMPLE_BUDGET = 64e6
+#: Radius (mm) of the smoothed surface the shaded relief of untextured scans is lit against.
+RELIEF_RADIUS_MM = 5.0
+#: Relief exaggeration of the shaded relief (the normals' deviation from the smoothed surface is scaled by it).
+RELIEF_EXAGGERATION = 2.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class BakeOptions:
+    """Options of the bake stage (field names are the CLI option names).
+
+    Attributes
+    ----------
+    px_per_mm : float or None
+        Output resolution in pixels per millimetre (give this or ``dpi``; default 4).
+    dpi : float or None
+        Output resolution in dots per inch (``px_per_mm = dpi / 25.4``).
+    maps : tuple of str
+        Distortion maps to write, from :data:`MAP_NAMES` (``"none"``: no maps); ``stress``
+        also writes the overlay.
+    sheet : bool
+        Write the rollout-vs-relaxed comparison sheet (needs ``NAME.rollout.ply`` beside the input).
+    position_map : bool
+        Write a float32 TIFF of the 3D point under each pixel (NaN outside).
+    grid : bool
+        Draw a labelled 10 mm grid in the scale layer.
+    tiff : bool
+        Also write the painting as a 16-bit RGBA TIFF.
+    supersample : int
+        Sub-samples per pixel side (1-8); 0 chooses from the texture density (2-4).
+    max_megapixels : float
+        Refuse images larger than this (protects laptops from a mistyped resolution).
+    """
+
+    px_per_mm: float | None = None
+    dpi: float | None = None
+    maps: tuple[str, ...] = MAP_NAMES
+    sheet: bool = False
+    position_map: bool = False
+    grid: bool = False
+    tiff: bool = False
+    supersample: int = 0
+    max_megapixels: float = 1000.0
+
+    def __post_init__(self) -> None:
+        if self.px_per_mm is not None and self.dpi is not None:
+            raise InvalidOptionError("give either px_per_mm (--px-per-mm) or dpi (--dpi), not both")
+        for name in ("px_per_mm", "dpi", "max_megapixels"):
+            value = getattr(self, name)
+            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))
+                                      or not math.isfinite(value) or value <= 0):
+                raise InvalidOptionError(f"{name} must be a positive number, got {value!r}")
+        maps = (self.maps,) if isinstance(self.maps, str) else tuple(self.maps)
+        if maps == ("none",):
+            maps = ()
+        unknown = [m for m in maps if m not in MAP_NAMES]
+        if unknown:
+            raise InvalidOptionError(f"unknown map {unknown[0]!r}; choose from {', '.join(MAP_NAMES)}")
+        object.__setattr__(self, "maps", tuple(dict.fromkeys(maps)))
+        if isinstance(self.supersample, bool) or not isinstance(self.supersample, int) or not 0 <= self.supersample <= 8:
+            raise InvalidOptionError(f"supersample must be an integer from 0 (automatic) to 8, got {self.supersample!r}")
+
+    @property
+    def resolution(self) -> float:
+        """The effective pixels per millimetre."""
+        if self.dpi is not None:
+            return self.dpi / 25.4
+        return float(self.px_per_mm) if self.px_per_mm is not None else DEFAULT_PX_PER_MM
+
+
+@dataclass(frozen=True, eq=False)
+class BakeResult:
+    """The baked images of one flattening (in memory).
+
+    Attributes
+    ----------
+    image : (h, w, 4) uint8
+        The painting, RGBA; alpha is the covered fraction of each pixel (0 outside and in holes).
+    maps : dict of str to (h, w) float32
+        Distortion values per pixel (NaN outside): ``stress`` in sqrt(mm) (paper Eq. 3,
+        interpolated from the vertices), ``area`` as log2(flat area / 3D area) per face,
+        ``anisotropy`` as sigma_max / sigma_min per face.
+    position : (h, w, 3) float32 or None
+        3D point (scan units) under each pixel, NaN outside.
+    px_per_mm : float
+        Resolution.
+    origin : (2,) float64
+        ``(u, v)`` of the top-left corner of pixel (0, 0), scan units; pixel ``(r, c)``
+        covers ``u`` from ``origin[0] + c / s`` and ``v`` down from ``origin[1] - r / s``
+        with ``s = px_per_mm * mm_per_unit`` pixels per unit.
+    figures : dict
+        Resolution, size, distortion figures, covered area (see :func:`run_bake_stage`).
+    """
+
+    image: np.ndarray
+    maps: dict
+    position: np.ndarray | None
+    px_per_mm: float
+    origin: np.ndarray
+    figures: dict = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------------------
+# per-mesh fields
+
+
+def _vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals, unit length. Shape (n, 3)."""
+    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    vn = np.zeros_like(V)
+    for k in range(3):
+        for j in range(3):
+            vn[:, j] += np.bincount(F[:, k], fn[:, j], len(V))
+    return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
+
+
+def _relief_normals_and_light(V: np.ndarray, uv: np.ndarray, F: np.ndarray, mm_per_unit: float) -> np.ndarray:
+    """Per-vertex normal and light direction for a shaded relief, shape (n, 6).
+
+    The light comes from the image's upper left at 45 degrees elevation, in a frame that
+    follows the surface smoothed over :data:`RELIEF_RADIUS_MM`, so the vessel's overall
+    curvature is not shaded but its relief is; the normals' deviation from the smoothed
+    surface is exaggerated by :data:`RELIEF_EXAGGERATION`."""
+    import scipy.sparse as sp
+
+    n = len(V)
+    normals = _vertex_normals(V, F)
+    # 3D direction of image-up (d X / d v) per face, accumulated to vertices by area
+    P1, P2 = V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]
+    Q1, Q2 = uv[F[:, 1]] - uv[F[:, 0]], uv[F[:, 2]] - uv[F[:, 0]]
+    det = Q1[:, 0] * Q2[:, 1] - Q1[:, 1] * Q2[:, 0]
+    ok = np.abs(det) > 0
+    safe = np.where(ok, det, 1.0)
+    # [P1 P2] = J [Q1 Q2]  ->  dX/dv = (-Q2_u P1 + Q1_u P2) / det
+    up_f = ((-Q2[:, 0])[:, None] * P1 + Q1[:, 0][:, None] * P2) / safe[:, None]
+    up_f[~ok] = 0.0
+    w = np.abs(det) * ok
+    up = np.stack([sum(np.bincount(F[:, k], up_f[:, j] * w, n) for k in range(3)) for j in range(3)], axis=1)
+    # smooth normals and up over the relief radius by neighbour averaging (diffusion)
+    edges = distortion.unique_edges(F)
+    adj = sp.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
+                        shape=(n, n)).tocsr()
+    deg = np.maximum(np.asarray(adj.sum(axis=1)).ravel(), 1.0)
+    mean_edge = float(np.mean(np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1))) * mm_per_unit if len(edges) else 1.0
+    steps = int(np.clip((RELIEF_RADIUS_MM / max(mean_edge, 1e-12)) ** 2, 1, 200))
+    smooth_n, smooth_up = normals.copy(), up.copy()
+    for _ in range(steps):
+        smooth_n = 0.5 * smooth_n + 0.5 * (adj @ smooth_n) / deg[:, None]
+        smooth_up = 0.5 * smooth_up + 0.5 * (adj @ smooth_up) / deg[:, None]
+    smooth_n /= np.maximum(np.linalg.norm(smooth_n, axis=1, keepdims=True), 1e-300)
+    t_v = smooth_up - np.einsum("ij,ij->i", smooth_up, smooth_n)[:, None] * smooth_n
+    t_v /= np.maximum(np.linalg.norm(t_v, axis=1, keepdims=True), 1e-300)
+    t_u = np.cross(t_v, smooth_n)  # right-handed: t_u x t_v = n (seen from outside)
+    light = -t_u + t_v + math.sqrt(2.0) * smooth_n
+    light /= np.maximum(np.linalg.norm(light, axis=1, keepdims=True), 1e-300)
+    relief = smooth_n + RELIEF_EXAGGERATION * (normals - smooth_n)
+    relief /= np.maximum(np.linalg.norm(relief, axis=1, keepdims=True), 1e-300)
+    return np.concatenate([relief, light], axis=1)
+
+
+def _chart_mask(texcoords: np.ndarray, height: int, width: int) -> np.ndarray:
+    """Texels covered by the texture-space triangles, grown by one texel. Shape (height, width) bool.
+
+    Parameters
+    ----------
+    texcoords : (m, 3, 2) float64
+        OBJ convention (v up).
+    height, width : int
+        Texture size.
+    """
+    import cv2
+
+    from potflat.bake import _kernels as raster
+
+    m = len(texcoords)
+    pts = np.empty((3 * m, 2))
+    pts[:, 0] = texcoords[..., 0].ravel() * width
+    pts[:, 1] = (1.0 - texcoords[..., 1].ravel()) * height
+    tri = np.arange(3 * m, dtype=np.int64).reshape(m, 3)
+    ptr, idx = raster.bin_triangles(pts, tri, float(BLOCK_ROWS), (height + BLOCK_ROWS - 1) // BLOCK_ROWS)
+    mask = np.zeros((height, width), np.uint8)
+    rows = max(BLOCK_ROWS, STRIP_SAMPLES // max(width, 1) // BLOCK_ROWS * BLOCK_ROWS)
+    for r0 in range(0, height, rows):
+        r1 = min(height, r0 + rows)
+        face = np.full((r1 - r0, width), -1, np.int32)
+        raster.rasterize_rows(pts, tri, ptr, idx, BLOCK_ROWS, r0, r1 - r0, width, 1e-9, face,
+                              np.zeros(face.shape + (2,)))
+        mask[r0:r1] = face >= 0
+    return cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool)
+
+
+def _halve_masked(img: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """2 x 2 box average over the valid texels only.
+
+    img : (H, W, C) uint8/uint16, valid : (H, W) bool -> ((H+1)//2, (W+1)//2, C) same dtype, and its
+    validity (any valid texel in the block).
+    """
+    from potflat.bake._kernels import halve_masked
+
+    h, w = (img.shape[0] + 1) // 2, (img.shape[1] + 1) // 2
+    out = np.empty((h, w, img.shape[2]), img.dtype)
+    out_valid = np.empty((h, w), bool)
+    halve_masked(img, np.ascontiguousarray(valid), out, out_valid)
+    return out, out_valid
+
+
+def _pull_fill(levels: list, valids: list) -> None:
+    """Fill each level's texels outside the charts from the next coarser level (in place)."""
+    import cv2
+
+    last, ok = levels[-1], valids[-1]
+    if ok.any() and not ok.all():
+        last[~ok] = last[ok].mean(axis=0).round().astype(last.dtype)
+    for k in range(len(levels) - 2, -1, -1):
+        hole = ~valids[k]
+        if hole.any():
+            up = cv2.resize(levels[k + 1], levels[k].shape[1::-1], interpolation=cv2.INTER_LINEAR)
+            levels[k][hole] = up.reshape(levels[k].shape)[hole]
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """Pixel grid of a flattening."""
+
+    px_per_mm: float
+    scale: float  # pixels per scan unit
+    origin: np.ndarray  # uv of the top-left pixel corner
+    width: int
+    height: int
+
+
+def _make_grid(flat: FlatMesh, px_per_mm: float, max_megapixels: float) -> _Grid:
+    used = np.zeros(len(flat.uv), bool)
+    used[flat.mesh.faces.ravel()] = True
+    if not used.any():
+        raise InvalidInputError(f"{flat.mesh.source or 'the mesh'} has no faces to bake; check the stage file")
+    uv = flat.uv[used]
+    if not np.isfinite(uv).all():
+        raise InvalidInputError(f"{flat.mesh.source or 'the flattening'} has NaN or infinite uv; flatten it again")
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    scale = px_per_mm * flat.mesh.mm_per_unit
+    width = math.ceil((hi[0] - lo[0]) * scale) + 2 * PAD_PX
+    height = math.ceil((hi[1] - lo[1]) * scale) + 2 * PAD_PX
+    if width * height > max_megapixels * 1e6:
+        suggest = px_per_mm * math.sqrt(max_megapixels * 1e6 / (width * height)) * 0.99
+        raise InvalidOptionError(
+            f"{px_per_mm:g} px/mm would make a {width} x {height} image ({width * height / 1e6:.0f} megapixels, "
+            f"over the {max_megapixels:g} MP limit); use px_per_mm {suggest:.3g} or less")
+    origin = np.array([lo[0] - PAD_PX / scale, hi[1] + PAD_PX / scale])
+    return _Grid(px_per_mm, scale, origin, width, height)
+
+
+class _Renderer:
+    """Rasterises a flattening strip by strip and produces every bake layer."""
+
+    def __init__(self, flat: FlatMesh, px_per_mm: float, *, supersample: int = 0, max_megapixels: float = 1000.0):
+        from potflat.bake import _kernels as raster
+
+        self.flat = flat
+        mesh = flat.mesh
+        self.faces = mesh.faces
+        self.grid = _make_grid(flat, px_per_mm, max_megapixels)
+        g = self.grid
+        # distortion first: its temporaries come and go before the texture is loaded
+        self.summary = distortion.summarize(mesh.vertices, flat.uv, self.faces)
+        fd = distortion.face_distortion(mesh.vertices, flat.uv, self.faces)
+        self.area_3d, self.area_2d, self.valid = fd.area_3d, fd.area_2d, fd.valid
+        self.face_values = {"area": fd.log_area_ratio / math.log(2.0), "anisotropy": np.minimum(fd.anisotropy, 1e6)}
+        del fd
+        self.vertex_stress = flat.stress if flat.stress is not None else distortion.vertex_stress(
+            mesh.vertices, flat.uv, self.faces, mesh.mm_per_unit)
+        pix = np.empty_like(flat.uv)
+        pix[:, 0] = (flat.uv[:, 0] - g.origin[0]) * g.scale
+        pix[:, 1] = (g.origin[1] - flat.uv[:, 1]) * g.scale
+        self.texture = None
+        self.texels_per_pixel = None
+        if mesh.texcoords is not None and mesh.texture_path is not None:
+            from potflat.io.images import read_texture
+
+            self.texture = read_texture(mesh.texture_path)
+            self.texels_per_pixel = self._texel_ratio(pix)
+        n = supersample
+        if n == 0:
+            ratio = float(np.median(self.texels_per_pixel)) if self.texels_per_pixel is not None else 1.0
+            n = int(np.clip(math.ceil(ratio - 0.01), 2, MAX_AUTO_SUPERSAMPLE))
+            while n > 1 and g.width * g.height * n * n > AUTO_SUPERSAMPLE_BUDGET:
+                n -= 1
+        self.n = n
+        self.mip_levels = 0
+        self.lod = None
+        if self.texture is not None:
+            self._build_mips()
+        self._pix = np.ascontiguousarray(pix * n)
+        self._block = BLOCK_ROWS * n
+        nblocks = (g.height * n + self._block - 1) // self._block
+        self._ptr, self._idx = raster.bin_triangles(self._pix, self.faces, float(self._block), nblocks)
+        self._raster_mod = raster
+        self._cache = None
+        self._vertex_paint = None  # per-vertex field of an untextured painting, made on first use
+
+    # -- setup ---------------------------------------------------------------------
+    def _texel_ratio(self, pix: np.ndarray, chunk: int = 1 << 20) -> np.ndarray:
+        """Texels per output pixel (largest singular value of the pixel-to-texel map) per face.
+
+        Computed in chunks of faces so no (m, 3, 2) temporaries are made for big meshes.
+        """
+        F, tc = self.faces, self.flat.mesh.texcoords
+        H0, W0 = self.texture.shape[:2]
+        ratio = np.ones(len(F))
+        for a in range(0, len(F), chunk):
+            f, t = F[a:a + chunk], tc[a:a + chunk]
+            p1, p2 = pix[f[:, 1]] - pix[f[:, 0]], pix[f[:, 2]] - pix[f[:, 0]]
+            t1 = np.stack([(t[:, 1, 0] - t[:, 0, 0]) * W0, (t[:, 0, 1] - t[:, 1, 1]) * H0], axis=1)
+            t2 = np.stack([(t[:, 2, 0] - t[:, 0, 0]) * W0, (t[:, 0, 1] - t[:, 2, 1]) * H0], axis=1)
+            det = p1[:, 0] * p2[:, 1] - p2[:, 0] * p1[:, 1]
+            ok = np.abs(det) > 1e-12
+            det = np.where(ok, det, 1.0)
+            # J = [t1 t2] [p1 p2]^-1, then its largest singular value in closed form
+            a11 = (t1[:, 0] * p2[:, 1] - t2[:, 0] * p1[:, 1]) / det
+            a12 = (t2[:, 0] * p1[:, 0] - t1[:, 0] * p2[:, 0]) / det
+            a21 = (t1[:, 1] * p2[:, 1] - t2[:, 1] * p1[:, 1]) / det
+            a22 = (t2[:, 1] * p1[:, 0] - t1[:, 1] * p2[:, 0]) / det
+            smax = np.hypot(0.5 * (a11 + a22), 0.5 * (a21 - a12)) + np.hypot(0.5 * (a11 - a22), 0.5 * (a21 + a12))
+            ratio[a:a + chunk] = np.where(ok, smax, 1.0)
+        return ratio
+
+    def _build_mips(self) -> None:
+        """Mip levels down to the coarsest level any face needs.
+
+        Each level averages the texels of the level above that lie in an atlas chart
+        (the texture-space footprint of the triangles, grown by one texel), and the texels
+        outside every chart are then filled from the coarser levels (push-pull), so a
+        coarse tap at a chart border never mixes in the atlas background: no seams.
+        """
+        lod = np.log2(np.maximum(self.texels_per_pixel / self.n, 1.0))
+        top = math.ceil(min(np.max(lod), math.log2(max(min(self.texture.shape[:2]), 1))))
+        levels, valids = [], []
+        if top > 0:
+            cur, valid = self.texture, _chart_mask(self.flat.mesh.texcoords, *self.texture.shape[:2])
+            for _ in range(top):
+                cur, valid = _halve_masked(cur, valid)
+                levels.append(cur)
+                valids.append(valid)
+            _pull_fill(levels, valids)
+        shapes = [self.texture.shape[:2]] + [lv.shape[:2] for lv in levels]
+        sizes = [0] + [lv.size for lv in levels]
+        self.mip_levels = top
+        self._mip_shapes = np.array(shapes, np.int64).reshape(-1, 2)
+        self._mip_offsets = np.concatenate([[0], np.cumsum(sizes[:-1])]).astype(np.int64)
+        self._mips = (np.concatenate([lv.ravel() for lv in levels]) if levels
+                      else np.zeros(1, self.texture.dtype))
+        self.lod = np.ascontiguousarray(lod)
+
+    # -- strips --------------------------------------------------------------------
+    def strips(self) -> Iterator[tuple[int, int]]:
+        """Pixel row ranges ``(r0, r1)`` covering the image, each a whole number of blocks."""
+        g = self.grid
+        rows = max(BLOCK_ROWS, (STRIP_SAMPLES // max(1, g.width * self.n * self.n)) // BLOCK_ROWS * BLOCK_ROWS)
+        for r0 in range(0, g.height, rows):
+            yield r0, min(g.height, r0 + rows)
+
+    def _raster(self, r0: int, r1: int):
+        if self._cache is not None and self._cache[0] == (r0, r1):
+            return self._cache[1]
+        n, g = self.n, self.grid
+        face = np.full(((r1 - r0) * n, g.width * n), -1, np.int32)
+        bary = np.zeros(face.shape + (2,), np.float64)
+        self._raster_mod.rasterize_rows(self._pix, self.faces, self._ptr, self._idx, self._block, r0 * n,
+                                        face.shape[0], face.shape[1], 1e-9, face, bary)
+        self._cache = ((r0, r1), (face, bary))
+        return face, bary
+
+    def coverage(self, r0: int, r1: int) -> np.ndarray:
+        """Covered fraction of each pixel. Shape (k, w) float32."""
+        face, _ = self._raster(r0, r1)
+        out = np.empty((r1 - r0, self.grid.width), np.float32)
+        self._raster_mod.coverage(face, self.n, out)
+        return out
+
+    def _vertex_field(self, values: np.ndarray, r0: int, r1: int) -> np.ndarray:
+        face, bary = self._raster(r0, r1)
+        attr = np.ascontiguousarray(values.reshape(len(values), -1), dtype=np.float64)
+        out = np.empty((r1 - r0, self.grid.width, attr.shape[1]), np.float32)
+        self._raster_mod.interpolate_vertex_attr(face, bary, self.faces, attr, self.n, out)
+        return out
+
+    def painting(self, r0: int, r1: int) -> np.ndarray:
+        """RGB in [0, 1] (NaN outside). Shape (k, w, 3) float32."""
+        face, bary = self._raster(r0, r1)
+        mesh = self.flat.mesh
+        if self.texture is not None:
+            out = np.empty((r1 - r0, self.grid.width, 3), np.float32)
+            self._raster_mod.sample_texture(face, bary, mesh.texcoords, self.lod, self.texture.reshape(-1), self._mips,
+                                            self._mip_offsets, self._mip_shapes, self.n, out)
+            out /= np.float32(np.iinfo(self.texture.dtype).max)
+            return out
+        if mesh.vertex_colors is not None:
+            if self._vertex_paint is None:
+                self._vertex_paint = mesh.vertex_colors[:, :3] / 255.0
+            return self._vertex_field(self._vertex_paint, r0, r1)
+        if self._vertex_paint is None:
+            self._vertex_paint = _relief_normals_and_light(mesh.vertices, self.flat.uv, self.faces, mesh.mm_per_unit)
+        nl = self._vertex_field(self._vertex_paint, r0, r1)
+        nrm, light = nl[..., :3], nl[..., 3:]
+        dot = np.einsum("...i,...i->...", nrm, light) / np.maximum(
+            np.linalg.norm(nrm, axis=-1) * np.linalg.norm(light, axis=-1), 1e-30)
+        shade = 0.15 + 0.85 * np.clip(dot, 0.0, 1.0)
+        return np.repeat(shade[..., None], 3, axis=-1).astype(np.float32)
+
+    def scalar(self, name: str, r0: int, r1: int) -> np.ndarray:
+        """A distortion map's values (NaN outside). Shape (k, w) float32."""
+        if name == "stress":
+            return self._vertex_field(self.vertex_stress, r0, r1)[..., 0]
+        face, _ = self._raster(r0, r1)
+        out = np.empty((r1 - r0, self.grid.width), np.float32)
+        self._raster_mod.face_values(face, np.ascontiguousarray(self.face_values[name], dtype=np.float64), self.n, out)
+        return out
+
+    def zone_outline(self, r0: int, r1: int) -> np.ndarray | None:
+        """Pixels on the outline of the important zone (importance crossing
+        :data:`potflat.mesh.distortion.ZONE_THRESHOLD`), shape (k, w) bool; None without importance."""
+        if self.flat.importance is None:
+            return None
+        import cv2
+
+        field = self._vertex_field(self.flat.importance, r0, r1)[..., 0]
+        inside = (np.nan_to_num(field, nan=0.0) >= distortion.ZONE_THRESHOLD).astype(np.uint8)
+        ring = np.ones((3, 3), np.uint8)
+        edge = cv2.dilate(inside, ring, borderType=cv2.BORDER_REPLICATE) & ~cv2.erode(
+            inside, ring, borderType=cv2.BORDER_REPLICATE)
+        return edge.astype(bool) & np.isfinite(field)
+
+    def position(self, r0: int, r1: int) -> np.ndarray:
+        """3D point under each pixel, scan units (NaN outside). Shape (k, w, 3) float32."""
+        return self._vertex_field(self.flat.mesh.vertices, r0, r1)
+
+
+# --------------------------------------------------------------------------------------
+# figures
+
+
+def _stats(values: np.ndarray, weights: np.ndarray | None = None) -> dict:
+    values = np.asarray(values, float)
+    if not len(values):
+        return {"mean": 0.0, "p95": 0.0, "max": 0.0}
+    mean = float(np.average(values, weights=weights)) if weights is not None and weights.sum() > 0 else float(values.mean())
+    return {"mean": mean, "p95": float(np.percentile(values, 95)), "max": float(values.max())}
+
+
+def _figures(r: _Renderer, covered_px: float) -> dict:
+    g, flat = r.grid, r.flat
+    mpu = flat.mesh.mm_per_unit
+    fv = r.face_values
+    valid = r.valid
+    w = r.area_3d[valid]
+    # JSON has no infinity: a collapsed flat triangle (anisotropy inf) is reported as null
+    summary = {k: (v if not isinstance(v, float) or math.isfinite(v) else None) for k, v in r.summary.as_dict().items()}
+    figures = {
+        "px_per_mm": g.px_per_mm,
+        "dpi": g.px_per_mm * 25.4,
+        "units": flat.mesh.units,
+        "mm_per_unit": mpu,
+        "px_per_unit": g.scale,
+        "image_px": [g.width, g.height],
+        "image_mm": [g.width / g.px_per_mm, g.height / g.px_per_mm],
+        "origin_uv": [float(g.origin[0]), float(g.origin[1])],
+        "supersample": r.n,
+        "mip_levels": r.mip_levels,
+        "texture": str(flat.mesh.texture_path) if r.texture is not None else None,
+        "texture_px": list(r.texture.shape[1::-1]) if r.texture is not None else None,
+        "texels_per_pixel_median": float(np.median(r.texels_per_pixel)) if r.texels_per_pixel is not None else None,
+        "painting": "texture" if r.texture is not None else "vertex colours" if flat.mesh.vertex_colors is not None
+        else "shaded relief",
+        "stress": {**_stats(r.vertex_stress), "unit": "sqrt(mm)"},
+        "area": {**_stats(np.abs(fv["area"][valid]), w), "unit": "|log2(flat area / 3D area)|"},
+        "anisotropy": {**_stats(fv["anisotropy"][valid], w), "unit": "sigma_max / sigma_min"},
+        "distortion": summary,
+        **distortion.zone_summary(flat.mesh.vertices, flat.uv, flat.mesh.faces, flat.importance),
+        "covered_area_mm2": covered_px / g.px_per_mm ** 2,
+        "flattened_area_mm2": float(np.abs(r.area_2d).sum()) * mpu ** 2,
+        "surface_area_mm2": float(r.area_3d.sum()) * mpu ** 2,
+    }
+    return figures
+
+
+# --------------------------------------------------------------------------------------
+# library entry point
+
+
+def bake(flat: FlatMesh, *, px_per_mm: float | None = None, dpi: float | None = None,
+         maps: tuple[str, ...] = MAP_NAMES, position_map: bool = False, supersample: int = 0,
+         max_megapixels: float = 1000.0) -> BakeResult:
+    """Bake a flattening into a true-scale RGBA image and distortion maps, in memory.
+
+    Parameters
+    ----------
+    flat : FlatMesh
+        The flattening (``uv`` in scan units, u right, v up).
+    px_per_mm, dpi : float, optional
+        Resolution (give at most one; default 4 px/mm).
+    maps : tuple of str
+        Distortion maps to compute, from :data:`MAP_NAMES`.
+    position_map : bool
+        Also return the 3D point under each pixel.
+    supersample : int
+        Sub-samples per pixel side (0: automatic).
+    max_megapixels : float
+        Refuse larger images.
+
+    Returns
+    -------
+    BakeResult
+
+    Notes
+    -----
+    Everything is held in memory; for very large images use :func:`run_bake_stage`,
+    which streams the same strips to disk.
+    """
+    opts = BakeOptions(px_per_mm=px_per_mm, dpi=dpi, maps=maps, position_map=position_map,
+                       supersample=supersample, max_megapixels=max_megapixels)
+    r = _Renderer(flat, opts.resolution, supersample=opts.supersample, max_megapixels=opts.max_megapixels)
+    g = r.grid
+    image = np.zeros((g.height, g.width, 4), np.uint8)
+    values = {name: np.empty((g.height, g.width), np.float32) for name in opts.maps}
+    position = np.empty((g.height, g.width, 3), np.float32) if opts.position_map else None
+    covered = 0.0
+    for r0, r1 in r.strips():
+        cov = r.coverage(r0, r1)
+        covered += float(cov.sum(dtype=np.float64))
+        image[r0:r1] = _rgba8(r.painting(r0, r1), cov)
+        for name in opts.maps:
+            values[name][r0:r1] = r.scalar(name, r0, r1)
+        if position is not None:
+            position[r0:r1] = r.position(r0, r1)
+    return BakeResult(image=image, maps=values, position=position, px_per_mm=g.px_per_mm,
+                      origin=g.origin.copy(), figures=_figures(r, covered))
+
+
+def _attachment_rows(share: np.ndarray) -> np.ndarray:
+    """RGBA rows of the attachment mask from the covered share of marked faces per pixel."""
+    alpha = np.nan_to_num(share, nan=0.0)
+    out = np.zeros(share.shape + (4,), np.uint8)
+    out[..., :3] = ATTACHMENT_COLOUR[:3]
+    out[..., 3] = np.round(alpha * ATTACHMENT_COLOUR[3]).astype(np.uint8)
+    return out
+
+
+def _rgba8(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
+    """(k, w, 3) float in [0, 1] (NaN outside) and coverage -> (k, w, 4) uint8."""
+    out = np.empty(rgb.shape[:2] + (4,), np.uint8)
+    out[..., :3] = np.rint(np.clip(np.nan_to_num(rgb, nan=0.0), 0.0, 1.0) * 255.0)
+    out[..., 3] = np.rint(coverage * 255.0)
+    return out
+
+
+def _rgba16(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
+    out = np.empty(rgb.shape[:2] + (4,), np.uint16)
+    out[..., :3] = np.rint(np.clip(np.nan_to_num(rgb, nan=0.0), 0.0, 1.0) * 65535.0)
+    out[..., 3] = np.rint(coverage * 65535.0)
+    return out
+
+
+# --------------------------------------------------------------------------------------
+# stage
+
+
+def stage_name(path: Path) -> str:
+    """Output NAME for a stage file: ``X.relaxed.ply`` -> ``X``; ``X.rollout.ply`` -> ``X.rollout``."""
+    stem = path.name[: -len(path.suffix)] if path.suffix else path.name
+    return stem.removesuffix(".relaxed")
+
+
+#: Colour (RGBA) of the faces where a left-out attachment (handle, spout, knob) met the wall.
+ATTACHMENT_COLOUR = (230, 0, 160, 220)
+
+
+def _attachment_roots(flat_ply: Path, n_faces: int) -> tuple[np.ndarray, Path | None]:
+    """Faces where the rollout left out an attachment, from ``NAME.rollout.json`` beside the input.
+
+    Returns a per-face indicator (n_faces,) float64 (empty when there is nothing to show) and
+    the JSON read (for provenance), or ``None``.
+    """
+    stem = flat_ply.name.removesuffix(".ply").removesuffix(".relaxed").removesuffix(".rollout")
+    rollout_json = flat_ply.with_name(f"{stem}.rollout.json")
+    try:
+        att = json.loads(rollout_json.read_text()).get("attachments", {})
+    except (OSError, ValueError):
+        return np.zeros(0), None
+    roots = np.asarray(att.get("root_faces") or [], dtype=np.int64)
+    if att.get("kept") or not len(roots) or roots.max() >= n_faces:
+        return np.zeros(0), rollout_json
+    marks = np.zeros(n_faces)
+    marks[roots] = 1.0
+    return marks, rollout_json
+
+
+def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: list) -> None:
+    """Refuse to bake when an output name is an input file (e.g. the scan's texture ``NAME.png``
+    when baking into the scan's own folder): the input would be replaced."""
+    suffixes = (".png", ".tif", ".position.tif", ".sheet.png", ".bake.json", ".overlay.png", ".scale-layer.png",
+                ".attachments.png",
+                ".scalebar.png", *(f".{m}.png" for m in options.maps))
+    for src in (Path(p) for p in inputs if p is not None):
+        for out in (out_dir / f"{name}{s}" for s in suffixes):
+            if src.exists() and out.exists() and os.path.samefile(out, src):
+                raise InvalidOptionError(f"the output {out} is the input {src} and would be overwritten; "
+                                         "bake into another folder (-o) or give another --name")
+
+
+def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, options: BakeOptions | None = None, *,
+                   name: str | None = None) -> StageOutput:
+    """Bake ``NAME.relaxed.ply`` (or a rollout) into images and ``NAME.bake.json``.
+
+    Files (in ``out_dir``): ``NAME.png`` (painting, RGBA, resolution in the file),
+    ``NAME.<map>.png`` (heat maps with a colour bar below the image),
+    ``NAME.overlay.png`` (stress over the greyscale painting), ``NAME.scale-layer.png``
+    (scale bar and optional 10 mm grid, same size as ``NAME.png``), ``NAME.scalebar.png``
+    (the bar alone, true scale), optionally ``NAME.tif`` (16-bit RGBA),
+    ``NAME.position.tif`` (float32 3D points) and ``NAME.sheet.png``, and
+    ``NAME.attachments.png`` (where handles or other attachments left out by the rollout met
+    the wall, from ``NAME.rollout.json`` beside the input); all images share
+    the pixel grid of ``NAME.png`` (maps add a legend band below it).
+
+    Parameters
+    ----------
+    flat_ply : path-like
+        A stage file from ``potflat relax`` (``NAME.relaxed.ply``) or ``potflat rollout``.
+    out_dir : path-like
+        Output folder (created).
+    options : BakeOptions, optional
+    name : str, optional
+        Output NAME; default: the input stem without ``.relaxed``.
+
+    Returns
+    -------
+    StageOutput
+        ``paths`` by role and the JSON sidecar content as ``summary``.
+    """
+    from potflat.bake import annotate
+    from potflat.io.atomic import write_json_atomic
+    from potflat.io.images import PngWriter, write_png, write_tiff_rows
+    from potflat.io.flat_ply import read_flat_ply
+    from potflat.stages.provenance import provenance
+
+    options = options or BakeOptions()
+    flat_ply = Path(flat_ply)
+    out_dir = Path(out_dir)
+    name = name or stage_name(flat_ply)
+    flat = read_flat_ply(flat_ply)
+    rollout_ply = None
+    if options.sheet:
+        if not flat_ply.name.endswith(".relaxed.ply"):
+            raise InvalidOptionError(f"the sheet compares NAME.rollout.ply with NAME.relaxed.ply; bake the relaxed file, not {flat_ply.name}")
+        rollout_ply = flat_ply.with_name(flat_ply.name[: -len(".relaxed.ply")] + ".rollout.ply")
+        if not rollout_ply.is_file():
+            raise InvalidInputError(f"--sheet needs {rollout_ply.name} beside {flat_ply}; copy it there or drop --sheet")
+    _check_not_inputs(out_dir, name, options, [flat_ply, flat.mesh.texture_path, rollout_ply])
+    attachment_marks, rollout_json = _attachment_roots(flat_ply, len(flat.mesh.faces))
+    ppm = options.resolution
+    r = _Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels)
+    g = r.grid
+    if len(attachment_marks):
+        r.face_values["attachments"] = attachment_marks
+    paths: dict[str, Path] = {"png": out_dir / f"{name}.png"}
+    scales = {m: annotate.map_scale(m, r.vertex_stress if m == "stress" else r.face_values[m]) for m in options.maps}
+    if flat.importance is not None:
+        scales = {m: replace(sc, label=f"{sc.label}; white line: painted zone") for m, sc in scales.items()}
+    legends = {m: annotate.legend_band(scales[m], g.width) for m in options.maps}
+    if "stress" in options.maps:
+        legends["overlay"] = legends["stress"]
+    layer = annotate.ScaleLayer(g.width, g.height, ppm, grid=options.grid)
+    covered = 0.0
+    with ExitStack() as stack:
+        png = stack.enter_context(PngWriter(paths["png"], g.width, g.height, 4, px_per_mm=ppm))
+        writers = {}
+        for key, band in legends.items():
+            paths[key] = out_dir / f"{name}.{key}.png"
+            writers[key] = stack.enter_context(PngWriter(paths[key], g.width, g.height + len(band), 4, px_per_mm=ppm))
+        paths["scale_layer"] = out_dir / f"{name}.scale-layer.png"
+        layer_png = stack.enter_context(PngWriter(paths["scale_layer"], g.width, g.height, 4, px_per_mm=ppm))
+        if len(attachment_marks):
+            paths["attachments"] = out_dir / f"{name}.attachments.png"
+            mask_png = stack.enter_context(PngWriter(paths["attachments"], g.width, g.height, 4, px_per_mm=ppm))
+        for r0, r1 in r.strips():
+            cov = r.coverage(r0, r1)
+            covered += float(cov.sum(dtype=np.float64))
+            rgb = r.painting(r0, r1)
+            png.write(_rgba8(rgb, cov))
+            outline = r.zone_outline(r0, r1) if options.maps else None
+            for m in options.maps:
+                values = r.scalar(m, r0, r1)
+                writers[m].write(annotate.draw_outline(annotate.colorize(values, scales[m], cov), outline))
+                if m == "stress":
+                    writers["overlay"].write(annotate.draw_outline(annotate.overlay(rgb, values, scales[m], cov), outline))
+            layer_png.write(layer.rows(r0, r1))
+            if len(attachment_marks):
+                mask_png.write(_attachment_rows(r.scalar("attachments", r0, r1)))
+        for key, band in legends.items():
+            writers[key].write(band)
+    paths["scalebar"] = write_png(out_dir / f"{name}.scalebar.png", layer.bar_image(), px_per_mm=ppm)
+    if options.tiff:
+        paths["tiff"] = write_tiff_rows(out_dir / f"{name}.tif",
+                                        (_rgba16(r.painting(a, b), r.coverage(a, b)) for a, b in r.strips()),
+                                        shape=(g.height, g.width, 4), dtype=np.uint16, px_per_mm=ppm, photometric="rgb")
+    if options.position_map:
+        paths["position"] = write_tiff_rows(out_dir / f"{name}.position.tif", (r.position(a, b) for a, b in r.strips()),
+                                            shape=(g.height, g.width, 3), dtype=np.float32, px_per_mm=ppm,
+                                            photometric="rgb")
+    figures = _figures(r, covered)
+    if rollout_ply is not None:
+        paths["sheet"] = annotate.comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat,
+                                                   title=name)
+    inputs = ([flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else [])
+              + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else []))
+    summary = {
+        **figures,
+        "scale_bar_mm": layer.bar_mm,
+        "maps": {m: {"range": [scales[m].lo, scales[m].hi], "label": scales[m].label} for m in options.maps},
+        "files": {k: p.name for k, p in paths.items()},
+        "provenance": provenance(stage="bake", inputs=inputs,
+                                 options={**asdict(options), "px_per_mm_effective": ppm, "name": name}),
+    }
+    paths["json"] = out_dir / f"{name}.bake.json"
+    summary["files"]["json"] = paths["json"].name
+    write_json_atomic(paths["json"], summary)
+    return StageOutput(paths=paths, summary=summary)

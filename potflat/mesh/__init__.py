@@ -1,0 +1,1 @@
+"""Mesh operations shared by the stages: cleaning, distortion measures and their kernels."""

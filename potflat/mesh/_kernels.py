@@ -1,0 +1,625 @@
+"""Numba kernels for mesh loading and cleaning: an OBJ tokenizer and orientation propagation.
+
+Arrays in, arrays out, no I/O. The OBJ kernels read the file's bytes (``uint8``) in two
+passes: :func:`obj_count` sizes the output, :func:`obj_fill` parses into preallocated arrays.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from potflat._jit import leaf, parallel, prange
+
+#: Marker for an index that can never be valid (``0`` in an OBJ face, or malformed).
+BAD_INDEX = -(2**62)
+
+
+@leaf
+def _is_space(c):
+    return c == 32 or c == 9 or c == 13 or c == 11 or c == 12
+
+
+@leaf
+def _skip_spaces(buf, i, n):
+    while i < n and _is_space(buf[i]):
+        i += 1
+    return i
+
+
+@leaf
+def _skip_line(buf, i, n):
+    while i < n and buf[i] != 10:
+        i += 1
+    return i
+
+
+@leaf
+def _token_end(buf, i, n):
+    while i < n and buf[i] != 10 and not _is_space(buf[i]):
+        i += 1
+    return i
+
+
+@leaf
+def _keyword(buf, i, n):
+    """Code of the OBJ keyword at ``i``: 1 v, 2 vt, 3 f, 4 usemtl, 5 mtllib, 0 other."""
+    j = _token_end(buf, i, n)
+    k = j - i
+    if k == 1 and buf[i] == 118:  # v
+        return 1, j
+    if k == 1 and buf[i] == 102:  # f
+        return 3, j
+    if k == 2 and buf[i] == 118 and buf[i + 1] == 116:  # vt
+        return 2, j
+    if k == 6 and buf[i] == 117 and buf[i + 1] == 115 and buf[i + 2] == 101 and buf[i + 3] == 109:
+        return 4, j  # usem(tl)
+    if k == 6 and buf[i] == 109 and buf[i + 1] == 116 and buf[i + 2] == 108 and buf[i + 3] == 108:
+        return 5, j  # mtll(ib)
+    return 0, j
+
+
+@leaf
+def _parse_float(buf, i, n):
+    """Parse a decimal float at ``i``; returns (value, end, ok). ``nan``/``inf`` are parsed."""
+    neg = False
+    if i < n and (buf[i] == 45 or buf[i] == 43):
+        neg = buf[i] == 45
+        i += 1
+    if i < n and (buf[i] | 32) == 110:  # nan
+        return np.nan, _token_end(buf, i, n), True
+    if i < n and (buf[i] | 32) == 105:  # inf
+        return (-np.inf if neg else np.inf), _token_end(buf, i, n), True
+    mant = 0
+    ndig = 0
+    exp10 = 0
+    seen = False
+    while i < n and 48 <= buf[i] <= 57:
+        seen = True
+        if ndig < 18:
+            mant = mant * 10 + (buf[i] - 48)
+            if mant > 0:
+                ndig += 1
+        else:
+            exp10 += 1
+        i += 1
+    if i < n and buf[i] == 46:
+        i += 1
+        while i < n and 48 <= buf[i] <= 57:
+            seen = True
+            if ndig < 18:
+                mant = mant * 10 + (buf[i] - 48)
+                if mant > 0:
+                    ndig += 1
+                exp10 -= 1
+            i += 1
+    if not seen:
+        return 0.0, i, False
+    if i < n and (buf[i] | 32) == 101:  # e / E
+        i += 1
+        eneg = False
+        if i < n and (buf[i] == 45 or buf[i] == 43):
+            eneg = buf[i] == 45
+            i += 1
+        e = 0
+        eseen = False
+        while i < n and 48 <= buf[i] <= 57:
+            eseen = True
+            if e < 100000:
+                e = e * 10 + (buf[i] - 48)
+            i += 1
+        if not eseen:
+            return 0.0, i, False
+        exp10 += -e if eneg else e
+    val = float(mant)
+    if mant == 0:
+        val = 0.0
+    elif exp10 > 0:
+        val = val * 10.0 ** exp10
+    elif exp10 < 0:
+        if exp10 < -300:
+            val = (val / 10.0 ** 300) / 10.0 ** (-exp10 - 300)
+        else:
+            val = val / 10.0 ** (-exp10)
+    return (-val if neg else val), i, True
+
+
+@leaf
+def _parse_int(buf, i, n):
+    """Parse a signed integer at ``i``; returns (value, end, ok)."""
+    neg = False
+    if i < n and (buf[i] == 45 or buf[i] == 43):
+        neg = buf[i] == 45
+        i += 1
+    v = 0
+    seen = False
+    while i < n and 48 <= buf[i] <= 57:
+        if v < 10**15:
+            v = v * 10 + (buf[i] - 48)
+        seen = True
+        i += 1
+    return (-v if neg else v), i, seen
+
+
+@leaf
+def obj_count(buf):
+    """Count the records of an OBJ file.
+
+    Parameters
+    ----------
+    buf : (nbytes,) uint8
+        The file's content.
+
+    Returns
+    -------
+    counts : (6,) int64
+        Vertices, texture coordinates, faces, face corners, ``usemtl`` lines, ``mtllib`` lines.
+    """
+    n = buf.shape[0]
+    counts = np.zeros(6, np.int64)
+    i = 0
+    while i < n:
+        i = _skip_spaces(buf, i, n)
+        if i < n and buf[i] != 10 and buf[i] != 35:
+            kw, i = _keyword(buf, i, n)
+            if kw == 1:
+                counts[0] += 1
+            elif kw == 2:
+                counts[1] += 1
+            elif kw == 3:
+                counts[2] += 1
+                while True:
+                    i = _skip_spaces(buf, i, n)
+                    if i >= n or buf[i] == 10 or buf[i] == 35:
+                        break
+                    counts[3] += 1
+                    i = _token_end(buf, i, n)
+            elif kw == 4:
+                counts[4] += 1
+            elif kw == 5:
+                counts[5] += 1
+        i = _skip_line(buf, i, n) + 1
+    return counts
+
+
+@leaf
+def obj_fill(buf, counts):
+    """Parse an OBJ file into arrays sized by :func:`obj_count`.
+
+    Parameters
+    ----------
+    buf : (nbytes,) uint8
+        The file's content.
+    counts : (6,) int64
+        From :func:`obj_count`.
+
+    Returns
+    -------
+    V : (nv, 6) float64
+        Up to six numbers per ``v`` line (x y z and optional r g b); missing ones NaN.
+    vcols : (nv,) int64
+        How many numbers each ``v`` line had.
+    VT : (nvt, 2) float64
+        First two numbers of each ``vt`` line (missing ones 0).
+    corner_v, corner_vt : (nc,) int64
+        0-based vertex and texture indices of each face corner; relative (negative) indices
+        resolved; ``-1`` = no texture index; :data:`BAD_INDEX` = malformed or zero index.
+    face_ptr : (nf + 1,) int64
+        Corners of face ``k`` are ``face_ptr[k]:face_ptr[k + 1]``.
+    use_spans : (nuse, 3) int64
+        Byte span of each ``usemtl`` line's argument and the index of the next face.
+    lib_spans : (nlib, 2) int64
+        Byte span of each ``mtllib`` line's argument.
+    bad_line : int
+        1-based number of the first line with an unparsable number, 0 if none.
+    """
+    n = buf.shape[0]
+    V = np.full((counts[0], 6), np.nan)
+    vcols = np.zeros(counts[0], np.int64)
+    VT = np.zeros((counts[1], 2))
+    corner_v = np.empty(counts[3], np.int64)
+    corner_vt = np.empty(counts[3], np.int64)
+    face_ptr = np.zeros(counts[2] + 1, np.int64)
+    use_spans = np.zeros((counts[4], 3), np.int64)
+    lib_spans = np.zeros((counts[5], 2), np.int64)
+    iv = 0
+    ivt = 0
+    jf = 0
+    jc = 0
+    ju = 0
+    jl = 0
+    line = 0
+    bad_line = 0
+    i = 0
+    while i < n:
+        line += 1
+        i = _skip_spaces(buf, i, n)
+        if i < n and buf[i] != 10 and buf[i] != 35:
+            kw, i = _keyword(buf, i, n)
+            if kw == 1 or kw == 2:
+                k = 0
+                while True:
+                    i = _skip_spaces(buf, i, n)
+                    if i >= n or buf[i] == 10 or buf[i] == 35:
+                        break
+                    val, i, ok = _parse_float(buf, i, n)
+                    if not ok or (i < n and buf[i] != 10 and not _is_space(buf[i])):
+                        if bad_line == 0:
+                            bad_line = line
+                        i = _token_end(buf, i, n)
+                        val = np.nan
+                    if kw == 1 and k < 6:
+                        V[iv, k] = val
+                    elif kw == 2 and k < 2:
+                        VT[ivt, k] = val
+                    k += 1
+                if kw == 1:
+                    vcols[iv] = k
+                    iv += 1
+                else:
+                    ivt += 1
+            elif kw == 3:
+                while True:
+                    i = _skip_spaces(buf, i, n)
+                    if i >= n or buf[i] == 10 or buf[i] == 35:
+                        break
+                    end = _token_end(buf, i, n)
+                    a, i, ok = _parse_int(buf, i, end)
+                    if not ok or a == 0:
+                        cv = BAD_INDEX
+                    elif a > 0:
+                        cv = a - 1
+                    else:
+                        cv = iv + a
+                        if cv < 0:
+                            cv = BAD_INDEX
+                    ct = -1
+                    if i < end and buf[i] == 47:  # '/'
+                        i += 1
+                        if i < end and buf[i] != 47:
+                            t, i, ok = _parse_int(buf, i, end)
+                            if not ok or t == 0:
+                                ct = BAD_INDEX
+                            elif t > 0:
+                                ct = t - 1
+                            else:
+                                ct = ivt + t
+                                if ct < 0:
+                                    ct = BAD_INDEX
+                    i = end
+                    corner_v[jc] = cv
+                    corner_vt[jc] = ct
+                    jc += 1
+                jf += 1
+                face_ptr[jf] = jc
+            elif kw == 4 or kw == 5:
+                i = _skip_spaces(buf, i, n)
+                e = _skip_line(buf, i, n)
+                while e > i and _is_space(buf[e - 1]):
+                    e -= 1
+                if kw == 4:
+                    use_spans[ju, 0] = i
+                    use_spans[ju, 1] = e
+                    use_spans[ju, 2] = jf
+                    ju += 1
+                else:
+                    lib_spans[jl, 0] = i
+                    lib_spans[jl, 1] = e
+                    jl += 1
+        i = _skip_line(buf, i, n) + 1
+    return V, vcols, VT, corner_v, corner_vt, face_ptr, use_spans, lib_spans, bad_line
+
+
+@leaf
+def propagate_orientation(nbr, same):
+    """Make face orientations consistent by breadth-first search over face adjacency.
+
+    Parameters
+    ----------
+    nbr : (m, 3) int64
+        Face across each edge ``(F[f, k], F[f, (k + 1) % 3])`` when that edge is manifold
+        (exactly two faces), else -1.
+    same : (m, 3) int8
+        1 when the neighbour traverses the shared edge in the same direction (inconsistent).
+
+    Returns
+    -------
+    flip : (m,) int64
+        1 for faces to reverse so that each component is consistently oriented; the
+        first face (lowest index) of each component keeps its orientation.
+    component : (m,) int64
+        Component label of each face (by manifold edges), numbered in order of first face.
+    conflicts : int
+        Adjacent pairs left inconsistent (non-orientable or contradictory input).
+    """
+    m = nbr.shape[0]
+    flip = np.zeros(m, np.int64)
+    component = np.full(m, -1, np.int64)
+    queue = np.empty(m, np.int64)
+    conflicts = 0
+    ncomp = 0
+    for seed in range(m):
+        if component[seed] >= 0:
+            continue
+        component[seed] = ncomp
+        head = 0
+        tail = 1
+        queue[0] = seed
+        while head < tail:
+            f = queue[head]
+            head += 1
+            for k in range(3):
+                g = nbr[f, k]
+                if g < 0:
+                    continue
+                want = flip[f] ^ same[f, k]
+                if component[g] < 0:
+                    component[g] = ncomp
+                    flip[g] = want
+                    queue[tail] = g
+                    tail += 1
+                elif flip[g] != want and g > f:
+                    conflicts += 1
+        ncomp += 1
+    return flip, component, conflicts
+
+
+@leaf
+def _find(parent, x):
+    while parent[x] != x:
+        parent[x] = parent[parent[x]]
+        x = parent[x]
+    return x
+
+
+@leaf
+def union_find(n, a, b):
+    """Connected components of a graph given as an edge list.
+
+    Parameters
+    ----------
+    n : int
+        Number of nodes.
+    a, b : (k,) int64
+        Edge end points.
+
+    Returns
+    -------
+    label : (n,) int64
+        Component of each node, numbered in order of the component's lowest node.
+    count : int
+        Number of components.
+    """
+    parent = np.arange(n)
+    for i in range(a.shape[0]):
+        x = _find(parent, a[i])
+        y = _find(parent, b[i])
+        if x < y:
+            parent[y] = x
+        elif y < x:
+            parent[x] = y
+    label = np.full(n, -1, np.int64)
+    count = 0
+    for v in range(n):
+        r = _find(parent, v)
+        if label[r] < 0:
+            label[r] = count
+            count += 1
+        label[v] = label[r]
+    return label, count
+
+
+@leaf
+def weld_representatives(V, order, h):
+    """First occurrence of each exactly equal position.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+        Positions (``-0.0`` already normalised to ``0.0``).
+    order : (n,) int64
+        Permutation sorting ``h``.
+    h : (n,) uint64
+        Hash of each position (equal positions have equal hashes).
+
+    Returns
+    -------
+    rep : (n,) int64
+        Lowest index of a vertex at exactly the same position (``rep[i] <= i``).
+    """
+    n = V.shape[0]
+    rep = np.arange(n)
+    s = 0
+    while s < n:
+        e = s + 1
+        while e < n and h[order[e]] == h[order[s]]:
+            e += 1
+        if e - s > 1:
+            for a in range(s, e):
+                rep[order[a]] = -1
+            for a in range(s, e):
+                i = order[a]
+                if rep[i] >= 0:
+                    continue
+                low = i
+                for b in range(a, e):
+                    j = order[b]
+                    if rep[j] < 0 and V[j, 0] == V[i, 0] and V[j, 1] == V[i, 1] and V[j, 2] == V[i, 2]:
+                        low = min(low, j)
+                for b in range(a, e):
+                    j = order[b]
+                    if rep[j] < 0 and V[j, 0] == V[i, 0] and V[j, 1] == V[i, 1] and V[j, 2] == V[i, 2]:
+                        rep[j] = low
+        s = e
+    return rep
+
+
+@leaf
+def _edge_lo(F, h):
+    a = F[h // 3, h % 3]
+    b = F[h // 3, (h % 3 + 1) % 3]
+    return min(a, b)
+
+
+@leaf
+def _edge_hi(F, h):
+    a = F[h // 3, h % 3]
+    b = F[h // 3, (h % 3 + 1) % 3]
+    return max(a, b)
+
+
+@leaf
+def edge_table(F, n):
+    """Undirected edges of a triangle mesh by counting sort (linear time, deterministic).
+
+    Parameters
+    ----------
+    F : (m, 3) int64
+        Faces; half-edge ``3 f + k`` goes from ``F[f, k]`` to ``F[f, (k + 1) % 3]``.
+    n : int
+        Number of vertices.
+
+    Returns
+    -------
+    edge_of : (3 m,) int64
+        Undirected edge id of each half-edge.
+    edges : (ne, 2) int64
+        Endpoints (smaller first), sorted lexicographically.
+    count : (ne,) int64
+        Number of half-edges (faces) on each edge.
+    halves : (ne, 2) int64
+        The first two half-edges of each edge (lowest ids), ``-1`` if absent.
+    """
+    m = F.shape[0]
+    start = np.zeros(n + 1, np.int64)
+    for h in range(3 * m):
+        start[_edge_lo(F, h) + 1] += 1
+    for v in range(n):
+        start[v + 1] += start[v]
+    fill = start[:-1].copy()
+    bucket = np.empty(3 * m, np.int64)
+    for h in range(3 * m):
+        lo = _edge_lo(F, h)
+        bucket[fill[lo]] = h
+        fill[lo] += 1
+    # sort each bucket by the other endpoint (buckets are small) and number the edges
+    edge_of = np.empty(3 * m, np.int64)
+    ne = 0
+    for v in range(n):
+        s = start[v]
+        e = start[v + 1]
+        for a in range(s + 1, e):
+            x = bucket[a]
+            hx = _edge_hi(F, x)
+            b = a - 1
+            while b >= s and (_edge_hi(F, bucket[b]) > hx or (_edge_hi(F, bucket[b]) == hx and bucket[b] > x)):
+                bucket[b + 1] = bucket[b]
+                b -= 1
+            bucket[b + 1] = x
+        for a in range(s, e):
+            if a == s or _edge_hi(F, bucket[a - 1]) != _edge_hi(F, bucket[a]):
+                ne += 1
+            edge_of[bucket[a]] = ne - 1
+    edges = np.empty((ne, 2), np.int64)
+    count = np.zeros(ne, np.int64)
+    halves = np.full((ne, 2), -1, np.int64)
+    for v in range(n):
+        for a in range(start[v], start[v + 1]):
+            x = bucket[a]
+            k = edge_of[x]
+            edges[k, 0] = v
+            edges[k, 1] = _edge_hi(F, x)
+            if count[k] < 2:
+                halves[k, count[k]] = x
+            count[k] += 1
+    return edge_of, edges, count, halves
+
+
+@parallel
+def triangle_areas(V, F):
+    """3D area of each face.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+    F : (m, 3) int64
+
+    Returns
+    -------
+    (m,) float64
+        ``|(p1 - p0) x (p2 - p0)| / 2``, bit-identical to
+        ``0.5 * np.linalg.norm(np.cross(p1 - p0, p2 - p0), axis=1)``.
+    """
+    m = F.shape[0]
+    out = np.empty(m)
+    for f in prange(m):
+        a = F[f, 0]
+        b = F[f, 1]
+        c = F[f, 2]
+        d1x = V[b, 0] - V[a, 0]
+        d1y = V[b, 1] - V[a, 1]
+        d1z = V[b, 2] - V[a, 2]
+        d2x = V[c, 0] - V[a, 0]
+        d2y = V[c, 1] - V[a, 1]
+        d2z = V[c, 2] - V[a, 2]
+        cx = d1y * d2z - d1z * d2y
+        cy = d1z * d2x - d1x * d2z
+        cz = d1x * d2y - d1y * d2x
+        out[f] = 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz)
+    return out
+
+
+@parallel
+def face_geometry(V, F):
+    """Per-face cross product, twice the area, longest squared edge and centroid.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+        Vertex positions.
+    F : (m, 3) int64
+        Faces.
+
+    Returns
+    -------
+    cross : (m, 3) float64
+        ``(V[F1] - V[F0]) x (V[F2] - V[F0])`` (normal times twice the area).
+    area2 : (m,) float64
+        Twice the area (norm of ``cross``).
+    longest2 : (m,) float64
+        Squared length of the longest edge.
+    centroid : (m, 3) float64
+        Mean of the three corners.
+    """
+    m = F.shape[0]
+    cross = np.empty((m, 3))
+    area2 = np.empty(m)
+    longest2 = np.empty(m)
+    centroid = np.empty((m, 3))
+    for f in prange(m):
+        a = F[f, 0]
+        b = F[f, 1]
+        c = F[f, 2]
+        e0x = V[b, 0] - V[a, 0]
+        e0y = V[b, 1] - V[a, 1]
+        e0z = V[b, 2] - V[a, 2]
+        e1x = V[c, 0] - V[b, 0]
+        e1y = V[c, 1] - V[b, 1]
+        e1z = V[c, 2] - V[b, 2]
+        e2x = V[a, 0] - V[c, 0]
+        e2y = V[a, 1] - V[c, 1]
+        e2z = V[a, 2] - V[c, 2]
+        # (b - a) x (c - a) = e0 x (-e2)
+        cx = e2y * e0z - e2z * e0y
+        cy = e2z * e0x - e2x * e0z
+        cz = e2x * e0y - e2y * e0x
+        cross[f, 0] = cx
+        cross[f, 1] = cy
+        cross[f, 2] = cz
+        area2[f] = np.sqrt(cx * cx + cy * cy + cz * cz)
+        l0 = e0x * e0x + e0y * e0y + e0z * e0z
+        l1 = e1x * e1x + e1y * e1y + e1z * e1z
+        l2 = e2x * e2x + e2y * e2y + e2z * e2z
+        longest2[f] = max(l0, max(l1, l2))
+        centroid[f, 0] = (V[a, 0] + V[b, 0] + V[c, 0]) / 3.0
+        centroid[f, 1] = (V[a, 1] + V[b, 1] + V[c, 1]) / 3.0
+        centroid[f, 2] = (V[a, 2] + V[b, 2] + V[c, 2]) / 3.0
+    return cross, area2, longest2, centroid

@@ -1,0 +1,420 @@
+"""Distortion measures of a flattening, shared by rollout, relax and bake.
+
+All measures compare each flattened triangle or edge with the same one on the 3D scan:
+
+* **edge-length RMS**: ``sqrt(mean(((l_2d - l_3d) / l_3d)^2))`` over the mesh edges
+  (dimensionless; 0 for an isometric flattening).
+* **area distortion** per face: ``log(A_2d / A_3d)``; summarised as the area-weighted mean
+  of its absolute value.
+* **anisotropy** per face: ``sigma_1 / sigma_2``, the ratio of the singular values of the
+  linear map from the 3D triangle to the flat one (1 = no shear or one-sided stretch).
+* **flipped**: faces whose flat signed area is not positive (folded or mirrored).
+* **stress** per vertex: the paper's Eq. 3, ``sqrt(sum_j (|x_i - x_j| - r_ij)^2 / sum_j r_ij)``
+  over the vertex's mesh edges, evaluated in millimetres (so its unit is sqrt(mm) and it does
+  not depend on the scan's unit).
+
+Faces whose 3D area is (numerically) zero carry no distortion and are excluded.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from potflat.types import FlatMesh
+
+#: Relative 3D area below which a face counts as degenerate (fraction of the mean face area).
+DEGENERATE_AREA_FRACTION = 1e-12
+#: Faces (or edges) per block of the per-face and per-edge figures: bounds their
+#: temporaries on big meshes (the figures do not depend on it).
+BLOCK = 1 << 18
+
+
+@dataclass(frozen=True)
+class FaceDistortion:
+    """Per-face distortion of a flattening.
+
+    Attributes
+    ----------
+    area_3d : (m,) float64
+        Triangle area on the scan, scan units squared.
+    area_2d : (m,) float64
+        Signed flattened area (negative when flipped).
+    sigma_max, sigma_min : (m,) float64
+        Singular values of the 3D-to-flat linear map (``sigma_min`` is signed: negative when flipped).
+    valid : (m,) bool
+        Non-degenerate faces (positive 3D area).
+    """
+
+    area_3d: np.ndarray
+    area_2d: np.ndarray
+    sigma_max: np.ndarray
+    sigma_min: np.ndarray
+    valid: np.ndarray
+
+    @property
+    def log_area_ratio(self) -> np.ndarray:
+        """``log(|A_2d| / A_3d)`` per face, 0 for degenerate faces. Shape (m,)."""
+        out = np.zeros_like(self.area_3d)
+        v = self.valid & (self.area_2d != 0)
+        out[v] = np.log(np.abs(self.area_2d[v]) / self.area_3d[v])
+        return out
+
+    @property
+    def anisotropy(self) -> np.ndarray:
+        """``sigma_max / |sigma_min|`` per face (inf for collapsed faces, 1 for degenerate ones). Shape (m,)."""
+        out = np.ones_like(self.area_3d)
+        v = self.valid
+        with np.errstate(divide="ignore"):
+            out[v] = self.sigma_max[v] / np.abs(self.sigma_min[v])
+        return out
+
+
+@dataclass(frozen=True)
+class DistortionSummary:
+    """Scalar distortion figures of a flattening (all dimensionless)."""
+
+    edge_rms: float
+    edge_max: float
+    area_mean_abs_log: float
+    area_p95_abs_log: float
+    area_max_abs_log: float
+    anisotropy_mean: float
+    anisotropy_p95: float
+    anisotropy_max: float
+    scale: float
+    flipped: int
+    degenerate: int
+
+    def as_dict(self) -> dict:
+        """The figures as a plain JSON-ready dict."""
+        return asdict(self)
+
+
+def face_distortion(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> FaceDistortion:
+    """Per-face distortion of the map from ``vertices`` to ``uv``.
+
+    Computed in blocks of :data:`BLOCK` faces, so the temporaries stay small on big
+    meshes (every figure is per face; the result does not depend on the blocks).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        3D positions.
+    uv : (n, 2) float64
+        Flattened positions, same units.
+    faces : (m, 3) int64
+        Triangles, counter-clockwise seen from outside.
+
+    Returns
+    -------
+    FaceDistortion
+    """
+    m = len(faces)
+    area_3d = face_areas(vertices, faces)
+    mean_area = area_3d.mean() if m else 0.0
+    valid = area_3d > DEGENERATE_AREA_FRACTION * max(mean_area, np.finfo(float).tiny)
+    area_2d, sigma_max, sigma_min = np.empty(m), np.empty(m), np.empty(m)
+    for s in row_blocks(m):
+        f, v = faces[s], valid[s]
+        d1, d2 = _edge_vectors(vertices, f)
+        len1 = np.linalg.norm(d1, axis=1)
+        safe = np.where(v, 1.0, 0.0)
+        len1s = np.where(v & (len1 > 0), len1, 1.0)
+        e1 = d1 / len1s[:, None]
+        q2x = np.einsum("ij,ij->i", d2, e1)
+        q2y = np.where(v, 2.0 * area_3d[s] / len1s, 1.0)
+        w1, w2 = _edge_vectors(uv, f)
+        area_2d[s] = 0.5 * (w1[:, 0] * w2[:, 1] - w1[:, 1] * w2[:, 0])
+        # J = W Q^-1 with Q = [[len1, q2x], [0, q2y]]
+        inv11, inv12, inv22 = 1.0 / len1s, -q2x / (len1s * q2y), 1.0 / q2y
+        a = w1[:, 0] * inv11
+        b = w1[:, 0] * inv12 + w2[:, 0] * inv22
+        c = w1[:, 1] * inv11
+        d = w1[:, 1] * inv12 + w2[:, 1] * inv22
+        # stable closed-form 2x2 SVD: sigma = hypot(E, H) +- hypot(F, G); the smaller one is
+        # signed (negative when the map reverses orientation)
+        q = np.hypot(0.5 * (a + d), 0.5 * (c - b))
+        r = np.hypot(0.5 * (a - d), 0.5 * (c + b))
+        sigma_max[s] = (q + r) * safe
+        sigma_min[s] = (q - r) * safe
+    return FaceDistortion(area_3d, area_2d, sigma_max, sigma_min, valid)
+
+
+def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """3D area of each face (a parallel kernel, no temporaries). Shape (m,) float64."""
+    from potflat.mesh._kernels import triangle_areas
+
+    return triangle_areas(np.ascontiguousarray(vertices, dtype=np.float64),
+                          np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3))
+
+
+def row_blocks(m: int, size: int | None = None) -> list[slice]:
+    """Slices of ``size`` rows (default :data:`BLOCK`) covering ``range(m)``, to bound the
+    temporaries of per-row work."""
+    size = size or BLOCK
+    return [slice(a, min(a + size, m)) for a in range(0, m, size)]
+
+
+def _edge_vectors(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``p1 - p0`` and ``p2 - p0`` of each face ((k, d) float64 each)."""
+    p0 = points[faces[:, 0]]
+    return points[faces[:, 1]] - p0, points[faces[:, 2]] - p0
+
+
+def unique_edges(faces: np.ndarray) -> np.ndarray:
+    """Undirected edges of ``faces``, each once (``i <= j``), sorted. Shape (e, 2) int64.
+
+    Parallel, without a global sort: each vertex groups the edges to its higher neighbours
+    (:func:`potflat.relax._kernels.springs.halfedge_springs`).
+    """
+    from potflat.relax._kernels.springs import halfedge_springs, vertex_faces
+
+    faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    n = int(faces.max()) + 1 if len(faces) else 0
+    return halfedge_springs(faces, *vertex_faces(n, faces), False)[0]
+
+
+def edge_length_error(vertices: np.ndarray, uv: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Relative edge-length error ``(l_2d - l_3d) / l_3d`` per edge (0 for zero-length edges). Shape (e,)."""
+    out = np.zeros(len(edges))
+    for s in row_blocks(len(edges)):
+        e = edges[s]
+        l3 = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)
+        l2 = np.linalg.norm(uv[e[:, 0]] - uv[e[:, 1]], axis=1)
+        ok = l3 > 0
+        out[s][ok] = (l2[ok] - l3[ok]) / l3[ok]
+    return out
+
+
+def vertex_stress(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, mm_per_unit: float = 1.0) -> np.ndarray:
+    """The paper's per-vertex residual stress (Eq. 3) over mesh edges, in sqrt(mm).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    uv : (n, 2) float64
+    faces : (m, 3) int64
+    mm_per_unit : float
+        Millimetres per unit of ``vertices`` and ``uv``.
+
+    Returns
+    -------
+    (n,) float64
+        0 for isolated vertices.
+    """
+    edges = unique_edges(faces)
+    n = len(vertices)
+    r, l = np.empty(len(edges)), np.empty(len(edges))
+    for s in row_blocks(len(edges)):
+        e = edges[s]
+        r[s] = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1) * mm_per_unit
+        l[s] = np.linalg.norm(uv[e[:, 0]] - uv[e[:, 1]], axis=1) * mm_per_unit
+    sq = (l - r) ** 2
+    num = np.bincount(edges[:, 0], sq, n) + np.bincount(edges[:, 1], sq, n)
+    den = np.bincount(edges[:, 0], r, n) + np.bincount(edges[:, 1], r, n)
+    out = np.zeros(n)
+    ok = den > 0
+    out[ok] = np.sqrt(num[ok] / den[ok])
+    return out
+
+
+def summarize(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> DistortionSummary:
+    """Scalar distortion figures of the map from ``vertices`` to ``uv`` (see module docs)."""
+    fd = face_distortion(vertices, uv, faces)
+    err = edge_length_error(vertices, uv, unique_edges(faces)) if len(faces) else np.zeros(1)
+    v = fd.valid
+    w = fd.area_3d[v]
+    la = np.abs(fd.log_area_ratio[v])
+    an = fd.anisotropy[v]
+    if not v.any():
+        la = an = w = np.ones(1)
+    total3 = fd.area_3d[v].sum()
+    return DistortionSummary(
+        edge_rms=float(np.sqrt(np.mean(err**2))),
+        edge_max=float(np.max(np.abs(err))),
+        area_mean_abs_log=float(np.average(la, weights=w)),
+        area_p95_abs_log=float(np.percentile(la, 95)),
+        area_max_abs_log=float(np.max(la)),
+        anisotropy_mean=float(np.average(an, weights=w)) if np.isfinite(an).all() else float("inf"),
+        # no interpolation across infinite values (inf - inf is NaN): collapsed faces give inf
+        anisotropy_p95=float(np.percentile(an, 95, method="linear" if np.isfinite(an).all() else "higher")),
+        anisotropy_max=float(np.max(an)),
+        scale=float(fd.area_2d[v].sum() / total3) if total3 > 0 else 0.0,
+        flipped=int(np.count_nonzero(v & (fd.area_2d <= 0))),
+        degenerate=int(np.count_nonzero(~v)),
+    )
+
+
+def summarize_flat(flat: FlatMesh) -> DistortionSummary:
+    """:func:`summarize` for a :class:`FlatMesh`."""
+    return summarize(flat.mesh.vertices, flat.uv, flat.mesh.faces)
+
+
+#: A face belongs to the important zone when the mean importance of its corners reaches this.
+ZONE_THRESHOLD = 0.5
+
+
+def important_faces(faces: np.ndarray, importance: np.ndarray | None) -> np.ndarray:
+    """Faces of the important zone (mean corner importance >= :data:`ZONE_THRESHOLD`).
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+    importance : (n,) float64 in [0, 1] or None
+        None: the whole surface is the zone.
+
+    Returns
+    -------
+    (m,) bool
+    """
+    if importance is None:
+        return np.ones(len(faces), bool)
+    return importance[faces].mean(axis=1) >= ZONE_THRESHOLD
+
+
+def weighted_percentile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
+    """The ``q``-th percentile (0-100) of ``values`` where each counts with its weight (the
+    smallest value at or above ``q`` % of the total weight). NaN for no positive weight."""
+    values, weights = np.asarray(values, float), np.asarray(weights, float)
+    keep = weights > 0
+    if not keep.any():
+        return float("nan")
+    order = np.argsort(values[keep], kind="stable")
+    v, cum = values[keep][order], np.cumsum(weights[keep][order])
+    return float(v[min(np.searchsorted(cum, q / 100.0 * cum[-1]), len(v) - 1)])
+
+
+def length_scale(fd: FaceDistortion) -> np.ndarray:
+    """Linear scale of each face, ``sqrt(|A_2d| / A_3d)`` (1 for degenerate faces). Shape (m,)."""
+    out = np.ones_like(fd.area_3d)
+    v = fd.valid
+    out[v] = np.sqrt(np.abs(fd.area_2d[v]) / fd.area_3d[v])
+    return out
+
+
+def length_error(fd: FaceDistortion) -> np.ndarray:
+    """Largest relative error of a length through each face: ``max(sigma_max - 1, 1 - sigma_min)``
+    (0.05: some length there is 5% too long or too short; flipped faces count > 1). Shape (m,)."""
+    return np.where(fd.valid, np.maximum(fd.sigma_max - 1.0, 1.0 - fd.sigma_min), 0.0)
+
+
+@dataclass(frozen=True)
+class ZoneFigures:
+    """How true the image is in one zone of the surface (the important zone or the rest).
+
+    Attributes
+    ----------
+    area_fraction : float
+        Share of the surface's 3D area in the zone.
+    faces : int
+    scale_median : float
+        Area-weighted median of the faces' linear scale (1: true scale).
+    length_error_median_pct, length_error_p95_pct : float
+        Area-weighted median and 95th percentile of the largest length error through a face,
+        in percent (:func:`length_error`).
+    distortion : DistortionSummary or None
+        The usual figures over the zone's faces (None for an empty zone).
+    """
+
+    area_fraction: float
+    faces: int
+    scale_median: float
+    length_error_median_pct: float
+    length_error_p95_pct: float
+    distortion: DistortionSummary | None
+
+    def as_dict(self) -> dict:
+        """JSON-ready dict (the distortion nested)."""
+        out = asdict(self)
+        out["distortion"] = self.distortion.as_dict() if self.distortion is not None else None
+        return out
+
+
+def zone_figures(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, importance: np.ndarray | None,
+                 ) -> dict[str, ZoneFigures]:
+    """:class:`ZoneFigures` of the important zone (``"important"``) and of the rest (``"rest"``).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    uv : (n, 2) float64
+    faces : (m, 3) int64
+    importance : (n,) float64 or None
+        None: the whole surface is the important zone and the rest is empty.
+    """
+    fd = face_distortion(vertices, uv, faces)
+    zone = important_faces(faces, importance)
+    scale, err = length_scale(fd), length_error(fd)
+    total = float(fd.area_3d[fd.valid].sum()) or 1.0
+    out = {}
+    for key, sel in (("important", zone), ("rest", ~zone)):
+        w = np.where(sel & fd.valid, fd.area_3d, 0.0)
+        if not sel.any() or w.sum() <= 0:
+            out[key] = ZoneFigures(0.0, int(sel.sum()), float("nan"), float("nan"), float("nan"), None)
+            continue
+        out[key] = ZoneFigures(
+            area_fraction=float(w.sum()) / total,
+            faces=int(sel.sum()),
+            scale_median=weighted_percentile(scale, w, 50.0),
+            length_error_median_pct=100.0 * weighted_percentile(err, w, 50.0),
+            length_error_p95_pct=100.0 * weighted_percentile(err, w, 95.0),
+            distortion=summarize(vertices, uv, faces[sel]),
+        )
+    return out
+
+
+def true_scale_factor(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, importance: np.ndarray | None) -> float:
+    """The uniform factor that brings the area-weighted median linear scale of the important
+    zone (the whole surface when ``importance`` is None) to 1; 1 when it is undefined.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    uv : (n, 2) float64
+    faces : (m, 3) int64
+    importance : (n,) float64 or None
+    """
+    fd = face_distortion(vertices, uv, faces)
+    zone = important_faces(faces, importance) & fd.valid
+    if not zone.any():
+        zone = fd.valid
+    median = weighted_percentile(length_scale(fd), np.where(zone, fd.area_3d, 0.0), 50.0)
+    return 1.0 / median if np.isfinite(median) and median > 0 else 1.0
+
+
+def zone_summary(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, importance: np.ndarray | None) -> dict:
+    """How true the flattening is inside the important zone and outside it, for the JSON.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    uv : (n, 2) float64
+    faces : (m, 3) int64
+    importance : (n,) float64 or None
+
+    Returns
+    -------
+    dict
+        ``important_zone`` and ``rest`` (:class:`potflat.mesh.distortion.ZoneFigures` as dicts,
+        NaN as null) and ``lengths``: one sentence on how far lengths read off the image
+        are off where the painting is.
+    """
+    zones = zone_figures(vertices, uv, faces, importance)
+    imp = zones["important"]
+    where = "in the painted zone" if importance is not None else "on the surface"
+    words = (f"lengths measured on the image {where} are off by {imp.length_error_median_pct:.1f}% "
+             f"(median) and by at most {imp.length_error_p95_pct:.1f}% over 95% of it; "
+             f"median scale {imp.scale_median:.3f}")
+    return {"important_zone": _json_safe(imp.as_dict()), "rest": _json_safe(zones["rest"].as_dict()),
+            "lengths": words}
+
+
+def _json_safe(node):
+    """NaN and infinity as None (JSON has neither), recursively."""
+    if isinstance(node, dict):
+        return {k: _json_safe(v) for k, v in node.items()}
+    if isinstance(node, float) and not math.isfinite(node):
+        return None
+    return node

@@ -1,0 +1,9 @@
+"""Stage 2, relax: fold-free elastic relaxation of a rollout.
+
+``from potflat.relax import relax, RelaxOptions``. Modules: :mod:`.solver` (options, the
+spring energy's minimisation and the file stage), :mod:`.hierarchy` (the multilevel
+preconditioner), :mod:`.simplify` (coarse copies), :mod:`._kernels` (Numba kernels).
+"""
+from potflat.relax.solver import PRESETS, RelaxOptions, RelaxResult, relax, run_relax_stage
+
+__all__ = ["PRESETS", "RelaxOptions", "RelaxResult", "relax", "run_relax_stage"]

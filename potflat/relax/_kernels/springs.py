@@ -1,0 +1,1116 @@
+"""Spring-model kernels of the relax stage (paper Eq. 1 and 2), all in 2D.
+
+Arrays in, arrays out, no I/O. Parallel kernels only write to per-iteration slots:
+forces are gathered per vertex over a CSR adjacency (each spring stored once per
+endpoint), sums are returned per vertex or per fixed-size block and added up serially,
+the mesh's edges are counted per vertex, then filled at the summed offsets, so every
+result is bit-identical run to run and for any thread count.
+
+Energy (normalised units, ``coef = k`` or ``k / r^2``)::
+
+    E = 1/2 sum_springs coef (|x_i - x_j| - r)^2  +  sum_faces B(A_f)
+
+with the barrier ``B = mu k a_ref phi(A / (eps a_ref))``, ``phi(a) = a - 1 - log a`` for
+``a < 1`` and 0 above: it is zero unless a triangle is squeezed below ``eps`` of its
+reference area, and infinite for a flipped one.
+
+A second barrier keeps the boundary from wrapping over itself at a vertex: for each guarded
+boundary vertex ``b`` (one incoming and one outgoing boundary half-edge, ``prv -> b -> nxt``)
+the flat interior angle sum ``Theta_b`` (the sum of its faces' angles at ``b``, which with
+positively oriented faces equals the angle swept from ``nxt - b`` counter-clockwise to
+``prv - b``) must stay below ``2 pi``: ``mu_b k phi((2 pi - Theta_b) / gap)``. Every face
+may keep its orientation while a fan with ``Theta_b > 2 pi`` overlaps itself, so the face
+barrier alone does not prevent this. ``Theta_b`` depends only on ``b``, ``prv`` and ``nxt``
+(the inner fan edges cancel), so its gradient touches three boundary vertices and is
+gathered per vertex through ``prv``/``nxt``.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from potflat._jit import leaf, parallel, prange
+
+#: Block size of the deterministic reductions (independent of the thread count).
+BLOCK = 4096
+
+
+#: A vertex's half-edges are sorted by insertion up to this many, by merge sort above (a fan
+#: of thousands of faces stays ``O(d log d)``).
+INSERTION_MAX = 32
+
+
+@parallel
+def halfedge_springs(faces, vf_ptr, vf_tri, springs=True):
+    """Unique edges and cross springs of a triangle mesh.
+
+    Count-then-fill over the vertices (no global sort): each vertex ``i`` groups the
+    half-edges of its faces whose smaller endpoint is ``i`` by the other endpoint. Equal to
+    a stable sort of all half-edges by edge, so the two half-edges of an edge come in the
+    order of their flat index ``3 f + c``.
+
+    Parameters
+    ----------
+    faces : (m, 3) int32 or int64
+    vf_ptr, vf_tri : CSR from :func:`vertex_faces` (its length gives the number of vertices)
+    springs : bool, optional
+        False: only the edges (``cross`` and ``boundary`` come back empty).
+
+    Returns
+    -------
+    edges : (e, 2) int64
+        Each undirected edge once (``i < j``; ``i == j`` for a face with a repeated vertex),
+        ordered by ``(i, j)``.
+    cross : (c, 4) int64
+        One row ``(p, q, a, b)`` per edge shared by exactly two faces, in ``edges``' order:
+        the shared edge ``a -> b`` as it runs in the face with the smaller half-edge index,
+        ``p`` its vertex opposite the edge and ``q`` the other face's; rows with ``p == q``
+        (e.g. a duplicate face) are left out.
+    boundary : (b, 2) int64
+        The edges used by one face only, in ``edges``' order, each oriented as in its face
+        (``a -> b`` counter-clockwise). Edges of three or more faces are in neither.
+    """
+    n = vf_ptr.shape[0] - 1
+    most = 0
+    for i in range(n):
+        most = max(most, vf_ptr[i + 1] - vf_ptr[i])
+    nblk = (n + BLOCK - 1) // BLOCK
+    # offsets of each vertex's edges, cross springs and boundary edges (counted, then summed);
+    # the counting pass writes nothing, so it gets empty outputs
+    start = np.zeros((n + 1, 3), np.int64)
+    edges = np.empty((0, 2), np.int64)
+    cross = np.empty((0, 4), np.int64)
+    boundary = np.empty((0, 2), np.int64)
+    for blk in prange(nblk):
+        hj = np.empty(3 * most, np.int64)
+        hh = np.empty(3 * most, np.int64)
+        for i in range(blk * BLOCK, min(n, (blk + 1) * BLOCK)):
+            k = _lower_halfedges(i, vf_ptr, vf_tri, faces, hj, hh)
+            ne, nc, nb = _vertex_edges(i, faces, hj, hh, k, springs, edges, cross, boundary, 0, 0, 0, False)
+            start[i + 1, 0] = ne
+            start[i + 1, 1] = nc
+            start[i + 1, 2] = nb
+    for i in range(n):
+        for t in range(3):
+            start[i + 1, t] += start[i, t]
+    edges = np.empty((start[n, 0], 2), np.int64)
+    cross = np.empty((start[n, 1], 4), np.int64)
+    boundary = np.empty((start[n, 2], 2), np.int64)
+    for blk in prange(nblk):
+        hj = np.empty(3 * most, np.int64)
+        hh = np.empty(3 * most, np.int64)
+        for i in range(blk * BLOCK, min(n, (blk + 1) * BLOCK)):
+            k = _lower_halfedges(i, vf_ptr, vf_tri, faces, hj, hh)
+            _vertex_edges(i, faces, hj, hh, k, springs, edges, cross, boundary,
+                          start[i, 0], start[i, 1], start[i, 2], True)
+    return edges, cross, boundary
+
+
+@leaf
+def _lower_halfedges(i, vf_ptr, vf_tri, faces, hj, hh):
+    """The half-edges whose smaller endpoint is vertex ``i``, sorted by ``(j, h)``.
+
+    Parameters
+    ----------
+    i : int
+    vf_ptr, vf_tri : CSR from :func:`vertex_faces`
+    faces : (m, 3) int32 or int64
+    hj, hh : (cap,) int64
+        Output in the first ``k`` slots: the other endpoint ``j >= i`` and the half-edge
+        index ``h = 3 f + c`` (from ``faces[f, c]`` to ``faces[f, (c + 1) % 3]``). ``cap``
+        must be at least three times the vertex's number of faces.
+
+    Returns
+    -------
+    k : int
+    """
+    k = 0
+    prev = -1
+    for p in range(vf_ptr[i], vf_ptr[i + 1]):
+        f = vf_tri[p]
+        if f == prev:  # a face with a repeated vertex is listed once per corner
+            continue
+        prev = f
+        for c in range(3):
+            a = faces[f, c]
+            b = faces[f, (c + 1) % 3]
+            if min(a, b) == i:
+                hj[k] = max(a, b)
+                hh[k] = 3 * f + c
+                k += 1
+    # the faces come in increasing order, so h does: a stable sort by j sorts by (j, h)
+    if k > INSERTION_MAX:
+        order = np.argsort(hj[:k], kind="mergesort")
+        hj[:k] = hj[order]
+        hh[:k] = hh[order]
+        return k
+    for s in range(1, k):
+        j = hj[s]
+        h = hh[s]
+        t = s - 1
+        while t >= 0 and hj[t] > j:
+            hj[t + 1] = hj[t]
+            hh[t + 1] = hh[t]
+            t -= 1
+        hj[t + 1] = j
+        hh[t + 1] = h
+    return k
+
+
+@leaf
+def _vertex_edges(i, faces, hj, hh, k, springs, edges, cross, boundary, oe, oc, ob, write):
+    """Count vertex ``i``'s edges, cross springs and boundary edges; with ``write``, also
+    store them from rows ``oe``, ``oc``, ``ob`` of ``edges``, ``cross``, ``boundary``.
+
+    ``hj[:k]``, ``hh[:k]`` are the vertex's half-edges from :func:`_lower_halfedges`; the
+    rows are those of :func:`halfedge_springs` (cross and boundary only with ``springs``).
+
+    Returns
+    -------
+    ne, nc, nb : int
+    """
+    ne = 0
+    nc = 0
+    nb = 0
+    s = 0
+    while s < k:
+        g = s + 1
+        while g < k and hj[g] == hj[s]:
+            g += 1
+        if write:
+            edges[oe + ne, 0] = i
+            edges[oe + ne, 1] = hj[s]
+        ne += 1
+        if springs and g - s <= 2:
+            f0 = hh[s] // 3
+            c0 = hh[s] % 3
+            a = faces[f0, c0]
+            b = faces[f0, (c0 + 1) % 3]
+            if g - s == 1:  # oriented as in its face
+                if write:
+                    boundary[ob + nb, 0] = a
+                    boundary[ob + nb, 1] = b
+                nb += 1
+            else:
+                p = faces[f0, (c0 + 2) % 3]
+                q = faces[hh[s + 1] // 3, (hh[s + 1] % 3 + 2) % 3]
+                if p != q:
+                    if write:
+                        cross[oc + nc, 0] = p
+                        cross[oc + nc, 1] = q
+                        cross[oc + nc, 2] = a
+                        cross[oc + nc, 3] = b
+                    nc += 1
+        s = g
+    return ne, nc, nb
+
+
+@parallel
+def halfedge_lengths(V, faces, out):
+    """Length of every face's three edges.
+
+    Parameters
+    ----------
+    V : (n, d) float64
+    faces : (m, 3) int32 or int64
+    out : (m, 3) float64
+        Output: ``out[f, c] = |V[faces[f, (c + 1) % 3]] - V[faces[f, c]]|``, bit-identical
+        to ``np.linalg.norm(V[faces[:, [1, 2, 0]]] - V[faces], axis=2)``.
+    """
+    for f in prange(faces.shape[0]):
+        for c in range(3):
+            a = faces[f, c]
+            b = faces[f, (c + 1) % 3]
+            acc = 0.0
+            for d in range(V.shape[1]):
+                t = V[b, d] - V[a, d]
+                acc += t * t
+            out[f, c] = math.sqrt(acc)
+
+
+@parallel
+def cross_rest_lengths(V, cross):
+    """Intrinsic rest length of each cross spring: the distance of the two opposite
+    vertices with the winged pair unfolded flat about the shared edge.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+    cross : (c, 4) int64
+        Rows ``(p, q, a, b)`` from :func:`halfedge_springs`.
+
+    Returns
+    -------
+    (c,) float64
+        Falls back to the 3D chord when the shared edge has zero length.
+    """
+    nc = cross.shape[0]
+    out = np.empty(nc)
+    for s in prange(nc):
+        p, q, a, b = cross[s, 0], cross[s, 1], cross[s, 2], cross[s, 3]
+        ab = 0.0
+        ap = 0.0
+        bp = 0.0
+        aq = 0.0
+        bq = 0.0
+        pq = 0.0
+        for d in range(3):
+            ab += (V[b, d] - V[a, d]) ** 2
+            ap += (V[p, d] - V[a, d]) ** 2
+            bp += (V[p, d] - V[b, d]) ** 2
+            aq += (V[q, d] - V[a, d]) ** 2
+            bq += (V[q, d] - V[b, d]) ** 2
+            pq += (V[q, d] - V[p, d]) ** 2
+        L = math.sqrt(ab)
+        if L <= 0.0:
+            out[s] = math.sqrt(pq)
+        else:
+            xp = (ap - bp + ab) / (2.0 * L)
+            xq = (aq - bq + ab) / (2.0 * L)
+            yp = math.sqrt(max(ap - xp * xp, 0.0))
+            yq = -math.sqrt(max(aq - xq * xq, 0.0))
+            out[s] = math.sqrt((xp - xq) ** 2 + (yp - yq) ** 2)
+    return out
+
+
+@leaf
+def build_csr(V, edges, cross, cross_rest):
+    """Per-vertex adjacency of the springs: each spring once per endpoint.
+
+    Parameters
+    ----------
+    V : (n, d) float64
+        Rest positions: an edge spring's rest length is its length here.
+    edges : (e, 2) int64
+        Edge springs.
+    cross : (c, 4) int64
+        Cross springs: rows ``(p, q, a, b)`` from :func:`halfedge_springs` join ``p`` and ``q``.
+    cross_rest : (c,) float64
+        Their rest lengths (:func:`cross_rest_lengths`).
+
+    Returns
+    -------
+    ptr : (n + 1,) int64
+    nbr : (2 (e + c),) int32
+        The other endpoint; within each vertex the edge springs in ``edges``' order, then the
+        cross springs in ``cross``' order.
+    rst : (2 (e + c),) float64
+        The rest length.
+    """
+    n = V.shape[0]
+    ne = edges.shape[0]
+    nc = cross.shape[0]
+    deg = np.zeros(n + 1, np.int64)
+    for s in range(ne):
+        deg[edges[s, 0] + 1] += 1
+        deg[edges[s, 1] + 1] += 1
+    for s in range(nc):
+        deg[cross[s, 0] + 1] += 1
+        deg[cross[s, 1] + 1] += 1
+    ptr = np.cumsum(deg)
+    fill = ptr[:-1].copy()
+    nbr = np.empty(2 * (ne + nc), np.int32)
+    rst = np.empty(2 * (ne + nc))
+    for s in range(ne):
+        i = edges[s, 0]
+        j = edges[s, 1]
+        acc = 0.0
+        for d in range(V.shape[1]):
+            t = V[i, d] - V[j, d]
+            acc += t * t
+        _put_spring(fill, nbr, rst, i, j, math.sqrt(acc))
+    for s in range(nc):
+        _put_spring(fill, nbr, rst, cross[s, 0], cross[s, 1], cross_rest[s])
+    return ptr, nbr, rst
+
+
+@leaf
+def _put_spring(fill, nbr, rst, i, j, r):
+    """Store spring ``(i, j)`` of rest length ``r`` at both endpoints' next CSR slots."""
+    nbr[fill[i]] = j
+    rst[fill[i]] = r
+    fill[i] += 1
+    nbr[fill[j]] = i
+    rst[fill[j]] = r
+    fill[j] += 1
+
+
+@leaf
+def vertex_faces(n, faces):
+    """Incident faces of each vertex (CSR, faces in increasing order).
+
+    Returns
+    -------
+    ptr : (n + 1,) int64
+    tri : (3 m,) int32
+    """
+    m = faces.shape[0]
+    deg = np.zeros(n + 1, np.int64)
+    for f in range(m):
+        for c in range(3):
+            deg[faces[f, c] + 1] += 1
+    ptr = np.cumsum(deg)
+    fill = ptr[:-1].copy()
+    tri = np.empty(3 * m, np.int32)
+    for f in range(m):
+        for c in range(3):
+            v = faces[f, c]
+            tri[fill[v]] = f
+            fill[v] += 1
+    return ptr, tri
+
+
+@parallel
+def neighbour_means(x, verts, vf_ptr, vf_tri, faces, out):
+    """Mean of ``x`` (positions, or a search direction) over each listed vertex's edge
+    neighbours (each neighbour counted once).
+
+    Parameters
+    ----------
+    x : (n, 2) float64
+    verts : (k,) int64
+    vf_ptr, vf_tri : CSR from :func:`vertex_faces`
+    faces : (m, 3) int32 or int64
+    out : (k, 2) float64
+        Output (the vertex's own value when it has no neighbour).
+    """
+    for k in prange(verts.shape[0]):
+        i = verts[k]
+        sx = 0.0
+        sy = 0.0
+        cnt = 0
+        lo = vf_ptr[i]
+        for p in range(lo, vf_ptr[i + 1]):
+            f = vf_tri[p]
+            for c in range(3):
+                j = faces[f, c]
+                if j == i:
+                    continue
+                seen = False
+                for p2 in range(lo, p):
+                    f2 = vf_tri[p2]
+                    if faces[f2, 0] == j or faces[f2, 1] == j or faces[f2, 2] == j:
+                        seen = True
+                        break
+                if not seen:
+                    sx += x[j, 0]
+                    sy += x[j, 1]
+                    cnt += 1
+        if cnt:
+            out[k, 0] = sx / cnt
+            out[k, 1] = sy / cnt
+        else:
+            out[k, 0] = x[i, 0]
+            out[k, 1] = x[i, 1]
+
+
+@leaf
+def _phi(a):
+    """Barrier profile: ``a - 1 - log a`` below 1, 0 above, inf at or below 0."""
+    if a >= 1.0:
+        return 0.0
+    if a <= 0.0:
+        return np.inf
+    return a - 1.0 - math.log(a)
+
+
+@parallel
+def face_areas(x, faces, out):
+    """Signed area of every face.
+
+    Parameters
+    ----------
+    x : (n, 2) float64
+    faces : (m, 3) int32 or int64
+    out : (m,) float64
+    """
+    for t in prange(faces.shape[0]):
+        a0 = faces[t, 0]
+        a1 = faces[t, 1]
+        a2 = faces[t, 2]
+        out[t] = 0.5 * ((x[a1, 0] - x[a0, 0]) * (x[a2, 1] - x[a0, 1])
+                        - (x[a1, 1] - x[a0, 1]) * (x[a2, 0] - x[a0, 0]))
+
+
+@leaf
+def _angle_barrier_slope(theta, sb, gap):
+    """Boundary angle barrier at angle sum ``theta``: ``dB / dTheta`` and the factor of its
+    Hessian diagonal bound (both 0 where the barrier is off, i.e. the gap is at least ``gap``)."""
+    a = (2.0 * math.pi - theta) / gap
+    if not 0.0 < a < 1.0:
+        return 0.0, 0.0
+    return -sb * (1.0 - 1.0 / a) / gap, sb / (a * a * gap * gap)
+
+
+@parallel
+def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_tri, faces, shape,
+                    bprev, bnext, bguard, theta, mu_b, gap, grad, e_spring, e_barrier, diag):
+    """Spring + shape term + boundary angle barrier energy per vertex and the gradient,
+    gathered per vertex.
+
+    The face barrier is added afterwards by :func:`face_barrier` (it acts on few faces).
+    The shape term of each face (:func:`shape_coefficients`) is gathered from its three
+    corners, each taking a third of its energy.
+
+    Parameters
+    ----------
+    x : (n, 2) float64
+        Positions (normalised units).
+    ptr, nbr, rst : CSR from :func:`build_csr`
+    k : float
+        Stiffness.
+    relative : bool
+        Weight each spring by ``1 / max(r, r_floor)^2`` (relative length error).
+    r_floor : float
+    weight : (n,) or (0,) float64
+        Importance weight of each vertex (:mod:`potflat.importance`): a spring's coefficient
+        is multiplied by the mean of its endpoints' weights. Empty: every weight is 1.
+    vf_ptr, vf_tri : CSR from :func:`vertex_faces`
+    faces : (m, 3) int32 or int64
+    shape : (m, 4) or (0, 4) float64
+        Shape term coefficients (:func:`shape_coefficients`). Empty: no shape term. A face
+        with non-positive flat area makes the energy infinite.
+    bprev, bnext : (n,) int32
+        Each vertex's unique boundary predecessor and successor (-1: none or not unique).
+    bguard : (n,) bool
+        Boundary vertices whose angle sum is guarded.
+    theta : (n,) float64
+        Flat interior angle sums of the guarded vertices at ``x`` (:func:`boundary_angle_sums`).
+    mu_b, gap : float
+        Angle barrier weight and activation (radians below ``2 pi``); ``mu_b = 0`` disables it.
+    grad : (n, 2) float64
+        Output: dE/dx.
+    e_spring, e_barrier : (n,) float64
+        Output: each vertex's share of the spring energy and its angle barrier energy.
+    diag : (n,) float64
+        Output: a bound of the Hessian's diagonal per vertex (sum of spring coefficients plus
+        the barrier's curvature), the Jacobi preconditioner of the fine-level solve.
+    """
+    n = x.shape[0]
+    weighted = weight.shape[0] > 0
+    shaped = shape.shape[0] > 0
+    for i in prange(n):
+        gx = 0.0
+        gy = 0.0
+        es = 0.0
+        hd = 0.0
+        xi = x[i, 0]
+        yi = x[i, 1]
+        for p in range(ptr[i], ptr[i + 1]):
+            j = nbr[p]
+            dx = xi - x[j, 0]
+            dy = yi - x[j, 1]
+            ln = math.sqrt(dx * dx + dy * dy)
+            r = rst[p]
+            c = k
+            if relative:
+                rr = max(r, r_floor)
+                c = k / (rr * rr)
+            if weighted:
+                c *= 0.5 * (weight[i] + weight[j])
+            hd += c
+            dl = ln - r
+            es += 0.25 * c * dl * dl
+            if ln > 0.0:
+                f = c * dl / ln
+                gx += f * dx
+                gy += f * dy
+        if shaped:
+            for q in range(vf_ptr[i], vf_ptr[i + 1]):
+                t = vf_tri[q]
+                ci = 0
+                if faces[t, 1] == i:
+                    ci = 1
+                elif faces[t, 2] == i:
+                    ci = 2
+                j = faces[t, (ci + 1) % 3]
+                l = faces[t, (ci + 2) % 3]
+                # cotangents of the rest angles at i, j, l, and 2 s w A_rest
+                ct_i = shape[t, ci]
+                ct_j = shape[t, (ci + 1) % 3]
+                ct_l = shape[t, (ci + 2) % 3]
+                wa = shape[t, 3]
+                ax = xi - x[j, 0]
+                ay = yi - x[j, 1]
+                bx = xi - x[l, 0]
+                by = yi - x[l, 1]
+                cx = x[j, 0] - x[l, 0]
+                cy = x[j, 1] - x[l, 1]
+                area = 0.5 * (ax * by - ay * bx)
+                if area <= 0.0:
+                    es = np.inf
+                    continue
+                # Dirichlet energy of the face's map, and its gradient at i
+                dir_ = 0.25 * (ct_l * (ax * ax + ay * ay) + ct_j * (bx * bx + by * by) + ct_i * (cx * cx + cy * cy))
+                dgx = 0.5 * (ct_l * ax + ct_j * bx)
+                dgy = 0.5 * (ct_l * ay + ct_j * by)
+                # the flat area's gradient at i
+                agx = 0.5 * (x[j, 1] - x[l, 1])
+                agy = 0.5 * (x[l, 0] - x[j, 0])
+                es += wa * (dir_ / area - 1.0) / 3.0
+                gx += wa * (dgx * area - dir_ * agx) / (area * area)
+                gy += wa * (dgy * area - dir_ * agy) / (area * area)
+                hd += wa * 0.5 * (ct_l + ct_j) / area
+        eb = 0.0
+        if mu_b > 0.0 and (bprev[i] >= 0 or bnext[i] >= 0):
+            sb = mu_b * k
+            # own angle sum: depends on x_i through u = x_nxt - x_i and w = x_prv - x_i
+            if bguard[i]:
+                a = (2.0 * math.pi - theta[i]) / gap
+                if a <= 0.0:
+                    eb = np.inf
+                elif a < 1.0:
+                    eb += sb * (a - 1.0 - math.log(a))
+                    cb, h = _angle_barrier_slope(theta[i], sb, gap)
+                    ux = x[bnext[i], 0] - xi
+                    uy = x[bnext[i], 1] - yi
+                    wx = x[bprev[i], 0] - xi
+                    wy = x[bprev[i], 1] - yi
+                    uu = ux * ux + uy * uy
+                    ww = wx * wx + wy * wy
+                    tx = -(uy / uu - wy / ww)
+                    ty = -(-ux / uu + wx / ww)
+                    gx += cb * tx
+                    gy += cb * ty
+                    hd += h * (tx * tx + ty * ty)
+            # as the successor of its predecessor p: Theta_p grows with arg(x_i - x_p) decreasing
+            pv = bprev[i]
+            if pv >= 0 and bguard[pv]:
+                cb, h = _angle_barrier_slope(theta[pv], sb, gap)
+                if h > 0.0:
+                    ux = xi - x[pv, 0]
+                    uy = yi - x[pv, 1]
+                    uu = ux * ux + uy * uy
+                    tx = uy / uu
+                    ty = -ux / uu
+                    gx += cb * tx
+                    gy += cb * ty
+                    hd += h * (tx * tx + ty * ty)
+            # as the predecessor of its successor q
+            qv = bnext[i]
+            if qv >= 0 and bguard[qv]:
+                cb, h = _angle_barrier_slope(theta[qv], sb, gap)
+                if h > 0.0:
+                    wx = xi - x[qv, 0]
+                    wy = yi - x[qv, 1]
+                    ww = wx * wx + wy * wy
+                    tx = -wy / ww
+                    ty = wx / ww
+                    gx += cb * tx
+                    gy += cb * ty
+                    hd += h * (tx * tx + ty * ty)
+        diag[i] = hd
+        grad[i, 0] = gx
+        grad[i, 1] = gy
+        e_spring[i] = es
+        e_barrier[i] = eb
+
+
+@parallel
+def shape_coefficients(V, faces, weight, scale, area_floor, out):
+    """Coefficients of the shape term: each face's symmetric anisotropy energy.
+
+    For a face with rest (3D) triangle of area ``A`` and the linear map ``J`` from it to
+    the flat triangle (singular values ``sigma_1 >= sigma_2 > 0``), the term is
+    ``s w A (sigma_1 / sigma_2 + sigma_2 / sigma_1 - 2)`` (the MIPS energy): zero for a
+    similarity, so it charges shear but neither scale nor rotation, about ``s w A S^2`` for
+    a small ``S = log(sigma_1 / sigma_2)`` (the anisotropy the maps show) and infinite for a
+    collapsed triangle. With ``|J|^2 / det J = 2 D / A_flat``, ``D = 1/4 sum_edges
+    cot(opposite angle) |x_a - x_b|^2`` the map's Dirichlet energy, it is
+    ``2 s w A (D / A_flat - 1)``.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+        Rest positions.
+    faces : (m, 3) int32 or int64
+    weight : (n,) or (0,) float64
+        Importance weight per vertex (a face takes its corners' mean); empty: 1.
+    scale : float
+        ``s``: the term's weight per unit rest area.
+    area_floor : float
+        Faces with a smaller rest area (degenerate, their angles meaningless) get no term.
+    out : (m, 4) float64
+        Output: the cotangents of the rest angles at corners 0, 1, 2 and ``2 s w A``.
+    """
+    for t in prange(faces.shape[0]):
+        a0 = faces[t, 0]
+        a1 = faces[t, 1]
+        a2 = faces[t, 2]
+        e1x = V[a1, 0] - V[a0, 0]
+        e1y = V[a1, 1] - V[a0, 1]
+        e1z = V[a1, 2] - V[a0, 2]
+        e2x = V[a2, 0] - V[a0, 0]
+        e2y = V[a2, 1] - V[a0, 1]
+        e2z = V[a2, 2] - V[a0, 2]
+        nx = e1y * e2z - e1z * e2y
+        ny = e1z * e2x - e1x * e2z
+        nz = e1x * e2y - e1y * e2x
+        twice = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if 0.5 * twice <= area_floor:
+            for c in range(4):
+                out[t, c] = 0.0
+            continue
+        w = scale
+        if weight.shape[0] > 0:
+            w *= (weight[a0] + weight[a1] + weight[a2]) / 3.0
+        e3x = V[a2, 0] - V[a1, 0]
+        e3y = V[a2, 1] - V[a1, 1]
+        e3z = V[a2, 2] - V[a1, 2]
+        # cot of the angle at a corner = (dot of its two edges) / (twice the area)
+        out[t, 0] = (e1x * e2x + e1y * e2y + e1z * e2z) / twice
+        out[t, 1] = (-e1x * e3x - e1y * e3y - e1z * e3z) / twice
+        out[t, 2] = (e2x * e3x + e2y * e3y + e2z * e3z) / twice
+        out[t, 3] = w * twice
+
+
+@leaf
+def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, weight, grad, diag):
+    """Add the face barrier to ``grad`` and ``diag``; return its energy.
+
+    Serial over the faces in order (deterministic); only faces squeezed below ``eps`` of
+    their reference area contribute, usually a small fraction, so this costs one pass over
+    ``areas`` and ``a_ref`` instead of a gather over every vertex's incident faces.
+
+    Parameters
+    ----------
+    x : (n, 2) float64
+    faces : (m, 3) int32 or int64
+    areas : (m,) float64
+        Signed face areas at ``x`` (:func:`face_areas`).
+    a_ref : (m,) float64
+        Reference (rest) area of each face, floored.
+    mu, k, eps : float
+        Barrier weight, stiffness and activation threshold (fraction of ``a_ref``).
+    relative : bool
+        Weight each face's barrier by ``mu k`` (relative spring weighting: the springs'
+        energy is dimensionless) instead of ``mu k a_ref`` (uniform: energy ~ length^2).
+    weight : (n,) or (0,) float64
+        Importance weight of each vertex: a face's barrier is multiplied by the mean of its
+        corners' weights, like its springs. Empty: every weight is 1.
+    grad, diag : (n, 2), (n,) float64
+        Updated in place: gradient and Hessian diagonal bound.
+
+    Returns
+    -------
+    float
+        ``sum mu k w phi(A / (eps a_ref))`` (``w = 1`` or ``a_ref``); inf when a face has
+        non-positive area.
+    """
+    total = 0.0
+    for t in range(faces.shape[0]):
+        area = areas[t]
+        th = eps * a_ref[t]
+        if area >= th:
+            continue
+        if area <= 0.0:
+            total = np.inf
+            continue
+        a = area / th
+        scale = mu * k if relative else mu * k * a_ref[t]
+        if weight.shape[0] > 0:
+            scale *= (weight[faces[t, 0]] + weight[faces[t, 1]] + weight[faces[t, 2]]) / 3.0
+        total += scale * (a - 1.0 - math.log(a))
+        dphi = scale * (1.0 - 1.0 / a) / th
+        h = scale / (area * area)
+        for c in range(3):
+            i = faces[t, c]
+            j1 = faces[t, (c + 1) % 3]
+            j2 = faces[t, (c + 2) % 3]
+            ax = 0.5 * (x[j1, 1] - x[j2, 1])
+            ay = 0.5 * (x[j2, 0] - x[j1, 0])
+            grad[i, 0] += dphi * ax
+            grad[i, 1] += dphi * ay
+            diag[i] += h * (ax * ax + ay * ay)
+    return total
+
+
+@leaf
+def _area_polynomial(x, d, faces, f, shrink):
+    """Coefficients ``(c0, c1, c2)`` of face ``f``'s signed area (doubled) along ``x + t d``
+    minus ``1 - shrink`` of its area at ``x``: ``c0 + c1 t + c2 t^2``."""
+    a0 = faces[f, 0]
+    a1 = faces[f, 1]
+    a2 = faces[f, 2]
+    e1x = x[a1, 0] - x[a0, 0]
+    e1y = x[a1, 1] - x[a0, 1]
+    e2x = x[a2, 0] - x[a0, 0]
+    e2y = x[a2, 1] - x[a0, 1]
+    f1x = d[a1, 0] - d[a0, 0]
+    f1y = d[a1, 1] - d[a0, 1]
+    f2x = d[a2, 0] - d[a0, 0]
+    f2y = d[a2, 1] - d[a0, 1]
+    c0 = (e1x * e2y - e1y * e2x) * shrink
+    c1 = e1x * f2y - e1y * f2x + f1x * e2y - f1y * e2x
+    c2 = f1x * f2y - f1y * f2x
+    return c0, c1, c2
+
+
+@leaf
+def _no_root_up_to(c0, c1, c2, t):
+    """True when ``c0 + c1 s + c2 s^2`` stays positive for every ``s`` in ``[0, t]``: positive
+    at both ends and no convex dip below zero in between (branch-free, without a division
+    or a square root)."""
+    return (c0 > 0.0) & (c0 + t * (c1 + t * c2) > 0.0) & (
+        (c2 <= 0.0) | (c1 >= 0.0) | (-c1 >= 2.0 * c2 * t) | (4.0 * c0 * c2 > c1 * c1))
+
+
+@parallel
+def max_step(x, d, faces, cap, shrink, out, limiting):
+    """Per block of faces, the largest ``t <= cap`` for which ``x + t d`` keeps every face's
+    signed area above ``1 - shrink`` times its area at ``x`` (``shrink = 1``: positive;
+    the smallest positive root of a quadratic in ``t``).
+
+    A face whose area polynomial has no root in ``[0, best]`` is skipped (most faces); only
+    the others solve their quadratic.
+
+    Parameters
+    ----------
+    x, d : (n, 2) float64
+    faces : (m, 3) int32 or int64
+    cap : float
+        Upper bound of interest (``inf``: none).
+    shrink : float
+        Largest fraction of its area a face may lose, in (0, 1].
+    out : (ceil(m / BLOCK),) float64
+        Output: minimum over each block (``cap`` when no face shrinks that far before it).
+    limiting : (m,) or (0,) bool
+        Output unless empty: the faces whose own bound is below ``cap``.
+    """
+    m = faces.shape[0]
+    nb = out.shape[0]
+    flag = limiting.shape[0] > 0
+    for b in prange(nb):
+        best = cap
+        for f in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
+            c0, c1, c2 = _area_polynomial(x, d, faces, f, shrink)
+            if flag:
+                limiting[f] = not _no_root_up_to(c0, c1, c2, cap)
+            if not _no_root_up_to(c0, c1, c2, best):
+                best = min(best, _first_root(c0, c1, c2))
+        out[b] = best
+
+
+@leaf
+def max_step_of(x, d, faces, face_list, cap, shrink):
+    """:func:`max_step` over the listed faces only (repeats allowed): the largest ``t <= cap``.
+
+    Parameters
+    ----------
+    x, d : (n, 2) float64
+    faces : (m, 3) int32 or int64
+    face_list : (k,) int64
+    cap, shrink : float
+    """
+    best = cap
+    for p in range(face_list.shape[0]):
+        c0, c1, c2 = _area_polynomial(x, d, faces, face_list[p], shrink)
+        if not _no_root_up_to(c0, c1, c2, best):
+            best = min(best, _first_root(c0, c1, c2))
+    return best
+
+
+@leaf
+def flagged_face_vertices(flags, faces, seen):
+    """The vertices of the flagged faces, each once, in order of first appearance.
+
+    Parameters
+    ----------
+    flags : (m,) bool
+    faces : (m, 3) int32 or int64
+    seen : (n,) bool
+        Work space, all False on entry and on return.
+
+    Returns
+    -------
+    (k,) int64
+    """
+    count = 0
+    for f in range(flags.shape[0]):
+        if flags[f]:
+            count += 3
+    out = np.empty(count, np.int64)
+    k = 0
+    for f in range(flags.shape[0]):
+        if flags[f]:
+            for c in range(3):
+                v = faces[f, c]
+                if not seen[v]:
+                    seen[v] = True
+                    out[k] = v
+                    k += 1
+    for p in range(k):
+        seen[out[p]] = False
+    return out[:k]
+
+
+@leaf
+def incident_faces(verts, vf_ptr, vf_tri):
+    """The faces incident to the listed vertices, concatenated per vertex (a face shared by
+    several listed vertices appears once per vertex).
+
+    Parameters
+    ----------
+    verts : (k,) int64
+    vf_ptr, vf_tri : CSR from :func:`vertex_faces`
+
+    Returns
+    -------
+    (sum of the valences,) int64
+    """
+    total = 0
+    for v in verts:
+        total += vf_ptr[v + 1] - vf_ptr[v]
+    out = np.empty(total, np.int64)
+    k = 0
+    for v in verts:
+        for p in range(vf_ptr[v], vf_ptr[v + 1]):
+            out[k] = vf_tri[p]
+            k += 1
+    return out
+
+
+@leaf
+def _first_root(c0, c1, c2):
+    """Smallest positive root of ``c0 + c1 t + c2 t^2`` (inf if none); 0 if ``c0 <= 0``."""
+    if c0 <= 0.0:
+        return 0.0
+    scale = abs(c0) + abs(c1) + abs(c2)
+    if abs(c2) <= 1e-14 * scale:
+        if c1 < 0.0:
+            return -c0 / c1
+        return np.inf
+    disc = c1 * c1 - 4.0 * c2 * c0
+    if disc < 0.0:
+        return np.inf
+    sq = math.sqrt(disc)
+    q = -0.5 * (c1 + sq) if c1 >= 0.0 else -0.5 * (c1 - sq)
+    best = np.inf
+    if q != 0.0:
+        r1 = q / c2
+        r2 = c0 / q
+        if r1 > 0.0:
+            best = r1
+        if 0.0 < r2 < best:
+            best = r2
+    return best
+
+
+@parallel
+def boundary_angle_sums(x, verts, vf_ptr, vf_tri, faces, out):
+    """Flat interior angle sum of each listed boundary vertex (sum of its faces' angles).
+
+    Parameters
+    ----------
+    x : (n, 2) float64
+    verts : (b,) int64
+        Distinct vertices.
+    vf_ptr, vf_tri : CSR from :func:`vertex_faces`
+    faces : (m, 3) int32 or int64
+    out : (n,) float64
+        Output at the rows ``verts`` (other rows untouched). Each face angle is
+        ``atan2(cross, dot)`` of its two edges at the vertex, in ``(-pi, pi]``.
+    """
+    for s in prange(verts.shape[0]):
+        i = verts[s]
+        acc = 0.0
+        for p in range(vf_ptr[i], vf_ptr[i + 1]):
+            t = vf_tri[p]
+            a0 = faces[t, 0]
+            a1 = faces[t, 1]
+            a2 = faces[t, 2]
+            if a0 == i:
+                j1 = a1
+                j2 = a2
+            elif a1 == i:
+                j1 = a2
+                j2 = a0
+            else:
+                j1 = a0
+                j2 = a1
+            ux = x[j1, 0] - x[i, 0]
+            uy = x[j1, 1] - x[i, 1]
+            wx = x[j2, 0] - x[i, 0]
+            wy = x[j2, 1] - x[i, 1]
+            acc += math.atan2(ux * wy - uy * wx, ux * wx + uy * wy)
+        out[i] = acc
+
+
+@parallel
+def boundary_max_step(x, d, verts, bprev, bnext, out):
+    """Per block of guarded boundary vertices, the largest ``t`` before the vertex's angle
+    sum at ``x + t d`` reaches ``2 pi`` (its two boundary edges align, pointing the same way).
+
+    With ``u = x_nxt - x_b`` and ``w = x_prv - x_b`` the angle sum is a multiple of ``2 pi``
+    exactly where ``cross(u, w) = 0`` (a quadratic in ``t``) and ``dot(u, w) > 0``; starting
+    below ``2 pi`` with no face flipping, the first such ``t`` is where it reaches ``2 pi``.
+
+    Parameters
+    ----------
+    x, d : (n, 2) float64
+    verts : (b,) int64
+        Guarded boundary vertices (angle sum below ``2 pi`` at ``x``).
+    bprev, bnext : (n,) int32
+    out : (ceil(b / BLOCK),) float64
+        Output: minimum over each block (inf when no angle sum reaches ``2 pi``).
+    """
+    nv = verts.shape[0]
+    for blk in prange(out.shape[0]):
+        best = np.inf
+        for s in range(blk * BLOCK, min(nv, (blk + 1) * BLOCK)):
+            b = verts[s]
+            nx = bnext[b]
+            pv = bprev[b]
+            ux = x[nx, 0] - x[b, 0]
+            uy = x[nx, 1] - x[b, 1]
+            wx = x[pv, 0] - x[b, 0]
+            wy = x[pv, 1] - x[b, 1]
+            dux = d[nx, 0] - d[b, 0]
+            duy = d[nx, 1] - d[b, 1]
+            dwx = d[pv, 0] - d[b, 0]
+            dwy = d[pv, 1] - d[b, 1]
+            c0 = ux * wy - uy * wx
+            c1 = ux * dwy - uy * dwx + dux * wy - duy * wx
+            c2 = dux * dwy - duy * dwx
+            e0 = ux * wx + uy * wy
+            e1 = ux * dwx + uy * dwy + dux * wx + duy * wy
+            e2 = dux * dwx + duy * dwy
+            r1, r2 = _positive_roots(c0, c1, c2)
+            if r1 < best and e0 + r1 * (e1 + r1 * e2) > 0.0:
+                best = r1
+            elif r2 < best and e0 + r2 * (e1 + r2 * e2) > 0.0:
+                best = r2
+        out[blk] = best
+
+
+@leaf
+def _positive_roots(c0, c1, c2):
+    """The non-negative roots of ``c0 + c1 t + c2 t^2`` in increasing order (inf for missing ones)."""
+    scale = abs(c0) + abs(c1) + abs(c2)
+    if scale == 0.0:
+        return np.inf, np.inf
+    if abs(c2) <= 1e-14 * scale:
+        if c1 != 0.0 and -c0 / c1 >= 0.0:
+            return -c0 / c1, np.inf
+        return np.inf, np.inf
+    disc = c1 * c1 - 4.0 * c2 * c0
+    if disc < 0.0:
+        return np.inf, np.inf
+    sq = math.sqrt(disc)
+    q = -0.5 * (c1 + sq) if c1 >= 0.0 else -0.5 * (c1 - sq)
+    r1 = q / c2
+    r2 = c0 / q if q != 0.0 else r1
+    lo = min(r1, r2)
+    hi = max(r1, r2)
+    if lo < 0.0:
+        lo = np.inf
+    if hi < 0.0:
+        hi = np.inf
+    if lo > hi:
+        lo, hi = hi, lo
+    return lo, hi
+
+
+@parallel
+def dynamics_step(x, v, ptr, nbr, rst, k, relative, r_floor, friction, dt, x_out, v_out, e_spring):
+    """One semi-implicit Euler step of the paper's damped spring system (mass 1).
+
+    ``v <- (1 - c_i) v + dt F``, ``x <- x + dt v`` with friction ``c_i`` applied per step.
+
+    Parameters
+    ----------
+    x, v : (n, 2) float64
+        Positions and velocities now.
+    ptr, nbr, rst, k, relative, r_floor
+        Springs as in :func:`energy_gradient`.
+    friction : (n,) float64
+    dt : float
+    x_out, v_out : (n, 2) float64
+        Output: the state after the step.
+    e_spring : (n,) float64
+        Output: each vertex's share of the spring energy at ``x`` (before the step).
+    """
+    n = x.shape[0]
+    for i in prange(n):
+        fx = 0.0
+        fy = 0.0
+        es = 0.0
+        xi = x[i, 0]
+        yi = x[i, 1]
+        for p in range(ptr[i], ptr[i + 1]):
+            j = nbr[p]
+            dx = xi - x[j, 0]
+            dy = yi - x[j, 1]
+            ln = math.sqrt(dx * dx + dy * dy)
+            r = rst[p]
+            c = k
+            if relative:
+                rr = max(r, r_floor)
+                c = k / (rr * rr)
+            dl = ln - r
+            es += 0.25 * c * dl * dl
+            if ln > 0.0:
+                f = c * dl / ln
+                fx -= f * dx
+                fy -= f * dy
+        keep = 1.0 - friction[i]
+        vx = keep * v[i, 0] + dt * fx
+        vy = keep * v[i, 1] + dt * fy
+        v_out[i, 0] = vx
+        v_out[i, 1] = vy
+        x_out[i, 0] = xi + dt * vx
+        x_out[i, 1] = yi + dt * vy
+        e_spring[i] = es
+
+
+@parallel
+def laplacian_matvec(y, ptr, nbr, rst, k, relative, r_floor, out):
+    """``out = L y`` for the spring graph Laplacian with weights ``coef`` (per coordinate).
+
+    Its largest eigenvalue bounds the spring energy's Hessian (each spring's Hessian is at
+    most ``coef I``), which sets the stable time step of the dynamics.
+
+    Parameters
+    ----------
+    y : (n,) float64
+    out : (n,) float64
+    """
+    n = y.shape[0]
+    for i in prange(n):
+        acc = 0.0
+        for p in range(ptr[i], ptr[i + 1]):
+            c = k
+            if relative:
+                rr = max(rst[p], r_floor)
+                c = k / (rr * rr)
+            acc += c * (y[i] - y[nbr[p]])
+        out[i] = acc
+
+
+@parallel
+def block_dot(a, b, out):
+    """Partial dot products of two flat vectors over fixed blocks (sum ``out`` serially).
+
+    Parameters
+    ----------
+    a, b : (N,) float64
+    out : (ceil(N / BLOCK),) float64
+    """
+    N = a.shape[0]
+    for blk in prange(out.shape[0]):
+        acc = 0.0
+        for i in range(blk * BLOCK, min(N, (blk + 1) * BLOCK)):
+            acc += a[i] * b[i]
+        out[blk] = acc
+
+
+@leaf
+def block_dot_serial(a, b, out):
+    """:func:`block_dot` without threads (same blocks, same result), for short vectors."""
+    N = a.shape[0]
+    for blk in range(out.shape[0]):
+        acc = 0.0
+        for i in range(blk * BLOCK, min(N, (blk + 1) * BLOCK)):
+            acc += a[i] * b[i]
+        out[blk] = acc

@@ -1,0 +1,1127 @@
+"""Relax stage: fold-free elastic relaxation of a rollout (the paper's spring model, Eq. 1).
+
+Springs along every mesh edge plus one cross spring over every winged triangle pair (rest
+length: the opposite vertices' distance with the pair unfolded flat about the shared edge),
+all in 2D. Two solvers minimise the same spring energy:
+
+* the default presets (``preview``, ``standard``, ``archival``, which differ in their
+  convergence tolerance): L-BFGS with a flip-avoiding, monotone line search (no step ever
+  lets a triangle's signed area reach zero, the energy never increases), a barrier that
+  only acts on triangles squeezed below half their rest area, a barrier that keeps each
+  boundary vertex's flat angle sum below 2 pi (its fan cannot wrap over itself; the step
+  bound includes it), preconditioned by Jacobi plus additive multilevel corrections on
+  bilinear grids over the rollout's domain (:mod:`potflat.relax.hierarchy`), so smooth, long-range
+  moves take few iterations. The result is checked for flipped triangles and boundary
+  self-overlap; a folded result is never returned.
+* ``paper``: the paper's damped dynamics (stretch 2, k = 0.5, mass 1, friction 0.01 inside
+  and 1 on the boundary applied per step, semi-implicit Euler, time step from the spring
+  graph's largest eigenvalue), reported with its flip count, whatever it is.
+
+Large meshes first relax coarse copies (grid clusters of the start layout,
+:mod:`potflat.relax.simplify`) and start from them; ``preview`` relaxes only a copy at the image's
+resolution, and the full mesh follows it.
+
+See ``docs/method.md`` for the method and ``docs/performance.md`` for measurements.
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from potflat.mesh.distortion import (
+    DistortionSummary,
+    face_areas,
+    row_blocks,
+    summarize,
+    true_scale_factor,
+    vertex_stress,
+    zone_summary,
+)
+from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
+from potflat.types import FlatMesh, Mesh, StageOutput
+
+#: The painted figures' settings of the fold-free presets (measured: docs/performance.md,
+#: "Painted figures"): the shape term's weight, how much stiffer the important zone is than
+#: plain surface, and the final scaling to true scale in the important zone.
+_FIGURES = {"shape": 0.2, "importance_contrast": 100.0, "true_scale": True}
+#: Settings of each preset; ``None`` in :class:`RelaxOptions` takes the preset's value.
+PRESETS: dict[str, dict] = {
+    "preview": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
+                "tol": 1e-3, "max_iter": 300, "cell_vertices": 8.0, "simplify_mm": 0.5,
+                "coarse_start": True, **_FIGURES},
+    "standard": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
+                 "tol": 1e-4, "max_iter": 2000, "cell_vertices": 8.0, "coarse_start": True, **_FIGURES},
+    "archival": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
+                 "tol": 1e-7, "max_iter": 20000, "cell_vertices": 8.0, "coarse_start": True, **_FIGURES},
+    "paper": {"solver": "dynamics", "stretch": 2.0, "stiffness": 0.5, "weighting": "uniform",
+              "tol": 1e-7, "max_iter": 100000, "friction_inside": 0.01, "friction_boundary": 1.0,
+              "coarse_start": False, "shape": 0.0, "importance_contrast": 1.0, "true_scale": False},
+}
+WEIGHTINGS = ("uniform", "relative")
+#: Coarse copies (grid clusters of the start layout, :mod:`potflat.relax.simplify`): a copy has at
+#: least COARSE_MIN_COPY vertices; the full mesh only follows one (``simplify_mm``) when the
+#: copy has at most COARSE_MAX_FRACTION of its vertices (else relaxing the copy costs about as
+#: much as the full mesh: 0.5M benchmark vessel, a 57% copy at 0.5 mm, 7.8 s against 6.2 s)
+#: and covers at least COARSE_MIN_COVERAGE of them (cells much smaller than the edges leave
+#: blocks empty: the goblet scan's copy at 2 mm cells covered 38% of its vertices); meshes of
+#: at least COARSE_MIN_VERTICES start their solve from a relaxed copy with about
+#: COARSE_CELL_VERTICES vertices per cell (which nests in turn).
+COARSE_MIN_COPY, COARSE_MAX_FRACTION, COARSE_MIN_COVERAGE = 100, 1.0 / 3.0, 0.95
+COARSE_MIN_VERTICES, COARSE_CELL_VERTICES = 20_000, 16.0
+
+#: Barrier: weight (times k times the face's rest area) and activation (fraction of rest area).
+BARRIER_MU, BARRIER_EPS = 1.0, 0.5
+#: Boundary angle barrier: weight (times k) and activation (radians below 2 pi of a boundary
+#: vertex's flat interior angle sum).
+BOUNDARY_MU, BOUNDARY_GAP = 1.0, 0.5
+#: Boundary contact barrier: weight (times k) and activation distance (mean edge lengths) between
+#: a boundary vertex and a boundary segment that is not its own (active when the start's
+#: boundary does not overlap itself).
+CONTACT_MU, CONTACT_GAP = 1.0, 0.5
+#: Floor of rest areas and spring lengths, in units of the mean edge length (squared).
+AREA_FLOOR, LENGTH_FLOOR = 1e-2, 1e-3
+#: L-BFGS memory, Armijo constant, fraction of the flip-free step taken at most, and the
+#: largest fraction of its area a triangle may lose in one step (the log barrier alone grows
+#: too slowly to stop steps that each go most of the way to collapse: at 2.5M vertices, 19
+#: triangles ended below 1e-11 of their rest area without this limit).
+LBFGS_MEMORY, ARMIJO, STEP_FRACTION, STEP_SHRINK = 6, 1e-4, 0.9, 0.8
+#: Direction smoothing: when a few triangles hold the flip-free step below the natural one
+#: (typically slivers, whose area reacts to the smallest uneven move of their vertices), the
+#: direction at their vertices is replaced by their edge neighbours' mean, SMOOTH_ROUNDS
+#: times, if at most SMOOTH_MAX_FRACTION of the vertices are concerned.
+SMOOTH_ROUNDS, SMOOTH_MAX_FRACTION = 3, 0.01
+#: Weight of the multilevel preconditioner's coarse terms against its Jacobi term (measured:
+#: 1 needs 30-50% more iterations than 2; 4 about as many as 2 but more backtracking).
+PRECOND_THETA = 2.0
+#: Window (iterations) of the relative-energy-change test: L-BFGS, dynamics. (L-BFGS with 5:
+#: a few iterations cut short by a nearly collapsed triangle passed the test on the 2.5M
+#: benchmark vessel at edge RMS 0.157; with 10 it went on to 0.1454.)
+WINDOW_LBFGS, WINDOW_DYNAMICS = 10, 100
+
+
+@dataclass(frozen=True, kw_only=True)
+class RelaxOptions:
+    """Options of the relax stage (field names are the CLI options with ``_`` for ``-``).
+
+    Attributes
+    ----------
+    preset : str
+        ``preview``, ``standard`` (default), ``archival`` (fold-free preconditioned L-BFGS,
+        increasingly thorough: tolerance 1e-3, 1e-4, 1e-7) or ``paper`` (the paper's damped
+        dynamics, may fold).
+    tol : float or None
+        Stop when the relative energy decrease per iteration (averaged over a window) falls
+        below this. None: the preset's.
+    max_iter : int or None
+        Iteration cap. None: the preset's.
+    time_budget : float or None
+        Seconds of relaxation after which the best state so far is returned (not converged).
+    threads : int or None
+        Numba threads (None: Numba's default).
+    stretch : float or None
+        Uniform initial scale of the rollout (the paper's s). None: the preset's (2 for paper, else 1).
+    stiffness : float or None
+        Spring stiffness k (> 0). None: the preset's (0.5 for paper).
+    weighting : str or None
+        ``uniform`` (the paper: absolute length errors) or ``relative`` (each spring weighted
+        by 1/r^2: relative length errors). None: the preset's.
+    simplify_mm : float or None
+        Relax a coarse copy of the mesh (its start layout clustered in square cells of this
+        side, in mm) and let the full mesh follow it piecewise linearly: no more resolution
+        than the image resolves (0.5 mm is 2 pixels at the default 4 px/mm). Only when the
+        copy has at most a third of the vertices and covers 95% of them (a mesh not that much
+        finer than the cells is relaxed itself). 0: relax the full mesh. None: the preset's
+        (0.5 for ``preview``, 0 for the others).
+    shape : float or None
+        Weight of the shape term (>= 0): each triangle's symmetric anisotropy energy
+        ``A (sigma_1 / sigma_2 + sigma_2 / sigma_1 - 2)`` per mean triangle area, added to
+        the springs. The springs alone charge shear half as much as area change; the shape
+        term charges shear only (about ``A log(sigma_1 / sigma_2)^2``), so larger values keep
+        figures rounder and lines straighter at some cost in area. 0: the springs alone.
+        None: the preset's (0 for ``paper``).
+    importance_contrast : float or None
+        How much stiffer the important (painted) zone is than plain surface (>= 1): springs,
+        barrier and shape term of plain surface are weighted ``1 / importance_contrast``, so
+        the distortion goes there. 1: the whole surface alike. Used when the flattening
+        carries an importance (:attr:`potflat.types.FlatMesh.importance`). None: the preset's.
+    true_scale : bool or None
+        Scale the result uniformly so that the median length scale in the important zone
+        (the whole surface without one) is exactly 1: lengths read off the image with its
+        scale bar are right where the painting is. None: the preset's (off for ``paper``).
+    """
+
+    preset: str = "standard"
+    tol: float | None = None
+    max_iter: int | None = None
+    time_budget: float | None = None
+    threads: int | None = None
+    stretch: float | None = None
+    stiffness: float | None = None
+    weighting: str | None = None
+    simplify_mm: float | None = None
+    shape: float | None = None
+    importance_contrast: float | None = None
+    true_scale: bool | None = None
+
+    def __post_init__(self) -> None:
+        if self.preset not in PRESETS:
+            raise InvalidOptionError(f"unknown relax preset {self.preset!r}; use one of {', '.join(PRESETS)}")
+        _positive("tol", self.tol)
+        _positive("time_budget", self.time_budget)
+        _positive("stretch", self.stretch)
+        _positive("stiffness", self.stiffness)
+        for name in ("max_iter", "threads"):
+            val = getattr(self, name)
+            if val is not None and (isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1):
+                raise InvalidOptionError(f"{name.replace('_', '-')} must be a whole number >= 1, got {val!r}")
+        if self.simplify_mm is not None and not (
+                isinstance(self.simplify_mm, (int, float, np.floating, np.integer)) and not isinstance(self.simplify_mm, bool)
+                and math.isfinite(self.simplify_mm) and self.simplify_mm >= 0):
+            raise InvalidOptionError(f"simplify-mm must be a number >= 0 (0: no simplification), got {self.simplify_mm!r}")
+        if self.shape is not None and (isinstance(self.shape, bool) or not isinstance(self.shape, (int, float, np.floating, np.integer))
+                                       or not (math.isfinite(self.shape) and self.shape >= 0)):
+            raise InvalidOptionError(f"shape must be a number >= 0 (0: springs only), got {self.shape!r}")
+        if self.importance_contrast is not None and (
+                isinstance(self.importance_contrast, bool)
+                or not isinstance(self.importance_contrast, (int, float, np.floating, np.integer))
+                or not (math.isfinite(self.importance_contrast) and self.importance_contrast >= 1)):
+            raise InvalidOptionError(
+                f"importance-contrast must be a number >= 1 (1: the whole surface alike), got {self.importance_contrast!r}")
+        if self.true_scale is not None and not isinstance(self.true_scale, (bool, np.bool_)):
+            raise InvalidOptionError(f"true-scale must be true or false, got {self.true_scale!r}")
+        if self.weighting is not None and self.weighting not in WEIGHTINGS:
+            raise InvalidOptionError(f"unknown weighting {self.weighting!r}; use one of {', '.join(WEIGHTINGS)}")
+
+    def resolved(self) -> dict:
+        """The preset's settings with the options given here applied."""
+        out = dict(PRESETS[self.preset])
+        out.setdefault("simplify_mm", 0.0)
+        for name in ("tol", "max_iter", "stretch", "stiffness", "weighting", "simplify_mm", "shape",
+                     "importance_contrast", "true_scale"):
+            if getattr(self, name) is not None:
+                out[name] = getattr(self, name)
+        out["time_budget"] = self.time_budget
+        return out
+
+
+def _positive(name: str, val) -> None:
+    if val is None:
+        return
+    if isinstance(val, bool) or not isinstance(val, (int, float, np.floating, np.integer)) or not (
+            math.isfinite(val) and val > 0):
+        raise InvalidOptionError(f"{name.replace('_', '-')} must be a positive number, got {val!r}")
+
+
+@dataclass(frozen=True)
+class RelaxResult:
+    """Outcome of :func:`relax`.
+
+    Attributes
+    ----------
+    flat : FlatMesh
+        The relaxed flattening (same vertices and faces, new ``uv``) with per-vertex
+        ``stress`` (the paper's Eq. 3 over mesh edges in sqrt(mm), from
+        :func:`potflat.mesh.distortion.vertex_stress`).
+    energy_history : (k,) float64
+        The minimised energy after each iteration, all levels in order (the coarse copies'
+        first; each level in its own normalised units: lengths divided by its mean 3D edge
+        length): springs plus the barrier for the fold-free presets (never increases within
+        a level), springs only for ``paper``.
+    iterations : int
+        Iterations (steps) taken, all levels together.
+    converged : bool
+        The convergence test passed (False when stopped by the iteration cap or time budget).
+    flipped : int
+        Faces with non-positive signed area in the result (always 0 unless preset ``paper``).
+    boundary_overlap : int
+        Crossing pairs of boundary segments in the result (0: the boundary does not overlap itself).
+    distortion : DistortionSummary
+        Distortion of the result.
+    distortion_before : DistortionSummary
+        Distortion of the input flattening.
+    timings : dict
+        Seconds per phase: ``setup`` (springs, hierarchy, untangling), ``solve``, ``check``
+        (fold checks, distortion summaries, stress), ``total``.
+    preset : str
+    levels : tuple of dict
+        Per level (``coarse`` copies, then ``fine`` for the full mesh, or ``follow`` when it
+        only follows a copy): name, vertices, iterations, spring energy (without barrier) at
+        its end, seconds; the solved levels also whether the boundary touched itself and how
+        many search directions were smoothed at faces limiting the step.
+    settings : dict
+        The resolved settings (preset values with options applied).
+    scale_factor : float
+        The uniform factor applied after solving for true scale (``true_scale``; 1 without):
+        the median length scale in the important zone (the whole surface without one) is 1.
+    notes : tuple of str
+        What the solver had to do beyond the plan (untangling, fallback), for the JSON.
+    """
+
+    flat: FlatMesh
+    energy_history: np.ndarray
+    iterations: int
+    converged: bool
+    flipped: int
+    boundary_overlap: int
+    distortion: DistortionSummary
+    distortion_before: DistortionSummary
+    timings: dict
+    preset: str
+    levels: tuple = ()
+    settings: dict = field(default_factory=dict)
+    scale_factor: float = 1.0
+    notes: tuple = ()
+
+
+_NO_FLAGS = np.empty(0, bool)
+_NO_WEIGHTS = np.empty(0)
+_NO_SHAPE = np.empty((0, 4))
+
+
+class _Springs:
+    """Spring system and triangles of a mesh in normalised, Morton-sorted form."""
+
+    def __init__(self, V: np.ndarray, faces: np.ndarray, n: int, *, k: float, relative: bool,
+                 weight: np.ndarray | None = None, shape: float = 0.0):
+        """``V`` (n, 3) rest positions and ``faces`` (m, 3) in normalised units; ``weight``
+        (n,) the vertices' importance weights (None: all 1), ``shape`` the shape term's
+        weight (0: none)."""
+        from potflat.relax._kernels import overlap as relax_overlap
+        from potflat.relax._kernels import springs as ks
+
+        self.ks, self.ko = ks, relax_overlap
+        self.vf_ptr, self.vf_tri = ks.vertex_faces(n, faces)
+        edges, cross, self.boundary_segments = ks.halfedge_springs(faces, self.vf_ptr, self.vf_tri)
+        self.ptr, self.nbr, self.rst = ks.build_csr(V, edges, cross, ks.cross_rest_lengths(V, cross))
+        del edges, cross  # peak memory: the spring lists are only needed for the CSR
+        areas = face_areas(V, faces)
+        self.a_ref = np.maximum(areas, AREA_FLOOR)
+        self.faces = np.ascontiguousarray(faces, dtype=np.int32)  # half the memory traffic
+        self.weight = _NO_WEIGHTS if weight is None else np.ascontiguousarray(weight, dtype=np.float64)
+        self.shape = _NO_SHAPE
+        if shape > 0 and len(faces):
+            # per unit rest area: a triangle of mean area weighs ``shape`` against its springs
+            self.shape = np.empty((len(faces), 4))
+            ks.shape_coefficients(V, self.faces, self.weight, float(shape) / float(np.mean(areas)),
+                                  AREA_FLOOR, self.shape)
+        del areas
+        self.k, self.relative = float(k), bool(relative)
+        self.n, self.m = n, len(faces)
+        self.n_springs = len(self.nbr) // 2
+        self.boundary = np.zeros(n, bool)
+        self.boundary[self.boundary_segments.ravel()] = True
+        self.isolated = np.diff(self.vf_ptr) == 0
+        self.bprev, self.bnext = _boundary_neighbours(self.boundary_segments, n)
+        self.bguard = np.zeros(n, bool)  # set by guard_boundary()
+        self.contact = False  # set by guard_boundary()
+        seg = self.boundary_segments
+        self._contact_cell = 2.0 * float(np.mean(np.linalg.norm(V[seg[:, 0]] - V[seg[:, 1]], axis=1))) if len(seg) else 1.0
+        self.bverts = np.zeros(0, np.int64)
+        self.theta = np.zeros(n)
+        self._bblocks = np.empty(1)
+        self._g = np.empty((n, 2))
+        self._es = np.empty(n)
+        self._eb = np.empty(n)
+        self._areas = np.empty(self.m)
+        self.diag = np.empty(n)
+        self._blocks = np.empty(max(1, -(-self.m // ks.BLOCK)))
+
+    def guard_boundary(self, x: np.ndarray) -> int:
+        """Guard the angle sum of every boundary vertex below ``2 pi`` from ``x`` on.
+
+        Vertices whose fan already wraps past ``2 pi`` at ``x`` (or whose boundary is not a
+        simple path through them) stay unguarded. Returns how many already wrapped.
+        """
+        cand = np.nonzero((self.bprev >= 0) & (self.bnext >= 0) & (self.bprev != self.bnext))[0]
+        theta = np.zeros(self.n)
+        if len(cand):
+            self.ks.boundary_angle_sums(x, cand, self.vf_ptr, self.vf_tri, self.faces, theta)
+        ok = theta[cand] < 2.0 * math.pi - 1e-9
+        self.bverts = np.ascontiguousarray(cand[ok])
+        self.bguard = np.zeros(self.n, bool)
+        self.bguard[self.bverts] = True
+        self._bblocks = np.empty(max(1, -(-len(self.bverts) // self.ks.BLOCK)))
+        self.contact = len(self.boundary_segments) >= 3 and self.overlap(x) == 0
+        return int((~ok).sum())
+
+    def evaluate(self, x: np.ndarray, *, barrier: bool = True,
+                 out: np.ndarray | None = None) -> tuple[float, float, np.ndarray]:
+        """Total energy, elastic energy (springs and shape term) and gradient at ``x``
+        (written into ``out`` (n, 2) when given, else a fresh array). Also sets ``diag``,
+        the Hessian diagonal bound at ``x``."""
+        g = np.empty((self.n, 2)) if out is None else out
+        if barrier:
+            self.ks.face_areas(x, self.faces, self._areas)
+            if len(self.bverts):
+                self.ks.boundary_angle_sums(x, self.bverts, self.vf_ptr, self.vf_tri, self.faces, self.theta)
+        self.ks.energy_gradient(x, self.ptr, self.nbr, self.rst, self.k, self.relative, LENGTH_FLOOR,
+                                self.weight, self.vf_ptr, self.vf_tri, self.faces,
+                                self.shape, self.bprev, self.bnext, self.bguard, self.theta, BOUNDARY_MU if barrier else 0.0,
+                                BOUNDARY_GAP, g, self._es, self._eb, self.diag)
+        es = float(np.sum(self._es))
+        if not barrier:
+            return es, es, g
+        eb = float(np.sum(self._eb))
+        ef = self.ks.face_barrier(x, self.faces, self._areas, self.a_ref, BARRIER_MU, self.k, BARRIER_EPS,
+                                  self.relative, self.weight, g, self.diag)
+        ec = 0.0
+        if self.contact:
+            ec = self.ko.contact_barrier(x, self.boundary_segments, self.bprev, self.bnext, CONTACT_GAP,
+                                 CONTACT_MU * self.k, max(CONTACT_GAP, self._contact_cell), g, self.diag)
+        return es + eb + ef + ec, es, g
+
+    def spring_energy(self, x: np.ndarray) -> float:
+        """Elastic energy without the barriers: the springs (Eq. 1 with the 1/2 per spring,
+        importance-weighted) plus the shape term."""
+        return self.evaluate(x, barrier=False)[1]
+
+    def max_step(self, x: np.ndarray, d: np.ndarray, cap: float = np.inf, shrink: float = 1.0,
+                 limiting: np.ndarray | None = None) -> float:
+        """Largest ``t`` (at most ``cap``) keeping every face of ``x + t d`` above ``1 - shrink``
+        of its area at ``x`` (``shrink = 1``: positively oriented) and every guarded boundary
+        vertex's angle sum below ``2 pi``. With ``limiting`` ((m,) bool) also flag the faces
+        whose own bound is below ``cap``."""
+        if self.m == 0:
+            return cap
+        self.ks.max_step(x, d, self.faces, float(cap), float(shrink), self._blocks,
+                         _NO_FLAGS if limiting is None else limiting)
+        return self._boundary_step(x, d, float(self._blocks.min()))
+
+    def max_step_near(self, x: np.ndarray, d: np.ndarray, verts: np.ndarray, cap: float, shrink: float) -> float:
+        """:meth:`max_step` for a direction ``d`` changed at ``verts`` only, from one for which
+        no face away from them was limiting (its bound was at least ``cap``): only the faces
+        around ``verts`` and the guarded boundary are tested."""
+        faces = self.ks.incident_faces(verts, self.vf_ptr, self.vf_tri)
+        return self._boundary_step(x, d, self.ks.max_step_of(x, d, self.faces, faces, float(cap), float(shrink)))
+
+    def _boundary_step(self, x: np.ndarray, d: np.ndarray, t: float) -> float:
+        """``t`` limited by the guarded boundary vertices' angle sums along ``x + t d``."""
+        if len(self.bverts):
+            self.ks.boundary_max_step(x, d, self.bverts, self.bprev, self.bnext, self._bblocks)
+            t = min(t, float(self._bblocks.min()))
+        return t
+
+    def dot(self, a: np.ndarray, b: np.ndarray) -> float:
+        """Deterministic dot product of two arrays of equal shape."""
+        a, b = a.reshape(-1), b.reshape(-1)
+        out = np.empty(max(1, -(-len(a) // self.ks.BLOCK)))
+        if len(a) > 16 * self.ks.BLOCK:
+            self.ks.block_dot(a, b, out)
+        else:
+            self.ks.block_dot_serial(a, b, out)
+        return float(np.sum(out))
+
+    def signed_areas(self, x: np.ndarray) -> np.ndarray:
+        """Signed area of every face at ``x``, shape (m,)."""
+        out = np.empty(self.m)
+        self.ks.face_areas(np.ascontiguousarray(x, dtype=np.float64), self.faces, out)
+        return out
+
+    def overlap(self, x: np.ndarray) -> int:
+        """Crossing pairs of boundary segments at ``x`` (counting stops at 1000)."""
+        seg = self.boundary_segments
+        if len(seg) < 2:
+            return 0
+        lens = np.linalg.norm(x[seg[:, 0]] - x[seg[:, 1]], axis=1)
+        extent = float(np.ptp(x[seg.ravel()], axis=0).max()) or 1.0
+        cell = max(2.0 * float(np.mean(lens)), extent / 2048.0, 1e-12)
+        count, _ = self.ko.count_crossings(x, seg, cell, 1000)
+        return int(count)
+
+    def largest_eigenvalue(self, iters: int = 30) -> float:
+        """Largest eigenvalue of the spring graph Laplacian (power iteration, padded 5%)."""
+        y = np.cos(np.arange(self.n) * 0.7071) + 1.1  # fixed, deterministic start
+        out = np.empty(self.n)
+        lam = 0.0
+        for _ in range(iters):
+            y -= y.mean()
+            nrm = math.sqrt(self.dot(y, y)) or 1.0
+            y /= nrm
+            self.ks.laplacian_matvec(y, self.ptr, self.nbr, self.rst, self.k, self.relative, LENGTH_FLOOR, out)
+            lam = self.dot(y, out)
+            y, out = out, y
+        return 1.05 * lam
+
+
+def _boundary_neighbours(segments: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each vertex's boundary predecessor and successor along the faces' orientation.
+
+    Parameters
+    ----------
+    segments : (b, 2) int64
+        Boundary half-edges ``a -> b`` oriented as in their faces (:func:`halfedge_springs`).
+
+    Returns
+    -------
+    bprev, bnext : (n,) int32
+        ``bnext[a] = b`` and ``bprev[b] = a``; -1 where a vertex has no or several boundary
+        half-edges leaving (arriving), i.e. off the boundary or where the boundary touches itself.
+    """
+    bprev = np.full(n, -1, np.int32)
+    bnext = np.full(n, -1, np.int32)
+    if len(segments) == 0:
+        return bprev, bnext
+    a, b = segments[:, 0], segments[:, 1]
+    keep = np.bincount(a, minlength=n)[a] == 1
+    bnext[a[keep]] = b[keep]
+    keep = np.bincount(b, minlength=n)[b] == 1
+    bprev[b[keep]] = a[keep]
+    return bprev, bnext
+
+
+class _Run:
+    """Bookkeeping shared by the solvers: history, budget, progress, callback."""
+
+    def __init__(self, max_iter: int, deadline: float, callback, progress):
+        self.history: list[float] = []
+        self.max_iter = max_iter
+        self.deadline = deadline
+        self.callback = callback
+        self.progress = progress
+        self.level = ""
+        self.stopped = ""
+
+    def record(self, energy: float) -> bool:
+        """Store one iteration; True when the run must stop (cap, budget, callback)."""
+        self.history.append(energy)
+        it = len(self.history)
+        if self.progress is not None and (it % 10 == 0 or it == 1):
+            self.progress(it, energy, self.level)
+        if self.callback is not None and self.callback({"iteration": it, "energy": energy, "level": self.level}):
+            self.stopped = "callback"
+        elif it >= self.max_iter:
+            self.stopped = "max_iter"
+        elif time.perf_counter() > self.deadline:
+            self.stopped = "time_budget"
+        return bool(self.stopped)
+
+
+def _relative_change(hist: list[float], window: int) -> float:
+    if len(hist) <= window:
+        return np.inf
+    old, new = hist[-1 - window], hist[-1]
+    return abs(old - new) / (window * max(abs(new), 1e-300))
+
+
+_NO_VECTOR = np.empty(0)
+
+
+class _LBFGS:
+    """Preconditioned L-BFGS with a flip-free, monotone line search.
+
+    The initial inverse Hessian is ``H0 = D^-1 + coarse terms``: the inverse of the
+    Hessian's diagonal bound at the current state (Jacobi, so a squeezed triangle's stiff
+    barrier does not shrink everybody's step) plus the additive multilevel correction of
+    :class:`potflat.relax.hierarchy.MultilevelPreconditioner` (smooth, long-range moves in one
+    step), scaled by ``s.y / y.H0.y`` of the newest pair. With ``guard_overlap`` a trial point
+    whose boundary overlaps itself is rejected like one of higher energy. The vector algebra
+    runs in fused in-place passes (:mod:`potflat.relax._kernels.lbfgs`) over preallocated buffers.
+
+    Attributes
+    ----------
+    x : (n, 2) float64
+        Current positions (``trial``: the line search's).
+    """
+
+    def __init__(self, sp: _Springs, x: np.ndarray, precond=None, *, guard_overlap: bool = False):
+        from potflat.relax._kernels import lbfgs as kl
+
+        self.kl, self.sp, self.precond = kl, sp, precond
+        self.guard_overlap = guard_overlap
+        self.contacts = 0  # trial points rejected because the boundary would overlap
+        self.smoothed = 0  # directions smoothed at the vertices of limiting faces
+        self._limiting = np.empty(sp.m, bool)  # faces holding the step below the natural one
+        self._seen = np.zeros(sp.n, bool)  # work space of the smoothing
+        size = 2 * sp.n
+        self.x = np.array(x, dtype=np.float64, order="C")
+        self.trial = np.empty_like(self.x)
+        self.grads = [np.empty_like(self.x), np.empty_like(self.x)]
+        # one slot more than the memory: a new pair is written before the oldest is dropped
+        self.S = np.empty((LBFGS_MEMORY + 1, size))
+        self.Y = np.empty((LBFGS_MEMORY + 1, size))
+        self.rho = np.zeros(LBFGS_MEMORY + 1)
+        self.yhy = np.zeros(LBFGS_MEMORY + 1)
+        self.slots: list[int] = []  # oldest first
+        self.q = np.empty(size)
+        self._tmp = np.empty(size) if precond is not None else None
+        self._part = np.empty(max(1, -(-size // kl.BLOCK)))
+        self._part2 = np.empty_like(self._part)
+        self.cur = 0  # index of grads holding the current gradient
+        self.E, _es, g = sp.evaluate(self.x, out=self.grads[self.cur])
+        self.g = g.reshape(-1)
+        if precond is not None:
+            precond.refresh(sp.diag)
+
+    def _combine(self, q, c, src, a, y, diag, scale, s) -> float:
+        self.kl.combine(q, c, src, a, y, diag, scale, s, self._part)
+        return float(np.sum(self._part))
+
+    def _initial(self, r: np.ndarray, scale: float, s: np.ndarray) -> float:
+        """``q = scale H0 r``; returns ``s . q``."""
+        if self.precond is None:
+            return self._combine(self.q, scale, r, 0.0, r, self.sp.diag, 1.0, s)
+        self.precond.apply(r.reshape(-1, 2), self.q.reshape(-1, 2))
+        return self._combine(self.q, scale, self.q, 0.0, self.q, _NO_VECTOR, 1.0, s)
+
+    def _direction(self) -> float:
+        """Set ``q`` to the L-BFGS direction (two-loop recursion); return ``g . q``."""
+        q, g, tmp, S, Y, rho = self.q, self.g, self._tmp, self.S, self.Y, self.rho
+        tmp = q if tmp is None else tmp  # without a preconditioner H0 is applied in place
+        order = self.slots[::-1]  # newest first
+        if not order:
+            return self._initial(g, -1.0, g)
+        gamma = 1.0 / (rho[order[0]] * self.yhy[order[0]])  # s.y / y.H0.y of the newest pair
+        alpha = {}
+        part = self._combine(tmp, -1.0, g, 0.0, g, _NO_VECTOR, 1.0, S[order[0]])
+        for k, j in enumerate(order):
+            alpha[j] = rho[j] * part
+            nxt = S[order[k + 1]] if k + 1 < len(order) else _NO_VECTOR
+            part = self._combine(tmp, 1.0, tmp, -alpha[j], Y[j], _NO_VECTOR, 1.0, nxt)
+        part = self._initial(tmp, gamma, Y[order[-1]])
+        for k, j in enumerate(order[::-1]):  # oldest first
+            beta = rho[j] * part
+            nxt = Y[order[-2 - k]] if k + 1 < len(order) else g
+            part = self._combine(q, 1.0, q, alpha[j] - beta, S[j], _NO_VECTOR, 1.0, nxt)
+        return part
+
+    def _store_pair(self, t: float, g_new: np.ndarray) -> None:
+        """Store ``s = t q``, ``y = g_new - g`` (``sp.diag`` is the Hessian bound at the new point)."""
+        used = set(self.slots)
+        slot = next(i for i in range(LBFGS_MEMORY + 1) if i not in used)
+        self.kl.pair(self.q, t, g_new, self.g, self.sp.diag, self.S[slot], self.Y[slot], self._part, self._part2)
+        sy, yhy = float(np.sum(self._part)), float(np.sum(self._part2))
+        if self.precond is not None:  # H0 = D^-1 (in yhy already) + the coarse terms
+            self.precond.refresh(self.sp.diag)
+            yhy += self.precond.coarse_norm(self.Y[slot].reshape(-1, 2))
+        if sy > 1e-300 and yhy > 0.0:
+            self.rho[slot], self.yhy[slot] = 1.0 / sy, yhy
+            self.slots.append(slot)
+            if len(self.slots) > LBFGS_MEMORY:
+                self.slots.pop(0)
+
+    def _smooth_limiting(self, t: float, gd: float) -> tuple[float, float]:
+        """Smooth the direction ``q`` at the vertices of the limiting faces (those flagged by
+        the step bound ``t``); kept only when it still descends and allows a longer step.
+        Returns the step and ``g . q``."""
+        sp = self.sp
+        verts = sp.ks.flagged_face_vertices(self._limiting, sp.faces, self._seen)
+        if not 0 < len(verts) <= SMOOTH_MAX_FRACTION * sp.n:  # none: the boundary limits the step
+            return t, gd
+        dx = self.q.reshape(-1, 2)
+        before = dx[verts]
+        mean = np.empty_like(before)
+        for _ in range(SMOOTH_ROUNDS):
+            sp.ks.neighbour_means(dx, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
+            dx[verts] = mean
+        gd_smooth = sp.dot(self.g, self.q)
+        t_smooth = STEP_FRACTION * sp.max_step_near(self.x, dx, verts, 1.0 / STEP_FRACTION, STEP_SHRINK)
+        if gd_smooth < 0.0 and t_smooth > t:
+            self.smoothed += 1
+            return t_smooth, gd_smooth
+        dx[verts] = before
+        return t, gd
+
+    def run(self, run: _Run, *, max_iter: int, tol: float, hist: list[float]) -> tuple[bool, int]:
+        """Up to ``max_iter`` iterations; returns (converged, iterations).
+
+        ``hist`` is the energy history of the relative-change test, extended here.
+        """
+        sp, kl = self.sp, self.kl
+        it = 0
+        converged = False
+        while it < max_iter:
+            gd = self._direction()
+            if not gd < 0.0:
+                self.slots.clear()
+                gd = self._direction()
+                if not gd < 0.0:
+                    converged = True  # zero gradient
+                    break
+            dx = self.q.reshape(-1, 2)
+            t = STEP_FRACTION * sp.max_step(self.x, dx, cap=1.0 / STEP_FRACTION, shrink=STEP_SHRINK,
+                                            limiting=self._limiting)
+            if t < 1.0:  # a face or the boundary holds the step below the natural one
+                t, gd = self._smooth_limiting(t, gd)
+            trial_grad = self.grads[1 - self.cur]
+            accepted = False
+            for _ in range(50):
+                kl.combine(self.trial.reshape(-1), 1.0, self.x.reshape(-1), t, self.q, _NO_VECTOR, 1.0,
+                           _NO_VECTOR, self._part)
+                En, _es, gn = sp.evaluate(self.trial, out=trial_grad)
+                if math.isfinite(En) and En <= self.E + ARMIJO * t * gd:
+                    if not self.guard_overlap or sp.overlap(self.trial) == 0:
+                        accepted = True
+                        break
+                    self.contacts += 1
+                t *= 0.5
+            if not accepted or t == 0.0:
+                converged = True  # no descent possible at machine precision
+                break
+            g_new = gn.reshape(-1)
+            self._store_pair(t, g_new)
+            self.x, self.trial = self.trial, self.x
+            self.cur = 1 - self.cur
+            self.E, self.g = En, g_new
+            it += 1
+            hist.append(En)
+            if run.record(En):
+                break
+            if En == 0.0 or _relative_change(hist, WINDOW_LBFGS) < tol:
+                converged = True
+                break
+        return converged, it
+
+
+def _minimise(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, levels_out: list, notes: list):
+    """The fold-free solve: preconditioned L-BFGS on the whole mesh.
+
+    When the start's boundary does not overlap itself, no accepted step lets it: a trial
+    point whose boundary segments cross is treated like one of higher energy (the step is
+    halved), so the boundary can touch itself but not pass through.
+    """
+    from potflat.relax.hierarchy import MultilevelPreconditioner
+
+    t0 = time.perf_counter()
+    run.level = "fine"
+    precond = MultilevelPreconditioner(hier, theta=PRECOND_THETA) if hier.levels else None
+    solver = _LBFGS(sp, x, precond, guard_overlap=sp.overlap(x) == 0)
+    del x
+    conv, its = solver.run(run, max_iter=run.max_iter, tol=settings["tol"], hist=[solver.E])
+    contacts, smoothed = solver.contacts, solver.smoothed
+    if contacts:
+        notes.append(f"the boundary touched itself: {contacts} trial steps that would have made it "
+                     "overlap were shortened")
+    x = solver.x
+    del solver
+    levels_out.append({"level": run.level, "vertices": sp.n, "iterations": its, "energy": sp.spring_energy(x),
+                       "seconds": time.perf_counter() - t0, "boundary_contact": contacts > 0,
+                       "smoothed_directions": smoothed})
+    return x, conv and not run.stopped
+
+
+def _dynamics(sp: _Springs, x: np.ndarray, settings: dict, run: _Run, levels_out: list):
+    friction = np.where(sp.boundary, settings["friction_boundary"], settings["friction_inside"]).astype(np.float64)
+    lam = sp.largest_eigenvalue()
+    dt = 1.9 / math.sqrt(lam) if lam > 0 else 1.0
+    v = np.zeros_like(x)
+    xo, vo = np.empty_like(x), np.empty_like(x)
+    es = np.empty(sp.n)
+    t0 = time.perf_counter()
+    run.level = "dynamics"
+    hist: list[float] = []
+    converged = False
+    it = 0
+    while True:
+        sp.ks.dynamics_step(x, v, sp.ptr, sp.nbr, sp.rst, sp.k, sp.relative, LENGTH_FLOOR, friction, dt, xo, vo, es)
+        x, xo, v, vo = xo, x, vo, v
+        it += 1
+        e = float(np.sum(es))  # energy before this step
+        hist.append(e)
+        if not np.isfinite(e):
+            break
+        if run.record(e):
+            break
+        if it % WINDOW_DYNAMICS == 0 and _relative_change(hist, WINDOW_DYNAMICS) < settings["tol"]:
+            converged = True
+            break
+    levels_out.append({"level": "dynamics", "iterations": it, "energy": sp.spring_energy(x),
+                           "seconds": time.perf_counter() - t0, "dt": dt})
+    return x, converged
+
+
+def _untangle(sp: _Springs, x: np.ndarray, rounds: int = 200) -> tuple[np.ndarray, int]:
+    """Move the vertices of non-positive faces to their edge neighbours' mean until none is left.
+
+    Averages over mesh edges only: the cross springs reach across the winged pair, and
+    averaging over them too left 81 of 83 flips of a sea-vase rollout in place (edges only:
+    all fixed in 6 rounds).
+    Returns the positions and the number of faces that were flipped at the start.
+    """
+    bad = sp.signed_areas(x) <= 0
+    n_bad = int(bad.sum())
+    if n_bad == 0:
+        return x, 0
+    x = x.copy()
+    region = np.zeros(sp.n, bool)
+    for r in range(rounds):
+        bad = sp.signed_areas(x) <= 0
+        if not bad.any():
+            break
+        region[sp.faces[bad].ravel()] = True
+        if r % 20 == 19:  # widen the region around persistent tangles
+            region[sp.faces[region[sp.faces].any(axis=1)].ravel()] = True
+        verts = np.nonzero(region)[0]
+        mean = np.empty((len(verts), 2))
+        sp.ks.neighbour_means(x, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
+        x[verts] = mean
+    return x, n_bad
+
+
+@dataclass(frozen=True)
+class _CoarseStart:
+    """A relaxed coarse copy of the rollout and the full mesh's layout following it."""
+
+    result: RelaxResult | None  # None: the copy could not be relaxed fold-free
+    uv: np.ndarray | None  # (n, 2) float64: the full mesh's layout following the copy's
+    final: bool  # the full mesh only follows (preview at the image's resolution), no iterations on it
+    notes: list
+
+
+def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progress: bool,
+                  callback, deadline: float) -> _CoarseStart | None:
+    """Relax a coarse copy of ``flat`` (grid clusters of its start layout, :mod:`potflat.relax.simplify`).
+
+    With ``simplify_mm`` the cells have that side and the full mesh will only follow the
+    coarse result (when the copy has at most :data:`COARSE_MAX_FRACTION` of the vertices and
+    covers :data:`COARSE_MIN_COVERAGE` of them); else,
+    for meshes of at least :data:`COARSE_MIN_VERTICES`, the cells hold about
+    :data:`COARSE_CELL_VERTICES` vertices and the coarse result is the full solve's start.
+    None when neither applies; ``result`` None (with a note) when the copy could not be
+    relaxed fold-free.
+    """
+    from potflat.relax.simplify import cell_side, grid_simplification, interpolate
+
+    V, uv = flat.mesh.vertices, flat.uv
+    spacing = settings["simplify_mm"]
+    simple, final = None, False
+    if spacing:  # no more resolution than the image resolves
+        simple = grid_simplification(V, uv, spacing / flat.mesh.mm_per_unit)
+        final = (COARSE_MIN_COPY <= len(simple.vertices) <= COARSE_MAX_FRACTION * len(V)
+                 and float(np.mean(interpolate(simple, uv, simple.uv)[1])) >= COARSE_MIN_COVERAGE)
+    if not final:
+        if not (settings["coarse_start"] and len(V) >= COARSE_MIN_VERTICES):
+            return None
+        simple = grid_simplification(V, uv, cell_side(uv, COARSE_CELL_VERTICES))
+        if len(simple.vertices) < COARSE_MIN_COPY:
+            return None
+    budget = None if deadline == np.inf else max(deadline - time.perf_counter(), 1e-3)
+    tagged = None if callback is None else (lambda info: callback({**info, "level": "coarse"}))
+    try:
+        importance = None
+        if flat.importance is not None:  # a coarse vertex is as important as its cluster on average
+            count = np.bincount(simple.cluster, minlength=len(simple.vertices))
+            importance = np.bincount(simple.cluster, flat.importance, len(simple.vertices)) / np.maximum(count, 1)
+        sub = relax(FlatMesh(Mesh(simple.vertices, simple.faces, units=flat.mesh.units), simple.uv,
+                             importance=importance),
+                    options=replace(options, simplify_mm=0.0, time_budget=budget, true_scale=False), progress=progress,
+                    callback=tagged)
+    except FoldedResultError as exc:
+        return _CoarseStart(result=None, uv=None, final=False, notes=[
+            f"the {len(simple.vertices)}-vertex coarse copy could not be relaxed fold-free ({exc}); "
+            "relaxed the full mesh from the rollout"])
+    what = (f"relaxed a coarse copy at {spacing:g} mm resolution ({len(simple.vertices)} vertices); the full mesh "
+            "follows it piecewise linearly" if final else
+            f"started from a relaxed coarse copy ({len(simple.vertices)} vertices)")
+    notes = [what] + [f"coarse copy: {note}" for note in sub.notes]
+    return _CoarseStart(result=sub, uv=interpolate(simple, uv, sub.flat.uv)[0], final=final, notes=notes)
+
+
+def _follow(sp: _Springs, x: np.ndarray, notes: list[str]) -> np.ndarray | None:
+    """The full mesh's layout ``x`` following a relaxed coarse copy, untangled; None (with a
+    note) when it cannot be made fold-free."""
+    x, n_bad = _untangle(sp, x)
+    if n_bad:
+        notes.append(f"untangled {n_bad} triangles flipped by following the coarse copy")
+    if (sp.signed_areas(x) <= 0).any() or sp.overlap(x):
+        notes.append("following the coarse copy folded the full mesh; relaxed the full mesh from the rollout")
+        return None
+    return x
+
+
+def _importance_weights(importance: np.ndarray, contrast: float) -> np.ndarray:
+    """Per-vertex weights from importance (n,) in [0, 1]: ``1 / contrast`` on plain surface,
+    1 in the important zone, linear between. Shape (n,) float64."""
+    low = 1.0 / contrast
+    # exactly 1 where the importance is 1: an all-important mesh is solved as without importance
+    return np.ascontiguousarray(np.where(importance >= 1.0, 1.0, low + (1.0 - low) * importance), dtype=np.float64)
+
+
+def _mean_edge_length(V: np.ndarray, F: np.ndarray) -> float:
+    """Mean 3D length of the faces' edges (each face's three edges; shared edges count twice).
+
+    The lengths come from a parallel kernel one block of rows at a time; each block is
+    summed by numpy and the block sums are added in order, so the result does not depend on
+    the thread count (and equals the former all-numpy computation bit for bit).
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+    F : (m, 3) int64, m > 0
+    """
+    from potflat.relax._kernels.springs import halfedge_lengths
+
+    blocks = row_blocks(len(F))
+    buf = np.empty((blocks[0].stop, 3))
+    total = 0.0
+    for s in blocks:
+        lengths = buf[:s.stop - s.start]
+        halfedge_lengths(V, F[s], lengths)
+        total += float(lengths.sum())
+    return total / (3 * len(F))
+
+
+def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool = False,
+          callback: Callable[[dict], bool | None] | None = None, **kwargs) -> RelaxResult:
+    """Relax a rollout's flattening by minimising the paper's spring energy.
+
+    Parameters
+    ----------
+    flat : FlatMesh
+        The rollout: ``flat.mesh.vertices`` (n, 3) give the rest lengths, ``flat.uv`` (n, 2)
+        the start, ``flat.mesh.faces`` (m, 3) a cut (disk-like) mesh.
+    options : RelaxOptions, optional
+        Or give its fields as keyword arguments (``relax(flat, preset="archival")``).
+    progress : bool
+        Show a progress bar on stderr.
+    callback : callable, optional
+        Called after every iteration with ``{"iteration", "energy", "level"}``; return True
+        to stop early.
+
+    Returns
+    -------
+    RelaxResult
+
+    Raises
+    ------
+    InvalidInputError
+        Empty mesh or non-finite coordinates.
+    FoldedResultError
+        With a fold-free preset, when the start cannot be untangled or the result would
+        have flipped triangles or an overlapping boundary (nothing folded is returned).
+    """
+    if options is None:
+        options = RelaxOptions(**kwargs)
+    elif kwargs:
+        raise InvalidOptionError("give either options= or option keywords to relax(), not both")
+    settings = options.resolved()
+    V = np.ascontiguousarray(flat.mesh.vertices, dtype=np.float64)
+    uv = np.ascontiguousarray(flat.uv, dtype=np.float64)
+    F = np.ascontiguousarray(flat.mesh.faces, dtype=np.int64)
+    n = len(V)
+    if n == 0 or len(F) == 0:
+        raise InvalidInputError("the rollout has no faces; nothing to relax (check the rollout stage's output)")
+    if not (np.isfinite(V).all() and np.isfinite(uv).all()):
+        raise InvalidInputError("the rollout has NaN or infinite coordinates; run the rollout stage again")
+    fold_free = settings["solver"] != "dynamics"
+    t_start = time.perf_counter()
+    deadline = t_start + (settings["time_budget"] or np.inf)
+
+    from potflat._jit import numba_threads
+
+    # normalised units: lengths / mean 3D edge length, layout centred on its bounding box
+    with numba_threads(options.threads):
+        unit = _mean_edge_length(V, F)
+    if not unit > 0:
+        raise InvalidInputError("all edges of the rollout have zero length; check the scan's units and faces")
+    coarse = _coarse_start(flat, options, settings, progress, callback, deadline) if fold_free else None
+    notes: list[str] = list(coarse.notes) if coarse is not None else []
+    if coarse is not None and coarse.result is None:
+        coarse = None
+    with numba_threads(options.threads):
+        centre = 0.5 * (uv.min(axis=0) + uv.max(axis=0))
+        x_in = (uv - centre) / unit
+        from potflat.relax.hierarchy import GridHierarchy
+
+        # locality-preserving order (Morton curve of the layout) and the preconditioner's grids
+        hier = GridHierarchy.build(x_in, min_vertices_per_cell=settings.get("cell_vertices", 8.0))
+        order = hier.order
+        inverse = np.empty(n, np.int64)
+        inverse[order] = np.arange(n)
+        Vs = np.ascontiguousarray(V[order] / unit)
+        Fs = np.ascontiguousarray(inverse[F])
+        weight = None
+        if fold_free and flat.importance is not None and settings["importance_contrast"] > 1:
+            weight = _importance_weights(flat.importance[order], settings["importance_contrast"])
+        sp = _Springs(Vs, Fs, n, k=settings["stiffness"], relative=settings["weighting"] == "relative",
+                      weight=weight, shape=settings["shape"] if fold_free else 0.0)
+        del Vs, Fs
+        x = np.ascontiguousarray(x_in[order]) * settings["stretch"]
+        t_follow = time.perf_counter()
+        if coarse is not None:
+            followed = _follow(sp, np.ascontiguousarray(((coarse.uv - centre) / unit)[order]), notes)
+            if followed is None:
+                coarse = None
+            else:
+                x = followed
+        t_follow = time.perf_counter() - t_follow
+        if fold_free:
+            x, n_bad = _untangle(sp, x)
+            if n_bad:
+                left = int((sp.signed_areas(x) <= 0).sum())
+                if left:
+                    raise FoldedResultError(
+                        f"the rollout has {n_bad} flipped or degenerate triangles and {left} could not be "
+                        "untangled; run the rollout again (another seam or proxy) or use --preset paper")
+                notes.append(f"untangled {n_bad} flipped or degenerate triangles of the rollout before relaxing")
+            wrapped = sp.guard_boundary(x)
+            if wrapped:
+                notes.append(f"{wrapped} boundary vertices already wrap past 2 pi in the start; their angle "
+                             "sums are not guarded (the final boundary check still applies)")
+        t_setup = time.perf_counter()
+
+        bar = _progress_bar(settings["max_iter"]) if progress else contextlib.nullcontext(None)
+        with bar as report:
+            levels: list[dict] = []
+            prefix = [] if coarse is None else list(coarse.result.energy_history)
+            run = _Run(settings["max_iter"] + len(prefix), deadline, callback, report)
+            run.history.extend(prefix)
+            if coarse is not None:
+                levels.extend({**level, "level": "coarse"} for level in coarse.result.levels)
+            if coarse is not None and coarse.final:
+                levels.append({"level": "follow", "vertices": n, "iterations": 0, "energy": sp.spring_energy(x),
+                               "seconds": t_follow})
+                converged = coarse.result.converged
+            elif fold_free:
+                x, converged = _minimise(sp, x, hier, settings, run, levels, notes)
+            else:
+                x, converged = _dynamics(sp, x, settings, run, levels)
+        t_solve = time.perf_counter()
+
+        finite = bool(np.isfinite(x).all())
+        flipped = int((sp.signed_areas(x) <= 0).sum()) if finite else len(F)
+        overlap = sp.overlap(x) if finite else 1
+        del sp, hier  # release the spring system before the distortion summaries (peak memory)
+    if fold_free and (flipped or overlap or not finite):
+        raise FoldedResultError(
+            f"relaxation ended with {flipped} flipped triangles and {overlap} boundary crossings; "
+            "nothing written: report this mesh, or try --preset preview")
+    if not finite:
+        raise FoldedResultError("the paper dynamics diverged (NaN); use the default preset")
+    uv_out = np.empty_like(x)
+    uv_out[order] = x * unit + centre
+    factor = 1.0
+    if settings["true_scale"]:
+        factor = true_scale_factor(V, uv_out, F, flat.importance)
+        uv_out = centre + (uv_out - centre) * factor
+    before = summarize(V, uv, F)
+    after = summarize(V, uv_out, F)
+    stress = vertex_stress(V, uv_out, F, flat.mesh.mm_per_unit)
+    t_end = time.perf_counter()
+    return RelaxResult(
+        flat=flat.replace(uv=uv_out, stress=stress),
+        energy_history=np.asarray(run.history, dtype=np.float64),
+        iterations=len(run.history),
+        converged=bool(converged),
+        flipped=flipped,
+        boundary_overlap=overlap,
+        distortion=after,
+        distortion_before=before,
+        timings={"setup": t_setup - t_start, "solve": t_solve - t_setup, "check": t_end - t_solve,
+                 "total": t_end - t_start},
+        preset=options.preset,
+        levels=tuple(levels),
+        settings=settings,
+        scale_factor=factor,
+        notes=tuple(notes + ([f"stopped by {run.stopped}"] if run.stopped else [])),
+    )
+
+
+@contextlib.contextmanager
+def _progress_bar(total: int):
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    with Progress(TextColumn("relax {task.fields[level]}"), BarColumn(), TextColumn("{task.completed} it"),
+                  TextColumn("E={task.fields[energy]:.4g}"), TimeElapsedColumn(), transient=True,
+                  console=Console(stderr=True)) as prog:
+        task = prog.add_task("relax", total=total, level="", energy=float("nan"))
+
+        def report(it: int, energy: float, level: str) -> None:
+            prog.update(task, completed=it, energy=energy, level=level)
+
+        yield report
+
+
+def _history_for_json(h: np.ndarray, limit: int = 1000) -> list[float]:
+    """The energy history, thinned to at most ``limit`` entries (first and last kept)."""
+    if len(h) <= limit:
+        return [float(e) for e in h]
+    idx = np.unique(np.linspace(0, len(h) - 1, limit).round().astype(np.int64))
+    return [float(h[i]) for i in idx]
+
+
+def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: RelaxOptions | None = None, *,
+                    name: str | None = None, progress: bool = False) -> StageOutput:
+    """Relax ``NAME.rollout.ply`` and write ``NAME.relaxed.ply`` and ``NAME.relaxed.json``.
+
+    Parameters
+    ----------
+    rollout_ply : path-like
+        The rollout stage's output.
+    out_dir : path-like
+        Folder for the outputs (created if needed).
+    options : RelaxOptions, optional
+    name : str, optional
+        Output stem (default: the input's name without ``.rollout.ply``).
+    progress : bool
+        Show a progress bar.
+
+    Returns
+    -------
+    StageOutput
+        ``paths`` with ``ply`` and ``json``; ``summary`` the JSON content.
+    """
+    from potflat.io.atomic import write_json_atomic
+    from potflat.io.flat_ply import read_flat_ply, write_flat_ply
+    from potflat.stages.provenance import provenance
+
+    options = options or RelaxOptions()
+    rollout_ply = Path(rollout_ply)
+    out_dir = Path(out_dir)
+    stem = rollout_ply.name
+    for suffix in (".ply", ".rollout"):
+        stem = stem.removesuffix(suffix)
+    name = name or stem
+    flat = read_flat_ply(rollout_ply)
+    result = relax(flat, options=options, progress=progress)
+    ply_path = out_dir / f"{name}.relaxed.ply"
+    json_path = out_dir / f"{name}.relaxed.json"
+    summary = {
+        "preset": result.preset,
+        "options": asdict(options),
+        "settings": result.settings,
+        "iterations": result.iterations,
+        "converged": result.converged,
+        "flipped": result.flipped,
+        "boundary_overlap": result.boundary_overlap,
+        "fold_free": result.flipped == 0 and result.boundary_overlap == 0,
+        "fold_free_verified_by": "signed area of every face > 0 and no crossing boundary segments, checked after solving",
+        "energy_history": _history_for_json(result.energy_history),
+        "energy_units": "lengths divided by the mean 3D edge length; springs + barrier (fold-free presets) or springs only (paper)",
+        "spring_energy": result.levels[-1]["energy"] if result.levels else None,
+        "stress": "paper Eq. 3 over mesh edges in sqrt(mm) (potflat.mesh.distortion.vertex_stress)",
+        "levels": list(result.levels),
+        "notes": list(result.notes),
+        "distortion_before": result.distortion_before.as_dict(),
+        "distortion": result.distortion.as_dict(),
+        "importance": ("none: the whole surface counts alike" if result.flat.importance is None else
+                       f"per vertex in {ply_path.name}; springs, barrier and shape term of plain surface weighted "
+                       f"1/{result.settings['importance_contrast']:g}"),
+        **zone_summary(flat.mesh.vertices, result.flat.uv, flat.mesh.faces, result.flat.importance),
+        "true_scale_factor": result.scale_factor,
+        "timings": result.timings,
+        "units": flat.mesh.units,
+        "vertices": len(flat.mesh.vertices),
+        "faces": len(flat.mesh.faces),
+    }
+    rollout_json = rollout_ply.with_name(f"{stem}.rollout.json")
+    if rollout_json.exists():
+        try:
+            rj = json.loads(rollout_json.read_text())
+        except (OSError, ValueError):
+            rj = {}
+        for key in ("axis", "proxy", "units"):
+            if key in rj:
+                summary[key] = rj[key]
+    inputs = [rollout_ply] + ([rollout_json] if rollout_json.exists() else [])
+    summary["provenance"] = provenance(stage="relax", inputs=inputs, options=asdict(options))
+    write_flat_ply(ply_path, result.flat, comments=(f"potflat relax preset {result.preset}",))
+    write_json_atomic(json_path, summary)
+    return StageOutput(paths={"ply": ply_path, "json": json_path}, summary=summary)

@@ -1,0 +1,381 @@
+"""Find the parts of a vessel scan that are not on its surface of revolution.
+
+Handles, spouts, lugs and knobs off the axis break the rotational symmetry that a rollout
+relies on. :func:`detect_attachments` finds them with two measures taken in the meridian
+half-plane (``r`` = distance from the axis, ``h`` = height along it):
+
+* **angular coverage**: the ``(r, h)`` plane is cut into square cells of side
+  ``tolerance``. A surface of revolution passes through its cells at every angle around the
+  axis (or over the whole angle range of a sherd), an attachment only over the few degrees
+  it spans. Each cell counts the angle bins (about ``tolerance`` of arc each) in which the
+  scan has vertices within one cell; a vertex is an attachment *core* when its cell's
+  coverage is below ``coverage_ratio`` times the best coverage at that height. Measured
+  this way, a foot ring, a flat base, a rim, both walls of a cup and every profile shape
+  count as revolution surface, and holes or a sherd's limited angle do not matter.
+* **offset**: each vertex's distance, in the meridian plane, from the revolution surface
+  (the median ``(r, h)`` point of every well-covered cell, joined to its neighbour). Noise
+  ``sigma`` is estimated from the offsets of the non-core vertices.
+
+The attachment is every face with all three vertices clearly off the surface
+(offset > ``max(3 sigma, 0.25 median edge)``) that is connected to a core face: it grows
+from the handle's body to where it meets the wall, and the faces touching the wall stay, so
+the painting around a handle root is kept.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.types import Mesh
+from potflat.rollout.walls import (
+    FaceGraph,
+    check_axis,
+    check_mesh,
+    cylindrical,
+    face_adjacency,
+    unique_ints,
+    weighted_quantiles,
+)
+
+#: Automatic cell size: at least this many median edge lengths ...
+_CELL_EDGES = 2.0
+#: ... and at least this many times the noise measured around the revolution surface.
+_CELL_NOISE = 4.0
+#: An offset above this many noise sigmas is "clearly off" the surface of revolution.
+_OFF_SIGMAS = 3.0
+#: ... and above this fraction of the median edge length (noise-free scans).
+_OFF_EDGE_FRACTION = 0.25
+#: Largest number of angle bins per cell ring.
+_MAX_ANGLE_BINS = 1 << 16
+
+
+@dataclass(frozen=True)
+class Attachment:
+    """One connected attachment (a handle, a spout, a knob...).
+
+    Attributes
+    ----------
+    n_faces : int
+    area : float
+        Scan units squared.
+    area_mm2 : float
+    height_min, height_max : float
+        Height range along the axis, scan units, measured from the scan's lowest point (the
+        frame of :class:`potflat.rollout.profile.Profile`).
+    centroid : (3,) float64
+        Area-weighted centre, scan coordinates.
+    max_offset : float
+        Largest distance of its vertices from the surface of revolution, scan units.
+    """
+
+    n_faces: int
+    area: float
+    area_mm2: float
+    height_min: float
+    height_max: float
+    centroid: np.ndarray
+    max_offset: float
+
+    def summary(self, mm_per_unit: float) -> dict:
+        """JSON-ready description, lengths in millimetres."""
+        return {
+            "faces": self.n_faces,
+            "area_mm2": self.area_mm2,
+            "height_mm": [self.height_min * mm_per_unit, self.height_max * mm_per_unit],
+            "centroid": self.centroid.tolist(),
+            "max_offset_mm": self.max_offset * mm_per_unit,
+        }
+
+
+@dataclass(frozen=True)
+class AttachmentSelection:
+    """Faces of a scan that are not on its surface of revolution.
+
+    Attributes
+    ----------
+    face_mask : (m,) bool
+        True for faces of attachments.
+    components : tuple of Attachment
+        Connected attachments, largest first.
+    vertex_offset : (n,) float64
+        Distance of each vertex from the surface of revolution in the meridian plane, scan
+        units (NaN for vertices used by no face).
+    tolerance : float
+        Cell size used (scan units).
+    coverage_ratio : float
+        Core threshold: fraction of the best angular coverage at the same height.
+    offset_threshold : float
+        Offset above which a vertex is clearly off the surface, scan units.
+    noise : float
+        Estimated noise (sigma) of the surface around its profile, scan units.
+    mm_per_unit : float
+    method : str
+    """
+
+    face_mask: np.ndarray
+    components: tuple
+    vertex_offset: np.ndarray
+    tolerance: float
+    coverage_ratio: float
+    offset_threshold: float
+    noise: float
+    mm_per_unit: float
+    method: str
+
+    @property
+    def n_faces(self) -> int:
+        """Number of attachment faces."""
+        return int(self.face_mask.sum())
+
+    def root_faces(self, faces: np.ndarray) -> np.ndarray:
+        """Faces not flagged that share a vertex with an attachment: where each one meets the
+        wall (its footprint on the rollout, to show as a mask in the bake).
+
+        Parameters
+        ----------
+        faces : (m, 3) int64
+            The faces of the mesh the selection was made on.
+
+        Returns
+        -------
+        (m,) bool
+        """
+        faces = np.asarray(faces)
+        if faces.shape != (len(self.face_mask), 3):
+            raise InvalidInputError("faces must be the (m, 3) faces of the mesh the attachments were detected on")
+        on = np.zeros(len(self.vertex_offset), dtype=bool)
+        on[faces[self.face_mask].ravel()] = True
+        return on[faces].any(axis=1) & ~self.face_mask
+
+    def summary(self) -> dict:
+        """JSON-ready figures for a stage sidecar (lengths in millimetres)."""
+        s = self.mm_per_unit
+        return {
+            "faces": self.n_faces,
+            "area_mm2": float(sum(c.area_mm2 for c in self.components)),
+            "components": [c.summary(s) for c in self.components],
+            "tolerance_mm": self.tolerance * s,
+            "coverage_ratio": self.coverage_ratio,
+            "offset_threshold_mm": self.offset_threshold * s,
+            "noise_mm": self.noise * s,
+            "method": self.method,
+        }
+
+
+def _check_positive(name: str, value, *, upper: float | None = None) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise InvalidOptionError(f"{name} must be a number, got {value!r}")
+    v = float(value)
+    if not (math.isfinite(v) and v > 0 and (upper is None or v < upper)):
+        rng = f"between 0 and {upper}" if upper is not None else "positive"
+        raise InvalidOptionError(f"{name} must be {rng}, got {value!r}")
+    return v
+
+
+def detect_attachments(mesh: Mesh, axis_point, axis_direction, *, tolerance: float | None = None,
+                       coverage_ratio: float = 0.3) -> AttachmentSelection:
+    """Detect handles, spouts, knobs and other parts off the surface of revolution.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The scan (open, holed, two-walled and partial meshes are fine).
+    axis_point : (3,) array_like
+        A point on the axis, scan units.
+    axis_direction : (3,) array_like
+        Axis direction, foot to mouth.
+    tolerance : float, optional
+        Cell size in scan units: how far from the surface of revolution a point still counts
+        as on it for the coverage measure. Default: two median edge lengths, or four
+        times the measured noise of the surface around its profile when that is larger.
+    coverage_ratio : float
+        A vertex is an attachment core when its cell is covered over less than this
+        fraction (0-1) of the angles covered at the best-covered cell of its height.
+
+    Returns
+    -------
+    AttachmentSelection
+
+    Raises
+    ------
+    InvalidOptionError
+        ``tolerance`` not positive or ``coverage_ratio`` outside (0, 1).
+    InvalidInputError
+        Bad mesh or axis.
+    """
+    if tolerance is not None:
+        tolerance = _check_positive("tolerance", tolerance)
+    coverage_ratio = _check_positive("coverage_ratio", coverage_ratio, upper=1.0)
+    check_mesh(mesh)
+    p, a = check_axis(axis_point, axis_direction)
+    V, F = mesh.vertices, mesh.faces
+    h_all, r_all, _ = cylindrical(V, p, a)
+    used = np.flatnonzero(np.bincount(F.ravel(), minlength=len(V)))
+    h0 = float(h_all[used].min())
+    med_edge = float(np.median(np.linalg.norm(V[F[:, [1, 2, 0]]] - V[F], axis=2)))
+
+    hv = h_all[used] - h0
+    rv = r_all[used]
+    tv = _angles(V[used] - p, a)
+    if tolerance is None:
+        # a first pass at two edge lengths measures the noise around the revolution surface;
+        # a noisy scan needs cells of about four sigma so that its surface covers them
+        cell = _CELL_EDGES * med_edge
+        if not cell > 0:
+            raise InvalidInputError("the mesh has no extent (all edges of zero length); check the scan")
+        _, off1 = _coverage_pass(hv, rv, tv, cell, coverage_ratio)
+        fin = np.isfinite(off1)
+        noise1 = float(np.median(off1[fin]) / 0.6745) if fin.any() else 0.0
+        cell = max(cell, _CELL_NOISE * noise1)
+    else:
+        cell = float(tolerance)
+    core_v, offset_u = _coverage_pass(hv, rv, tv, cell, coverage_ratio)
+    body = ~core_v & np.isfinite(offset_u)
+    noise = float(np.median(offset_u[body]) / 0.6745) if body.any() else 0.0
+    threshold = max(_OFF_SIGMAS * noise, _OFF_EDGE_FRACTION * med_edge)
+    offset = np.full(len(V), np.nan)
+    offset[used] = np.nan_to_num(offset_u, nan=np.inf)
+    core = np.zeros(len(V), dtype=bool)
+    core[used] = core_v
+
+    off_f = (offset[F] > threshold).all(axis=1)
+    core_f = off_f & core[F].all(axis=1)
+    mask = np.zeros(len(F), dtype=bool)
+    components: list[Attachment] = []
+    if core_f.any():
+        graph = FaceGraph(len(F), face_adjacency(F))
+        adj = graph.pairs
+        comp = graph.components(off_f[adj[:, 0]] & off_f[adj[:, 1]])
+        seeded = np.zeros(int(comp.max()) + 1, dtype=bool)
+        seeded[comp[core_f]] = True
+        tri = V[F]
+        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        cand = off_f & seeded[comp]
+        comp_area = np.bincount(comp[cand], weights=area[cand], minlength=len(seeded))
+        big = seeded & (comp_area >= cell * cell)  # smaller flagged specks are noise
+        mask = off_f & big[comp]
+        idx = np.flatnonzero(mask)
+        idx = idx[np.argsort(comp[idx], kind="stable")]
+        groups = np.split(idx, np.flatnonzero(np.diff(comp[idx])) + 1) if len(idx) else []
+        cen = tri.mean(axis=1)
+        for fm in groups:
+            ar = float(area[fm].sum())
+            vi = unique_ints(F[fm])
+            hc = h_all[vi] - h0
+            components.append(Attachment(
+                n_faces=len(fm),
+                area=ar,
+                area_mm2=ar * mesh.mm_per_unit ** 2,
+                height_min=float(hc.min()),
+                height_max=float(hc.max()),
+                centroid=(area[fm] @ cen[fm]) / ar,
+                max_offset=float(np.max(offset[vi])),
+            ))
+        components.sort(key=lambda c: -c.area)
+    offset[used] = offset_u
+    return AttachmentSelection(
+        face_mask=mask,
+        components=tuple(components),
+        vertex_offset=offset,
+        tolerance=cell,
+        coverage_ratio=coverage_ratio,
+        offset_threshold=float(threshold),
+        noise=noise,
+        mm_per_unit=mesh.mm_per_unit,
+        method="angular coverage of the meridian plane + offset from the revolution surface",
+    )
+
+
+def _coverage_pass(hv: np.ndarray, rv: np.ndarray, tv: np.ndarray, cell: float,
+                   coverage_ratio: float) -> tuple[np.ndarray, np.ndarray]:
+    """Attachment cores and offsets from the revolution surface at one cell size.
+
+    Parameters
+    ----------
+    hv, rv, tv : (s,) float64
+        Height (>= 0), radius and angle of the vertices.
+    cell : float
+        Cell side in the meridian plane (and arc width of an angle bin).
+    coverage_ratio : float
+
+    Returns
+    -------
+    core : (s,) bool
+        Vertices whose cell is covered over few angles compared with the best cell of its row.
+    offset : (s,) float64
+        Distance from the revolution surface in the meridian plane (NaN when none found).
+    """
+    ih = np.floor(hv / cell).astype(np.int64)
+    ir = np.floor(rv / cell).astype(np.int64)
+    nh = int(ih.max()) + 1
+    nr = int(ir.max()) + 2
+
+    def n_ang(ring: np.ndarray) -> np.ndarray:
+        # angle bins about one cell of arc wide at the ring's mid radius
+        return np.clip(np.floor(2 * np.pi * (ring + 0.5)), 6, _MAX_ANGLE_BINS).astype(np.int64)
+
+    def occupied(dh: int, dr: int) -> np.ndarray:
+        th, tr = ih + dh, ir + dr
+        ok = (th >= 0) & (th < nh) & (tr >= 0)
+        na = n_ang(tr[ok])
+        ia = np.minimum((tv[ok] / (2 * np.pi) * na).astype(np.int64), na - 1)
+        return unique_ints((th[ok] * nr + tr[ok]) * _MAX_ANGLE_BINS + ia)
+
+    own_keys = occupied(0, 0)
+    keys = unique_ints(np.concatenate([occupied(dh, dr) for dh in (-1, 0, 1) for dr in (-1, 0, 1)]))
+    cells, counts = unique_ints(keys // _MAX_ANGLE_BINS, return_counts=True)
+    frac = counts / n_ang(cells % nr)
+    row_ref = np.zeros(nh)
+    np.maximum.at(row_ref, cells // nr, frac)
+    own_cell = ih * nr + ir
+    frac_v = frac[np.searchsorted(cells, own_cell)]
+    core = frac_v < coverage_ratio * row_ref[ih]
+
+    # revolution surface: median (r, h) of the vertices of each cell that the scan itself
+    # covers over many angles (a handle's few vertices in a wall cell do not move the median)
+    ocells, ocounts = unique_ints(own_keys // _MAX_ANGLE_BINS, return_counts=True)
+    good_ids = ocells[ocounts / n_ang(ocells % nr) >= coverage_ratio * row_ref[ocells // nr]]
+    offset = np.full(len(hv), np.nan)
+    if len(good_ids) == 0:
+        return core, offset
+    pos = np.minimum(np.searchsorted(good_ids, own_cell), len(good_ids) - 1)
+    in_good = good_ids[pos] == own_cell
+    ones = np.ones(int(in_good.sum()))
+    rep_r = weighted_quantiles(pos[in_good], rv[in_good], ones, len(good_ids), (0.5,))[0]
+    rep_h = weighted_quantiles(pos[in_good], hv[in_good], ones, len(good_ids), (0.5,))[0]
+    reps = np.column_stack([rep_r, rep_h])
+    reps = reps[np.isfinite(reps).all(axis=1)]
+    offset = _distance_to_curve(reps, np.column_stack([rv, hv]), 2.5 * cell)
+    return core, offset
+
+
+def _angles(d: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Angle in [0, 2 pi) of each offset ``d`` ((n, 3)) about the unit axis ``a``."""
+    ref = np.eye(3)[int(np.argmin(np.abs(a)))]
+    e1 = np.cross(a, ref)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(a, e1)
+    t = np.arctan2(d @ e2, d @ e1)
+    return np.mod(t, 2 * np.pi)
+
+
+def _distance_to_curve(reps: np.ndarray, pts: np.ndarray, join: float) -> np.ndarray:
+    """Distance of each point to the curve through ``reps`` ((q, 2)), approximated by the
+    segment to its two nearest representatives when they are closer than ``join``."""
+    if len(reps) == 0:
+        return np.full(len(pts), np.nan)
+    tree = cKDTree(reps)
+    if len(reps) == 1:
+        d, _ = tree.query(pts, k=1)
+        return d
+    d, idx = tree.query(pts, k=2)
+    p1, p2 = reps[idx[:, 0]], reps[idx[:, 1]]
+    seg = p2 - p1
+    L2 = np.einsum("ij,ij->i", seg, seg)
+    t = np.clip(np.einsum("ij,ij->i", pts - p1, seg) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+    dseg = np.linalg.norm(pts - (p1 + t[:, None] * seg), axis=1)
+    return np.where(np.sqrt(L2) <= join, np.minimum(d[:, 0], dseg), d[:, 0])

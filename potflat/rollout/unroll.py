@@ -1,0 +1,1264 @@
+"""Stage 1, rollout: find the axis, select the region, cut a seam and unroll on a proxy.
+
+``rollout(mesh)`` returns a :class:`RolloutResult` whose :attr:`~RolloutResult.flat` is a
+disk-topology mesh covering every selected face, with seam vertices duplicated (one copy per
+side) and no triangle altered. The selected faces are the painted side asked for (the outer
+wall, or the inner one seen from inside: :mod:`potflat.rollout.walls`), without attachments such as
+handles (:mod:`potflat.rollout.attachments`) and without the border faces that fold the development
+over (the rim top, a base's underside, break faces: :func:`border_folds`); folds inside the
+region, from the scan itself, are unfolded (:func:`untangle`), so the result has no flipped
+face and no overlapping border, and everything left out is reported.
+``run_rollout_stage(scan, out_dir)`` reads a scan and writes ``NAME.rollout.ply``,
+``NAME.rollout.json`` (see ``docs/formats.md``) and the profile ``NAME.profile.csv`` /
+``NAME.profile.svg`` (see ``docs/profile.md``).
+
+Angles: the reference direction of the axis (:attr:`AxisFit.reference`) is 0 degrees; the
+seam angle is measured from it counter-clockwise about the axis (axis pointing up). Angles
+of the region (``angles``) and of the output (``u = R theta`` on a cylinder) are measured
+from the seam. A region that does not go all the way round (a sherd, a frieze, a scan
+with a gap from foot to rim) needs no cut.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse
+import scipy.sparse.csgraph
+from scipy.spatial import cKDTree
+
+from potflat import importance as _importance
+from potflat.rollout import proxy as _proxy
+from potflat.mesh._kernels import union_find
+from potflat.rollout.attachments import AttachmentSelection, detect_attachments
+from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
+from potflat.mesh.distortion import DistortionSummary, face_areas, row_blocks, summarize
+from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.types import UNITS_MM, FlatMesh, Mesh, StageOutput
+from potflat.rollout.walls import SIDES, FaceGraph, WallSelection, face_adjacency, select_wall
+
+TWO_PI = 2.0 * np.pi
+#: A connected piece with at least this fraction of the largest piece's area is an object of
+#: its own: it must share the largest piece's axis (an inner wall does) or it is left out.
+SEPARATE_OBJECT_FRACTION = 0.1
+#: Two pieces share an axis when their axes differ by less than this angle (degrees) ...
+SHARED_AXIS_DEG = 5.0
+#: ... and pass within this fraction of the largest piece's height of each other.
+SHARED_AXIS_OFFSET = 0.05
+#: Angular bins (per turn) used to choose the seam and to find gaps in a region.
+SEAM_BINS = 360
+#: Width (bins) of the circular moving average applied to the seam cost.
+SEAM_SMOOTH = 5
+#: A face is edge-on to the proxy when its flat area is below this fraction of its 3D area.
+EDGE_ON_RATIO = 0.05
+#: Rounds of trimming folded border faces: all but the last unroll again without them (the
+#: proxy is refitted), the last removes them from the development as it is.
+TRIM_ROUNDS = 3
+#: Passes of :func:`border_folds` over one development (each peels what the last exposed).
+BORDER_PASSES = 50
+#: Rounds of :func:`untangle`; its region widens by one ring every ``UNTANGLE_WIDEN`` rounds.
+UNTANGLE_ROUNDS, UNTANGLE_WIDEN = 200, 20
+
+
+@dataclass(frozen=True, kw_only=True)
+class RolloutOptions:
+    """Options of the rollout stage (names equal the CLI options, ``_`` for ``-``).
+
+    Attributes
+    ----------
+    units : str or None
+        Length unit of the scan file (``mm``, ``cm``, ``m``, ``um``, ``in``); None: the unit
+        the file declares (a PLY ``comment units``, an STL header, glTF's metres), else mm.
+        Used when reading the file; :func:`rollout` itself uses :attr:`Mesh.units`.
+    texture : bool
+        Use the scan's texture image; False loads the geometry (and vertex colours) only,
+        e.g. when the texture file is missing or corrupt. Used when reading the file.
+    proxy : str
+        ``auto``, ``cylinder``, ``cone``, ``sphere`` or ``ortho``.
+    axis : tuple of 6 float or None
+        Manual axis ``(px, py, pz, dx, dy, dz)``: a point and a direction from foot to mouth.
+    flip : bool
+        Reverse the axis direction (mouth and foot swapped).
+    seam : float or None
+        Seam angle in degrees from the axis' reference direction; chosen automatically when
+        None (0 when ``angles`` is given).
+    band : (float, float) or None
+        Height band as fractions of the axial extent, 0 = foot, 1 = mouth.
+    angles : (float, float) or None
+        Angle range in degrees relative to the seam, e.g. ``(-60, 60)``; at most 360 wide.
+    view : tuple of 3 float or None
+        For ``proxy="ortho"``: direction from the vessel to the viewer (``x,y,z``, scan
+        coordinates); default: from the axis towards the region's centre (from the region
+        towards the axis for the inner side).
+    side : str
+        Painted side to unroll: ``outer`` (the outside, default) or ``inner`` (the inside
+        seen from within: a cup's interior, a kylix tondo). Two-walled scans are split at
+        the rim (:func:`potflat.rollout.walls.select_wall`).
+    keep_attachments : bool
+        Keep handles, spouts and knobs (parts off the surface of revolution, found by
+        :func:`potflat.rollout.attachments.detect_attachments`) in the rollout; by default they are
+        left out and reported, and the painting around their roots stays.
+    importance : str
+        Where the painting is, which the relax stage keeps true and the bake stage reports
+        (:mod:`potflat.importance`): ``auto`` (found in the colours; none for a scan without
+        colours or painted all over), ``none`` (the whole surface alike), ``mask`` (a PNG
+        painted over a potflat image, ``importance_mask``), ``texture-mask`` (a PNG in the
+        texture's space, ``importance_mask``) or ``band`` (``importance_band`` and/or
+        ``importance_angles``).
+    importance_mask : str or None
+        The mask image (white = important) for ``mask`` and ``texture-mask``.
+    importance_image : str or None
+        For ``mask``: the ``NAME.bake.json`` of the image the mask was painted over (default:
+        the one beside the mask whose image has the mask's size).
+    importance_band : (float, float) or None
+        For ``band``: heights as fractions of the axial extent (0 foot, 1 mouth).
+    importance_angles : (float, float) or None
+        For ``band``: angle range in degrees from the seam.
+    """
+
+    units: str | None = None
+    texture: bool = True
+    proxy: str = "auto"
+    axis: tuple[float, ...] | None = None
+    flip: bool = False
+    seam: float | None = None
+    band: tuple[float, float] | None = None
+    angles: tuple[float, float] | None = None
+    view: tuple[float, ...] | None = None
+    side: str = "outer"
+    keep_attachments: bool = False
+    importance: str = "auto"
+    importance_mask: str | None = None
+    importance_image: str | None = None
+    importance_band: tuple[float, float] | None = None
+    importance_angles: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        _importance.check_method(self.importance)
+        if (self.importance in ("mask", "texture-mask")) != (self.importance_mask is not None):
+            raise InvalidOptionError("give importance_mask (--importance-mask PNG) with importance mask or "
+                                     "texture-mask, and only then")
+        if self.importance_image is not None and self.importance != "mask":
+            raise InvalidOptionError("importance_image (--importance-image) goes with importance mask")
+        if self.importance_band is not None:
+            lo, hi = _floats("importance_band", self.importance_band, 2, "LO HI")
+            if not 0.0 <= lo < hi <= 1.0:
+                raise InvalidOptionError(
+                    f"importance band {lo:g} {hi:g} is invalid; give fractions of the height with 0 <= LO < HI <= 1")
+            object.__setattr__(self, "importance_band", (lo, hi))
+        if self.importance_angles is not None:
+            a0, a1 = _floats("importance_angles", self.importance_angles, 2, "A0 A1")
+            if not a0 < a1 <= a0 + 360.0:
+                raise InvalidOptionError(
+                    f"importance angles {a0:g} {a1:g} are invalid; give A0 < A1 <= A0 + 360 (degrees from the seam)")
+            object.__setattr__(self, "importance_angles", (a0, a1))
+        if (self.importance == "band") != (self.importance_band is not None or self.importance_angles is not None):
+            raise InvalidOptionError("give importance_band and/or importance_angles with importance band, and only then")
+        if self.side not in SIDES:
+            raise InvalidOptionError(f"side {self.side!r} is unknown; use outer or inner")
+        if not isinstance(self.keep_attachments, bool):
+            raise InvalidOptionError(f"keep_attachments must be true or false, got {self.keep_attachments!r}")
+        if self.units is not None and self.units not in UNITS_MM:
+            raise InvalidOptionError(f"units {self.units!r} is unknown; use one of {', '.join(UNITS_MM)}")
+        if not isinstance(self.texture, bool):
+            raise InvalidOptionError(f"texture must be true or false, got {self.texture!r}")
+        if self.proxy not in ("auto", *_proxy.KINDS):
+            raise InvalidOptionError(
+                f"proxy {self.proxy!r} is unknown; use auto, {', '.join(_proxy.KINDS)}")
+        if self.axis is not None:
+            ax = _floats("axis", self.axis, 6, "px,py,pz,dx,dy,dz")
+            if not any(ax[3:]):
+                raise InvalidOptionError("axis direction is zero; give dx,dy,dz not all 0")
+            object.__setattr__(self, "axis", ax)
+        if self.seam is not None:
+            object.__setattr__(self, "seam", _floats("seam", (self.seam,), 1, "DEG")[0])
+        if self.band is not None:
+            lo, hi = _floats("band", self.band, 2, "LO HI")
+            if not 0.0 <= lo < hi <= 1.0:
+                raise InvalidOptionError(
+                    f"band {lo:g} {hi:g} is invalid; give fractions of the height with 0 <= LO < HI <= 1")
+            object.__setattr__(self, "band", (lo, hi))
+        if self.angles is not None:
+            a0, a1 = _floats("angles", self.angles, 2, "A0 A1")
+            if not a0 < a1 <= a0 + 360.0:
+                raise InvalidOptionError(
+                    f"angles {a0:g} {a1:g} are invalid; give A0 < A1 <= A0 + 360 (degrees from the seam)")
+            object.__setattr__(self, "angles", (a0, a1))
+        if self.view is not None:
+            view = _floats("view", self.view, 3, "x,y,z")
+            if not any(view):
+                raise InvalidOptionError("view direction is zero; give x,y,z not all 0")
+            if self.proxy != "ortho":
+                raise InvalidOptionError("view applies only to proxy ortho; add --proxy ortho or drop --view")
+            object.__setattr__(self, "view", view)
+
+    def as_dict(self) -> dict:
+        """The options as a JSON-ready dict."""
+        return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v)
+                for f in fields(self)}
+
+
+def _floats(name: str, values, count: int, form: str) -> tuple[float, ...]:
+    try:
+        out = tuple(float(x) for x in values)
+    except (TypeError, ValueError):
+        raise InvalidOptionError(f"{name} needs {count} numbers ({form})") from None
+    if len(out) != count or not all(math.isfinite(x) for x in out):
+        raise InvalidOptionError(f"{name} needs {count} finite numbers ({form}), got {len(out)}")
+    return out
+
+
+@dataclass(frozen=True)
+class Region:
+    """The part of the scan that was unrolled.
+
+    Attributes
+    ----------
+    band : (float, float)
+        Height band, fractions of the axial extent (0 = foot, 1 = mouth).
+    angles_deg : (float, float) or None
+        Requested angle range from the seam, degrees.
+    height_range : (float, float)
+        Heights above the foot covered by the selected faces, scan units.
+    theta_range_deg : (float, float)
+        Angles from the seam covered by the output vertices, degrees.
+    faces, faces_total : int
+        Faces selected, faces in the scan.
+    cut : bool
+        Whether the region went all the way round and had to be cut open.
+    """
+
+    band: tuple[float, float]
+    angles_deg: tuple[float, float] | None
+    height_range: tuple[float, float]
+    theta_range_deg: tuple[float, float]
+    faces: int
+    faces_total: int
+    cut: bool
+
+    def as_dict(self) -> dict:
+        """JSON-ready description."""
+        d = asdict(self)
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
+
+
+@dataclass(frozen=True, eq=False)
+class RolloutResult:
+    """The rollout of a scan.
+
+    Attributes
+    ----------
+    flat : FlatMesh
+        The cut region with its flattened ``uv`` (scan units).
+    axis : AxisFit
+        Axis used, with its fit quality.
+    proxy : Proxy
+        Proxy used, its parameters, the candidates' figures and the reason.
+    seam_angle : float
+        Seam angle in degrees from the axis' reference direction, in ``[0, 360)``.
+    seam_method : str
+        How the seam was chosen (``user``, ``texture``, ``colours``, ``geometry``, ``gap``).
+    region : Region
+        What was selected.
+    distortion : DistortionSummary
+        Distortion of the rollout.
+    face_index : (m_out,) int64
+        Input face of each output face.
+    vertex_index : (n_out,) int64
+        Input vertex of each output vertex.
+    seam_vertices : int
+        Vertex copies added by the cut (each seam vertex once more).
+    split_vertices : int
+        Vertex copies added where the input was not manifold (a vertex whose faces form
+        separate fans becomes one vertex per fan).
+    walls : WallSelection
+        The painted side's faces (``side`` outer or inner) and the wall labels.
+    attachments : AttachmentSelection
+        Handles, spouts, knobs found off the surface of revolution.
+    attachments_kept : bool
+        Whether the attachments were kept in the rollout (``keep_attachments``).
+    attachment_roots : (k,) int64
+        Rollout faces (indices into ``flat.mesh.faces``) where a left-out attachment met
+        the wall: its footprint, to show as a mask in the bake (empty when kept or none).
+    trimmed : (t,) int64
+        Input faces left out because they are edge-on to the proxy at the region's border
+        (the rim top, a base's underside, a sherd's break faces): their development folds
+        over (see :func:`border_folds`).
+    trimmed_area : float
+        Their 3D area, scan units squared.
+    untangled_faces, untangled_vertices : int
+        Faces folded inside the development (creases of the scan surface, slivers) before
+        :func:`untangle`, and the vertices it moved to unfold them.
+    boundary_overlap : int
+        Crossing pairs of boundary segments left in the development (0: its outline and
+        holes do not overlap).
+    """
+
+    flat: FlatMesh
+    axis: AxisFit
+    proxy: _proxy.Proxy
+    seam_angle: float
+    seam_method: str
+    region: Region
+    distortion: DistortionSummary
+    face_index: np.ndarray
+    vertex_index: np.ndarray
+    seam_vertices: int
+    split_vertices: int
+    walls: WallSelection
+    attachments: AttachmentSelection
+    attachments_kept: bool
+    attachment_roots: np.ndarray
+    trimmed: np.ndarray
+    trimmed_area: float
+    untangled_faces: int
+    untangled_vertices: int
+    boundary_overlap: int
+    other_objects_faces: int = 0
+    importance: _importance.Importance | None = None
+
+    @property
+    def side(self) -> str:
+        """The painted side unrolled, ``outer`` or ``inner``."""
+        return self.walls.side
+
+
+def _wrap_pi(x: np.ndarray) -> np.ndarray:
+    return (x + np.pi) % TWO_PI - np.pi
+
+
+def _luminance_variation(mesh: Mesh, faces: np.ndarray) -> tuple[np.ndarray | None, str]:
+    """Per-face spread of brightness (std of samples at its corners), and its source."""
+    if mesh.texcoords is not None and mesh.texture_path is not None:
+        import cv2
+
+        img = cv2.imread(str(mesh.texture_path), cv2.IMREAD_REDUCED_GRAYSCALE_4)
+        if img is not None and img.size:
+            hgt, wid = img.shape[:2]
+            out = np.empty(len(faces))
+            for s in row_blocks(len(faces)):
+                tc = mesh.texcoords[faces[s]]
+                pts = np.concatenate([tc, tc.mean(axis=1, keepdims=True)], axis=1) % 1.0
+                col = np.minimum((pts[..., 0] * wid).astype(np.int64), wid - 1)
+                row = np.minimum(((1.0 - pts[..., 1]) * hgt).astype(np.int64), hgt - 1)
+                out[s] = img[row, col].astype(np.float64).std(axis=1)
+            return out, "texture"
+    if mesh.vertex_colors is not None:
+        rgb = mesh.vertex_colors[:, :3].astype(np.float64)
+        lum = rgb @ np.array([0.299, 0.587, 0.114])
+        return lum[mesh.faces[faces]].std(axis=1), "colours"
+    return None, "geometry"
+
+
+def _longest_min_run(cost: np.ndarray) -> int:
+    """Index of the middle of the longest circular run of (near-)minimal bins."""
+    low = cost <= cost.min() + 1e-9 * max(cost.max(), 1e-300)
+    if low.all():
+        return 0
+    k = len(cost)
+    start = int(np.argmin(low))  # a non-minimal bin: runs do not wrap past it
+    rolled = np.roll(low, -start)
+    best_len, best_mid, run = 0, 0, 0
+    for i in range(k + 1):
+        if i < k and rolled[i]:
+            run += 1
+            continue
+        if run > best_len:
+            best_len, best_mid = run, (i - run + (run - 1) / 2.0)
+        run = 0
+    return round(start + best_mid) % k
+
+
+def choose_seam(mesh: Mesh, faces: np.ndarray, theta_c: np.ndarray, area: np.ndarray,
+                covered: np.ndarray | None = None) -> tuple[float, str]:
+    """Seam angle (radians from the reference) where the region is least painted.
+
+    Each face costs its area times (the spread of brightness at its corners + 10 % of the
+    mean spread) when a texture or vertex colours exist, its area otherwise; the costs are
+    summed per degree of angle, smoothed over :data:`SEAM_SMOOTH` degrees, and the seam goes
+    to the middle of the longest run of minimal cost. When the region has an empty sector
+    (no face spans it: a sherd, a scan with a gap from foot to rim) the seam goes to the
+    middle of the widest one, and nothing needs to be cut.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    faces : (k,) int64
+        Indices of the region's faces.
+    theta_c : (k,) float64
+        Angles of their centroids, radians in ``[0, 2 pi)`` from the reference.
+    area : (k,) float64
+        Their areas.
+    covered : (SEAM_BINS,) bool, optional
+        Angle bins (from the reference) covered by the faces' angular spans.
+
+    Returns
+    -------
+    angle : float
+        Radians in ``[0, 2 pi)``.
+    method : str
+        ``texture``, ``colours``, ``geometry``, or ``gap`` when the region has an empty sector.
+    """
+    if covered is not None and (gap := _gap_middle(covered)) is not None:
+        return gap, "gap"
+    var, method = _luminance_variation(mesh, faces)
+    weight = area if var is None else area * (var + 0.1 * max(float(np.average(var, weights=area)), 1e-12))
+    bins = np.minimum((theta_c / TWO_PI * SEAM_BINS).astype(np.int64), SEAM_BINS - 1)
+    cost = np.bincount(bins, weight, SEAM_BINS)
+    kernel = np.ones(SEAM_SMOOTH) / SEAM_SMOOTH
+    pad = SEAM_SMOOTH // 2
+    smooth = np.convolve(np.concatenate([cost[-pad:], cost, cost[:pad]]), kernel, mode="valid")
+    k = _longest_min_run(smooth)
+    return _snap_to_gap(theta_c, (k + 0.5) / SEAM_BINS * TWO_PI, TWO_PI / SEAM_BINS), method
+
+
+def _snap_to_gap(theta_c: np.ndarray, angle: float, half_width: float) -> float:
+    """Move ``angle`` to the middle of the widest gap between face-centroid angles within
+    ``half_width`` of it, so the cut lies at a place of the surface, not of the bin grid
+    (whose origin, the reference direction, depends on the scan's pose)."""
+    offset = (theta_c - angle + np.pi) % TWO_PI - np.pi
+    near = np.sort(offset[np.abs(offset) <= half_width])
+    if len(near) < 2:
+        return angle
+    gaps = np.diff(near)
+    i = int(np.argmax(gaps))
+    return float((angle + 0.5 * (near[i] + near[i + 1])) % TWO_PI)
+
+
+def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
+    """Cut a mesh where the unwrapped angles of a vertex's corners disagree.
+
+    Corners of the same vertex stay one vertex when they are joined through shared edges
+    whose faces agree on the vertex's angle (differ by less than pi); otherwise they
+    become separate copies. So vertices on the seam get one copy per side, no face is
+    changed, and a vertex whose faces form separate fans (a non-manifold input) becomes one
+    vertex per fan.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+        Faces (indices into the original vertices).
+    corner_theta : (m, 3) float64
+        Unwrapped angle of each face corner.
+
+    Returns
+    -------
+    new_faces : (m, 3) int64
+        Faces indexing the new vertices.
+    vertex_index : (n_out,) int64
+        Original vertex of each new vertex (sorted, so the input order is kept).
+    theta : (n_out,) float64
+        Angle of each new vertex.
+    seam_vertices : int
+        Copies made because of the angle (the cut).
+    split_vertices : int
+        Further copies made for separate fans.
+    """
+    m = len(faces)
+    corner_v = faces.ravel()
+    th = corner_theta.ravel()
+    # half-edge h runs from corner h to the next corner of its face; half-edges on the same
+    # edge are neighbours when sorted by (lower vertex, higher vertex) (stable: by h on ties)
+    nxt = faces[:, [1, 2, 0]].ravel()
+    swap = corner_v > nxt
+    n = int(corner_v.max()) + 1 if m else 1
+    key = np.minimum(corner_v, nxt) * n + np.maximum(corner_v, nxt)
+    del nxt
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    pair = np.flatnonzero(key[1:] == key[:-1])
+    del key
+    h1, h2 = order[pair], order[pair + 1]
+    del order, pair
+    # join the corners at the lower vertex of two such half-edges, and those at the higher
+    # one, where their faces agree on the angle
+    def ends(h):  # corners of half-edges h at their lower and at their higher vertex
+        nh = h - h % 3 + (h + 1) % 3
+        return np.where(swap[h], nh, h), np.where(swap[h], h, nh)
+
+    (lo1, hi1), (lo2, hi2) = ends(h1), ends(h2)
+    del h1, h2, swap
+    a, b = np.concatenate([lo1, hi1]), np.concatenate([lo2, hi2])
+    del lo1, hi1, lo2, hi2
+    ok = np.abs(th[a] - th[b]) < np.pi
+    labels, n_comp = union_find(3 * m, a[ok], b[ok])
+    del a, b, ok
+    by_label = np.argsort(labels, kind="stable")
+    starts = np.searchsorted(labels[by_label], np.arange(n_comp))
+    first = by_label[starts]  # lowest corner of each component
+    vertex_of = corner_v[first]
+    perm = np.lexsort((first, vertex_of))
+    rank = np.empty(n_comp, np.int64)
+    rank[perm] = np.arange(n_comp)
+    new_faces = rank[labels].reshape(m, 3)
+    vertex_index = vertex_of[perm]
+    theta = th[first][perm]
+    base = np.count_nonzero(np.bincount(corner_v))
+    # copies of one vertex made by the cut differ in angle by whole turns
+    turns = np.floor(theta / TWO_PI + 0.5).astype(np.int64)
+    o = np.lexsort((turns, vertex_index))
+    distinct = 1 + np.count_nonzero((np.diff(vertex_index[o]) != 0) | (np.diff(turns[o]) != 0))
+    seam = distinct - base
+    return new_faces, vertex_index, theta, int(seam), int(n_comp - base - seam)
+
+
+def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.ndarray | None = None,
+            **option_fields) -> RolloutResult:
+    """Unroll a scan: axis, painted side, region, seam cut and proxy development.
+
+    After the axis, the attachments (handles, spouts, knobs) are found and, unless
+    ``keep_attachments``, left out; the painted side (``side``: the outer wall, or the inner
+    one seen from inside with ``u`` mirrored so that faces keep their orientation) is
+    selected, so the two walls of a cup are never mixed. Strips at the region's border
+    that are edge-on to the proxy and fold over in the development (the rim top, a base's
+    underside, a sherd's break faces) are trimmed and reported (:func:`border_folds`);
+    folds inside the region (scan noise) stay for the relax stage to untangle.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The scan (outward-oriented faces), e.g. ``load_scan(path).mesh``.
+    options : RolloutOptions, optional
+        All options; or give them as keywords (``rollout(mesh, proxy="cone")``), not both.
+    face_mask : (m,) bool, optional
+        Faces that may be unrolled, further restricting the painted side's faces; the band
+        and angles select within them. The axis is fitted on the whole scan and the band's
+        fractions refer to the whole scan's height.
+    **option_fields
+        Fields of :class:`RolloutOptions`.
+
+    Returns
+    -------
+    RolloutResult
+
+    Raises
+    ------
+    AxisNotFoundError
+        When no axis is given and the scan has no rotational symmetry.
+    InvalidOptionError
+        When an option is invalid or the region selects no face.
+    InvalidInputError
+        When ``side="inner"`` and the scan has no inner wall, or ``face_mask`` is malformed.
+    """
+    if options is None:
+        options = RolloutOptions(**option_fields)
+    elif option_fields:
+        raise InvalidOptionError("give either options= or option keywords to rollout(), not both")
+    if not isinstance(mesh, Mesh):
+        raise InvalidInputError(f"rollout needs a potflat Mesh, got {type(mesh).__name__}")
+    if len(mesh.faces) == 0:
+        raise InvalidInputError(f"{mesh.source or 'mesh'} has no faces; give a triangle mesh of the vessel")
+    V, F = mesh.vertices, mesh.faces
+    if face_mask is not None:
+        face_mask = np.asarray(face_mask)
+        if face_mask.dtype != bool or face_mask.shape != (len(F),):
+            raise InvalidInputError(f"face_mask must be a bool array of shape ({len(F)},), got "
+                                    f"{face_mask.dtype} {face_mask.shape}")
+    other_objects = np.zeros(len(F), bool)
+    if options.axis is not None:
+        axis = manual_axis(mesh, options.axis[:3], options.axis[3:], flip=options.flip)
+    else:
+        main = _main_object(mesh)
+        if main is None:
+            axis = estimate_axis(mesh, flip=options.flip)
+        else:
+            axis = estimate_axis(_submesh(mesh, main), flip=options.flip)
+            other_objects = ~main
+            face_mask = main if face_mask is None else face_mask & main
+    attachments = detect_attachments(mesh, axis.point, axis.direction)
+    walls = select_wall(mesh, axis.point, axis.direction, side=options.side,
+                        exclude=None if options.keep_attachments else attachments.face_mask)
+    allowed = walls.face_mask if face_mask is None else walls.face_mask & face_mask
+
+    area = face_areas(V, F)
+    centroid = np.empty((len(F), 3))
+    for s in row_blocks(len(F)):
+        f = F[s]
+        centroid[s] = (V[f[:, 0]] + V[f[:, 1]] + V[f[:, 2]]) / 3.0
+    h_c, _, theta_c = axis.cylindrical(centroid)
+    del centroid
+    band = options.band or (0.0, 1.0)
+    trimmed = np.zeros(len(F), bool)
+    un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, area)
+    for rnd in range(TRIM_ROUNDS):
+        fold = border_folds(un.flat.mesh.faces, un.flat.uv, area[un.face_index])
+        if not fold.any() or fold.all():
+            break
+        trimmed[un.face_index[fold]] = True
+        if rnd < TRIM_ROUNDS - 1:
+            un = _unroll(mesh, axis, options, allowed & ~trimmed, band, h_c, theta_c, area,
+                         seam=(un.seam, un.seam_method))
+        else:
+            un = _without(un, ~fold)
+    uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv)
+    for _ in range(TRIM_ROUNDS):  # folds pushed against the border by untangling are trimmed
+        fold = border_folds(un.flat.mesh.faces, uv, area[un.face_index])
+        if not fold.any() or fold.all():
+            break
+        trimmed[un.face_index[fold]] = True
+        un = _without(dataclasses.replace(un, flat=un.flat.replace(uv=uv)), ~fold)
+        uv, more, moved_more = untangle(un.flat.mesh.faces, un.flat.uv)
+        n_untangled, moved = n_untangled + more, moved + moved_more
+    overlap = len(crossing_segments(uv, boundary_segments(un.flat.mesh.faces, len(uv))[0])[0])
+    distortion = un.distortion
+    if n_untangled:
+        distortion = summarize(un.flat.mesh.vertices, uv, un.flat.mesh.faces)
+    if options.keep_attachments or not attachments.n_faces:
+        roots = np.zeros(0, np.int64)
+    else:
+        roots = np.flatnonzero(attachments.root_faces(F)[un.face_index]).astype(np.int64)
+
+    theta_deg = np.degrees(un.theta)
+    region = Region(
+        band=tuple(band), angles_deg=options.angles,
+        height_range=(float(h_c[un.face_index].min()), float(h_c[un.face_index].max())),
+        theta_range_deg=(float(theta_deg.min()), float(theta_deg.max())),
+        faces=len(un.face_index), faces_total=len(F), cut=un.seam_vertices > 0)
+    cut = un.flat.mesh
+    if mesh.texcoords is not None:  # attached once, to the final faces (see _unroll)
+        cut = cut.replace(texcoords=mesh.texcoords[un.face_index])
+    flat = un.flat.replace(mesh=cut, uv=uv)
+    importance = _find_importance(flat, options, axis, theta_deg)
+    return RolloutResult(
+        flat=flat.replace(importance=importance.values), importance=importance, axis=axis, proxy=un.proxy,
+        seam_angle=float(math.degrees(un.seam) % 360.0), seam_method=un.seam_method, region=region,
+        distortion=distortion, face_index=un.face_index, vertex_index=un.vertex_index,
+        seam_vertices=un.seam_vertices, split_vertices=un.split_vertices, walls=walls,
+        attachments=attachments, attachments_kept=options.keep_attachments, attachment_roots=roots,
+        trimmed=np.flatnonzero(trimmed).astype(np.int64), trimmed_area=float(area[trimmed].sum()),
+        untangled_faces=n_untangled, untangled_vertices=moved, boundary_overlap=overlap,
+        other_objects_faces=int(other_objects.sum()))
+
+
+@dataclass(frozen=True, eq=False)
+class _Unrolled:
+    """One unrolling of a face selection (what :func:`rollout` repeats while trimming)."""
+
+    flat: FlatMesh
+    proxy: _proxy.Proxy
+    distortion: DistortionSummary
+    face_index: np.ndarray
+    vertex_index: np.ndarray
+    theta: np.ndarray
+    seam: float
+    seam_method: str
+    seam_vertices: int
+    split_vertices: int
+
+
+def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndarray, band, h_c, theta_c,
+            area, seam: tuple[float, str] | None = None) -> _Unrolled:
+    """Select the region within ``allowed``, cut it open and develop it on the proxy (with
+    ``seam`` = (radians, method) from an earlier unrolling, or a seam chosen here)."""
+    V = mesh.vertices
+    face_index, seam, seam_method, corner_theta = _select(
+        mesh, axis, options, allowed, band, h_c, theta_c, area, seam)
+    sub_f = mesh.faces[face_index]
+    inner = options.side == "inner"
+
+    if options.proxy == "ortho":  # a projection: nothing to cut
+        vertex_index = np.flatnonzero(np.bincount(sub_f.ravel(), minlength=len(V)))
+        new_index = np.zeros(len(V), np.int64)
+        new_index[vertex_index] = np.arange(len(vertex_index))
+        new_faces = new_index[sub_f]
+        theta_new = np.zeros(len(vertex_index))
+        theta_new[new_faces.ravel()] = corner_theta.ravel()
+        n_seam = n_split = 0
+    else:
+        new_faces, vertex_index, theta_new, n_seam, n_split = cut_open(sub_f, corner_theta)
+
+    del sub_f, corner_theta
+    # without texture coordinates: rollout() attaches them to the final faces only (a copy
+    # per unrolling would be the largest array here)
+    cut_mesh = Mesh(
+        V[vertex_index], new_faces, texture_path=mesh.texture_path,
+        vertex_colors=None if mesh.vertex_colors is None else mesh.vertex_colors[vertex_index],
+        units=mesh.units, source=mesh.source)
+    h, r, _ = axis.cylindrical(cut_mesh.vertices)
+    vert_area = np.bincount(new_faces.ravel(), np.repeat(area[face_index] / 3.0, 3), len(vertex_index))
+    # the inner side is seen from the axis: u runs clockwise (seen from above), which is the
+    # development of -theta (an exact mirror of u for every proxy)
+    dev_theta = -theta_new if inner else theta_new
+
+    if options.proxy == "ortho":
+        view = options.view
+        if view is None:
+            view = _default_view(axis, theta_c[face_index], area[face_index], seam)
+            view = -view if inner else view
+        prox = _proxy.ortho_proxy(axis.direction, axis.reference, np.asarray(view, float))
+        prox = _proxy.Proxy(prox.kind, prox.params, reason="requested (orthographic projection)")
+        uv = _proxy.project_ortho(prox, cut_mesh.vertices, axis.point)
+        summary = summarize(cut_mesh.vertices, uv, new_faces)
+    elif options.proxy == "auto":
+        prox, uv, summary = _proxy.choose(cut_mesh.vertices, new_faces, h, r, dev_theta, vert_area)
+    else:
+        prox = _proxy.fit(options.proxy, h, r, dev_theta, vert_area)
+        prox = _proxy.Proxy(prox.kind, prox.params, reason="requested")
+        uv = _proxy.develop(prox, h, r, dev_theta)
+        summary = summarize(cut_mesh.vertices, uv, new_faces)
+    return _Unrolled(FlatMesh(cut_mesh, uv), prox, summary, face_index, vertex_index, theta_new, seam,
+                     seam_method, n_seam, n_split)
+
+
+def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
+    """The same development restricted to the faces in ``keep`` ((m,) bool), vertices compacted."""
+    mesh = un.flat.mesh
+    faces = mesh.faces[keep]
+    used = np.flatnonzero(np.bincount(faces.ravel(), minlength=len(mesh.vertices)))
+    new_index = np.zeros(len(mesh.vertices), np.int64)
+    new_index[used] = np.arange(len(used))
+    cut = mesh.replace(vertices=mesh.vertices[used], faces=new_index[faces],
+                       vertex_colors=None if mesh.vertex_colors is None else mesh.vertex_colors[used])
+    uv = un.flat.uv[used]
+    vertex_index = un.vertex_index[used]
+    copies = len(used) - len(np.unique(vertex_index))
+    seam = min(un.seam_vertices, copies)
+    return _Unrolled(FlatMesh(cut, uv), un.proxy, summarize(cut.vertices, uv, cut.faces), un.face_index[keep],
+                     vertex_index, un.theta[used], un.seam, un.seam_method, seam, copies - seam)
+
+
+def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.ndarray:
+    """Faces at the border of a development that fold it over: to trim before relaxing.
+
+    Two kinds, peeled in up to :data:`BORDER_PASSES` passes (each pass looks at the border
+    the previous one exposed):
+
+    * **edge-on strips**: a face is edge-on when its flat signed area is below
+      :data:`EDGE_ON_RATIO` times its 3D area (it faces along the proxy surface, not out
+      of it: a rim top, a flat base's underside, the break faces of a thick sherd, the wall
+      of a hole through a thick wall). A connected strip of edge-on faces that contains a
+      flipped face (signed area <= 0) and reaches the boundary (the outline, the seam, a
+      hole) is not part of the painted surface and cannot be unrolled without a fold.
+    * **overlapping border**: faces owning boundary segments that cross or touch another
+      boundary segment (a ragged rim or hole edge whose thin border faces overlap their
+      neighbours).
+    * **pinched vertices**: where a vertex's faces form separate fans (they meet at the
+      vertex only, e.g. after trimming), all but the fan of largest area are left out, so
+      the development does not touch itself.
+
+    Folds enclosed by well-unrolled faces (scan noise, slivers) are left to :func:`untangle`.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+        Faces of the cut mesh.
+    uv : (n, 2) float64
+        Its development.
+    area_3d : (m,) float64
+        3D area of each face.
+
+    Returns
+    -------
+    (m,) bool
+    """
+    faces = np.asarray(faces, np.int64)
+    keep = np.ones(len(faces), bool)
+    for _ in range(BORDER_PASSES):
+        idx = np.flatnonzero(keep)
+        if len(idx) == 0:
+            break
+        sub = faces[idx]
+        edges, seg, owner = _edge_table(sub, len(uv))
+        drop = _edge_on_strips(sub, uv, area_3d[idx], seg) | _minor_fans(sub, area_3d[idx], edges, len(uv))
+        if not drop.any():  # overlaps are judged on a border without folded strips
+            a, b = crossing_segments(uv, seg)
+            drop[owner[a]] = True
+            drop[owner[b]] = True
+        if not drop.any():
+            break
+        keep[idx[drop]] = False
+    return ~keep
+
+
+def signed_areas(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Signed flat area ((m,) float64) of each face, positive when counter-clockwise."""
+    out = np.empty(len(faces))
+    for s in row_blocks(len(faces)):
+        f = faces[s]
+        a, b, c = uv[f[:, 0]], uv[f[:, 1]], uv[f[:, 2]]
+        out[s] = 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    return out
+
+
+def boundary_segments(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Edges used by one face only.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+    n : int
+        Number of vertices.
+
+    Returns
+    -------
+    segments : (b, 2) int64
+        Vertex pairs, in their face's order.
+    owner : (b,) int64
+        The face of each segment.
+    """
+    _, seg, owner = _edge_table(faces, n)
+    return seg, owner
+
+
+def _edge_table(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unique edges ((e, 2) int64, sorted pairs), boundary segments and their faces."""
+    # half-edge h = 3 f + j runs from faces[f, j] to faces[f, (j + 1) % 3]
+    a, b = faces.ravel(), faces[:, [1, 2, 0]].ravel()
+    key = np.minimum(a, b) * n + np.maximum(a, b)
+    order = np.argsort(key, kind="stable")
+    k = key[order]
+    del key
+    first = np.ones(len(k), bool)
+    first[1:] = k[1:] != k[:-1]
+    start = np.flatnonzero(first)
+    count = np.diff(np.append(start, len(k)))
+    single = order[start[count == 1]]
+    k = k[start]
+    return np.stack([k // n, k % n], axis=1), np.stack([a[single], b[single]], axis=1), single // 3
+
+
+def crossing_segments(uv: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs of segments that cross or touch (segments sharing a vertex are not compared).
+
+    Parameters
+    ----------
+    uv : (n, 2) float64
+    seg : (b, 2) int64
+
+    Returns
+    -------
+    a, b : (k,) int64
+        Indices into ``seg`` of each crossing pair.
+    """
+    if len(seg) < 2:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    P, Q = uv[seg[:, 0]], uv[seg[:, 1]]
+    length = np.linalg.norm(Q - P, axis=1)
+    # crossing segments have midpoints closer than the longer one's length
+    pairs = cKDTree(0.5 * (P + Q)).query_pairs(float(length.max()), output_type="ndarray")
+    a, b = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
+    a, b = a[length[a] + length[b] > 0], b[length[a] + length[b] > 0]
+    share = ((seg[a, 0] == seg[b, 0]) | (seg[a, 0] == seg[b, 1])
+             | (seg[a, 1] == seg[b, 0]) | (seg[a, 1] == seg[b, 1]))
+    a, b = a[~share], b[~share]
+
+    def orient(p, q, r):
+        return np.sign((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
+
+    def within(p, q, r):  # r inside the bounding box of segment p-q
+        return ((np.minimum(p, q) <= r) & (r <= np.maximum(p, q))).all(axis=1)
+
+    pa, qa, pb, qb = P[a], Q[a], P[b], Q[b]
+    o1, o2, o3, o4 = orient(pa, qa, pb), orient(pa, qa, qb), orient(pb, qb, pa), orient(pb, qb, qa)
+    # proper crossings, and touching (a vertex on the other segment, e.g. two copies of a vertex)
+    cross = (((o1 * o2 < 0) & (o3 * o4 < 0)) | ((o1 == 0) & within(pa, qa, pb)) | ((o2 == 0) & within(pa, qa, qb))
+             | ((o3 == 0) & within(pb, qb, pa)) | ((o4 == 0) & within(pb, qb, qa)))
+    return a[cross], b[cross]
+
+
+def _minor_fans(faces: np.ndarray, area_3d: np.ndarray, edges: np.ndarray, n: int) -> np.ndarray:
+    """Faces of the smaller fans at vertices whose faces form several fans (see :func:`border_folds`).
+
+    A vertex with ``k`` faces in open fans has ``k`` plus one edge per fan, so a vertex
+    with at least two more edges than faces is pinched; only the faces around those are cut
+    apart (:func:`cut_open`) to find the fans.
+    """
+    pinched = np.bincount(edges.ravel(), minlength=n) - np.bincount(faces.ravel(), minlength=n) >= 2
+    out = np.zeros(len(faces), bool)
+    if not pinched.any():
+        return out
+    local = np.flatnonzero(pinched[faces].any(axis=1))
+    new_faces, vertex_index, _, _, _ = cut_open(faces[local], np.zeros((len(local), 3)))
+    fan_area = np.bincount(new_faces.ravel(), np.repeat(area_3d[local], 3), len(vertex_index))
+    # keep the largest fan of each pinched vertex
+    order = np.lexsort((-fan_area, vertex_index))
+    first = np.ones(len(order), bool)
+    first[1:] = vertex_index[order][1:] != vertex_index[order][:-1]
+    minor = np.zeros(len(vertex_index), bool)
+    minor[order[~first]] = True
+    minor &= pinched[vertex_index]
+    out[local] = minor[new_faces].any(axis=1)
+    return out
+
+
+def _edge_on_strips(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """Edge-on strips that contain a flipped face and touch the boundary (see :func:`border_folds`)."""
+    flat = signed_areas(faces, uv)
+    out = np.zeros(len(faces), bool)
+    if not (flat <= 0).any():
+        return out
+    sel = np.flatnonzero(flat < EDGE_ON_RATIO * area_3d)
+    sub = faces[sel]
+    comp = FaceGraph(len(sel), face_adjacency(sub)).components()
+    on_border = np.zeros(len(uv), bool)
+    on_border[seg.ravel()] = True
+    k = int(comp.max()) + 1
+    has_flip = np.bincount(comp[flat[sel] <= 0], minlength=k) > 0
+    touches = np.bincount(comp[on_border[sub].any(axis=1)], minlength=k) > 0
+    out[sel] = (has_flip & touches)[comp]
+    return out
+
+
+def untangle(faces: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """Unfold folds inside a development by moving their vertices to their neighbours' mean.
+
+    The vertices of flipped faces (signed area <= 0) move to the mean of their edge
+    neighbours (Jacobi steps), the region widening by one ring every
+    :data:`UNTANGLE_WIDEN` rounds, for up to :data:`UNTANGLE_ROUNDS` rounds; boundary
+    vertices stay. Such folds come from the scan (a crease, a sliver, a spike), not from
+    the development; the relax stage then restores the lengths around them.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+    uv : (n, 2) float64
+
+    Returns
+    -------
+    uv : (n, 2) float64
+        A new array (``uv`` itself when nothing was flipped).
+    flipped : int
+        Faces flipped before.
+    moved : int
+        Vertices moved.
+    """
+    bad = signed_areas(faces, uv) <= 0
+    n_bad = int(bad.sum())
+    if n_bad == 0:
+        return uv, 0, 0
+    n = len(uv)
+    edges, seg, _ = _edge_table(faces, n)
+    A = scipy.sparse.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]],
+                                                            np.r_[edges[:, 1], edges[:, 0]])), shape=(n, n)).tocsr()
+    deg = np.maximum(np.diff(A.indptr), 1).astype(np.float64)
+    movable = np.ones(n, bool)
+    movable[seg.ravel()] = False
+    # faces of each vertex (CSR), to re-check only the faces around the moved vertices
+    corner_order = np.argsort(faces.ravel(), kind="stable")
+    vf_ptr = np.concatenate([[0], np.cumsum(np.bincount(faces.ravel(), minlength=n))])
+    x = uv.copy()
+    region = np.zeros(n, bool)
+    region[faces[bad].ravel()] = True
+    for r in range(UNTANGLE_ROUNDS):
+        if r % UNTANGLE_WIDEN == UNTANGLE_WIDEN - 1:  # widen the region around persistent tangles
+            region |= (A @ region.astype(np.float64)) > 0
+        region &= movable
+        idx = np.flatnonzero(region)
+        if len(idx) == 0:
+            break
+        x[idx] = (A[idx] @ x) / deg[idx, None]
+        count = vf_ptr[idx + 1] - vf_ptr[idx]
+        offset = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+        near = np.unique(corner_order[np.repeat(vf_ptr[idx], count) + offset] // 3)
+        still = near[signed_areas(faces[near], x) <= 0]
+        if len(still) == 0:
+            break
+        region[faces[still].ravel()] = True
+    return x, n_bad, int(np.count_nonzero(np.any(x != uv, axis=1)))
+
+
+def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c, area,
+            seam_given: tuple[float, str] | None = None):
+    """Faces of the region, the seam (radians, and how it was chosen) and the corners' unwrapped angles."""
+    V, F = mesh.vertices, mesh.faces
+    theta_v = axis.cylindrical(V)[2]
+    frac = h_c / axis.height if axis.height > 0 else np.zeros(len(F))
+    keep = (frac >= band[0]) & (frac <= band[1]) & face_mask
+    if seam_given is not None:
+        seam, seam_method = seam_given
+    elif options.seam is not None:
+        seam, seam_method = math.radians(options.seam % 360.0), "user"
+    elif options.angles is not None:
+        seam, seam_method = 0.0, "user"
+    else:
+        sel = np.flatnonzero(keep)
+        if len(sel) == 0:
+            raise InvalidOptionError(f"band {band[0]:g} {band[1]:g} selects no faces; widen it")
+        corners = _corner_angles(theta_v, F, sel, theta_c[sel])
+        seam, seam_method = choose_seam(mesh, sel, theta_c[sel], area[sel],
+                                        _covered(theta_c[sel], corners))
+
+    # centroid angle from the seam, in [lo, lo + 2 pi): faces are unwrapped around it
+    lo = math.radians(options.angles[0]) if options.angles is not None else 0.0
+    rel_c = (theta_c - seam - lo) % TWO_PI + lo
+    if options.angles is not None:
+        keep &= rel_c <= math.radians(options.angles[1])
+    face_index = np.flatnonzero(keep)
+    if len(face_index) == 0:
+        raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
+    if options.angles is None and seam_method == "user":
+        # a region that does not go round is not cut: unwrap from the middle of its gap
+        corners = _corner_angles(theta_v, F, face_index, rel_c[face_index], seam)
+        gap = _gap_middle(_covered(rel_c[face_index], corners))
+        if gap is not None:
+            rel_c = (theta_c - seam - gap) % TWO_PI + gap
+            rel_c -= TWO_PI * np.round(np.average(rel_c[face_index], weights=area[face_index]) / TWO_PI)
+    corner_theta = _corner_angles(theta_v, F, face_index, rel_c[face_index], seam)
+    return face_index, seam, seam_method, corner_theta
+
+
+def _corner_angles(theta_v: np.ndarray, F: np.ndarray, idx: np.ndarray, centre: np.ndarray,
+                   shift: float = 0.0) -> np.ndarray:
+    """Corner angles of the faces ``F[idx]``, ``theta_v - shift`` unwrapped to within pi of
+    ``centre`` ((k,) angle of each face). Shape (k, 3); computed in blocks of faces."""
+    out = np.empty((len(idx), 3))
+    for s in row_blocks(len(idx)):
+        c = centre[s, None]
+        out[s] = c + _wrap_pi(theta_v[F[idx[s]]] - shift - c)
+    return out
+
+
+def _default_view(axis: AxisFit, theta_c: np.ndarray, area: np.ndarray, seam: float) -> np.ndarray:
+    """From the axis towards the region's (area-weighted) centre angle; opposite the seam if all round."""
+    s, c = area @ np.sin(theta_c), area @ np.cos(theta_c)
+    angle = math.atan2(s, c) if np.hypot(s, c) >= 1e-6 * area.sum() else seam + math.pi
+    other = np.cross(axis.direction, axis.reference)
+    return math.cos(angle) * axis.reference + math.sin(angle) * other
+
+
+def _covered(theta_c: np.ndarray, corner_theta: np.ndarray) -> np.ndarray:
+    """Which of the :data:`SEAM_BINS` angle bins the faces' angular spans cover.
+
+    Parameters
+    ----------
+    theta_c : (k,) float64
+        Face centroid angles (radians, any origin).
+    corner_theta : (k, 3) float64
+        Corner angles unwrapped around ``theta_c`` (same origin).
+
+    Returns
+    -------
+    (SEAM_BINS,) bool
+        Bin ``i`` covers ``[i, i + 1)`` turns / SEAM_BINS from the origin. Faces spanning
+        half a turn or more (around the axis itself) are ignored.
+    """
+    lo, hi = corner_theta.min(axis=1), corner_theta.max(axis=1)
+    narrow = hi - lo < np.pi
+    b0 = np.floor(lo[narrow] / TWO_PI * SEAM_BINS).astype(np.int64)
+    b1 = np.floor(hi[narrow] / TWO_PI * SEAM_BINS).astype(np.int64) + 1
+    s0, s1 = b0 % SEAM_BINS, b1 % SEAM_BINS
+    delta = np.bincount(s0, minlength=SEAM_BINS) - np.bincount(s1, minlength=SEAM_BINS)
+    delta[0] += np.count_nonzero(s1 <= s0)
+    return np.cumsum(delta)[:SEAM_BINS] > 0
+
+
+def _gap_middle(covered: np.ndarray) -> float | None:
+    """Middle (radians from the bins' origin) of the longest uncovered sector, None if all covered."""
+    if covered.all():
+        return None
+    return (_longest_min_run(covered.astype(np.float64)) + 0.5) / SEAM_BINS * TWO_PI
+
+
+def _find_importance(flat: FlatMesh, options: RolloutOptions, axis: AxisFit, theta_deg: np.ndarray
+                     ) -> _importance.Importance:
+    """The importance of the rollout's vertices as ``options.importance`` asks."""
+    method = options.importance
+    if method == "none":
+        return _importance.Importance(None, "none", 1.0, "importance off: the whole surface counts alike")
+    if method == "auto":
+        return _importance.auto_importance(flat)
+    if method == "mask":
+        return _importance.image_mask_importance(flat, options.importance_mask, options.importance_image)
+    if method == "texture-mask":
+        return _importance.texture_mask_importance(flat, options.importance_mask)
+    h = axis.cylindrical(flat.mesh.vertices)[0]
+    return _importance.band_importance(flat, h / max(axis.height, np.finfo(float).tiny), theta_deg,
+                                       options.importance_band, options.importance_angles)
+
+
+def rollout_summary(result: RolloutResult) -> dict:
+    """The JSON-ready figures of a rollout (the sidecar without file and provenance fields)."""
+    mesh = result.flat.mesh
+    return {
+        "units": mesh.units,
+        "mm_per_unit": mesh.mm_per_unit,
+        "axis": result.axis.as_dict(),
+        "proxy": result.proxy.as_dict(),
+        "seam": {"angle_deg": result.seam_angle, "method": result.seam_method, "cut": result.region.cut},
+        "region": result.region.as_dict(),
+        "counts": {
+            "vertices": len(mesh.vertices), "faces": len(mesh.faces),
+            "input_faces": result.region.faces_total,
+            "input_vertices_used": int(len(result.vertex_index) - result.seam_vertices - result.split_vertices),
+            "seam_vertices_duplicated": result.seam_vertices,
+            "nonmanifold_vertices_split": result.split_vertices,
+        },
+        "distortion": result.distortion.as_dict(),
+        "importance": result.importance.as_dict() if result.importance is not None else None,
+        "boundary_overlap": result.boundary_overlap,
+        "walls": result.walls.summary(),
+        "attachments": _attachments_summary(result),
+        "trimmed": _trimmed_summary(result, mesh.mm_per_unit),
+        "notes": _notes(result),
+        "untangled": {"faces": result.untangled_faces, "vertices_moved": result.untangled_vertices,
+                      "reason": "faces folded inside the development by the scan's own creases and "
+                                "slivers, unfolded by moving their vertices to their neighbours' mean"},
+    }
+
+
+def _notes(result: RolloutResult) -> list[str]:
+    """Warnings for the sidecar: what the user should know before relaxing."""
+    notes = []
+    if result.distortion.flipped:
+        why = (" (kept attachments: a handle cannot be unrolled without folds; leave them out)"
+               if result.attachments_kept and result.attachments.n_faces else "")
+        if result.distortion.flipped > 0.05 * len(result.flat.mesh.faces):
+            why = (" (they face the other way: the two sides of the wall were not told apart"
+                   + (", the scan's faces were read as pointing inwards" if result.walls.normals_inverted else "")
+                   + "; check the axis (--axis) or try --side inner)")
+        notes.append(f"{result.distortion.flipped} faces stay flipped{why}; the relax stage will refuse them")
+    if result.boundary_overlap:
+        notes.append(f"the border overlaps itself at {result.boundary_overlap} places; the relax stage will refuse it")
+    if result.other_objects_faces:
+        notes.append(f"{result.other_objects_faces} faces of separate objects that do not share the vessel's axis "
+                     "(another vessel or fragment in the same file) were left out; split the file or give --axis")
+    return notes
+
+
+def _submesh(mesh: Mesh, face_mask: np.ndarray) -> Mesh:
+    """The faces of ``mesh`` selected by ``face_mask`` with only the vertices they use."""
+    F = mesh.faces[face_mask]
+    used = np.zeros(len(mesh.vertices), bool)
+    used[F] = True
+    remap = np.cumsum(used) - 1  # np.unique is slow on millions of indices in numpy 2.4
+    return Mesh(mesh.vertices[used], remap[F], units=mesh.units, source=mesh.source)
+
+
+def _main_object(mesh: Mesh) -> np.ndarray | None:
+    """Faces of the vessel when the scan holds separate objects, else ``None``.
+
+    Pieces (connected components) with at least :data:`SEPARATE_OBJECT_FRACTION` of the
+    largest piece's area are objects; each is kept when its own axis agrees with the
+    largest piece's (a separately scanned inner wall or foot does), and left out when it
+    does not (a second vessel, a fragment lying beside it). Returns ``None`` when nothing
+    would be left out, so a single-object scan is fitted as a whole.
+    """
+    from potflat.errors import AxisNotFoundError
+
+    V, F = mesh.vertices, mesh.faces
+    graph = scipy.sparse.coo_matrix((np.ones(2 * len(F)), (np.concatenate([F[:, 0], F[:, 1]]),
+                                                           np.concatenate([F[:, 1], F[:, 2]]))),
+                                    shape=(len(V), len(V)))
+    n_pieces, labels = scipy.sparse.csgraph.connected_components(graph, directed=False)
+    if n_pieces < 2:
+        return None
+    face_label = labels[F[:, 0]]
+    area = face_areas(V, F)
+    piece_area = np.bincount(face_label, area, n_pieces)
+    order = np.argsort(-piece_area, kind="stable")
+    objects = [k for k in order if piece_area[k] >= SEPARATE_OBJECT_FRACTION * piece_area[order[0]]]
+    if len(objects) < 2:
+        return None
+    main = face_label == objects[0]
+    try:
+        ref = estimate_axis(_submesh(mesh, main))
+    except AxisNotFoundError:
+        return None  # the whole scan decides (and refuses honestly if it must)
+    keep = main.copy()
+    for k in objects[1:]:
+        piece = face_label == k
+        try:
+            own = estimate_axis(_submesh(mesh, piece))
+        except AxisNotFoundError:
+            continue
+        cos = abs(float(own.direction @ ref.direction))
+        offset = own.point - ref.point
+        distance = np.linalg.norm(offset - (offset @ ref.direction) * ref.direction)
+        if cos >= math.cos(math.radians(SHARED_AXIS_DEG)) and distance <= SHARED_AXIS_OFFSET * ref.height:
+            keep |= piece
+    small = ~np.isin(face_label, objects)
+    keep |= small  # small pieces are judged by the wall and attachment analysis
+    return None if keep.all() else keep
+
+
+def _attachments_summary(result: RolloutResult) -> dict:
+    att = result.attachments
+    summary = att.summary()
+    return {**summary, "kept": result.attachments_kept,
+            "faces_left_out": 0 if result.attachments_kept else att.n_faces,
+            "area_left_out_mm2": 0.0 if result.attachments_kept else summary["area_mm2"],
+            "root_faces": result.attachment_roots.tolist(),
+            "root_faces_note": "rollout faces (indices into the PLY's faces) where a left-out "
+                               "attachment met the wall, to mask in the bake"}
+
+
+def _trimmed_summary(result: RolloutResult, mm_per_unit: float) -> dict:
+    """Counts and area of the folded border faces left out (see :func:`border_folds`)."""
+    return {"faces": len(result.trimmed), "area_mm2": result.trimmed_area * mm_per_unit ** 2,
+            "reason": "border faces that fold the development over: strips edge-on to the proxy "
+                      "(rim top, base underside, break faces) and overlapping border faces"}
+
+
+def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None, *,
+                      name: str | None = None) -> StageOutput:
+    """Read a scan, roll it out, write ``NAME.rollout.ply``, ``NAME.rollout.json`` and its profile.
+
+    The profile (:func:`potflat.rollout.profile.vessel_profile` of both walls around the rollout's
+    axis, attachments left out) is written as ``NAME.profile.csv`` and ``NAME.profile.svg``
+    (a section drawing, see ``docs/profile.md``).
+
+    Parameters
+    ----------
+    scan_path : path-like
+        The scan (any format :func:`potflat.io.scan.load_scan` reads).
+    out_dir : path-like
+        Output folder (created if needed).
+    options : RolloutOptions, optional
+    name : str, optional
+        Output stem; default: the scan's file stem.
+
+    Returns
+    -------
+    StageOutput
+        ``paths`` with ``"ply"``, ``"json"``, ``"profile_csv"`` and ``"profile_svg"``;
+        ``summary`` = the JSON content.
+
+    Raises
+    ------
+    InvalidOptionError
+        When an output would overwrite the input, or the name is not a plain file stem.
+    """
+    from potflat import __version__
+    from potflat.io.atomic import write_json_atomic
+    from potflat.io.scan import load_scan
+    from potflat.io.flat_ply import write_flat_ply
+    from potflat.rollout.profile import vessel_profile, write_profile_csv, write_profile_svg
+    from potflat.stages.provenance import provenance
+
+    options = options or RolloutOptions()
+    scan_path, out_dir = Path(scan_path), Path(out_dir)
+    name = name or scan_path.stem
+    if not name or Path(name).name != name or name in (".", ".."):
+        raise InvalidOptionError(f"name {name!r} must be a plain file stem without folders")
+    ply_path = out_dir / f"{name}.rollout.ply"
+    json_path = out_dir / f"{name}.rollout.json"
+    csv_path = out_dir / f"{name}.profile.csv"
+    svg_path = out_dir / f"{name}.profile.svg"
+    for out in (ply_path, json_path, csv_path, svg_path):
+        if out.resolve() == scan_path.resolve():
+            raise InvalidOptionError(
+                f"output {out} would overwrite the input scan; choose another output folder or --name")
+    loaded = load_scan(scan_path, units=options.units, texture="use" if options.texture else "ignore")
+    mesh, cleaning = loaded.mesh, loaded.report.as_dict()
+    del loaded
+    result = rollout(mesh, options=options)
+    mesh = mesh.replace(texcoords=None)  # the rollout has its own; the profile needs none
+    body = None if result.attachments_kept or not result.attachments.n_faces else ~result.attachments.face_mask
+    profile = vessel_profile(mesh, result.axis.point, result.axis.direction, face_mask=body,
+                             labels=result.walls.labels)
+    del mesh
+    summary = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_summary(result),
+               "profile": profile.summary(),
+               "cleaning": cleaning,
+               "files": {"ply": ply_path.name, "json": json_path.name, "profile_csv": csv_path.name,
+                         "profile_svg": svg_path.name}}
+    summary["provenance"] = provenance(stage="rollout", inputs=[scan_path], options=options.as_dict())
+    write_flat_ply(ply_path, result.flat, comments=(f"potflat {__version__} rollout of {scan_path.name}",))
+    write_profile_csv(profile, csv_path)
+    write_profile_svg(profile, svg_path, title=f"{name}: profile ({profile.units})")
+    write_json_atomic(json_path, summary)
+    return StageOutput({"ply": ply_path, "json": json_path, "profile_csv": csv_path, "profile_svg": svg_path},
+                       summary)

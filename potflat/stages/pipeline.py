@@ -1,0 +1,332 @@
+"""Run one scan through all three stages: rollout -> relax -> bake.
+
+The stages are found by name (``potflat.rollout``, ``potflat.relax``, ``potflat.bake``),
+each providing an options dataclass (``RolloutOptions``...) and a file-level function
+(``run_rollout_stage``...). They are imported on first use, so importing this module is
+cheap and the batch schema can be derived from the options dataclasses.
+"""
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import enum
+import importlib
+import re
+import time
+import types
+import typing
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+from potflat.errors import InvalidOptionError, PotflatError
+from potflat.types import StageOutput
+
+#: The stages in the order they run.
+STAGES: tuple[str, ...] = ("rollout", "relax", "bake")
+
+#: The distortion figures a batch summary reports (keys of DistortionSummary).
+FIGURES: tuple[str, ...] = ("edge_rms", "area_mean_abs_log", "anisotropy_p95", "flipped")
+
+# File that each stage reads, after the first: ``NAME<suffix>`` in the output folder.
+_STAGE_INPUT = {"relax": ".rollout.ply", "bake": ".relaxed.ply"}
+
+
+def stage_api(stage: str) -> tuple[type, Callable[..., StageOutput]]:
+    """The options dataclass and the file-level function of ``stage``.
+
+    Parameters
+    ----------
+    stage : str
+        ``"rollout"``, ``"relax"`` or ``"bake"``.
+
+    Returns
+    -------
+    options_class : type
+        ``RolloutOptions``, ``RelaxOptions`` or ``BakeOptions``.
+    run : callable
+        ``run_<stage>_stage(input_path, out_dir, options, *, name=None) -> StageOutput``.
+    """
+    if stage not in STAGES:
+        raise ValueError(f"unknown stage {stage!r}; one of {', '.join(STAGES)}")
+    module = importlib.import_module(f"potflat.{stage}")
+    return getattr(module, f"{stage.capitalize()}Options"), getattr(module, f"run_{stage}_stage")
+
+
+def options_dict(options: Any) -> dict[str, Any]:
+    """A stage options dataclass as a JSON-ready dict (tuples become lists)."""
+    import json
+
+    return json.loads(json.dumps(dataclasses.asdict(options), default=str))
+
+
+@dataclass(frozen=True)
+class ScanResult:
+    """What :func:`run_scan` produced for one scan.
+
+    Attributes
+    ----------
+    name : str
+        Output name: files are ``NAME.rollout.ply``, ``NAME.relaxed.ply``, ``NAME.png``...
+    scan : Path
+        The scan that was read.
+    out_dir : Path
+        Folder holding every output.
+    stages : dict of str to StageOutput
+        ``"rollout"``, ``"relax"``, ``"bake"`` to what each stage wrote.
+    seconds : dict of str to float
+        Wall time of each stage, and ``"total"``.
+    """
+
+    name: str
+    scan: Path
+    out_dir: Path
+    stages: dict
+    seconds: dict
+
+    @property
+    def paths(self) -> dict[str, Path]:
+        """Every file written, keyed ``"<stage>.<role>"`` (e.g. ``"bake.png"``)."""
+        return {f"{stage}.{role}": Path(p) for stage, out in self.stages.items()
+                for role, p in out.paths.items()}
+
+    @property
+    def figures(self) -> dict[str, Any]:
+        """Distortion figures of the final flattening (:data:`FIGURES`, from the relax stage)."""
+        return distortion_figures(self.stages["relax"].summary)
+
+
+def distortion_figures(summary: dict) -> dict[str, Any]:
+    """The :data:`FIGURES` found in a stage's JSON summary (``None`` where absent).
+
+    The figures are looked up in the first nested dict holding ``edge_rms`` (a
+    :class:`potflat.mesh.distortion.DistortionSummary`), preferring one under a key named
+    ``distortion``.
+    """
+    found = _find_figures(summary)
+    return {k: (found or {}).get(k) for k in FIGURES}
+
+
+def _find_figures(node: Any) -> dict | None:
+    if isinstance(node, dict):
+        if "edge_rms" in node:
+            return node
+        keys = sorted(node, key=lambda k: (k != "distortion", str(k)))
+        for key in keys:
+            hit = _find_figures(node[key])
+            if hit is not None:
+                return hit
+    return None
+
+
+def option_types(options_class: type) -> dict[str, Any]:
+    """Field name to resolved type hint of a stage options dataclass (fields only)."""
+    hints = typing.get_type_hints(options_class)
+    return {f.name: hints.get(f.name, Any) for f in dataclasses.fields(options_class) if f.init}
+
+
+def describe_type(tp: Any) -> str:
+    """A short English description of a type hint, for messages ("a number", ...)."""
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        parts = [describe_type(a) for a in args if a is not type(None)]
+        return " or ".join(parts) + (" or null" if type(None) in args else "")
+    if origin is typing.Literal:
+        return "one of " + ", ".join(map(str, args))
+    if origin is tuple:
+        if len(args) == 2 and args[1] is Ellipsis:
+            return f"a list of {_plural(args[0])}"
+        if args and all(a == args[0] for a in args):
+            return f"a list of {len(args)} {_plural(args[0])}"
+        return "a list of " + ", ".join(describe_type(a) for a in args)
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        return "one of " + ", ".join(str(m.value) for m in tp)
+    return {bool: "true or false", int: "a whole number", float: "a number", str: "text",
+            Path: "a path"}.get(tp, getattr(tp, "__name__", str(tp)))
+
+
+def _plural(tp: Any) -> str:
+    return {int: "whole numbers", float: "numbers", str: "names", bool: "true/false values"}.get(
+        tp, describe_type(tp))
+
+
+def coerce_option(tp: Any, value: Any) -> Any:
+    """Convert a YAML or command-line value to the type hint ``tp`` of an option field.
+
+    Numbers may be given for floats, integral numbers for ints, lists (or comma-separated
+    text) for tuples, text for paths and enums. Range checks are left to the options
+    dataclass itself.
+
+    Raises
+    ------
+    InvalidOptionError
+        If ``value`` cannot be read as ``tp``; the message names the expected type.
+    """
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if tp is Any:
+        return value
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        for arg in args:
+            if arg is type(None):
+                continue
+            try:
+                return coerce_option(arg, value)
+            except InvalidOptionError:
+                continue
+        raise _type_error(tp, value)
+    if origin is typing.Literal:
+        if value in args:
+            return value
+        close = difflib.get_close_matches(str(value), [str(a) for a in args], n=1)
+        hint = f" (did you mean {close[0]}?)" if close else ""
+        raise InvalidOptionError(f"must be {describe_type(tp)}, got {value!r}{hint}")
+    if origin is tuple:
+        if isinstance(value, str):
+            value = [v.strip() for v in value.split(",") if v.strip()]
+        if not isinstance(value, (list, tuple)):
+            raise _type_error(tp, value)
+        if len(args) == 2 and args[1] is Ellipsis:
+            item_types = [args[0]] * len(value)
+        else:
+            item_types = list(args)
+            if len(value) != len(item_types):
+                raise _type_error(tp, value)
+        try:
+            return tuple(coerce_option(t, v) for t, v in zip(item_types, value))
+        except InvalidOptionError:
+            raise _type_error(tp, value) from None
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        for member in tp:
+            if value in (member, member.value, member.name):
+                return member
+        raise _type_error(tp, value)
+    if tp is bool:
+        if isinstance(value, bool):
+            return value
+    elif tp is int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        if isinstance(value, float) and value.is_integer():
+            return int(value)
+        if isinstance(value, str) and re.fullmatch(r"[+-]?\d+", value.strip()):
+            return int(value)
+    elif tp is float:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        if isinstance(value, str):
+            try:
+                return float(value)
+            except ValueError:
+                pass
+    elif tp is str:
+        if isinstance(value, str):
+            return value
+    elif tp is Path:
+        if isinstance(value, (str, Path)):
+            return Path(value)
+    else:
+        return value
+    raise _type_error(tp, value)
+
+
+def _type_error(tp: Any, value: Any) -> InvalidOptionError:
+    shown = "null" if value is None else repr(value)
+    return InvalidOptionError(f"must be {describe_type(tp)}, got {shown}")
+
+
+def resolve_options(**given: Any) -> dict[str, Any]:
+    """Options instances for every stage: the given ones, checked, or the defaults.
+
+    Parameters
+    ----------
+    **given
+        ``rollout=``, ``relax=``, ``bake=``: an options instance, a dict of option
+        values, or ``None`` for the defaults.
+    """
+    out = {}
+    for stage in STAGES:
+        cls, _ = stage_api(stage)
+        value = given.get(stage)
+        if value is None:
+            value = cls()
+        elif isinstance(value, dict):
+            value = cls(**value)
+        elif not isinstance(value, cls):
+            raise InvalidOptionError(
+                f"{stage}= must be a {cls.__name__} (or a dict of its fields), got {type(value).__name__}")
+        out[stage] = value
+    return out
+
+
+def _check_painting_name_is_free(out: Path, name: str) -> None:
+    """Refuse before any work when ``NAME.png`` exists in ``out`` and was not baked by potflat
+    (typically the scan's own texture, when the output folder is the scan's folder): the bake
+    would stop there after rollout and relax had run."""
+    painting = out / f"{name}.png"
+    if painting.exists() and not (out / f"{name}.bake.json").exists():
+        raise InvalidOptionError(f"{painting} exists and was not made by potflat (the scan's texture?) and would be "
+                                 "overwritten; give another output folder (-o) or --name")
+
+
+def _preview_at_image_resolution(options: dict) -> dict:
+    """A relax preset that relaxes a coarse copy (``preview``) does so at 2 pixels of the image
+    it is baked into, unless ``simplify_mm`` was given."""
+    relax, bake = options["relax"], options["bake"]
+    if getattr(relax, "simplify_mm", 0.0) is not None:  # given (or a stage stand-in without it, in tests)
+        return options
+    if relax.resolved()["simplify_mm"]:
+        options = {**options, "relax": dataclasses.replace(relax, simplify_mm=2.0 / bake.resolution)}
+    return options
+
+
+def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: str | None = None,
+             progress: Callable[[str], None] | None = None) -> ScanResult:
+    """Run rollout, relax and bake on one scan, writing every output into ``out_dir``.
+
+    Parameters
+    ----------
+    scan_path : path-like
+        The textured scan (OBJ, PLY, ...).
+    out_dir : path-like
+        Output folder (created if needed).
+    rollout, relax, bake : RolloutOptions, RelaxOptions, BakeOptions, dict or None
+        Options of each stage; ``None`` uses the stage's defaults.
+    name : str, optional
+        Output name; defaults to the scan's file stem.
+    progress : callable, optional
+        Called with the stage name (``"rollout"``, ``"relax"``, ``"bake"``) as each starts.
+
+    Returns
+    -------
+    ScanResult
+
+    Raises
+    ------
+    PotflatError
+        From the stage that failed; outputs of the stages already done are kept.
+    """
+    scan = Path(scan_path)
+    out = Path(out_dir)
+    name = name or scan.stem
+    options = _preview_at_image_resolution(resolve_options(rollout=rollout, relax=relax, bake=bake))
+    _check_painting_name_is_free(out, name)
+    stages: dict[str, StageOutput] = {}
+    seconds: dict[str, float] = {}
+    start = time.perf_counter()
+    source = scan
+    for stage in STAGES:
+        if progress is not None:
+            progress(stage)
+        if stage in _STAGE_INPUT:
+            source = out / f"{name}{_STAGE_INPUT[stage]}"
+            if not source.is_file():
+                raise PotflatError(f"{source}: the previous stage did not write it; "
+                                   "this is a bug in potflat, please report it")
+        _, run = stage_api(stage)
+        t = time.perf_counter()
+        stages[stage] = run(source, out, options[stage], name=name)
+        seconds[stage] = time.perf_counter() - t
+    seconds["total"] = time.perf_counter() - start
+    return ScanResult(name=name, scan=scan, out_dir=out, stages=stages, seconds=seconds)

@@ -1,0 +1,336 @@
+"""Painted figures (issue: importance and the shape term): the weighted springs and the shape
+term against references, importance found in the colours, masks and bands, true scale, the
+zone figures and outline, and that importance makes a painted panel measurably truer."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+import reference as ref
+from _bench_meshes import meshes, signed_areas
+
+from potflat import importance as imp
+from potflat.mesh.distortion import face_distortion, important_faces, true_scale_factor, zone_figures
+from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.relax import relax
+from potflat.types import FlatMesh, Mesh
+
+
+def _springs(V, F, **kw):
+    from potflat.relax.solver import _Springs
+
+    return _Springs(np.ascontiguousarray(V, float), np.ascontiguousarray(F, np.int64), len(V), **kw)
+
+
+@pytest.fixture(scope="module")
+def bumpy():
+    flat, _ = meshes.cylinder_patch(5, 4, seed=3)
+    V = flat.mesh.vertices.copy()
+    V[:, 0] += np.random.default_rng(1).normal(0, 0.05, len(V))
+    return FlatMesh(Mesh(V, flat.mesh.faces), flat.uv)
+
+
+# --- the energy -----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("relative", [False, True])
+def test_weighted_springs_and_shape_term_match_reference(bumpy, relative):
+    V, F = bumpy.mesh.vertices, bumpy.mesh.faces
+    pairs, rest = ref.springs(V, F)
+    weight = np.random.default_rng(4).uniform(0.05, 1.0, len(V))
+    sp = _springs(V, F, k=0.7, relative=relative, weight=weight, shape=0.3)
+    x = np.ascontiguousarray(bumpy.uv * np.array([1.1, 0.93]))
+    E, Es, g = sp.evaluate(x, barrier=False)
+    from potflat.mesh.distortion import face_areas
+
+    scale = 0.3 / float(np.mean(face_areas(V, F)))
+    want = ref.weighted_spring_energy(x, pairs, rest, 0.7, relative, weight) + ref.shape_energy(V, F, x, weight, scale)
+    assert Es == pytest.approx(want, rel=1e-10)
+    num = ref.numeric_gradient(lambda y: sp.evaluate(np.ascontiguousarray(y), barrier=False)[0], x)
+    np.testing.assert_allclose(g, num, atol=1e-6 * np.abs(num).max())
+
+
+def test_shape_term_is_zero_for_a_similarity_and_infinite_when_folded():
+    flat, exact = meshes.cylinder_patch(6, 5, seed=2)
+    F = flat.mesh.faces
+    V = np.column_stack([exact, np.zeros(len(exact))])  # a plane: ``exact`` is its isometric layout
+    sp = _springs(V, F, k=1.0, relative=True, shape=1.0)
+    rot = np.array([[np.cos(0.3), -np.sin(0.3)], [np.sin(0.3), np.cos(0.3)]])
+    for x in (exact, 2.5 * exact @ rot.T):  # isometric, then a similarity: no shape energy
+        spring_free = _springs(V, F, k=1.0, relative=True)
+        e_shape = sp.evaluate(np.ascontiguousarray(x), barrier=False)[1] - spring_free.evaluate(
+            np.ascontiguousarray(x), barrier=False)[1]
+        assert abs(e_shape) < 1e-9
+    sheared = np.ascontiguousarray(exact @ np.array([[1.0, 0.4], [0.0, 1.0]]).T)
+    assert sp.evaluate(sheared, barrier=False)[1] > spring_free.evaluate(sheared, barrier=False)[1] + 1e-3
+    folded = np.ascontiguousarray(exact * np.array([-1.0, 1.0]))
+    assert sp.evaluate(folded, barrier=False)[1] == np.inf
+
+
+def test_uniform_weights_reproduce_the_result_without_importance_exactly():
+    flat = meshes.vessel_rollout(1500, seed=2)
+    plain = relax(flat)
+    ones = relax(flat.replace(importance=np.ones(len(flat.uv))))
+    np.testing.assert_array_equal(plain.flat.uv, ones.flat.uv)
+    np.testing.assert_array_equal(plain.energy_history, ones.energy_history)
+    # contrast 1 weights nothing (the importance still says where true scale is measured)
+    half = relax(flat.replace(importance=np.linspace(0, 1, len(flat.uv))), importance_contrast=1.0, true_scale=False)
+    np.testing.assert_array_equal(relax(flat, true_scale=False).flat.uv, half.flat.uv)
+
+
+def test_shape_term_keeps_figures_rounder_and_never_folds():
+    flat = meshes.vessel_rollout(3000, seed=1)
+    springs = relax(flat, shape=0.0)
+    shaped = relax(flat, shape=0.5)
+    for r in (springs, shaped):
+        assert r.flipped == 0 and r.boundary_overlap == 0
+        assert np.all(signed_areas(r.flat.uv, flat.mesh.faces) > 0)
+        assert np.all(np.diff(r.energy_history[-r.levels[-1]["iterations"]:]) <= 0)
+    assert shaped.distortion.anisotropy_p95 < springs.distortion.anisotropy_p95 - 0.1
+    assert shaped.distortion.area_mean_abs_log > springs.distortion.area_mean_abs_log  # the trade
+
+
+def test_true_scale_sets_the_zone_median_scale_to_one():
+    flat = meshes.vessel_rollout(1500, seed=2)
+    zone = (flat.uv[:, 1] > np.median(flat.uv[:, 1])).astype(float)
+    for importance in (None, zone):
+        f = flat.replace(importance=importance)
+        r = relax(f)
+        z = zone_figures(f.mesh.vertices, r.flat.uv, f.mesh.faces, importance)["important"]
+        assert z.scale_median == pytest.approx(1.0, abs=1e-9)
+        assert r.scale_factor != 1.0
+        off = relax(f, true_scale=False)
+        assert off.scale_factor == 1.0
+        np.testing.assert_allclose(r.flat.uv - r.flat.uv.mean(0), r.scale_factor * (off.flat.uv - off.flat.uv.mean(0)),
+                                   atol=1e-9 * np.ptp(off.flat.uv))
+
+
+def test_zone_figures_of_an_isometric_layout_are_exact():
+    flat, exact = meshes.cylinder_patch(12, 8, seed=1)
+    V = np.column_stack([exact, np.zeros(len(exact))])  # a plane: ``exact`` is its isometric layout
+    flat = FlatMesh(Mesh(V, flat.mesh.faces), exact)
+    zone = np.zeros(len(exact))
+    zone[: len(exact) // 2] = 1.0
+    z = zone_figures(flat.mesh.vertices, exact, flat.mesh.faces, zone)
+    for key in ("important", "rest"):
+        assert z[key].scale_median == pytest.approx(1.0, abs=1e-9)
+        assert z[key].length_error_p95_pct < 1e-6
+    assert z["important"].area_fraction + z["rest"].area_fraction == pytest.approx(1.0)
+    assert true_scale_factor(flat.mesh.vertices, 1.25 * exact, flat.mesh.faces, zone) == pytest.approx(0.8)
+
+
+# --- extremes ---------------------------------------------------------------------------------
+
+def test_weights_at_the_extremes_stay_fold_free():
+    flat = meshes.vessel_rollout(1500, seed=3)
+    F = flat.mesh.faces
+    one_face = np.zeros(len(flat.uv))
+    one_face[F[len(F) // 2]] = 1.0
+    for importance in (one_face, np.zeros(len(flat.uv)), np.ones(len(flat.uv))):
+        r = relax(flat.replace(importance=importance), importance_contrast=1000.0)
+        assert r.flipped == 0 and r.boundary_overlap == 0 and np.isfinite(r.flat.uv).all()
+    # the one important face keeps its size (true scale is measured there) and its shape
+    fd = face_distortion(flat.mesh.vertices, relax(flat.replace(importance=one_face), importance_contrast=1000.0).flat.uv, F)
+    face = len(F) // 2
+    assert important_faces(F, one_face)[face] and important_faces(F, one_face).sum() <= 4  # it and its neighbours
+    assert abs(np.log(fd.sigma_max[face] * fd.sigma_min[face])) < 0.05
+    assert fd.sigma_max[face] / fd.sigma_min[face] < 1.05
+
+
+def test_a_mask_that_marks_nothing_or_everything_means_no_importance(tmp_path):
+    import cv2
+
+    flat, exact = meshes.cylinder_patch(8, 6)
+    flat = flat.replace(uv=exact)
+    for value in (0, 255):
+        path = tmp_path / f"m{value}.png"
+        cv2.imwrite(str(path), np.full((16, 16), value, np.uint8))
+        tex = flat.replace(mesh=flat.mesh.replace(texcoords=np.full((len(flat.mesh.faces), 3, 2), 0.5)))
+        got = imp.texture_mask_importance(tex, path)
+        assert got.values is None and "alike" in got.reason
+
+
+# --- finding the painting -------------------------------------------------------------------
+
+def _painted_image(size=(400, 900), px_per_mm=2.0, panel=True, shading=True, seed=0):
+    """Terracotta with a lighting gradient and noise; black and cream circles in a panel."""
+    rng = np.random.default_rng(seed)
+    h, w = size
+    img = np.zeros((h, w, 4), np.uint8)
+    yy, xx = np.mgrid[0:h, 0:w]
+    base = np.array([188, 94, 52], float)
+    light = (0.7 + 0.4 * xx / w + 0.1 * np.sin(yy / h * 3)) if shading else np.ones((h, w))
+    rgb = base[None, None] * light[..., None] + (rng.normal(0, 3, (h, w, 3)) if shading else 0)
+    inside = np.zeros((h, w), bool)
+    if panel:
+        r = 10 * px_per_mm
+        for k, cx in enumerate(range(int(w * 0.3), int(w * 0.7), int(3.5 * r))):
+            disc = (xx - cx) ** 2 + (yy - h / 2) ** 2 <= r * r
+            rgb[disc] = (28, 22, 20) if k % 2 == 0 else (232, 214, 178)
+            inside |= disc
+    img[..., :3] = np.clip(rgb, 0, 255)
+    img[..., 3] = 255
+    return img, inside
+
+
+def test_painted_zone_is_found_against_lighting_and_noise():
+    img, circles = _painted_image()
+    zone, reason = imp.painted_zone_image(img, 2.0)
+    assert zone is not None, reason
+    assert np.all(zone[circles] > 0.99)  # every painted pixel is in the zone
+    h, w = circles.shape
+    assert zone[:, : int(0.2 * w)].max() < 0.01 and zone[:, int(0.8 * w):].max() < 0.01  # plain stays plain
+
+
+def test_no_painting_and_painted_all_over_give_no_importance():
+    plain, _ = _painted_image(panel=False)
+    zone, reason = imp.painted_zone_image(plain, 2.0)
+    assert zone is None and "no paint" in reason
+    img = _painted_image(shading=False, panel=False)[0]
+    yy, xx = np.mgrid[0:img.shape[0], 0:img.shape[1]]
+    img[((xx // 20 + yy // 20) % 2 == 0)] = (28, 22, 20, 255)  # a chequer all over
+    zone, reason = imp.painted_zone_image(img, 2.0)
+    assert zone is None and "all over" in reason
+
+
+def _textured(vessel, folder: Path) -> Mesh:
+    """The vessel's mesh with its texture written to ``folder``."""
+    from potflat.io.images import write_png
+
+    path = write_png(folder / f"{vessel.kind}.png", vessel.texture, px_per_mm=None)
+    return vessel.mesh.replace(texture_path=path)
+
+
+def test_auto_importance_on_a_generated_vessel_covers_the_frieze_not_the_plain_body(tmp_path):
+    from potflat.rollout import rollout
+    from potflat_synthetic.vessels import make_vessel
+
+    vessel = make_vessel("hydria", n_vertices=6000, seed=2)
+    ro = rollout(_textured(vessel, tmp_path))
+    assert ro.importance.method == "auto" and ro.importance.values is not None
+    V, F = ro.flat.mesh.vertices, ro.flat.mesh.faces
+    zone = important_faces(F, ro.flat.importance)
+    centroid = V[F].mean(axis=1)
+    in_circle = np.zeros(len(F), bool)
+    for c in vessel.features:
+        in_circle |= np.linalg.norm(centroid - c.centre, axis=1) <= c.radius
+    assert zone[in_circle].mean() > 0.99
+    assert 0.1 < ro.importance.zone_fraction < 0.8
+
+
+def test_rollout_without_colours_has_no_importance():
+    from potflat.rollout import rollout
+    from potflat_synthetic.vessels import make_vessel
+
+    vessel = make_vessel("cylinder", n_vertices=2000, seed=1)
+    ro = rollout(vessel.mesh.replace(texcoords=None, texture_path=None))
+    assert ro.importance.values is None and "no texture" in ro.importance.reason
+
+
+# --- masks and bands ------------------------------------------------------------------------
+
+def test_image_mask_round_trip_is_exact_on_a_developable_vessel(tmp_path):
+    """image -> surface -> image: every vertex reads the mask exactly where the image shows
+    it, and the important faces are those the painted rectangle covers."""
+    import cv2
+
+    from potflat.bake import BakeOptions, run_bake_stage
+    from potflat.io.flat_ply import write_flat_ply
+    from potflat.rollout import rollout
+    from potflat_synthetic.vessels import make_vessel
+
+    mesh = _textured(make_vessel("cylinder", n_vertices=3000, seed=4), tmp_path)
+    first = relax(rollout(mesh, importance="none").flat)
+    write_flat_ply(tmp_path / "v.relaxed.ply", first.flat)
+    run_bake_stage(tmp_path / "v.relaxed.ply", tmp_path, BakeOptions(px_per_mm=1.0, maps=()))
+    meta = json.loads((tmp_path / "v.bake.json").read_text())
+    w, h = meta["image_px"]
+    mask = np.zeros((h, w), np.uint8)
+    r0, r1, c0, c1 = int(0.3 * h), int(0.7 * h), int(0.3 * w), int(0.6 * w)
+    mask[r0:r1, c0:c1] = 255
+    cv2.imwrite(str(tmp_path / "v.mask.png"), mask)
+
+    again = rollout(mesh, importance="mask", importance_mask=str(tmp_path / "v.mask.png"))
+    px = imp._pixels(first.flat.uv, np.asarray(meta["origin_uv"]), meta["px_per_unit"])
+    np.testing.assert_allclose(again.flat.importance, imp.sample_image(mask / 255.0, px), atol=1e-12)
+    # faces whose corners all lie a pixel inside the rectangle are important, those outside are not
+    F = again.flat.mesh.faces
+    col, row = px[F][..., 0], px[F][..., 1]
+    inside = ((col > c0 + 1.5) & (col < c1 - 1.5) & (row > r0 + 1.5) & (row < r1 - 1.5)).all(axis=1)
+    outside = ((col < c0 - 1.5) | (col > c1 + 1.5) | (row < r0 - 1.5) | (row > r1 + 1.5)).all(axis=1)
+    zone = important_faces(F, again.flat.importance)
+    assert inside.any() and np.all(zone[inside]) and not np.any(zone[outside])
+    # relaxed with that zone: still fold-free, the zone true to scale
+    second = relax(again.flat)
+    z = zone_figures(again.flat.mesh.vertices, second.flat.uv, F, again.flat.importance)["important"]
+    assert second.flipped == 0 and z.length_error_p95_pct < 1.0
+    # a mask of another size is refused with one line
+    cv2.imwrite(str(tmp_path / "small.png"), mask[:10, :10])
+    with pytest.raises(InvalidInputError, match="size"):
+        rollout(mesh, importance="mask", importance_mask=str(tmp_path / "small.png"))
+
+
+def test_band_importance_selects_heights_and_angles():
+    from potflat.rollout import rollout
+    from potflat_synthetic.vessels import make_vessel
+
+    vessel = make_vessel("cylinder", n_vertices=3000, seed=1)
+    ro = rollout(vessel.mesh, importance="band", importance_band=(0.25, 0.75), importance_angles=(0.0, 180.0))
+    frac = ro.importance.zone_fraction
+    assert frac == pytest.approx(0.25, abs=0.04)  # half the height, half the way round
+    with pytest.raises(InvalidOptionError, match="importance band"):
+        rollout(vessel.mesh, importance="band", importance_band=(0.6, 0.4))
+    with pytest.raises(InvalidOptionError, match="importance_mask"):
+        rollout(vessel.mesh, importance="mask")
+
+
+def test_texture_mask_importance_reads_the_texture_space(tmp_path):
+    import cv2
+
+    flat, exact = meshes.cylinder_patch(10, 8)
+    F = flat.mesh.faces
+    tc = (exact - exact.min(0)) / np.ptp(exact, axis=0)  # texture coordinates = the development
+    mesh = flat.mesh.replace(texcoords=tc[F])
+    mask = np.zeros((64, 64), np.uint8)
+    mask[:, :32] = 255  # left half of the texture
+    path = tmp_path / "mask.png"
+    cv2.imwrite(str(path), mask)
+    got = imp.texture_mask_importance(FlatMesh(mesh, exact), path)
+    left = tc[:, 0] < 0.45
+    right = tc[:, 0] > 0.55
+    assert np.all(got.values[left] == 1.0) and np.all(got.values[right] == 0.0)
+    with pytest.raises(InvalidInputError, match="not found"):
+        imp.texture_mask_importance(FlatMesh(mesh, exact), tmp_path / "missing.png")
+
+
+def test_unknown_importance_is_one_line():
+    from potflat.rollout import RolloutOptions
+
+    with pytest.raises(InvalidOptionError, match="unknown importance"):
+        RolloutOptions(importance="painted")
+
+
+def test_a_painted_panel_comes_out_rounder_and_truer_with_importance(tmp_path):
+    """A whole hydria painted in a panel only (black glaze elsewhere, lighting and noise):
+    with the painted zone found in the colours its circles are rounder and closer to true
+    size than with the whole surface alike, fold-free."""
+    from _bench_meshes import figures
+
+    from potflat.rollout import rollout
+    from potflat_synthetic.vessels import make_vessel
+
+    vessel = make_vessel("hydria", n_vertices=8000, seed=3, painting="panel", shading=True)
+    mesh = _textured(vessel, tmp_path)
+    found = rollout(mesh)
+    assert found.importance.values is not None and found.importance.zone_fraction < 0.5
+    alike = found.flat.replace(importance=None)
+    with_zone, without = relax(found.flat), relax(alike)
+    a, b = figures.measure_figures(with_zone.flat, vessel.features), figures.measure_figures(without.flat, vessel.features)
+    assert a.measured == b.measured >= 3
+    assert with_zone.flipped == 0 and without.flipped == 0
+    assert a.anisotropy_p95 - 1 < 0.5 * (b.anisotropy_p95 - 1)
+    assert abs(a.area_ratio - 1) < 0.5 * abs(b.area_ratio - 1)
