@@ -84,7 +84,9 @@ def _worker(size_m: float, method: str, budget: float, target: float | None) -> 
             trace.append((time.perf_counter() - t0, info["energy"]))
 
         kw = {"preset": preset, "time_budget": budget}
-        if weighting:
+        if weighting == "springs":  # the springs alone: no shape term, no final scaling (before issue 13)
+            kw.update(shape=0.0, true_scale=False)
+        elif weighting:
             kw["weighting"] = weighting
         r = relax(flat, callback=cb if preset == "paper" else None, **kw)
         uv = r.flat.uv
@@ -174,7 +176,8 @@ def main() -> None:
         return
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", default="0.1,0.5,1,2.5", help="million vertices, comma separated")
-    ap.add_argument("--methods", default="preview,standard,archival,paper,arap")
+    ap.add_argument("--methods", default="preview,standard,archival,paper,arap",
+                    help="PRESET[:uniform|relative|springs] (springs: no shape term, no true scale), paper, arap")
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--budget", type=float, default=600.0, help="time budget (s) of each relax run")

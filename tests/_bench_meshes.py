@@ -28,3 +28,21 @@ def signed_areas(uv: np.ndarray, F: np.ndarray) -> np.ndarray:
     e2 = uv[F[:, 2]] - uv[F[:, 0]]
     return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
 
+
+
+def bumpy_patch():
+    """A tiny non-planar irregular mesh (random heights over a jittered lattice) with its
+    cylinder-patch layout: the kernels' reference cases."""
+    from potflat.types import FlatMesh, Mesh
+
+    flat, _ = meshes.cylinder_patch(5, 4, seed=3)
+    V = flat.mesh.vertices.copy()
+    V[:, 0] += np.random.default_rng(1).normal(0, 0.05, len(V))
+    return FlatMesh(Mesh(V, flat.mesh.faces), flat.uv)
+
+
+def spring_system(V: np.ndarray, F: np.ndarray, **kw):
+    """The relax solver's spring system of a mesh (``V`` (n, 3), ``F`` (m, 3))."""
+    from potflat.relax.solver import _Springs
+
+    return _Springs(np.ascontiguousarray(V, float), np.ascontiguousarray(F, np.int64), len(V), **kw)

@@ -12,7 +12,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 import reference as ref
-from _bench_meshes import meshes, signed_areas
+from _bench_meshes import bumpy_patch, meshes, signed_areas, spring_system
 
 from potflat import importance as imp
 from potflat.mesh.distortion import face_distortion, important_faces, true_scale_factor, zone_figures
@@ -21,18 +21,9 @@ from potflat.relax import relax
 from potflat.types import FlatMesh, Mesh
 
 
-def _springs(V, F, **kw):
-    from potflat.relax.solver import _Springs
-
-    return _Springs(np.ascontiguousarray(V, float), np.ascontiguousarray(F, np.int64), len(V), **kw)
-
-
 @pytest.fixture(scope="module")
 def bumpy():
-    flat, _ = meshes.cylinder_patch(5, 4, seed=3)
-    V = flat.mesh.vertices.copy()
-    V[:, 0] += np.random.default_rng(1).normal(0, 0.05, len(V))
-    return FlatMesh(Mesh(V, flat.mesh.faces), flat.uv)
+    return bumpy_patch()
 
 
 # --- the energy -----------------------------------------------------------------------------
@@ -42,7 +33,7 @@ def test_weighted_springs_and_shape_term_match_reference(bumpy, relative):
     V, F = bumpy.mesh.vertices, bumpy.mesh.faces
     pairs, rest = ref.springs(V, F)
     weight = np.random.default_rng(4).uniform(0.05, 1.0, len(V))
-    sp = _springs(V, F, k=0.7, relative=relative, weight=weight, shape=0.3)
+    sp = spring_system(V, F, k=0.7, relative=relative, weight=weight, shape=0.3)
     x = np.ascontiguousarray(bumpy.uv * np.array([1.1, 0.93]))
     E, Es, g = sp.evaluate(x, barrier=False)
     from potflat.mesh.distortion import face_areas
@@ -58,10 +49,10 @@ def test_shape_term_is_zero_for_a_similarity_and_infinite_when_folded():
     flat, exact = meshes.cylinder_patch(6, 5, seed=2)
     F = flat.mesh.faces
     V = np.column_stack([exact, np.zeros(len(exact))])  # a plane: ``exact`` is its isometric layout
-    sp = _springs(V, F, k=1.0, relative=True, shape=1.0)
+    sp = spring_system(V, F, k=1.0, relative=True, shape=1.0)
     rot = np.array([[np.cos(0.3), -np.sin(0.3)], [np.sin(0.3), np.cos(0.3)]])
     for x in (exact, 2.5 * exact @ rot.T):  # isometric, then a similarity: no shape energy
-        spring_free = _springs(V, F, k=1.0, relative=True)
+        spring_free = spring_system(V, F, k=1.0, relative=True)
         e_shape = sp.evaluate(np.ascontiguousarray(x), barrier=False)[1] - spring_free.evaluate(
             np.ascontiguousarray(x), barrier=False)[1]
         assert abs(e_shape) < 1e-9

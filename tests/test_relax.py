@@ -11,7 +11,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 import reference as ref
-from _bench_meshes import meshes, signed_areas
+from _bench_meshes import bumpy_patch, meshes, signed_areas, spring_system
 
 from potflat.mesh.distortion import summarize
 from potflat.errors import FoldedResultError, InvalidOptionError
@@ -28,19 +28,9 @@ def _procrustes_error(a, b):
     return float(np.abs(a0 @ rot - b0).max())
 
 
-def _springs(V, F, **kw):
-    from potflat.relax.solver import _Springs
-
-    return _Springs(np.ascontiguousarray(V, float), np.ascontiguousarray(F, np.int64), len(V), **kw)
-
-
 @pytest.fixture(scope="module")
 def bumpy():
-    """A tiny non-planar irregular mesh (random heights over a jittered lattice)."""
-    flat, _ = meshes.cylinder_patch(5, 4, seed=3)
-    V = flat.mesh.vertices.copy()
-    V[:, 0] += np.random.default_rng(1).normal(0, 0.05, len(V))
-    return FlatMesh(Mesh(V, flat.mesh.faces), flat.uv)
+    return bumpy_patch()
 
 
 @pytest.fixture(scope="module")
@@ -74,7 +64,7 @@ def test_springs_and_cross_rest_lengths_match_reference(bumpy):
 def test_energy_and_gradient_match_reference(bumpy, relative):
     V, F = bumpy.mesh.vertices, bumpy.mesh.faces
     pairs, rest = ref.springs(V, F)
-    sp = _springs(V, F, k=0.7, relative=relative)
+    sp = spring_system(V, F, k=0.7, relative=relative)
     x = np.ascontiguousarray(bumpy.uv * 1.1)
     E, Es, g = sp.evaluate(x, barrier=False)
     assert Es == pytest.approx(ref.energy(x, pairs, rest, 0.7, relative), rel=1e-12)
@@ -86,7 +76,7 @@ def test_barrier_energy_and_gradient_match_reference(bumpy):
     from potflat.relax.solver import BARRIER_EPS, BARRIER_MU
 
     V, F = bumpy.mesh.vertices, bumpy.mesh.faces
-    sp = _springs(V, F, k=1.0, relative=False)
+    sp = spring_system(V, F, k=1.0, relative=False)
     x = np.ascontiguousarray(bumpy.uv.copy())
     x[:, 0] *= 0.4  # squeeze: triangles below half their rest area switch the barrier on
     E, Es, g = sp.evaluate(x)
@@ -101,7 +91,7 @@ def test_barrier_energy_and_gradient_match_reference(bumpy):
 
 def test_max_step_matches_reference(bumpy):
     F = bumpy.mesh.faces
-    sp = _springs(bumpy.mesh.vertices, F, k=1.0, relative=False)
+    sp = spring_system(bumpy.mesh.vertices, F, k=1.0, relative=False)
     rng = np.random.default_rng(0)
     for _ in range(5):
         d = rng.normal(size=bumpy.uv.shape)
@@ -114,7 +104,7 @@ def test_max_step_matches_reference(bumpy):
 
 
 def test_limiting_faces_are_those_whose_own_bound_is_below_the_cap(bumpy):
-    sp = _springs(bumpy.mesh.vertices, bumpy.mesh.faces, k=1.0, relative=False)
+    sp = spring_system(bumpy.mesh.vertices, bumpy.mesh.faces, k=1.0, relative=False)
     x = np.ascontiguousarray(bumpy.uv)
     d = 0.5 * np.random.default_rng(1).normal(size=x.shape)
     flags = np.empty(sp.m, bool)
@@ -127,7 +117,7 @@ def test_limiting_faces_are_those_whose_own_bound_is_below_the_cap(bumpy):
 
 
 def test_max_step_near_equals_the_full_bound_after_a_local_change(bumpy):
-    sp = _springs(bumpy.mesh.vertices, bumpy.mesh.faces, k=1.0, relative=False)
+    sp = spring_system(bumpy.mesh.vertices, bumpy.mesh.faces, k=1.0, relative=False)
     x = np.ascontiguousarray(bumpy.uv)
     rng = np.random.default_rng(2)
     for _ in range(5):
@@ -313,7 +303,9 @@ def test_stretch_factors_never_nan(vessel, stretch, preset):
 @pytest.mark.parametrize("bad", [{"stiffness": 0.0}, {"stiffness": -1.0}, {"stretch": 0.0}, {"tol": -1e-3},
                                  {"max_iter": 0}, {"threads": 0}, {"time_budget": -1.0}, {"preset": "fast"},
                                  {"weighting": "cubic"}, {"stiffness": float("nan")}, {"max_iter": 2.5},
-                                 {"simplify_mm": -0.5}, {"simplify_mm": float("inf")}])
+                                 {"simplify_mm": -0.5}, {"simplify_mm": float("inf")}, {"shape": -0.1},
+                                 {"shape": float("nan")}, {"importance_contrast": 0.5}, {"importance_contrast": True},
+                                 {"true_scale": "yes"}])
 def test_invalid_options_raise_one_line_errors(bad):
     with pytest.raises(InvalidOptionError) as err:
         RelaxOptions(**bad)
@@ -428,7 +420,7 @@ def test_contact_barrier_matches_reference():
     from potflat.relax.solver import CONTACT_GAP, CONTACT_MU
 
     strip = _notched_strip(0.3)
-    sp = _springs(strip.mesh.vertices, strip.mesh.faces, k=1.0, relative=True)
+    sp = spring_system(strip.mesh.vertices, strip.mesh.faces, k=1.0, relative=True)
     x = np.ascontiguousarray(strip.uv)
     sp.guard_boundary(x)
     assert sp.contact
@@ -483,7 +475,7 @@ def test_untangle_fixes_flipped_interior_vertices():
     flat, _ = meshes.cylinder_patch(12, 10, seed=4)
     F = flat.mesh.faces
     uv = flat.uv.copy()
-    sp = _springs(flat.mesh.vertices, F, k=1.0, relative=True)
+    sp = spring_system(flat.mesh.vertices, F, k=1.0, relative=True)
     interior = np.setdiff1d(np.arange(len(uv)), _boundary_edges(F).ravel())
     for i in interior[[3, len(interior) // 2, -4]]:
         nb = np.unique(F[(F == i).any(1)])
@@ -531,7 +523,7 @@ def test_boundary_angle_barrier_matches_reference():
 
     fan = _saddle_fan(flat_gap=0.15)  # the centre's gap 0.15 < BOUNDARY_GAP: its barrier is on
     V, F = fan.mesh.vertices, fan.mesh.faces
-    sp = _springs(V, F, k=0.8, relative=True)
+    sp = spring_system(V, F, k=0.8, relative=True)
     x = np.ascontiguousarray(fan.uv)
     assert sp.guard_boundary(x) == 0 and sp.bguard.all()
     E, Es, g = sp.evaluate(x)
@@ -549,7 +541,7 @@ def test_boundary_max_step_stops_before_the_fan_wraps():
     gap = 0.3
     fan = _saddle_fan(flat_gap=gap)
     F = fan.mesh.faces
-    sp = _springs(fan.mesh.vertices, F, k=1.0, relative=True)
+    sp = spring_system(fan.mesh.vertices, F, k=1.0, relative=True)
     x = np.ascontiguousarray(fan.uv)
     d = np.zeros_like(x)
     d[-1] = (0.0, 1.0)  # the last rim vertex (angle 2 pi - gap) moves up across the first one's ray

@@ -143,18 +143,10 @@ class RolloutOptions:
                                      "texture-mask, and only then")
         if self.importance_image is not None and self.importance != "mask":
             raise InvalidOptionError("importance_image (--importance-image) goes with importance mask")
-        if self.importance_band is not None:
-            lo, hi = _floats("importance_band", self.importance_band, 2, "LO HI")
-            if not 0.0 <= lo < hi <= 1.0:
-                raise InvalidOptionError(
-                    f"importance band {lo:g} {hi:g} is invalid; give fractions of the height with 0 <= LO < HI <= 1")
-            object.__setattr__(self, "importance_band", (lo, hi))
-        if self.importance_angles is not None:
-            a0, a1 = _floats("importance_angles", self.importance_angles, 2, "A0 A1")
-            if not a0 < a1 <= a0 + 360.0:
-                raise InvalidOptionError(
-                    f"importance angles {a0:g} {a1:g} are invalid; give A0 < A1 <= A0 + 360 (degrees from the seam)")
-            object.__setattr__(self, "importance_angles", (a0, a1))
+        for name in ("band", "angles", "importance_band", "importance_angles"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, _height_band(name, getattr(self, name)) if name.endswith("band")
+                                   else _angle_range(name, getattr(self, name)))
         if (self.importance == "band") != (self.importance_band is not None or self.importance_angles is not None):
             raise InvalidOptionError("give importance_band and/or importance_angles with importance band, and only then")
         if self.side not in SIDES:
@@ -175,18 +167,6 @@ class RolloutOptions:
             object.__setattr__(self, "axis", ax)
         if self.seam is not None:
             object.__setattr__(self, "seam", _floats("seam", (self.seam,), 1, "DEG")[0])
-        if self.band is not None:
-            lo, hi = _floats("band", self.band, 2, "LO HI")
-            if not 0.0 <= lo < hi <= 1.0:
-                raise InvalidOptionError(
-                    f"band {lo:g} {hi:g} is invalid; give fractions of the height with 0 <= LO < HI <= 1")
-            object.__setattr__(self, "band", (lo, hi))
-        if self.angles is not None:
-            a0, a1 = _floats("angles", self.angles, 2, "A0 A1")
-            if not a0 < a1 <= a0 + 360.0:
-                raise InvalidOptionError(
-                    f"angles {a0:g} {a1:g} are invalid; give A0 < A1 <= A0 + 360 (degrees from the seam)")
-            object.__setattr__(self, "angles", (a0, a1))
         if self.view is not None:
             view = _floats("view", self.view, 3, "x,y,z")
             if not any(view):
@@ -209,6 +189,24 @@ def _floats(name: str, values, count: int, form: str) -> tuple[float, ...]:
     if len(out) != count or not all(math.isfinite(x) for x in out):
         raise InvalidOptionError(f"{name} needs {count} finite numbers ({form}), got {len(out)}")
     return out
+
+
+def _height_band(name: str, value) -> tuple[float, float]:
+    """A height band ``(LO, HI)``, fractions with ``0 <= LO < HI <= 1``, or one error line."""
+    lo, hi = _floats(name, value, 2, "LO HI")
+    if not 0.0 <= lo < hi <= 1.0:
+        raise InvalidOptionError(f"{name.replace('_', ' ')} {lo:g} {hi:g} is invalid; give fractions of the height "
+                                 "with 0 <= LO < HI <= 1")
+    return lo, hi
+
+
+def _angle_range(name: str, value) -> tuple[float, float]:
+    """An angle range ``(A0, A1)`` in degrees from the seam, at most 360 wide, or one error line."""
+    a0, a1 = _floats(name, value, 2, "A0 A1")
+    if not a0 < a1 <= a0 + 360.0:
+        raise InvalidOptionError(f"{name.replace('_', ' ')} {a0:g} {a1:g} are invalid; give A0 < A1 <= A0 + 360 "
+                                 "(degrees from the seam)")
+    return a0, a1
 
 
 @dataclass(frozen=True)
