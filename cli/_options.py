@@ -83,9 +83,9 @@ def stage_parameters(stage: str) -> list[inspect.Parameter]:
     tuples take that many values (``--band 0.2 0.6``), variable-length ones a
     comma-separated list.
     """
-    from potflat.stages.pipeline import option_types, stage_api
+    from potflat.stages.pipeline import option_types, options_class
 
-    cls, _ = stage_api(stage)
+    cls = options_class(stage)
     helps = {**_docstring_help(cls), **_command_help(stage)}
     defaults = {f.name: f.default for f in dataclasses.fields(cls)}
     params = []
@@ -124,9 +124,9 @@ def options_from_cli(stage: str, values: dict[str, Any]):
         Naming the option (``--px-per-mm ...``) and what is wrong.
     """
     from potflat.errors import InvalidOptionError
-    from potflat.stages.pipeline import coerce_option, option_types, stage_api
+    from potflat.stages.pipeline import coerce_option, option_types, options_class
 
-    cls, _ = stage_api(stage)
+    cls = options_class(stage)
     kwargs = {}
     for name, tp in option_types(cls).items():
         value = values.get(name)

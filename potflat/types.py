@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -40,6 +41,20 @@ def _as_array(name: str, arr, dtype, shape_tail: tuple[int, ...]) -> np.ndarray:
         want = "(n" + "".join(f", {s}" for s in shape_tail) + ")"
         raise InvalidInputError(f"{name} must have shape {want}, got {out.shape}")
     return out
+
+
+def _check_face_indices(faces: np.ndarray, n_vertices: int, source: Path | None) -> None:
+    """Every index of ``faces`` (m, 3) names one of ``n_vertices`` vertices (the kernels index
+    unchecked)."""
+    if not len(faces):
+        return
+    lo, hi = int(faces.min()), int(faces.max())
+    if lo < 0 or hi >= n_vertices:
+        where = f"{source}: " if source is not None else ""
+        bad = lo if lo < 0 else hi
+        raise InvalidInputError(
+            f"{where}a face names vertex {bad}, but there are {n_vertices} vertices (0 to {n_vertices - 1}); "
+            "the file is corrupt or truncated: export the scan again")
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,6 +90,7 @@ class Mesh:
     def __post_init__(self) -> None:
         object.__setattr__(self, "vertices", _as_array("vertices", self.vertices, np.float64, (3,)))
         object.__setattr__(self, "faces", _as_array("faces", self.faces, np.int64, (3,)))
+        _check_face_indices(self.faces, len(self.vertices), self.source)
         if self.texcoords is not None:
             tc = _as_array("texcoords", self.texcoords, np.float64, (3, 2))
             if len(tc) != len(self.faces):
@@ -153,15 +169,23 @@ class FlatMesh:
 
 @dataclass(frozen=True)
 class StageOutput:
-    """What a stage wrote: its files and the content of its JSON sidecar.
+    """What a stage wrote: its files and the content of its JSON sidecar, and what the next
+    stage takes in memory.
 
     Attributes
     ----------
     paths : dict of str to Path
         Role (``"ply"``, ``"json"``, ``"png"``, ...) to the file written.
     summary : dict
-        The JSON sidecar's content (figures used in batch summaries).
+        The JSON sidecar's content.
+    flat : FlatMesh or None
+        The flattening exactly as the stage's PLY holds it (rollout, relax), which
+        :func:`potflat.run_scan` hands to the next stage instead of reading the file.
+    distortion : DistortionSummary or None
+        Distortion figures of that flattening (:class:`potflat.mesh.distortion.DistortionSummary`).
     """
 
     paths: dict
     summary: dict
+    flat: FlatMesh | None = None
+    distortion: Any = None

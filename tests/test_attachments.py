@@ -126,7 +126,7 @@ def test_bad_axis():
 
 
 def test_synthetic_handles_if_available():
-    synthetic = pytest.importorskip("potflat_synthetic.vessels")
+    from potflat_synthetic import vessels as synthetic
     v = synthetic.make_vessel("amphora", n_vertices=8000, texture_size=64, handles=True)
     att = detect_attachments(v.mesh, v.axis_point, v.axis_direction)
     handle = v.face_part == synthetic.PART_HANDLE

@@ -303,6 +303,15 @@ def test_bad_options(kwargs, match):
         BakeOptions(**kwargs)
 
 
+def test_options_object_or_keywords_bake_the_same(painted_plane):
+    by_keywords = bake(painted_plane, px_per_mm=3, maps=("area",))
+    by_options = bake(painted_plane, options=BakeOptions(px_per_mm=3, maps=("area",)))
+    assert np.array_equal(by_keywords.image, by_options.image)
+    assert np.array_equal(by_keywords.maps["area"], by_options.maps["area"], equal_nan=True)
+    with pytest.raises(InvalidOptionError, match="not both"):
+        bake(painted_plane, options=BakeOptions(), px_per_mm=3)
+
+
 def test_resolution_from_dpi_and_default():
     assert BakeOptions(dpi=254).resolution == pytest.approx(10.0)
     assert BakeOptions().resolution == 4.0

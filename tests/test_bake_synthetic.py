@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 
 from potflat.types import FlatMesh
-
-synthetic = pytest.importorskip("potflat_synthetic.vessels")
+from potflat_synthetic import vessels as synthetic
 
 
 @pytest.fixture(scope="module")

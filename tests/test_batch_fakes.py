@@ -67,6 +67,7 @@ class RelaxOptions:
     tol: float = 1e-6
     max_iter: int = 10000
     threads: int | None = None
+    simplify_mm: float | None = 0.0  # given: run_scan leaves it (it never reads the real default)
 
     def __post_init__(self):
         if self.max_iter < 1:
@@ -140,7 +141,8 @@ def run_relax_stage(rollout_ply, out_dir, options, *, name=None):
                               "anisotropy_p95": 1.1, "flipped": 0},
                "provenance": provenance(stage="relax", inputs=[src], options=asdict(options))}
     js = write_json_atomic(out / f"{name}.relaxed.json", summary)
-    return StageOutput(paths={"ply": ply, "json": js}, summary=summary)
+    return StageOutput(paths={"ply": ply, "json": js}, summary=summary,
+                       distortion=types.SimpleNamespace(**summary["distortion"]))
 
 
 def run_bake_stage(relaxed_ply, out_dir, options, *, name=None):

@@ -270,7 +270,7 @@ def test_band_importance_selects_heights_and_angles():
     from potflat_synthetic.vessels import make_vessel
 
     vessel = make_vessel("cylinder", n_vertices=3000, seed=1)
-    ro = rollout(vessel.mesh, importance="band", importance_band=(0.25, 0.75), importance_angles=(0.0, 180.0))
+    ro = rollout(vessel.mesh, importance="band", importance_band=(0.25, 0.75), importance_arc=(0.0, 180.0))
     frac = ro.importance.zone_fraction
     assert frac == pytest.approx(0.25, abs=0.04)  # half the height, half the way round
     with pytest.raises(InvalidOptionError, match="importance band"):

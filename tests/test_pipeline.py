@@ -8,7 +8,7 @@ import pytest
 
 import test_batch_fakes as fakes
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.stages.pipeline import (FIGURES, coerce_option, describe_type, distortion_figures, option_types,
+from potflat.stages.pipeline import (FIGURES, coerce_option, describe_type, option_types,
                               resolve_options, run_scan, stage_api)
 
 
@@ -119,14 +119,6 @@ def test_describe_type():
     assert describe_type(typing.Literal["a", "b"]) == "one of a, b"
 
 
-def test_distortion_figures_prefers_distortion_key():
-    summary = {"aaa": {"edge_rms": 9.0}, "distortion": {"edge_rms": 0.1, "flipped": 2}}
-    figures = distortion_figures(summary)
-    assert figures["edge_rms"] == 0.1 and figures["flipped"] == 2
-    assert set(figures) == set(FIGURES) and figures["anisotropy_p95"] is None
-    assert distortion_figures({}) == dict.fromkeys(FIGURES)
-
-
 def test_run_refuses_early_when_the_painting_would_replace_the_scan_texture(tmp_path):
     """`potflat run pot.obj` into the scan's own folder, whose texture is pot.png: refused
     before any stage runs (nothing written), and the texture is kept."""
@@ -156,3 +148,25 @@ def test_preview_relaxes_at_two_pixels_of_the_image(relax, bake, want):
 
     options = _preview_at_image_resolution(resolve_options(relax=relax, bake=bake))
     assert options["relax"].simplify_mm == pytest.approx(want) if want is not None else options["relax"].simplify_mm is None
+
+
+def test_run_scan_hands_the_flattening_on_in_memory(tmp_path, monkeypatch):
+    """Relax and bake take the previous stage's flattening from memory (its file is the record),
+    exactly as the file holds it; the figures come typed from the relax stage."""
+    import potflat.io.flat_ply
+    from potflat_synthetic.vessels import make_vessel, write_obj
+
+    scan = write_obj(make_vessel("amphora", n_vertices=3000, seed=2, texture_size=64), tmp_path / "in" / "a.obj")
+
+    def no_reading(path):
+        raise AssertionError(f"run_scan read {path} back")
+
+    monkeypatch.setattr(potflat.io.flat_ply, "read_flat_ply", no_reading)
+    result = run_scan(scan, tmp_path / "out", relax={"preset": "preview"}, bake={"px_per_mm": 1.0, "maps": ()})
+    monkeypatch.undo()
+    relaxed = result.stages["relax"]
+    assert result.figures == {k: relaxed.summary["distortion"][k] for k in FIGURES}
+    back = potflat.io.flat_ply.read_flat_ply(result.paths["relax.ply"])
+    assert back.uv.tobytes() == relaxed.flat.uv.tobytes()
+    assert back.mesh.texcoords.tobytes() == relaxed.flat.mesh.texcoords.tobytes()
+    assert back.mesh.texture_path == relaxed.flat.mesh.texture_path

@@ -357,7 +357,7 @@ def test_real_goblet_band_rolls_out(tmp_path):
 
 
 def test_synthetic_samples_from_the_generator():
-    synthetic = pytest.importorskip("potflat_synthetic.vessels")
+    from potflat_synthetic import vessels as synthetic
     for kind in ("cylinder", "cone", "sherd"):
         sv = synthetic.make_vessel(kind, n_vertices=2000, seed=3, texture_size=64)
         res = rollout(sv.mesh)

@@ -1,8 +1,10 @@
+import dataclasses
+
 import numpy as np
 import pytest
 
 from potflat.errors import InvalidInputError
-from potflat.io.flat_ply import read_flat_ply, write_flat_ply
+from potflat.io.flat_ply import as_stored, read_flat_ply, write_flat_ply
 from potflat.types import FlatMesh, Mesh
 
 
@@ -42,6 +44,29 @@ def test_round_trip(tmp_path, with_texture, with_colors, stress):
         np.testing.assert_array_equal(back.stress, flat.stress)
     assert "made by test" in back.comments
     assert not list(out.parent.glob("*.part"))
+
+
+@pytest.mark.parametrize("with_texture,with_colors,stress", [(True, False, False), (False, True, True)])
+def test_as_stored_is_what_the_file_reads_back(tmp_path, with_texture, with_colors, stress):
+    flat = _flat(tmp_path, with_texture, with_colors, stress)
+    importance = np.linspace(0.0, 1.0, len(flat.uv)) if stress else None
+    flat = flat.replace(comments=("from the scan", ""), importance=importance)
+    out = tmp_path / "out" / "x.rollout.ply"
+    write_flat_ply(out, flat, comments=("made by test", "two\nlines"))
+    back, stored = read_flat_ply(out), as_stored(flat, out, comments=("made by test", "two\nlines"))
+    for name in ("vertices", "faces", "texcoords", "vertex_colors"):
+        a, b = getattr(back.mesh, name), getattr(stored.mesh, name)
+        assert (a is None and b is None) or (a.dtype == b.dtype and np.array_equal(a, b)), name
+    assert back.uv.tobytes() == stored.uv.tobytes()
+    assert (back.stress is None) == (stored.stress is None)
+    if stress:
+        assert back.stress.tobytes() == stored.stress.tobytes()
+        assert back.importance.tobytes() == stored.importance.tobytes()
+    assert (back.importance is None) == (stored.importance is None)
+    assert {f.name for f in dataclasses.fields(FlatMesh)} == {"mesh", "uv", "stress", "comments", "importance"}
+    assert (back.mesh.texture_path, back.mesh.units, back.mesh.source) == (
+        stored.mesh.texture_path, stored.mesh.units, stored.mesh.source)
+    assert back.comments == stored.comments == ("from the scan", "", "made by test")
 
 
 def test_truncated_file_is_rejected(tmp_path):

@@ -206,7 +206,7 @@ def test_bad_mesh():
 
 
 def test_synthetic_vessels_if_available():
-    synthetic = pytest.importorskip("potflat_synthetic.vessels")
+    from potflat_synthetic import vessels as synthetic
     v = synthetic.make_vessel("cup", n_vertices=6000, texture_size=64)
     outer = select_wall(v.mesh, v.axis_point, v.axis_direction)
     inner = select_wall(v.mesh, v.axis_point, v.axis_direction, side="inner")

@@ -56,12 +56,14 @@ def relax_command(
     quiet: Quiet = False,
     json: Json = False,
 ) -> None:
-    from potflat.relax import RelaxOptions, run_relax_stage
+    from potflat.relax import run_relax_stage
+    from potflat_cli._options import options_from_cli
     from potflat_cli._stage import run_stage
 
-    options = RelaxOptions(preset=preset, tol=tol, max_iter=max_iter, time_budget=time_budget, threads=threads,
-                           stretch=stretch, stiffness=stiffness, weighting=weighting, simplify_mm=simplify_mm,
-                           shape=shape, importance_contrast=importance_contrast, true_scale=true_scale)
+    options = options_from_cli("relax", {
+        "preset": preset, "tol": tol, "max_iter": max_iter, "time_budget": time_budget, "threads": threads,
+        "stretch": stretch, "stiffness": stiffness, "weighting": weighting, "simplify_mm": simplify_mm,
+        "shape": shape, "importance_contrast": importance_contrast, "true_scale": true_scale})
     show_progress = sys.stderr.isatty() and not (quiet or json)
     out = run_stage(None if show_progress else f"relaxing {rollout_ply.name}",
                     lambda: run_relax_stage(rollout_ply, output if output is not None else rollout_ply.parent,

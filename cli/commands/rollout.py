@@ -58,7 +58,7 @@ def rollout_command(
         "--importance", help="Where the painting is (kept true by relax, reported by bake): auto (found in the "
                              "colours), none (the whole surface alike), mask (--importance-mask painted over a "
                              "potflat image), texture-mask (--importance-mask in the texture's space), band "
-                             "(--importance-band / --importance-angles) \\[default: auto].")] = None,
+                             "(--importance-band / --importance-arc) \\[default: auto].")] = None,
     importance_mask: Annotated[Optional[str], typer.Option(
         "--importance-mask", help="PNG mask, white = important: painted over a potflat image (--importance mask) "
                                   "or in texture space (--importance texture-mask).")] = None,
@@ -67,8 +67,8 @@ def rollout_command(
                                    "beside the mask with the mask's size].")] = None,
     importance_band: Annotated[Optional[tuple[float, float]], typer.Option(
         "--importance-band", help="With --importance band: heights LO HI as fractions, 0 = foot, 1 = mouth.")] = None,
-    importance_angles: Annotated[Optional[tuple[float, float]], typer.Option(
-        "--importance-angles", help="With --importance band: angles A0 A1 in degrees from the seam.")] = None,
+    importance_arc: Annotated[Optional[tuple[float, float]], typer.Option(
+        "--importance-arc", help="With --importance band: angles A0 A1 in degrees from the seam.")] = None,
     name: Name = None,
     quiet: Quiet = False,
     json: Json = False,
@@ -84,7 +84,7 @@ def rollout_command(
               "angles": angles, "view": view, "units": units, "texture": None if texture else False,
               "side": side, "keep_attachments": keep_attachments or None, "importance": importance,
               "importance_mask": importance_mask, "importance_image": importance_image,
-              "importance_band": importance_band, "importance_angles": importance_angles}
+              "importance_band": importance_band, "importance_arc": importance_arc}
     options = options_from_cli("rollout", values)
     _rollout(scan, output, options, name=name, quiet=quiet, as_json=json)
 

@@ -2,8 +2,11 @@
 
 ``from potflat.bake import bake, BakeOptions``. Modules: :mod:`.render` (options, the
 renderer and the file stage), :mod:`.annotate` (colour scales, legends, scale bars, the
-comparison sheet), :mod:`._kernels` (the rasteriser and texture sampler, Numba).
+comparison sheet), :mod:`._kernels` (the rasteriser and texture sampler, Numba). Names are
+imported on first use.
 """
-from potflat.bake.render import MAP_NAMES, BakeOptions, BakeResult, bake, run_bake_stage
+from potflat._lazy import lazy_exports
 
+__getattr__ = lazy_exports(__name__, dict.fromkeys(
+    ("MAP_NAMES", "BakeOptions", "BakeResult", "bake", "run_bake_stage"), ".render"))
 __all__ = ["MAP_NAMES", "BakeOptions", "BakeResult", "bake", "run_bake_stage"]

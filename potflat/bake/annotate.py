@@ -14,6 +14,9 @@ import numpy as np
 
 from potflat.types import FlatMesh
 
+#: Longest side in pixels of each baked panel of the comparison sheet.
+SHEET_PANEL_PX = 900
+
 #: Opacity of the heat map in the stress overlay.
 OVERLAY_ALPHA = 0.6
 #: Grid spacing in millimetres.
@@ -296,19 +299,18 @@ def _zone_line(flat: FlatMesh) -> str:
     return "\n".join(parts)
 
 
-def comparison_sheet(path: str | Path, rollout: FlatMesh, relaxed: FlatMesh, *, title: str = "",
-                     max_px: int = 900) -> Path:
+def comparison_sheet(path: str | Path, panels, *, title: str = "") -> Path:
     """Side-by-side sheet: proxy rollout vs relaxed, painting and stress map with figures.
 
-    Both stress maps use one colour scale. Written atomically as PNG.
+    Both stress maps use one colour scale. Written atomically as PNG. The panels are baked
+    by the caller (:func:`potflat.bake.render.comparison_sheet`), so this module draws only.
 
     Parameters
     ----------
     path : path-like
-    rollout, relaxed : FlatMesh
+    panels : sequence of (str, FlatMesh, BakeResult)
+        Label, flattening and its bake (with the ``stress`` map) of each column.
     title : str
-    max_px : int
-        Longest side of each baked panel in pixels.
 
     Returns
     -------
@@ -317,20 +319,11 @@ def comparison_sheet(path: str | Path, rollout: FlatMesh, relaxed: FlatMesh, *, 
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from potflat.mesh import distortion
-    from potflat.bake import bake
     from potflat.io.atomic import write_bytes_atomic
+    from potflat.mesh import distortion
 
-    panels = []
-    for label, flat in (("proxy rollout", rollout), ("relaxed", relaxed)):
-        mpu = flat.mesh.mm_per_unit
-        ext = (flat.uv.max(axis=0) - flat.uv.min(axis=0)) * mpu
-        ppm = max(1e-3, max_px / max(ext.max(), 1e-9))
-        res = bake(flat, px_per_mm=ppm, maps=("stress",))
-        stress = flat.stress if flat.stress is not None else distortion.vertex_stress(
-            flat.mesh.vertices, flat.uv, flat.mesh.faces, mpu)
-        panels.append((label, res, stress, distortion.summarize(flat.mesh.vertices, flat.uv, flat.mesh.faces),
-                       _zone_line(flat)))
+    panels = [(label, res, _vertex_stress(flat), distortion.summarize(flat.mesh.vertices, flat.uv, flat.mesh.faces),
+               _zone_line(flat)) for label, flat, res in panels]
     hi = max(map_scale("stress", p[2]).hi for p in panels)
     scale = map_scale("stress", np.zeros(1), hi=hi)
     aspect = max(p[1].image.shape[0] / p[1].px_per_mm for p in panels) / max(
@@ -368,3 +361,17 @@ def comparison_sheet(path: str | Path, rollout: FlatMesh, relaxed: FlatMesh, *, 
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=100)
     return write_bytes_atomic(path, buf.getvalue())
+
+
+def _vertex_stress(flat: FlatMesh) -> np.ndarray:
+    from potflat.mesh import distortion
+
+    if flat.stress is not None:
+        return flat.stress
+    return distortion.vertex_stress(flat.mesh.vertices, flat.uv, flat.mesh.faces, flat.mesh.mm_per_unit)
+
+
+def sheet_px_per_mm(flat: FlatMesh, max_px: int = SHEET_PANEL_PX) -> float:
+    """Resolution of a comparison-sheet panel: its longest side ``max_px`` pixels."""
+    ext = (flat.uv.max(axis=0) - flat.uv.min(axis=0)) * flat.mesh.mm_per_unit
+    return max(1e-3, max_px / max(ext.max(), 1e-9))

@@ -534,37 +534,39 @@ def _figures(r: _Renderer, covered_px: float) -> dict:
 # library entry point
 
 
-def bake(flat: FlatMesh, *, px_per_mm: float | None = None, dpi: float | None = None,
-         maps: tuple[str, ...] = MAP_NAMES, position_map: bool = False, supersample: int = 0,
-         max_megapixels: float = 1000.0) -> BakeResult:
+def bake(flat: FlatMesh, *, options: BakeOptions | None = None, **option_fields) -> BakeResult:
     """Bake a flattening into a true-scale RGBA image and distortion maps, in memory.
 
     Parameters
     ----------
     flat : FlatMesh
         The flattening (``uv`` in scan units, u right, v up).
-    px_per_mm, dpi : float, optional
-        Resolution (give at most one; default 4 px/mm).
-    maps : tuple of str
-        Distortion maps to compute, from :data:`MAP_NAMES`.
-    position_map : bool
-        Also return the 3D point under each pixel.
-    supersample : int
-        Sub-samples per pixel side (0: automatic).
-    max_megapixels : float
-        Refuse larger images.
+    options : BakeOptions, optional
+        The stage's options; or give its fields as keywords (not both). Used here:
+        ``px_per_mm`` or ``dpi`` (default 4 px/mm), ``maps`` (from :data:`MAP_NAMES`),
+        ``position_map`` (also return the 3D point under each pixel), ``supersample``
+        (sub-samples per pixel side, 0: automatic), ``max_megapixels`` (refuse larger
+        images); the other fields concern the files :func:`run_bake_stage` writes.
 
     Returns
     -------
     BakeResult
+
+    Raises
+    ------
+    InvalidOptionError
+        When an option is invalid, or both ``options`` and option keywords are given.
 
     Notes
     -----
     Everything is held in memory; for very large images use :func:`run_bake_stage`,
     which streams the same strips to disk.
     """
-    opts = BakeOptions(px_per_mm=px_per_mm, dpi=dpi, maps=maps, position_map=position_map,
-                       supersample=supersample, max_megapixels=max_megapixels)
+    if options is None:
+        options = BakeOptions(**option_fields)
+    elif option_fields:
+        raise InvalidOptionError("give either options= or option keywords to bake(), not both")
+    opts = options
     r = _Renderer(flat, opts.resolution, supersample=opts.supersample, max_megapixels=opts.max_megapixels)
     g = r.grid
     image = np.zeros((g.height, g.width, 4), np.uint8)
@@ -581,6 +583,16 @@ def bake(flat: FlatMesh, *, px_per_mm: float | None = None, dpi: float | None = 
             position[r0:r1] = r.position(r0, r1)
     return BakeResult(image=image, maps=values, position=position, px_per_mm=g.px_per_mm,
                       origin=g.origin.copy(), figures=_figures(r, covered))
+
+
+def comparison_sheet(path: str | os.PathLike, rollout: FlatMesh, relaxed: FlatMesh, *, title: str = "") -> Path:
+    """Bake the proxy rollout and the relaxed flattening and draw them side by side
+    (:func:`potflat.bake.annotate.comparison_sheet`); written atomically as PNG."""
+    from potflat.bake import annotate
+
+    panels = [(label, flat, bake(flat, px_per_mm=annotate.sheet_px_per_mm(flat), maps=("stress",)))
+              for label, flat in (("proxy rollout", rollout), ("relaxed", relaxed))]
+    return annotate.comparison_sheet(path, panels, title=title)
 
 
 def _attachment_rows(share: np.ndarray) -> np.ndarray:
@@ -621,16 +633,19 @@ def stage_name(path: Path) -> str:
 ATTACHMENT_COLOUR = (230, 0, 160, 220)
 
 
-def _attachment_roots(flat_ply: Path, n_faces: int) -> tuple[np.ndarray, Path | None]:
-    """Faces where the rollout left out an attachment, from ``NAME.rollout.json`` beside the input.
+def _attachment_roots(flat_ply: Path, n_faces: int, rollout_summary: dict | None = None
+                      ) -> tuple[np.ndarray, Path | None]:
+    """Faces where the rollout left out an attachment, from its summary (``rollout_summary``,
+    else ``NAME.rollout.json`` beside the input).
 
     Returns a per-face indicator (n_faces,) float64 (empty when there is nothing to show) and
-    the JSON read (for provenance), or ``None``.
+    the rollout JSON (for provenance), or ``None``.
     """
     stem = flat_ply.name.removesuffix(".ply").removesuffix(".relaxed").removesuffix(".rollout")
     rollout_json = flat_ply.with_name(f"{stem}.rollout.json")
     try:
-        att = json.loads(rollout_json.read_text()).get("attachments", {})
+        summary = rollout_summary if rollout_summary is not None else json.loads(rollout_json.read_text())
+        att = summary.get("attachments", {})
     except (OSError, ValueError):
         return np.zeros(0), None
     roots = np.asarray(att.get("root_faces") or [], dtype=np.int64)
@@ -655,7 +670,8 @@ def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: li
 
 
 def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, options: BakeOptions | None = None, *,
-                   name: str | None = None) -> StageOutput:
+                   name: str | None = None, flat: FlatMesh | None = None,
+                   rollout_summary: dict | None = None) -> StageOutput:
     """Bake ``NAME.relaxed.ply`` (or a rollout) into images and ``NAME.bake.json``.
 
     Files (in ``out_dir``): ``NAME.png`` (painting, RGBA, resolution in the file),
@@ -677,6 +693,12 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     options : BakeOptions, optional
     name : str, optional
         Output NAME; default: the input stem without ``.relaxed``.
+    flat : FlatMesh, optional
+        The content of ``flat_ply`` already in memory (:func:`potflat.run_scan`); read from
+        the file when not given.
+    rollout_summary : dict, optional
+        The rollout stage's summary in memory (where attachments met the wall); read from
+        ``NAME.rollout.json`` beside the input when not given.
 
     Returns
     -------
@@ -693,7 +715,8 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     flat_ply = Path(flat_ply)
     out_dir = Path(out_dir)
     name = name or stage_name(flat_ply)
-    flat = read_flat_ply(flat_ply)
+    if flat is None:
+        flat = read_flat_ply(flat_ply)
     rollout_ply = None
     if options.sheet:
         if not flat_ply.name.endswith(".relaxed.ply"):
@@ -702,7 +725,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
         if not rollout_ply.is_file():
             raise InvalidInputError(f"--sheet needs {rollout_ply.name} beside {flat_ply}; copy it there or drop --sheet")
     _check_not_inputs(out_dir, name, options, [flat_ply, flat.mesh.texture_path, rollout_ply])
-    attachment_marks, rollout_json = _attachment_roots(flat_ply, len(flat.mesh.faces))
+    attachment_marks, rollout_json = _attachment_roots(flat_ply, len(flat.mesh.faces), rollout_summary)
     ppm = options.resolution
     r = _Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels)
     g = r.grid
@@ -755,8 +778,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
                                             photometric="rgb")
     figures = _figures(r, covered)
     if rollout_ply is not None:
-        paths["sheet"] = annotate.comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat,
-                                                   title=name)
+        paths["sheet"] = comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat, title=name)
     inputs = ([flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else [])
               + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else []))
     summary = {

@@ -29,6 +29,17 @@ _PLY_TYPES = {
 }
 
 
+def _texture_target(texture: Path, ply_path: Path) -> Path:
+    """Where :func:`_place_texture` makes ``texture`` available beside ``ply_path``."""
+    out_dir = ply_path.parent
+    if os.path.samefile(texture.parent, out_dir):
+        return texture
+    stem = ply_path.name
+    for suffix in (".ply", ".rollout", ".relaxed"):
+        stem = stem[: -len(suffix)] if stem.endswith(suffix) else stem
+    return out_dir / f"{stem}.texture{texture.suffix.lower()}"
+
+
 def _place_texture(texture: Path, ply_path: Path) -> str:
     """Make ``texture`` available beside ``ply_path`` and return its name there.
 
@@ -38,16 +49,10 @@ def _place_texture(texture: Path, ply_path: Path) -> str:
     no other scan's texture can take (one output folder, several scans with a
     ``texture.jpg``). A stale file of that name is replaced.
     """
-    out_dir = ply_path.parent
-    if os.path.samefile(texture.parent, out_dir):
-        return texture.name
-    stem = ply_path.name
-    for suffix in (".ply", ".rollout", ".relaxed"):
-        stem = stem[: -len(suffix)] if stem.endswith(suffix) else stem
-    target = out_dir / f"{stem}.texture{texture.suffix.lower()}"
-    if target.exists() and os.path.samefile(target, texture):
+    target = _texture_target(texture, ply_path)
+    if target == texture or (target.exists() and os.path.samefile(target, texture)):
         return target.name
-    tmp = out_dir / f".{target.name}.{os.getpid()}.part"
+    tmp = target.parent / f".{target.name}.{os.getpid()}.part"
     try:  # link under a temporary name, then rename (atomic_path would chmod the scan's texture)
         tmp.unlink(missing_ok=True)
         os.link(texture, tmp)
@@ -97,11 +102,9 @@ def write_flat_ply(path: str | os.PathLike, flat: FlatMesh, *, comments: tuple[s
     ffields = [("n", "u1"), ("idx", "<i4", (3,))]
     if texture_name is not None:
         ffields += [("nt", "u1"), ("tc", "<f4", (6,))]
-    if mesh.faces.size and (mesh.faces.min() < 0 or mesh.faces.max() >= max(n, 1)):
-        raise InvalidInputError("faces index vertices that do not exist")
 
     header = ["ply", "format binary_little_endian 1.0", f"comment units {mesh.units}"]
-    header += [f"comment {c}" for c in (*flat.comments, *comments) if "\n" not in c]
+    header += [f"comment {c}" for c in _header_comments(flat, comments)]
     if texture_name is not None:
         header.append(f"comment TextureFile {texture_name}")
     header.append(f"element vertex {n}")
@@ -138,6 +141,41 @@ def write_flat_ply(path: str | os.PathLike, flat: FlatMesh, *, comments: tuple[s
             fh.flush()
             os.fsync(fh.fileno())
     return path
+
+
+def _header_comments(flat: FlatMesh, comments: tuple[str, ...]) -> tuple[str, ...]:
+    return tuple(c for c in (*flat.comments, *comments) if "\n" not in c)
+
+
+def as_stored(flat: FlatMesh, path: str | os.PathLike, *, comments: tuple[str, ...] = ()) -> FlatMesh:
+    """The flattening :func:`read_flat_ply` returns for the file ``write_flat_ply(path, flat,
+    comments=comments)`` wrote, without reading it: texture coordinates at the file's float32
+    precision, the texture beside ``path``, the header comments. So the next stage gets in
+    memory exactly what it would read from the file.
+
+    Parameters
+    ----------
+    flat : FlatMesh
+        What was written.
+    path : path-like
+        The stage PLY it was written to (and its texture placed beside).
+    comments : tuple of str
+        The ``comments`` given to :func:`write_flat_ply`.
+
+    Returns
+    -------
+    FlatMesh
+    """
+    path = Path(path)
+    mesh = flat.mesh
+    texcoords, texture_path = None, None
+    if mesh.texture_path is not None and mesh.texcoords is not None:
+        texcoords = mesh.texcoords.astype(np.float32).astype(np.float64)
+        texture_path = (path.parent / _texture_target(mesh.texture_path, path).name).resolve()
+    stored = Mesh(mesh.vertices, mesh.faces, texcoords=texcoords, texture_path=texture_path,
+                  vertex_colors=mesh.vertex_colors, units=mesh.units, source=path)
+    return FlatMesh(stored, flat.uv, stress=flat.stress, comments=_header_comments(flat, comments),
+                    importance=flat.importance)
 
 
 def read_flat_ply(path: str | os.PathLike) -> FlatMesh:

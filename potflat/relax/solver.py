@@ -764,6 +764,55 @@ def _untangle(sp: _Springs, x: np.ndarray, rounds: int = 200) -> tuple[np.ndarra
     return x, n_bad
 
 
+def _fold_free_start(sp: _Springs, x: np.ndarray, n_bad: int, notes: list[str]) -> tuple[np.ndarray, bool]:
+    """A fold-free start from a layout ``x`` that untangling left folded: each folded cluster
+    re-embedded inside its fixed surroundings (:func:`potflat.mesh.embedding.repair_folds`),
+    else Tutte's embedding of the whole mesh (:func:`potflat.mesh.embedding.tutte_embedding`).
+    Returns the start and whether it is Tutte's disc (whose orientation is arbitrary).
+
+    Raises
+    ------
+    FoldedResultError
+        When neither gives a fold-free layout (the mesh is not disk-like), with the fix.
+    """
+    from potflat.mesh.embedding import repair_folds, tutte_embedding
+
+    areas = sp.signed_areas(x)
+    if np.abs(areas[areas < 0]).sum() > np.abs(areas[areas > 0]).sum():
+        raise FoldedResultError(
+            "the rollout is mirrored (most of its area faces the other way): it shows the surface from the wrong "
+            "side; run the rollout again (--side inner for a vessel's inside)")
+    faces = sp.faces.astype(np.int64)
+    y, repaired, left = repair_folds(faces, x)
+    if not left:
+        notes.append(f"the rollout had {n_bad} flipped or degenerate triangles; untangling left "
+                     f"{repaired}, re-embedded inside their surroundings (a harmonic map of each folded cluster)")
+        return np.ascontiguousarray(y), False
+    disc = tutte_embedding(faces, sp.n)
+    if disc is None or (sp.signed_areas(disc) <= 0).any():
+        raise FoldedResultError(
+            f"the rollout has {left} folded triangles that no fold-free layout of this mesh removes: it is not a "
+            "disk (a closed part, or faces joined at a single edge by three or more); run the rollout with "
+            "--band or --angles to leave that part out, or clean the scan (remove the duplicated sheet)")
+    notes.append(f"the rollout had {n_bad} flipped or degenerate triangles and {left} stayed folded after a local "
+                 "repair; relaxed from Tutte's embedding of the whole mesh into a disc, then turned to the rollout's "
+                 "orientation")
+    return np.ascontiguousarray(disc), True
+
+
+def _turned_like(x: np.ndarray, reference: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """``x`` (n, 2) rotated and moved (no mirroring) to fit ``reference`` (n, 2) best, each
+    vertex counting with ``weight`` (n,): the relaxed layout keeps the rollout's orientation
+    (axis vertical, mouth up) however the solver turned it on the way (the energy does not
+    care; a weak plain surface lets it drift)."""
+    w = weight / weight.sum()
+    ca, cb = w @ x, w @ reference
+    h = ((x - ca) * w[:, None]).T @ (reference - cb)
+    angle = math.atan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1])
+    rot = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+    return np.ascontiguousarray((x - ca) @ rot.T + cb)
+
+
 @dataclass(frozen=True)
 class _CoarseStart:
     """A relaxed coarse copy of the rollout and the full mesh's layout following it."""
@@ -951,15 +1000,18 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
             else:
                 x = followed
         t_follow = time.perf_counter() - t_follow
+        folded_start = None
+        start = x_in[order]  # the rollout's layout: its orientation is the result's
         if fold_free:
             x, n_bad = _untangle(sp, x)
             if n_bad:
-                left = int((sp.signed_areas(x) <= 0).sum())
-                if left:
-                    raise FoldedResultError(
-                        f"the rollout has {n_bad} flipped or degenerate triangles and {left} could not be "
-                        "untangled; run the rollout again (another seam or proxy) or use --preset paper")
-                notes.append(f"untangled {n_bad} flipped or degenerate triangles of the rollout before relaxing")
+                if (sp.signed_areas(x) <= 0).any():
+                    folded_start = x
+                    x, from_disc = _fold_free_start(sp, x, n_bad, notes)
+                    if not from_disc:
+                        folded_start = None
+                else:
+                    notes.append(f"untangled {n_bad} flipped or degenerate triangles of the rollout before relaxing")
             wrapped = sp.guard_boundary(x)
             if wrapped:
                 notes.append(f"{wrapped} boundary vertices already wrap past 2 pi in the start; their angle "
@@ -984,6 +1036,11 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
                 x, converged = _dynamics(sp, x, settings, run, levels)
         t_solve = time.perf_counter()
 
+        if fold_free:  # back to the rollout's orientation, the painting counting most
+            turn = np.ones(n) if weight is None else weight.copy()
+            if folded_start is not None:  # relaxed from Tutte's disc: only what was not folded counts
+                turn[sp.faces[sp.signed_areas(folded_start) <= 0].ravel()] = 0.0
+            x = _turned_like(x, folded_start if folded_start is not None else start, turn)
         finite = bool(np.isfinite(x).all())
         flipped = int((sp.signed_areas(x) <= 0).sum()) if finite else len(F)
         overlap = sp.overlap(x) if finite else 1
@@ -1048,7 +1105,8 @@ def _history_for_json(h: np.ndarray, limit: int = 1000) -> list[float]:
 
 
 def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: RelaxOptions | None = None, *,
-                    name: str | None = None, progress: bool = False) -> StageOutput:
+                    name: str | None = None, progress: bool = False, flat: FlatMesh | None = None,
+                    rollout_summary: dict | None = None) -> StageOutput:
     """Relax ``NAME.rollout.ply`` and write ``NAME.relaxed.ply`` and ``NAME.relaxed.json``.
 
     Parameters
@@ -1062,14 +1120,21 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         Output stem (default: the input's name without ``.rollout.ply``).
     progress : bool
         Show a progress bar.
+    flat : FlatMesh, optional
+        The content of ``rollout_ply`` already in memory (:func:`potflat.run_scan`); read
+        from the file when not given.
+    rollout_summary : dict, optional
+        The rollout stage's summary in memory (its axis, proxy and units go into the JSON);
+        read from ``NAME.rollout.json`` beside the input when not given.
 
     Returns
     -------
     StageOutput
-        ``paths`` with ``ply`` and ``json``; ``summary`` the JSON content.
+        ``paths`` with ``ply`` and ``json``; ``summary`` the JSON content; the relaxed
+        ``flat`` as written and its ``distortion``.
     """
     from potflat.io.atomic import write_json_atomic
-    from potflat.io.flat_ply import read_flat_ply, write_flat_ply
+    from potflat.io.flat_ply import as_stored, read_flat_ply, write_flat_ply
     from potflat.stages.provenance import provenance
 
     options = options or RelaxOptions()
@@ -1079,7 +1144,8 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     for suffix in (".ply", ".rollout"):
         stem = stem.removesuffix(suffix)
     name = name or stem
-    flat = read_flat_ply(rollout_ply)
+    if flat is None:
+        flat = read_flat_ply(rollout_ply)
     result = relax(flat, options=options, progress=progress)
     ply_path = out_dir / f"{name}.relaxed.ply"
     json_path = out_dir / f"{name}.relaxed.json"
@@ -1112,9 +1178,9 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         "faces": len(flat.mesh.faces),
     }
     rollout_json = rollout_ply.with_name(f"{stem}.rollout.json")
-    if rollout_json.exists():
+    if rollout_summary is not None or rollout_json.exists():
         try:
-            rj = json.loads(rollout_json.read_text())
+            rj = rollout_summary if rollout_summary is not None else json.loads(rollout_json.read_text())
         except (OSError, ValueError):
             rj = {}
         for key in ("axis", "proxy", "units"):
@@ -1122,6 +1188,8 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
                 summary[key] = rj[key]
     inputs = [rollout_ply] + ([rollout_json] if rollout_json.exists() else [])
     summary["provenance"] = provenance(stage="relax", inputs=inputs, options=asdict(options))
-    write_flat_ply(ply_path, result.flat, comments=(f"potflat relax preset {result.preset}",))
+    comments = (f"potflat relax preset {result.preset}",)
+    write_flat_ply(ply_path, result.flat, comments=comments)
     write_json_atomic(json_path, summary)
-    return StageOutput(paths={"ply": ply_path, "json": json_path}, summary=summary)
+    return StageOutput(paths={"ply": ply_path, "json": json_path}, summary=summary,
+                       flat=as_stored(result.flat, ply_path, comments=comments), distortion=result.distortion)

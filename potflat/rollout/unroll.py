@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -37,8 +37,9 @@ from potflat.rollout.attachments import AttachmentSelection, detect_attachments
 from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
 from potflat.mesh.distortion import DistortionSummary, face_areas, row_blocks, summarize
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.types import UNITS_MM, FlatMesh, Mesh, StageOutput
-from potflat.rollout.walls import SIDES, FaceGraph, WallSelection, face_adjacency, select_wall
+from potflat.types import FlatMesh, Mesh, StageOutput
+from potflat.rollout.options import RolloutOptions
+from potflat.rollout.walls import FaceGraph, WallSelection, face_adjacency, select_wall
 
 TWO_PI = 2.0 * np.pi
 #: A connected piece with at least this fraction of the largest piece's area is an object of
@@ -61,152 +62,6 @@ TRIM_ROUNDS = 3
 BORDER_PASSES = 50
 #: Rounds of :func:`untangle`; its region widens by one ring every ``UNTANGLE_WIDEN`` rounds.
 UNTANGLE_ROUNDS, UNTANGLE_WIDEN = 200, 20
-
-
-@dataclass(frozen=True, kw_only=True)
-class RolloutOptions:
-    """Options of the rollout stage (names equal the CLI options, ``_`` for ``-``).
-
-    Attributes
-    ----------
-    units : str or None
-        Length unit of the scan file (``mm``, ``cm``, ``m``, ``um``, ``in``); None: the unit
-        the file declares (a PLY ``comment units``, an STL header, glTF's metres), else mm.
-        Used when reading the file; :func:`rollout` itself uses :attr:`Mesh.units`.
-    texture : bool
-        Use the scan's texture image; False loads the geometry (and vertex colours) only,
-        e.g. when the texture file is missing or corrupt. Used when reading the file.
-    proxy : str
-        ``auto``, ``cylinder``, ``cone``, ``sphere`` or ``ortho``.
-    axis : tuple of 6 float or None
-        Manual axis ``(px, py, pz, dx, dy, dz)``: a point and a direction from foot to mouth.
-    flip : bool
-        Reverse the axis direction (mouth and foot swapped).
-    seam : float or None
-        Seam angle in degrees from the axis' reference direction; chosen automatically when
-        None (0 when ``angles`` is given).
-    band : (float, float) or None
-        Height band as fractions of the axial extent, 0 = foot, 1 = mouth.
-    angles : (float, float) or None
-        Angle range in degrees relative to the seam, e.g. ``(-60, 60)``; at most 360 wide.
-    view : tuple of 3 float or None
-        For ``proxy="ortho"``: direction from the vessel to the viewer (``x,y,z``, scan
-        coordinates); default: from the axis towards the region's centre (from the region
-        towards the axis for the inner side).
-    side : str
-        Painted side to unroll: ``outer`` (the outside, default) or ``inner`` (the inside
-        seen from within: a cup's interior, a kylix tondo). Two-walled scans are split at
-        the rim (:func:`potflat.rollout.walls.select_wall`).
-    keep_attachments : bool
-        Keep handles, spouts and knobs (parts off the surface of revolution, found by
-        :func:`potflat.rollout.attachments.detect_attachments`) in the rollout; by default they are
-        left out and reported, and the painting around their roots stays.
-    importance : str
-        Where the painting is, which the relax stage keeps true and the bake stage reports
-        (:mod:`potflat.importance`): ``auto`` (found in the colours; none for a scan without
-        colours or painted all over), ``none`` (the whole surface alike), ``mask`` (a PNG
-        painted over a potflat image, ``importance_mask``), ``texture-mask`` (a PNG in the
-        texture's space, ``importance_mask``) or ``band`` (``importance_band`` and/or
-        ``importance_angles``).
-    importance_mask : str or None
-        The mask image (white = important) for ``mask`` and ``texture-mask``.
-    importance_image : str or None
-        For ``mask``: the ``NAME.bake.json`` of the image the mask was painted over (default:
-        the one beside the mask whose image has the mask's size).
-    importance_band : (float, float) or None
-        For ``band``: heights as fractions of the axial extent (0 foot, 1 mouth).
-    importance_angles : (float, float) or None
-        For ``band``: angle range in degrees from the seam.
-    """
-
-    units: str | None = None
-    texture: bool = True
-    proxy: str = "auto"
-    axis: tuple[float, ...] | None = None
-    flip: bool = False
-    seam: float | None = None
-    band: tuple[float, float] | None = None
-    angles: tuple[float, float] | None = None
-    view: tuple[float, ...] | None = None
-    side: str = "outer"
-    keep_attachments: bool = False
-    importance: str = "auto"
-    importance_mask: str | None = None
-    importance_image: str | None = None
-    importance_band: tuple[float, float] | None = None
-    importance_angles: tuple[float, float] | None = None
-
-    def __post_init__(self) -> None:
-        _importance.check_method(self.importance)
-        if (self.importance in ("mask", "texture-mask")) != (self.importance_mask is not None):
-            raise InvalidOptionError("give importance_mask (--importance-mask PNG) with importance mask or "
-                                     "texture-mask, and only then")
-        if self.importance_image is not None and self.importance != "mask":
-            raise InvalidOptionError("importance_image (--importance-image) goes with importance mask")
-        for name in ("band", "angles", "importance_band", "importance_angles"):
-            if getattr(self, name) is not None:
-                object.__setattr__(self, name, _height_band(name, getattr(self, name)) if name.endswith("band")
-                                   else _angle_range(name, getattr(self, name)))
-        if (self.importance == "band") != (self.importance_band is not None or self.importance_angles is not None):
-            raise InvalidOptionError("give importance_band and/or importance_angles with importance band, and only then")
-        if self.side not in SIDES:
-            raise InvalidOptionError(f"side {self.side!r} is unknown; use outer or inner")
-        if not isinstance(self.keep_attachments, bool):
-            raise InvalidOptionError(f"keep_attachments must be true or false, got {self.keep_attachments!r}")
-        if self.units is not None and self.units not in UNITS_MM:
-            raise InvalidOptionError(f"units {self.units!r} is unknown; use one of {', '.join(UNITS_MM)}")
-        if not isinstance(self.texture, bool):
-            raise InvalidOptionError(f"texture must be true or false, got {self.texture!r}")
-        if self.proxy not in ("auto", *_proxy.KINDS):
-            raise InvalidOptionError(
-                f"proxy {self.proxy!r} is unknown; use auto, {', '.join(_proxy.KINDS)}")
-        if self.axis is not None:
-            ax = _floats("axis", self.axis, 6, "px,py,pz,dx,dy,dz")
-            if not any(ax[3:]):
-                raise InvalidOptionError("axis direction is zero; give dx,dy,dz not all 0")
-            object.__setattr__(self, "axis", ax)
-        if self.seam is not None:
-            object.__setattr__(self, "seam", _floats("seam", (self.seam,), 1, "DEG")[0])
-        if self.view is not None:
-            view = _floats("view", self.view, 3, "x,y,z")
-            if not any(view):
-                raise InvalidOptionError("view direction is zero; give x,y,z not all 0")
-            if self.proxy != "ortho":
-                raise InvalidOptionError("view applies only to proxy ortho; add --proxy ortho or drop --view")
-            object.__setattr__(self, "view", view)
-
-    def as_dict(self) -> dict:
-        """The options as a JSON-ready dict."""
-        return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v)
-                for f in fields(self)}
-
-
-def _floats(name: str, values, count: int, form: str) -> tuple[float, ...]:
-    try:
-        out = tuple(float(x) for x in values)
-    except (TypeError, ValueError):
-        raise InvalidOptionError(f"{name} needs {count} numbers ({form})") from None
-    if len(out) != count or not all(math.isfinite(x) for x in out):
-        raise InvalidOptionError(f"{name} needs {count} finite numbers ({form}), got {len(out)}")
-    return out
-
-
-def _height_band(name: str, value) -> tuple[float, float]:
-    """A height band ``(LO, HI)``, fractions with ``0 <= LO < HI <= 1``, or one error line."""
-    lo, hi = _floats(name, value, 2, "LO HI")
-    if not 0.0 <= lo < hi <= 1.0:
-        raise InvalidOptionError(f"{name.replace('_', ' ')} {lo:g} {hi:g} is invalid; give fractions of the height "
-                                 "with 0 <= LO < HI <= 1")
-    return lo, hi
-
-
-def _angle_range(name: str, value) -> tuple[float, float]:
-    """An angle range ``(A0, A1)`` in degrees from the seam, at most 360 wide, or one error line."""
-    a0, a1 = _floats(name, value, 2, "A0 A1")
-    if not a0 < a1 <= a0 + 360.0:
-        raise InvalidOptionError(f"{name.replace('_', ' ')} {a0:g} {a1:g} are invalid; give A0 < A1 <= A0 + 360 "
-                                 "(degrees from the seam)")
-    return a0, a1
 
 
 @dataclass(frozen=True)
@@ -1064,7 +919,7 @@ def _find_importance(flat: FlatMesh, options: RolloutOptions, axis: AxisFit, the
         return _importance.texture_mask_importance(flat, options.importance_mask)
     h = axis.cylindrical(flat.mesh.vertices)[0]
     return _importance.band_importance(flat, h / max(axis.height, np.finfo(float).tiny), theta_deg,
-                                       options.importance_band, options.importance_angles)
+                                       options.importance_band, options.importance_arc)
 
 
 def rollout_summary(result: RolloutResult) -> dict:
@@ -1222,7 +1077,7 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     from potflat import __version__
     from potflat.io.atomic import write_json_atomic
     from potflat.io.scan import load_scan
-    from potflat.io.flat_ply import write_flat_ply
+    from potflat.io.flat_ply import as_stored, write_flat_ply
     from potflat.rollout.profile import vessel_profile, write_profile_csv, write_profile_svg
     from potflat.stages.provenance import provenance
 
@@ -1254,9 +1109,11 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
                "files": {"ply": ply_path.name, "json": json_path.name, "profile_csv": csv_path.name,
                          "profile_svg": svg_path.name}}
     summary["provenance"] = provenance(stage="rollout", inputs=[scan_path], options=options.as_dict())
-    write_flat_ply(ply_path, result.flat, comments=(f"potflat {__version__} rollout of {scan_path.name}",))
+    comments = (f"potflat {__version__} rollout of {scan_path.name}",)
+    write_flat_ply(ply_path, result.flat, comments=comments)
     write_profile_csv(profile, csv_path)
     write_profile_svg(profile, svg_path, title=f"{name}: profile ({profile.units})")
     write_json_atomic(json_path, summary)
     return StageOutput({"ply": ply_path, "json": json_path, "profile_csv": csv_path, "profile_svg": svg_path},
-                       summary)
+                       summary, flat=as_stored(result.flat, ply_path, comments=comments),
+                       distortion=result.distortion)

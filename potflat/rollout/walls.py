@@ -36,10 +36,9 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 
 from potflat.mesh.distortion import row_blocks
 from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.rollout.options import SIDES  # the sides select_wall accepts
 from potflat.types import Mesh
 
-#: Sides accepted by :func:`select_wall`.
-SIDES = ("outer", "inner")
 #: Label values in :attr:`WallSelection.labels`.
 OUTER, INNER = 1, -1
 

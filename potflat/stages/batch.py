@@ -173,11 +173,11 @@ class Batch:
 
 def option_stages() -> dict[str, list[tuple[str, Any]]]:
     """Every stage option name to the (stage, type hint) pairs that use it."""
-    from potflat.stages.pipeline import STAGES, option_types, stage_api
+    from potflat.stages.pipeline import STAGES, option_types, options_class
 
     out: dict[str, list[tuple[str, Any]]] = {}
     for stage in STAGES:
-        for name, tp in option_types(stage_api(stage)[0]).items():
+        for name, tp in option_types(options_class(stage)).items():
             out.setdefault(name, []).append((stage, tp))
     return out
 
@@ -322,11 +322,11 @@ class _Validator:
         return out
 
     def build_options(self, values: dict[str, dict[str, tuple[Any, int]]], line: int) -> dict | None:
-        from potflat.stages.pipeline import STAGES, stage_api
+        from potflat.stages.pipeline import STAGES, options_class
 
         built = {}
         for stage in STAGES:
-            cls = stage_api(stage)[0]
+            cls = options_class(stage)
             given = values.get(stage, {})
             try:
                 built[stage] = cls(**{k: v for k, (v, _) in given.items()})

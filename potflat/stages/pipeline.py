@@ -32,6 +32,20 @@ FIGURES: tuple[str, ...] = ("edge_rms", "area_mean_abs_log", "anisotropy_p95", "
 _STAGE_INPUT = {"relax": ".rollout.ply", "bake": ".relaxed.ply"}
 
 
+def options_class(stage: str) -> type:
+    """The options dataclass of ``stage`` (``RolloutOptions``...), without importing the
+    stage's algorithm (the command line builds its options and help from it).
+
+    Parameters
+    ----------
+    stage : str
+        ``"rollout"``, ``"relax"`` or ``"bake"``.
+    """
+    if stage not in STAGES:
+        raise ValueError(f"unknown stage {stage!r}; one of {', '.join(STAGES)}")
+    return getattr(importlib.import_module(f"potflat.{stage}"), f"{stage.capitalize()}Options")
+
+
 def stage_api(stage: str) -> tuple[type, Callable[..., StageOutput]]:
     """The options dataclass and the file-level function of ``stage``.
 
@@ -47,10 +61,8 @@ def stage_api(stage: str) -> tuple[type, Callable[..., StageOutput]]:
     run : callable
         ``run_<stage>_stage(input_path, out_dir, options, *, name=None) -> StageOutput``.
     """
-    if stage not in STAGES:
-        raise ValueError(f"unknown stage {stage!r}; one of {', '.join(STAGES)}")
-    module = importlib.import_module(f"potflat.{stage}")
-    return getattr(module, f"{stage.capitalize()}Options"), getattr(module, f"run_{stage}_stage")
+    cls = options_class(stage)
+    return cls, getattr(importlib.import_module(f"potflat.{stage}"), f"run_{stage}_stage")
 
 
 def options_dict(options: Any) -> dict[str, Any]:
@@ -93,36 +105,13 @@ class ScanResult:
     @property
     def figures(self) -> dict[str, Any]:
         """Distortion figures of the final flattening (:data:`FIGURES`, from the relax stage)."""
-        return distortion_figures(self.stages["relax"].summary)
+        return {k: getattr(self.stages["relax"].distortion, k) for k in FIGURES}
 
 
-def distortion_figures(summary: dict) -> dict[str, Any]:
-    """The :data:`FIGURES` found in a stage's JSON summary (``None`` where absent).
-
-    The figures are looked up in the first nested dict holding ``edge_rms`` (a
-    :class:`potflat.mesh.distortion.DistortionSummary`), preferring one under a key named
-    ``distortion``.
-    """
-    found = _find_figures(summary)
-    return {k: (found or {}).get(k) for k in FIGURES}
-
-
-def _find_figures(node: Any) -> dict | None:
-    if isinstance(node, dict):
-        if "edge_rms" in node:
-            return node
-        keys = sorted(node, key=lambda k: (k != "distortion", str(k)))
-        for key in keys:
-            hit = _find_figures(node[key])
-            if hit is not None:
-                return hit
-    return None
-
-
-def option_types(options_class: type) -> dict[str, Any]:
-    """Field name to resolved type hint of a stage options dataclass (fields only)."""
-    hints = typing.get_type_hints(options_class)
-    return {f.name: hints.get(f.name, Any) for f in dataclasses.fields(options_class) if f.init}
+def option_types(cls: type) -> dict[str, Any]:
+    """Field name to resolved type hint of a stage options dataclass ``cls`` (fields only)."""
+    hints = typing.get_type_hints(cls)
+    return {f.name: hints.get(f.name, Any) for f in dataclasses.fields(cls) if f.init}
 
 
 def describe_type(tp: Any) -> str:
@@ -247,7 +236,7 @@ def resolve_options(**given: Any) -> dict[str, Any]:
     """
     out = {}
     for stage in STAGES:
-        cls, _ = stage_api(stage)
+        cls = options_class(stage)
         value = given.get(stage)
         if value is None:
             value = cls()
@@ -274,7 +263,7 @@ def _preview_at_image_resolution(options: dict) -> dict:
     """A relax preset that relaxes a coarse copy (``preview``) does so at 2 pixels of the image
     it is baked into, unless ``simplify_mm`` was given."""
     relax, bake = options["relax"], options["bake"]
-    if getattr(relax, "simplify_mm", 0.0) is not None:  # given (or a stage stand-in without it, in tests)
+    if relax.simplify_mm is not None:  # given
         return options
     if relax.resolved()["simplify_mm"]:
         options = {**options, "relax": dataclasses.replace(relax, simplify_mm=2.0 / bake.resolution)}
@@ -315,7 +304,7 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
     stages: dict[str, StageOutput] = {}
     seconds: dict[str, float] = {}
     start = time.perf_counter()
-    source = scan
+    source, handed = scan, {}
     for stage in STAGES:
         if progress is not None:
             progress(stage)
@@ -326,7 +315,11 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
                                    "this is a bug in potflat, please report it")
         _, run = stage_api(stage)
         t = time.perf_counter()
-        stages[stage] = run(source, out, options[stage], name=name)
+        stages[stage] = run(source, out, options[stage], name=name, **handed)
+        # the flattening and the rollout's summary go on in memory; the files are the record
+        # (and the stage commands' input)
+        handed = ({"flat": stages[stage].flat, "rollout_summary": stages["rollout"].summary}
+                  if stages[stage].flat is not None else {})
         seconds[stage] = time.perf_counter() - t
     seconds["total"] = time.perf_counter() - start
     return ScanResult(name=name, scan=scan, out_dir=out, stages=stages, seconds=seconds)

@@ -1,0 +1,160 @@
+"""Options of the rollout stage: light (no scipy, trimesh or Numba), so the command line
+builds its options and ``--help`` without importing the algorithm."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+from potflat import importance as _importance
+from potflat.errors import InvalidOptionError
+from potflat.rollout.proxy import KINDS as PROXY_KINDS
+from potflat.types import UNITS_MM
+
+#: Sides accepted by :func:`potflat.rollout.walls.select_wall`.
+SIDES = ("outer", "inner")
+
+
+@dataclass(frozen=True, kw_only=True)
+class RolloutOptions:
+    """Options of the rollout stage (names equal the CLI options, ``_`` for ``-``).
+
+    Attributes
+    ----------
+    units : str or None
+        Length unit of the scan file (``mm``, ``cm``, ``m``, ``um``, ``in``); None: the unit
+        the file declares (a PLY ``comment units``, an STL header, glTF's metres), else mm.
+        Used when reading the file; :func:`rollout` itself uses :attr:`Mesh.units`.
+    texture : bool
+        Use the scan's texture image; False loads the geometry (and vertex colours) only,
+        e.g. when the texture file is missing or corrupt. Used when reading the file.
+    proxy : str
+        ``auto``, ``cylinder``, ``cone``, ``sphere`` or ``ortho``.
+    axis : tuple of 6 float or None
+        Manual axis ``(px, py, pz, dx, dy, dz)``: a point and a direction from foot to mouth.
+    flip : bool
+        Reverse the axis direction (mouth and foot swapped).
+    seam : float or None
+        Seam angle in degrees from the axis' reference direction; chosen automatically when
+        None (0 when ``angles`` is given).
+    band : (float, float) or None
+        Height band as fractions of the axial extent, 0 = foot, 1 = mouth.
+    angles : (float, float) or None
+        Angle range in degrees relative to the seam, e.g. ``(-60, 60)``; at most 360 wide.
+    view : tuple of 3 float or None
+        For ``proxy="ortho"``: direction from the vessel to the viewer (``x,y,z``, scan
+        coordinates); default: from the axis towards the region's centre (from the region
+        towards the axis for the inner side).
+    side : str
+        Painted side to unroll: ``outer`` (the outside, default) or ``inner`` (the inside
+        seen from within: a cup's interior, a kylix tondo). Two-walled scans are split at
+        the rim (:func:`potflat.rollout.walls.select_wall`).
+    keep_attachments : bool
+        Keep handles, spouts and knobs (parts off the surface of revolution, found by
+        :func:`potflat.rollout.attachments.detect_attachments`) in the rollout; by default they are
+        left out and reported, and the painting around their roots stays.
+    importance : str
+        Where the painting is, which the relax stage keeps true and the bake stage reports
+        (:mod:`potflat.importance`): ``auto`` (found in the colours; none for a scan without
+        colours or painted all over), ``none`` (the whole surface alike), ``mask`` (a PNG
+        painted over a potflat image, ``importance_mask``), ``texture-mask`` (a PNG in the
+        texture's space, ``importance_mask``) or ``band`` (``importance_band`` and/or
+        ``importance_arc``).
+    importance_mask : str or None
+        The mask image (white = important) for ``mask`` and ``texture-mask``.
+    importance_image : str or None
+        For ``mask``: the ``NAME.bake.json`` of the image the mask was painted over (default:
+        the one beside the mask whose image has the mask's size).
+    importance_band : (float, float) or None
+        For ``band``: heights as fractions of the axial extent (0 foot, 1 mouth).
+    importance_arc : (float, float) or None
+        For ``band``: angle range in degrees from the seam.
+    """
+
+    units: str | None = None
+    texture: bool = True
+    proxy: str = "auto"
+    axis: tuple[float, ...] | None = None
+    flip: bool = False
+    seam: float | None = None
+    band: tuple[float, float] | None = None
+    angles: tuple[float, float] | None = None
+    view: tuple[float, ...] | None = None
+    side: str = "outer"
+    keep_attachments: bool = False
+    importance: str = "auto"
+    importance_mask: str | None = None
+    importance_image: str | None = None
+    importance_band: tuple[float, float] | None = None
+    importance_arc: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        _importance.check_method(self.importance)
+        if (self.importance in ("mask", "texture-mask")) != (self.importance_mask is not None):
+            raise InvalidOptionError("give importance_mask (--importance-mask PNG) with importance mask or "
+                                     "texture-mask, and only then")
+        if self.importance_image is not None and self.importance != "mask":
+            raise InvalidOptionError("importance_image (--importance-image) goes with importance mask")
+        for name in ("band", "angles", "importance_band", "importance_arc"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, _height_band(name, getattr(self, name)) if name.endswith("band")
+                                   else _angle_range(name, getattr(self, name)))
+        if (self.importance == "band") != (self.importance_band is not None or self.importance_arc is not None):
+            raise InvalidOptionError("give importance_band and/or importance_arc with importance band, and only then")
+        if self.side not in SIDES:
+            raise InvalidOptionError(f"side {self.side!r} is unknown; use outer or inner")
+        if not isinstance(self.keep_attachments, bool):
+            raise InvalidOptionError(f"keep_attachments must be true or false, got {self.keep_attachments!r}")
+        if self.units is not None and self.units not in UNITS_MM:
+            raise InvalidOptionError(f"units {self.units!r} is unknown; use one of {', '.join(UNITS_MM)}")
+        if not isinstance(self.texture, bool):
+            raise InvalidOptionError(f"texture must be true or false, got {self.texture!r}")
+        if self.proxy not in ("auto", *PROXY_KINDS):
+            raise InvalidOptionError(
+                f"proxy {self.proxy!r} is unknown; use auto, {', '.join(PROXY_KINDS)}")
+        if self.axis is not None:
+            ax = _floats("axis", self.axis, 6, "px,py,pz,dx,dy,dz")
+            if not any(ax[3:]):
+                raise InvalidOptionError("axis direction is zero; give dx,dy,dz not all 0")
+            object.__setattr__(self, "axis", ax)
+        if self.seam is not None:
+            object.__setattr__(self, "seam", _floats("seam", (self.seam,), 1, "DEG")[0])
+        if self.view is not None:
+            view = _floats("view", self.view, 3, "x,y,z")
+            if not any(view):
+                raise InvalidOptionError("view direction is zero; give x,y,z not all 0")
+            if self.proxy != "ortho":
+                raise InvalidOptionError("view applies only to proxy ortho; add --proxy ortho or drop --view")
+            object.__setattr__(self, "view", view)
+
+    def as_dict(self) -> dict:
+        """The options as a JSON-ready dict."""
+        return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v)
+                for f in fields(self)}
+
+
+def _floats(name: str, values, count: int, form: str) -> tuple[float, ...]:
+    try:
+        out = tuple(float(x) for x in values)
+    except (TypeError, ValueError):
+        raise InvalidOptionError(f"{name} needs {count} numbers ({form})") from None
+    if len(out) != count or not all(math.isfinite(x) for x in out):
+        raise InvalidOptionError(f"{name} needs {count} finite numbers ({form}), got {len(out)}")
+    return out
+
+
+def _height_band(name: str, value) -> tuple[float, float]:
+    """A height band ``(LO, HI)``, fractions with ``0 <= LO < HI <= 1``, or one error line."""
+    lo, hi = _floats(name, value, 2, "LO HI")
+    if not 0.0 <= lo < hi <= 1.0:
+        raise InvalidOptionError(f"{name.replace('_', ' ')} {lo:g} {hi:g} is invalid; give fractions of the height "
+                                 "with 0 <= LO < HI <= 1")
+    return lo, hi
+
+
+def _angle_range(name: str, value) -> tuple[float, float]:
+    """An angle range ``(A0, A1)`` in degrees from the seam, at most 360 wide, or one error line."""
+    a0, a1 = _floats(name, value, 2, "A0 A1")
+    if not a0 < a1 <= a0 + 360.0:
+        raise InvalidOptionError(f"{name.replace('_', ' ')} {a0:g} {a1:g} are invalid; give A0 < A1 <= A0 + 360 "
+                                 "(degrees from the seam)")
+    return a0, a1

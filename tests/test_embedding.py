@@ -1,0 +1,113 @@
+"""Fold-free starts (potflat.mesh.embedding): local repair of folded clusters, Tutte's
+embedding, and the relax stage starting from them when untangling leaves folds."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from _bench_meshes import meshes, signed_areas
+
+from potflat.errors import FoldedResultError
+from potflat.mesh.embedding import boundary_loops, repair_folds, tutte_embedding
+from potflat.relax import relax
+from potflat.relax import solver
+
+
+def _interior_vertex(faces, n):
+    border = np.zeros(n, bool)
+    for loop in boundary_loops(faces, n):
+        border[loop] = True
+    ring = np.zeros(n, bool)
+    ring[faces[border[faces].any(axis=1)].ravel()] = True
+    return int(np.flatnonzero(~ring)[len(np.flatnonzero(~ring)) // 2])
+
+
+def test_repair_folds_fixes_an_interior_fold_and_moves_nothing_far_away():
+    flat = meshes.vessel_rollout(2000, seed=4)
+    F, uv = flat.mesh.faces, flat.uv.copy()
+    v = _interior_vertex(F, len(uv))
+    nbr = np.unique(F[(F == v).any(axis=1)])
+    uv[v] += 3.0 * (uv[nbr].mean(axis=0) - uv[v]) + 4.0 * (uv[nbr].max(axis=0) - uv[nbr].min(axis=0))
+    assert (signed_areas(uv, F) <= 0).sum() >= 2
+    fixed, repaired, left = repair_folds(F, uv)
+    assert left == 0 and repaired >= 2 and np.all(signed_areas(fixed, F) > 0)
+    far = np.linalg.norm(flat.uv - flat.uv[v], axis=1) > 20 * np.median(np.ptp(flat.uv[F], axis=1))
+    np.testing.assert_array_equal(fixed[far], uv[far])
+    assert repair_folds(F, flat.uv)[1:] == (0, 0)  # nothing to do on a clean layout
+
+
+def test_tutte_embedding_is_fold_free_with_holes_and_several_parts():
+    flat = meshes.vessel_rollout(2000, seed=5)
+    F = flat.mesh.faces
+    c = flat.uv[F].mean(axis=1)
+    centre = np.median(c, axis=0)
+    hole = np.linalg.norm(c - centre, axis=1) < 0.08 * np.ptp(flat.uv[:, 0])  # a hole in the middle
+    part, _ = meshes.cylinder_patch(6, 5)
+    both = np.concatenate([F[~hole], part.mesh.faces + len(flat.uv)])
+    n = len(flat.uv) + len(part.uv)
+    disc = tutte_embedding(both, n)
+    assert disc is not None and np.all(signed_areas(disc, both) > 0)
+    assert len(boundary_loops(F[~hole], len(flat.uv))) == 2
+    tetra = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
+    assert tutte_embedding(tetra, 4) is None  # a closed surface has no flat layout
+
+
+def test_relax_starts_fold_free_whatever_the_start(monkeypatch):
+    """When untangling leaves folds, the relax stage re-embeds them or starts from Tutte's
+    embedding; the relaxed result does not depend on the start (edge RMS within 1%)."""
+    flat = meshes.vessel_rollout(3000, seed=1)
+    clean = relax(flat)
+    F, uv = flat.mesh.faces, flat.uv.copy()
+    v = _interior_vertex(F, len(uv))
+    nbr = np.unique(F[(F == v).any(axis=1)])
+    uv[v] += 5.0 * (uv[nbr].max(axis=0) - uv[nbr].min(axis=0))
+    monkeypatch.setattr(solver, "_untangle", lambda sp, x, rounds=200: (x, int((sp.signed_areas(x) <= 0).sum())))
+    local = relax(flat.replace(uv=uv))
+    assert any("re-embedded" in note for note in local.notes)
+    # a fold reaching the border: no local repair, Tutte's disc
+    u = uv[:, 0]
+    a, b = np.percentile(u, [40, 55])
+    strip = (u > a) & (u < b)
+    uv[strip, 0] = a + b - u[strip] + 0.3 * (u[strip] - a)
+    disc = relax(flat.replace(uv=uv))
+    assert any("Tutte" in note for note in disc.notes)
+    for r in (local, disc):
+        assert r.flipped == 0 and r.boundary_overlap == 0 and np.all(signed_areas(r.flat.uv, F) > 0)
+        assert r.distortion.edge_rms == pytest.approx(clean.distortion.edge_rms, rel=0.01)
+        assert r.distortion.anisotropy_p95 == pytest.approx(clean.distortion.anisotropy_p95, rel=0.02)
+
+
+def test_a_mesh_that_no_layout_unfolds_is_refused_with_the_fix(monkeypatch):
+    flat = meshes.vessel_rollout(1500, seed=2)
+    monkeypatch.setattr(solver, "_untangle", lambda sp, x, rounds=200: (x, 1))
+    with pytest.raises(FoldedResultError, match="mirrored.*--side inner"):
+        relax(flat.replace(uv=flat.uv * np.array([-1.0, 1.0])))  # every face flipped: seen from the wrong side
+    monkeypatch.setattr("potflat.mesh.embedding.tutte_embedding", lambda faces, n, scale=1.0: None)
+    uv = flat.uv.copy()
+    u = uv[:, 0]
+    a, b = np.percentile(u, [40, 55])
+    strip = (u > a) & (u < b)
+    uv[strip, 0] = a + b - u[strip] + 0.3 * (u[strip] - a)
+    with pytest.raises(FoldedResultError, match="--band"):
+        relax(flat.replace(uv=uv))
+
+
+def test_a_result_relaxed_from_the_disc_keeps_the_rollouts_orientation(monkeypatch):
+    """Mouth up: the layout relaxed from Tutte's disc is turned back to the rollout's
+    orientation (the direction from the foot's vertices to the mouth's stays +v)."""
+    flat = meshes.vessel_rollout(3000, seed=1)
+    clean = relax(flat)
+    uv = flat.uv.copy()
+    u = uv[:, 0]
+    a, b = np.percentile(u, [40, 55])
+    strip = (u > a) & (u < b)
+    uv[strip, 0] = a + b - u[strip] + 0.3 * (u[strip] - a)
+    monkeypatch.setattr(solver, "_untangle", lambda sp, x, rounds=200: (x, int((sp.signed_areas(x) <= 0).sum())))
+    r = relax(flat.replace(uv=uv))
+    assert any("Tutte" in note for note in r.notes)
+    top = flat.mesh.vertices[:, 2] > np.percentile(flat.mesh.vertices[:, 2], 90)
+    bottom = flat.mesh.vertices[:, 2] < np.percentile(flat.mesh.vertices[:, 2], 10)
+    up = r.flat.uv[top].mean(axis=0) - r.flat.uv[bottom].mean(axis=0)
+    want = clean.flat.uv[top].mean(axis=0) - clean.flat.uv[bottom].mean(axis=0)
+    cos = up @ want / np.linalg.norm(up) / np.linalg.norm(want)
+    assert cos > 0.999
