@@ -16,8 +16,10 @@ def libigl_arap(flat: FlatMesh, iterations: int = ARAP_ITERATIONS) -> tuple[np.n
 
     ARAP fits rotations, so it needs a start that is not mirrored (a mirrored start folds
     most triangles in the first iteration): a start with negative total signed area is
-    mirrored in ``u`` for the solve and the result mirrored back. One vertex is pinned
-    at its start (without any the global system is singular and the solve fails at times).
+    mirrored in ``u`` for the solve and the result mirrored back. One vertex of each
+    connected piece, and every vertex of no face, is pinned at its start (a piece or a
+    vertex without one makes the global system singular: the precomputation or the solve
+    fails).
 
     Parameters
     ----------
@@ -42,10 +44,26 @@ def libigl_arap(flat: FlatMesh, iterations: int = ARAP_ITERATIONS) -> tuple[np.n
     mirror = np.array([-1.0, 1.0]) if (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum() < 0 else np.ones(2)
     start = np.ascontiguousarray(flat.uv * mirror)
     t0 = time.perf_counter()
+    pinned = _pinned_vertices(F, len(V))
     data = igl.ARAPData()
     data.energy = igl.ARAP_ENERGY_TYPE_ELEMENTS
     data.max_iter = iterations
-    igl.arap_precomputation(V, F, 2, np.zeros(1, np.int32), data)
+    igl.arap_precomputation(V, F, 2, pinned.astype(np.int32), data)
     t1 = time.perf_counter()
-    uv = igl.arap_solve(start[:1].copy(), data, start.copy())
+    uv = igl.arap_solve(start[pinned].copy(), data, start.copy())
     return np.asarray(uv, np.float64) * mirror, t1 - t0, time.perf_counter() - t0
+
+
+def _pinned_vertices(faces: np.ndarray, n: int) -> np.ndarray:
+    """The lowest vertex index of each connected piece of ``faces`` (pieces joined by shared
+    vertices) and every vertex of no face, sorted, ``(k,)`` int64."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]]])
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    used = np.zeros(n, bool)
+    used[faces.ravel()] = True
+    _, first = np.unique(label[used], return_index=True)
+    return np.sort(np.concatenate([np.flatnonzero(used)[first], np.flatnonzero(~used)]))

@@ -276,6 +276,10 @@ def plot(rows: list[dict], path: Path) -> None:
             ax.plot(r["anisotropy_p95"], r["area"], style[0], c=style[1])
             ax.annotate(r["method"], (r["anisotropy_p95"], r["area"]), fontsize=6, xytext=(3, 2),
                         textcoords="offset points")
+        curve = sorted((r["keywords"]["shape"], r["anisotropy_p95"], r["area"]) for r in sel
+                       if set(r.get("keywords") or {}) == {"shape"})
+        if len(curve) > 1:  # the shape setting's trade
+            ax.plot([c[1] for c in curve], [c[2] for c in curve], "-", c="tab:blue", lw=0.8, alpha=0.6)
         ax.set_title(f"{vessel}, {painting}", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
@@ -303,6 +307,20 @@ def _variants(args) -> dict[str, dict]:
         if not isinstance(out[name], dict):
             raise SystemExit(f"--variant {spec!r}: the JSON must be an object of option keywords")
     return out
+
+
+def _command(given: list[str]) -> str:
+    """The command line that reproduces the table (without where the rows were dumped)."""
+    keep, skip = [], False
+    for a in given:
+        if skip or a.startswith("--json="):
+            skip = False
+            continue
+        if a == "--json":
+            skip = True
+            continue
+        keep.append(a if a.startswith("--") or all(ch.isalnum() or ch in "-_,:." for ch in a) else f"'{a}'")
+    return " ".join(["python benchmarks/bench_figures.py", *keep])
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -342,14 +360,11 @@ def main(argv: list[str] | None = None) -> None:
         rows += case_rows
         print(table(case_rows).split("\n", 2)[2].rstrip() + f"   [{time.perf_counter() - t0:.0f} s]", flush=True)
     total = time.perf_counter() - t_all
-    given = list(argv if argv is not None else sys.argv[1:])
-    command = "python benchmarks/bench_figures.py " + " ".join(
-        a if a.replace("-", "").replace("_", "").replace(",", "").replace(":", "").isalnum() or a.startswith("--")
-        else f"'{a}'" for a in given)
+    command = _command(list(argv if argv is not None else sys.argv[1:]))
     text = table(rows)
     goals = targets(rows)
     print("\n" + text + "\nTargets (issue 13):\n" + "\n".join(goals))
-    print(f"\nreproduce: {command.strip()}   ({total / 60:.1f} min)")
+    print(f"\nreproduce: {command}   ({total / 60:.1f} min)")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     if args.plot:
@@ -360,7 +375,7 @@ def main(argv: list[str] | None = None) -> None:
 
         section = (
             "## Painted figures\n\n"
-            f"Measured with `{command.strip()}` (potflat {__version__}, {os.cpu_count()} cores, "
+            f"Measured with `{command}` (potflat {__version__}, {os.cpu_count()} cores, "
             f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {total / 60:.0f} min in all). Vessels generated like "
             "the samples (about {:,} vertices), painted only in a panel or a belt (black glaze elsewhere) or all over, "
             "and the bundled amphora (frieze circles 20 mm across). Circles are measured on a fine sample of the surface "
@@ -368,7 +383,8 @@ def main(argv: list[str] | None = None) -> None:
             "circles' surface; area ratio = the circles' flat over 3D area; widths and heights = 4 sigma of each "
             "circle's image along u and v (a true circle: 20 mm). Cut-out = the painted zone flattened alone. "
             "Seconds: libigl ARAP precomputation and 10 iterations; relax setup and solve (not the rollout).\n\n"
-            .format(args.vertices) + text + "\nTargets (issue 13):\n\n" + "\n".join(goals) + "\n"
+            .format(args.vertices) + text + "\nTargets (issue 13) at the default:\n\n"
+            + "\n".join(g for g in goals if ", default:" in g) + "\n"
             + ("\n![area distortion against circle anisotropy](img/figures_trade.png)\n" if args.plot else ""))
         write_section(section)
 

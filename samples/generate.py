@@ -16,7 +16,7 @@ from pathlib import Path
 
 
 def main(argv: list[str] | None = None) -> int:
-    from potflat_synthetic.vessels import KINDS
+    from potflat_synthetic.vessels import KINDS, PAINTINGS
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -40,6 +40,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sherd-span", type=float, default=80.0, help="sherd width in degrees")
     ap.add_argument("--sherd-thickness", type=float, default=0.0,
                     help="0 = painted surface only; else a closed fragment this thick (mm)")
+    ap.add_argument("--painting", choices=PAINTINGS, default="frieze",
+                    help="frieze (default), belt or panel (black glaze elsewhere), allover")
+    ap.add_argument("--shading", action="store_true",
+                    help="light the texture with a smooth gradient and mild noise, like a scan")
     ap.add_argument("--ply", action="store_true", help="also write a vertex-coloured PLY")
     ap.add_argument("--name", default=None, help="output file stem (default: the kind)")
     ap.add_argument("-o", "--out", type=Path, default=Path("."), help="output folder")
@@ -54,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
             texture_size=args.texture_size, base=args.base, walls=args.walls,
             thickness=args.thickness, handles=args.handles or False, holes=args.holes,
             sherd_of=args.sherd_of, sherd_span=args.sherd_span,
-            sherd_thickness=args.sherd_thickness,
+            sherd_thickness=args.sherd_thickness, painting=args.painting, shading=args.shading,
         )
         stem = args.name or args.kind
         obj = write_obj(vessel, args.out / f"{stem}.obj")

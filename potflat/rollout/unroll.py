@@ -33,6 +33,7 @@ from scipy.spatial import cKDTree
 from potflat import importance as _importance
 from potflat.rollout import proxy as _proxy
 from potflat.mesh._kernels import union_find
+from potflat.mesh.embedding import signed_areas
 from potflat.rollout.attachments import AttachmentSelection, detect_attachments
 from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
 from potflat.mesh.distortion import DistortionSummary, face_areas, row_blocks, summarize
@@ -657,16 +658,6 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.n
             break
         keep[idx[drop]] = False
     return ~keep
-
-
-def signed_areas(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Signed flat area ((m,) float64) of each face, positive when counter-clockwise."""
-    out = np.empty(len(faces))
-    for s in row_blocks(len(faces)):
-        f = faces[s]
-        a, b, c = uv[f[:, 0]], uv[f[:, 1]], uv[f[:, 2]]
-        out[s] = 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
-    return out
 
 
 def boundary_segments(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
