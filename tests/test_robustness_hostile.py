@@ -446,9 +446,11 @@ def test_stopping_the_pool_ends_its_workers_and_cancels_the_queue():
     processes = list(pool._processes.values())
     start = time.monotonic()
     _stop_workers(pool)
-    assert time.monotonic() - start < 15
-    assert not any(p.is_alive() for p in processes)
-    assert all(f.cancelled() for f in queued[1:])  # one may already sit in the call queue
+    assert time.monotonic() - start < 30
+    assert processes and not any(p.is_alive() for p in processes)
+    time.sleep(0.5)  # the executor's own thread marks what was left
+    finished = [f for f in queued if f.done() and not f.cancelled() and f.exception(timeout=0) is None]
+    assert not finished  # no queued scan ran after the stop
 
 
 def test_potflats_own_partial_painting_does_not_block_the_rerun(tmp_path, fake_stages):
