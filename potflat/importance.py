@@ -239,14 +239,14 @@ def auto_importance(flat: FlatMesh) -> Importance:
     mesh = flat.mesh
     if (mesh.texcoords is None or mesh.texture_path is None) and mesh.vertex_colors is None:
         return Importance(None, "auto", 1.0, "no texture or vertex colours: the whole surface counts alike")
-    from potflat.bake import bake
+    from potflat.bake.render import paint
 
     px_per_mm = DETECT_PX_PER_MM
-    baked = bake(flat, px_per_mm=px_per_mm, maps=(), supersample=2)
-    zone, reason = painted_zone_image(baked.image, px_per_mm)
+    image, origin = paint(flat, px_per_mm)
+    zone, reason = painted_zone_image(image, px_per_mm)
     if zone is None:
         return Importance(None, "auto", 1.0, reason)
-    values = sample_image(zone, _pixels(flat.uv, baked.origin, px_per_mm * mesh.mm_per_unit))
+    values = sample_image(zone, _pixels(flat.uv, origin, px_per_mm * mesh.mm_per_unit))
     return _result(flat, values, "auto", reason)
 
 

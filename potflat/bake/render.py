@@ -346,7 +346,8 @@ def image_size(extent_mm, px_per_mm: float, max_megapixels: float) -> tuple[int,
 class _Renderer:
     """Rasterises a flattening strip by strip and produces every bake layer."""
 
-    def __init__(self, flat: FlatMesh, px_per_mm: float, *, supersample: int = 0, max_megapixels: float = 1000.0):
+    def __init__(self, flat: FlatMesh, px_per_mm: float, *, supersample: int = 0, max_megapixels: float = 1000.0,
+                 distortion_maps: bool = True):
         from potflat.bake import _kernels as raster
 
         self.flat = flat
@@ -354,14 +355,14 @@ class _Renderer:
         self.faces = mesh.faces
         self.grid = _make_grid(flat, px_per_mm, max_megapixels)
         g = self.grid
-        # distortion first: its temporaries come and go before the texture is loaded
-        self.summary = distortion.summarize(mesh.vertices, flat.uv, self.faces)
-        fd = distortion.face_distortion(mesh.vertices, flat.uv, self.faces)
-        self.area_3d, self.area_2d, self.valid = fd.area_3d, fd.area_2d, fd.valid
-        self.face_values = {"area": fd.log_area_ratio, "anisotropy": np.minimum(fd.anisotropy, 1e6)}
-        del fd
-        self.vertex_stress = flat.stress if flat.stress is not None else distortion.vertex_stress(
-            mesh.vertices, flat.uv, self.faces, mesh.mm_per_unit)
+        if distortion_maps:  # first: their temporaries come and go before the texture is loaded
+            self.summary = distortion.summarize(mesh.vertices, flat.uv, self.faces)
+            fd = distortion.face_distortion(mesh.vertices, flat.uv, self.faces)
+            self.area_3d, self.area_2d, self.valid = fd.area_3d, fd.area_2d, fd.valid
+            self.face_values = {"area": fd.log_area_ratio, "anisotropy": np.minimum(fd.anisotropy, 1e6)}
+            del fd
+            self.vertex_stress = flat.stress if flat.stress is not None else distortion.vertex_stress(
+                mesh.vertices, flat.uv, self.faces, mesh.mm_per_unit)
         pix = np.empty_like(flat.uv)
         pix[:, 0] = (flat.uv[:, 0] - g.origin[0]) * g.scale
         pix[:, 1] = (g.origin[1] - flat.uv[:, 1]) * g.scale
@@ -578,6 +579,31 @@ def _figures(r: _Renderer, covered_px: float) -> dict:
 
 # --------------------------------------------------------------------------------------
 # library entry point
+
+
+def paint(flat: FlatMesh, px_per_mm: float, *, supersample: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """The painting of a flattening alone (no distortion maps or figures), in memory.
+
+    Parameters
+    ----------
+    flat : FlatMesh
+    px_per_mm : float
+    supersample : int
+        Sub-samples per pixel side (1-8).
+
+    Returns
+    -------
+    image : (h, w, 4) uint8
+        RGBA, alpha the covered fraction; the pixel grid of :func:`bake`.
+    origin : (2,) float64
+        ``(u, v)`` of the top-left pixel corner (:attr:`BakeResult.origin`).
+    """
+    r = _Renderer(flat, px_per_mm, supersample=supersample, distortion_maps=False)
+    g = r.grid
+    image = np.zeros((g.height, g.width, 4), np.uint8)
+    for r0, r1 in r.strips():
+        image[r0:r1] = _rgba8(r.painting(r0, r1), r.coverage(r0, r1))
+    return image, g.origin.copy()
 
 
 def bake(flat: FlatMesh, *, options: BakeOptions | None = None, **option_fields) -> BakeResult:
