@@ -13,6 +13,15 @@ def with_compile_note(status: str) -> str:
     return status if kernels_cached() else f"{status} (first run: compiling potflat's kernels, about a minute, once)"
 
 
+def say_compiling(console) -> None:
+    """One plain line on ``console`` (stderr) when this run compiles the kernels and no live
+    status line can say so (stderr is not a terminal: a log, a pipe, a batch job)."""
+    from potflat._jit import kernels_cached
+
+    if not console.is_terminal and not kernels_cached():
+        console.print("potflat: first run: compiling potflat's kernels, about a minute, once", highlight=False)
+
+
 def run_stage(status: str | None, call: Callable, *, quiet: bool, as_json: bool):
     """Run ``call()`` (a ``run_<stage>_stage``) under a status spinner on stderr.
 
@@ -28,10 +37,12 @@ def run_stage(status: str | None, call: Callable, *, quiet: bool, as_json: bool)
     """
     from rich.console import Console
 
+    console = Console(stderr=True, quiet=quiet or as_json)
+    say_compiling(console)
     if status is None:
         result = call()
     else:
-        with Console(stderr=True, quiet=quiet or as_json).status(with_compile_note(status)):
+        with console.status(with_compile_note(status)):
             result = call()
     if as_json:
         print(json.dumps({k: v for k, v in result.summary.items() if k != "provenance"}, indent=2))

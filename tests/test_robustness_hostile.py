@@ -569,10 +569,26 @@ def test_large_trims_and_poor_axis_fits_are_warned_with_the_option():
     result = SimpleNamespace(landmark_notes=(), region=SimpleNamespace(repeated_from=None),
                              distortion=SimpleNamespace(flipped=0), boundary_overlap=0,
                              other_objects_faces=0,
-                             trimmed_area=20.0, flat=flat, axis=SimpleNamespace(rms_angle_deg=14.0))
+                             trimmed_area=20.0, flat=flat, proxy=SimpleNamespace(kind="cylinder"),
+                             axis=SimpleNamespace(rms_angle_deg=14.0, direction=np.array([0.0, 1.0, 0.0])))
     notes = " ".join(_notes(result))
     assert "29 % of the surface was trimmed" in notes and "--band" in notes
     assert "14 deg RMS" in notes and "--axis" in notes
+    assert "faces along the axis" not in notes  # the triangle faces across the axis (y)
+    result.axis.direction = np.array([0.0, 0.0, 1.0])  # now the triangle faces along it: a flange
+    assert "100 % of the unrolled surface faces along the axis" in " ".join(_notes(result))
+
+
+def test_a_foot_unrolled_into_a_flange_is_warned_with_the_option():
+    from potflat.rollout import rollout
+    from potflat_synthetic.vessels import make_vessel
+
+    from potflat.rollout.unroll import _notes
+
+    kylix = rollout(make_vessel("kylix", n_vertices=4000, seed=1).mesh, importance="none")
+    assert any("faces along the axis" in note and "--band" in note for note in _notes(kylix))
+    hydria = rollout(make_vessel("hydria", n_vertices=4000, seed=1).mesh, importance="none")
+    assert not any("faces along the axis" in note for note in _notes(hydria))
 
 
 def test_compile_note_on_a_first_run(tmp_path, monkeypatch):
@@ -586,6 +602,26 @@ def test_compile_note_on_a_first_run(tmp_path, monkeypatch):
     (tmp_path / "full" / "x" / "springs.f-1.py311.nbi").write_bytes(b"")
     monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "full"))
     assert with_compile_note("rolling out") == "rolling out"
+
+
+def test_compile_note_is_a_plain_line_when_stderr_is_not_a_terminal(tmp_path, monkeypatch):
+    import io
+
+    import numba
+    from rich.console import Console
+
+    from potflat_cli._stage import say_compiling
+
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "empty"))
+    log = io.StringIO()
+    say_compiling(Console(file=log, force_terminal=False))
+    assert "first run: compiling" in log.getvalue()
+    (tmp_path / "full" / "x").mkdir(parents=True)
+    (tmp_path / "full" / "x" / "springs.f-1.py311.nbi").write_bytes(b"")
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "full"))
+    log = io.StringIO()
+    say_compiling(Console(file=log, force_terminal=False))
+    assert log.getvalue() == ""
 
 
 def test_the_output_texture_is_a_copy_never_a_link(tmp_path):

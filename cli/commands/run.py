@@ -59,11 +59,12 @@ def _run(values: dict[str, Any]) -> None:
     from potflat.mesh.distortion import distortion_words
     from potflat.stages.pipeline import STAGES, run_scan
     from potflat_cli._options import options_from_cli
-    from potflat_cli._stage import with_compile_note
+    from potflat_cli._stage import say_compiling, with_compile_note
 
     options = {stage: options_from_cli(stage, values) for stage in STAGES}
     scan = Path(values["scan"])
     err = Console(stderr=True, quiet=values["quiet"] or values["json"])
+    say_compiling(err)
     with err.status(f"{scan.name}: starting") as status:
         def progress(stage: str) -> None:
             check_stop()

@@ -1049,6 +1049,10 @@ def rollout_summary(result: RolloutResult) -> dict:
 WARN_TRIMMED_FRACTION = 0.05
 #: Warn when the axis' RMS normal-to-meridian angle (degrees) is above this.
 WARN_AXIS_RMS_DEG = 5.0
+#: Warn when more than this share of the unrolled area faces along the axis (normal within
+#: :data:`FLANGE_ANGLE_DEG` of it: a foot's top, a base, a flat shoulder): a cylinder, cone or
+#: sphere develops such a ring into a wide, lobed flange.
+WARN_FLANGE_FRACTION, FLANGE_ANGLE_DEG = 0.08, 30.0
 
 
 def _notes(result: RolloutResult) -> list[str]:
@@ -1078,12 +1082,27 @@ def _notes(result: RolloutResult) -> list[str]:
             notes.append(f"{100 * share:.0f} % of the surface was trimmed away as folded border (rim top, base "
                          "underside, breaks, a foot turned under); if painting is lost there, unroll the painted "
                          "height only (--band LO HI) or try another --proxy")
+    share = _facing_axis_share(result)
+    if share > WARN_FLANGE_FRACTION and result.proxy.kind != "ortho":
+        notes.append(f"{100 * share:.0f} % of the unrolled surface faces along the axis (a foot, a base or a flat "
+                     "shoulder): the proxy unrolls it as a wide, lobed flange; if the painting is elsewhere, unroll "
+                     "the painted height only (--band LO HI)")
     if result.axis.rms_angle_deg > WARN_AXIS_RMS_DEG:
         notes.append(f"the axis fits the surface poorly ({result.axis.rms_angle_deg:.0f} deg RMS between the normals "
                      "and the meridian planes): the vessel is not very round, or a foot, handle or break misleads the "
                      "fit, so the rollout is distorted; give the axis (--axis px,py,pz,dx,dy,dz) or unroll the "
                      "painted height only (--band LO HI)")
     return notes
+
+
+def _facing_axis_share(result: RolloutResult) -> float:
+    """Share of the unrolled 3D area whose normal lies within :data:`FLANGE_ANGLE_DEG` of the axis."""
+    V, F = result.flat.mesh.vertices, result.flat.mesh.faces
+    normal = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])  # length = twice the area
+    twice = np.linalg.norm(normal, axis=1)
+    along = np.abs(normal @ result.axis.direction) > math.cos(math.radians(FLANGE_ANGLE_DEG)) * twice
+    total = float(twice.sum())
+    return float(twice[along].sum()) / total if total > 0 else 0.0
 
 
 def _submesh(mesh: Mesh, face_mask: np.ndarray) -> Mesh:
