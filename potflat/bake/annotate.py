@@ -64,7 +64,7 @@ def map_scale(name: str, values: np.ndarray, *, hi: float | None = None) -> MapS
     Parameters
     ----------
     name : str
-        ``stress`` (sqrt(mm)), ``area`` (ln area ratio) or ``anisotropy`` (ratio >= 1).
+        ``stress`` (% length error around each vertex), ``area`` (ln area ratio) or ``anisotropy`` (ratio >= 1).
     values : (k,) float64
     hi : float, optional
         Fixed upper end (to share one scale between images).
@@ -77,8 +77,9 @@ def map_scale(name: str, values: np.ndarray, *, hi: float | None = None) -> MapS
     v = v[np.isfinite(v)]
     p99 = lambda x: float(np.percentile(x, 99)) if len(x) else 0.0
     if name == "stress":
-        top = hi if hi is not None else max(p99(v), 1e-3)
-        return MapScale(name, 0.0, top, "magma", "stress (paper Eq. 3), √mm")
+        top = hi if hi is not None else max(p99(v), 0.5)
+        return MapScale(name, 0.0, top, "magma",
+                        "length error around each point, % (RMS over its edges; the paper's Eq. 3 stress is in the JSON)")
     if name == "area":
         half = hi if hi is not None else max(p99(np.abs(v)), 0.035)
         return MapScale(name, -half, half, "RdBu_r", "area ratio flat / 3D (log scale)")
@@ -387,7 +388,8 @@ def comparison_sheet(path: str | Path, panels, *, title: str = "") -> Path:
     from potflat.io.atomic import write_bytes_atomic
     from potflat.mesh import distortion
 
-    panels = [(label, res, _vertex_stress(flat), distortion.summarize(flat.mesh.vertices, flat.uv, flat.mesh.faces),
+    panels = [(label, res, distortion.vertex_length_error(flat.mesh.vertices, flat.uv, flat.mesh.faces),
+               distortion.summarize(flat.mesh.vertices, flat.uv, flat.mesh.faces),
                _zone_line(flat)) for label, flat, res in panels]
     hi = max(map_scale("stress", p[2]).hi for p in panels)
     scale = map_scale("stress", np.zeros(1), hi=hi)
@@ -416,7 +418,7 @@ def comparison_sheet(path: str | Path, panels, *, title: str = "") -> Path:
         ax2.set_title(f"lengths off by {100 * summ.edge_rms:.1f} % RMS   areas by "
                       f"{percent_from_log(summ.area_mean_abs_log):.1f} % (mean |ln| {summ.area_mean_abs_log:.4f})\n"
                       f"anisotropy p95 {summ.anisotropy_p95:.3f}   flipped {summ.flipped}   "
-                      f"stress p95 {np.percentile(stress, 95):.3g} √mm", fontsize=10)
+                      f"length error p95 {np.percentile(stress, 95):.3g} %", fontsize=10)
         ax2.set_xlabel("mm")
         for a in (ax, ax2):
             a.set_xlim(0, max_w)
@@ -427,13 +429,6 @@ def comparison_sheet(path: str | Path, panels, *, title: str = "") -> Path:
     fig.savefig(buf, format="png", dpi=100)
     return write_bytes_atomic(path, buf.getvalue())
 
-
-def _vertex_stress(flat: FlatMesh) -> np.ndarray:
-    from potflat.mesh import distortion
-
-    if flat.stress is not None:
-        return flat.stress
-    return distortion.vertex_stress(flat.mesh.vertices, flat.uv, flat.mesh.faces, flat.mesh.mm_per_unit)
 
 
 def sheet_px_per_mm(flat: FlatMesh, max_px: int = SHEET_PANEL_PX) -> float:

@@ -151,8 +151,9 @@ class BakeResult:
     image : (h, w, 4) uint8
         The painting, RGBA; alpha is the covered fraction of each pixel (0 outside and in holes).
     maps : dict of str to (h, w) float32
-        Distortion values per pixel (NaN outside): ``stress`` in sqrt(mm) (paper Eq. 3,
-        interpolated from the vertices), ``area`` as ln(flat area / 3D area) per face (the natural log, as every area figure),
+        Distortion values per pixel (NaN outside): ``stress`` as the % length error around
+        each vertex (:func:`potflat.mesh.distortion.vertex_length_error`, interpolated; the
+        paper's Eq. 3 stress is in the figures and the PLY), ``area`` as ln(flat area / 3D area) per face (the natural log, as every area figure),
         ``anisotropy`` as sigma_max / sigma_min per face.
     position : (h, w, 3) float32 or None
         3D point (scan units) under each pixel, NaN outside.
@@ -363,6 +364,8 @@ class _Renderer:
             del fd
             self.vertex_stress = flat.stress if flat.stress is not None else distortion.vertex_stress(
                 mesh.vertices, flat.uv, self.faces, mesh.mm_per_unit)
+            # the stress map shows it in words people read: % length error around each point
+            self.vertex_length_error = distortion.vertex_length_error(mesh.vertices, flat.uv, self.faces)
         pix = np.empty_like(flat.uv)
         pix[:, 0] = (flat.uv[:, 0] - g.origin[0]) * g.scale
         pix[:, 1] = (g.origin[1] - flat.uv[:, 1]) * g.scale
@@ -504,7 +507,7 @@ class _Renderer:
     def scalar(self, name: str, r0: int, r1: int) -> np.ndarray:
         """A distortion map's values (NaN outside). Shape (k, w) float32."""
         if name == "stress":
-            return self._vertex_field(self.vertex_stress, r0, r1)[..., 0]
+            return self._vertex_field(self.vertex_length_error, r0, r1)[..., 0]
         face, _ = self._raster(r0, r1)
         out = np.empty((r1 - r0, self.grid.width), np.float32)
         self._raster_mod.face_values(face, np.ascontiguousarray(self.face_values[name], dtype=np.float64), self.n, out)
@@ -910,7 +913,8 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     if len(repeated):
         r.face_values["repeated"] = repeated
     paths: dict[str, Path] = {"png": out_dir / f"{name}.png"}
-    scales = {m: annotate.map_scale(m, r.vertex_stress if m == "stress" else r.face_values[m]) for m in options.maps}
+    scales = {m: annotate.map_scale(m, r.vertex_length_error if m == "stress" else r.face_values[m])
+              for m in options.maps}
     if flat.importance is not None:
         scales = {m: replace(sc, label=f"{sc.label}; white line: painted zone") for m, sc in scales.items()}
     legends = {m: annotate.legend_band(scales[m], g.width) for m in options.maps}

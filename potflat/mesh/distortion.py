@@ -228,6 +228,33 @@ def vertex_stress(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, mm_pe
     return out
 
 
+def vertex_length_error(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """How far the lengths around each vertex are off, in percent: the RMS of the relative
+    length error ``(l_2d - l_3d) / l_3d`` over the vertex's mesh edges (what the stress map
+    shows; the paper's Eq. 3 stays :func:`vertex_stress`).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    uv : (n, 2) float64
+    faces : (m, 3) int64
+
+    Returns
+    -------
+    (n,) float64
+        0 for isolated vertices.
+    """
+    edges = unique_edges(faces)
+    n = len(vertices)
+    sq = edge_length_error(vertices, uv, edges) ** 2 if len(edges) else np.zeros(0)
+    num = np.bincount(edges[:, 0], sq, n) + np.bincount(edges[:, 1], sq, n)
+    count = np.bincount(edges[:, 0], minlength=n) + np.bincount(edges[:, 1], minlength=n)
+    out = np.zeros(n)
+    ok = count > 0
+    out[ok] = 100.0 * np.sqrt(num[ok] / count[ok])
+    return out
+
+
 def summarize(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> DistortionSummary:
     """Scalar distortion figures of the map from ``vertices`` to ``uv`` (see module docs)."""
     fd = face_distortion(vertices, uv, faces)
