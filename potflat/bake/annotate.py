@@ -79,7 +79,7 @@ def map_scale(name: str, values: np.ndarray, *, hi: float | None = None) -> MapS
     if name == "stress":
         top = hi if hi is not None else max(p99(v), 0.5)
         return MapScale(name, 0.0, top, "magma",
-                        "length error around each point, % (RMS over its edges; the paper's Eq. 3 stress is in the JSON)")
+                        "length error around each point, %")
     if name == "area":
         half = hi if hi is not None else max(p99(np.abs(v)), 0.035)
         return MapScale(name, -half, half, "RdBu_r", "area ratio flat / 3D (log scale)")
