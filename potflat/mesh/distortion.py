@@ -219,12 +219,17 @@ def vertex_stress(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, mm_pe
         e = edges[s]
         r[s] = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1) * mm_per_unit
         l[s] = np.linalg.norm(uv[e[:, 0]] - uv[e[:, 1]], axis=1) * mm_per_unit
-    sq = (l - r) ** 2
-    num = np.bincount(edges[:, 0], sq, n) + np.bincount(edges[:, 1], sq, n)
-    den = np.bincount(edges[:, 0], r, n) + np.bincount(edges[:, 1], r, n)
+    return _vertex_root_ratio(edges, (l - r) ** 2, r, n)
+
+
+def _vertex_root_ratio(edges: np.ndarray, num: np.ndarray, den: np.ndarray, n: int) -> np.ndarray:
+    """``sqrt(sum num / sum den)`` over each vertex's edges ((e,) values per edge), 0 where a
+    vertex has no edge weight. Shape (n,) float64."""
+    top = np.bincount(edges[:, 0], num, n) + np.bincount(edges[:, 1], num, n)
+    bottom = np.bincount(edges[:, 0], den, n) + np.bincount(edges[:, 1], den, n)
     out = np.zeros(n)
-    ok = den > 0
-    out[ok] = np.sqrt(num[ok] / den[ok])
+    ok = bottom > 0
+    out[ok] = np.sqrt(top[ok] / bottom[ok])
     return out
 
 
@@ -245,14 +250,10 @@ def vertex_length_error(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray)
         0 for isolated vertices.
     """
     edges = unique_edges(faces)
-    n = len(vertices)
-    sq = edge_length_error(vertices, uv, edges) ** 2 if len(edges) else np.zeros(0)
-    num = np.bincount(edges[:, 0], sq, n) + np.bincount(edges[:, 1], sq, n)
-    count = np.bincount(edges[:, 0], minlength=n) + np.bincount(edges[:, 1], minlength=n)
-    out = np.zeros(n)
-    ok = count > 0
-    out[ok] = 100.0 * np.sqrt(num[ok] / count[ok])
-    return out
+    if not len(edges):
+        return np.zeros(len(vertices))
+    return 100.0 * _vertex_root_ratio(edges, edge_length_error(vertices, uv, edges) ** 2, np.ones(len(edges)),
+                                      len(vertices))
 
 
 def summarize(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> DistortionSummary:
