@@ -206,3 +206,26 @@ class StageOutput:
     summary: dict
     flat: FlatMesh | None = None
     distortion: Any = None
+
+
+class StepClock:
+    """Wall seconds of a stage's steps, for its JSON (``timings``): ``lap(name)`` closes the
+    step since the last lap; :meth:`total` gives every step and ``total``."""
+
+    def __init__(self) -> None:
+        import time
+
+        self._now = time.perf_counter
+        self._start = self._last = self._now()
+        self.steps: dict[str, float] = {}
+
+    def lap(self, name: str) -> None:
+        """Close step ``name`` (added to an earlier step of that name)."""
+        now = self._now()
+        self.steps[name] = self.steps.get(name, 0.0) + now - self._last
+        self._last = now
+
+    def total(self) -> dict[str, float]:
+        """Seconds per step and ``total`` since the clock started."""
+        return {**self.steps, "total": self._now() - self._start}
+

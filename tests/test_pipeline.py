@@ -170,3 +170,22 @@ def test_run_scan_hands_the_flattening_on_in_memory(tmp_path, monkeypatch):
     assert back.uv.tobytes() == relaxed.flat.uv.tobytes()
     assert back.mesh.texcoords.tobytes() == relaxed.flat.mesh.texcoords.tobytes()
     assert back.mesh.texture_path == relaxed.flat.mesh.texture_path
+
+
+def test_every_stage_json_records_its_timings_by_step(tmp_path):
+    """rollout.json, relaxed.json and bake.json each say how long their steps took."""
+    from pathlib import Path
+
+    from potflat.stages.pipeline import run_scan
+
+    sample = Path(__file__).parents[1] / "samples" / "data" / "cone.obj"
+    result = run_scan(sample, tmp_path, bake={"px_per_mm": 1.0, "maps": ()})
+    rollout = result.stages["rollout"].summary["timings"]
+    assert {"load", "rollout", "profile", "write", "total"} <= set(rollout)
+    assert {"axis", "walls", "unroll", "untangle", "importance", "total"} <= set(rollout["rollout_steps"])
+    assert {"setup", "solve", "total"} <= set(result.stages["relax"].summary["timings"])
+    bake = result.stages["bake"].summary["timings"]
+    assert {"prepare", "render", "figures", "total"} <= set(bake)
+    for timings in (rollout, rollout["rollout_steps"], bake):
+        steps = [v for k, v in timings.items() if k != "total" and isinstance(v, float)]
+        assert all(v >= 0 for v in steps) and sum(steps) <= timings["total"] + 1e-6

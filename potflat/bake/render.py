@@ -30,7 +30,7 @@ import numpy as np
 
 from potflat.mesh import distortion
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.types import FlatMesh, StageOutput
+from potflat.types import FlatMesh, StageOutput, StepClock
 
 #: Distortion maps :func:`bake` can make.
 MAP_NAMES = ("stress", "area", "anisotropy")
@@ -890,6 +890,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     flat_ply = Path(flat_ply)
     out_dir = Path(out_dir)
     name = name or stage_name(flat_ply)
+    clock = StepClock()
     if flat is None:
         flat = read_flat_ply(flat_ply)
     rollout_ply = None
@@ -908,6 +909,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     ppm = options.resolution
     r = _Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels)
     g = r.grid
+    clock.lap("prepare")
     if len(attachment_marks):
         r.face_values["attachments"] = attachment_marks
     if len(repeated):
@@ -957,6 +959,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
         for key, legend in legends.items():
             writers[key].write(legend)
     paths["scalebar"] = write_png(out_dir / f"{name}.scalebar.png", layer.bar_image(), px_per_mm=ppm)
+    clock.lap("render")
     if options.tiff:
         paths["tiff"] = write_tiff_rows(out_dir / f"{name}.tif",
                                         (_rgba16(r.painting(a, b), r.coverage(a, b)) for a, b in r.strips()),
@@ -965,12 +968,15 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
         paths["position"] = write_tiff_rows(out_dir / f"{name}.position.tif", (r.position(a, b) for a, b in r.strips()),
                                             shape=(g.height, g.width, 3), dtype=np.float32, px_per_mm=ppm,
                                             photometric="rgb")
+    clock.lap("tiff")
     figures = _figures(r, covered)
+    clock.lap("figures")
     if options.obj:
         paths["obj"] = _write_flat_obj(out_dir / f"{name}.flat.obj", flat, g, band, paths["png"].name)
         paths["mtl"] = paths["obj"].with_suffix(".mtl")
     if rollout_ply is not None:
         paths["sheet"] = comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat, title=name)
+    clock.lap("obj_sheet")
     inputs = ([flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else [])
               + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else []))
     summary = {
@@ -989,6 +995,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     }
     paths["json"] = out_dir / f"{name}.bake.json"
     summary["files"]["json"] = paths["json"].name
+    summary["timings"] = clock.total()  # the plate (made from these files) comes after
     write_json_atomic(paths["json"], summary)
     if options.plate:
         from potflat.bake.plate import make_plate

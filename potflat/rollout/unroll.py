@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +38,7 @@ from potflat.rollout.attachments import AttachmentSelection, detect_attachments
 from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
 from potflat.mesh.distortion import DistortionSummary, face_areas, row_blocks, summarize
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.types import FlatMesh, Mesh, StageOutput
+from potflat.types import FlatMesh, Mesh, StageOutput, StepClock
 from potflat.rollout.options import RolloutOptions
 from potflat.rollout.walls import FaceGraph, WallSelection, face_adjacency, select_wall
 
@@ -193,6 +193,7 @@ class RolloutResult:
     theta_origin: float = 0.0
     landmark_notes: tuple = ()
     importance: _importance.Importance | None = None
+    timings: dict = field(default_factory=dict)
 
     @property
     def side(self) -> str:
@@ -436,6 +437,7 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         if face_mask.dtype != bool or face_mask.shape != (len(F),):
             raise InvalidInputError(f"face_mask must be a bool array of shape ({len(F)},), got "
                                     f"{face_mask.dtype} {face_mask.shape}")
+    clock = StepClock()
     other_objects = np.zeros(len(F), bool)
     if options.axis is not None:
         axis = manual_axis(mesh, options.axis[:3], options.axis[3:], flip=options.flip)
@@ -447,10 +449,13 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
             axis = estimate_axis(_submesh(mesh, main), flip=options.flip)
             other_objects = ~main
             face_mask = main if face_mask is None else face_mask & main
+    clock.lap("axis")
     attachments = detect_attachments(mesh, axis.point, axis.direction)
+    clock.lap("attachments")
     walls = select_wall(mesh, axis.point, axis.direction, side=options.side,
                         exclude=None if options.keep_attachments else attachments.face_mask)
     allowed = walls.face_mask if face_mask is None else walls.face_mask & face_mask
+    clock.lap("walls")
 
     area = face_areas(V, F)
     centroid = np.empty((len(F), 3))
@@ -473,6 +478,7 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
                          seam=(un.seam, un.seam_method), landmark=landmark)
         else:
             un = _without(un, ~fold)
+    clock.lap("unroll")
     uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv)
     for _ in range(TRIM_ROUNDS):  # folds pushed against the border by untangling are trimmed
         fold = border_folds(un.flat.mesh.faces, uv, area[un.face_index])
@@ -482,6 +488,7 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         un = _without(dataclasses.replace(un, flat=un.flat.replace(uv=uv)), ~fold)
         uv, more, moved_more = untangle(un.flat.mesh.faces, un.flat.uv)
         n_untangled, moved = n_untangled + more, moved + moved_more
+    clock.lap("untangle")
     overlap = len(crossing_segments(uv, boundary_segments(un.flat.mesh.faces, len(uv))[0])[0])
     distortion = un.distortion
     if n_untangled:
@@ -505,7 +512,9 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
     if mesh.texcoords is not None:  # attached once, to the final faces (see _unroll)
         cut = cut.replace(texcoords=mesh.texcoords[un.face_index])
     flat = un.flat.replace(mesh=cut, uv=uv)
+    clock.lap("checks")
     importance = _find_importance(flat, options, axis, theta_deg)
+    clock.lap("importance")
     return RolloutResult(
         flat=flat.replace(importance=importance.values), importance=importance, axis=axis, proxy=un.proxy,
         seam_angle=float(math.degrees(un.seam) % 360.0), seam_method=un.seam_method, region=region,
@@ -515,7 +524,8 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         trimmed=np.flatnonzero(trimmed).astype(np.int64), trimmed_area=float(area[trimmed].sum()),
         untangled_faces=n_untangled, untangled_vertices=moved, boundary_overlap=overlap,
         other_objects_faces=int(other_objects.sum()), landmark=landmark,
-        theta_origin=float(math.degrees(un.origin) % 360.0), landmark_notes=tuple(landmark_notes))
+        theta_origin=float(math.degrees(un.origin) % 360.0), landmark_notes=tuple(landmark_notes),
+        timings=clock.total())
 
 
 @dataclass(frozen=True, eq=False)
@@ -1229,11 +1239,14 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
         if out.resolve() == scan_path.resolve():
             raise InvalidOptionError(
                 f"output {out} would overwrite the input scan; choose another output folder or --name")
+    clock = StepClock()
     loaded = load_scan(scan_path, units=options.units, texture="use" if options.texture else "ignore")
     check_plausible_size(loaded, scan_path)
     mesh, cleaning = loaded.mesh, loaded.report.as_dict()
     del loaded
+    clock.lap("load")
     result = rollout(mesh, options=options)
+    clock.lap("rollout")
     if check is not None:
         check(result.flat)
     mesh = mesh.replace(texcoords=None)  # the rollout has its own; the profile needs none
@@ -1244,6 +1257,7 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     profile = vessel_profile(mesh, result.axis.point, result.axis.direction, face_mask=body,
                              labels=result.walls.labels, bins=bins)
     del mesh
+    clock.lap("profile")
     summary = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_summary(result),
                "profile": profile.summary(),
                "cleaning": cleaning,
@@ -1254,6 +1268,8 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     write_flat_ply(ply_path, result.flat, comments=comments)
     write_profile_csv(profile, csv_path)
     write_profile_svg(profile, svg_path, title=f"{name}: profile ({profile.units})")
+    clock.lap("write")
+    summary["timings"] = {**clock.total(), "rollout_steps": result.timings}
     write_json_atomic(json_path, summary)
     return StageOutput({"ply": ply_path, "json": json_path, "profile_csv": csv_path, "profile_svg": svg_path},
                        summary, flat=as_stored(result.flat, ply_path, comments=comments),
