@@ -21,6 +21,10 @@ def _load(name: str):
 meshes = _load("_meshes")
 figures = _load("_figures")
 
+#: Relax options of the springs alone (no shape term, no final scaling): what the tests of the
+#: springs' edge-length figures run.
+SPRINGS_ONLY = {"shape": 0.0, "true_scale": False}
+
 
 def signed_areas(uv: np.ndarray, F: np.ndarray) -> np.ndarray:
     """Signed area of every face of the layout ``uv`` (n, 2), shape (m,)."""

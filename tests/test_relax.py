@@ -11,7 +11,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 import reference as ref
-from _bench_meshes import bumpy_patch, meshes, signed_areas, spring_system
+from _bench_meshes import SPRINGS_ONLY, bumpy_patch, meshes, signed_areas, spring_system
 
 from potflat.mesh.distortion import summarize
 from potflat.errors import FoldedResultError, InvalidOptionError
@@ -158,10 +158,6 @@ def test_overlap_counts_crossing_boundary():
 
 
 # --- the default solver ---------------------------------------------------------------------
-
-#: The springs alone (no shape term, no final scaling): what the edge-length figures test.
-SPRINGS_ONLY = {"shape": 0.0, "true_scale": False}
-
 
 @pytest.mark.parametrize("proxy", ["cylinder", "sphere"])
 def test_default_is_fold_free_on_a_bulgy_vessel(proxy):

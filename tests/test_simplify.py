@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _bench_meshes import meshes, signed_areas
+from _bench_meshes import SPRINGS_ONLY, meshes, signed_areas
 
 import potflat.relax.solver as relax_module
 from potflat.relax import relax
@@ -93,10 +93,6 @@ def test_standard_starts_from_a_coarse_copy(vessel, monkeypatch):
         assert r.converged and r.flipped == 0 and r.boundary_overlap == 0
     assert nested.distortion.edge_rms <= plain.distortion.edge_rms + 2e-3
     assert nested.levels[-1]["iterations"] < plain.levels[-1]["iterations"]
-
-
-#: The springs alone (no shape term, no final scaling): what the edge-length figures test.
-SPRINGS_ONLY = {"shape": 0.0, "true_scale": False}
 
 
 def test_preview_follows_a_coarse_copy_and_scales_with_units(vessel):
