@@ -4,10 +4,10 @@ Usage: ``python benchmarks/compare_outputs.py BEFORE AFTER``
 
 Every PLY, PNG, TIFF, CSV and SVG must be byte-identical; every JSON equal once timings
 (keys ``seconds`` and ``timings``), the versions of the provenance record and the folder
-part of file paths (the file's own folder, and the folder compared) are set aside, and with them what only follows from a JSON file's
-timings: the SHA-256 of a JSON input and a JSON file's size in a batch manifest. A CSV with
-a ``seconds`` column (the batch summary) is compared with that column and folders set
-aside. Prints one line per file and exits 1 on any difference or on a file that is in one
+part of file paths (the file's own folder and the folder compared) are set aside, and with
+them what follows only from a JSON file's timings: the SHA-256 of a JSON input and a JSON
+file's size in a batch manifest. A CSV with a ``seconds`` column (the batch summary) is
+compared with that column and the folders set aside. Prints one line per file and exits 1 on any difference or on a file that is in one
 folder only.
 """
 from __future__ import annotations
