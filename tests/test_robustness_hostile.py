@@ -364,6 +364,7 @@ def test_overflowing_coordinates_are_named(tmp_path):
 def test_paper_dynamics_that_diverge_stop_with_one_line_and_write_nothing(tmp_path, monkeypatch):
     from potflat.relax import solver as relax_mod
     from potflat.io.flat_ply import write_flat_ply
+    from potflat.stages.relax_stage import run_relax_stage
     from potflat.types import FlatMesh, Mesh
 
     x, y = np.meshgrid(np.linspace(0, 40, 8), np.linspace(0, 30, 7))
@@ -373,8 +374,7 @@ def test_paper_dynamics_that_diverge_stop_with_one_line_and_write_nothing(tmp_pa
     write_flat_ply(tmp_path / "pot.rollout.ply", FlatMesh(Mesh(V, F), V[:, :2].copy()))
     monkeypatch.setattr(relax_mod._Springs, "laplacian_bound", lambda self: 1e-4)  # a step 100x too long
     with pytest.raises(FoldedResultError, match="diverged"):
-        relax_mod.run_relax_stage(tmp_path / "pot.rollout.ply", tmp_path / "out",
-                                  relax_mod.RelaxOptions(preset="paper"))
+        run_relax_stage(tmp_path / "pot.rollout.ply", tmp_path / "out", relax_mod.RelaxOptions(preset="paper"))
     assert not (tmp_path / "out").exists()
 
 
