@@ -206,9 +206,9 @@ def _wrap_pi(x: np.ndarray) -> np.ndarray:
 def _luminance_variation(mesh: Mesh, faces: np.ndarray) -> tuple[np.ndarray | None, str]:
     """Per-face spread of brightness (std of samples at its corners), and its source."""
     if mesh.texcoords is not None and mesh.texture_path is not None:
-        import cv2
+        from potflat.io.images import read_texture_grey_quarter
 
-        img = cv2.imread(str(mesh.texture_path), cv2.IMREAD_REDUCED_GRAYSCALE_4)
+        img = read_texture_grey_quarter(mesh.texture_path)
         if img is not None and img.size:
             hgt, wid = img.shape[:2]
             out = np.empty(len(faces))
