@@ -73,14 +73,14 @@ def test_energy_and_gradient_match_reference(bumpy, relative):
 
 
 def test_barrier_energy_and_gradient_match_reference(bumpy):
-    from potflat.relax.solver import BARRIER_EPS, BARRIER_MU
+    from potflat.relax.parameters import ENERGY
 
     V, F = bumpy.mesh.vertices, bumpy.mesh.faces
     sp = spring_system(V, F, k=1.0, relative=False)
     x = np.ascontiguousarray(bumpy.uv.copy())
     x[:, 0] *= 0.4  # squeeze: triangles below half their rest area switch the barrier on
     E, Es, g = sp.evaluate(x)
-    Eb = ref.barrier_energy(x, F, sp.a_ref, 1.0, BARRIER_MU, BARRIER_EPS)
+    Eb = ref.barrier_energy(x, F, sp.a_ref, 1.0, ENERGY.barrier_mu, ENERGY.barrier_eps)
     assert Eb > 0
     assert E - Es == pytest.approx(Eb, rel=1e-10)
     num = ref.numeric_gradient(lambda y: sp.evaluate(np.ascontiguousarray(y))[0], x)
@@ -253,10 +253,12 @@ def test_slivers_stay_unflipped():
 
 
 def test_smoothing_the_direction_at_limiting_faces_keeps_every_guarantee(vessel, monkeypatch):
+    import dataclasses
+
     import potflat.relax.solver as rx
 
     smooth = relax(vessel, preset="standard", **SPRINGS_ONLY)
-    monkeypatch.setattr(rx, "SMOOTH_MAX_FRACTION", 0.0)
+    monkeypatch.setattr(rx, "SOLVER", dataclasses.replace(rx.SOLVER, smooth_max_fraction=0.0))
     plain = relax(vessel, preset="standard", **SPRINGS_ONLY)
     assert sum(lv["smoothed_directions"] for lv in smooth.levels) > 0
     assert sum(lv["smoothed_directions"] for lv in plain.levels) == 0
@@ -413,7 +415,7 @@ def _notched_strip(gap):
 
 
 def test_contact_barrier_matches_reference():
-    from potflat.relax.solver import CONTACT_GAP, CONTACT_MU
+    from potflat.relax.parameters import ENERGY
 
     strip = _notched_strip(0.3)
     sp = spring_system(strip.mesh.vertices, strip.mesh.faces, k=1.0, relative=True)
@@ -423,7 +425,7 @@ def test_contact_barrier_matches_reference():
     E, _, g = sp.evaluate(x)
     sp.contact = False
     E0 = sp.evaluate(x)[0]
-    want = ref.contact_energy(x, sp.boundary_segments, sp.bprev, sp.bnext, CONTACT_GAP, CONTACT_MU)
+    want = ref.contact_energy(x, sp.boundary_segments, sp.bprev, sp.bnext, ENERGY.contact_gap, ENERGY.contact_mu)
     assert want > 0 and E - E0 == pytest.approx(want, rel=1e-10)
     sp.contact = True
     num = ref.numeric_gradient(lambda y: sp.evaluate(np.ascontiguousarray(y))[0], x)
@@ -508,25 +510,19 @@ def _angle_sum(uv, F, b=0):
 
 
 def test_boundary_angle_barrier_matches_reference():
-    from potflat.relax.solver import (
-        BARRIER_EPS,
-        BARRIER_MU,
-        BOUNDARY_GAP,
-        BOUNDARY_MU,
-        CONTACT_GAP,
-        CONTACT_MU,
-    )
+    from potflat.relax.parameters import ENERGY
 
-    fan = _saddle_fan(flat_gap=0.15)  # the centre's gap 0.15 < BOUNDARY_GAP: its barrier is on
+    fan = _saddle_fan(flat_gap=0.15)  # the centre's gap 0.15 < ENERGY.boundary_gap: its barrier is on
     V, F = fan.mesh.vertices, fan.mesh.faces
     sp = spring_system(V, F, k=0.8, relative=True)
     x = np.ascontiguousarray(fan.uv)
     assert sp.guard_boundary(x) == 0 and sp.bguard.all()
     E, Es, g = sp.evaluate(x)
     boundary = np.arange(len(V))
-    want = ref.boundary_angle_barrier(x, F, boundary, 0.8, BOUNDARY_MU, BOUNDARY_GAP)
-    want += ref.barrier_energy(x, F, sp.a_ref, 0.8, BARRIER_MU, BARRIER_EPS, relative=True)
-    want += ref.contact_energy(x, sp.boundary_segments, sp.bprev, sp.bnext, CONTACT_GAP, 0.8 * CONTACT_MU)
+    want = ref.boundary_angle_barrier(x, F, boundary, 0.8, ENERGY.boundary_mu, ENERGY.boundary_gap)
+    want += ref.barrier_energy(x, F, sp.a_ref, 0.8, ENERGY.barrier_mu, ENERGY.barrier_eps, relative=True)
+    want += ref.contact_energy(x, sp.boundary_segments, sp.bprev, sp.bnext, ENERGY.contact_gap,
+                               0.8 * ENERGY.contact_mu)
     assert want > 0.3
     assert E - Es == pytest.approx(want, rel=1e-10)
     num = ref.numeric_gradient(lambda y: sp.evaluate(np.ascontiguousarray(y))[0], x)

@@ -397,7 +397,7 @@ def test_the_paper_step_bounds_the_largest_eigenvalue():
         for i in range(n):
             for p in range(sp.ptr[i], sp.ptr[i + 1]):
                 j = sp.nbr[p]
-                c = sp.k / max(sp.rst[p], relax_mod.LENGTH_FLOOR) ** 2 if sp.relative else sp.k
+                c = sp.k / max(sp.rst[p], relax_mod.ENERGY.length_floor) ** 2 if sp.relative else sp.k
                 L[i, i] += c
                 L[i, j] -= c
         assert sp.laplacian_bound() >= np.linalg.eigvalsh(L).max() * (1 - 1e-12)
