@@ -43,6 +43,7 @@ from potflat.mesh.distortion import (
     vertex_stress,
 )
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
+from potflat.mesh.boundary import crossing_pairs
 from potflat.relax.parameters import COARSE, ENERGY, PRESETS, SOLVER, WEIGHTINGS
 from potflat.types import FlatMesh, Mesh
 
@@ -367,14 +368,7 @@ class _Springs:
 
     def overlap(self, x: np.ndarray) -> int:
         """Crossing pairs of boundary segments at ``x`` (counting stops at 1000)."""
-        seg = self.boundary_segments
-        if len(seg) < 2:
-            return 0
-        lens = np.linalg.norm(x[seg[:, 0]] - x[seg[:, 1]], axis=1)
-        extent = float(np.ptp(x[seg.ravel()], axis=0).max()) or 1.0
-        cell = max(2.0 * float(np.mean(lens)), extent / 2048.0, 1e-12)
-        count, _ = self.ko.count_crossings(x, seg, cell, 1000)
-        return int(count)
+        return len(crossing_pairs(x, self.boundary_segments, max_pairs=1000))
 
     def laplacian_bound(self) -> float:
         """An upper bound of the spring graph Laplacian's largest eigenvalue from the actual

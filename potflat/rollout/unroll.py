@@ -26,11 +26,11 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 import scipy.sparse
 import scipy.sparse.csgraph
-from scipy.spatial import cKDTree
 
 from potflat import importance as _importance
 from potflat.rollout import proxy as _proxy
 from potflat.mesh._kernels import union_find
+from potflat.mesh.boundary import crossing_pairs
 from potflat.mesh.embedding import signed_areas
 from potflat.rollout.attachments import AttachmentSelection, detect_attachments
 from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
@@ -706,7 +706,8 @@ def _edge_table(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.n
 
 
 def crossing_segments(uv: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pairs of segments that cross or touch (segments sharing a vertex are not compared).
+    """Pairs of segments that cross or touch (:func:`potflat.mesh.boundary.crossing_pairs`),
+    but for pairs of two zero-length segments.
 
     Parameters
     ----------
@@ -718,30 +719,11 @@ def crossing_segments(uv: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.n
     a, b : (k,) int64
         Indices into ``seg`` of each crossing pair.
     """
-    if len(seg) < 2:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    P, Q = uv[seg[:, 0]], uv[seg[:, 1]]
-    length = np.linalg.norm(Q - P, axis=1)
-    # crossing segments have midpoints closer than the longer one's length
-    pairs = cKDTree(0.5 * (P + Q)).query_pairs(float(length.max()), output_type="ndarray")
-    a, b = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
-    a, b = a[length[a] + length[b] > 0], b[length[a] + length[b] > 0]
-    share = ((seg[a, 0] == seg[b, 0]) | (seg[a, 0] == seg[b, 1])
-             | (seg[a, 1] == seg[b, 0]) | (seg[a, 1] == seg[b, 1]))
-    a, b = a[~share], b[~share]
-
-    def orient(p, q, r):
-        return np.sign((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
-
-    def within(p, q, r):  # r inside the bounding box of segment p-q
-        return ((np.minimum(p, q) <= r) & (r <= np.maximum(p, q))).all(axis=1)
-
-    pa, qa, pb, qb = P[a], Q[a], P[b], Q[b]
-    o1, o2, o3, o4 = orient(pa, qa, pb), orient(pa, qa, qb), orient(pb, qb, pa), orient(pb, qb, qa)
-    # proper crossings, and touching (a vertex on the other segment, e.g. two copies of a vertex)
-    cross = (((o1 * o2 < 0) & (o3 * o4 < 0)) | ((o1 == 0) & within(pa, qa, pb)) | ((o2 == 0) & within(pa, qa, qb))
-             | ((o3 == 0) & within(pb, qb, pa)) | ((o4 == 0) & within(pb, qb, qa)))
-    return a[cross], b[cross]
+    pairs = crossing_pairs(uv, seg)
+    a, b = pairs[:, 0], pairs[:, 1]
+    length = np.linalg.norm(uv[seg[:, 1]] - uv[seg[:, 0]], axis=1) if len(seg) else np.zeros(0)
+    real = length[a] + length[b] > 0
+    return a[real], b[real]
 
 
 def _minor_fans(faces: np.ndarray, area_3d: np.ndarray, edges: np.ndarray, n: int) -> np.ndarray:

@@ -1,0 +1,57 @@
+"""Boundary checks of a flattening: which boundary segments cross or touch each other.
+
+One implementation for every stage: the rollout trims the faces of a border that overlaps
+itself and reports the count, the relax stage refuses a result whose border does
+(:mod:`potflat.mesh._segments` holds the Numba kernels).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from potflat.mesh import _segments
+
+#: Finest grid of the search: the cell is at least the layout's extent over this.
+GRID_CELLS = 2048
+#: Smallest cell (layout units), for a layout that has collapsed to a point.
+MIN_CELL = 1e-12
+
+
+def _coerced(uv, seg) -> tuple[np.ndarray, np.ndarray]:
+    uv = np.ascontiguousarray(uv, dtype=np.float64)
+    seg = np.ascontiguousarray(seg, dtype=np.int64).reshape(-1, 2)
+    if uv.ndim != 2 or uv.shape[1] != 2:
+        raise ValueError(f"uv must be (n, 2), got {uv.shape}")
+    if len(seg) and (seg.min() < 0 or seg.max() >= len(uv)):
+        raise ValueError("segments name vertices outside uv")
+    return uv, seg
+
+
+def _cell(uv: np.ndarray, seg: np.ndarray) -> float:
+    """Grid cell of the search: twice the mean segment length, at least the extent over
+    :data:`GRID_CELLS`."""
+    lens = np.linalg.norm(uv[seg[:, 0]] - uv[seg[:, 1]], axis=1)
+    extent = float(np.ptp(uv[seg.ravel()], axis=0).max()) or 1.0
+    return max(2.0 * float(np.mean(lens)), extent / GRID_CELLS, MIN_CELL)
+
+
+def crossing_pairs(uv: np.ndarray, seg: np.ndarray, *, max_pairs: int | None = None) -> np.ndarray:
+    """Pairs of segments that cross or touch (segments sharing a vertex are not compared).
+
+    Parameters
+    ----------
+    uv : (n, 2) float64
+    seg : (b, 2) int64
+        Segments as vertex index pairs (typically the boundary of a flattening).
+    max_pairs : int, optional
+        Stop after this many pairs (default: all).
+
+    Returns
+    -------
+    (k, 2) int64
+        Indices into ``seg`` of each crossing pair.
+    """
+    uv, seg = _coerced(uv, seg)
+    if len(seg) < 2:
+        return np.zeros((0, 2), np.int64)
+    limit = np.iinfo(np.int64).max if max_pairs is None else int(max_pairs)
+    return _segments.crossing_pairs(uv, seg, _cell(uv, seg), limit)
