@@ -55,3 +55,43 @@ def crossing_pairs(uv: np.ndarray, seg: np.ndarray, *, max_pairs: int | None = N
         return np.zeros((0, 2), np.int64)
     limit = np.iinfo(np.int64).max if max_pairs is None else int(max_pairs)
     return _segments.crossing_pairs(uv, seg, _cell(uv, seg), limit)
+
+
+def edges_and_boundary(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The undirected edges of a triangle mesh and its boundary segments (edges of one face).
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+    n : int
+        Number of vertices.
+
+    Returns
+    -------
+    edges : (e, 2) int64
+        Endpoints (smaller first), sorted lexicographically.
+    segments : (b, 2) int64
+        Boundary edges as vertex pairs in their face's order, in the order of ``edges``.
+    owner : (b,) int64
+        The face of each segment.
+    """
+    from potflat.mesh._kernels import edge_table
+
+    F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    _, edges, count, halves = edge_table(F, int(n))
+    half = halves[count == 1, 0]
+    owner, k = half // 3, half % 3
+    return edges, np.stack([F[owner, k], F[owner, (k + 1) % 3]], axis=1), owner
+
+
+def boundary_segments(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Edges used by one face only (:func:`edges_and_boundary` without the edges).
+
+    Returns
+    -------
+    segments : (b, 2) int64
+        Vertex pairs, in their face's order.
+    owner : (b,) int64
+        The face of each segment.
+    """
+    return edges_and_boundary(faces, n)[1:]

@@ -30,7 +30,7 @@ import scipy.sparse.csgraph
 from potflat import importance as _importance
 from potflat.rollout import proxy as _proxy
 from potflat.mesh._kernels import union_find
-from potflat.mesh.boundary import crossing_pairs
+from potflat.mesh.boundary import boundary_segments, crossing_pairs, edges_and_boundary
 from potflat.mesh.embedding import signed_areas
 from potflat.rollout.attachments import AttachmentSelection, detect_attachments
 from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
@@ -656,7 +656,7 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.n
         if len(idx) == 0:
             break
         sub = faces[idx]
-        edges, seg, owner = _edge_table(sub, len(uv))
+        edges, seg, owner = edges_and_boundary(sub, len(uv))
         drop = _edge_on_strips(sub, uv, area_3d[idx], seg) | _minor_fans(sub, area_3d[idx], edges, len(uv))
         if not drop.any():  # overlaps are judged on a border without folded strips
             a, b = crossing_segments(uv, seg)
@@ -666,43 +666,6 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.n
             break
         keep[idx[drop]] = False
     return ~keep
-
-
-def boundary_segments(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Edges used by one face only.
-
-    Parameters
-    ----------
-    faces : (m, 3) int64
-    n : int
-        Number of vertices.
-
-    Returns
-    -------
-    segments : (b, 2) int64
-        Vertex pairs, in their face's order.
-    owner : (b,) int64
-        The face of each segment.
-    """
-    _, seg, owner = _edge_table(faces, n)
-    return seg, owner
-
-
-def _edge_table(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Unique edges ((e, 2) int64, sorted pairs), boundary segments and their faces."""
-    # half-edge h = 3 f + j runs from faces[f, j] to faces[f, (j + 1) % 3]
-    a, b = faces.ravel(), faces[:, [1, 2, 0]].ravel()
-    key = np.minimum(a, b) * n + np.maximum(a, b)
-    order = np.argsort(key, kind="stable")
-    k = key[order]
-    del key
-    first = np.ones(len(k), bool)
-    first[1:] = k[1:] != k[:-1]
-    start = np.flatnonzero(first)
-    count = np.diff(np.append(start, len(k)))
-    single = order[start[count == 1]]
-    k = k[start]
-    return np.stack([k // n, k % n], axis=1), np.stack([a[single], b[single]], axis=1), single // 3
 
 
 def crossing_segments(uv: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -797,7 +760,7 @@ def untangle(faces: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, int, int]:
     if n_bad == 0:
         return uv, 0, 0
     n = len(uv)
-    edges, seg, _ = _edge_table(faces, n)
+    edges, seg, _ = edges_and_boundary(faces, n)
     A = scipy.sparse.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]],
                                                             np.r_[edges[:, 1], edges[:, 0]])), shape=(n, n)).tocsr()
     deg = np.maximum(np.diff(A.indptr), 1).astype(np.float64)
