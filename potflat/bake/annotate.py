@@ -15,6 +15,7 @@ import numpy as np
 from potflat.mesh.distortion import percent_from_log
 
 from potflat.types import FlatMesh
+from potflat.mesh.tolerances import ROUNDING
 
 #: Longest side in pixels of each baked panel of the comparison sheet.
 SHEET_PANEL_PX = 900
@@ -188,7 +189,7 @@ def nice_length(limit: float) -> float:
     """The largest 1-2-5 x 10^k not above ``limit`` (> 0)."""
     k = math.floor(math.log10(limit))
     for m in (5.0, 2.0, 1.0):
-        if m * 10.0 ** k <= limit * (1 + 1e-9):
+        if m * 10.0 ** k <= limit * (1 + ROUNDING):
             return m * 10.0 ** k
     return 10.0 ** k
 

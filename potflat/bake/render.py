@@ -30,6 +30,7 @@ import numpy as np
 from potflat.mesh import distortion
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import FlatMesh
+from potflat.mesh.tolerances import DEGENERATE, ROUNDING
 
 #: Distortion maps :func:`bake` can make.
 MAP_NAMES = ("stress", "area", "anisotropy")
@@ -257,7 +258,7 @@ def _chart_mask(texcoords: np.ndarray, height: int, width: int) -> np.ndarray:
     for r0 in range(0, height, rows):
         r1 = min(height, r0 + rows)
         face = np.full((r1 - r0, width), -1, np.int32)
-        raster.rasterize_rows(pts, tri, ptr, idx, BLOCK_ROWS, r0, r1 - r0, width, 1e-9, face,
+        raster.rasterize_rows(pts, tri, ptr, idx, BLOCK_ROWS, r0, r1 - r0, width, ROUNDING, face,
                               np.zeros(face.shape + (2,)))
         mask[r0:r1] = face >= 0
     return cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool)
@@ -416,7 +417,7 @@ class Renderer:
             t1 = np.stack([(t[:, 1, 0] - t[:, 0, 0]) * W0, (t[:, 0, 1] - t[:, 1, 1]) * H0], axis=1)
             t2 = np.stack([(t[:, 2, 0] - t[:, 0, 0]) * W0, (t[:, 0, 1] - t[:, 2, 1]) * H0], axis=1)
             det = p1[:, 0] * p2[:, 1] - p2[:, 0] * p1[:, 1]
-            ok = np.abs(det) > 1e-12
+            ok = np.abs(det) > DEGENERATE
             det = np.where(ok, det, 1.0)
             # J = [t1 t2] [p1 p2]^-1, then its largest singular value in closed form
             a11 = (t1[:, 0] * p2[:, 1] - t2[:, 0] * p1[:, 1]) / det
@@ -469,7 +470,7 @@ class Renderer:
         face = np.full(((r1 - r0) * n, g.width * n), -1, np.int32)
         bary = np.zeros(face.shape + (2,), np.float64)
         self._raster_mod.rasterize_rows(self._pix, self.faces, self._ptr, self._idx, self._block, r0 * n,
-                                        face.shape[0], face.shape[1], 1e-9, face, bary)
+                                        face.shape[0], face.shape[1], ROUNDING, face, bary)
         self._cache = ((r0, r1), (face, bary))
         return face, bary
 
@@ -757,7 +758,7 @@ def scale_layer_on_image(r: Renderer, grid: bool):
     covered = _chart_mask(tex, hc, wc)
     default = annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid)
     bar = default.bar_mm
-    while bar >= MIN_BAR_FRACTION * default.bar_mm * (1 - 1e-9):
+    while bar >= MIN_BAR_FRACTION * default.bar_mm * (1 - ROUNDING):
         probe = annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid, bar_mm=bar)
         bw, bh = probe.box_size
         spot = annotate.free_spot(covered, (math.ceil(bw / f) + 1, math.ceil(bh / f) + 1), math.ceil(probe.margin / f))

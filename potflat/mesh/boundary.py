@@ -8,12 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from potflat.mesh import _segments
+from potflat.mesh.tolerances import DEGENERATE
 
 #: Finest grid of the search: the cell is at least the layout's extent over this.
 GRID_CELLS = 2048
-#: Smallest cell (layout units), for a layout that has collapsed to a point.
-MIN_CELL = 1e-12
 
 
 def _coerced(uv, seg) -> tuple[np.ndarray, np.ndarray]:
@@ -31,7 +29,7 @@ def _cell(uv: np.ndarray, seg: np.ndarray) -> float:
     :data:`GRID_CELLS`."""
     lens = np.linalg.norm(uv[seg[:, 0]] - uv[seg[:, 1]], axis=1)
     extent = float(np.ptp(uv[seg.ravel()], axis=0).max()) or 1.0
-    return max(2.0 * float(np.mean(lens)), extent / GRID_CELLS, MIN_CELL)
+    return max(2.0 * float(np.mean(lens)), extent / GRID_CELLS, DEGENERATE)  # a layout collapsed to a point
 
 
 def crossing_pairs(uv: np.ndarray, seg: np.ndarray, *, max_pairs: int | None = None) -> np.ndarray:
@@ -50,6 +48,8 @@ def crossing_pairs(uv: np.ndarray, seg: np.ndarray, *, max_pairs: int | None = N
     (k, 2) int64
         Indices into ``seg`` of each crossing pair.
     """
+    from potflat.mesh import _segments  # Numba: imported on first use
+
     uv, seg = _coerced(uv, seg)
     if len(seg) < 2:
         return np.zeros((0, 2), np.int64)
@@ -75,7 +75,7 @@ def edges_and_boundary(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarra
     owner : (b,) int64
         The face of each segment.
     """
-    from potflat.mesh._kernels import edge_table
+    from potflat.mesh._kernels import edge_table  # Numba: imported on first use
 
     F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
     _, edges, count, halves = edge_table(F, int(n))

@@ -39,6 +39,7 @@ from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import FlatMesh, Mesh, StepClock
 from potflat.rollout.options import RolloutOptions
 from potflat.rollout.walls import FaceGraph, WallSelection, face_adjacency, select_wall
+from potflat.mesh.tolerances import ROUNDING
 
 TWO_PI = 2.0 * np.pi
 #: A connected piece with at least this fraction of the largest piece's area is an object of
@@ -228,7 +229,7 @@ def _luminance_variation(mesh: Mesh, faces: np.ndarray) -> tuple[np.ndarray | No
 
 def _longest_min_run(cost: np.ndarray) -> int:
     """Index of the middle of the longest circular run of (near-)minimal bins."""
-    low = cost <= cost.min() + 1e-9 * max(cost.max(), 1e-300)
+    low = cost <= cost.min() + ROUNDING * max(cost.max(), 1e-300)
     if low.all():
         return 0
     k = len(cost)
