@@ -34,10 +34,11 @@ class RelaxPreset:
         Relax only a copy with cells of this side (mm); 0: the full mesh.
     friction_inside, friction_boundary : float or None
         The dynamics' friction inside and on the boundary (``dynamics`` only).
-    shape, importance_contrast, true_scale
+    shape, rigidity, importance_contrast, true_scale
         The painted figures' defaults (measured in ``docs/performance.md``, "Painted
-        figures"): the shape term's weight, how much stiffer the important zone is than
-        plain surface, and the final scaling to true scale in the important zone.
+        figures"): the shape and rigidity terms' weights, how much stiffer the important
+        zone is than plain surface, and the final scaling to true scale in the important
+        zone.
     """
 
     solver: str
@@ -52,6 +53,7 @@ class RelaxPreset:
     friction_inside: float | None = None
     friction_boundary: float | None = None
     shape: float = 0.2
+    rigidity: float = 2.0
     importance_contrast: float = 100.0
     true_scale: bool = True
 
@@ -72,7 +74,7 @@ PRESETS: dict[str, RelaxPreset] = {
     "archival": RelaxPreset(**_FOLD_FREE, tol=1e-7, max_iter=20000),
     "paper": RelaxPreset(solver="dynamics", stretch=2.0, stiffness=0.5, weighting="uniform", tol=1e-7,
                          max_iter=100000, friction_inside=0.01, friction_boundary=1.0, coarse_start=False,
-                         shape=0.0, importance_contrast=1.0, true_scale=False),
+                         shape=0.0, rigidity=0.0, importance_contrast=1.0, true_scale=False),
 }
 
 
