@@ -164,7 +164,7 @@ class BakeResult:
         covers ``u`` from ``origin[0] + c / s`` and ``v`` down from ``origin[1] - r / s``
         with ``s = px_per_mm * mm_per_unit`` pixels per unit.
     figures : dict
-        Resolution, size, distortion figures, covered area (see :func:`run_bake_stage`).
+        Resolution, size, distortion figures, covered area (see :func:`potflat.stages.bake_stage.run_bake_stage`).
     """
 
     image: np.ndarray
