@@ -27,24 +27,18 @@ from potflat.bake.render import (
     scale_layer_on_image,
 )
 from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.stages.names import rollout_json_beside, stage_name
 from potflat.types import FlatMesh, StageOutput, StepClock
 
 if TYPE_CHECKING:
     from potflat.bake.render import _Grid
 
 
-def stage_name(path: Path) -> str:
-    """Output NAME for a stage file: ``X.relaxed.ply`` -> ``X``; ``X.rollout.ply`` -> ``X.rollout``."""
-    stem = path.name[: -len(path.suffix)] if path.suffix else path.name
-    return stem.removesuffix(".relaxed")
-
-
 def _rollout_sidecar(flat_ply: Path, rollout_summary: dict | None = None) -> tuple[dict, Path | None]:
     """The rollout's summary (``rollout_summary`` when handed over in memory, else
     ``NAME.rollout.json`` beside the input; an empty dict when absent or unreadable) and that
     JSON file (for provenance) or None."""
-    stem = flat_ply.name.removesuffix(".ply").removesuffix(".relaxed").removesuffix(".rollout")
-    rollout_json = flat_ply.with_name(f"{stem}.rollout.json")
+    rollout_json = rollout_json_beside(flat_ply)
     if rollout_summary is not None:
         return rollout_summary, rollout_json if rollout_json.is_file() else None
     try:

@@ -10,6 +10,7 @@ import numpy as np
 
 from potflat.mesh.distortion import zone_summary
 from potflat.relax.solver import RelaxOptions, relax
+from potflat.stages.names import relax_name
 from potflat.types import FlatMesh, StageOutput
 
 
@@ -57,9 +58,7 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     options = options or RelaxOptions()
     rollout_ply = Path(rollout_ply)
     out_dir = Path(out_dir)
-    stem = rollout_ply.name
-    for suffix in (".ply", ".rollout"):
-        stem = stem.removesuffix(suffix)
+    stem = relax_name(rollout_ply)
     name = name or stem
     if flat is None:
         flat = read_flat_ply(rollout_ply)
