@@ -13,8 +13,9 @@ its own angle, in the vessel's canonical frame (axis = z):
 * ``flap``: a tongue of the wall cut free on three sides and folded back over its
   neighbour about the fourth (its faces face into the wall), leaving a hole.
 * ``spikes``: single vertices thrown 3 edge lengths off the wall (outliers).
-* ``sheet``: a patch of the wall scanned twice: a copy of its faces, 0.5 mm off the wall
-  and turned by half an edge, not joined to it (a second, misregistered pass).
+* ``sheet``: a tongue of the wall cut free on three sides and slid along the wall, off it,
+  by half its length: its far half lies over the wall beyond (the same surface scanned
+  twice, fused where two misregistered passes meet), every face still facing out.
 * ``nonmanifold``: fins (a third face on an edge) and a small fan hanging on one vertex.
 * ``noise``: every vertex of the wall moved along the wall's normal, Gaussian, 5% of the
   edge length.
@@ -141,29 +142,43 @@ class _Builder:
         del p
         self._mark_vertices(idx[moved & (taper * bump > 0.05)])
 
-    def flap(self, part: int, angle: float):
-        half_w, half_h = 2.5 * self.edge, 3.0 * self.edge
+    def _tongue(self, part: int, angle: float, half_w: float, half_h: float):
+        """Cut a tongue of wall ``part`` free on three sides (hinge at ``angle``, running
+        towards larger angles): its faces get copies of its vertices off the hinge.
+        Returns the tongue's faces, its loose vertices' copies, their distance from the hinge
+        (mm), angle, radius and height."""
         angle, height = self.site(part, angle, half_h)
         faces = np.flatnonzero(self.patch(part, angle + half_w / self._radius(part, height), height, half_w, half_h))
-        # the tongue: the patch's vertices except those on its hinge (the side at ``angle``)
         verts = np.unique(self.F[faces])
         r, t, z = self.cyl(verts)
         hinge_s = r * _wrap(t - angle)
-        on_hinge = hinge_s <= np.min(hinge_s) + 0.5 * self.edge
-        loose = verts[~on_hinge]
+        loose = verts[hinge_s > np.min(hinge_s) + 0.5 * self.edge]
         copy = np.arange(len(self.V), len(self.V) + len(loose))
         remap = np.arange(len(self.V))
         remap[loose] = copy
-        rl, tl, zl = self.cyl(loose)
-        d = rl * _wrap(tl - angle)  # distance from the hinge along the wall
-        folded_t = angle - d / np.maximum(rl, 1e-9)  # turned over the hinge onto the neighbour
-        p = np.stack([rl * np.cos(folded_t), rl * np.sin(folded_t), zl], axis=1)
-        p += (SHEET_GAP_MM * (1.0 + d / (2 * half_w)))[:, None] * self.normal_offset(loose, part)
-        self.V = np.concatenate([self.V, p])
+        self.V = np.concatenate([self.V, self.V[loose]])
         self.vertex_part = np.concatenate([self.vertex_part, self.vertex_part[loose]])
         self.F[faces] = remap[self.F[faces]]
         self.defect[faces] = True
-        # the loose vertices keep the faces outside the tongue: the hole's border
+        rl, tl, zl = self.cyl(copy)
+        return copy, rl * _wrap(tl - angle), angle, rl, zl
+
+    def flap(self, part: int, angle: float):
+        half_w = 2.5 * self.edge
+        copy, d, angle, r, z = self._tongue(part, angle, half_w, 3.0 * self.edge)
+        folded_t = angle - d / np.maximum(r, 1e-9)  # turned over the hinge onto the neighbour: a hole is left
+        self.V[copy] = np.stack([r * np.cos(folded_t), r * np.sin(folded_t), z], axis=1)
+        self.V[copy] += (SHEET_GAP_MM * (1.0 + d / (2 * half_w)))[:, None] * self.normal_offset(copy, part)
+
+    def sheet(self, part: int, angle: float):
+        half_w = 4.0 * self.edge
+        copy, d, angle, r, z = self._tongue(part, angle, half_w, 3.0 * self.edge)
+        # slid along the wall by up to half its length, off the wall: its far half lies over
+        # the wall beyond its cut end (a second pass fused on misregistered), orientation kept
+        slide = half_w * np.clip(d / half_w, 0.0, 1.0)
+        t = angle + (d + slide) / np.maximum(r, 1e-9)
+        self.V[copy] = np.stack([r * np.cos(t), r * np.sin(t), z], axis=1)
+        self.V[copy] += (SHEET_GAP_MM * 1.25 * np.clip(d / half_w, 0.0, 1.0))[:, None] * self.normal_offset(copy, part)
 
     def spikes(self, part: int, angle: float, count: int = 4):
         idx = self.wall_vertices(part)
@@ -174,18 +189,6 @@ class _Builder:
         sign = np.where(np.arange(len(pick)) % 2 == 0, 1.0, -1.0)
         self.V[pick] += (3.0 * self.edge * sign)[:, None] * self.normal_offset(pick, part)
         self._mark_vertices(pick)
-
-    def sheet(self, part: int, angle: float):
-        half_w, half_h = 4.0 * self.edge, 3.0 * self.edge
-        angle, height = self.site(part, angle, half_h)
-        faces = np.flatnonzero(self.patch(part, angle, height, half_w, half_h))
-        verts, local = np.unique(self.F[faces], return_inverse=True)
-        r, t, z = self.cyl(verts)
-        t = t + 0.5 * self.edge / np.maximum(r, 1e-9)  # misregistered by half an edge
-        p = np.stack([r * np.cos(t), r * np.sin(t), z], axis=1)
-        p += SHEET_GAP_MM * 1.25 * self.normal_offset(verts, part)
-        tc = None if self.texcoords is None else self.texcoords[faces]
-        self.add(p, local.reshape(-1, 3) + len(self.V), part, tc, self.face_chart[faces])
 
     def nonmanifold(self, part: int, angle: float, fins: int = 3):
         idx = self.wall_vertices(part)
