@@ -18,7 +18,7 @@ its own angle, in the vessel's canonical frame (axis = z):
   twice, fused where two misregistered passes meet), every face still facing out.
 * ``nonmanifold``: fins (a third face on an edge) and a small fan hanging on one vertex.
 * ``noise``: every vertex of the wall moved along the wall's normal, Gaussian, 5% of the
-  edge length.
+  edge length (no face is marked: it is everywhere).
 """
 from __future__ import annotations
 
@@ -123,7 +123,7 @@ class _Builder:
 
     # -- defects --------------------------------------------------------------------
     def crease(self, part: int, angle: float):
-        width, half_h = 3.0 * self.edge, 5.0 * self.edge
+        width, half_h = 1.5 * self.edge, 4.0 * self.edge
         angle, height = self.site(part, angle, half_h)
         idx = self.wall_vertices(part)
         r, t, z = self.cyl(idx)
@@ -131,7 +131,7 @@ class _Builder:
         taper = np.clip(1.0 - ((z - height) / half_h) ** 2, 0.0, None)  # the crease dies out at its ends
         bump = np.exp(-0.5 * (s / width) ** 2)
         # s -> s - k s bump: folds back where k taper > 1 (three sheets across the crease)
-        shift = -2.5 * taper * s * bump
+        shift = -1.8 * taper * s * bump
         lift = SHEET_GAP_MM * taper * (s / width) * bump
         moved = np.abs(shift) > 1e-9 * self.edge
         new_t = t + shift / np.maximum(r, 1e-9)
