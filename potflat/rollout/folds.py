@@ -48,8 +48,9 @@ class ScanFolds:
         3D area of those faces, and of the whole rollout.
     regions : list of dict
         Connected clusters (sharing a vertex), largest first: ``faces``, ``area_mm2``,
-        ``height_mm`` [low, high] above the foot, ``angle_deg`` [low, high] in the rollout's
-        angles, ``centroid`` (scan coordinates).
+        ``height_mm`` [low, high] above the foot, ``band`` the same as fractions of the
+        vessel's height (``--band`` values), ``angle_deg`` [low, high] in the rollout's angles,
+        ``centroid`` (scan coordinates).
     """
 
     faces: np.ndarray
@@ -83,8 +84,8 @@ class ScanFolds:
         big = self.regions[0]
         return (f"{self.percent:.1f} % of the unrolled surface ({self.area_mm2:.0f} mm2 in {len(self.regions)} "
                 f"places, the largest {big['area_mm2']:.0f} mm2 at {big['height_mm'][0]:.0f}-{big['height_mm'][1]:.0f} "
-                f"mm above the foot) folds over itself in the scan (a crease, a flap or a duplicated sheet): it is "
-                "squeezed flat in the image and hatched on the distortion maps; clean the scan there if painting "
+                f"mm above the foot) folds over itself (a crease, a flap or a duplicated sheet of the scan, or a kept "
+                "attachment): it is squeezed flat in the image and hatched on the distortion maps; clean the scan there if painting "
                 "matters")
 
 
@@ -150,7 +151,7 @@ def fold_masks(faces: np.ndarray, raw_uv: np.ndarray) -> tuple[np.ndarray, np.nd
 
 
 def scan_folds(vertices: np.ndarray, faces: np.ndarray, facing_in: np.ndarray, overlapping: np.ndarray, *,
-               height: np.ndarray, angle_deg: np.ndarray, mm_per_unit: float) -> ScanFolds:
+               height: np.ndarray, vessel_height: float, angle_deg: np.ndarray, mm_per_unit: float) -> ScanFolds:
     """Measure and locate the folded faces found by :func:`fold_masks`.
 
     Parameters
@@ -161,6 +162,8 @@ def scan_folds(vertices: np.ndarray, faces: np.ndarray, facing_in: np.ndarray, o
     facing_in, overlapping : (m,) bool
     height : (n,) float64
         Height of each vertex above the foot along the axis, scan units.
+    vessel_height : float
+        The vessel's height (scan units): heights as fractions of it are ``--band`` values.
     angle_deg : (n,) float64
         Angle of each vertex in the rollout's angles, degrees.
     mm_per_unit : float
@@ -187,9 +190,11 @@ def scan_folds(vertices: np.ndarray, faces: np.ndarray, facing_in: np.ndarray, o
             w = a[mine]
             cen = vertices[sub[mine]].mean(axis=1)
             centroid = (w @ cen / w.sum()) if w.sum() > 0 else cen.mean(axis=0)
-            h = height[verts] * mm_per_unit
+            h = height[verts]
+            band = h / vessel_height if vessel_height > 0 else np.zeros(len(h))
             regions.append({"faces": int(mine.sum()), "area_mm2": float(w.sum()),
-                            "height_mm": [float(h.min()), float(h.max())],
+                            "height_mm": [float(h.min() * mm_per_unit), float(h.max() * mm_per_unit)],
+                            "band": [float(band.min()), float(band.max())],
                             "angle_deg": [float(angle_deg[verts].min()), float(angle_deg[verts].max())],
                             "centroid": [float(x) for x in centroid]})
     return ScanFolds(faces=folded, facing_in=int(facing_in.sum()), overlapping=int(overlapping.sum()),

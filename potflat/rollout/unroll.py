@@ -526,7 +526,8 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
     importance = _find_importance(flat, options, axis, theta_deg)
     clock.lap("importance")
     folds = scan_folds(cut.vertices, cut.faces, facing_in[un.face_index], overlapping[un.face_index],
-                       height=axis.cylindrical(cut.vertices)[0], angle_deg=theta_deg, mm_per_unit=mesh.mm_per_unit)
+                       height=axis.cylindrical(cut.vertices)[0], vessel_height=axis.height, angle_deg=theta_deg,
+                       mm_per_unit=mesh.mm_per_unit)
     clock.lap("folds")
     return RolloutResult(
         flat=flat.replace(importance=importance.values), importance=importance, axis=axis, proxy=un.proxy,
