@@ -372,10 +372,14 @@ def test_paper_dynamics_that_diverge_stop_with_one_line_and_write_nothing(tmp_pa
                  + [[r * 8 + c, r * 8 + c + 9, r * 8 + c + 8] for r in range(6) for c in range(7)])
     write_flat_ply(tmp_path / "pot.rollout.ply", FlatMesh(Mesh(V, F), V[:, :2].copy()))
     monkeypatch.setattr(relax_mod._Springs, "laplacian_bound", lambda self: 1e-4)  # a step 100x too long
-    with pytest.raises(FoldedResultError, match="diverged"):
+    with pytest.raises(FoldedResultError, match="diverged.*--preset standard"):
         relax_mod.run_relax_stage(tmp_path / "pot.rollout.ply", tmp_path / "out",
                                   relax_mod.RelaxOptions(preset="paper"))
     assert not (tmp_path / "out").exists()
+    # the advice works
+    out = relax_mod.run_relax_stage(tmp_path / "pot.rollout.ply", tmp_path / "out",
+                                    relax_mod.RelaxOptions(preset="standard"))
+    assert out.summary["fold_free"]
 
 
 def test_the_paper_step_bounds_the_largest_eigenvalue():

@@ -518,14 +518,8 @@ class _Renderer:
         :data:`potflat.mesh.distortion.ZONE_THRESHOLD`), shape (k, w) bool; None without importance."""
         if self.flat.importance is None:
             return None
-        import cv2
-
         field = self._vertex_field(self.flat.importance, r0, r1)[..., 0]
-        inside = (np.nan_to_num(field, nan=0.0) >= distortion.ZONE_THRESHOLD).astype(np.uint8)
-        ring = np.ones((3, 3), np.uint8)
-        edge = cv2.dilate(inside, ring, borderType=cv2.BORDER_REPLICATE) & ~cv2.erode(
-            inside, ring, borderType=cv2.BORDER_REPLICATE)
-        return edge.astype(bool) & np.isfinite(field)
+        return _outline(field, distortion.ZONE_THRESHOLD)
 
     def position(self, r0: int, r1: int) -> np.ndarray:
         """3D point under each pixel, scan units (NaN outside). Shape (k, w, 3) float32."""
@@ -765,18 +759,23 @@ FOLDED_COLOUR = (255, 0, 255, 255)
 FOLDED_HATCH_PX = 6
 
 
-def _folded_hatch(share: np.ndarray, r0: int) -> np.ndarray:
-    """Pixels (k, w) bool marking where the scan folds in 3D: the outline of the faces'
-    footprint (their share crossing one half) and diagonal hatching inside it."""
+def _outline(field: np.ndarray, threshold: float) -> np.ndarray:
+    """Pixels (k, w) bool on the outline of where ``field`` (k, w, NaN outside) is at least ``threshold``."""
     import cv2
 
-    inside = (np.nan_to_num(share, nan=0.0) >= 0.5).astype(np.uint8)
+    inside = (np.nan_to_num(field, nan=0.0) >= threshold).astype(np.uint8)
     ring = np.ones((3, 3), np.uint8)
     edge = cv2.dilate(inside, ring, borderType=cv2.BORDER_REPLICATE) & ~cv2.erode(
         inside, ring, borderType=cv2.BORDER_REPLICATE)
-    rows, cols = np.indices(inside.shape)
-    hatch = inside.astype(bool) & ((rows + r0 + cols) % FOLDED_HATCH_PX == 0)
-    return (edge.astype(bool) & np.isfinite(share)) | hatch
+    return edge.astype(bool) & np.isfinite(field)
+
+
+def _folded_hatch(share: np.ndarray, r0: int) -> np.ndarray:
+    """Pixels (k, w) bool marking where the scan folds in 3D: the outline of the faces'
+    footprint (their share crossing one half) and diagonal hatching inside it."""
+    rows, cols = np.indices(share.shape)
+    hatch = (np.nan_to_num(share, nan=0.0) >= 0.5) & ((rows + r0 + cols) % FOLDED_HATCH_PX == 0)
+    return _outline(share, 0.5) | hatch
 
 
 def _repeated_faces(sidecar: dict, n_faces: int) -> np.ndarray:
