@@ -1094,12 +1094,14 @@ def _notes(result: RolloutResult) -> list[str]:
             why = (" (they face the other way: the two sides of the wall were not told apart"
                    + (", the scan's faces were read as pointing inwards" if result.walls.normals_inverted else "")
                    + "; check the axis (--axis) or try --side inner)")
-        notes.append(f"{result.distortion.flipped} faces stay flipped{why}; the relax stage will refuse them")
+        notes.append(f"{result.distortion.flipped} faces stay flipped{why}; the relax stage starts from a fold-free "
+                     "layout (it refuses only a mesh that is not a disk)")
     folded = result.folds.note() if result.folds is not None else None
     if folded:
         notes.append(folded)
     if result.boundary_overlap:
-        notes.append(f"the border overlaps itself at {result.boundary_overlap} places; the relax stage will refuse it")
+        notes.append(f"the border overlaps itself at {result.boundary_overlap} places; the relax stage unfolds it "
+                     "(and refuses a result that still overlaps)")
     if result.other_objects_faces:
         notes.append(f"{result.other_objects_faces} faces of separate objects that do not share the vessel's axis "
                      "(another vessel or fragment in the same file) were left out; split the file or give --axis")
