@@ -135,11 +135,9 @@ class _Builder:
         lift = SHEET_GAP_MM * taper * (s / width) * bump
         moved = np.abs(shift) > 1e-9 * self.edge
         new_t = t + shift / np.maximum(r, 1e-9)
-        p = self.V[idx]
         self.V[idx, 0] = r * np.cos(new_t)
         self.V[idx, 1] = r * np.sin(new_t)
         self.V[idx] += lift[:, None] * self.normal_offset(idx, part)
-        del p
         self._mark_vertices(idx[moved & (taper * bump > 0.05)])
 
     def _tongue(self, part: int, angle: float, half_w: float, half_h: float):

@@ -3,6 +3,7 @@ follows the advice of one message and checks that the run then succeeds (divergi
 dynamics: ``test_paper_dynamics_that_diverge_stop_with_one_line_and_write_nothing``)."""
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -64,8 +65,6 @@ def test_a_scan_of_one_side_names_the_side_it_has(tmp_path):
     index = np.full(len(cup.mesh.vertices), -1)
     index[used] = np.arange(len(used))
     inside = Mesh(cup.mesh.vertices[used], index[cup.mesh.faces[keep]], units="mm")
-    import dataclasses
-
     scan = dataclasses.replace(cup, mesh=inside, face_part=cup.face_part[keep], vertex_part=cup.vertex_part[used])
     ply = write_ply_colored(scan, tmp_path / "inside.ply")
     _refused(_cli("rollout", ply, "-o", tmp_path / "a", "--side", "inner"), "no inner wall", "--side outer")
