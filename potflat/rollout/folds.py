@@ -89,22 +89,13 @@ class ScanFolds:
                 "matters")
 
 
-def _inside(c: np.ndarray, a: np.ndarray, b: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Whether points ``c`` (k, 2) lie strictly inside triangles ``a b d`` (k, 2 each), either orientation."""
-    def side(p, q):
-        return (q[:, 0] - p[:, 0]) * (c[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (c[:, 0] - p[:, 0])
-
-    s1, s2, s3 = side(a, b), side(b, d), side(d, a)
-    return ((s1 > 0) & (s2 > 0) & (s3 > 0)) | ((s1 < 0) & (s2 < 0) & (s3 < 0))
-
-
 def overlapping_faces(faces: np.ndarray, uv: np.ndarray, k: int = OVERLAP_NEIGHBOURS) -> np.ndarray:
-    """Faces of a 2D layout that lie over another: the centre of one inside the other,
-    the two sharing no vertex (both are marked).
+    """Faces of a 2D layout that lie over another: the centre of one strictly inside the
+    other, the two sharing no vertex (both are marked).
 
     Parameters
     ----------
-    faces : (m, 3) int64
+    faces : (m, 3) int
     uv : (n, 2) float64
     k : int
         Faces with the nearest centres tested for each face.
@@ -115,22 +106,26 @@ def overlapping_faces(faces: np.ndarray, uv: np.ndarray, k: int = OVERLAP_NEIGHB
     """
     from scipy.spatial import cKDTree
 
+    from potflat.mesh._kernels import faces_under_centres
+
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    uv = np.ascontiguousarray(uv, dtype=np.float64)
     m = len(faces)
     out = np.zeros(m, bool)
     if m < 2:
         return out
-    centre = uv[faces].mean(axis=1)
-    k = min(k + 1, m)
-    _, near = cKDTree(centre).query(centre, k=k)
+    centre = np.empty((m, 2))
     for s in row_blocks(m):
-        f, c = faces[s], centre[s]
-        for j in range(1, k):
-            other = near[s, j]
-            g = faces[other]
-            shared = (f[:, :, None] == g[:, None, :]).any(axis=(1, 2))
-            hit = _inside(c, uv[g[:, 0]], uv[g[:, 1]], uv[g[:, 2]]) & ~shared
-            out[s.start + np.flatnonzero(hit)] = True
-            out[other[hit]] = True
+        f = faces[s]
+        centre[s] = (uv[f[:, 0]] + uv[f[:, 1]] + uv[f[:, 2]]) / 3.0
+    tree = cKDTree(centre)
+    lying_in = np.empty(m, np.int64)
+    for s in row_blocks(m):  # blocks of rows bound the (rows, k + 1) neighbour table
+        _, near = tree.query(centre[s], k=min(k + 1, m), workers=-1)
+        faces_under_centres(faces, uv, centre, np.ascontiguousarray(near, dtype=np.int64), s.start, lying_in[s])
+    hit = lying_in >= 0
+    out[hit] = True
+    out[lying_in[hit]] = True
     return out
 
 
