@@ -525,14 +525,8 @@ class Renderer:
         :data:`potflat.mesh.distortion.ZONE_THRESHOLD`), shape (k, w) bool; None without importance."""
         if self.flat.importance is None:
             return None
-        import cv2
-
         field = self._vertex_field(self.flat.importance, r0, r1)[..., 0]
-        inside = (np.nan_to_num(field, nan=0.0) >= distortion.ZONE_THRESHOLD).astype(np.uint8)
-        ring = np.ones((3, 3), np.uint8)
-        edge = cv2.dilate(inside, ring, borderType=cv2.BORDER_REPLICATE) & ~cv2.erode(
-            inside, ring, borderType=cv2.BORDER_REPLICATE)
-        return edge.astype(bool) & np.isfinite(field)
+        return _outline(field, distortion.ZONE_THRESHOLD)
 
     def position(self, r0: int, r1: int) -> np.ndarray:
         """3D point under each pixel, scan units (NaN outside). Shape (k, w, 3) float32."""
@@ -707,6 +701,31 @@ def rgba16(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
 
 #: Colour (RGBA) of the faces where a left-out attachment (handle, spout, knob) met the wall.
 ATTACHMENT_COLOUR = (230, 0, 160, 220)
+
+
+#: Colour (RGBA) of the outline and hatching of the places where the scan folds over itself in 3D.
+FOLDED_COLOUR = (255, 0, 255, 255)
+#: Spacing (pixels) of the hatching's diagonal lines.
+FOLDED_HATCH_PX = 6
+
+
+def _outline(field: np.ndarray, threshold: float) -> np.ndarray:
+    """Pixels (k, w) bool on the outline of where ``field`` (k, w, NaN outside) is at least ``threshold``."""
+    import cv2
+
+    inside = (np.nan_to_num(field, nan=0.0) >= threshold).astype(np.uint8)
+    ring = np.ones((3, 3), np.uint8)
+    edge = cv2.dilate(inside, ring, borderType=cv2.BORDER_REPLICATE) & ~cv2.erode(
+        inside, ring, borderType=cv2.BORDER_REPLICATE)
+    return edge.astype(bool) & np.isfinite(field)
+
+
+def folded_hatch(share: np.ndarray, r0: int) -> np.ndarray:
+    """Pixels (k, w) bool marking where the scan folds in 3D: the outline of the faces'
+    footprint (their share crossing one half) and diagonal hatching inside it."""
+    rows, cols = np.indices(share.shape)
+    hatch = (np.nan_to_num(share, nan=0.0) >= 0.5) & ((rows + r0 + cols) % FOLDED_HATCH_PX == 0)
+    return _outline(share, 0.5) | hatch
 
 
 #: Colour (RGBA) of the dashed line where a rollout's repeat past 360 degrees (``overlap``) starts.

@@ -623,3 +623,39 @@ def face_geometry(V, F):
         centroid[f, 1] = (V[a, 1] + V[b, 1] + V[c, 1]) / 3.0
         centroid[f, 2] = (V[a, 2] + V[b, 2] + V[c, 2]) / 3.0
     return cross, area2, longest2, centroid
+
+
+@leaf
+def _strictly_inside(px, py, ax, ay, bx, by, cx, cy):
+    """Whether (px, py) lies strictly inside the triangle a b c, either orientation."""
+    s1 = (bx - ax) * (py - ay) - (by - ay) * (px - ax)
+    s2 = (cx - bx) * (py - by) - (cy - by) * (px - bx)
+    s3 = (ax - cx) * (py - cy) - (ay - cy) * (px - cx)
+    return (s1 > 0.0 and s2 > 0.0 and s3 > 0.0) or (s1 < 0.0 and s2 < 0.0 and s3 < 0.0)
+
+
+@parallel
+def faces_under_centres(faces, uv, centre, near, first, lying_in):
+    """For each face ``first + r`` (``r`` a row of ``near``), the first face of ``near[r]``
+    that shares no vertex with it and holds its centre strictly inside; -1 when none.
+
+    faces (m, 3) int64, uv (n, 2) float64, centre (m, 2) float64, near (k, j) int64 (faces
+    with the nearest centres; indices >= m are padding), first int64, lying_in (k,) int64 out.
+    """
+    m = faces.shape[0]
+    for r in prange(near.shape[0]):
+        i = first + r
+        lying_in[r] = -1
+        a0, a1, a2 = faces[i, 0], faces[i, 1], faces[i, 2]
+        px, py = centre[i, 0], centre[i, 1]
+        for q in range(near.shape[1]):
+            j = near[r, q]
+            if j == i or j >= m:
+                continue
+            b0, b1, b2 = faces[j, 0], faces[j, 1], faces[j, 2]
+            if (b0 == a0 or b0 == a1 or b0 == a2 or b1 == a0 or b1 == a1 or b1 == a2
+                    or b2 == a0 or b2 == a1 or b2 == a2):
+                continue
+            if _strictly_inside(px, py, uv[b0, 0], uv[b0, 1], uv[b1, 0], uv[b1, 1], uv[b2, 0], uv[b2, 1]):
+                lying_in[r] = j
+                break

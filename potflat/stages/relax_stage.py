@@ -105,6 +105,9 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         for key in ("axis", "proxy", "units"):
             if key in rj:
                 summary[key] = rj[key]
+        folded = rj.get("folded")
+        if isinstance(folded, dict):  # where the scan folds in 3D: the figures, the faces stay in the rollout's JSON
+            summary["folded"] = {k: v for k, v in folded.items() if k != "face_indices"}
     inputs = [rollout_ply] + ([rollout_json] if rollout_json.exists() else [])
     summary["provenance"] = provenance(stage="relax", inputs=inputs, options=asdict(options))
     comments = (f"potflat relax preset {result.preset}",)
