@@ -9,9 +9,9 @@ scan can cause them (the development itself is one-to-one):
   against the proxy's normal on the painted side): the middle sheet of a crease, a flap
   turned over, the far side of a spike's sliver;
 * a face **lying over another sheet**: its centre falls inside another face of the
-  development that shares no vertex with it (checked against the
-  :data:`OVERLAP_NEIGHBOURS` faces with the nearest centres): both sheets of a
-  duplicated, misregistered pass, and the outer sheets of a crease.
+  development that shares no vertex with it (every face whose bounding box covers the
+  centre's cell of a grid is tested): both sheets of a duplicated, misregistered pass, and
+  the outer sheets of a crease.
 
 Such faces cannot be laid flat true to scale: the relaxation squeezes them (no image is
 refused for them) and the report says where they are, how large, and the bake marks them
@@ -19,15 +19,19 @@ on the distortion maps.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from potflat.mesh.distortion import face_areas, row_blocks
+from potflat.mesh.distortion import face_areas
 from potflat.mesh.embedding import signed_areas
 
-#: Faces with the nearest centres (in the development) tested for lying over a face.
-OVERLAP_NEIGHBOURS = 8
+#: Grid cells per face of the overlap test (about one face per cell, a few per face's box).
+OVERLAP_CELLS_PER_FACE = 1.0
+#: A grid whose (cell, face) table grows past this many entries per face gets cells twice as
+#: large (long sliver triangles of a spike would otherwise fill many small cells).
+OVERLAP_MAX_ENTRIES_PER_FACE = 16
 #: Folded regions listed one by one in the JSON (the largest first); the rest are counted.
 MAX_REGIONS = 20
 #: A note warns when more than this share (percent) of the unrolled surface is folded.
@@ -89,7 +93,7 @@ class ScanFolds:
                 "matters")
 
 
-def overlapping_faces(faces: np.ndarray, uv: np.ndarray, k: int = OVERLAP_NEIGHBOURS) -> np.ndarray:
+def overlapping_faces(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """Faces of a 2D layout that lie over another: the centre of one strictly inside the
     other, the two sharing no vertex (both are marked).
 
@@ -97,16 +101,12 @@ def overlapping_faces(faces: np.ndarray, uv: np.ndarray, k: int = OVERLAP_NEIGHB
     ----------
     faces : (m, 3) int
     uv : (n, 2) float64
-    k : int
-        Faces with the nearest centres tested for each face.
 
     Returns
     -------
     (m,) bool
     """
-    from scipy.spatial import cKDTree
-
-    from potflat.mesh._kernels import faces_under_centres
+    from potflat.mesh._kernels import centres_in_faces, triangle_cells
 
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     uv = np.ascontiguousarray(uv, dtype=np.float64)
@@ -114,18 +114,34 @@ def overlapping_faces(faces: np.ndarray, uv: np.ndarray, k: int = OVERLAP_NEIGHB
     out = np.zeros(m, bool)
     if m < 2:
         return out
-    centre = np.empty((m, 2))
-    for s in row_blocks(m):
-        f = faces[s]
-        centre[s] = (uv[f[:, 0]] + uv[f[:, 1]] + uv[f[:, 2]]) / 3.0
-    tree = cKDTree(centre)
-    lying_in = np.empty(m, np.int64)
-    for s in row_blocks(m):  # blocks of rows bound the (rows, k + 1) neighbour table
-        _, near = tree.query(centre[s], k=min(k + 1, m), workers=-1)
-        faces_under_centres(faces, uv, centre, np.ascontiguousarray(near, dtype=np.int64), s.start, lying_in[s])
-    hit = lying_in >= 0
-    out[hit] = True
-    out[lying_in[hit]] = True
+    in_use = np.zeros(len(uv), bool)
+    in_use[faces.ravel()] = True
+    used = uv[in_use]
+    lo, hi = used.min(axis=0), used.max(axis=0)
+    extent = float(max(hi[0] - lo[0], hi[1] - lo[1]))
+    if not extent > 0:
+        return out
+    cell = max(math.sqrt(float((hi[0] - lo[0]) * (hi[1] - lo[1])) / (OVERLAP_CELLS_PER_FACE * m)), extent / 65536.0)
+    while True:
+        gx, gy = int((hi[0] - lo[0]) / cell) + 1, int((hi[1] - lo[1]) / cell) + 1
+        start = np.empty(gx * gy + 1, np.int64)
+        total = triangle_cells(faces, uv, lo[0], lo[1], cell, gx, gy, start, np.empty(0, np.int64))
+        if total <= OVERLAP_MAX_ENTRIES_PER_FACE * m or gx * gy == 1:
+            break
+        cell *= 2.0
+    items = np.empty(total, np.int64)
+    triangle_cells(faces, uv, lo[0], lo[1], cell, gx, gy, start, items)
+    counts = np.empty(m, np.int64)
+    nothing = np.empty(0, np.int64)
+    centres_in_faces(faces, uv, lo[0], lo[1], cell, gy, start, items, nothing, counts, nothing)
+    hit = counts > 0
+    if hit.any():
+        first = np.zeros(m, np.int64)
+        np.cumsum(counts[:-1], out=first[1:])
+        pairs = np.empty(int(counts.sum()), np.int64)
+        centres_in_faces(faces, uv, lo[0], lo[1], cell, gy, start, items, first, counts, pairs)
+        out[hit] = True
+        out[pairs] = True
     return out
 
 
