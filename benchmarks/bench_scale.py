@@ -2,15 +2,16 @@
 ``potflat run``, each beside a trimesh load of the same OBJ.
 
 For each size a painted amphora (:func:`potflat_synthetic.vessels.make_vessel`, random pose,
-multi-chart texture atlas) is written as OBJ + MTL + PNG. Then, side by side in one run:
-``trimesh.load(obj, process=False)`` in a child process (the yardstick: the time of the load
-call itself and that process's peak), and ``python -m potflat_cli run`` in another child,
-exactly as a user would run it. The benchmark samples the potflat child's resident memory
-(``VmRSS`` in ``/proc/PID/status``) every 0.1 s and its high-water mark (``VmHWM``), and
-splits the run into stages by the appearance of each stage's JSON sidecar
-(``NAME.rollout.json``, ``NAME.relaxed.json``, ``NAME.bake.json``): per stage the wall time
-(as the run reports it) and the peak memory; for the whole run the wall time (start-up
-included), the CPU time of the child (user + system, all threads) and its peak (``VmHWM``).
+multi-chart texture atlas) is written as OBJ + MTL + PNG. Then, one after the other in one
+run, each in its own child process: ``trimesh.load(obj, process=False)`` (the yardstick: the
+time of the load call itself and that process's peak), potflat's loader alone
+(``load_scan(obj, clean=False)``, timed alike), and ``python -m potflat_cli run`` exactly as a
+user would run it. The benchmark samples the run's resident memory (``VmRSS`` in
+``/proc/PID/status``) every 0.1 s and its high-water mark (``VmHWM``), and splits the run into
+stages by the appearance of each stage's JSON sidecar (``NAME.rollout.json``,
+``NAME.relaxed.json``, ``NAME.bake.json``): per stage the wall time (as the run reports it)
+and the peak memory; for the whole run the wall time (start-up included), the CPU time of the
+child (user + system, all threads) and its peak (``VmHWM``).
 The rollout's own steps (load, axis, walls, unroll, ...) come from its JSON's timings.
 
 Goals (issue 15): at 1M vertices the whole run at most 2x the trimesh load; at 3M at most
@@ -80,10 +81,16 @@ print(load, hwm, len(mesh.vertices))
 """
 
 
-def trimesh_load(scan: Path) -> dict:
-    """Load ``scan`` with ``trimesh.load(path, process=False)`` in a child process: the seconds
-    of the load call (not the import) and the child's peak memory (GB)."""
-    out = subprocess.run([sys.executable, "-c", TRIMESH_CHILD, str(scan)], capture_output=True, text=True,
+#: potflat's loader alone, as the trimesh child: no cleaning (``potflat run`` cleans too)
+POTFLAT_CHILD = TRIMESH_CHILD.replace("import trimesh", "from potflat.io.scan import load_scan").replace(
+    "mesh = trimesh.load(sys.argv[1], process=False)", "mesh = load_scan(sys.argv[1], clean=False).mesh")
+
+
+def child_load(scan: Path, code: str = TRIMESH_CHILD) -> dict:
+    """Load ``scan`` in a child process running ``code`` (default: ``trimesh.load(path,
+    process=False)``): the seconds of the load call (not the import) and the child's peak
+    memory (GB)."""
+    out = subprocess.run([sys.executable, "-c", code, str(scan)], capture_output=True, text=True,
                          check=True).stdout.split()
     return {"load_s": float(out[0]), "peak_gb": int(out[1]) / 2**20}
 
@@ -160,11 +167,13 @@ def measure(n_vertices: float, root: Path, *, preset: str, px_per_mm: float, tex
     scan, info = make_scan(int(n_vertices), root / "scan", texture_size=texture_size)
     print(f"  {info['vertices']:,} vertices, {info['faces']:,} faces, {info['obj_mb']:.0f} MB, "
           f"{info['generate_s']:.0f} s; trimesh load ...", flush=True)
-    yardstick = trimesh_load(scan)
-    print(f"  trimesh {yardstick['load_s']:.1f} s; potflat run ...", flush=True)
+    yardstick = child_load(scan)
+    loader = child_load(scan, POTFLAT_CHILD)
+    print(f"  trimesh load {yardstick['load_s']:.1f} s, potflat load {loader['load_s']:.1f} s; potflat run ...",
+          flush=True)
     result = run_benchmark(scan, root / "out", preset=preset, px_per_mm=px_per_mm)
     print(f"  potflat run {result['total_wall_s']:.1f} s, peak {result['peak_gb']:.2f} GB", flush=True)
-    return {"info": info, "trimesh": yardstick, "result": result, "image": _image(root / "out", scan.stem),
+    return {"info": info, "trimesh": yardstick, "loader": loader, "result": result, "image": _image(root / "out", scan.stem),
             "steps": _rollout_steps(root / "out", scan.stem)}
 
 
@@ -188,20 +197,22 @@ def table(rows: list[dict], *, command: str, preset: str, px_per_mm: float, text
     setup = (f"`{command}` ({time.strftime('%Y-%m-%d')}, {os.cpu_count()} cores, {platform.machine()}, "
              f"Python {platform.python_version()}): synthetic painted amphorae with a {texture} texture "
              f"atlas (OBJ + MTL + PNG; generating them is not counted), each loaded by "
-             f"`trimesh.load(path, process=False)` (the load call, in its own process) and run through "
+             f"`trimesh.load(path, process=False)` and by potflat's `load_scan(path, clean=False)` (the load "
+             f"call, each in its own process), and run through "
              f"`potflat run --preset {preset} --px-per-mm {px_per_mm:g}` (one process, start-up included), "
              "one after the other in one benchmark run. Stage times are the run's own; memory is the "
              "resident set sampled every 0.1 s (stage peaks) and the process's high-water mark (whole "
              "run), GB = 2^30 bytes. The machine is shared: treat times as +-30%.")
     lines = [SECTION, "", setup, "",
-             "| vertices | faces | OBJ MB | trimesh load s (GB) | rollout s (GB) | relax s (GB) | bake s (GB) "
+             "| vertices | faces | OBJ MB | trimesh load s (GB) | potflat load s (GB) | rollout s (GB) | relax s (GB) | bake s (GB) "
              "| whole run s (CPU s) | peak GB | run / trimesh | image |",
-             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     for row in rows:
         info, res, tm = row["info"], row["result"], row["trimesh"]
         st = {r["stage"]: r for r in res["rows"]}
         cells = [f"{info['vertices']:,}", f"{info['faces']:,}", f"{info['obj_mb']:.0f}",
-                 f"{tm['load_s']:.1f} ({tm['peak_gb']:.2f})"]
+                 f"{tm['load_s']:.1f} ({tm['peak_gb']:.2f})",
+                 f"{row['loader']['load_s']:.1f} ({row['loader']['peak_gb']:.2f})"]
         cells += [f"{st[k]['wall_s']:.1f} ({st[k]['peak_gb']:.2f})" for k in STAGES]
         cells += [f"**{res['total_wall_s']:.1f}** ({res['cpu_s']:.0f})", f"**{res['peak_gb']:.2f}**",
                   f"{res['total_wall_s'] / tm['load_s']:.1f}", row["image"]]
