@@ -186,7 +186,12 @@ def test_fold_free_from_a_deliberately_distorted_start(vessel):
     assert np.all(signed_areas(warped, vessel.mesh.faces) > 0)
     r = relax(start)
     assert r.flipped == 0 and r.boundary_overlap == 0
-    assert r.distortion.edge_rms < 0.5 * r.distortion_before.edge_rms
+    # it finds the same minimum as from the rollout itself (the energy trades edge length for
+    # shape, so compare with that, not with a fixed fraction of the start's error)
+    direct = relax(vessel)
+    assert r.distortion_before.edge_rms > 1.5 * direct.distortion.edge_rms
+    assert r.distortion.edge_rms == pytest.approx(direct.distortion.edge_rms, rel=0.01)
+    assert r.distortion.anisotropy_p95 == pytest.approx(direct.distortion.anisotropy_p95, rel=0.01)
 
 
 @pytest.mark.parametrize("start", ["orthographic", "sphere"])

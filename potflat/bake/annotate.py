@@ -115,11 +115,11 @@ def overlay(rgb: np.ndarray, values: np.ndarray, scale: MapScale, coverage: np.n
 OUTLINE_RGBA = (255, 255, 255, 255)
 
 
-def draw_outline(rows: np.ndarray, outline: np.ndarray | None) -> np.ndarray:
-    """Map rows (k, w, 4) uint8 with the important zone's outline (k, w) bool drawn in
-    :data:`OUTLINE_RGBA` (in place; returned). ``None``: unchanged."""
+def draw_outline(rows: np.ndarray, outline: np.ndarray | None, rgba=OUTLINE_RGBA) -> np.ndarray:
+    """Map rows (k, w, 4) uint8 with an outline (k, w) bool drawn in ``rgba`` (the important
+    zone's: :data:`OUTLINE_RGBA`) (in place; returned). ``None``: unchanged."""
     if outline is not None:
-        rows[outline] = OUTLINE_RGBA
+        rows[outline] = rgba
     return rows
 
 

@@ -520,14 +520,8 @@ class _Renderer:
         :data:`potflat.mesh.distortion.ZONE_THRESHOLD`), shape (k, w) bool; None without importance."""
         if self.flat.importance is None:
             return None
-        import cv2
-
         field = self._vertex_field(self.flat.importance, r0, r1)[..., 0]
-        inside = (np.nan_to_num(field, nan=0.0) >= distortion.ZONE_THRESHOLD).astype(np.uint8)
-        ring = np.ones((3, 3), np.uint8)
-        edge = cv2.dilate(inside, ring, borderType=cv2.BORDER_REPLICATE) & ~cv2.erode(
-            inside, ring, borderType=cv2.BORDER_REPLICATE)
-        return edge.astype(bool) & np.isfinite(field)
+        return _outline(field, distortion.ZONE_THRESHOLD)
 
     def position(self, r0: int, r1: int) -> np.ndarray:
         """3D point under each pixel, scan units (NaN outside). Shape (k, w, 3) float32."""
@@ -732,19 +726,58 @@ def _rollout_sidecar(flat_ply: Path, rollout_summary: dict | None = None) -> tup
     return (data if isinstance(data, dict) else {}), rollout_json
 
 
+def _face_marks(listed, n_faces: int) -> np.ndarray:
+    """A per-face indicator (n_faces,) float64 of the face indices ``listed`` in a sidecar;
+    empty when the list is empty, not a list of whole numbers or out of range."""
+    if not isinstance(listed, list) or not all(isinstance(f, int) and not isinstance(f, bool) for f in listed):
+        return np.zeros(0)
+    listed = np.asarray(listed, dtype=np.int64)
+    if not len(listed) or listed.min() < 0 or listed.max() >= n_faces:
+        return np.zeros(0)
+    marks = np.zeros(n_faces)
+    marks[listed] = 1.0
+    return marks
+
+
 def _attachment_roots(sidecar: dict, n_faces: int) -> np.ndarray:
     """Faces where the rollout left out an attachment, from ``NAME.rollout.json``: a per-face
     indicator (n_faces,) float64, empty when there is nothing to show."""
     att = sidecar.get("attachments")
-    roots = att.get("root_faces") if isinstance(att, dict) else None
-    if not isinstance(roots, list) or not all(isinstance(r, int) and not isinstance(r, bool) for r in roots):
+    if not isinstance(att, dict) or att.get("kept"):
         return np.zeros(0)
-    roots = np.asarray(roots, dtype=np.int64)
-    if att.get("kept") or not len(roots) or roots.min() < 0 or roots.max() >= n_faces:
-        return np.zeros(0)
-    marks = np.zeros(n_faces)
-    marks[roots] = 1.0
-    return marks
+    return _face_marks(att.get("root_faces"), n_faces)
+
+
+def _folded_faces(sidecar: dict, n_faces: int) -> np.ndarray:
+    """Faces where the scan folds over itself in 3D (``folded.face_indices`` of
+    ``NAME.rollout.json``): a per-face indicator (n_faces,) float64, empty when none."""
+    folded = sidecar.get("folded")
+    return _face_marks(folded.get("face_indices") if isinstance(folded, dict) else None, n_faces)
+
+
+#: Colour (RGBA) of the outline and hatching of the places where the scan folds over itself in 3D.
+FOLDED_COLOUR = (255, 0, 255, 255)
+#: Spacing (pixels) of the hatching's diagonal lines.
+FOLDED_HATCH_PX = 6
+
+
+def _outline(field: np.ndarray, threshold: float) -> np.ndarray:
+    """Pixels (k, w) bool on the outline of where ``field`` (k, w, NaN outside) is at least ``threshold``."""
+    import cv2
+
+    inside = (np.nan_to_num(field, nan=0.0) >= threshold).astype(np.uint8)
+    ring = np.ones((3, 3), np.uint8)
+    edge = cv2.dilate(inside, ring, borderType=cv2.BORDER_REPLICATE) & ~cv2.erode(
+        inside, ring, borderType=cv2.BORDER_REPLICATE)
+    return edge.astype(bool) & np.isfinite(field)
+
+
+def _folded_hatch(share: np.ndarray, r0: int) -> np.ndarray:
+    """Pixels (k, w) bool marking where the scan folds in 3D: the outline of the faces'
+    footprint (their share crossing one half) and diagonal hatching inside it."""
+    rows, cols = np.indices(share.shape)
+    hatch = (np.nan_to_num(share, nan=0.0) >= 0.5) & ((rows + r0 + cols) % FOLDED_HATCH_PX == 0)
+    return _outline(share, 0.5) | hatch
 
 
 def _repeated_faces(sidecar: dict, n_faces: int) -> np.ndarray:
@@ -908,6 +941,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     sidecar, rollout_json = _rollout_sidecar(flat_ply, rollout_summary)
     attachment_marks = _attachment_roots(sidecar, len(flat.mesh.faces))
     repeated = _repeated_faces(sidecar, len(flat.mesh.faces))
+    folded = _folded_faces(sidecar, len(flat.mesh.faces))
     ppm = options.resolution
     r = _Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels)
     g = r.grid
@@ -916,11 +950,15 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
         r.face_values["attachments"] = attachment_marks
     if len(repeated):
         r.face_values["repeated"] = repeated
+    if len(folded):
+        r.face_values["folded"] = folded
     paths: dict[str, Path] = {"png": out_dir / f"{name}.png"}
     scales = {m: annotate.map_scale(m, r.vertex_length_error if m == "stress" else r.face_values[m])
               for m in options.maps}
     if flat.importance is not None:
         scales = {m: replace(sc, label=f"{sc.label}; white line: painted zone") for m, sc in scales.items()}
+    if len(folded):
+        scales = {m: replace(sc, label=f"{sc.label}; hatched: folded scan") for m, sc in scales.items()}
     legends = {m: annotate.legend_band(scales[m], g.width) for m in options.maps}
     if "stress" in options.maps:
         legends["overlay"] = legends["stress"]
@@ -948,11 +986,14 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
                 rgba[_repeat_line(r.scalar("repeated", r0, r1), r0)] = REPEAT_COLOUR
             png.write(rgba if on_image is None else annotate.over(on_image.rows(r0, r1), rgba))
             outline = r.zone_outline(r0, r1) if options.maps else None
+            hatch = _folded_hatch(r.scalar("folded", r0, r1), r0) if options.maps and len(folded) else None
             for m in options.maps:
                 values = r.scalar(m, r0, r1)
-                writers[m].write(annotate.draw_outline(annotate.colorize(values, scales[m], cov), outline))
+                rows = annotate.draw_outline(annotate.colorize(values, scales[m], cov), outline)
+                writers[m].write(annotate.draw_outline(rows, hatch, FOLDED_COLOUR))
                 if m == "stress":
-                    writers["overlay"].write(annotate.draw_outline(annotate.overlay(rgb, values, scales[m], cov), outline))
+                    rows = annotate.draw_outline(annotate.overlay(rgb, values, scales[m], cov), outline)
+                    writers["overlay"].write(annotate.draw_outline(rows, hatch, FOLDED_COLOUR))
             layer_png.write(layer.rows(r0, r1))
             if len(attachment_marks):
                 mask_png.write(_attachment_rows(r.scalar("attachments", r0, r1)))
@@ -986,6 +1027,10 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
         "overlap": None if not len(repeated) else {
             "deg": sidecar["region"].get("overlap_deg"), "repeated_faces": int(repeated.sum()),
             "mark": f"dashed line {REPEAT_COLOUR[:3]} where the repeat past 360 degrees starts"},
+        "folded": None if not len(folded) else {
+            **{k: sidecar["folded"].get(k) for k in ("faces", "area_mm2", "percent_of_surface", "regions_total")},
+            "mark": f"outlined and hatched {FOLDED_COLOUR[:3]} on the distortion maps and the overlay: where the scan "
+                    "folds over itself in 3D (see NAME.rollout.json, folded)"},
         "scale_bar_mm": layer.bar_mm,
         "scale_on_image": None if on_image is None else {
             "bar_mm": on_image.bar_mm, "at_px": list(on_image.at), "box_px": list(on_image.box_size),

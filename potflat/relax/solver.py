@@ -736,8 +736,8 @@ def _dynamics(sp: _Springs, x: np.ndarray, settings: dict, run: _Run, levels_out
         hist.append(e)
         if not np.isfinite(e):  # NaN or overflowing positions make the energy non-finite
             raise FoldedResultError(f"the paper dynamics diverged at iteration {it} (the spring energy is no longer "
-                                    "finite); nothing written: use a fold-free preset (standard) or a smaller "
-                                    "--stiffness")
+                                    "finite); nothing written: use a fold-free preset (--preset standard; a "
+                                    "smaller --stiffness does not help: the step scales with it)")
         if run.record(e):
             break
         if it % WINDOW_DYNAMICS == 0 and _relative_change(hist, WINDOW_DYNAMICS) < settings["tol"]:
@@ -793,7 +793,7 @@ def _fold_free_start(sp: _Springs, x: np.ndarray, n_bad: int, notes: list[str]) 
     if np.abs(areas[areas < 0]).sum() > np.abs(areas[areas > 0]).sum():
         raise FoldedResultError(
             "the rollout is mirrored (most of its area faces the other way): it shows the surface from the wrong "
-            "side; run the rollout again (--side inner for a vessel's inside)")
+            "side; nothing written: make it again with potflat rollout (--side inner for a vessel's inside)")
     faces = sp.faces.astype(np.int64)
     y, repaired, left = repair_folds(faces, x)
     if not left:
@@ -804,8 +804,9 @@ def _fold_free_start(sp: _Springs, x: np.ndarray, n_bad: int, notes: list[str]) 
     if disc is None or (sp.signed_areas(disc) <= 0).any():
         raise FoldedResultError(
             f"the rollout has {left} folded triangles that no fold-free layout of this mesh removes: it is not a "
-            "disk (a closed part, or faces joined at a single edge by three or more); run the rollout with "
-            "--band or --angles to leave that part out, or clean the scan (remove the duplicated sheet)")
+            "disk (a handle kept with the wall, a closed part, or faces joined at a single edge by three or more); "
+            "nothing written: run the rollout without --keep-attachments, or with --band LO HI leaving that part "
+            "out (folded.regions[].band in the rollout's JSON: where the folds are, as --band fractions)")
     notes.append(f"the rollout had {n_bad} flipped or degenerate triangles and {left} stayed folded after a local "
                  "repair; relaxed from Tutte's embedding of the whole mesh into a disc, then turned to the rollout's "
                  "orientation")
@@ -1061,7 +1062,7 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
     if fold_free and (flipped or overlap or not finite):
         raise FoldedResultError(
             f"relaxation ended with {flipped} flipped triangles and {overlap} boundary crossings; "
-            "nothing written: report this mesh, or try --preset preview")
+            "nothing written: this is a bug in potflat, please report it with the rollout file")
     if not finite:
         raise FoldedResultError("the paper dynamics diverged (positions no longer finite); nothing written: use a "
                                 "fold-free preset (standard)")
@@ -1203,6 +1204,9 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         for key in ("axis", "proxy", "units"):
             if key in rj:
                 summary[key] = rj[key]
+        folded = rj.get("folded")
+        if isinstance(folded, dict):  # where the scan folds in 3D: the figures, the faces stay in the rollout's JSON
+            summary["folded"] = {k: v for k, v in folded.items() if k != "face_indices"}
     inputs = [rollout_ply] + ([rollout_json] if rollout_json.exists() else [])
     summary["provenance"] = provenance(stage="relax", inputs=inputs, options=asdict(options))
     comments = (f"potflat relax preset {result.preset}",)

@@ -35,6 +35,7 @@ from potflat.rollout import proxy as _proxy
 from potflat.mesh._kernels import union_find
 from potflat.mesh.embedding import signed_areas
 from potflat.rollout.attachments import AttachmentSelection, detect_attachments
+from potflat.rollout.folds import ScanFolds, fold_masks, scan_folds
 from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
 from potflat.mesh.distortion import DistortionSummary, face_areas, row_blocks, summarize
 from potflat.errors import InvalidInputError, InvalidOptionError
@@ -166,6 +167,9 @@ class RolloutResult:
         are measured from: the seam, or the origin of ``angles``.
     landmark_notes : tuple of str
         What was used where a named landmark is missing.
+    folds : ScanFolds or None
+        Where the scan folds over itself in 3D (creases, flaps, duplicated sheets;
+        :mod:`potflat.rollout.folds`).
     """
 
     flat: FlatMesh
@@ -194,6 +198,7 @@ class RolloutResult:
     landmark_notes: tuple = ()
     importance: _importance.Importance | None = None
     timings: dict = field(default_factory=dict)
+    folds: ScanFolds | None = None
 
     @property
     def side(self) -> str:
@@ -479,6 +484,11 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         else:
             un = _without(un, ~fold)
     clock.lap("unroll")
+    # where the scan folds in 3D, judged on the development before untangling, kept per scan face
+    facing_in, overlapping = (np.zeros(len(F), bool) for _ in range(2))
+    for scan_mask, mask in zip((facing_in, overlapping), fold_masks(un.flat.mesh.faces, un.flat.uv)):
+        scan_mask[un.face_index[mask]] = True
+    clock.lap("folds")
     uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv)
     for _ in range(TRIM_ROUNDS):  # folds pushed against the border by untangling are trimmed
         fold = border_folds(un.flat.mesh.faces, uv, area[un.face_index])
@@ -515,6 +525,10 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
     clock.lap("checks")
     importance = _find_importance(flat, options, axis, theta_deg)
     clock.lap("importance")
+    folds = scan_folds(cut.vertices, cut.faces, facing_in[un.face_index], overlapping[un.face_index],
+                       height=axis.cylindrical(cut.vertices)[0], vessel_height=axis.height, angle_deg=theta_deg,
+                       mm_per_unit=mesh.mm_per_unit)
+    clock.lap("folds")
     return RolloutResult(
         flat=flat.replace(importance=importance.values), importance=importance, axis=axis, proxy=un.proxy,
         seam_angle=float(math.degrees(un.seam) % 360.0), seam_method=un.seam_method, region=region,
@@ -525,7 +539,7 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         untangled_faces=n_untangled, untangled_vertices=moved, boundary_overlap=overlap,
         other_objects_faces=int(other_objects.sum()), landmark=landmark,
         theta_origin=float(math.degrees(un.origin) % 360.0), landmark_notes=tuple(landmark_notes),
-        timings=clock.total())
+        timings=clock.total(), folds=folds)
 
 
 @dataclass(frozen=True, eq=False)
@@ -1049,6 +1063,7 @@ def rollout_summary(result: RolloutResult) -> dict:
         "attachments": _attachments_summary(result),
         "trimmed": _trimmed_summary(result, mesh.mm_per_unit),
         "notes": _notes(result),
+        "folded": result.folds.as_dict() if result.folds is not None else None,
         "untangled": {"faces": result.untangled_faces, "vertices_moved": result.untangled_vertices,
                       "reason": "faces folded inside the development by the scan's own creases and "
                                 "slivers, unfolded by moving their vertices to their neighbours' mean"},
@@ -1079,9 +1094,14 @@ def _notes(result: RolloutResult) -> list[str]:
             why = (" (they face the other way: the two sides of the wall were not told apart"
                    + (", the scan's faces were read as pointing inwards" if result.walls.normals_inverted else "")
                    + "; check the axis (--axis) or try --side inner)")
-        notes.append(f"{result.distortion.flipped} faces stay flipped{why}; the relax stage will refuse them")
+        notes.append(f"{result.distortion.flipped} faces stay flipped{why}; the relax stage starts from a fold-free "
+                     "layout (it refuses only a mesh that is not a disk)")
+    folded = result.folds.note() if result.folds is not None else None
+    if folded:
+        notes.append(folded)
     if result.boundary_overlap:
-        notes.append(f"the border overlaps itself at {result.boundary_overlap} places; the relax stage will refuse it")
+        notes.append(f"the border overlaps itself at {result.boundary_overlap} places; the relax stage unfolds it "
+                     "(and refuses a result that still overlaps)")
     if result.other_objects_faces:
         notes.append(f"{result.other_objects_faces} faces of separate objects that do not share the vessel's axis "
                      "(another vessel or fragment in the same file) were left out; split the file or give --axis")

@@ -480,9 +480,11 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
     chosen = labels == want
     if not chosen.any():
         where = f" {mesh.source}" if mesh.source else ""
+        other = "inner" if side == "outer" else "outer"
+        facing = "face the axis" if side == "outer" else "face away from the axis"
         raise InvalidInputError(
-            f"the scan{where} has no inner wall (its faces all face away from the axis); use side='outer'"
-        )
+            f"the scan{where} has no {side} wall (its faces all {facing}); unroll its {other} side "
+            f"(--side {other}, side='{other}')")
     candidates = chosen if exclude is None else chosen & ~exclude
     mask = _largest_region(candidates, fr.graph, fr.area) if candidates.any() else candidates
     adj = fr.adjacency
