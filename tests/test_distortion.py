@@ -1,6 +1,14 @@
 import numpy as np
 
-from potflat.mesh.distortion import face_distortion, summarize, vertex_stress
+from potflat.mesh.distortion import (
+    SurfaceReference,
+    edge_length_error,
+    face_distortion,
+    summarize,
+    unique_edges,
+    vertex_length_error,
+    vertex_stress,
+)
 
 
 def _grid(nx=4, ny=3):
@@ -54,3 +62,59 @@ def test_stress_is_unit_independent():
     in_m = vertex_stress(V / 1000, uv / 1000, F, mm_per_unit=1000.0)
     np.testing.assert_allclose(in_mm, in_m, rtol=1e-12)
     assert vertex_stress(V, V[:, :2], F).max() == 0
+
+
+def _face_distortion_reference(V, uv, F):
+    """The numpy formulation the kernels replaced (per face, vectorised)."""
+    area_3d = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    valid = area_3d > 1e-12 * max(area_3d.mean(), np.finfo(float).tiny)
+    d1, d2 = V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]
+    len1 = np.linalg.norm(d1, axis=1)
+    len1s = np.where(valid & (len1 > 0), len1, 1.0)
+    q2x = np.einsum("ij,ij->i", d2, d1 / len1s[:, None])
+    q2y = np.where(valid, 2.0 * area_3d / len1s, 1.0)
+    w1, w2 = uv[F[:, 1]] - uv[F[:, 0]], uv[F[:, 2]] - uv[F[:, 0]]
+    area_2d = 0.5 * (w1[:, 0] * w2[:, 1] - w1[:, 1] * w2[:, 0])
+    inv11, inv12, inv22 = 1.0 / len1s, -q2x / (len1s * q2y), 1.0 / q2y
+    a, c = w1[:, 0] * inv11, w1[:, 1] * inv11
+    b, d = w1[:, 0] * inv12 + w2[:, 0] * inv22, w1[:, 1] * inv12 + w2[:, 1] * inv22
+    q, r = np.hypot(0.5 * (a + d), 0.5 * (c - b)), np.hypot(0.5 * (a - d), 0.5 * (c + b))
+    return area_3d, area_2d, (q + r) * valid, (q - r) * valid, valid
+
+
+def test_face_kernels_match_numpy_reference():
+    rng = np.random.default_rng(3)
+    V, F = _grid(7, 6)
+    V = V + rng.normal(scale=0.2, size=V.shape)
+    V[F[4, 1]] = V[F[4, 0]]  # a degenerate face
+    uv = V[:, :2] * [1.3, 0.7] + rng.normal(scale=0.1, size=(len(V), 2))
+    uv[F[9, 2]] = uv[F[9, 1]]  # a collapsed flat face
+    fd = face_distortion(V, uv, F)
+    for got, want in zip((fd.area_3d, fd.area_2d, fd.sigma_max, fd.sigma_min, fd.valid),
+                         _face_distortion_reference(V, uv, F)):
+        np.testing.assert_array_equal(got, want)
+    assert not fd.valid[4] and fd.area_2d[9] == 0
+
+
+def test_edge_kernels_and_shared_reference_match_numpy():
+    rng = np.random.default_rng(4)
+    V, F = _grid(6, 5)
+    V = V + rng.normal(scale=0.2, size=V.shape)
+    uv = V[:, :2] * [1.2, 0.9]
+    edges = unique_edges(F)
+    l3 = np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1)
+    l2 = np.linalg.norm(uv[edges[:, 0]] - uv[edges[:, 1]], axis=1)
+    np.testing.assert_array_equal(edge_length_error(V, uv, edges), (l2 - l3) / l3)
+    reference = SurfaceReference(V, F)
+    for flat in (uv, uv * 0.5, uv[:, ::-1].copy()):  # one reference, several flattenings
+        assert reference.summarize(flat) == summarize(V, flat, F)
+        np.testing.assert_array_equal(reference.vertex_stress(flat, 2.0), vertex_stress(V, flat, F, 2.0))
+        np.testing.assert_array_equal(reference.vertex_length_error(flat), vertex_length_error(V, flat, F))
+    ref_stress = np.zeros(len(V))
+    num, den = np.zeros(len(V)), np.zeros(len(V))
+    for (i, j), a, b in zip(edges, l3, l2):
+        for v in (i, j):
+            num[v] += (b - a) ** 2
+            den[v] += a
+    ref_stress = np.sqrt(num / den)
+    np.testing.assert_allclose(vertex_stress(V, uv, F), ref_stress, rtol=1e-12)

@@ -364,15 +364,17 @@ class Renderer:
         self.grid = _make_grid(flat, px_per_mm, max_megapixels)
         g = self.grid
         if distortion_maps:  # first: their temporaries come and go before the texture is loaded
-            self.summary = distortion.summarize(mesh.vertices, flat.uv, self.faces)
-            fd = distortion.face_distortion(mesh.vertices, flat.uv, self.faces)
+            reference = distortion.SurfaceReference(mesh.vertices, self.faces)  # the 3D side once
+            self.summary = reference.summarize(flat.uv)
+            fd = reference.face_distortion(flat.uv)
             self.area_3d, self.area_2d, self.valid = fd.area_3d, fd.area_2d, fd.valid
             self.face_values = {"area": fd.log_area_ratio, "anisotropy": np.minimum(fd.anisotropy, 1e6)}
             del fd
-            self.vertex_stress = flat.stress if flat.stress is not None else distortion.vertex_stress(
-                mesh.vertices, flat.uv, self.faces, mesh.mm_per_unit)
+            self.vertex_stress = flat.stress if flat.stress is not None else reference.vertex_stress(
+                flat.uv, mesh.mm_per_unit)
             # the stress map shows it in words people read: % length error around each point
-            self.vertex_length_error = distortion.vertex_length_error(mesh.vertices, flat.uv, self.faces)
+            self.vertex_length_error = reference.vertex_length_error(flat.uv)
+            del reference
         pix = np.empty_like(flat.uv)
         pix[:, 0] = (flat.uv[:, 0] - g.origin[0]) * g.scale
         pix[:, 1] = (g.origin[1] - flat.uv[:, 1]) * g.scale

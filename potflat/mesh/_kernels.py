@@ -625,6 +625,112 @@ def face_geometry(V, F):
     return cross, area2, longest2, centroid
 
 
+@parallel
+def face_frames(V, F, area_3d, valid):
+    """Each face's 3D frame for the distortion figures: the inverse of its edge matrix in a
+    frame of its plane.
+
+    With ``d1 = p1 - p0``, ``d2 = p2 - p0``, ``e1 = d1 / |d1|`` the face is
+    ``Q = [[|d1|, d2 . e1], [0, 2 A / |d1|]]``; the flat map's Jacobian is ``W Q^-1``.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+    F : (m, 3) int64
+    area_3d : (m,) float64
+        3D face areas.
+    valid : (m,) bool
+        Non-degenerate faces.
+
+    Returns
+    -------
+    (m, 4) float64
+        ``Q^-1``'s entries ``(1,1), (1,2), (2,2)`` and 1.0 for a valid face (0.0 else); a
+        degenerate face gets the frame of ``Q = I``-like placeholders (its figures are masked).
+    """
+    m = F.shape[0]
+    out = np.empty((m, 4))
+    for f in prange(m):
+        a = F[f, 0]
+        b = F[f, 1]
+        c = F[f, 2]
+        d1x = V[b, 0] - V[a, 0]
+        d1y = V[b, 1] - V[a, 1]
+        d1z = V[b, 2] - V[a, 2]
+        d2x = V[c, 0] - V[a, 0]
+        d2y = V[c, 1] - V[a, 1]
+        d2z = V[c, 2] - V[a, 2]
+        len1 = np.sqrt(d1x * d1x + d1y * d1y + d1z * d1z)
+        ok = valid[f]
+        len1s = len1 if (ok and len1 > 0) else 1.0
+        # summed in the order numpy's einsum("ij,ij->i") uses for rows of 3 (x, z, then y): the
+        # figures stay bit-identical to the former numpy implementation
+        q2x = (d2x * (d1x / len1s) + d2z * (d1z / len1s)) + d2y * (d1y / len1s)
+        q2y = 2.0 * area_3d[f] / len1s if ok else 1.0
+        out[f, 0] = 1.0 / len1s
+        out[f, 1] = -q2x / (len1s * q2y)
+        out[f, 2] = 1.0 / q2y
+        out[f, 3] = 1.0 if ok else 0.0
+    return out
+
+
+@parallel
+def flat_face_maps(uv, F, frames):
+    """Signed flat area and singular values of each face's 3D-to-flat map.
+
+    Parameters
+    ----------
+    uv : (n, 2) float64
+    F : (m, 3) int64
+    frames : (m, 4) float64
+        From :func:`face_frames`.
+
+    Returns
+    -------
+    area_2d, sigma_max, sigma_min : (m,) float64
+        ``sigma_min`` negative when the face is mirrored; both 0 for a degenerate face.
+    """
+    m = F.shape[0]
+    area_2d = np.empty(m)
+    sigma_max = np.empty(m)
+    sigma_min = np.empty(m)
+    for f in prange(m):
+        p = F[f, 0]
+        w1x = uv[F[f, 1], 0] - uv[p, 0]
+        w1y = uv[F[f, 1], 1] - uv[p, 1]
+        w2x = uv[F[f, 2], 0] - uv[p, 0]
+        w2y = uv[F[f, 2], 1] - uv[p, 1]
+        area_2d[f] = 0.5 * (w1x * w2y - w1y * w2x)
+        inv11 = frames[f, 0]
+        inv12 = frames[f, 1]
+        inv22 = frames[f, 2]
+        a = w1x * inv11
+        b = w1x * inv12 + w2x * inv22
+        c = w1y * inv11
+        d = w1y * inv12 + w2y * inv22
+        # stable closed-form 2x2 SVD: sigma = hypot(E, H) +- hypot(F, G)
+        q = np.hypot(0.5 * (a + d), 0.5 * (c - b))
+        r = np.hypot(0.5 * (a - d), 0.5 * (c + b))
+        sigma_max[f] = (q + r) * frames[f, 3]
+        sigma_min[f] = (q - r) * frames[f, 3]
+    return area_2d, sigma_max, sigma_min
+
+
+@parallel
+def edge_lengths(P, E):
+    """Length of each edge ``E`` (e, 2) int64 between points ``P`` (n, d) float64. Shape (e,)."""
+    k = E.shape[0]
+    d = P.shape[1]
+    out = np.empty(k)
+    for i in prange(k):
+        s = 0.0
+        for j in range(d):
+            x = P[E[i, 0], j] - P[E[i, 1], j]
+            s += x * x
+        out[i] = np.sqrt(s)
+    return out
+
+
 @leaf
 def _strictly_inside(px, py, ax, ay, bx, by, cx, cy):
     """Whether (px, py) lies strictly inside the triangle a b c, either orientation."""

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -104,9 +105,6 @@ def percent_from_log(mean_abs_log: float) -> float:
 def face_distortion(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> FaceDistortion:
     """Per-face distortion of the map from ``vertices`` to ``uv``.
 
-    Computed in blocks of :data:`BLOCK` faces, so the temporaries stay small on big
-    meshes (every figure is per face; the result does not depend on the blocks).
-
     Parameters
     ----------
     vertices : (n, 3) float64
@@ -120,35 +118,109 @@ def face_distortion(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> 
     -------
     FaceDistortion
     """
-    m = len(faces)
-    area_3d = face_areas(vertices, faces)
-    mean_area = area_3d.mean() if m else 0.0
-    valid = area_3d > DEGENERATE_AREA_FRACTION * max(mean_area, np.finfo(float).tiny)
-    area_2d, sigma_max, sigma_min = np.empty(m), np.empty(m), np.empty(m)
-    for s in row_blocks(m):
-        f, v = faces[s], valid[s]
-        d1, d2 = _edge_vectors(vertices, f)
-        len1 = np.linalg.norm(d1, axis=1)
-        safe = np.where(v, 1.0, 0.0)
-        len1s = np.where(v & (len1 > 0), len1, 1.0)
-        e1 = d1 / len1s[:, None]
-        q2x = np.einsum("ij,ij->i", d2, e1)
-        q2y = np.where(v, 2.0 * area_3d[s] / len1s, 1.0)
-        w1, w2 = _edge_vectors(uv, f)
-        area_2d[s] = 0.5 * (w1[:, 0] * w2[:, 1] - w1[:, 1] * w2[:, 0])
-        # J = W Q^-1 with Q = [[len1, q2x], [0, q2y]]
-        inv11, inv12, inv22 = 1.0 / len1s, -q2x / (len1s * q2y), 1.0 / q2y
-        a = w1[:, 0] * inv11
-        b = w1[:, 0] * inv12 + w2[:, 0] * inv22
-        c = w1[:, 1] * inv11
-        d = w1[:, 1] * inv12 + w2[:, 1] * inv22
-        # stable closed-form 2x2 SVD: sigma = hypot(E, H) +- hypot(F, G); the smaller one is
-        # signed (negative when the map reverses orientation)
-        q = np.hypot(0.5 * (a + d), 0.5 * (c - b))
-        r = np.hypot(0.5 * (a - d), 0.5 * (c + b))
-        sigma_max[s] = (q + r) * safe
-        sigma_min[s] = (q - r) * safe
-    return FaceDistortion(area_3d, area_2d, sigma_max, sigma_min, valid)
+    return SurfaceReference(vertices, faces).face_distortion(uv)
+
+
+class SurfaceReference:
+    """The 3D side of the distortion figures of one triangle set, computed once and reused
+    for every flattening of it (the proxy candidates of a rollout, before and after relax).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        3D positions.
+    faces : (m, 3) int64
+        Triangles, counter-clockwise seen from outside.
+    """
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+        self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+        self.faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+
+    @cached_property
+    def area_3d(self) -> np.ndarray:
+        """3D face areas. Shape (m,) float64."""
+        return face_areas(self.vertices, self.faces)
+
+    @cached_property
+    def valid(self) -> np.ndarray:
+        """Non-degenerate faces (3D area above :data:`DEGENERATE_AREA_FRACTION` of the mean). Shape (m,) bool."""
+        mean_area = self.area_3d.mean() if len(self.faces) else 0.0
+        return self.area_3d > DEGENERATE_AREA_FRACTION * max(mean_area, np.finfo(float).tiny)
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """The undirected mesh edges (:func:`unique_edges`). Shape (e, 2) int64."""
+        return unique_edges(self.faces)
+
+    @cached_property
+    def edge_length_3d(self) -> np.ndarray:
+        """3D length of each of :attr:`edges`. Shape (e,) float64."""
+        from potflat.mesh._kernels import edge_lengths
+
+        return edge_lengths(self.vertices, self.edges)
+
+    @cached_property
+    def _frames(self) -> np.ndarray:
+        from potflat.mesh._kernels import face_frames
+
+        return face_frames(self.vertices, self.faces, self.area_3d, self.valid)
+
+    def _flat_lengths(self, uv: np.ndarray) -> np.ndarray:
+        from potflat.mesh._kernels import edge_lengths
+
+        return edge_lengths(np.ascontiguousarray(uv, dtype=np.float64), self.edges)
+
+    def face_distortion(self, uv: np.ndarray) -> FaceDistortion:
+        """Per-face distortion of the map to ``uv`` ((n, 2) float64)."""
+        from potflat.mesh._kernels import flat_face_maps
+
+        area_2d, sigma_max, sigma_min = flat_face_maps(np.ascontiguousarray(uv, dtype=np.float64),
+                                                       self.faces, self._frames)
+        return FaceDistortion(self.area_3d, area_2d, sigma_max, sigma_min, self.valid)
+
+    def edge_length_error(self, uv: np.ndarray) -> np.ndarray:
+        """Relative edge-length error per edge of :attr:`edges` (as :func:`edge_length_error`). Shape (e,)."""
+        return _relative_error(self._flat_lengths(uv), self.edge_length_3d)
+
+    def vertex_stress(self, uv: np.ndarray, mm_per_unit: float = 1.0) -> np.ndarray:
+        """:func:`vertex_stress` of the map to ``uv``. Shape (n,) float64."""
+        r = self.edge_length_3d * mm_per_unit
+        l = self._flat_lengths(uv) * mm_per_unit
+        return _vertex_root_ratio(self.edges, (l - r) ** 2, r, len(self.vertices))
+
+    def vertex_length_error(self, uv: np.ndarray) -> np.ndarray:
+        """:func:`vertex_length_error` of the map to ``uv``. Shape (n,) float64."""
+        if not len(self.edges):
+            return np.zeros(len(self.vertices))
+        return 100.0 * _vertex_root_ratio(self.edges, self.edge_length_error(uv) ** 2, np.ones(len(self.edges)),
+                                          len(self.vertices))
+
+    def summarize(self, uv: np.ndarray) -> DistortionSummary:
+        """Scalar distortion figures of the map to ``uv`` ((n, 2) float64; see module docs)."""
+        fd = self.face_distortion(uv)
+        err = self.edge_length_error(uv) if len(self.faces) else np.zeros(1)
+        v = fd.valid
+        w = fd.area_3d[v]
+        la = np.abs(fd.log_area_ratio[v])
+        an = fd.anisotropy[v]
+        if not v.any():
+            la = an = w = np.ones(1)
+        total3 = fd.area_3d[v].sum()
+        return DistortionSummary(
+            edge_rms=float(np.sqrt(np.mean(err**2))),
+            edge_max=float(np.max(np.abs(err))),
+            area_mean_abs_log=float(np.average(la, weights=w)),
+            area_p95_abs_log=float(np.percentile(la, 95)),
+            area_max_abs_log=float(np.max(la)),
+            anisotropy_mean=float(np.average(an, weights=w)) if np.isfinite(an).all() else float("inf"),
+            # no interpolation across infinite values (inf - inf is NaN): collapsed faces give inf
+            anisotropy_p95=float(np.percentile(an, 95, method="linear" if np.isfinite(an).all() else "higher")),
+            anisotropy_max=float(np.max(an)),
+            scale=float(fd.area_2d[v].sum() / total3) if total3 > 0 else 0.0,
+            flipped=int(np.count_nonzero(v & (fd.area_2d <= 0))),
+            degenerate=int(np.count_nonzero(~v)),
+        )
 
 
 def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -187,13 +259,18 @@ def unique_edges(faces: np.ndarray) -> np.ndarray:
 
 def edge_length_error(vertices: np.ndarray, uv: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """Relative edge-length error ``(l_2d - l_3d) / l_3d`` per edge (0 for zero-length edges). Shape (e,)."""
-    out = np.zeros(len(edges))
-    for s in row_blocks(len(edges)):
-        e = edges[s]
-        l3 = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)
-        l2 = np.linalg.norm(uv[e[:, 0]] - uv[e[:, 1]], axis=1)
-        ok = l3 > 0
-        out[s][ok] = (l2[ok] - l3[ok]) / l3[ok]
+    from potflat.mesh._kernels import edge_lengths
+
+    edges = np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2)
+    return _relative_error(edge_lengths(np.ascontiguousarray(uv, dtype=np.float64), edges),
+                           edge_lengths(np.ascontiguousarray(vertices, dtype=np.float64), edges))
+
+
+def _relative_error(l2: np.ndarray, l3: np.ndarray) -> np.ndarray:
+    """``(l2 - l3) / l3`` where ``l3 > 0``, else 0. Shape like ``l3``."""
+    out = np.zeros(len(l3))
+    ok = l3 > 0
+    out[ok] = (l2[ok] - l3[ok]) / l3[ok]
     return out
 
 
@@ -213,14 +290,7 @@ def vertex_stress(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, mm_pe
     (n,) float64
         0 for isolated vertices.
     """
-    edges = unique_edges(faces)
-    n = len(vertices)
-    r, l = np.empty(len(edges)), np.empty(len(edges))
-    for s in row_blocks(len(edges)):
-        e = edges[s]
-        r[s] = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1) * mm_per_unit
-        l[s] = np.linalg.norm(uv[e[:, 0]] - uv[e[:, 1]], axis=1) * mm_per_unit
-    return _vertex_root_ratio(edges, (l - r) ** 2, r, n)
+    return SurfaceReference(vertices, faces).vertex_stress(uv, mm_per_unit)
 
 
 def _vertex_root_ratio(edges: np.ndarray, num: np.ndarray, den: np.ndarray, n: int) -> np.ndarray:
@@ -250,38 +320,13 @@ def vertex_length_error(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray)
     (n,) float64
         0 for isolated vertices.
     """
-    edges = unique_edges(faces)
-    if not len(edges):
-        return np.zeros(len(vertices))
-    return 100.0 * _vertex_root_ratio(edges, edge_length_error(vertices, uv, edges) ** 2, np.ones(len(edges)),
-                                      len(vertices))
+    return SurfaceReference(vertices, faces).vertex_length_error(uv)
 
 
 def summarize(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> DistortionSummary:
-    """Scalar distortion figures of the map from ``vertices`` to ``uv`` (see module docs)."""
-    fd = face_distortion(vertices, uv, faces)
-    err = edge_length_error(vertices, uv, unique_edges(faces)) if len(faces) else np.zeros(1)
-    v = fd.valid
-    w = fd.area_3d[v]
-    la = np.abs(fd.log_area_ratio[v])
-    an = fd.anisotropy[v]
-    if not v.any():
-        la = an = w = np.ones(1)
-    total3 = fd.area_3d[v].sum()
-    return DistortionSummary(
-        edge_rms=float(np.sqrt(np.mean(err**2))),
-        edge_max=float(np.max(np.abs(err))),
-        area_mean_abs_log=float(np.average(la, weights=w)),
-        area_p95_abs_log=float(np.percentile(la, 95)),
-        area_max_abs_log=float(np.max(la)),
-        anisotropy_mean=float(np.average(an, weights=w)) if np.isfinite(an).all() else float("inf"),
-        # no interpolation across infinite values (inf - inf is NaN): collapsed faces give inf
-        anisotropy_p95=float(np.percentile(an, 95, method="linear" if np.isfinite(an).all() else "higher")),
-        anisotropy_max=float(np.max(an)),
-        scale=float(fd.area_2d[v].sum() / total3) if total3 > 0 else 0.0,
-        flipped=int(np.count_nonzero(v & (fd.area_2d <= 0))),
-        degenerate=int(np.count_nonzero(~v)),
-    )
+    """Scalar distortion figures of the map from ``vertices`` to ``uv`` (see module docs); to
+    compare several flattenings of one mesh, build one :class:`SurfaceReference`."""
+    return SurfaceReference(vertices, faces).summarize(uv)
 
 
 def summarize_flat(flat: FlatMesh) -> DistortionSummary:

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from potflat.mesh.distortion import DistortionSummary, summarize
+from potflat.mesh.distortion import DistortionSummary, SurfaceReference
 from potflat.mesh.tolerances import DEGENERATE
 
 #: Proxy kinds that are developments around the axis, simplest first (``auto`` chooses among them).
@@ -223,7 +223,7 @@ def choose(vertices: np.ndarray, faces: np.ndarray, h: np.ndarray, r: np.ndarray
            ) -> tuple[Proxy, np.ndarray, DistortionSummary]:
     """Fit every candidate proxy, unroll with each, and keep the least distorted.
 
-    The candidates are ranked by edge-length RMS (:func:`potflat.mesh.distortion.summarize`):
+    The candidates are ranked by edge-length RMS (:meth:`potflat.mesh.distortion.SurfaceReference.summarize`):
     among those within :data:`AUTO_TOLERANCE` of the best, the simplest (cylinder, cone,
     sphere, in that order) wins. Flipped triangles are reported with each candidate; they
     come from the scan (an inner wall, overhangs), not from the choice of a development.
@@ -249,12 +249,13 @@ def choose(vertices: np.ndarray, faces: np.ndarray, h: np.ndarray, r: np.ndarray
     summary : DistortionSummary
     """
     results = {}
+    reference = SurfaceReference(vertices, faces)  # the 3D side once for every candidate
     for kind in kinds:
         prox = fit(kind, h, r, theta, weights)
         uv = develop(prox, h, r, theta)
         if not np.isfinite(uv).all():
             continue
-        results[kind] = (prox, uv, summarize(vertices, uv, faces))
+        results[kind] = (prox, uv, reference.summarize(uv))
     best = min(s.edge_rms for _, _, s in results.values())
     pick = next(k for k in results if results[k][2].edge_rms <= AUTO_TOLERANCE * best + DEGENERATE)
     prox, uv, summ = results[pick]

@@ -34,7 +34,7 @@ import scipy.sparse as sp
 import trimesh
 from scipy.sparse.csgraph import connected_components, dijkstra
 
-from potflat.mesh.distortion import row_blocks
+from potflat.mesh._kernels import face_geometry
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.rollout.options import SIDES  # the sides select_wall accepts
 from potflat.types import Mesh
@@ -223,15 +223,12 @@ def face_frame(mesh: Mesh, axis_point: np.ndarray, axis_direction: np.ndarray, *
     """Compute :class:`FaceFrame` for a validated mesh and axis (``adjacency=False`` skips
     the face adjacency, which only the wall labelling needs)."""
     V, F = mesh.vertices, mesh.faces
-    m = len(F)
-    dbl, normal, centroid = np.empty(m), np.zeros((m, 3)), np.empty((m, 3))
-    for s in row_blocks(m):  # blocks of faces: no (m, 3, 3) temporaries
-        tri = V[F[s]]
-        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        dbl[s] = np.linalg.norm(cross, axis=1)
-        ok = dbl[s] > 0
-        normal[s][ok] = cross[ok] / dbl[s][ok, None]
-        centroid[s] = tri.mean(axis=1)
+    # one parallel pass over the faces; the cross products become the unit normals in place
+    normal, dbl, _, centroid = face_geometry(np.ascontiguousarray(V, dtype=np.float64),
+                                             np.ascontiguousarray(F, dtype=np.int64).reshape(-1, 3))
+    ok = dbl > 0
+    normal[ok] /= dbl[ok, None]
+    normal[~ok] = 0.0
     height, radius, radial = cylindrical(centroid, axis_point, axis_direction)
     if adjacency:
         pairs, edges = trimesh.graph.face_adjacency(faces=F, return_edges=True)
