@@ -213,3 +213,37 @@ def test_synthetic_vessels_if_available():
     part = v.face_part
     _assert_clean_split(outer, inner, part, [synthetic.PART_OUTER, synthetic.PART_BASE], [synthetic.PART_INNER])
     assert set(np.unique(outer.labels)) == {OUTER, INNER}
+
+
+def _face_adjacency_reference(F):
+    """Slow reference: faces on each undirected edge used by exactly two faces, the pairs
+    ordered by (larger, smaller) endpoint of the edge, lower face first."""
+    on_edge = {}
+    for f, tri in enumerate(F):
+        for k in range(3):
+            a, b = int(tri[k]), int(tri[(k + 1) % 3])
+            on_edge.setdefault((min(a, b), max(a, b)), []).append(f)
+    rows = sorted((e[1], e[0], min(fs), max(fs)) for e, fs in on_edge.items() if len(fs) == 2 and fs[0] != fs[1])
+    pairs = np.array([[r[2], r[3]] for r in rows], np.int64).reshape(-1, 2)
+    edges = np.array([[r[1], r[0]] for r in rows], np.int64).reshape(-1, 2)
+    return pairs, edges
+
+
+def test_face_adjacency_matches_reference_and_trimesh():
+    import trimesh
+
+    from potflat.rollout.walls import face_adjacency
+
+    rng = np.random.default_rng(3)
+    meshes = [np.asarray(vm.cup(n_theta=16)[1], np.int64)]
+    # random small meshes with non-manifold edges (three faces) and degenerate faces
+    for _ in range(20):
+        meshes.append(rng.integers(0, 9, size=(rng.integers(1, 30), 3)).astype(np.int64))
+    meshes.append(np.array([[0, 1, 2], [2, 1, 3], [1, 0, 4], [0, 0, 1]], np.int64))
+    for F in meshes:
+        pairs, edges = face_adjacency(F, return_edges=True)
+        ref_pairs, ref_edges = _face_adjacency_reference(F)
+        np.testing.assert_array_equal(pairs, ref_pairs)
+        np.testing.assert_array_equal(edges, ref_edges)
+        np.testing.assert_array_equal(face_adjacency(F), ref_pairs)
+        np.testing.assert_array_equal(pairs, np.asarray(trimesh.graph.face_adjacency(faces=F), np.int64).reshape(-1, 2))

@@ -533,6 +533,48 @@ def edge_table(F, n):
     return edge_of, edges, count, halves
 
 
+@leaf
+def face_pairs(edges, count, halves, n):
+    """Faces on each edge used by exactly two distinct faces, ordered by the edge's (larger,
+    smaller) endpoint: a stable counting sort of :func:`edge_table`'s edges by the larger one.
+
+    Parameters
+    ----------
+    edges, count, halves
+        From :func:`edge_table` (edges sorted by (smaller, larger) endpoint).
+    n : int
+        Number of vertices.
+
+    Returns
+    -------
+    pairs : (p, 2) int64
+        The two faces, lower first.
+    shared : (p, 2) int64
+        The shared edge's endpoints, smaller first.
+    """
+    ne = edges.shape[0]
+    start = np.zeros(n + 1, np.int64)
+    for e in range(ne):
+        if count[e] == 2 and halves[e, 0] // 3 != halves[e, 1] // 3:
+            start[edges[e, 1] + 1] += 1
+    for v in range(n):
+        start[v + 1] += start[v]
+    p = start[n]
+    pairs = np.empty((p, 2), np.int64)
+    shared = np.empty((p, 2), np.int64)
+    for e in range(ne):
+        f0 = halves[e, 0] // 3
+        f1 = halves[e, 1] // 3
+        if count[e] == 2 and f0 != f1:
+            k = start[edges[e, 1]]
+            start[edges[e, 1]] += 1
+            pairs[k, 0] = min(f0, f1)
+            pairs[k, 1] = max(f0, f1)
+            shared[k, 0] = edges[e, 0]
+            shared[k, 1] = edges[e, 1]
+    return pairs, shared
+
+
 @parallel
 def triangle_areas(V, F):
     """3D area of each face.

@@ -31,7 +31,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import trimesh
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from potflat.mesh._kernels import face_geometry
@@ -186,9 +185,32 @@ def unique_ints(x: np.ndarray, return_counts: bool = False):
     return u, np.diff(np.append(start, len(srt)))
 
 
-def face_adjacency(faces: np.ndarray) -> np.ndarray:
-    """Pairs ((p, 2) int64) of faces sharing an edge used by exactly two faces."""
-    return np.ascontiguousarray(trimesh.graph.face_adjacency(faces=faces), dtype=np.int64).reshape(-1, 2)
+def face_adjacency(faces: np.ndarray, return_edges: bool = False):
+    """Pairs of faces sharing an edge used by exactly two faces.
+
+    From the linear edge table (:func:`potflat.mesh._kernels.edge_table`), in the order and
+    form of ``trimesh.graph.face_adjacency`` (which this replaced: 0.3 s against 0.4-1.1 s at 2M faces):
+    pairs ordered by their edge's (larger, smaller) endpoint, each pair's lower face first.
+
+    Parameters
+    ----------
+    faces : (m, 3) int
+    return_edges : bool
+        Also return each pair's shared edge.
+
+    Returns
+    -------
+    pairs : (p, 2) int64
+    edges : (p, 2) int64
+        Only with ``return_edges``: endpoints of the shared edge, smaller first.
+    """
+    from potflat.mesh._kernels import edge_table, face_pairs  # Numba: imported on first use
+
+    F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    n = int(F.max()) + 1 if len(F) else 0
+    _, edges, count, halves = edge_table(F, n)
+    pairs, shared = face_pairs(edges, count, halves, n)
+    return (pairs, shared) if return_edges else pairs
 
 
 def cylindrical(points: np.ndarray, axis_point: np.ndarray, axis_direction: np.ndarray):
@@ -231,9 +253,7 @@ def face_frame(mesh: Mesh, axis_point: np.ndarray, axis_direction: np.ndarray, *
     normal[~ok] = 0.0
     height, radius, radial = cylindrical(centroid, axis_point, axis_direction)
     if adjacency:
-        pairs, edges = trimesh.graph.face_adjacency(faces=F, return_edges=True)
-        pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
-        edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+        pairs, edges = face_adjacency(F, return_edges=True)
         edge_length = np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1)
         graph = FaceGraph(len(F), pairs)
     else:
