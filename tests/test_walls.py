@@ -247,3 +247,21 @@ def test_face_adjacency_matches_reference_and_trimesh():
         np.testing.assert_array_equal(edges, ref_edges)
         np.testing.assert_array_equal(face_adjacency(F), ref_pairs)
         np.testing.assert_array_equal(pairs, np.asarray(trimesh.graph.face_adjacency(faces=F), np.int64).reshape(-1, 2))
+
+
+def test_face_graph_components_match_scipy():
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    from potflat.rollout.walls import FaceGraph, face_adjacency
+
+    rng = np.random.default_rng(5)
+    F = np.asarray(vm.cup(n_theta=16)[1], np.int64)
+    graph = FaceGraph(len(F), face_adjacency(F))
+    for mask in (None, rng.random(len(graph.pairs)) < 0.5, np.zeros(len(graph.pairs), bool)):
+        pairs = graph.pairs if mask is None else graph.pairs[mask]
+        A = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(F), len(F)))
+        _, ref = connected_components(A, directed=False)
+        comp = graph.components(mask)
+        assert comp.dtype == np.int64
+        np.testing.assert_array_equal(comp, ref)

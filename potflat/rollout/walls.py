@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.sparse.csgraph import dijkstra
 
 from potflat.mesh._kernels import face_geometry
 from potflat.errors import InvalidInputError, InvalidOptionError
@@ -162,10 +162,14 @@ class FaceGraph:
         return A
 
     def components(self, pair_mask: np.ndarray | None = None) -> np.ndarray:
-        """Connected-component label (m,) int64 of every face, over the pairs in ``pair_mask``."""
-        w = None if pair_mask is None else pair_mask.astype(np.float64)
-        _, comp = connected_components(self.matrix(w), directed=False)
-        return comp.astype(np.int64)
+        """Connected-component label (m,) int64 of every face, over the pairs in ``pair_mask``
+        (numbered in order of each component's lowest face, as scipy's connected_components)."""
+        from potflat.mesh._kernels import union_find  # Numba: imported on first use
+
+        pairs = self.pairs if pair_mask is None else self.pairs[np.asarray(pair_mask, dtype=bool)]
+        comp, _ = union_find(self.m, np.ascontiguousarray(pairs[:, 0], dtype=np.int64),
+                             np.ascontiguousarray(pairs[:, 1], dtype=np.int64))
+        return comp
 
 
 def unique_ints(x: np.ndarray, return_counts: bool = False):
