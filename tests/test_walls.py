@@ -265,3 +265,43 @@ def test_face_graph_components_match_scipy():
         comp = graph.components(mask)
         assert comp.dtype == np.int64
         np.testing.assert_array_equal(comp, ref)
+
+
+def test_weighted_quantiles_match_lexsort_reference():
+    from potflat.rollout.walls import weighted_quantiles
+
+    def reference(b, v, w, k, quantiles):
+        out = np.full((len(quantiles), k), np.nan)
+        for g in range(k):
+            sel = np.flatnonzero(b == g)
+            sel = sel[np.argsort(v[sel], kind="stable")]
+            cw = np.concatenate([[0.0], np.cumsum(w[sel])])
+            if cw[-1] <= 0:
+                continue
+            for qi, q in enumerate(quantiles):
+                i = np.searchsorted(cw, q * cw[-1], side="left") - 1
+                out[qi, g] = v[sel[min(max(i, 0), len(sel) - 1)]]
+        return out
+
+    rng = np.random.default_rng(7)
+    k = 6
+    b = rng.integers(0, k - 1, 300)  # the last group stays empty
+    v = np.round(rng.normal(size=300), 1)  # ties
+    w = rng.integers(1, 4, 300).astype(np.float64)
+    q = (0.1, 0.5, 0.9)
+    got = weighted_quantiles(b, v, w, k, q)
+    np.testing.assert_array_equal(got, reference(b, v, w, k, q))
+    assert np.isnan(got[:, -1]).all()
+    v[3] = np.nan  # NaN sorts last, as NumPy does
+    np.testing.assert_array_equal(weighted_quantiles(b, v, w, k, q), reference(b, v, w, k, q))
+
+
+def test_group_value_order_is_the_lexsort_permutation():
+    from potflat.mesh._kernels import group_value_order
+
+    rng = np.random.default_rng(8)
+    for s, k in ((0, 3), (1, 1), (500, 7), (500, 400)):
+        b = rng.integers(0, k, s).astype(np.int64)
+        v = np.round(rng.normal(size=s), 1)
+        v[::17] = -0.0  # equal to 0.0: a tie, kept in index order
+        np.testing.assert_array_equal(group_value_order(b, v, k), np.lexsort((v, b)))
