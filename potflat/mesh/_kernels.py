@@ -575,46 +575,6 @@ def face_pairs(edges, count, halves, n):
     return pairs, shared
 
 
-@leaf
-def group_value_order(group, value, k):
-    """The permutation of ``np.lexsort((value, group))`` (by group, then value, ties in
-    index order) by a counting sort of the groups and a stable sort inside each group.
-
-    Parameters
-    ----------
-    group : (s,) int64
-        In ``[0, k)``.
-    value : (s,) float64
-        Without NaN.
-    k : int
-        Number of groups.
-
-    Returns
-    -------
-    order : (s,) int64
-    """
-    s = group.shape[0]
-    start = np.zeros(k + 1, np.int64)
-    for i in range(s):
-        start[group[i] + 1] += 1
-    for g in range(k):
-        start[g + 1] += start[g]
-    fill = start[:-1].copy()
-    order = np.empty(s, np.int64)
-    for i in range(s):
-        order[fill[group[i]]] = i
-        fill[group[i]] += 1
-    for g in range(k):
-        a = start[g]
-        e = start[g + 1]
-        if e - a > 1:
-            idx = order[a:e].copy()
-            within = np.argsort(value[idx], kind="mergesort")
-            for j in range(e - a):
-                order[a + j] = idx[within[j]]
-    return order
-
-
 @parallel
 def triangle_areas(V, F):
     """3D area of each face.

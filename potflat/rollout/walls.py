@@ -369,13 +369,7 @@ def weighted_quantiles(b: np.ndarray, v: np.ndarray, w: np.ndarray, k: int, quan
     (len(quantiles), k) float64
         NaN for empty groups.
     """
-    from potflat.mesh._kernels import group_value_order  # Numba: imported on first use
-
-    b = np.ascontiguousarray(b, dtype=np.int64)
-    v = np.ascontiguousarray(v, dtype=np.float64)
-    # the same order as np.lexsort((v, b)) by a linear pass over the groups (Numba's sort
-    # does not place NaN as NumPy does: values with NaN keep the lexsort)
-    order = np.lexsort((v, b)) if np.isnan(v).any() else group_value_order(b, v, int(k))
+    order = np.lexsort((v, b))
     b, v, w = b[order], v[order], w[order]
     cw = np.concatenate([[0.0], np.cumsum(w)])
     start = np.searchsorted(b, np.arange(k), side="left")
