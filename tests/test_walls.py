@@ -265,3 +265,24 @@ def test_face_graph_components_match_scipy():
         comp = graph.components(mask)
         assert comp.dtype == np.int64
         np.testing.assert_array_equal(comp, ref)
+
+
+def test_cylindrical_matches_numpy_reference():
+    from potflat.rollout.walls import cylindrical
+
+    rng = np.random.default_rng(9)
+    points = rng.normal(size=(200, 3)) * 50.0
+    p = np.array([1.0, -2.0, 3.0])
+    a = np.array([0.3, -0.4, 0.866])
+    a /= np.linalg.norm(a)
+    points[0] = p  # on the axis: radius 0, radial 0
+    d = points - p
+    h_ref = d @ a
+    perp = d - h_ref[:, None] * a
+    r_ref = np.linalg.norm(perp, axis=1)
+    height, radius, radial = cylindrical(points, p, a)
+    np.testing.assert_array_equal(height, h_ref)
+    np.testing.assert_array_equal(radius, r_ref)
+    ok = r_ref > 0
+    np.testing.assert_array_equal(radial[ok], perp[ok] / r_ref[ok, None])
+    assert radius[0] == 0 and (radial[0] == 0).all()

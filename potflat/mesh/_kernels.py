@@ -575,6 +575,41 @@ def face_pairs(edges, count, halves, n):
     return pairs, shared
 
 
+@leaf
+def radial_parts(d, height, direction):
+    """Distance from an axis and unit radial direction of offsets from a point on it.
+
+    Parameters
+    ----------
+    d : (n, 3) float64
+        Offsets of the points from the axis point.
+    height : (n,) float64
+        ``d @ direction`` (computed by the caller, so that it is NumPy's own product).
+    direction : (3,) float64
+        Unit axis direction.
+
+    Returns
+    -------
+    radius : (n,) float64
+    radial : (n, 3) float64
+        Zero where the radius is zero.
+    """
+    n = d.shape[0]
+    radius = np.empty(n)
+    radial = np.zeros((n, 3))
+    for i in range(n):
+        q0 = d[i, 0] - height[i] * direction[0]
+        q1 = d[i, 1] - height[i] * direction[1]
+        q2 = d[i, 2] - height[i] * direction[2]
+        r = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
+        radius[i] = r
+        if r > 0:
+            radial[i, 0] = q0 / r
+            radial[i, 1] = q1 / r
+            radial[i, 2] = q2 / r
+    return radius, radial
+
+
 @parallel
 def triangle_areas(V, F):
     """3D area of each face.

@@ -234,13 +234,12 @@ def cylindrical(points: np.ndarray, axis_point: np.ndarray, axis_direction: np.n
     radial : (n, 3) float64
         Unit vectors pointing away from the axis (zero on the axis).
     """
-    d = points - axis_point
-    height = d @ axis_direction
-    perp = d - height[:, None] * axis_direction
-    radius = np.linalg.norm(perp, axis=1)
-    radial = np.zeros_like(perp)
-    ok = radius > 0
-    radial[ok] = perp[ok] / radius[ok, None]
+    from potflat.mesh._kernels import radial_parts  # Numba: imported on first use
+
+    direction = np.ascontiguousarray(axis_direction, dtype=np.float64)
+    d = np.ascontiguousarray(np.asarray(points, dtype=np.float64) - axis_point).reshape(-1, 3)
+    height = d @ direction
+    radius, radial = radial_parts(d, height, direction)
     return height, radius, radial
 
 
