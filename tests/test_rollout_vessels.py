@@ -9,10 +9,10 @@ from typer.testing import CliRunner
 
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.flat_ply import read_flat_ply
+from potflat.mesh.boundary import boundary_segments, edges_and_boundary
 from potflat.rollout.unroll import (
     RolloutOptions,
     border_folds,
-    boundary_segments,
     crossing_segments,
     rollout,
     signed_areas,
@@ -159,6 +159,12 @@ def test_border_folds_keeps_enclosed_folds_and_untangle_fixes_them():
     edge[q[0, 2]] += [0.0, 1.5]
     drop = border_folds(faces, edge, area)
     assert drop.any() and np.all(signed_areas(faces[~drop], edge) > 0)
+    # the caller's edge table (computed once for a face set) gives the same answers
+    table = edges_and_boundary(faces, 36)
+    np.testing.assert_array_equal(border_folds(faces, edge, area, table=table), drop)
+    again, n_again, moved_again = untangle(faces, folded, table=table)
+    np.testing.assert_array_equal(again, fixed)
+    assert (n_again, moved_again) == (n_bad, moved)
 
 
 def test_crossing_segments_against_brute_force():

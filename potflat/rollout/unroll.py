@@ -30,7 +30,7 @@ import scipy.sparse.csgraph
 from potflat import importance as _importance
 from potflat.rollout import proxy as _proxy
 from potflat.mesh._kernels import union_find
-from potflat.mesh.boundary import boundary_segments, crossing_pairs, edges_and_boundary
+from potflat.mesh.boundary import crossing_pairs, edges_and_boundary
 from potflat.mesh.embedding import signed_areas
 from potflat.rollout.attachments import AttachmentSelection, detect_attachments
 from potflat.rollout.folds import ScanFolds, fold_masks, scan_folds
@@ -472,10 +472,14 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
     landmark, landmark_notes = _find_landmark(mesh, axis, options, attachments, allowed, band, h_c, theta_c, area)
     trimmed = np.zeros(len(F), bool)
     un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, area, landmark=landmark)
+    table = None
     for rnd in range(TRIM_ROUNDS):
-        fold = border_folds(un.flat.mesh.faces, un.flat.uv, area[un.face_index])
+        # the development's edges and boundary, computed once for each face set
+        table = edges_and_boundary(un.flat.mesh.faces, len(un.flat.uv))
+        fold = border_folds(un.flat.mesh.faces, un.flat.uv, area[un.face_index], table=table)
         if not fold.any() or fold.all():
             break
+        table = None
         trimmed[un.face_index[fold]] = True
         if rnd < TRIM_ROUNDS - 1:
             un = _unroll(mesh, axis, options, allowed & ~trimmed, band, h_c, theta_c, area,
@@ -488,17 +492,20 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
     for scan_mask, mask in zip((facing_in, overlapping), fold_masks(un.flat.mesh.faces, un.flat.uv)):
         scan_mask[un.face_index[mask]] = True
     clock.lap("folds")
-    uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv)
+    if table is None:
+        table = edges_and_boundary(un.flat.mesh.faces, len(un.flat.uv))
+    uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv, table=table)
     for _ in range(TRIM_ROUNDS):  # folds pushed against the border by untangling are trimmed
-        fold = border_folds(un.flat.mesh.faces, uv, area[un.face_index])
+        fold = border_folds(un.flat.mesh.faces, uv, area[un.face_index], table=table)
         if not fold.any() or fold.all():
             break
         trimmed[un.face_index[fold]] = True
         un = _without(dataclasses.replace(un, flat=un.flat.replace(uv=uv)), ~fold)
-        uv, more, moved_more = untangle(un.flat.mesh.faces, un.flat.uv)
+        table = edges_and_boundary(un.flat.mesh.faces, len(un.flat.uv))
+        uv, more, moved_more = untangle(un.flat.mesh.faces, un.flat.uv, table=table)
         n_untangled, moved = n_untangled + more, moved + moved_more
     clock.lap("untangle")
-    overlap = len(crossing_segments(uv, boundary_segments(un.flat.mesh.faces, len(uv))[0])[0])
+    overlap = len(crossing_segments(uv, table[1])[0])
     distortion = un.distortion
     if n_untangled:
         distortion = summarize(un.flat.mesh.vertices, uv, un.flat.mesh.faces)
@@ -630,7 +637,7 @@ def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
                      vertex_index, un.theta[used], un.seam, un.seam_method, seam, copies - seam, un.origin)
 
 
-def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.ndarray:
+def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *, table: tuple | None = None) -> np.ndarray:
     """Faces at the border of a development that fold it over: to trim before relaxing.
 
     Two kinds, peeled in up to :data:`BORDER_PASSES` passes (each pass looks at the border
@@ -659,6 +666,8 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.n
         Its development.
     area_3d : (m,) float64
         3D area of each face.
+    table : tuple, optional
+        ``edges_and_boundary(faces, len(uv))`` when the caller has it (used by the first pass).
 
     Returns
     -------
@@ -671,7 +680,8 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.n
         if len(idx) == 0:
             break
         sub = faces[idx]
-        edges, seg, owner = edges_and_boundary(sub, len(uv))
+        full = len(idx) == len(faces)  # sub is faces itself
+        edges, seg, owner = table if table is not None and full else edges_and_boundary(sub, len(uv))
         drop = _edge_on_strips(sub, uv, area_3d[idx], seg) | _minor_fans(sub, area_3d[idx], edges, len(uv))
         if not drop.any():  # overlaps are judged on a border without folded strips
             a, b = crossing_segments(uv, seg)
@@ -747,7 +757,7 @@ def _edge_on_strips(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, seg:
     return out
 
 
-def untangle(faces: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, int, int]:
+def untangle(faces: np.ndarray, uv: np.ndarray, *, table: tuple | None = None) -> tuple[np.ndarray, int, int]:
     """Unfold folds inside a development by moving their vertices to their neighbours' mean.
 
     The vertices of flipped faces (signed area <= 0) move to the mean of their edge
@@ -760,6 +770,8 @@ def untangle(faces: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, int, int]:
     ----------
     faces : (m, 3) int64
     uv : (n, 2) float64
+    table : tuple, optional
+        ``edges_and_boundary(faces, len(uv))`` when the caller has it.
 
     Returns
     -------
@@ -775,7 +787,7 @@ def untangle(faces: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, int, int]:
     if n_bad == 0:
         return uv, 0, 0
     n = len(uv)
-    edges, seg, _ = edges_and_boundary(faces, n)
+    edges, seg, _ = table if table is not None else edges_and_boundary(faces, n)
     A = scipy.sparse.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]],
                                                             np.r_[edges[:, 1], edges[:, 0]])), shape=(n, n)).tocsr()
     deg = np.maximum(np.diff(A.indptr), 1).astype(np.float64)
