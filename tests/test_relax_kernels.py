@@ -129,3 +129,14 @@ def test_neighbour_means_count_each_edge_neighbour_once():
     for v in verts:
         nbrs = {int(u) for f in faces if v in f for u in f if u != v}
         np.testing.assert_allclose(out[v], x[sorted(nbrs)].mean(axis=0), rtol=1e-14)
+
+
+@pytest.mark.parametrize("dtype", [np.int32, np.int64])
+def test_faces_by_first_vertex_is_a_stable_sort_by_the_smallest_corner(dtype):
+    from potflat.relax._kernels.springs import faces_by_first_vertex
+
+    rng = np.random.default_rng(7)
+    faces = rng.integers(0, 40, size=(300, 3)).astype(dtype)  # many ties, unused vertices
+    order = faces_by_first_vertex(50, faces)
+    np.testing.assert_array_equal(order, np.argsort(faces.min(axis=1), kind="stable"))
+    assert len(faces_by_first_vertex(5, np.empty((0, 3), dtype))) == 0

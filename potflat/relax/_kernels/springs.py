@@ -361,6 +361,39 @@ def vertex_faces(n, faces):
     return ptr, tri
 
 
+@leaf
+def faces_by_first_vertex(n, faces):
+    """An order of the faces by their smallest vertex index (stable: ties keep their order).
+
+    With vertices in a locality-preserving order, the faces in this order are local too:
+    the per-face passes and the per-vertex gathers over incident faces then read nearby
+    memory (a counting sort, ``O(n + m)``; equal to ``np.argsort(faces.min(axis=1),
+    kind="stable")``).
+
+    Parameters
+    ----------
+    n : int
+        Number of vertices (every index in ``faces`` is below it).
+    faces : (m, 3) int32 or int64
+
+    Returns
+    -------
+    order : (m,) int64
+    """
+    m = faces.shape[0]
+    start = np.zeros(n + 1, np.int64)
+    for f in range(m):
+        start[min(faces[f, 0], faces[f, 1], faces[f, 2]) + 1] += 1
+    for i in range(n):
+        start[i + 1] += start[i]
+    order = np.empty(m, np.int64)
+    for f in range(m):
+        v = min(faces[f, 0], faces[f, 1], faces[f, 2])
+        order[start[v]] = f
+        start[v] += 1
+    return order
+
+
 @parallel
 def neighbour_means(x, verts, vf_ptr, vf_tri, faces, out):
     """Mean of ``x`` (positions, or a search direction) over each listed vertex's edge
