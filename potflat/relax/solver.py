@@ -858,10 +858,10 @@ def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
         if flat.importance is not None:  # a coarse vertex is as important as its cluster on average
             count = np.bincount(simple.cluster, minlength=len(simple.vertices))
             importance = np.bincount(simple.cluster, flat.importance, len(simple.vertices)) / np.maximum(count, 1)
-        sub = relax(FlatMesh(Mesh(simple.vertices, simple.faces, units=flat.mesh.units), simple.uv,
-                             importance=importance),
-                    options=replace(options, simplify_mm=0.0, time_budget=budget, true_scale=False), progress=progress,
-                    callback=tagged)
+        sub = _relax(FlatMesh(Mesh(simple.vertices, simple.faces, units=flat.mesh.units), simple.uv,
+                              importance=importance),
+                     replace(options, simplify_mm=0.0, time_budget=budget, true_scale=False), progress, tagged,
+                     summaries=False)
     except FoldedResultError as exc:
         return _CoarseStart(result=None, uv=None, final=False, notes=[
             f"the {len(simple.vertices)}-vertex coarse copy could not be relaxed fold-free ({exc}); "
@@ -950,6 +950,12 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
         options = RelaxOptions(**kwargs)
     elif kwargs:
         raise InvalidOptionError("give either options= or option keywords to relax(), not both")
+    return _relax(flat, options, progress, callback, summaries=True)
+
+
+def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, summaries: bool) -> RelaxResult:
+    """:func:`relax`; without ``summaries`` (a coarse copy, whose layout is all its caller
+    reads) the result's distortion summaries are None and its stress is not computed."""
     settings = options.resolved()
     V = np.ascontiguousarray(flat.mesh.vertices, dtype=np.float64)
     uv = np.ascontiguousarray(flat.uv, dtype=np.float64)
@@ -1063,9 +1069,11 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
     if settings["true_scale"]:
         factor = true_scale_factor(V, uv_out, F, flat.importance)
         uv_out = centre + (uv_out - centre) * factor
-    before = summarize(V, uv, F)
-    after = summarize(V, uv_out, F)
-    stress = vertex_stress(V, uv_out, F, flat.mesh.mm_per_unit)
+    before = after = stress = None
+    if summaries:
+        before = summarize(V, uv, F)
+        after = summarize(V, uv_out, F)
+        stress = vertex_stress(V, uv_out, F, flat.mesh.mm_per_unit)
     t_end = time.perf_counter()
     return RelaxResult(
         flat=flat.replace(uv=uv_out, stress=stress),

@@ -34,6 +34,8 @@ from potflat._jit import leaf, parallel, prange
 
 #: Block size of the deterministic reductions (independent of the thread count).
 BLOCK = 4096
+#: Each corner's share of its face's shape energy.
+THIRD = 1.0 / 3.0
 
 
 #: A vertex's half-edges are sorted by insertion up to this many, by merge sort above (a fan
@@ -581,10 +583,14 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
                 # the flat area's gradient at i
                 agx = 0.5 * (x[j, 1] - x[l, 1])
                 agy = 0.5 * (x[l, 0] - x[j, 0])
-                es += wa * (dir_ / area - 1.0) / 3.0
-                gx += wa * (dgx * area - dir_ * agx) / (area * area)
-                gy += wa * (dgy * area - dir_ * agy) / (area * area)
-                hd += wa * 0.5 * (ct_l + ct_j) / area
+                # one division per corner (the gradient is wa (dgx A - D agx) / A^2)
+                inv = 1.0 / area
+                wi = wa * inv
+                ratio = dir_ * inv
+                es += wa * (ratio - 1.0) * THIRD
+                gx += wi * (dgx - ratio * agx)
+                gy += wi * (dgy - ratio * agy)
+                hd += 0.5 * wi * (ct_l + ct_j)
         eb = 0.0
         if mu_b > 0.0 and (bprev[i] >= 0 or bnext[i] >= 0):
             sb = mu_b * k
