@@ -333,6 +333,7 @@ class _Springs:
         self._areas = np.empty(self.m)
         self.diag = np.empty(n)
         self._blocks = np.empty(max(1, -(-self.m // ks.BLOCK)))
+        self._below = np.zeros(len(self._blocks), np.int64)  # faces near the barrier per block
 
     def guard_boundary(self, x: np.ndarray) -> int:
         """Guard the angle sum of every boundary vertex below ``2 pi`` from ``x`` on.
@@ -359,7 +360,7 @@ class _Springs:
         the Hessian diagonal bound at ``x``."""
         g = np.empty((self.n, 2)) if out is None else out
         if barrier:
-            self.ks.face_areas(x, self.faces, self._areas)
+            self.ks.face_areas_below(x, self.faces, self.a_ref, BARRIER_EPS, self._areas, self._below)
             if len(self.bverts):
                 self.ks.boundary_angle_sums(x, self.bverts, self.vf_ptr, self.vf_tri, self.faces, self.theta)
         self.ks.energy_gradient(x, self.ptr, self.nbr, self.rst, self.k, self.relative, LENGTH_FLOOR,
@@ -371,7 +372,7 @@ class _Springs:
             return es, es, g
         eb = float(np.sum(self._eb))
         ef = self.ks.face_barrier(x, self.faces, self._areas, self.a_ref, BARRIER_MU, self.k, BARRIER_EPS,
-                                  self.relative, self.weight, g, self.diag)
+                                  self.relative, self.weight, g, self.diag, self._below)
         ec = 0.0
         if self.contact:
             ec = self.ko.contact_barrier(x, self.boundary_segments, self.bprev, self.bnext, CONTACT_GAP,

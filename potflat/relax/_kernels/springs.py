@@ -468,6 +468,37 @@ def face_areas(x, faces, out):
                         - (x[a1, 1] - x[a0, 1]) * (x[a2, 0] - x[a0, 0]))
 
 
+@parallel
+def face_areas_below(x, faces, a_ref, eps, out, below):
+    """:func:`face_areas`, and per block of :data:`BLOCK` faces how many are not above ``eps``
+    of their reference area (the faces :func:`face_barrier` acts on; NaN areas count).
+
+    Parameters
+    ----------
+    x : (n, 2) float64
+    faces : (m, 3) int32 or int64
+    a_ref : (m,) float64
+    eps : float
+    out : (m,) float64
+        Output: signed areas.
+    below : (ceil(m / BLOCK),) int64
+        Output: counts per block.
+    """
+    m = faces.shape[0]
+    for b in prange(below.shape[0]):
+        count = 0
+        for t in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
+            a0 = faces[t, 0]
+            a1 = faces[t, 1]
+            a2 = faces[t, 2]
+            area = 0.5 * ((x[a1, 0] - x[a0, 0]) * (x[a2, 1] - x[a0, 1])
+                          - (x[a1, 1] - x[a0, 1]) * (x[a2, 0] - x[a0, 0]))
+            out[t] = area
+            if not area >= eps * a_ref[t]:
+                count += 1
+        below[b] = count
+
+
 @leaf
 def _angle_barrier_slope(theta, sb, gap):
     """Boundary angle barrier at angle sum ``theta``: ``dB / dTheta`` and the factor of its
@@ -705,12 +736,13 @@ def shape_coefficients(V, faces, weight, scale, area_floor, out):
 
 
 @leaf
-def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, weight, grad, diag):
+def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, weight, grad, diag, below):
     """Add the face barrier to ``grad`` and ``diag``; return its energy.
 
     Serial over the faces in order (deterministic); only faces squeezed below ``eps`` of
-    their reference area contribute, usually a small fraction, so this costs one pass over
-    ``areas`` and ``a_ref`` instead of a gather over every vertex's incident faces.
+    their reference area contribute, usually a small fraction, so only the blocks that
+    hold one (``below``, from :func:`face_areas_below`) are visited, instead of a gather
+    over every vertex's incident faces.
 
     Parameters
     ----------
@@ -730,6 +762,9 @@ def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, weight, grad, dia
         corners' weights, like its springs. Empty: every weight is 1.
     grad, diag : (n, 2), (n,) float64
         Updated in place: gradient and Hessian diagonal bound.
+    below : (ceil(m / BLOCK),) int64
+        Faces not above ``eps a_ref`` per block of :data:`BLOCK` (:func:`face_areas_below`):
+        blocks with none are skipped.
 
     Returns
     -------
@@ -738,30 +773,34 @@ def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, weight, grad, dia
         non-positive area.
     """
     total = 0.0
-    for t in range(faces.shape[0]):
-        area = areas[t]
-        th = eps * a_ref[t]
-        if area >= th:
+    m = faces.shape[0]
+    for b in range(below.shape[0]):
+        if below[b] == 0:
             continue
-        if area <= 0.0:
-            total = np.inf
-            continue
-        a = area / th
-        scale = mu * k if relative else mu * k * a_ref[t]
-        if weight.shape[0] > 0:
-            scale *= (weight[faces[t, 0]] + weight[faces[t, 1]] + weight[faces[t, 2]]) / 3.0
-        total += scale * (a - 1.0 - math.log(a))
-        dphi = scale * (1.0 - 1.0 / a) / th
-        h = scale / (area * area)
-        for c in range(3):
-            i = faces[t, c]
-            j1 = faces[t, (c + 1) % 3]
-            j2 = faces[t, (c + 2) % 3]
-            ax = 0.5 * (x[j1, 1] - x[j2, 1])
-            ay = 0.5 * (x[j2, 0] - x[j1, 0])
-            grad[i, 0] += dphi * ax
-            grad[i, 1] += dphi * ay
-            diag[i] += h * (ax * ax + ay * ay)
+        for t in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
+            area = areas[t]
+            th = eps * a_ref[t]
+            if area >= th:
+                continue
+            if area <= 0.0:
+                total = np.inf
+                continue
+            a = area / th
+            scale = mu * k if relative else mu * k * a_ref[t]
+            if weight.shape[0] > 0:
+                scale *= (weight[faces[t, 0]] + weight[faces[t, 1]] + weight[faces[t, 2]]) / 3.0
+            total += scale * (a - 1.0 - math.log(a))
+            dphi = scale * (1.0 - 1.0 / a) / th
+            h = scale / (area * area)
+            for c in range(3):
+                i = faces[t, c]
+                j1 = faces[t, (c + 1) % 3]
+                j2 = faces[t, (c + 2) % 3]
+                ax = 0.5 * (x[j1, 1] - x[j2, 1])
+                ay = 0.5 * (x[j2, 0] - x[j1, 0])
+                grad[i, 0] += dphi * ax
+                grad[i, 1] += dphi * ay
+                diag[i] += h * (ax * ax + ay * ay)
     return total
 
 
