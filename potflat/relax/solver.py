@@ -410,16 +410,6 @@ class _Springs:
             t = min(t, float(self._bblocks.min()))
         return t
 
-    def dot(self, a: np.ndarray, b: np.ndarray) -> float:
-        """Deterministic dot product of two arrays of equal shape."""
-        a, b = a.reshape(-1), b.reshape(-1)
-        out = np.empty(max(1, -(-len(a) // self.ks.BLOCK)))
-        if len(a) > 16 * self.ks.BLOCK:
-            self.ks.block_dot(a, b, out)
-        else:
-            self.ks.block_dot_serial(a, b, out)
-        return float(np.sum(out))
-
     def signed_areas(self, x: np.ndarray) -> np.ndarray:
         """Signed area of every face at ``x``, shape (m,)."""
         out = np.empty(self.m)
@@ -620,7 +610,9 @@ class _LBFGS:
         for _ in range(SMOOTH_ROUNDS):
             sp.ks.neighbour_means(dx, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
             dx[verts] = mean
-        gd_smooth = sp.dot(self.g, self.q)
+        # g . q changed at verts only (no pass over the whole mesh)
+        g = self.g.reshape(-1, 2)[verts]
+        gd_smooth = gd + float(np.sum(g * (dx[verts] - before)))
         t_smooth = STEP_FRACTION * sp.max_step_near(self.x, dx, verts, 1.0 / STEP_FRACTION, STEP_SHRINK)
         if gd_smooth < 0.0 and t_smooth > t:
             self.smoothed += 1

@@ -1141,30 +1141,3 @@ def dynamics_step(x, v, ptr, nbr, rst, k, relative, r_floor, friction, dt, x_out
         x_out[i, 1] = yi + dt * vy
         e_spring[i] = es
 
-
-@parallel
-def block_dot(a, b, out):
-    """Partial dot products of two flat vectors over fixed blocks (sum ``out`` serially).
-
-    Parameters
-    ----------
-    a, b : (N,) float64
-    out : (ceil(N / BLOCK),) float64
-    """
-    N = a.shape[0]
-    for blk in prange(out.shape[0]):
-        acc = 0.0
-        for i in range(blk * BLOCK, min(N, (blk + 1) * BLOCK)):
-            acc += a[i] * b[i]
-        out[blk] = acc
-
-
-@leaf
-def block_dot_serial(a, b, out):
-    """:func:`block_dot` without threads (same blocks, same result), for short vectors."""
-    N = a.shape[0]
-    for blk in range(out.shape[0]):
-        acc = 0.0
-        for i in range(blk * BLOCK, min(N, (blk + 1) * BLOCK)):
-            acc += a[i] * b[i]
-        out[blk] = acc
