@@ -50,11 +50,14 @@ VARIANTS: dict[str, dict] = {
     "shape 0.5": {"shape": 0.5},
     "shape 1": {"shape": 1.0},
     "shape 2": {"shape": 2.0},
+    "rigidity 0": {"rigidity": 0.0},
+    "rigidity 1": {"rigidity": 1.0},
+    "rigidity 4": {"rigidity": 4.0},
     "no importance": {"importance": "none"},
 }
 #: The relax of the springs alone (the result before importance and shape existed): the keywords
 #: this version has are used.
-SPRINGS_ALONE = {"importance": "none", "shape": 0.0, "importance_contrast": 1.0, "true_scale": False}
+SPRINGS_ALONE = {"importance": "none", "shape": 0.0, "rigidity": 0.0, "importance_contrast": 1.0, "true_scale": False}
 #: (kind, painting) of the generated vessels.
 CASES = [(k, p) for k in ("hydria", "aryballos", "amphora") for p in ("panel", "belt", "allover")] + [
     ("alabastron", "allover")]
@@ -276,10 +279,11 @@ def plot(rows: list[dict], path: Path) -> None:
             ax.plot(r["anisotropy_p95"], r["area"], style[0], c=style[1])
             ax.annotate(r["method"], (r["anisotropy_p95"], r["area"]), fontsize=6, xytext=(3, 2),
                         textcoords="offset points")
-        curve = sorted((r["keywords"]["shape"], r["anisotropy_p95"], r["area"]) for r in sel
-                       if set(r.get("keywords") or {}) == {"shape"})
-        if len(curve) > 1:  # the shape setting's trade
-            ax.plot([c[1] for c in curve], [c[2] for c in curve], "-", c="tab:blue", lw=0.8, alpha=0.6)
+        for knob, colour in (("shape", "tab:blue"), ("rigidity", "tab:green")):
+            curve = sorted((r["keywords"][knob], r["anisotropy_p95"], r["area"]) for r in sel
+                           if set(r.get("keywords") or {}) == {knob})
+            if len(curve) > 1:  # one setting's trade, the other at its default
+                ax.plot([c[1] for c in curve], [c[2] for c in curve], "-", c=colour, lw=0.8, alpha=0.6)
         ax.set_title(f"{vessel}, {painting}", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)

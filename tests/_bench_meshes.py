@@ -23,7 +23,7 @@ figures = _load("_figures")
 
 #: Relax options of the springs alone (no shape term, no final scaling): what the tests of the
 #: springs' edge-length figures run.
-SPRINGS_ONLY = {"shape": 0.0, "true_scale": False}
+SPRINGS_ONLY = {"shape": 0.0, "rigidity": 0.0, "true_scale": False}
 
 
 def signed_areas(uv: np.ndarray, F: np.ndarray) -> np.ndarray:

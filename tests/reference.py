@@ -222,10 +222,12 @@ def weighted_spring_energy(x: np.ndarray, pairs: np.ndarray, rest: np.ndarray, k
     return float(0.5 * np.sum(coef * (l - rest) ** 2))
 
 
-def shape_energy(V: np.ndarray, F: np.ndarray, x: np.ndarray, weight: np.ndarray, scale: float) -> float:
-    """``sum_f s w_f A_f (sigma_1 / sigma_2 + sigma_2 / sigma_1 - 2)`` by an SVD of each face's
-    map from its rest triangle (in a 2D frame of its plane) to the flat one; ``w_f`` the mean
-    of the corners' weights."""
+def shape_energy(V: np.ndarray, F: np.ndarray, x: np.ndarray, weight: np.ndarray, scale: float,
+                 rigidity: float = 0.0) -> float:
+    """``sum_f w_f A_f (s (sigma_1 / sigma_2 + sigma_2 / sigma_1 - 2) + r ((sigma_1 - 1)^2 +
+    (sigma_2 - 1)^2))`` by an SVD of each face's map from its rest triangle (in a 2D frame of
+    its plane) to the flat one; ``w_f`` the mean of the corners' weights, ``s`` the scale and
+    ``r`` the rigidity (per unit area)."""
     total = 0.0
     for f in F:
         p0, p1, p2 = V[f]
@@ -240,5 +242,6 @@ def shape_energy(V: np.ndarray, F: np.ndarray, x: np.ndarray, weight: np.ndarray
         s = np.linalg.svd(flat @ np.linalg.inv(rest), compute_uv=False)
         if np.linalg.det(flat) <= 0:
             return np.inf
-        total += scale * weight[f].mean() * area * (s[0] / s[1] + s[1] / s[0] - 2.0)
+        total += weight[f].mean() * area * (scale * (s[0] / s[1] + s[1] / s[0] - 2.0)
+                                            + rigidity * ((s[0] - 1.0) ** 2 + (s[1] - 1.0) ** 2))
     return float(total)

@@ -28,18 +28,20 @@ def bumpy():
 
 # --- the energy -----------------------------------------------------------------------------
 
-@pytest.mark.parametrize("relative", [False, True])
-def test_weighted_springs_and_shape_term_match_reference(bumpy, relative):
+@pytest.mark.parametrize("relative, shape, rigidity", [(False, 0.3, 0.0), (True, 0.3, 0.0), (True, 0.3, 0.8),
+                                                        (False, 0.0, 0.8)])
+def test_weighted_springs_and_shape_term_match_reference(bumpy, relative, shape, rigidity):
     V, F = bumpy.mesh.vertices, bumpy.mesh.faces
     pairs, rest = ref.springs(V, F)
     weight = np.random.default_rng(4).uniform(0.05, 1.0, len(V))
-    sp = spring_system(V, F, k=0.7, relative=relative, weight=weight, shape=0.3)
+    sp = spring_system(V, F, k=0.7, relative=relative, weight=weight, shape=shape, rigidity=rigidity)
     x = np.ascontiguousarray(bumpy.uv * np.array([1.1, 0.93]))
     E, Es, g = sp.evaluate(x, barrier=False)
     from potflat.mesh.distortion import face_areas
 
-    scale = 0.3 / float(np.mean(face_areas(V, F)))
-    want = ref.weighted_spring_energy(x, pairs, rest, 0.7, relative, weight) + ref.shape_energy(V, F, x, weight, scale)
+    mean_area = float(np.mean(face_areas(V, F)))
+    want = ref.weighted_spring_energy(x, pairs, rest, 0.7, relative, weight) + ref.shape_energy(
+        V, F, x, weight, shape / mean_area, rigidity / mean_area)
     assert Es == pytest.approx(want, rel=1e-10)
     num = ref.numeric_gradient(lambda y: sp.evaluate(np.ascontiguousarray(y), barrier=False)[0], x)
     np.testing.assert_allclose(g, num, atol=1e-6 * np.abs(num).max())
@@ -62,6 +64,26 @@ def test_shape_term_is_zero_for_a_similarity_and_infinite_when_folded():
     assert sp.evaluate(folded, barrier=False)[1] == np.inf
 
 
+def test_rigidity_term_is_zero_for_a_rotation_and_charges_a_uniform_scale():
+    flat, exact = meshes.cylinder_patch(6, 5, seed=2)
+    F = flat.mesh.faces
+    V = np.column_stack([exact, np.zeros(len(exact))])
+    rigid = spring_system(V, F, k=1.0, relative=True, rigidity=1.0)
+    spring_free = spring_system(V, F, k=1.0, relative=True)
+    rot = np.array([[np.cos(0.3), -np.sin(0.3)], [np.sin(0.3), np.cos(0.3)]])
+
+    def term(x):
+        x = np.ascontiguousarray(x)
+        return rigid.evaluate(x, barrier=False)[1] - spring_free.evaluate(x, barrier=False)[1]
+
+    assert abs(term(exact @ rot.T)) < 1e-9
+    # a uniform scale by 1.2: every face pays A ((1.2 - 1)^2 + (1.2 - 1)^2) per mean face area
+    from potflat.mesh.distortion import face_areas
+
+    areas = face_areas(V, F)
+    assert term(1.2 * exact @ rot.T) == pytest.approx(2 * 0.04 * areas.sum() / areas.mean(), rel=1e-9)
+
+
 def test_uniform_weights_reproduce_the_result_without_importance_exactly():
     flat = meshes.vessel_rollout(1500, seed=2)
     plain = relax(flat)
@@ -75,13 +97,15 @@ def test_uniform_weights_reproduce_the_result_without_importance_exactly():
 
 def test_shape_term_keeps_figures_rounder_and_never_folds():
     flat = meshes.vessel_rollout(3000, seed=1)
-    springs = relax(flat, shape=0.0)
-    shaped = relax(flat, shape=0.5)
-    for r in (springs, shaped):
+    springs = relax(flat, shape=0.0, rigidity=0.0)
+    shaped = relax(flat, shape=0.5, rigidity=0.0)
+    rigid = relax(flat, shape=0.0, rigidity=2.0)
+    for r in (springs, shaped, rigid):
         assert r.flipped == 0 and r.boundary_overlap == 0
         assert np.all(signed_areas(r.flat.uv, flat.mesh.faces) > 0)
         assert np.all(np.diff(r.energy_history[-r.levels[-1]["iterations"]:]) <= 0)
     assert shaped.distortion.anisotropy_p95 < springs.distortion.anisotropy_p95 - 0.1
+    assert rigid.distortion.anisotropy_p95 < springs.distortion.anisotropy_p95 - 0.1
     assert shaped.distortion.area_mean_abs_log > springs.distortion.area_mean_abs_log  # the trade
 
 

@@ -46,6 +46,9 @@ def relax_command(
     shape: Annotated[float | None, typer.Option(
         "--shape", help="Weight of the shape term (>= 0): rounder figures and straighter lines at some cost in "
                         "area; 0: the springs alone \\[default: 0.2, 0 for paper].")] = None,
+    rigidity: Annotated[float | None, typer.Option(
+        "--rigidity", help="Weight of the rigidity (as-rigid-as-possible) term (>= 0): evens out shear from "
+                           "triangle to triangle; 0: none \\[default: 2, 0 for paper].")] = None,
     importance_contrast: Annotated[float | None, typer.Option(
         "--importance-contrast", help="How much stiffer the painted zone is than plain surface (>= 1; 1: the whole "
                                       "surface alike) \\[default: 100, 1 for paper].")] = None,
@@ -64,7 +67,7 @@ def relax_command(
     options = options_from_cli("relax", {
         "preset": preset, "tol": tol, "max_iter": max_iter, "time_budget": time_budget, "threads": threads,
         "stretch": stretch, "stiffness": stiffness, "weighting": weighting, "simplify_mm": simplify_mm,
-        "shape": shape, "importance_contrast": importance_contrast, "true_scale": true_scale})
+        "shape": shape, "rigidity": rigidity, "importance_contrast": importance_contrast, "true_scale": true_scale})
     show_progress = sys.stderr.isatty() and not (quiet or json)
     if show_progress and with_compile_note("") != "":
         print(f"note: {with_compile_note('').strip(' ()')}", file=sys.stderr)

@@ -49,9 +49,9 @@ from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionEr
 from potflat.types import FlatMesh, Mesh, StageOutput
 
 #: The painted figures' settings of the fold-free presets (measured: docs/performance.md,
-#: "Painted figures"): the shape term's weight, how much stiffer the important zone is than
+#: "Painted figures"): the shape and rigidity terms' weights, how much stiffer the important zone is than
 #: plain surface, and the final scaling to true scale in the important zone.
-_FIGURES = {"shape": 0.2, "importance_contrast": 100.0, "true_scale": True}
+_FIGURES = {"shape": 0.2, "rigidity": 2.0, "importance_contrast": 100.0, "true_scale": True}
 #: Settings of each preset; ``None`` in :class:`RelaxOptions` takes the preset's value.
 PRESETS: dict[str, dict] = {
     "preview": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
@@ -63,7 +63,7 @@ PRESETS: dict[str, dict] = {
                  "tol": 1e-7, "max_iter": 20000, "cell_vertices": 8.0, "coarse_start": True, **_FIGURES},
     "paper": {"solver": "dynamics", "stretch": 2.0, "stiffness": 0.5, "weighting": "uniform",
               "tol": 1e-7, "max_iter": 100000, "friction_inside": 0.01, "friction_boundary": 1.0,
-              "coarse_start": False, "shape": 0.0, "importance_contrast": 1.0, "true_scale": False},
+              "coarse_start": False, "shape": 0.0, "rigidity": 0.0, "importance_contrast": 1.0, "true_scale": False},
 }
 WEIGHTINGS = ("uniform", "relative")
 #: Coarse copies (grid clusters of the start layout, :mod:`potflat.relax.simplify`): a copy has at
@@ -147,6 +147,12 @@ class RelaxOptions:
         term charges shear only (about ``A log(sigma_1 / sigma_2)^2``), so larger values keep
         figures rounder and lines straighter at some cost in area. 0: the springs alone.
         None: the preset's (0 for ``paper``).
+    rigidity : float or None
+        Weight of the rigidity term (>= 0): each triangle's as-rigid-as-possible energy
+        ``A ((sigma_1 - 1)^2 + (sigma_2 - 1)^2)`` per mean triangle area, added to the springs
+        and the shape term. It charges shear and area change alike, per triangle, which the
+        springs of an irregular mesh do not: it evens out triangle-to-triangle shear (the
+        speckle of the anisotropy map). 0: none. None: the preset's (2; 0 for ``paper``).
     importance_contrast : float or None
         How much stiffer the important (painted) zone is than plain surface (>= 1): springs,
         barrier and shape term of plain surface are weighted ``1 / importance_contrast``, so
@@ -168,6 +174,7 @@ class RelaxOptions:
     weighting: str | None = None
     simplify_mm: float | None = None
     shape: float | None = None
+    rigidity: float | None = None
     importance_contrast: float | None = None
     true_scale: bool | None = None
 
@@ -189,6 +196,9 @@ class RelaxOptions:
         if self.shape is not None and (isinstance(self.shape, bool) or not isinstance(self.shape, (int, float, np.floating, np.integer))
                                        or not (math.isfinite(self.shape) and self.shape >= 0)):
             raise InvalidOptionError(f"shape must be a number >= 0 (0: springs only), got {self.shape!r}")
+        if self.rigidity is not None and (isinstance(self.rigidity, bool) or not isinstance(self.rigidity, (int, float, np.floating, np.integer))
+                                          or not (math.isfinite(self.rigidity) and self.rigidity >= 0)):
+            raise InvalidOptionError(f"rigidity must be a number >= 0 (0: no rigidity term), got {self.rigidity!r}")
         if self.importance_contrast is not None and (
                 isinstance(self.importance_contrast, bool)
                 or not isinstance(self.importance_contrast, (int, float, np.floating, np.integer))
@@ -205,7 +215,7 @@ class RelaxOptions:
         out = dict(PRESETS[self.preset])
         out.setdefault("simplify_mm", 0.0)
         for name in ("tol", "max_iter", "stretch", "stiffness", "weighting", "simplify_mm", "shape",
-                     "importance_contrast", "true_scale"):
+                     "rigidity", "importance_contrast", "true_scale"):
             if getattr(self, name) is not None:
                 out[name] = getattr(self, name)
         out["time_budget"] = self.time_budget
@@ -290,10 +300,10 @@ class _Springs:
     """Spring system and triangles of a mesh in normalised, Morton-sorted form."""
 
     def __init__(self, V: np.ndarray, faces: np.ndarray, n: int, *, k: float, relative: bool,
-                 weight: np.ndarray | None = None, shape: float = 0.0):
+                 weight: np.ndarray | None = None, shape: float = 0.0, rigidity: float = 0.0):
         """``V`` (n, 3) rest positions and ``faces`` (m, 3) in normalised units; ``weight``
-        (n,) the vertices' importance weights (None: all 1), ``shape`` the shape term's
-        weight (0: none)."""
+        (n,) the vertices' importance weights (None: all 1), ``shape`` and ``rigidity`` the
+        shape and rigidity terms' weights (0: none)."""
         from potflat.relax._kernels import overlap as relax_overlap
         from potflat.relax._kernels import springs as ks
 
@@ -307,11 +317,12 @@ class _Springs:
         self.faces = np.ascontiguousarray(faces, dtype=np.int32)  # half the memory traffic
         self.weight = _NO_WEIGHTS if weight is None else np.ascontiguousarray(weight, dtype=np.float64)
         self.shape = _NO_SHAPE
-        if shape > 0 and len(faces):
+        if (shape > 0 or rigidity > 0) and len(faces):
             # per unit rest area: a triangle of mean area weighs ``shape`` against its springs
-            self.shape = np.empty((len(faces), 4))
-            ks.shape_coefficients(V, self.faces, self.weight, float(shape) / float(np.mean(areas)),
-                                  AREA_FLOOR, self.shape)
+            self.shape = np.empty((len(faces), 6 if rigidity > 0 else 4))
+            mean_area = float(np.mean(areas))
+            ks.shape_coefficients(V, self.faces, self.weight, float(shape) / mean_area,
+                                  float(rigidity) / mean_area, AREA_FLOOR, self.shape)
         del areas
         self.k, self.relative = float(k), bool(relative)
         self.n, self.m = n, len(faces)
@@ -993,7 +1004,8 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         if fold_free and flat.importance is not None and settings["importance_contrast"] > 1:
             weight = _importance_weights(flat.importance[order], settings["importance_contrast"])
         sp = _Springs(Vs, Fs, n, k=settings["stiffness"], relative=settings["weighting"] == "relative",
-                      weight=weight, shape=settings["shape"] if fold_free else 0.0)
+                      weight=weight, shape=settings["shape"] if fold_free else 0.0,
+                      rigidity=settings["rigidity"] if fold_free else 0.0)
         del Vs, Fs
         x = np.ascontiguousarray(x_in[order]) * settings["stretch"]
         t_follow = time.perf_counter()

@@ -534,9 +534,10 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
         is multiplied by the mean of its endpoints' weights. Empty: every weight is 1.
     vf_ptr, vf_tri : CSR from :func:`vertex_faces`
     faces : (m, 3) int32 or int64
-    shape : (m, 4) or (0, 4) float64
-        Shape term coefficients (:func:`shape_coefficients`). Empty: no shape term. A face
-        with non-positive flat area makes the energy infinite.
+    shape : (m, 4), (m, 6) or (0, 4) float64
+        Shape term coefficients (:func:`shape_coefficients`; six columns: with the rigidity
+        term). Empty: no shape term. A face with non-positive flat area makes the energy
+        infinite.
     bprev, bnext : (n,) int32
         Each vertex's unique boundary predecessor and successor (-1: none or not unique).
     bguard : (n,) bool
@@ -556,6 +557,7 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
     n = x.shape[0]
     weighted = weight.shape[0] > 0
     shaped = shape.shape[0] > 0
+    rigid = shape.shape[1] > 4
     for i in prange(n):
         gx = 0.0
         gy = 0.0
@@ -622,6 +624,15 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
                 gx += wi * (dgx - ratio * agx)
                 gy += wi * (dgy - ratio * agy)
                 hd += 0.5 * wi * (ct_l + ct_j)
+                if rigid:
+                    # ARAP energy rho ((s1 - 1)^2 + (s2 - 1)^2), s1 + s2 = q = sqrt(2 (D + A_flat) / A)
+                    rho = shape[t, 4]
+                    a_rest = shape[t, 5]
+                    q = math.sqrt(2.0 * (dir_ + area) / a_rest)
+                    es += rho * (2.0 * dir_ / a_rest - 2.0 * q + 2.0) / 3.0
+                    gx += 2.0 * rho * (dgx - (dgx + agx) / q) / a_rest
+                    gy += 2.0 * rho * (dgy - (dgy + agy) / q) / a_rest
+                    hd += rho * (ct_l + ct_j) / a_rest
         eb = 0.0
         if mu_b > 0.0 and (bprev[i] >= 0 or bnext[i] >= 0):
             sb = mu_b * k
@@ -678,8 +689,9 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
 
 
 @parallel
-def shape_coefficients(V, faces, weight, scale, area_floor, out):
-    """Coefficients of the shape term: each face's symmetric anisotropy energy.
+def shape_coefficients(V, faces, weight, scale, rigid_scale, area_floor, out):
+    """Coefficients of the shape term: each face's symmetric anisotropy energy, and its
+    rigidity energy.
 
     For a face with rest (3D) triangle of area ``A`` and the linear map ``J`` from it to
     the flat triangle (singular values ``sigma_1 >= sigma_2 > 0``), the term is
@@ -688,7 +700,10 @@ def shape_coefficients(V, faces, weight, scale, area_floor, out):
     a small ``S = log(sigma_1 / sigma_2)`` (the anisotropy the maps show) and infinite for a
     collapsed triangle. With ``|J|^2 / det J = 2 D / A_flat``, ``D = 1/4 sum_edges
     cot(opposite angle) |x_a - x_b|^2`` the map's Dirichlet energy, it is
-    ``2 s w A (D / A_flat - 1)``.
+    ``2 s w A (D / A_flat - 1)``. The rigidity term is the as-rigid-as-possible energy
+    ``r w A ((sigma_1 - 1)^2 + (sigma_2 - 1)^2)``: it charges shear and scale alike (about
+    ``2 r w A (a^2 + s^2)`` for an area change ``a`` and a shear ``s``), with
+    ``sigma_1 + sigma_2 = sqrt(2 (D + A_flat) / A)``.
 
     Parameters
     ----------
@@ -698,11 +713,14 @@ def shape_coefficients(V, faces, weight, scale, area_floor, out):
     weight : (n,) or (0,) float64
         Importance weight per vertex (a face takes its corners' mean); empty: 1.
     scale : float
-        ``s``: the term's weight per unit rest area.
+        ``s``: the anisotropy term's weight per unit rest area.
+    rigid_scale : float
+        ``r``: the rigidity term's weight per unit rest area (used when ``out`` has six columns).
     area_floor : float
         Faces with a smaller rest area (degenerate, their angles meaningless) get no term.
-    out : (m, 4) float64
-        Output: the cotangents of the rest angles at corners 0, 1, 2 and ``2 s w A``.
+    out : (m, 4) or (m, 6) float64
+        Output: the cotangents of the rest angles at corners 0, 1, 2 and ``2 s w A``; with
+        six columns also ``r w A`` and ``A``.
     """
     for t in prange(faces.shape[0]):
         a0 = faces[t, 0]
@@ -719,12 +737,15 @@ def shape_coefficients(V, faces, weight, scale, area_floor, out):
         nz = e1x * e2y - e1y * e2x
         twice = math.sqrt(nx * nx + ny * ny + nz * nz)
         if 0.5 * twice <= area_floor:
-            for c in range(4):
+            for c in range(out.shape[1]):
                 out[t, c] = 0.0
+            if out.shape[1] > 4:
+                out[t, 5] = 1.0
             continue
-        w = scale
+        w_imp = 1.0
         if weight.shape[0] > 0:
-            w *= (weight[a0] + weight[a1] + weight[a2]) / 3.0
+            w_imp = (weight[a0] + weight[a1] + weight[a2]) / 3.0
+        w = scale * w_imp
         e3x = V[a2, 0] - V[a1, 0]
         e3y = V[a2, 1] - V[a1, 1]
         e3z = V[a2, 2] - V[a1, 2]
@@ -733,6 +754,9 @@ def shape_coefficients(V, faces, weight, scale, area_floor, out):
         out[t, 1] = (-e1x * e3x - e1y * e3y - e1z * e3z) / twice
         out[t, 2] = (e2x * e3x + e2y * e3y + e2z * e3z) / twice
         out[t, 3] = w * twice
+        if out.shape[1] > 4:
+            out[t, 4] = rigid_scale * w_imp * 0.5 * twice
+            out[t, 5] = 0.5 * twice
 
 
 @leaf
