@@ -998,7 +998,7 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         Vs = np.ascontiguousarray(V[order] / unit)
         Fs = inverse[F]
         # faces in the vertices' order too: the face passes and gathers read nearby memory
-        # (2.5M benchmark vessel: the energy and gradient 1.6x faster)
+        # (2.5M benchmark vessel: an evaluation of the energy and gradient 1.6x faster)
         Fs = np.ascontiguousarray(Fs[faces_by_first_vertex(n, Fs)])
         weight = None
         if fold_free and flat.importance is not None and settings["importance_contrast"] > 1:
