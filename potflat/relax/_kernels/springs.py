@@ -627,12 +627,14 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
                 if rigid:
                     # ARAP energy rho ((s1 - 1)^2 + (s2 - 1)^2), s1 + s2 = q = sqrt(2 (D + A_flat) / A)
                     rho = shape[t, 4]
-                    a_rest = shape[t, 5]
-                    q = math.sqrt(2.0 * (dir_ + area) / a_rest)
-                    es += rho * (2.0 * dir_ / a_rest - 2.0 * q + 2.0) / 3.0
-                    gx += 2.0 * rho * (dgx - (dgx + agx) / q) / a_rest
-                    gy += 2.0 * rho * (dgy - (dgy + agy) / q) / a_rest
-                    hd += rho * (ct_l + ct_j) / a_rest
+                    ia = 1.0 / shape[t, 5]  # 1 / A_rest: two divisions per corner in all
+                    ra = rho * ia
+                    q = math.sqrt(2.0 * (dir_ + area) * ia)
+                    iq = 1.0 / q
+                    es += rho * (2.0 * dir_ * ia - 2.0 * q + 2.0) * THIRD
+                    gx += 2.0 * ra * (dgx - (dgx + agx) * iq)
+                    gy += 2.0 * ra * (dgy - (dgy + agy) * iq)
+                    hd += ra * (ct_l + ct_j)
         eb = 0.0
         if mu_b > 0.0 and (bprev[i] >= 0 or bnext[i] >= 0):
             sb = mu_b * k
