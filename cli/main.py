@@ -97,8 +97,8 @@ class _Group(TyperGroup):
 
 #: Options that take a name, and where their allowed values are defined (module, constant).
 CHOICES = {"proxy": ("potflat.rollout.proxy", "KINDS"), "units": ("potflat.types", "UNITS_MM"),
-           "preset": ("potflat.relax.solver", "PRESETS"), "weighting": ("potflat.relax.solver", "WEIGHTINGS"),
-           "side": ("potflat.rollout.walls", "SIDES"), "importance": ("potflat.importance", "METHODS"),
+           "preset": ("potflat.relax.parameters", "PRESETS"), "weighting": ("potflat.relax.parameters", "WEIGHTINGS"),
+           "side": ("potflat.rollout.options", "SIDES"), "importance": ("potflat.importance", "METHODS"),
            "maps": ("potflat.bake.render", "MAP_NAMES")}
 
 

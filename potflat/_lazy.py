@@ -8,8 +8,8 @@ from typing import Any
 
 def lazy_exports(package: str, names: dict[str, str]) -> Callable[[str], Any]:
     """A module ``__getattr__`` for ``package`` resolving each of ``names`` (name to module
-    path relative to ``package``, e.g. ``".unroll"``) on first access, so importing the
-    package, or one light module of it, does not import its heavy modules."""
+    path, relative to ``package`` like ``".unroll"`` or absolute) on first access, so
+    importing the package, or one light module of it, does not import its heavy modules."""
 
     def __getattr__(name: str) -> Any:
         if name in names:

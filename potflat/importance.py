@@ -250,31 +250,6 @@ def auto_importance(flat: FlatMesh) -> Importance:
     return _result(flat, values, "auto", reason)
 
 
-def read_mask(path: str | Path) -> np.ndarray:
-    """A mask image as importance in [0, 1]: grey level times alpha (white opaque = 1).
-
-    Returns
-    -------
-    (h, w) float32
-    """
-    import cv2
-
-    path = Path(path)
-    if not path.is_file():
-        raise InvalidInputError(f"importance mask {path} not found; give the PNG you painted (white = important)")
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH)
-    if img is None:
-        raise InvalidInputError(f"cannot read importance mask {path}; save it as PNG")
-    scale = 65535.0 if img.dtype == np.uint16 else 255.0 if img.dtype == np.uint8 else 1.0
-    img = img.astype(np.float32) / scale
-    if img.ndim == 2:
-        return np.clip(img, 0.0, 1.0)
-    grey = img[..., :3].mean(axis=2)
-    if img.shape[2] == 4:
-        grey = grey * img[..., 3]
-    return np.clip(grey, 0.0, 1.0)
-
-
 def _reference_for(mask_path: Path, shape: tuple[int, int], reference: Path | None) -> Path:
     """The ``NAME.bake.json`` of the image a mask was painted over."""
     if reference is not None:
@@ -361,6 +336,7 @@ def image_mask_importance(flat: FlatMesh, mask_path: str | Path, reference: str 
     from scipy.spatial import cKDTree
 
     from potflat.io.flat_ply import read_flat_ply
+    from potflat.io.images import read_mask
 
     mask_path = Path(mask_path)
     mask = read_mask(mask_path)
@@ -403,6 +379,8 @@ def texture_mask_importance(flat: FlatMesh, mask_path: str | Path) -> Importance
     if mesh.texcoords is None:
         raise InvalidInputError(f"{mesh.source or 'the scan'} has no texture coordinates, so a texture-space mask "
                                 "cannot be placed; paint the mask over a potflat image instead (--importance PNG)")
+    from potflat.io.images import read_mask
+
     mask = read_mask(mask_path)
     h, w = mask.shape
     tc = mesh.texcoords.reshape(-1, 2)

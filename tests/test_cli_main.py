@@ -53,6 +53,15 @@ def test_cli_startup_imports_no_numerics():
     assert out.stdout.strip() == "[]"
 
 
+@pytest.mark.parametrize("command", COMMANDS)
+def test_help_imports_no_numerics(command):
+    """``--help`` shows the allowed values of the name options from light modules only."""
+    code = (f"import sys\nfrom potflat_cli.main import app\ntry:\n    app(prog_name='potflat', args=['{command}', '--help'])\n"
+            "except SystemExit:\n    pass\nprint(sorted({'numba', 'scipy', 'trimesh', 'cv2'} & set(sys.modules)), file=sys.stderr)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stderr.strip().splitlines()[-1] == "[]"
+
+
 def test_run_help_lists_every_stage_option(fake_stages):
     result = cli("run", "--help")
     assert result.exit_code == 0, result.output

@@ -111,3 +111,23 @@ def test_a_result_relaxed_from_the_disc_keeps_the_rollouts_orientation(monkeypat
     want = clean.flat.uv[top].mean(axis=0) - clean.flat.uv[bottom].mean(axis=0)
     cos = up @ want / np.linalg.norm(up) / np.linalg.norm(want)
     assert cos > 0.999
+
+
+def test_a_start_whose_border_crosses_itself_relaxes_into_what_it_is():
+    """A flat strip laid round past a full turn (no face flipped, its ends overlapping: the
+    border crosses itself) relaxes into the flat strip it is, as the rollout's note says."""
+    from potflat.types import FlatMesh, Mesh
+
+    nu, nv, length, width = 60, 6, 300.0, 25.0
+    u, v = np.meshgrid(np.linspace(0, length, nu), np.linspace(0, width, nv), indexing="ij")
+    V = np.column_stack([u.ravel(), v.ravel(), np.zeros(u.size)])
+    idx = np.arange(nu * nv).reshape(nu, nv)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    phi = 2.3 * np.pi * V[:, 0] / length
+    r = 40.0 + width - V[:, 1]
+    start = np.column_stack([r * np.cos(phi), r * np.sin(phi)])
+    assert np.all(signed_areas(start, F) > 0)
+    result = relax(FlatMesh(Mesh(V, F, units="mm"), start))
+    assert result.flipped == 0 and result.boundary_overlap == 0
+    assert result.distortion.edge_rms < 0.01

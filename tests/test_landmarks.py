@@ -122,7 +122,8 @@ def test_overlap_repeats_the_start_past_360(vessel):
 def test_overlap_is_marked_in_the_baked_image(vessel, tmp_path):
     from PIL import Image
 
-    from potflat.bake.render import REPEAT_COLOUR, BakeOptions, run_bake_stage
+    from potflat.bake.render import REPEAT_COLOUR, BakeOptions
+    from potflat.stages.bake_stage import run_bake_stage
     from potflat.io.atomic import write_json_atomic
     from potflat.io.flat_ply import write_flat_ply
 

@@ -73,14 +73,14 @@ def test_energy_and_gradient_match_reference(bumpy, relative):
 
 
 def test_barrier_energy_and_gradient_match_reference(bumpy):
-    from potflat.relax.solver import BARRIER_EPS, BARRIER_MU
+    from potflat.relax.parameters import ENERGY
 
     V, F = bumpy.mesh.vertices, bumpy.mesh.faces
     sp = spring_system(V, F, k=1.0, relative=False)
     x = np.ascontiguousarray(bumpy.uv.copy())
     x[:, 0] *= 0.4  # squeeze: triangles below half their rest area switch the barrier on
     E, Es, g = sp.evaluate(x)
-    Eb = ref.barrier_energy(x, F, sp.a_ref, 1.0, BARRIER_MU, BARRIER_EPS)
+    Eb = ref.barrier_energy(x, F, sp.a_ref, 1.0, ENERGY.barrier_mu, ENERGY.barrier_eps)
     assert Eb > 0
     assert E - Es == pytest.approx(Eb, rel=1e-10)
     num = ref.numeric_gradient(lambda y: sp.evaluate(np.ascontiguousarray(y))[0], x)
@@ -147,14 +147,13 @@ def test_flagged_face_vertices_and_incident_faces_match_numpy():
 
 
 def test_overlap_counts_crossing_boundary():
-    from potflat.relax._kernels.overlap import count_crossings
+    from potflat.mesh._segments import crossing_pairs
 
     x = np.array([[0, 0], [2, 0], [1, -1], [1, 1], [5, 5], [6, 5]], float)
     seg = np.array([[0, 1], [2, 3], [4, 5], [1, 2]])
-    count, first = count_crossings(x, seg, 0.5, 100)
-    assert count == 1 and sorted(first) == [0, 1]
-    count, _ = count_crossings(x, seg[[0, 2, 3]], 0.5, 100)
-    assert count == 0
+    pairs = crossing_pairs(x, seg, 0.5, 100)
+    assert len(pairs) == 1 and sorted(pairs[0]) == [0, 1]
+    assert len(crossing_pairs(x, seg[[0, 2, 3]], 0.5, 100)) == 0
 
 
 # --- the default solver ---------------------------------------------------------------------
@@ -186,7 +185,12 @@ def test_fold_free_from_a_deliberately_distorted_start(vessel):
     assert np.all(signed_areas(warped, vessel.mesh.faces) > 0)
     r = relax(start)
     assert r.flipped == 0 and r.boundary_overlap == 0
-    assert r.distortion.edge_rms < 0.5 * r.distortion_before.edge_rms
+    # it finds the same minimum as from the rollout itself (the energy trades edge length for
+    # shape, so compare with that, not with a fixed fraction of the start's error)
+    direct = relax(vessel)
+    assert r.distortion_before.edge_rms > 1.5 * direct.distortion.edge_rms
+    assert r.distortion.edge_rms == pytest.approx(direct.distortion.edge_rms, rel=0.01)
+    assert r.distortion.anisotropy_p95 == pytest.approx(direct.distortion.anisotropy_p95, rel=0.01)
 
 
 @pytest.mark.parametrize("start", ["orthographic", "sphere"])
@@ -253,10 +257,12 @@ def test_slivers_stay_unflipped():
 
 
 def test_smoothing_the_direction_at_limiting_faces_keeps_every_guarantee(vessel, monkeypatch):
+    import dataclasses
+
     import potflat.relax.solver as rx
 
     smooth = relax(vessel, preset="standard", **SPRINGS_ONLY)
-    monkeypatch.setattr(rx, "SMOOTH_MAX_FRACTION", 0.0)
+    monkeypatch.setattr(rx, "SOLVER", dataclasses.replace(rx.SOLVER, smooth_max_fraction=0.0))
     plain = relax(vessel, preset="standard", **SPRINGS_ONLY)
     assert sum(lv["smoothed_directions"] for lv in smooth.levels) > 0
     assert sum(lv["smoothed_directions"] for lv in plain.levels) == 0
@@ -413,7 +419,7 @@ def _notched_strip(gap):
 
 
 def test_contact_barrier_matches_reference():
-    from potflat.relax.solver import CONTACT_GAP, CONTACT_MU
+    from potflat.relax.parameters import ENERGY
 
     strip = _notched_strip(0.3)
     sp = spring_system(strip.mesh.vertices, strip.mesh.faces, k=1.0, relative=True)
@@ -423,7 +429,7 @@ def test_contact_barrier_matches_reference():
     E, _, g = sp.evaluate(x)
     sp.contact = False
     E0 = sp.evaluate(x)[0]
-    want = ref.contact_energy(x, sp.boundary_segments, sp.bprev, sp.bnext, CONTACT_GAP, CONTACT_MU)
+    want = ref.contact_energy(x, sp.boundary_segments, sp.bprev, sp.bnext, ENERGY.contact_gap, ENERGY.contact_mu)
     assert want > 0 and E - E0 == pytest.approx(want, rel=1e-10)
     sp.contact = True
     num = ref.numeric_gradient(lambda y: sp.evaluate(np.ascontiguousarray(y))[0], x)
@@ -508,25 +514,19 @@ def _angle_sum(uv, F, b=0):
 
 
 def test_boundary_angle_barrier_matches_reference():
-    from potflat.relax.solver import (
-        BARRIER_EPS,
-        BARRIER_MU,
-        BOUNDARY_GAP,
-        BOUNDARY_MU,
-        CONTACT_GAP,
-        CONTACT_MU,
-    )
+    from potflat.relax.parameters import ENERGY
 
-    fan = _saddle_fan(flat_gap=0.15)  # the centre's gap 0.15 < BOUNDARY_GAP: its barrier is on
+    fan = _saddle_fan(flat_gap=0.15)  # the centre's gap 0.15 < ENERGY.boundary_gap: its barrier is on
     V, F = fan.mesh.vertices, fan.mesh.faces
     sp = spring_system(V, F, k=0.8, relative=True)
     x = np.ascontiguousarray(fan.uv)
     assert sp.guard_boundary(x) == 0 and sp.bguard.all()
     E, Es, g = sp.evaluate(x)
     boundary = np.arange(len(V))
-    want = ref.boundary_angle_barrier(x, F, boundary, 0.8, BOUNDARY_MU, BOUNDARY_GAP)
-    want += ref.barrier_energy(x, F, sp.a_ref, 0.8, BARRIER_MU, BARRIER_EPS, relative=True)
-    want += ref.contact_energy(x, sp.boundary_segments, sp.bprev, sp.bnext, CONTACT_GAP, 0.8 * CONTACT_MU)
+    want = ref.boundary_angle_barrier(x, F, boundary, 0.8, ENERGY.boundary_mu, ENERGY.boundary_gap)
+    want += ref.barrier_energy(x, F, sp.a_ref, 0.8, ENERGY.barrier_mu, ENERGY.barrier_eps, relative=True)
+    want += ref.contact_energy(x, sp.boundary_segments, sp.bprev, sp.bnext, ENERGY.contact_gap,
+                               0.8 * ENERGY.contact_mu)
     assert want > 0.3
     assert E - Es == pytest.approx(want, rel=1e-10)
     num = ref.numeric_gradient(lambda y: sp.evaluate(np.ascontiguousarray(y))[0], x)

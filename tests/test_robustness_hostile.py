@@ -364,6 +364,7 @@ def test_overflowing_coordinates_are_named(tmp_path):
 def test_paper_dynamics_that_diverge_stop_with_one_line_and_write_nothing(tmp_path, monkeypatch):
     from potflat.relax import solver as relax_mod
     from potflat.io.flat_ply import write_flat_ply
+    from potflat.stages.relax_stage import run_relax_stage
     from potflat.types import FlatMesh, Mesh
 
     x, y = np.meshgrid(np.linspace(0, 40, 8), np.linspace(0, 30, 7))
@@ -372,10 +373,12 @@ def test_paper_dynamics_that_diverge_stop_with_one_line_and_write_nothing(tmp_pa
                  + [[r * 8 + c, r * 8 + c + 9, r * 8 + c + 8] for r in range(6) for c in range(7)])
     write_flat_ply(tmp_path / "pot.rollout.ply", FlatMesh(Mesh(V, F), V[:, :2].copy()))
     monkeypatch.setattr(relax_mod._Springs, "laplacian_bound", lambda self: 1e-4)  # a step 100x too long
-    with pytest.raises(FoldedResultError, match="diverged"):
-        relax_mod.run_relax_stage(tmp_path / "pot.rollout.ply", tmp_path / "out",
-                                  relax_mod.RelaxOptions(preset="paper"))
+    with pytest.raises(FoldedResultError, match="diverged.*--preset standard"):
+        run_relax_stage(tmp_path / "pot.rollout.ply", tmp_path / "out", relax_mod.RelaxOptions(preset="paper"))
     assert not (tmp_path / "out").exists()
+    # the advice works
+    out = run_relax_stage(tmp_path / "pot.rollout.ply", tmp_path / "out", relax_mod.RelaxOptions(preset="standard"))
+    assert out.summary["fold_free"]
 
 
 def test_the_paper_step_bounds_the_largest_eigenvalue():
@@ -397,7 +400,7 @@ def test_the_paper_step_bounds_the_largest_eigenvalue():
         for i in range(n):
             for p in range(sp.ptr[i], sp.ptr[i + 1]):
                 j = sp.nbr[p]
-                c = sp.k / max(sp.rst[p], relax_mod.LENGTH_FLOOR) ** 2 if sp.relative else sp.k
+                c = sp.k / max(sp.rst[p], relax_mod.ENERGY.length_floor) ** 2 if sp.relative else sp.k
                 L[i, i] += c
                 L[i, j] -= c
         assert sp.laplacian_bound() >= np.linalg.eigvalsh(L).max() * (1 - 1e-12)
@@ -567,7 +570,7 @@ def test_large_trims_and_poor_axis_fits_are_warned_with_the_option():
     V = np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0]], float)
     flat = FlatMesh(Mesh(V, np.array([[0, 1, 2]])), V[:, :2].copy())
     result = SimpleNamespace(landmark_notes=(), region=SimpleNamespace(repeated_from=None),
-                             distortion=SimpleNamespace(flipped=0), boundary_overlap=0,
+                             distortion=SimpleNamespace(flipped=0), boundary_overlap=0, folds=None,
                              other_objects_faces=0,
                              trimmed_area=20.0, flat=flat, proxy=SimpleNamespace(kind="cylinder"),
                              axis=SimpleNamespace(rms_angle_deg=14.0, direction=np.array([0.0, 1.0, 0.0])))

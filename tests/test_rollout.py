@@ -10,7 +10,8 @@ from potflat.rollout.axis import _boundary_loops
 from potflat.mesh.distortion import face_distortion
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.flat_ply import read_flat_ply
-from potflat.rollout.unroll import RolloutOptions, cut_open, rollout, run_rollout_stage
+from potflat.rollout.unroll import RolloutOptions, cut_open, rollout
+from potflat.stages.rollout_stage import run_rollout_stage
 
 #: The shared real scans (CI has ../shared beside the repository).
 REAL = Path(__file__).resolve().parents[2] / "shared/data/real"

@@ -15,10 +15,10 @@ from potflat.rollout.unroll import (
     boundary_segments,
     crossing_segments,
     rollout,
-    run_rollout_stage,
     signed_areas,
     untangle,
 )
+from potflat.stages.rollout_stage import run_rollout_stage
 from potflat_synthetic.vessels import (
     PART_BASE,
     PART_HANDLE,

@@ -1,6 +1,7 @@
 """Coarse copies of a rollout (potflat.relax.simplify) and relaxation from or at a coarse copy."""
 from __future__ import annotations
 
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -18,7 +19,7 @@ from potflat.types import FlatMesh, Mesh
 
 @pytest.fixture(scope="module")
 def vessel():
-    """Big enough to start from a coarse copy (relax.COARSE_MIN_VERTICES)."""
+    """Big enough to start from a coarse copy (relax.COARSE.min_vertices)."""
     return meshes.vessel_rollout(30_000, seed=4)
 
 
@@ -84,7 +85,7 @@ def test_interpolate_matches_brute_force_location(vessel):
 
 def test_standard_starts_from_a_coarse_copy(vessel, monkeypatch):
     nested = relax(vessel, preset="standard")
-    monkeypatch.setattr(relax_module, "COARSE_MIN_VERTICES", 10**9)
+    monkeypatch.setattr(relax_module, "COARSE", dataclasses.replace(relax_module.COARSE, min_vertices=10**9))
     plain = relax(vessel, preset="standard")
     assert [lv["level"] for lv in nested.levels] == ["coarse", "fine"]
     assert [lv["level"] for lv in plain.levels] == ["fine"]

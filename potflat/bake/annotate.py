@@ -15,6 +15,7 @@ import numpy as np
 from potflat.mesh.distortion import percent_from_log
 
 from potflat.types import FlatMesh
+from potflat.mesh.tolerances import ROUNDING
 
 #: Longest side in pixels of each baked panel of the comparison sheet.
 SHEET_PANEL_PX = 900
@@ -115,11 +116,11 @@ def overlay(rgb: np.ndarray, values: np.ndarray, scale: MapScale, coverage: np.n
 OUTLINE_RGBA = (255, 255, 255, 255)
 
 
-def draw_outline(rows: np.ndarray, outline: np.ndarray | None) -> np.ndarray:
-    """Map rows (k, w, 4) uint8 with the important zone's outline (k, w) bool drawn in
-    :data:`OUTLINE_RGBA` (in place; returned). ``None``: unchanged."""
+def draw_outline(rows: np.ndarray, outline: np.ndarray | None, rgba=OUTLINE_RGBA) -> np.ndarray:
+    """Map rows (k, w, 4) uint8 with an outline (k, w) bool drawn in ``rgba`` (the important
+    zone's: :data:`OUTLINE_RGBA`) (in place; returned). ``None``: unchanged."""
     if outline is not None:
-        rows[outline] = OUTLINE_RGBA
+        rows[outline] = rgba
     return rows
 
 
@@ -188,7 +189,7 @@ def nice_length(limit: float) -> float:
     """The largest 1-2-5 x 10^k not above ``limit`` (> 0)."""
     k = math.floor(math.log10(limit))
     for m in (5.0, 2.0, 1.0):
-        if m * 10.0 ** k <= limit * (1 + 1e-9):
+        if m * 10.0 ** k <= limit * (1 + ROUNDING):
             return m * 10.0 ** k
     return 10.0 ** k
 

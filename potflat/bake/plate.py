@@ -126,9 +126,9 @@ def _read_rgba(path: Path) -> np.ndarray:
 
 
 def _sources(relaxed_ply: Path, name: str | None, bake_dir: Path) -> _Sources:
-    from potflat.bake.render import stage_name
     from potflat.io.flat_ply import read_flat_ply
     from potflat.rollout.profile import read_profile_csv
+    from potflat.stages.names import stage_name
 
     if not relaxed_ply.name.endswith(".relaxed.ply"):
         raise InvalidInputError(f"{relaxed_ply.name}: the plate is made from NAME.relaxed.ply (with the rollout, "

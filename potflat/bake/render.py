@@ -13,24 +13,24 @@ shaded relief.
 The pixel grid: ``px_per_mm`` pixels per millimetre, row 0 at the largest ``v`` (the
 mouth up), column 0 at the smallest ``u`` (not mirrored); :attr:`BakeResult.origin`
 is the ``uv`` of the top-left pixel corner. Images are rendered in horizontal strips,
-so large outputs (hundreds of megapixels) are streamed to disk by
-:func:`run_bake_stage` with a bounded memory footprint.
+so large outputs (hundreds of megapixels) are streamed to disk with a bounded memory
+footprint: :class:`Renderer` gives every layer of a strip of rows, which the file stage
+(:func:`potflat.stages.bake_stage.run_bake_stage`) writes as it goes.
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Iterator
-from contextlib import ExitStack
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from potflat.mesh import distortion
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.types import FlatMesh, StageOutput, StepClock
+from potflat.types import FlatMesh
+from potflat.mesh.tolerances import DEGENERATE, ROUNDING
 
 #: Distortion maps :func:`bake` can make.
 MAP_NAMES = ("stress", "area", "anisotropy")
@@ -164,7 +164,7 @@ class BakeResult:
         covers ``u`` from ``origin[0] + c / s`` and ``v`` down from ``origin[1] - r / s``
         with ``s = px_per_mm * mm_per_unit`` pixels per unit.
     figures : dict
-        Resolution, size, distortion figures, covered area (see :func:`run_bake_stage`).
+        Resolution, size, distortion figures, covered area (see :func:`potflat.stages.bake_stage.run_bake_stage`).
     """
 
     image: np.ndarray
@@ -258,7 +258,7 @@ def _chart_mask(texcoords: np.ndarray, height: int, width: int) -> np.ndarray:
     for r0 in range(0, height, rows):
         r1 = min(height, r0 + rows)
         face = np.full((r1 - r0, width), -1, np.int32)
-        raster.rasterize_rows(pts, tri, ptr, idx, BLOCK_ROWS, r0, r1 - r0, width, 1e-9, face,
+        raster.rasterize_rows(pts, tri, ptr, idx, BLOCK_ROWS, r0, r1 - r0, width, ROUNDING, face,
                               np.zeros(face.shape + (2,)))
         mask[r0:r1] = face >= 0
     return cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool)
@@ -344,8 +344,15 @@ def image_size(extent_mm, px_per_mm: float, max_megapixels: float) -> tuple[int,
     return width, height
 
 
-class _Renderer:
-    """Rasterises a flattening strip by strip and produces every bake layer."""
+class Renderer:
+    """Rasterises a flattening strip by strip and produces every bake layer.
+
+    The strip API: :attr:`grid` (the pixel grid), :meth:`strips` (row ranges ``r0, r1``),
+    and per strip :meth:`coverage`, :meth:`painting`, :meth:`scalar` (a distortion map or a
+    per-face field put in :attr:`face_values`), :meth:`zone_outline` and :meth:`position`;
+    :func:`image_figures` sums them up. Every layer of one strip has ``r1 - r0`` rows of
+    ``grid.width`` pixels.
+    """
 
     def __init__(self, flat: FlatMesh, px_per_mm: float, *, supersample: int = 0, max_megapixels: float = 1000.0,
                  distortion_maps: bool = True):
@@ -410,7 +417,7 @@ class _Renderer:
             t1 = np.stack([(t[:, 1, 0] - t[:, 0, 0]) * W0, (t[:, 0, 1] - t[:, 1, 1]) * H0], axis=1)
             t2 = np.stack([(t[:, 2, 0] - t[:, 0, 0]) * W0, (t[:, 0, 1] - t[:, 2, 1]) * H0], axis=1)
             det = p1[:, 0] * p2[:, 1] - p2[:, 0] * p1[:, 1]
-            ok = np.abs(det) > 1e-12
+            ok = np.abs(det) > DEGENERATE
             det = np.where(ok, det, 1.0)
             # J = [t1 t2] [p1 p2]^-1, then its largest singular value in closed form
             a11 = (t1[:, 0] * p2[:, 1] - t2[:, 0] * p1[:, 1]) / det
@@ -463,7 +470,7 @@ class _Renderer:
         face = np.full(((r1 - r0) * n, g.width * n), -1, np.int32)
         bary = np.zeros(face.shape + (2,), np.float64)
         self._raster_mod.rasterize_rows(self._pix, self.faces, self._ptr, self._idx, self._block, r0 * n,
-                                        face.shape[0], face.shape[1], 1e-9, face, bary)
+                                        face.shape[0], face.shape[1], ROUNDING, face, bary)
         self._cache = ((r0, r1), (face, bary))
         return face, bary
 
@@ -518,14 +525,8 @@ class _Renderer:
         :data:`potflat.mesh.distortion.ZONE_THRESHOLD`), shape (k, w) bool; None without importance."""
         if self.flat.importance is None:
             return None
-        import cv2
-
         field = self._vertex_field(self.flat.importance, r0, r1)[..., 0]
-        inside = (np.nan_to_num(field, nan=0.0) >= distortion.ZONE_THRESHOLD).astype(np.uint8)
-        ring = np.ones((3, 3), np.uint8)
-        edge = cv2.dilate(inside, ring, borderType=cv2.BORDER_REPLICATE) & ~cv2.erode(
-            inside, ring, borderType=cv2.BORDER_REPLICATE)
-        return edge.astype(bool) & np.isfinite(field)
+        return _outline(field, distortion.ZONE_THRESHOLD)
 
     def position(self, r0: int, r1: int) -> np.ndarray:
         """3D point under each pixel, scan units (NaN outside). Shape (k, w, 3) float32."""
@@ -544,7 +545,7 @@ def _stats(values: np.ndarray, weights: np.ndarray | None = None) -> dict:
     return {"mean": mean, "p95": float(np.percentile(values, 95)), "max": float(values.max())}
 
 
-def _figures(r: _Renderer, covered_px: float) -> dict:
+def image_figures(r: Renderer, covered_px: float) -> dict:
     g, flat = r.grid, r.flat
     mpu = flat.mesh.mm_per_unit
     fv = r.face_values
@@ -601,11 +602,11 @@ def paint(flat: FlatMesh, px_per_mm: float, *, supersample: int = 2) -> tuple[np
     origin : (2,) float64
         ``(u, v)`` of the top-left pixel corner (:attr:`BakeResult.origin`).
     """
-    r = _Renderer(flat, px_per_mm, supersample=supersample, distortion_maps=False)
+    r = Renderer(flat, px_per_mm, supersample=supersample, distortion_maps=False)
     g = r.grid
     image = np.zeros((g.height, g.width, 4), np.uint8)
     for r0, r1 in r.strips():
-        image[r0:r1] = _rgba8(r.painting(r0, r1), r.coverage(r0, r1))
+        image[r0:r1] = rgba8(r.painting(r0, r1), r.coverage(r0, r1))
     return image, g.origin.copy()
 
 
@@ -642,7 +643,7 @@ def bake(flat: FlatMesh, *, options: BakeOptions | None = None, **option_fields)
     elif option_fields:
         raise InvalidOptionError("give either options= or option keywords to bake(), not both")
     opts = options
-    r = _Renderer(flat, opts.resolution, supersample=opts.supersample, max_megapixels=opts.max_megapixels)
+    r = Renderer(flat, opts.resolution, supersample=opts.supersample, max_megapixels=opts.max_megapixels)
     g = r.grid
     image = np.zeros((g.height, g.width, 4), np.uint8)
     values = {name: np.empty((g.height, g.width), np.float32) for name in opts.maps}
@@ -651,13 +652,13 @@ def bake(flat: FlatMesh, *, options: BakeOptions | None = None, **option_fields)
     for r0, r1 in r.strips():
         cov = r.coverage(r0, r1)
         covered += float(cov.sum(dtype=np.float64))
-        image[r0:r1] = _rgba8(r.painting(r0, r1), cov)
+        image[r0:r1] = rgba8(r.painting(r0, r1), cov)
         for name in opts.maps:
             values[name][r0:r1] = r.scalar(name, r0, r1)
         if position is not None:
             position[r0:r1] = r.position(r0, r1)
     return BakeResult(image=image, maps=values, position=position, px_per_mm=g.px_per_mm,
-                      origin=g.origin.copy(), figures=_figures(r, covered))
+                      origin=g.origin.copy(), figures=image_figures(r, covered))
 
 
 def comparison_sheet(path: str | os.PathLike, rollout: FlatMesh, relaxed: FlatMesh, *, title: str = "") -> Path:
@@ -670,7 +671,7 @@ def comparison_sheet(path: str | os.PathLike, rollout: FlatMesh, relaxed: FlatMe
     return annotate.comparison_sheet(path, panels, title=title)
 
 
-def _attachment_rows(share: np.ndarray) -> np.ndarray:
+def attachment_rows(share: np.ndarray) -> np.ndarray:
     """RGBA rows of the attachment mask from the covered share of marked faces per pixel."""
     alpha = np.nan_to_num(share, nan=0.0)
     out = np.zeros(share.shape + (4,), np.uint8)
@@ -679,7 +680,7 @@ def _attachment_rows(share: np.ndarray) -> np.ndarray:
     return out
 
 
-def _rgba8(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
+def rgba8(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
     """(k, w, 3) float in [0, 1] (NaN outside) and coverage -> (k, w, 4) uint8."""
     out = np.empty(rgb.shape[:2] + (4,), np.uint8)
     out[..., :3] = np.rint(np.clip(np.nan_to_num(rgb, nan=0.0), 0.0, 1.0) * 255.0)
@@ -687,7 +688,7 @@ def _rgba8(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
     return out
 
 
-def _rgba16(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
+def rgba16(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
     out = np.empty(rgb.shape[:2] + (4,), np.uint16)
     out[..., :3] = np.rint(np.clip(np.nan_to_num(rgb, nan=0.0), 0.0, 1.0) * 65535.0)
     out[..., 3] = np.rint(coverage * 65535.0)
@@ -695,17 +696,36 @@ def _rgba16(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------------------
-# stage
-
-
-def stage_name(path: Path) -> str:
-    """Output NAME for a stage file: ``X.relaxed.ply`` -> ``X``; ``X.rollout.ply`` -> ``X.rollout``."""
-    stem = path.name[: -len(path.suffix)] if path.suffix else path.name
-    return stem.removesuffix(".relaxed")
+# marks and the scale bar drawn into the painting (used strip by strip by the file stage)
 
 
 #: Colour (RGBA) of the faces where a left-out attachment (handle, spout, knob) met the wall.
 ATTACHMENT_COLOUR = (230, 0, 160, 220)
+
+
+#: Colour (RGBA) of the outline and hatching of the places where the scan folds over itself in 3D.
+FOLDED_COLOUR = (255, 0, 255, 255)
+#: Spacing (pixels) of the hatching's diagonal lines.
+FOLDED_HATCH_PX = 6
+
+
+def _outline(field: np.ndarray, threshold: float) -> np.ndarray:
+    """Pixels (k, w) bool on the outline of where ``field`` (k, w, NaN outside) is at least ``threshold``."""
+    import cv2
+
+    inside = (np.nan_to_num(field, nan=0.0) >= threshold).astype(np.uint8)
+    ring = np.ones((3, 3), np.uint8)
+    edge = cv2.dilate(inside, ring, borderType=cv2.BORDER_REPLICATE) & ~cv2.erode(
+        inside, ring, borderType=cv2.BORDER_REPLICATE)
+    return edge.astype(bool) & np.isfinite(field)
+
+
+def folded_hatch(share: np.ndarray, r0: int) -> np.ndarray:
+    """Pixels (k, w) bool marking where the scan folds in 3D: the outline of the faces'
+    footprint (their share crossing one half) and diagonal hatching inside it."""
+    rows, cols = np.indices(share.shape)
+    hatch = (np.nan_to_num(share, nan=0.0) >= 0.5) & ((rows + r0 + cols) % FOLDED_HATCH_PX == 0)
+    return _outline(share, 0.5) | hatch
 
 
 #: Colour (RGBA) of the dashed line where a rollout's repeat past 360 degrees (``overlap``) starts.
@@ -714,50 +734,7 @@ REPEAT_COLOUR = (255, 0, 200, 255)
 REPEAT_DASH_PX = 6
 
 
-def _rollout_sidecar(flat_ply: Path, rollout_summary: dict | None = None) -> tuple[dict, Path | None]:
-    """The rollout's summary (``rollout_summary`` when handed over in memory, else
-    ``NAME.rollout.json`` beside the input; an empty dict when absent or unreadable) and that
-    JSON file (for provenance) or None."""
-    stem = flat_ply.name.removesuffix(".ply").removesuffix(".relaxed").removesuffix(".rollout")
-    rollout_json = flat_ply.with_name(f"{stem}.rollout.json")
-    if rollout_summary is not None:
-        return rollout_summary, rollout_json if rollout_json.is_file() else None
-    try:
-        data = json.loads(rollout_json.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return {}, None
-    # a sidecar of another shape (null, a list: edited by hand) has nothing to mark
-    return (data if isinstance(data, dict) else {}), rollout_json
-
-
-def _attachment_roots(sidecar: dict, n_faces: int) -> np.ndarray:
-    """Faces where the rollout left out an attachment, from ``NAME.rollout.json``: a per-face
-    indicator (n_faces,) float64, empty when there is nothing to show."""
-    att = sidecar.get("attachments")
-    roots = att.get("root_faces") if isinstance(att, dict) else None
-    if not isinstance(roots, list) or not all(isinstance(r, int) and not isinstance(r, bool) for r in roots):
-        return np.zeros(0)
-    roots = np.asarray(roots, dtype=np.int64)
-    if att.get("kept") or not len(roots) or roots.min() < 0 or roots.max() >= n_faces:
-        return np.zeros(0)
-    marks = np.zeros(n_faces)
-    marks[roots] = 1.0
-    return marks
-
-
-def _repeated_faces(sidecar: dict, n_faces: int) -> np.ndarray:
-    """Faces that repeat the start of the rollout past 360 degrees (``overlap``), from
-    ``NAME.rollout.json``: a per-face indicator (n_faces,) float64, empty when none."""
-    region = sidecar.get("region")
-    start = region.get("repeated_from") if isinstance(region, dict) else None
-    if not isinstance(start, int) or region.get("faces") != n_faces or not 0 < start < n_faces:
-        return np.zeros(0)
-    marks = np.zeros(n_faces)
-    marks[int(start):] = 1.0
-    return marks
-
-
-def _repeat_line(share: np.ndarray, r0: int) -> np.ndarray:
+def repeat_line(share: np.ndarray, r0: int) -> np.ndarray:
     """Pixels (k, w) bool of a dashed line where the repeated part starts: where the share of
     repeated faces crosses one half from left to right (the line runs from foot to mouth)."""
     rep = np.nan_to_num(share, nan=-1.0)
@@ -773,7 +750,7 @@ def _repeat_line(share: np.ndarray, r0: int) -> np.ndarray:
 MIN_BAR_FRACTION = 0.1
 
 
-def _scale_on_image(r: _Renderer, grid: bool):
+def scale_layer_on_image(r: Renderer, grid: bool):
     """The scale layer to draw into ``NAME.png``, placed where it covers no painting.
 
     The painting's footprint is rasterised on a grid of at most
@@ -800,7 +777,7 @@ def _scale_on_image(r: _Renderer, grid: bool):
     covered = _chart_mask(tex, hc, wc)
     default = annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid)
     bar = default.bar_mm
-    while bar >= MIN_BAR_FRACTION * default.bar_mm * (1 - 1e-9):
+    while bar >= MIN_BAR_FRACTION * default.bar_mm * (1 - ROUNDING):
         probe = annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid, bar_mm=bar)
         bw, bh = probe.box_size
         spot = annotate.free_spot(covered, (math.ceil(bw / f) + 1, math.ceil(bh / f) + 1), math.ceil(probe.margin / f))
@@ -813,196 +790,3 @@ def _scale_on_image(r: _Renderer, grid: bool):
     return annotate.ScaleLayer(g.width, g.height + band, g.px_per_mm, grid=grid, bar_mm=default.bar_mm,
                                at=(default.margin, g.height + default.margin)), band
 
-
-def _write_flat_obj(path: Path, flat: FlatMesh, g: _Grid, band: int, texture_name: str) -> Path:
-    """The flattened surface as a textured OBJ: 3D positions, texture coordinates = the flat
-    coordinates in the pixel grid of ``NAME.png`` (``band`` rows added below it)."""
-    from potflat import __version__
-    from potflat.io.obj import write_textured_obj
-
-    height = g.height + band
-    vt = np.empty_like(flat.uv)
-    vt[:, 0] = (flat.uv[:, 0] - g.origin[0]) * g.scale / g.width
-    vt[:, 1] = 1.0 - (g.origin[1] - flat.uv[:, 1]) * g.scale / height
-    header = (f"potflat {__version__}: {flat.mesh.source.name if flat.mesh.source else 'flattening'}, "
-              f"units {flat.mesh.units}; texture coordinates = the flat layout in {texture_name} "
-              f"({g.px_per_mm:g} px/mm)")
-    return write_textured_obj(path, flat.mesh.vertices, flat.mesh.faces, vt, flat.mesh.faces, texture_name,
-                              header=header)
-
-
-def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: list) -> None:
-    """Refuse to bake when an output name is an input file (e.g. the scan's texture ``NAME.png``
-    when baking into the scan's own folder): the input would be replaced."""
-    suffixes = (".png", ".tif", ".position.tif", ".sheet.png", ".bake.json", ".overlay.png", ".scale-layer.png",
-                ".attachments.png", ".flat.obj", ".flat.mtl", ".plate.svg", ".plate.pdf", ".plate.png",
-                ".scalebar.png", *(f".{m}.png" for m in options.maps))
-    for src in (Path(p) for p in inputs if p is not None):
-        for out in (out_dir / f"{name}{s}" for s in suffixes):
-            if src.exists() and out.exists() and os.path.samefile(out, src):
-                raise InvalidOptionError(f"the output {out} is the input {src} and would be overwritten; "
-                                         "bake into another folder (-o) or give another --name")
-
-
-def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, options: BakeOptions | None = None, *,
-                   name: str | None = None, flat: FlatMesh | None = None,
-                   rollout_summary: dict | None = None) -> StageOutput:
-    """Bake ``NAME.relaxed.ply`` (or a rollout) into images and ``NAME.bake.json``.
-
-    Files (in ``out_dir``): ``NAME.png`` (painting, RGBA, resolution in the file),
-    ``NAME.<map>.png`` (heat maps with a colour bar below the image),
-    ``NAME.overlay.png`` (stress over the greyscale painting), ``NAME.scale-layer.png``
-    (scale bar and optional 10 mm grid, same size as ``NAME.png``), ``NAME.scalebar.png``
-    (the bar alone, true scale), optionally ``NAME.tif`` (16-bit RGBA),
-    ``NAME.position.tif`` (float32 3D points) and ``NAME.sheet.png``, and
-    ``NAME.attachments.png`` (where handles or other attachments left out by the rollout met
-    the wall, from ``NAME.rollout.json`` beside the input); all images share
-    the pixel grid of ``NAME.png`` (maps add a legend band below it).
-
-    Parameters
-    ----------
-    flat_ply : path-like
-        A stage file from ``potflat relax`` (``NAME.relaxed.ply``) or ``potflat rollout``.
-    out_dir : path-like
-        Output folder (created).
-    options : BakeOptions, optional
-    name : str, optional
-        Output NAME; default: the input stem without ``.relaxed``.
-    flat : FlatMesh, optional
-        The content of ``flat_ply`` already in memory (:func:`potflat.run_scan`); read from
-        the file when not given.
-    rollout_summary : dict, optional
-        The rollout stage's summary in memory (where attachments met the wall); read from
-        ``NAME.rollout.json`` beside the input when not given.
-
-    Returns
-    -------
-    StageOutput
-        ``paths`` by role and the JSON sidecar content as ``summary``.
-    """
-    from potflat.bake import annotate
-    from potflat.io.atomic import write_json_atomic
-    from potflat.io.images import PngWriter, write_png, write_tiff_rows
-    from potflat.io.flat_ply import read_flat_ply
-    from potflat.stages.provenance import provenance
-
-    options = options or BakeOptions()
-    flat_ply = Path(flat_ply)
-    out_dir = Path(out_dir)
-    name = name or stage_name(flat_ply)
-    clock = StepClock()
-    if flat is None:
-        flat = read_flat_ply(flat_ply)
-    rollout_ply = None
-    if options.sheet:
-        if not flat_ply.name.endswith(".relaxed.ply"):
-            raise InvalidOptionError(f"the sheet compares NAME.rollout.ply with NAME.relaxed.ply; bake the relaxed file, not {flat_ply.name}")
-        rollout_ply = flat_ply.with_name(flat_ply.name[: -len(".relaxed.ply")] + ".rollout.ply")
-        if not rollout_ply.is_file():
-            raise InvalidInputError(f"--sheet needs {rollout_ply.name} beside {flat_ply}; copy it there or drop --sheet")
-    if options.plate and not flat_ply.name.endswith(".relaxed.ply"):
-        raise InvalidOptionError(f"the plate is made from NAME.relaxed.ply; bake the relaxed file, not {flat_ply.name}")
-    _check_not_inputs(out_dir, name, options, [flat_ply, flat.mesh.texture_path, rollout_ply])
-    sidecar, rollout_json = _rollout_sidecar(flat_ply, rollout_summary)
-    attachment_marks = _attachment_roots(sidecar, len(flat.mesh.faces))
-    repeated = _repeated_faces(sidecar, len(flat.mesh.faces))
-    ppm = options.resolution
-    r = _Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels)
-    g = r.grid
-    clock.lap("prepare")
-    if len(attachment_marks):
-        r.face_values["attachments"] = attachment_marks
-    if len(repeated):
-        r.face_values["repeated"] = repeated
-    paths: dict[str, Path] = {"png": out_dir / f"{name}.png"}
-    scales = {m: annotate.map_scale(m, r.vertex_length_error if m == "stress" else r.face_values[m])
-              for m in options.maps}
-    if flat.importance is not None:
-        scales = {m: replace(sc, label=f"{sc.label}; white line: painted zone") for m, sc in scales.items()}
-    legends = {m: annotate.legend_band(scales[m], g.width) for m in options.maps}
-    if "stress" in options.maps:
-        legends["overlay"] = legends["stress"]
-    layer = annotate.ScaleLayer(g.width, g.height, ppm, grid=options.grid)
-    on_image, band = _scale_on_image(r, options.grid) if options.scale_on_image else (None, 0)
-    covered = 0.0
-    with ExitStack() as stack:
-        png = stack.enter_context(PngWriter(paths["png"], g.width, g.height + band, 4, px_per_mm=ppm))
-        writers = {}
-        for key, legend in legends.items():
-            paths[key] = out_dir / f"{name}.{key}.png"
-            writers[key] = stack.enter_context(PngWriter(paths[key], g.width, g.height + len(legend), 4,
-                                                         px_per_mm=ppm))
-        paths["scale_layer"] = out_dir / f"{name}.scale-layer.png"
-        layer_png = stack.enter_context(PngWriter(paths["scale_layer"], g.width, g.height, 4, px_per_mm=ppm))
-        if len(attachment_marks):
-            paths["attachments"] = out_dir / f"{name}.attachments.png"
-            mask_png = stack.enter_context(PngWriter(paths["attachments"], g.width, g.height, 4, px_per_mm=ppm))
-        for r0, r1 in r.strips():
-            cov = r.coverage(r0, r1)
-            covered += float(cov.sum(dtype=np.float64))
-            rgb = r.painting(r0, r1)
-            rgba = _rgba8(rgb, cov)
-            if len(repeated):
-                rgba[_repeat_line(r.scalar("repeated", r0, r1), r0)] = REPEAT_COLOUR
-            png.write(rgba if on_image is None else annotate.over(on_image.rows(r0, r1), rgba))
-            outline = r.zone_outline(r0, r1) if options.maps else None
-            for m in options.maps:
-                values = r.scalar(m, r0, r1)
-                writers[m].write(annotate.draw_outline(annotate.colorize(values, scales[m], cov), outline))
-                if m == "stress":
-                    writers["overlay"].write(annotate.draw_outline(annotate.overlay(rgb, values, scales[m], cov), outline))
-            layer_png.write(layer.rows(r0, r1))
-            if len(attachment_marks):
-                mask_png.write(_attachment_rows(r.scalar("attachments", r0, r1)))
-        if band:
-            png.write(on_image.rows(g.height, g.height + band))
-        for key, legend in legends.items():
-            writers[key].write(legend)
-    paths["scalebar"] = write_png(out_dir / f"{name}.scalebar.png", layer.bar_image(), px_per_mm=ppm)
-    clock.lap("render")
-    if options.tiff:
-        paths["tiff"] = write_tiff_rows(out_dir / f"{name}.tif",
-                                        (_rgba16(r.painting(a, b), r.coverage(a, b)) for a, b in r.strips()),
-                                        shape=(g.height, g.width, 4), dtype=np.uint16, px_per_mm=ppm, photometric="rgb")
-    if options.position_map:
-        paths["position"] = write_tiff_rows(out_dir / f"{name}.position.tif", (r.position(a, b) for a, b in r.strips()),
-                                            shape=(g.height, g.width, 3), dtype=np.float32, px_per_mm=ppm,
-                                            photometric="rgb")
-    clock.lap("tiff")
-    figures = _figures(r, covered)
-    clock.lap("figures")
-    if options.obj:
-        paths["obj"] = _write_flat_obj(out_dir / f"{name}.flat.obj", flat, g, band, paths["png"].name)
-        paths["mtl"] = paths["obj"].with_suffix(".mtl")
-    if rollout_ply is not None:
-        paths["sheet"] = comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat, title=name)
-    clock.lap("obj_sheet")
-    inputs = ([flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else [])
-              + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else []))
-    summary = {
-        **figures,
-        "overlap": None if not len(repeated) else {
-            "deg": sidecar["region"].get("overlap_deg"), "repeated_faces": int(repeated.sum()),
-            "mark": f"dashed line {REPEAT_COLOUR[:3]} where the repeat past 360 degrees starts"},
-        "scale_bar_mm": layer.bar_mm,
-        "scale_on_image": None if on_image is None else {
-            "bar_mm": on_image.bar_mm, "at_px": list(on_image.at), "box_px": list(on_image.box_size),
-            "band_below_px": band, "grid": options.grid},
-        "maps": {m: {"range": [scales[m].lo, scales[m].hi], "label": scales[m].label} for m in options.maps},
-        "files": {k: p.name for k, p in paths.items()},
-        "provenance": provenance(stage="bake", inputs=inputs,
-                                 options={**asdict(options), "px_per_mm_effective": ppm, "name": name}),
-    }
-    paths["json"] = out_dir / f"{name}.bake.json"
-    summary["files"]["json"] = paths["json"].name
-    summary["timings"] = clock.total()  # the plate (made from these files) comes after
-    write_json_atomic(paths["json"], summary)
-    if options.plate:
-        from potflat.bake.plate import make_plate
-
-        plate = make_plate(flat_ply, out_dir, scale=options.plate_scale, name=name)
-        paths.update({f"plate_{k}": p for k, p in plate.paths.items()})
-        summary["files"].update({f"plate_{k}": p.name for k, p in plate.paths.items()})
-        summary["plate"] = {k: v for k, v in plate.summary.items() if k not in ("files", "inputs")}
-        write_json_atomic(paths["json"], summary)
-    return StageOutput(paths=paths, summary=summary)

@@ -275,3 +275,36 @@ def write_tiff_rows(path, rows: Iterable[np.ndarray], *, shape: tuple[int, ...],
                          compression="zlib", compressionargs={"level": 1},
                          metadata=None, **extrasamples, **kwargs)
     return Path(path)
+
+
+def read_mask(path: str | Path) -> np.ndarray:
+    """A mask image as importance in [0, 1]: grey level times alpha (white opaque = 1).
+
+    Returns
+    -------
+    (h, w) float32
+    """
+    import cv2
+
+    path = Path(path)
+    if not path.is_file():
+        raise InvalidInputError(f"importance mask {path} not found; give the PNG you painted (white = important)")
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH)
+    if img is None:
+        raise InvalidInputError(f"cannot read importance mask {path}; save it as PNG")
+    scale = 65535.0 if img.dtype == np.uint16 else 255.0 if img.dtype == np.uint8 else 1.0
+    img = img.astype(np.float32) / scale
+    if img.ndim == 2:
+        return np.clip(img, 0.0, 1.0)
+    grey = img[..., :3].mean(axis=2)
+    if img.shape[2] == 4:
+        grey = grey * img[..., 3]
+    return np.clip(grey, 0.0, 1.0)
+
+
+def read_texture_grey_quarter(path: str | os.PathLike) -> np.ndarray | None:
+    """A texture in grey levels at a quarter of its size (h/4, w/4) uint8 (OpenCV's reduced
+    read: cheap on large atlases), or None when it cannot be read."""
+    import cv2
+
+    return cv2.imread(str(path), cv2.IMREAD_REDUCED_GRAYSCALE_4)

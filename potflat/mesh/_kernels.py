@@ -623,3 +623,91 @@ def face_geometry(V, F):
         centroid[f, 1] = (V[a, 1] + V[b, 1] + V[c, 1]) / 3.0
         centroid[f, 2] = (V[a, 2] + V[b, 2] + V[c, 2]) / 3.0
     return cross, area2, longest2, centroid
+
+
+@leaf
+def _strictly_inside(px, py, ax, ay, bx, by, cx, cy):
+    """Whether (px, py) lies strictly inside the triangle a b c, either orientation."""
+    s1 = (bx - ax) * (py - ay) - (by - ay) * (px - ax)
+    s2 = (cx - bx) * (py - by) - (cy - by) * (px - bx)
+    s3 = (ax - cx) * (py - cy) - (ay - cy) * (px - cx)
+    return (s1 > 0.0 and s2 > 0.0 and s3 > 0.0) or (s1 < 0.0 and s2 < 0.0 and s3 < 0.0)
+
+
+@leaf
+def _cell_range(lo, hi, origin, cell, cells):
+    """First and last grid cell (clamped to ``0 .. cells - 1``) of the interval [lo, hi]."""
+    a = int((lo - origin) / cell)
+    b = int((hi - origin) / cell)
+    return min(max(a, 0), cells - 1), min(max(b, 0), cells - 1)
+
+
+@leaf
+def triangle_cells(faces, uv, ox, oy, cell, gx, gy, start, items):
+    """Bin triangles by their bounding boxes into a ``gx`` x ``gy`` grid of square cells of
+    side ``cell`` from (``ox``, ``oy``), as a CSR table: cell ``c`` (``cx * gy + cy``) holds
+    ``items[start[c]:start[c + 1]]``, in face order. With ``items`` empty, only counts.
+
+    faces (m, 3) int64, uv (n, 2) float64, start (gx * gy + 1,) int64 out, items (k,) int64
+    out or (0,). Returns the number of (cell, triangle) entries.
+    """
+    fill = items.shape[0] > 0
+    if not fill:
+        start[:] = 0
+    else:
+        for c in range(start.shape[0] - 1, 0, -1):  # to each cell's first slot, filled upwards
+            start[c] = start[c - 1]
+        start[0] = 0
+    total = 0
+    for t in range(faces.shape[0]):
+        a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
+        x0, x1 = _cell_range(min(uv[a, 0], uv[b, 0], uv[c, 0]), max(uv[a, 0], uv[b, 0], uv[c, 0]), ox, cell, gx)
+        y0, y1 = _cell_range(min(uv[a, 1], uv[b, 1], uv[c, 1]), max(uv[a, 1], uv[b, 1], uv[c, 1]), oy, cell, gy)
+        for cx in range(x0, x1 + 1):
+            for cy in range(y0, y1 + 1):
+                k = cx * gy + cy
+                if fill:
+                    items[start[k + 1]] = t
+                    start[k + 1] += 1
+                else:
+                    start[k + 1] += 1
+                total += 1
+    if not fill:
+        for k in range(1, start.shape[0]):
+            start[k] += start[k - 1]
+    return total
+
+
+@parallel
+def centres_in_faces(faces, uv, ox, oy, cell, gy, start, items, first, counts, pairs):
+    """Faces whose centre lies strictly inside another face sharing no vertex with it, through
+    the grid of :func:`triangle_cells`: per face the number of such faces (``first`` empty), or
+    their indices written to ``pairs[first[i]:first[i] + counts[i]]``.
+
+    faces (m, 3) int64, uv (n, 2) float64, start/items the grid's CSR, first (m,) int64 or (0,),
+    counts (m,) int64 (out when counting), pairs (k,) int64 out.
+    """
+    gx = (start.shape[0] - 1) // gy
+    fill = first.shape[0] > 0
+    for i in prange(faces.shape[0]):
+        a0, a1, a2 = faces[i, 0], faces[i, 1], faces[i, 2]
+        px = (uv[a0, 0] + uv[a1, 0] + uv[a2, 0]) / 3.0
+        py = (uv[a0, 1] + uv[a1, 1] + uv[a2, 1]) / 3.0
+        cx, _ = _cell_range(px, px, ox, cell, gx)
+        cy, _ = _cell_range(py, py, oy, cell, gy)
+        k = cx * gy + cy
+        n_in = 0
+        for q in range(start[k], start[k + 1]):
+            j = items[q]
+            if j == i:
+                continue
+            b0, b1, b2 = faces[j, 0], faces[j, 1], faces[j, 2]
+            if (b0 == a0 or b0 == a1 or b0 == a2 or b1 == a0 or b1 == a1 or b1 == a2
+                    or b2 == a0 or b2 == a1 or b2 == a2):
+                continue
+            if _strictly_inside(px, py, uv[b0, 0], uv[b0, 1], uv[b1, 0], uv[b1, 1], uv[b2, 0], uv[b2, 1]):
+                if fill:
+                    pairs[first[i] + n_in] = j
+                n_in += 1
+        if not fill:
+            counts[i] = n_in

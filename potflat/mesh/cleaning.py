@@ -34,10 +34,9 @@ from potflat.mesh._kernels import (
 )
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
+from potflat.mesh.tolerances import DEGENERATE
 
 _HASH = (np.uint64(0x9E3779B97F4A7C15), np.uint64(0xC2B2AE3D27D4EB4F), np.uint64(0x165667B19E3779F9))
-#: A face is degenerate when twice its area is at most this times its longest edge squared.
-DEGENERATE_RELATIVE_AREA = 1e-12
 #: Removing more than this fraction of the total area as stray components adds a warning.
 REMOVED_AREA_WARNING = 0.05
 
@@ -389,7 +388,7 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
     F = mesh.faces
     _, area2, longest2, _ = face_geometry(mesh.vertices, F)  # cross, centroid: made again when needed
     degenerate = ((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
-                  | (area2 <= DEGENERATE_RELATIVE_AREA * longest2))
+                  | (area2 <= DEGENERATE * longest2))  # twice the area against the longest edge squared
     del longest2
     n_degenerate = int(degenerate.sum())
     if n_degenerate == len(F):

@@ -23,6 +23,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from potflat.types import FlatMesh
+from potflat.mesh.tolerances import ROUNDING
 
 #: Relative 3D area below which a face counts as degenerate (fraction of the mean face area).
 DEGENERATE_AREA_FRACTION = 1e-12
@@ -486,7 +487,7 @@ def painted_zone_distortion(relax_summary: dict) -> tuple[dict, str]:
     if isinstance(zone, dict) and isinstance(zone.get("distortion"), dict):
         figures = {**zone["distortion"], **{k: zone.get(k) for k in ("length_error_median_pct",
                                                                       "length_error_p95_pct", "area_fraction")}}
-        whole = (zone.get("area_fraction") or 0.0) >= 1.0 - 1e-9
+        whole = (zone.get("area_fraction") or 0.0) >= 1.0 - ROUNDING
         return figures, "whole surface" if whole else "painted zone"
     return relax_summary.get("distortion") or {}, "whole surface"
 

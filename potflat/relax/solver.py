@@ -27,12 +27,10 @@ See ``docs/method.md`` for the method and ``docs/performance.md`` for measuremen
 from __future__ import annotations
 
 import contextlib
-import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
-from pathlib import Path
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -43,68 +41,12 @@ from potflat.mesh.distortion import (
     summarize,
     true_scale_factor,
     vertex_stress,
-    zone_summary,
 )
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
-from potflat.types import FlatMesh, Mesh, StageOutput
+from potflat.mesh.boundary import crossing_pairs
+from potflat.relax.parameters import COARSE, ENERGY, PRESETS, SOLVER, WEIGHTINGS
+from potflat.types import FlatMesh, Mesh
 
-#: The painted figures' settings of the fold-free presets (measured: docs/performance.md,
-#: "Painted figures"): the shape and rigidity terms' weights, how much stiffer the important zone is than
-#: plain surface, and the final scaling to true scale in the important zone.
-_FIGURES = {"shape": 0.2, "rigidity": 2.0, "importance_contrast": 100.0, "true_scale": True}
-#: Settings of each preset; ``None`` in :class:`RelaxOptions` takes the preset's value.
-PRESETS: dict[str, dict] = {
-    "preview": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
-                "tol": 1e-3, "max_iter": 300, "cell_vertices": 8.0, "simplify_mm": 0.5,
-                "coarse_start": True, **_FIGURES},
-    "standard": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
-                 "tol": 1e-4, "max_iter": 2000, "cell_vertices": 8.0, "coarse_start": True, **_FIGURES},
-    "archival": {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative",
-                 "tol": 1e-7, "max_iter": 20000, "cell_vertices": 8.0, "coarse_start": True, **_FIGURES},
-    "paper": {"solver": "dynamics", "stretch": 2.0, "stiffness": 0.5, "weighting": "uniform",
-              "tol": 1e-7, "max_iter": 100000, "friction_inside": 0.01, "friction_boundary": 1.0,
-              "coarse_start": False, "shape": 0.0, "rigidity": 0.0, "importance_contrast": 1.0, "true_scale": False},
-}
-WEIGHTINGS = ("uniform", "relative")
-#: Coarse copies (grid clusters of the start layout, :mod:`potflat.relax.simplify`): a copy has at
-#: least COARSE_MIN_COPY vertices; the full mesh only follows one (``simplify_mm``) when the
-#: copy has at most COARSE_MAX_FRACTION of its vertices (else relaxing the copy costs about as
-#: much as the full mesh: 0.5M benchmark vessel, a 57% copy at 0.5 mm, 7.8 s against 6.2 s)
-#: and covers at least COARSE_MIN_COVERAGE of them (cells much smaller than the edges leave
-#: blocks empty: the goblet scan's copy at 2 mm cells covered 38% of its vertices); meshes of
-#: at least COARSE_MIN_VERTICES start their solve from a relaxed copy with about
-#: COARSE_CELL_VERTICES vertices per cell (which nests in turn).
-COARSE_MIN_COPY, COARSE_MAX_FRACTION, COARSE_MIN_COVERAGE = 100, 1.0 / 3.0, 0.95
-COARSE_MIN_VERTICES, COARSE_CELL_VERTICES = 20_000, 16.0
-
-#: Barrier: weight (times k times the face's rest area) and activation (fraction of rest area).
-BARRIER_MU, BARRIER_EPS = 1.0, 0.5
-#: Boundary angle barrier: weight (times k) and activation (radians below 2 pi of a boundary
-#: vertex's flat interior angle sum).
-BOUNDARY_MU, BOUNDARY_GAP = 1.0, 0.5
-#: Boundary contact barrier: weight (times k) and activation distance (mean edge lengths) between
-#: a boundary vertex and a boundary segment that is not its own (active when the start's
-#: boundary does not overlap itself).
-CONTACT_MU, CONTACT_GAP = 1.0, 0.5
-#: Floor of rest areas and spring lengths, in units of the mean edge length (squared).
-AREA_FLOOR, LENGTH_FLOOR = 1e-2, 1e-3
-#: L-BFGS memory, Armijo constant, fraction of the flip-free step taken at most, and the
-#: largest fraction of its area a triangle may lose in one step (the log barrier alone grows
-#: too slowly to stop steps that each go most of the way to collapse: at 2.5M vertices, 19
-#: triangles ended below 1e-11 of their rest area without this limit).
-LBFGS_MEMORY, ARMIJO, STEP_FRACTION, STEP_SHRINK = 6, 1e-4, 0.9, 0.8
-#: Direction smoothing: when a few triangles hold the flip-free step below the natural one
-#: (typically slivers, whose area reacts to the smallest uneven move of their vertices), the
-#: direction at their vertices is replaced by their edge neighbours' mean, SMOOTH_ROUNDS
-#: times, if at most SMOOTH_MAX_FRACTION of the vertices are concerned.
-SMOOTH_ROUNDS, SMOOTH_MAX_FRACTION = 3, 0.01
-#: Weight of the multilevel preconditioner's coarse terms against its Jacobi term (measured:
-#: 1 needs 30-50% more iterations than 2; 4 about as many as 2 but more backtracking).
-PRECOND_THETA = 2.0
-#: Window (iterations) of the relative-energy-change test: L-BFGS, dynamics. (L-BFGS with 5:
-#: a few iterations cut short by a nearly collapsed triangle passed the test on the 2.5M
-#: benchmark vessel at edge RMS 0.157; with 10 it went on to 0.1454.)
-WINDOW_LBFGS, WINDOW_DYNAMICS = 10, 100
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -212,8 +154,7 @@ class RelaxOptions:
 
     def resolved(self) -> dict:
         """The preset's settings with the options given here applied."""
-        out = dict(PRESETS[self.preset])
-        out.setdefault("simplify_mm", 0.0)
+        out = PRESETS[self.preset].settings()
         for name in ("tol", "max_iter", "stretch", "stiffness", "weighting", "simplify_mm", "shape",
                      "rigidity", "importance_contrast", "true_scale"):
             if getattr(self, name) is not None:
@@ -313,7 +254,7 @@ class _Springs:
         self.ptr, self.nbr, self.rst = ks.build_csr(V, edges, cross, ks.cross_rest_lengths(V, cross))
         del edges, cross  # peak memory: the spring lists are only needed for the CSR
         areas = face_areas(V, faces)
-        self.a_ref = np.maximum(areas, AREA_FLOOR)
+        self.a_ref = np.maximum(areas, ENERGY.area_floor)
         self.faces = np.ascontiguousarray(faces, dtype=np.int32)  # half the memory traffic
         self.weight = _NO_WEIGHTS if weight is None else np.ascontiguousarray(weight, dtype=np.float64)
         self.shape = _NO_SHAPE
@@ -322,7 +263,7 @@ class _Springs:
             self.shape = np.empty((len(faces), 6 if rigidity > 0 else 4))
             mean_area = float(np.mean(areas))
             ks.shape_coefficients(V, self.faces, self.weight, float(shape) / mean_area,
-                                  float(rigidity) / mean_area, AREA_FLOOR, self.shape)
+                                  float(rigidity) / mean_area, ENERGY.area_floor, self.shape)
         del areas
         self.k, self.relative = float(k), bool(relative)
         self.n, self.m = n, len(faces)
@@ -356,7 +297,7 @@ class _Springs:
         theta = np.zeros(self.n)
         if len(cand):
             self.ks.boundary_angle_sums(x, cand, self.vf_ptr, self.vf_tri, self.faces, theta)
-        ok = theta[cand] < 2.0 * math.pi - 1e-9
+        ok = theta[cand] < 2.0 * math.pi - SOLVER.boundary_angle_slack
         self.bverts = np.ascontiguousarray(cand[ok])
         self.bguard = np.zeros(self.n, bool)
         self.bguard[self.bverts] = True
@@ -371,23 +312,23 @@ class _Springs:
         the Hessian diagonal bound at ``x``."""
         g = np.empty((self.n, 2)) if out is None else out
         if barrier:
-            self.ks.face_areas_below(x, self.faces, self.a_ref, BARRIER_EPS, self._areas, self._below)
+            self.ks.face_areas_below(x, self.faces, self.a_ref, ENERGY.barrier_eps, self._areas, self._below)
             if len(self.bverts):
                 self.ks.boundary_angle_sums(x, self.bverts, self.vf_ptr, self.vf_tri, self.faces, self.theta)
-        self.ks.energy_gradient(x, self.ptr, self.nbr, self.rst, self.k, self.relative, LENGTH_FLOOR,
+        self.ks.energy_gradient(x, self.ptr, self.nbr, self.rst, self.k, self.relative, ENERGY.length_floor,
                                 self.weight, self.vf_ptr, self.vf_tri, self.faces,
-                                self.shape, self.bprev, self.bnext, self.bguard, self.theta, BOUNDARY_MU if barrier else 0.0,
-                                BOUNDARY_GAP, g, self._es, self._eb, self.diag)
+                                self.shape, self.bprev, self.bnext, self.bguard, self.theta, ENERGY.boundary_mu if barrier else 0.0,
+                                ENERGY.boundary_gap, g, self._es, self._eb, self.diag)
         es = float(np.sum(self._es))
         if not barrier:
             return es, es, g
         eb = float(np.sum(self._eb))
-        ef = self.ks.face_barrier(x, self.faces, self._areas, self.a_ref, BARRIER_MU, self.k, BARRIER_EPS,
+        ef = self.ks.face_barrier(x, self.faces, self._areas, self.a_ref, ENERGY.barrier_mu, self.k, ENERGY.barrier_eps,
                                   self.relative, self.weight, g, self.diag, self._below)
         ec = 0.0
         if self.contact:
-            ec = self.ko.contact_barrier(x, self.boundary_segments, self.bprev, self.bnext, CONTACT_GAP,
-                                 CONTACT_MU * self.k, max(CONTACT_GAP, self._contact_cell), g, self.diag)
+            ec = self.ko.contact_barrier(x, self.boundary_segments, self.bprev, self.bnext, ENERGY.contact_gap,
+                                 ENERGY.contact_mu * self.k, max(ENERGY.contact_gap, self._contact_cell), g, self.diag)
         return es + eb + ef + ec, es, g
 
     def spring_energy(self, x: np.ndarray) -> float:
@@ -429,14 +370,7 @@ class _Springs:
 
     def overlap(self, x: np.ndarray) -> int:
         """Crossing pairs of boundary segments at ``x`` (counting stops at 1000)."""
-        seg = self.boundary_segments
-        if len(seg) < 2:
-            return 0
-        lens = np.linalg.norm(x[seg[:, 0]] - x[seg[:, 1]], axis=1)
-        extent = float(np.ptp(x[seg.ravel()], axis=0).max()) or 1.0
-        cell = max(2.0 * float(np.mean(lens)), extent / 2048.0, 1e-12)
-        count, _ = self.ko.count_crossings(x, seg, cell, 1000)
-        return int(count)
+        return len(crossing_pairs(x, self.boundary_segments, max_pairs=1000))
 
     def laplacian_bound(self) -> float:
         """An upper bound of the spring graph Laplacian's largest eigenvalue from the actual
@@ -444,7 +378,7 @@ class _Springs:
         stiffnesses). A power iteration approaches the eigenvalue from below, and a step from
         its estimate diverged on real scans (plastic and sea vase: positions beyond 1e150)."""
         if self.relative:
-            coef = self.k / np.maximum(self.rst, LENGTH_FLOOR) ** 2
+            coef = self.k / np.maximum(self.rst, ENERGY.length_floor) ** 2
             rows = np.bincount(np.repeat(np.arange(self.n), np.diff(self.ptr)), weights=coef, minlength=self.n)
         else:
             rows = self.k * np.diff(self.ptr).astype(np.float64)
@@ -545,10 +479,10 @@ class _LBFGS:
         self.trial = np.empty_like(self.x)
         self.grads = [np.empty_like(self.x), np.empty_like(self.x)]
         # one slot more than the memory: a new pair is written before the oldest is dropped
-        self.S = np.empty((LBFGS_MEMORY + 1, size))
-        self.Y = np.empty((LBFGS_MEMORY + 1, size))
-        self.rho = np.zeros(LBFGS_MEMORY + 1)
-        self.yhy = np.zeros(LBFGS_MEMORY + 1)
+        self.S = np.empty((SOLVER.lbfgs_memory + 1, size))
+        self.Y = np.empty((SOLVER.lbfgs_memory + 1, size))
+        self.rho = np.zeros(SOLVER.lbfgs_memory + 1)
+        self.yhy = np.zeros(SOLVER.lbfgs_memory + 1)
         self.slots: list[int] = []  # oldest first
         self.q = np.empty(size)
         self._tmp = np.empty(size) if precond is not None else None
@@ -595,7 +529,7 @@ class _LBFGS:
     def _store_pair(self, t: float, g_new: np.ndarray) -> None:
         """Store ``s = t q``, ``y = g_new - g`` (``sp.diag`` is the Hessian bound at the new point)."""
         used = set(self.slots)
-        slot = next(i for i in range(LBFGS_MEMORY + 1) if i not in used)
+        slot = next(i for i in range(SOLVER.lbfgs_memory + 1) if i not in used)
         self.kl.pair(self.q, t, g_new, self.g, self.sp.diag, self.S[slot], self.Y[slot], self._part, self._part2)
         sy, yhy = float(np.sum(self._part)), float(np.sum(self._part2))
         if self.precond is not None:  # H0 = D^-1 (in yhy already) + the coarse terms
@@ -604,7 +538,7 @@ class _LBFGS:
         if sy > 1e-300 and yhy > 0.0:
             self.rho[slot], self.yhy[slot] = 1.0 / sy, yhy
             self.slots.append(slot)
-            if len(self.slots) > LBFGS_MEMORY:
+            if len(self.slots) > SOLVER.lbfgs_memory:
                 self.slots.pop(0)
 
     def _smooth_limiting(self, t: float, gd: float) -> tuple[float, float]:
@@ -613,18 +547,18 @@ class _LBFGS:
         Returns the step and ``g . q``."""
         sp = self.sp
         verts = sp.ks.flagged_face_vertices(self._limiting, sp.faces, self._seen)
-        if not 0 < len(verts) <= SMOOTH_MAX_FRACTION * sp.n:  # none: the boundary limits the step
+        if not 0 < len(verts) <= SOLVER.smooth_max_fraction * sp.n:  # none: the boundary limits the step
             return t, gd
         dx = self.q.reshape(-1, 2)
         before = dx[verts]
         mean = np.empty_like(before)
-        for _ in range(SMOOTH_ROUNDS):
+        for _ in range(SOLVER.smooth_rounds):
             sp.ks.neighbour_means(dx, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
             dx[verts] = mean
         # g . q changed at verts only (no pass over the whole mesh)
         g = self.g.reshape(-1, 2)[verts]
         gd_smooth = gd + float(np.sum(g * (dx[verts] - before)))
-        t_smooth = STEP_FRACTION * sp.max_step_near(self.x, dx, verts, 1.0 / STEP_FRACTION, STEP_SHRINK)
+        t_smooth = SOLVER.step_fraction * sp.max_step_near(self.x, dx, verts, 1.0 / SOLVER.step_fraction, SOLVER.step_shrink)
         if gd_smooth < 0.0 and t_smooth > t:
             self.smoothed += 1
             return t_smooth, gd_smooth
@@ -648,7 +582,7 @@ class _LBFGS:
                     converged = True  # zero gradient
                     break
             dx = self.q.reshape(-1, 2)
-            t = STEP_FRACTION * sp.max_step(self.x, dx, cap=1.0 / STEP_FRACTION, shrink=STEP_SHRINK,
+            t = SOLVER.step_fraction * sp.max_step(self.x, dx, cap=1.0 / SOLVER.step_fraction, shrink=SOLVER.step_shrink,
                                             limiting=self._limiting)
             if t < 1.0:  # a face or the boundary holds the step below the natural one
                 t, gd = self._smooth_limiting(t, gd)
@@ -658,7 +592,7 @@ class _LBFGS:
                 kl.combine(self.trial.reshape(-1), 1.0, self.x.reshape(-1), t, self.q, _NO_VECTOR, 1.0,
                            _NO_VECTOR, self._part)
                 En, _es, gn = sp.evaluate(self.trial, out=trial_grad)
-                if math.isfinite(En) and En <= self.E + ARMIJO * t * gd:
+                if math.isfinite(En) and En <= self.E + SOLVER.armijo * t * gd:
                     if not self.guard_overlap or sp.overlap(self.trial) == 0:
                         accepted = True
                         break
@@ -676,7 +610,7 @@ class _LBFGS:
             hist.append(En)
             if run.record(En):
                 break
-            if En == 0.0 or _relative_change(hist, WINDOW_LBFGS) < tol:
+            if En == 0.0 or _relative_change(hist, SOLVER.window_lbfgs) < tol:
                 converged = True
                 break
         return converged, it
@@ -693,7 +627,7 @@ def _minimise(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, leve
 
     t0 = time.perf_counter()
     run.level = "fine"
-    precond = MultilevelPreconditioner(hier, theta=PRECOND_THETA) if hier.levels else None
+    precond = MultilevelPreconditioner(hier, theta=SOLVER.precond_theta) if hier.levels else None
     solver = _LBFGS(sp, x, precond, guard_overlap=sp.overlap(x) == 0)
     del x
     conv, its = solver.run(run, max_iter=run.max_iter, tol=settings["tol"], hist=[solver.E])
@@ -722,18 +656,18 @@ def _dynamics(sp: _Springs, x: np.ndarray, settings: dict, run: _Run, levels_out
     converged = False
     it = 0
     while True:
-        sp.ks.dynamics_step(x, v, sp.ptr, sp.nbr, sp.rst, sp.k, sp.relative, LENGTH_FLOOR, friction, dt, xo, vo, es)
+        sp.ks.dynamics_step(x, v, sp.ptr, sp.nbr, sp.rst, sp.k, sp.relative, ENERGY.length_floor, friction, dt, xo, vo, es)
         x, xo, v, vo = xo, x, vo, v
         it += 1
         e = float(np.sum(es))  # energy before this step
         hist.append(e)
         if not np.isfinite(e):  # NaN or overflowing positions make the energy non-finite
             raise FoldedResultError(f"the paper dynamics diverged at iteration {it} (the spring energy is no longer "
-                                    "finite); nothing written: use a fold-free preset (standard) or a smaller "
-                                    "--stiffness")
+                                    "finite); nothing written: use a fold-free preset (--preset standard; a "
+                                    "smaller --stiffness does not help: the step scales with it)")
         if run.record(e):
             break
-        if it % WINDOW_DYNAMICS == 0 and _relative_change(hist, WINDOW_DYNAMICS) < settings["tol"]:
+        if it % SOLVER.window_dynamics == 0 and _relative_change(hist, SOLVER.window_dynamics) < settings["tol"]:
             converged = True
             break
     levels_out.append({"level": "dynamics", "iterations": it, "energy": sp.spring_energy(x),
@@ -786,7 +720,7 @@ def _fold_free_start(sp: _Springs, x: np.ndarray, n_bad: int, notes: list[str]) 
     if np.abs(areas[areas < 0]).sum() > np.abs(areas[areas > 0]).sum():
         raise FoldedResultError(
             "the rollout is mirrored (most of its area faces the other way): it shows the surface from the wrong "
-            "side; run the rollout again (--side inner for a vessel's inside)")
+            "side; nothing written: make it again with potflat rollout (--side inner for a vessel's inside)")
     faces = sp.faces.astype(np.int64)
     y, repaired, left = repair_folds(faces, x)
     if not left:
@@ -797,8 +731,9 @@ def _fold_free_start(sp: _Springs, x: np.ndarray, n_bad: int, notes: list[str]) 
     if disc is None or (sp.signed_areas(disc) <= 0).any():
         raise FoldedResultError(
             f"the rollout has {left} folded triangles that no fold-free layout of this mesh removes: it is not a "
-            "disk (a closed part, or faces joined at a single edge by three or more); run the rollout with "
-            "--band or --angles to leave that part out, or clean the scan (remove the duplicated sheet)")
+            "disk (a handle kept with the wall, a closed part, or faces joined at a single edge by three or more); "
+            "nothing written: run the rollout without --keep-attachments, or with --band LO HI leaving that part "
+            "out (folded.regions[].band in the rollout's JSON: where the folds are, as --band fractions)")
     notes.append(f"the rollout had {n_bad} flipped or degenerate triangles and {left} stayed folded after a local "
                  "repair; relaxed from Tutte's embedding of the whole mesh into a disc, then turned to the rollout's "
                  "orientation")
@@ -833,10 +768,10 @@ def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
     """Relax a coarse copy of ``flat`` (grid clusters of its start layout, :mod:`potflat.relax.simplify`).
 
     With ``simplify_mm`` the cells have that side and the full mesh will only follow the
-    coarse result (when the copy has at most :data:`COARSE_MAX_FRACTION` of the vertices and
-    covers :data:`COARSE_MIN_COVERAGE` of them); else,
-    for meshes of at least :data:`COARSE_MIN_VERTICES`, the cells hold about
-    :data:`COARSE_CELL_VERTICES` vertices and the coarse result is the full solve's start.
+    coarse result (when the copy has at most ``COARSE.max_fraction`` of the vertices and
+    covers ``COARSE.min_coverage`` of them); else,
+    for meshes of at least ``COARSE.min_vertices``, the cells hold about
+    ``COARSE.cell_vertices`` vertices and the coarse result is the full solve's start.
     None when neither applies; ``result`` None (with a note) when the copy could not be
     relaxed fold-free.
     """
@@ -847,15 +782,15 @@ def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
     simple, final = None, False
     if spacing:  # no more resolution than the image resolves
         simple = grid_simplification(V, uv, spacing / flat.mesh.mm_per_unit)
-        final = (COARSE_MIN_COPY <= len(simple.vertices) <= COARSE_MAX_FRACTION * len(V)
-                 and float(np.mean(interpolate(simple, uv, simple.uv)[1])) >= COARSE_MIN_COVERAGE)
+        final = (COARSE.min_copy <= len(simple.vertices) <= COARSE.max_fraction * len(V)
+                 and float(np.mean(interpolate(simple, uv, simple.uv)[1])) >= COARSE.min_coverage)
     if not final:
-        if not (settings["coarse_start"] and len(V) >= COARSE_MIN_VERTICES):
+        if not (settings["coarse_start"] and len(V) >= COARSE.min_vertices):
             return None
-        simple = grid_simplification(V, uv, cell_side(uv, COARSE_CELL_VERTICES))
-        if len(simple.vertices) < COARSE_MIN_COPY:
+        simple = grid_simplification(V, uv, cell_side(uv, COARSE.cell_vertices))
+        if len(simple.vertices) < COARSE.min_copy:
             return None
-    budget = None if deadline == np.inf else max(deadline - time.perf_counter(), 1e-3)
+    budget = None if deadline == np.inf else max(deadline - time.perf_counter(), SOLVER.min_time_budget)
     tagged = None if callback is None else (lambda info: callback({**info, "level": "coarse"}))
     try:
         importance = None
@@ -1064,7 +999,7 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
     if fold_free and (flipped or overlap or not finite):
         raise FoldedResultError(
             f"relaxation ended with {flipped} flipped triangles and {overlap} boundary crossings; "
-            "nothing written: report this mesh, or try --preset preview")
+            "nothing written: this is a bug in potflat, please report it with the rollout file")
     if not finite:
         raise FoldedResultError("the paper dynamics diverged (positions no longer finite); nothing written: use a "
                                 "fold-free preset (standard)")
@@ -1113,105 +1048,3 @@ def _progress_bar(total: int):
             prog.update(task, completed=it, energy=energy, level=level)
 
         yield report
-
-
-def _history_for_json(h: np.ndarray, limit: int = 1000) -> list[float]:
-    """The energy history, thinned to at most ``limit`` entries (first and last kept)."""
-    if len(h) <= limit:
-        return [float(e) for e in h]
-    idx = np.unique(np.linspace(0, len(h) - 1, limit).round().astype(np.int64))
-    return [float(h[i]) for i in idx]
-
-
-def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: RelaxOptions | None = None, *,
-                    name: str | None = None, progress: bool = False, flat: FlatMesh | None = None,
-                    rollout_summary: dict | None = None) -> StageOutput:
-    """Relax ``NAME.rollout.ply`` and write ``NAME.relaxed.ply`` and ``NAME.relaxed.json``.
-
-    Parameters
-    ----------
-    rollout_ply : path-like
-        The rollout stage's output.
-    out_dir : path-like
-        Folder for the outputs (created if needed).
-    options : RelaxOptions, optional
-    name : str, optional
-        Output stem (default: the input's name without ``.rollout.ply``).
-    progress : bool
-        Show a progress bar.
-    flat : FlatMesh, optional
-        The content of ``rollout_ply`` already in memory (:func:`potflat.run_scan`); read
-        from the file when not given.
-    rollout_summary : dict, optional
-        The rollout stage's summary in memory (its axis, proxy and units go into the JSON);
-        read from ``NAME.rollout.json`` beside the input when not given.
-
-    Returns
-    -------
-    StageOutput
-        ``paths`` with ``ply`` and ``json``; ``summary`` the JSON content; the relaxed
-        ``flat`` as written and its ``distortion``.
-    """
-    from potflat.io.atomic import write_json_atomic
-    from potflat.io.flat_ply import as_stored, read_flat_ply, write_flat_ply
-    from potflat.stages.provenance import provenance
-
-    options = options or RelaxOptions()
-    rollout_ply = Path(rollout_ply)
-    out_dir = Path(out_dir)
-    stem = rollout_ply.name
-    for suffix in (".ply", ".rollout"):
-        stem = stem.removesuffix(suffix)
-    name = name or stem
-    if flat is None:
-        flat = read_flat_ply(rollout_ply)
-    result = relax(flat, options=options, progress=progress)
-    ply_path = out_dir / f"{name}.relaxed.ply"
-    json_path = out_dir / f"{name}.relaxed.json"
-    summary = {
-        "preset": result.preset,
-        "options": asdict(options),
-        "settings": result.settings,
-        "iterations": result.iterations,
-        "converged": result.converged,
-        "flipped": result.flipped,
-        "boundary_overlap": result.boundary_overlap,
-        "fold_free": result.flipped == 0 and result.boundary_overlap == 0,
-        "fold_free_verified_by": "signed area of every face > 0 and no crossing boundary segments, checked after solving",
-        "energy_history": _history_for_json(result.energy_history),
-        "energy_units": "lengths divided by the mean 3D edge length; springs + barrier (fold-free presets) or springs only (paper)",
-        "spring_energy": result.levels[-1]["energy"] if result.levels else None,
-        "stress": "paper Eq. 3 over mesh edges in sqrt(mm) (potflat.mesh.distortion.vertex_stress)",
-        "levels": list(result.levels),
-        "notes": list(result.notes),
-        "distortion_before": result.distortion_before.as_dict(),
-        "distortion": result.distortion.as_dict(),
-        "importance": ("none: the whole surface counts alike" if result.flat.importance is None else
-                       f"per vertex in {ply_path.name}; springs, barrier and shape term of plain surface weighted "
-                       f"1/{result.settings['importance_contrast']:g}"),
-        **zone_summary(flat.mesh.vertices, result.flat.uv, flat.mesh.faces, result.flat.importance),
-        "true_scale_factor": result.scale_factor,
-        "timings": result.timings,
-        "units": flat.mesh.units,
-        "vertices": len(flat.mesh.vertices),
-        "faces": len(flat.mesh.faces),
-    }
-    rollout_json = rollout_ply.with_name(f"{stem}.rollout.json")
-    if rollout_summary is not None or rollout_json.exists():
-        try:
-            rj = rollout_summary if rollout_summary is not None else json.loads(
-                rollout_json.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            rj = {}
-        if not isinstance(rj, dict):  # a sidecar holding null, a list...: nothing to copy from it
-            rj = {}
-        for key in ("axis", "proxy", "units"):
-            if key in rj:
-                summary[key] = rj[key]
-    inputs = [rollout_ply] + ([rollout_json] if rollout_json.exists() else [])
-    summary["provenance"] = provenance(stage="relax", inputs=inputs, options=asdict(options))
-    comments = (f"potflat relax preset {result.preset}",)
-    write_flat_ply(ply_path, result.flat, comments=comments)
-    write_json_atomic(json_path, summary)
-    return StageOutput(paths={"ply": ply_path, "json": json_path}, summary=summary,
-                       flat=as_stored(result.flat, ply_path, comments=comments), distortion=result.distortion)

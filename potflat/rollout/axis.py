@@ -53,6 +53,7 @@ import scipy.sparse.csgraph
 
 from potflat.errors import AxisNotFoundError, InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
+from potflat.mesh.tolerances import DEGENERATE
 
 #: Largest relative profile deviation (median |r - slice median r| / median r) of a vessel.
 MAX_PROFILE_DEVIATION = 0.05
@@ -585,7 +586,7 @@ def estimate_axis(mesh: Mesh, *, flip: bool = False, profile: bool = True,
             if len(pick) >= 20:
                 p2, d2 = _profile_refine(cs[pick], weights, point, direction)
                 # kept unless the normals disagree (outliers the profile followed)
-                if _median_sin(cs, n, area, p2, d2) <= 1.02 * _median_sin(cs, n, area, point, direction) + 1e-12:
+                if _median_sin(cs, n, area, p2, d2) <= 1.02 * _median_sin(cs, n, area, point, direction) + DEGENERATE:
                     point, direction, method = p2, d2, "normals+profile"
     point = centre + size * point
     rms_angle, median_angle, _, prof = axis_residuals(mesh, point, direction, lines=lines)

@@ -20,6 +20,7 @@ import numpy as np
 
 from potflat.errors import InvalidOptionError
 from potflat.rollout.options import LANDMARKS
+from potflat.mesh.tolerances import DEGENERATE
 
 #: The painting's contrast has a centre when its weighted circular mean has at least this
 #: length (1 = all in one direction, 0 = evenly round).
@@ -122,7 +123,7 @@ def find_landmark(mesh, axis, *, seam_at, landmark: str | None, painted_zone, au
     if seam_at is not None:
         p = np.asarray(seam_at, np.float64)
         d = float(np.sqrt(np.min(np.sum((mesh.vertices - p) ** 2, axis=1))))
-        if d > MAX_POINT_DISTANCE * max(axis.height, 1e-12):
+        if d > MAX_POINT_DISTANCE * max(axis.height, DEGENERATE):
             mm = mesh.mm_per_unit
             raise InvalidOptionError(
                 f"seam_at {p[0]:g} {p[1]:g} {p[2]:g} lies {d * mm:.3g} mm from the scan's surface; pick a point on "

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from potflat.mesh.distortion import DistortionSummary, summarize
+from potflat.mesh.tolerances import DEGENERATE
 
 #: Proxy kinds that are developments around the axis, simplest first (``auto`` chooses among them).
 DEVELOPABLE = ("cylinder", "cone", "sphere")
@@ -255,7 +256,7 @@ def choose(vertices: np.ndarray, faces: np.ndarray, h: np.ndarray, r: np.ndarray
             continue
         results[kind] = (prox, uv, summarize(vertices, uv, faces))
     best = min(s.edge_rms for _, _, s in results.values())
-    pick = next(k for k in results if results[k][2].edge_rms <= AUTO_TOLERANCE * best + 1e-12)
+    pick = next(k for k in results if results[k][2].edge_rms <= AUTO_TOLERANCE * best + DEGENERATE)
     prox, uv, summ = results[pick]
     others = ", ".join(f"{k} {results[k][2].edge_rms:.3g}" + (f" ({results[k][2].flipped} flipped)"
                                                            if results[k][2].flipped else "")

@@ -7,10 +7,9 @@ wall, or the inner one seen from inside: :mod:`potflat.rollout.walls`), without 
 handles (:mod:`potflat.rollout.attachments`) and without the border faces that fold the development
 over (the rim top, a base's underside, break faces: :func:`border_folds`); folds inside the
 region, from the scan itself, are unfolded (:func:`untangle`), so the result has no flipped
-face and no overlapping border, and everything left out is reported.
-``run_rollout_stage(scan, out_dir)`` reads a scan and writes ``NAME.rollout.ply``,
-``NAME.rollout.json`` (see ``docs/formats.md``) and the profile ``NAME.profile.csv`` /
-``NAME.profile.svg`` (see ``docs/profile.md``).
+face and no overlapping border, and everything left out is reported. The file stage
+(reading a scan, writing ``NAME.rollout.ply`` and its sidecars) is
+:func:`potflat.stages.rollout_stage.run_rollout_stage`.
 
 Angles: the reference direction of the axis (:attr:`AxisFit.reference`) is 0 degrees; the
 seam angle is measured from it counter-clockwise about the axis (axis pointing up). Angles
@@ -23,24 +22,25 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 
 import numpy as np
 import scipy.sparse
 import scipy.sparse.csgraph
-from scipy.spatial import cKDTree
 
 from potflat import importance as _importance
 from potflat.rollout import proxy as _proxy
 from potflat.mesh._kernels import union_find
+from potflat.mesh.boundary import boundary_segments, crossing_pairs, edges_and_boundary
 from potflat.mesh.embedding import signed_areas
 from potflat.rollout.attachments import AttachmentSelection, detect_attachments
+from potflat.rollout.folds import ScanFolds, fold_masks, scan_folds
 from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
 from potflat.mesh.distortion import DistortionSummary, face_areas, row_blocks, summarize
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.types import FlatMesh, Mesh, StageOutput, StepClock
+from potflat.types import FlatMesh, Mesh, StepClock
 from potflat.rollout.options import RolloutOptions
 from potflat.rollout.walls import FaceGraph, WallSelection, face_adjacency, select_wall
+from potflat.mesh.tolerances import ROUNDING
 
 TWO_PI = 2.0 * np.pi
 #: A connected piece with at least this fraction of the largest piece's area is an object of
@@ -166,6 +166,9 @@ class RolloutResult:
         are measured from: the seam, or the origin of ``angles``.
     landmark_notes : tuple of str
         What was used where a named landmark is missing.
+    folds : ScanFolds or None
+        Where the scan folds over itself in 3D (creases, flaps, duplicated sheets;
+        :mod:`potflat.rollout.folds`).
     """
 
     flat: FlatMesh
@@ -194,6 +197,7 @@ class RolloutResult:
     landmark_notes: tuple = ()
     importance: _importance.Importance | None = None
     timings: dict = field(default_factory=dict)
+    folds: ScanFolds | None = None
 
     @property
     def side(self) -> str:
@@ -208,9 +212,9 @@ def _wrap_pi(x: np.ndarray) -> np.ndarray:
 def _luminance_variation(mesh: Mesh, faces: np.ndarray) -> tuple[np.ndarray | None, str]:
     """Per-face spread of brightness (std of samples at its corners), and its source."""
     if mesh.texcoords is not None and mesh.texture_path is not None:
-        import cv2
+        from potflat.io.images import read_texture_grey_quarter
 
-        img = cv2.imread(str(mesh.texture_path), cv2.IMREAD_REDUCED_GRAYSCALE_4)
+        img = read_texture_grey_quarter(mesh.texture_path)
         if img is not None and img.size:
             hgt, wid = img.shape[:2]
             out = np.empty(len(faces))
@@ -230,7 +234,7 @@ def _luminance_variation(mesh: Mesh, faces: np.ndarray) -> tuple[np.ndarray | No
 
 def _longest_min_run(cost: np.ndarray) -> int:
     """Index of the middle of the longest circular run of (near-)minimal bins."""
-    low = cost <= cost.min() + 1e-9 * max(cost.max(), 1e-300)
+    low = cost <= cost.min() + ROUNDING * max(cost.max(), 1e-300)
     if low.all():
         return 0
     k = len(cost)
@@ -479,6 +483,11 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         else:
             un = _without(un, ~fold)
     clock.lap("unroll")
+    # where the scan folds in 3D, judged on the development before untangling, kept per scan face
+    facing_in, overlapping = (np.zeros(len(F), bool) for _ in range(2))
+    for scan_mask, mask in zip((facing_in, overlapping), fold_masks(un.flat.mesh.faces, un.flat.uv)):
+        scan_mask[un.face_index[mask]] = True
+    clock.lap("folds")
     uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv)
     for _ in range(TRIM_ROUNDS):  # folds pushed against the border by untangling are trimmed
         fold = border_folds(un.flat.mesh.faces, uv, area[un.face_index])
@@ -515,6 +524,10 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
     clock.lap("checks")
     importance = _find_importance(flat, options, axis, theta_deg)
     clock.lap("importance")
+    folds = scan_folds(cut.vertices, cut.faces, facing_in[un.face_index], overlapping[un.face_index],
+                       height=axis.cylindrical(cut.vertices)[0], vessel_height=axis.height, angle_deg=theta_deg,
+                       mm_per_unit=mesh.mm_per_unit)
+    clock.lap("folds")
     return RolloutResult(
         flat=flat.replace(importance=importance.values), importance=importance, axis=axis, proxy=un.proxy,
         seam_angle=float(math.degrees(un.seam) % 360.0), seam_method=un.seam_method, region=region,
@@ -525,7 +538,7 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         untangled_faces=n_untangled, untangled_vertices=moved, boundary_overlap=overlap,
         other_objects_faces=int(other_objects.sum()), landmark=landmark,
         theta_origin=float(math.degrees(un.origin) % 360.0), landmark_notes=tuple(landmark_notes),
-        timings=clock.total())
+        timings=clock.total(), folds=folds)
 
 
 @dataclass(frozen=True, eq=False)
@@ -658,7 +671,7 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.n
         if len(idx) == 0:
             break
         sub = faces[idx]
-        edges, seg, owner = _edge_table(sub, len(uv))
+        edges, seg, owner = edges_and_boundary(sub, len(uv))
         drop = _edge_on_strips(sub, uv, area_3d[idx], seg) | _minor_fans(sub, area_3d[idx], edges, len(uv))
         if not drop.any():  # overlaps are judged on a border without folded strips
             a, b = crossing_segments(uv, seg)
@@ -670,45 +683,9 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray) -> np.n
     return ~keep
 
 
-def boundary_segments(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Edges used by one face only.
-
-    Parameters
-    ----------
-    faces : (m, 3) int64
-    n : int
-        Number of vertices.
-
-    Returns
-    -------
-    segments : (b, 2) int64
-        Vertex pairs, in their face's order.
-    owner : (b,) int64
-        The face of each segment.
-    """
-    _, seg, owner = _edge_table(faces, n)
-    return seg, owner
-
-
-def _edge_table(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Unique edges ((e, 2) int64, sorted pairs), boundary segments and their faces."""
-    # half-edge h = 3 f + j runs from faces[f, j] to faces[f, (j + 1) % 3]
-    a, b = faces.ravel(), faces[:, [1, 2, 0]].ravel()
-    key = np.minimum(a, b) * n + np.maximum(a, b)
-    order = np.argsort(key, kind="stable")
-    k = key[order]
-    del key
-    first = np.ones(len(k), bool)
-    first[1:] = k[1:] != k[:-1]
-    start = np.flatnonzero(first)
-    count = np.diff(np.append(start, len(k)))
-    single = order[start[count == 1]]
-    k = k[start]
-    return np.stack([k // n, k % n], axis=1), np.stack([a[single], b[single]], axis=1), single // 3
-
-
 def crossing_segments(uv: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pairs of segments that cross or touch (segments sharing a vertex are not compared).
+    """Pairs of segments that cross or touch (:func:`potflat.mesh.boundary.crossing_pairs`),
+    but for pairs of two zero-length segments.
 
     Parameters
     ----------
@@ -720,30 +697,11 @@ def crossing_segments(uv: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.n
     a, b : (k,) int64
         Indices into ``seg`` of each crossing pair.
     """
-    if len(seg) < 2:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    P, Q = uv[seg[:, 0]], uv[seg[:, 1]]
-    length = np.linalg.norm(Q - P, axis=1)
-    # crossing segments have midpoints closer than the longer one's length
-    pairs = cKDTree(0.5 * (P + Q)).query_pairs(float(length.max()), output_type="ndarray")
-    a, b = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
-    a, b = a[length[a] + length[b] > 0], b[length[a] + length[b] > 0]
-    share = ((seg[a, 0] == seg[b, 0]) | (seg[a, 0] == seg[b, 1])
-             | (seg[a, 1] == seg[b, 0]) | (seg[a, 1] == seg[b, 1]))
-    a, b = a[~share], b[~share]
-
-    def orient(p, q, r):
-        return np.sign((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
-
-    def within(p, q, r):  # r inside the bounding box of segment p-q
-        return ((np.minimum(p, q) <= r) & (r <= np.maximum(p, q))).all(axis=1)
-
-    pa, qa, pb, qb = P[a], Q[a], P[b], Q[b]
-    o1, o2, o3, o4 = orient(pa, qa, pb), orient(pa, qa, qb), orient(pb, qb, pa), orient(pb, qb, qa)
-    # proper crossings, and touching (a vertex on the other segment, e.g. two copies of a vertex)
-    cross = (((o1 * o2 < 0) & (o3 * o4 < 0)) | ((o1 == 0) & within(pa, qa, pb)) | ((o2 == 0) & within(pa, qa, qb))
-             | ((o3 == 0) & within(pb, qb, pa)) | ((o4 == 0) & within(pb, qb, qa)))
-    return a[cross], b[cross]
+    pairs = crossing_pairs(uv, seg)
+    a, b = pairs[:, 0], pairs[:, 1]
+    length = np.linalg.norm(uv[seg[:, 1]] - uv[seg[:, 0]], axis=1) if len(seg) else np.zeros(0)
+    real = length[a] + length[b] > 0
+    return a[real], b[real]
 
 
 def _minor_fans(faces: np.ndarray, area_3d: np.ndarray, edges: np.ndarray, n: int) -> np.ndarray:
@@ -817,7 +775,7 @@ def untangle(faces: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, int, int]:
     if n_bad == 0:
         return uv, 0, 0
     n = len(uv)
-    edges, seg, _ = _edge_table(faces, n)
+    edges, seg, _ = edges_and_boundary(faces, n)
     A = scipy.sparse.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]],
                                                             np.r_[edges[:, 1], edges[:, 0]])), shape=(n, n)).tocsr()
     deg = np.maximum(np.diff(A.indptr), 1).astype(np.float64)
@@ -1049,6 +1007,7 @@ def rollout_summary(result: RolloutResult) -> dict:
         "attachments": _attachments_summary(result),
         "trimmed": _trimmed_summary(result, mesh.mm_per_unit),
         "notes": _notes(result),
+        "folded": result.folds.as_dict() if result.folds is not None else None,
         "untangled": {"faces": result.untangled_faces, "vertices_moved": result.untangled_vertices,
                       "reason": "faces folded inside the development by the scan's own creases and "
                                 "slivers, unfolded by moving their vertices to their neighbours' mean"},
@@ -1079,9 +1038,14 @@ def _notes(result: RolloutResult) -> list[str]:
             why = (" (they face the other way: the two sides of the wall were not told apart"
                    + (", the scan's faces were read as pointing inwards" if result.walls.normals_inverted else "")
                    + "; check the axis (--axis) or try --side inner)")
-        notes.append(f"{result.distortion.flipped} faces stay flipped{why}; the relax stage will refuse them")
+        notes.append(f"{result.distortion.flipped} faces stay flipped{why}; the relax stage starts from a fold-free "
+                     "layout (it refuses only a mesh that is not a disk)")
+    folded = result.folds.note() if result.folds is not None else None
+    if folded:
+        notes.append(folded)
     if result.boundary_overlap:
-        notes.append(f"the border overlaps itself at {result.boundary_overlap} places; the relax stage will refuse it")
+        notes.append(f"the border overlaps itself at {result.boundary_overlap} places; the relax stage unfolds it "
+                     "(and refuses a result that still overlaps)")
     if result.other_objects_faces:
         notes.append(f"{result.other_objects_faces} faces of separate objects that do not share the vessel's axis "
                      "(another vessel or fragment in the same file) were left out; split the file or give --axis")
@@ -1187,90 +1151,3 @@ def _trimmed_summary(result: RolloutResult, mm_per_unit: float) -> dict:
     return {"faces": len(result.trimmed), "area_mm2": result.trimmed_area * mm_per_unit ** 2,
             "reason": "border faces that fold the development over: strips edge-on to the proxy "
                       "(rim top, base underside, break faces) and overlapping border faces"}
-
-
-def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None, *,
-                      name: str | None = None, check=None) -> StageOutput:
-    """Read a scan, roll it out, write ``NAME.rollout.ply``, ``NAME.rollout.json`` and its profile.
-
-    The profile (:func:`potflat.rollout.profile.vessel_profile` of both walls around the rollout's
-    axis, attachments left out) is written as ``NAME.profile.csv`` and ``NAME.profile.svg``
-    (a section drawing, see ``docs/profile.md``).
-
-    Parameters
-    ----------
-    scan_path : path-like
-        The scan (any format :func:`potflat.io.scan.load_scan` reads).
-    out_dir : path-like
-        Output folder (created if needed).
-    options : RolloutOptions, optional
-    name : str, optional
-        Output stem; default: the scan's file stem.
-    check : callable, optional
-        Called with the flattening (:class:`FlatMesh`) before anything is written; it may
-        raise to stop the run (``potflat run`` checks the size of the image to come).
-
-    Returns
-    -------
-    StageOutput
-        ``paths`` with ``"ply"``, ``"json"``, ``"profile_csv"`` and ``"profile_svg"``;
-        ``summary`` = the JSON content.
-
-    Raises
-    ------
-    InvalidOptionError
-        When an output would overwrite the input, or the name is not a plain file stem.
-    """
-    from potflat import __version__
-    from potflat.io.atomic import check_output_name, write_json_atomic
-    from potflat.io.scan import check_plausible_size, load_scan
-    from potflat.io.flat_ply import as_stored, write_flat_ply
-    from potflat.rollout.profile import vessel_profile, write_profile_csv, write_profile_svg
-    from potflat.stages.provenance import provenance
-
-    options = options or RolloutOptions()
-    scan_path, out_dir = Path(scan_path), Path(out_dir)
-    name = check_output_name(name or scan_path.stem, what="name" if name else f"the name of {scan_path}")
-    ply_path = out_dir / f"{name}.rollout.ply"
-    json_path = out_dir / f"{name}.rollout.json"
-    csv_path = out_dir / f"{name}.profile.csv"
-    svg_path = out_dir / f"{name}.profile.svg"
-    for out in (ply_path, json_path, csv_path, svg_path):
-        if out.resolve() == scan_path.resolve():
-            raise InvalidOptionError(
-                f"output {out} would overwrite the input scan; choose another output folder or --name")
-    clock = StepClock()
-    loaded = load_scan(scan_path, units=options.units, texture="use" if options.texture else "ignore")
-    check_plausible_size(loaded, scan_path)
-    mesh, cleaning = loaded.mesh, loaded.report.as_dict()
-    del loaded
-    clock.lap("load")
-    result = rollout(mesh, options=options)
-    clock.lap("rollout")
-    if check is not None:
-        check(result.flat)
-    mesh = mesh.replace(texcoords=None)  # the rollout has its own; the profile needs none
-    body = None if result.attachments_kept or not result.attachments.n_faces else ~result.attachments.face_mask
-    bins = None
-    if options.profile_mm is not None:
-        bins = max(1, math.ceil(result.axis.height * mesh.mm_per_unit / options.profile_mm))
-    profile = vessel_profile(mesh, result.axis.point, result.axis.direction, face_mask=body,
-                             labels=result.walls.labels, bins=bins)
-    del mesh
-    clock.lap("profile")
-    summary = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_summary(result),
-               "profile": profile.summary(),
-               "cleaning": cleaning,
-               "files": {"ply": ply_path.name, "json": json_path.name, "profile_csv": csv_path.name,
-                         "profile_svg": svg_path.name}}
-    summary["provenance"] = provenance(stage="rollout", inputs=[scan_path], options=options.as_dict())
-    comments = (f"potflat {__version__} rollout of {scan_path.name}",)
-    write_flat_ply(ply_path, result.flat, comments=comments)
-    write_profile_csv(profile, csv_path)
-    write_profile_svg(profile, svg_path, title=f"{name}: profile ({profile.units})")
-    clock.lap("write")
-    summary["timings"] = {**clock.total(), "rollout_steps": result.timings}
-    write_json_atomic(json_path, summary)
-    return StageOutput({"ply": ply_path, "json": json_path, "profile_csv": csv_path, "profile_svg": svg_path},
-                       summary, flat=as_stored(result.flat, ply_path, comments=comments),
-                       distortion=result.distortion)

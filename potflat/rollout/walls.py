@@ -38,6 +38,7 @@ from potflat.mesh.distortion import row_blocks
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.rollout.options import SIDES  # the sides select_wall accepts
 from potflat.types import Mesh
+from potflat.mesh.tolerances import DEGENERATE, ROUNDING
 
 #: Label values in :attr:`WallSelection.labels`.
 OUTER, INNER = 1, -1
@@ -75,7 +76,7 @@ def check_axis(axis_point, axis_direction) -> tuple[np.ndarray, np.ndarray]:
     if not (np.isfinite(p).all() and np.isfinite(a).all()):
         raise InvalidInputError("axis point and direction must be finite numbers; give a valid axis")
     norm = float(np.linalg.norm(a))
-    if norm <= 1e-12:
+    if norm <= DEGENERATE:
         raise InvalidInputError("axis direction has zero length; give a non-zero direction (foot to mouth)")
     return p.copy(), a / norm
 
@@ -483,9 +484,11 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
     chosen = labels == want
     if not chosen.any():
         where = f" {mesh.source}" if mesh.source else ""
+        other = "inner" if side == "outer" else "outer"
+        facing = "face the axis" if side == "outer" else "face away from the axis"
         raise InvalidInputError(
-            f"the scan{where} has no inner wall (its faces all face away from the axis); use side='outer'"
-        )
+            f"the scan{where} has no {side} wall (its faces all {facing}); unroll its {other} side "
+            f"(--side {other}, side='{other}')")
     candidates = chosen if exclude is None else chosen & ~exclude
     mask = _largest_region(candidates, fr.graph, fr.area) if candidates.any() else candidates
     adj = fr.adjacency
@@ -542,7 +545,7 @@ def _label_once(fr: FaceFrame, flat_tolerance: float, sign: float) -> np.ndarray
         # nearest seed along the surface (centroid-to-centroid steps, kept strictly positive
         # so the sparse graph keeps every edge)
         step = np.linalg.norm(fr.centroid[adj[:, 0]] - fr.centroid[adj[:, 1]], axis=1)
-        step = np.maximum(step, 1e-9 * max(float(step.max(initial=0.0)), 1e-300))
+        step = np.maximum(step, ROUNDING * max(float(step.max(initial=0.0)), 1e-300))
         G = fr.graph.matrix(step)
         _, _, src = dijkstra(G, directed=False, indices=np.flatnonzero(seed),
                              return_predecessors=True, min_only=True)
@@ -588,7 +591,7 @@ def _region_stats(fr: FaceFrame, labels: np.ndarray, sign: float):
     nsum = sign * (fr.normal[cross[:, 0]] + fr.normal[cross[:, 1]])
     nn = np.linalg.norm(nsum, axis=1)
     up = np.zeros(len(cross))
-    ok = nn > 1e-12
+    ok = nn > DEGENERATE
     up[ok] = (sign * (fr.n_axial[cross[ok, 0]] + fr.n_axial[cross[ok, 1]])) / nn[ok]
     border = np.zeros(nc)
     border_up = np.zeros(nc)

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from potflat.errors import InvalidOptionError, PotflatError
+from potflat.stages.names import STAGE_INPUT
 from potflat.types import StageOutput
 
 #: The stages in the order they run.
@@ -27,9 +28,6 @@ STAGES: tuple[str, ...] = ("rollout", "relax", "bake")
 
 #: The distortion figures a batch summary reports (keys of DistortionSummary).
 FIGURES: tuple[str, ...] = ("edge_rms", "area_mean_abs_log", "anisotropy_p95", "flipped")
-
-# File that each stage reads, after the first: ``NAME<suffix>`` in the output folder.
-_STAGE_INPUT = {"relax": ".rollout.ply", "bake": ".relaxed.ply"}
 
 
 def options_class(stage: str) -> type:
@@ -340,8 +338,8 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
         for stage in STAGES:
             if progress is not None:
                 progress(stage)
-            if stage in _STAGE_INPUT:
-                source = out / f"{name}{_STAGE_INPUT[stage]}"
+            if stage in STAGE_INPUT:
+                source = out / f"{name}{STAGE_INPUT[stage]}"
                 if not source.is_file():
                     raise PotflatError(f"{source}: the previous stage did not write it; "
                                        "this is a bug in potflat, please report it")

@@ -1,0 +1,97 @@
+"""Boundary checks of a flattening: which boundary segments cross or touch each other.
+
+One implementation for every stage: the rollout trims the faces of a border that overlaps
+itself and reports the count, the relax stage refuses a result whose border does
+(:mod:`potflat.mesh._segments` holds the Numba kernels).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from potflat.mesh.tolerances import DEGENERATE
+
+#: Finest grid of the search: the cell is at least the layout's extent over this.
+GRID_CELLS = 2048
+
+
+def _coerced(uv, seg) -> tuple[np.ndarray, np.ndarray]:
+    uv = np.ascontiguousarray(uv, dtype=np.float64)
+    seg = np.ascontiguousarray(seg, dtype=np.int64).reshape(-1, 2)
+    if uv.ndim != 2 or uv.shape[1] != 2:
+        raise ValueError(f"uv must be (n, 2), got {uv.shape}")
+    if len(seg) and (seg.min() < 0 or seg.max() >= len(uv)):
+        raise ValueError("segments name vertices outside uv")
+    return uv, seg
+
+
+def _cell(uv: np.ndarray, seg: np.ndarray) -> float:
+    """Grid cell of the search: twice the mean segment length, at least the extent over
+    :data:`GRID_CELLS`."""
+    lens = np.linalg.norm(uv[seg[:, 0]] - uv[seg[:, 1]], axis=1)
+    extent = float(np.ptp(uv[seg.ravel()], axis=0).max()) or 1.0
+    return max(2.0 * float(np.mean(lens)), extent / GRID_CELLS, DEGENERATE)  # a layout collapsed to a point
+
+
+def crossing_pairs(uv: np.ndarray, seg: np.ndarray, *, max_pairs: int | None = None) -> np.ndarray:
+    """Pairs of segments that cross or touch (segments sharing a vertex are not compared).
+
+    Parameters
+    ----------
+    uv : (n, 2) float64
+    seg : (b, 2) int64
+        Segments as vertex index pairs (typically the boundary of a flattening).
+    max_pairs : int, optional
+        Stop after this many pairs (default: all).
+
+    Returns
+    -------
+    (k, 2) int64
+        Indices into ``seg`` of each crossing pair.
+    """
+    from potflat.mesh import _segments  # Numba: imported on first use
+
+    uv, seg = _coerced(uv, seg)
+    if len(seg) < 2:
+        return np.zeros((0, 2), np.int64)
+    limit = np.iinfo(np.int64).max if max_pairs is None else int(max_pairs)
+    return _segments.crossing_pairs(uv, seg, _cell(uv, seg), limit)
+
+
+def edges_and_boundary(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The undirected edges of a triangle mesh and its boundary segments (edges of one face).
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+    n : int
+        Number of vertices.
+
+    Returns
+    -------
+    edges : (e, 2) int64
+        Endpoints (smaller first), sorted lexicographically.
+    segments : (b, 2) int64
+        Boundary edges as vertex pairs in their face's order, in the order of ``edges``.
+    owner : (b,) int64
+        The face of each segment.
+    """
+    from potflat.mesh._kernels import edge_table  # Numba: imported on first use
+
+    F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    _, edges, count, halves = edge_table(F, int(n))
+    half = halves[count == 1, 0]
+    owner, k = half // 3, half % 3
+    return edges, np.stack([F[owner, k], F[owner, (k + 1) % 3]], axis=1), owner
+
+
+def boundary_segments(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Edges used by one face only (:func:`edges_and_boundary` without the edges).
+
+    Returns
+    -------
+    segments : (b, 2) int64
+        Vertex pairs, in their face's order.
+    owner : (b,) int64
+        The face of each segment.
+    """
+    return edges_and_boundary(faces, n)[1:]

@@ -1,0 +1,185 @@
+"""The relax stage's parameters, one frozen object per concern.
+
+:data:`PRESETS` (typed :class:`RelaxPreset` settings, which :class:`~potflat.relax.RelaxOptions`
+overrides field by field), :data:`ENERGY` (the barriers and floors of the energy),
+:data:`SOLVER` (steps, line search and stopping of the two solvers) and :data:`COARSE` (when
+and how coarse copies are relaxed first). Light to import (the command line lists the
+presets from here). Every value changes the outputs; the comments say how each was chosen.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+
+@dataclass(frozen=True, kw_only=True)
+class RelaxPreset:
+    """The settings of one relax preset (``None`` fields are not set by it).
+
+    Attributes
+    ----------
+    solver : str
+        ``"lbfgs"`` (fold-free, preconditioned) or ``"dynamics"`` (the paper's damped dynamics).
+    stretch, stiffness : float
+        Initial uniform scale of the rollout and spring stiffness k.
+    weighting : str
+        One of :data:`WEIGHTINGS`.
+    tol : float
+        Relative energy decrease per iteration (averaged over :data:`SOLVER`'s window) to stop at.
+    max_iter : int
+    coarse_start : bool
+        Start large meshes from a relaxed coarse copy (:data:`COARSE`).
+    cell_vertices : float or None
+        Vertices per cell of the multilevel preconditioner's coarsest grid (L-BFGS only).
+    simplify_mm : float
+        Relax only a copy with cells of this side (mm); 0: the full mesh.
+    friction_inside, friction_boundary : float or None
+        The dynamics' friction inside and on the boundary (``dynamics`` only).
+    shape, rigidity, importance_contrast, true_scale
+        The painted figures' defaults (measured in ``docs/performance.md``, "Painted
+        figures"): the shape and rigidity terms' weights, how much stiffer the important
+        zone is than plain surface, and the final scaling to true scale in the important
+        zone.
+    """
+
+    solver: str
+    stretch: float
+    stiffness: float
+    weighting: str
+    tol: float
+    max_iter: int
+    coarse_start: bool
+    cell_vertices: float | None = None
+    simplify_mm: float = 0.0
+    friction_inside: float | None = None
+    friction_boundary: float | None = None
+    shape: float = 0.2
+    rigidity: float = 2.0
+    importance_contrast: float = 100.0
+    true_scale: bool = True
+
+    def settings(self) -> dict:
+        """The fields the preset sets, by name (the ``settings`` recorded in ``NAME.relaxed.json``)."""
+        return {k: v for k, v in asdict(self).items() if v is not None}
+
+
+#: Spring weightings: ``uniform`` (the paper: absolute length errors) or ``relative``.
+WEIGHTINGS = ("uniform", "relative")
+
+_FOLD_FREE = {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": "relative", "cell_vertices": 8.0,
+              "coarse_start": True}
+#: The presets by name: three fold-free ones, increasingly thorough, and the paper's dynamics.
+PRESETS: dict[str, RelaxPreset] = {
+    "preview": RelaxPreset(**_FOLD_FREE, tol=1e-3, max_iter=300, simplify_mm=0.5),
+    "standard": RelaxPreset(**_FOLD_FREE, tol=1e-4, max_iter=2000),
+    "archival": RelaxPreset(**_FOLD_FREE, tol=1e-7, max_iter=20000),
+    "paper": RelaxPreset(solver="dynamics", stretch=2.0, stiffness=0.5, weighting="uniform", tol=1e-7,
+                         max_iter=100000, friction_inside=0.01, friction_boundary=1.0, coarse_start=False,
+                         shape=0.0, rigidity=0.0, importance_contrast=1.0, true_scale=False),
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class EnergyParameters:
+    """Barriers and floors of the relax energy (lengths in mean edge lengths).
+
+    Attributes
+    ----------
+    barrier_mu, barrier_eps : float
+        Face barrier: weight (times k times the face's rest area) and activation (fraction
+        of the rest area).
+    boundary_mu, boundary_gap : float
+        Boundary angle barrier: weight (times k) and activation (radians below 2 pi of a
+        boundary vertex's flat interior angle sum).
+    contact_mu, contact_gap : float
+        Boundary contact barrier: weight (times k) and activation distance between a
+        boundary vertex and a boundary segment that is not its own (active when the start's
+        boundary does not overlap itself).
+    area_floor, length_floor : float
+        Floor of rest areas (squared lengths) and of spring lengths.
+    """
+
+    barrier_mu: float = 1.0
+    barrier_eps: float = 0.5
+    boundary_mu: float = 1.0
+    boundary_gap: float = 0.5
+    contact_mu: float = 1.0
+    contact_gap: float = 0.5
+    area_floor: float = 1e-2
+    length_floor: float = 1e-3
+
+
+@dataclass(frozen=True, kw_only=True)
+class SolverParameters:
+    """Steps, line search and stopping of the two solvers.
+
+    Attributes
+    ----------
+    lbfgs_memory : int
+        L-BFGS memory (pairs kept).
+    armijo : float
+        Armijo constant of the monotone line search.
+    step_fraction : float
+        Fraction of the flip-free step taken at most.
+    step_shrink : float
+        Largest fraction of its area a triangle may lose in one step (the log barrier alone
+        grows too slowly to stop steps that each go most of the way to collapse: at 2.5M
+        vertices, 19 triangles ended below 1e-11 of their rest area without this limit).
+    smooth_rounds, smooth_max_fraction : int, float
+        Direction smoothing: when a few triangles hold the flip-free step below the natural
+        one (typically slivers, whose area reacts to the smallest uneven move of their
+        vertices), the direction at their vertices is replaced by their edge neighbours'
+        mean, ``smooth_rounds`` times, if at most ``smooth_max_fraction`` of the vertices
+        are concerned.
+    precond_theta : float
+        Weight of the multilevel preconditioner's coarse terms against its Jacobi term
+        (measured: 1 needs 30-50% more iterations than 2; 4 about as many as 2 but more
+        backtracking).
+    window_lbfgs, window_dynamics : int
+        Window (iterations) of the relative-energy-change test. (L-BFGS with 5: a few
+        iterations cut short by a nearly collapsed triangle passed the test on the 2.5M
+        benchmark vessel at edge RMS 0.157; with 10 it went on to 0.1454.)
+    boundary_angle_slack : float
+        Radians below 2 pi under which a boundary vertex's angle sum counts as open.
+    min_time_budget : float
+        Seconds a coarse copy gets at the least from what is left of the time budget.
+    """
+
+    lbfgs_memory: int = 6
+    armijo: float = 1e-4
+    step_fraction: float = 0.9
+    step_shrink: float = 0.8
+    smooth_rounds: int = 3
+    smooth_max_fraction: float = 0.01
+    precond_theta: float = 2.0
+    window_lbfgs: int = 10
+    window_dynamics: int = 100
+    boundary_angle_slack: float = 1e-9
+    min_time_budget: float = 1e-3
+
+
+@dataclass(frozen=True, kw_only=True)
+class CoarseParameters:
+    """Coarse copies (grid clusters of the start layout, :mod:`potflat.relax.simplify`).
+
+    A copy has at least ``min_copy`` vertices; the full mesh only follows one
+    (``simplify_mm``) when the copy has at most ``max_fraction`` of its vertices (else
+    relaxing the copy costs about as much as the full mesh: 0.5M benchmark vessel, a 57%
+    copy at 0.5 mm, 7.8 s against 6.2 s) and covers at least ``min_coverage`` of them (cells
+    much smaller than the edges leave blocks empty: the goblet scan's copy at 2 mm cells
+    covered 38% of its vertices); meshes of at least ``min_vertices`` start their solve from
+    a relaxed copy with about ``cell_vertices`` vertices per cell (which nests in turn).
+    """
+
+    min_copy: int = 100
+    max_fraction: float = 1.0 / 3.0
+    min_coverage: float = 0.95
+    min_vertices: int = 20_000
+    cell_vertices: float = 16.0
+
+
+#: The energy's barriers and floors.
+ENERGY = EnergyParameters()
+#: The solvers' steps and stopping.
+SOLVER = SolverParameters()
+#: The coarse copies.
+COARSE = CoarseParameters()

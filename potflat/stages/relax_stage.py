@@ -1,0 +1,117 @@
+"""The relax stage's file stage: read ``NAME.rollout.ply`` (or take it in memory), relax it
+(:func:`potflat.relax.relax`), write ``NAME.relaxed.ply`` and ``NAME.relaxed.json``."""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from potflat.mesh.distortion import zone_summary
+from potflat.relax.solver import RelaxOptions, relax
+from potflat.stages.names import relax_name
+from potflat.types import FlatMesh, StageOutput
+
+
+def _history_for_json(h: np.ndarray, limit: int = 1000) -> list[float]:
+    """The energy history, thinned to at most ``limit`` entries (first and last kept)."""
+    if len(h) <= limit:
+        return [float(e) for e in h]
+    idx = np.unique(np.linspace(0, len(h) - 1, limit).round().astype(np.int64))
+    return [float(h[i]) for i in idx]
+
+
+def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: RelaxOptions | None = None, *,
+                    name: str | None = None, progress: bool = False, flat: FlatMesh | None = None,
+                    rollout_summary: dict | None = None) -> StageOutput:
+    """Relax ``NAME.rollout.ply`` and write ``NAME.relaxed.ply`` and ``NAME.relaxed.json``.
+
+    Parameters
+    ----------
+    rollout_ply : path-like
+        The rollout stage's output.
+    out_dir : path-like
+        Folder for the outputs (created if needed).
+    options : RelaxOptions, optional
+    name : str, optional
+        Output stem (default: the input's name without ``.rollout.ply``).
+    progress : bool
+        Show a progress bar.
+    flat : FlatMesh, optional
+        The content of ``rollout_ply`` already in memory (:func:`potflat.run_scan`); read
+        from the file when not given.
+    rollout_summary : dict, optional
+        The rollout stage's summary in memory (its axis, proxy and units go into the JSON);
+        read from ``NAME.rollout.json`` beside the input when not given.
+
+    Returns
+    -------
+    StageOutput
+        ``paths`` with ``ply`` and ``json``; ``summary`` the JSON content; the relaxed
+        ``flat`` as written and its ``distortion``.
+    """
+    from potflat.io.atomic import write_json_atomic
+    from potflat.io.flat_ply import as_stored, read_flat_ply, write_flat_ply
+    from potflat.stages.provenance import provenance
+
+    options = options or RelaxOptions()
+    rollout_ply = Path(rollout_ply)
+    out_dir = Path(out_dir)
+    stem = relax_name(rollout_ply)
+    name = name or stem
+    if flat is None:
+        flat = read_flat_ply(rollout_ply)
+    result = relax(flat, options=options, progress=progress)
+    ply_path = out_dir / f"{name}.relaxed.ply"
+    json_path = out_dir / f"{name}.relaxed.json"
+    summary = {
+        "preset": result.preset,
+        "options": asdict(options),
+        "settings": result.settings,
+        "iterations": result.iterations,
+        "converged": result.converged,
+        "flipped": result.flipped,
+        "boundary_overlap": result.boundary_overlap,
+        "fold_free": result.flipped == 0 and result.boundary_overlap == 0,
+        "fold_free_verified_by": "signed area of every face > 0 and no crossing boundary segments, checked after solving",
+        "energy_history": _history_for_json(result.energy_history),
+        "energy_units": "lengths divided by the mean 3D edge length; springs + barrier (fold-free presets) or springs only (paper)",
+        "spring_energy": result.levels[-1]["energy"] if result.levels else None,
+        "stress": "paper Eq. 3 over mesh edges in sqrt(mm) (potflat.mesh.distortion.vertex_stress)",
+        "levels": list(result.levels),
+        "notes": list(result.notes),
+        "distortion_before": result.distortion_before.as_dict(),
+        "distortion": result.distortion.as_dict(),
+        "importance": ("none: the whole surface counts alike" if result.flat.importance is None else
+                       f"per vertex in {ply_path.name}; springs, barrier and shape term of plain surface weighted "
+                       f"1/{result.settings['importance_contrast']:g}"),
+        **zone_summary(flat.mesh.vertices, result.flat.uv, flat.mesh.faces, result.flat.importance),
+        "true_scale_factor": result.scale_factor,
+        "timings": result.timings,
+        "units": flat.mesh.units,
+        "vertices": len(flat.mesh.vertices),
+        "faces": len(flat.mesh.faces),
+    }
+    rollout_json = rollout_ply.with_name(f"{stem}.rollout.json")
+    if rollout_summary is not None or rollout_json.exists():
+        try:
+            rj = rollout_summary if rollout_summary is not None else json.loads(
+                rollout_json.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            rj = {}
+        if not isinstance(rj, dict):  # a sidecar holding null, a list...: nothing to copy from it
+            rj = {}
+        for key in ("axis", "proxy", "units"):
+            if key in rj:
+                summary[key] = rj[key]
+        folded = rj.get("folded")
+        if isinstance(folded, dict):  # where the scan folds in 3D: the figures, the faces stay in the rollout's JSON
+            summary["folded"] = {k: v for k, v in folded.items() if k != "face_indices"}
+    inputs = [rollout_ply] + ([rollout_json] if rollout_json.exists() else [])
+    summary["provenance"] = provenance(stage="relax", inputs=inputs, options=asdict(options))
+    comments = (f"potflat relax preset {result.preset}",)
+    write_flat_ply(ply_path, result.flat, comments=comments)
+    write_json_atomic(json_path, summary)
+    return StageOutput(paths={"ply": ply_path, "json": json_path}, summary=summary,
+                       flat=as_stored(result.flat, ply_path, comments=comments), distortion=result.distortion)

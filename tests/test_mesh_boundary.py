@@ -1,0 +1,39 @@
+"""potflat.mesh.boundary: edges, boundary segments and their crossings."""
+from collections import Counter
+
+import numpy as np
+
+from potflat.mesh.boundary import boundary_segments, crossing_pairs, edges_and_boundary
+
+
+def test_edges_and_boundary_match_a_slow_reference():
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        n = int(rng.integers(3, 30))
+        F = rng.integers(0, n, (int(rng.integers(1, 40)), 3))
+        F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])]
+        halves = [(int(f[j]), int(f[(j + 1) % 3]), i) for i, f in enumerate(F) for j in range(3)]
+        uses = Counter((min(a, b), max(a, b)) for a, b, _ in halves)
+        edges, seg, owner = edges_and_boundary(F, n)
+        assert edges.tolist() == sorted(map(list, uses))
+        want = sorted((min(a, b), max(a, b), a, b, f) for a, b, f in halves if uses[(min(a, b), max(a, b))] == 1)
+        assert [[a, b] for _, _, a, b, _ in want] == seg.tolist()
+        assert [f for *_, f in want] == owner.tolist()
+        assert all(np.array_equal(x, y) for x, y in zip(boundary_segments(F, n), (seg, owner)))
+
+
+def test_a_closed_surface_has_no_boundary():
+    tetra = np.array([[0, 1, 2], [0, 3, 1], [1, 3, 2], [2, 3, 0]])
+    edges, seg, owner = edges_and_boundary(tetra, 4)
+    assert len(edges) == 6 and seg.shape == (0, 2) and owner.shape == (0,)
+
+
+def test_crossing_pairs_lists_every_pair_of_a_grid_and_stops_at_the_cap():
+    """12 horizontal and 12 vertical segments cross 144 times (past the kernel's first buffer)."""
+    t = np.arange(12, dtype=float)
+    x = np.concatenate([np.column_stack([np.full(12, -1.0), t]), np.column_stack([np.full(12, 12.0), t]),
+                        np.column_stack([t, np.full(12, -1.0)]), np.column_stack([t, np.full(12, 12.0)])])
+    seg = np.array([[i, 12 + i] for i in range(12)] + [[24 + i, 36 + i] for i in range(12)])
+    got = {tuple(sorted(p)) for p in crossing_pairs(x, seg).tolist()}
+    assert got == {(i, j) for i in range(12) for j in range(12, 24)}
+    assert len(crossing_pairs(x, seg, max_pairs=100)) == 100
