@@ -36,11 +36,10 @@ import numpy as np
 
 from potflat.mesh.distortion import (
     DistortionSummary,
+    SurfaceReference,
     face_areas,
     row_blocks,
-    summarize,
     true_scale_factor,
-    vertex_stress,
 )
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
 from potflat.mesh.boundary import crossing_pairs
@@ -1006,14 +1005,15 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
     uv_out = np.empty_like(x)
     uv_out[order] = x * unit + centre
     factor = 1.0
+    surface = SurfaceReference(V, F)  # the 3D side of every figure below, computed once
     if settings["true_scale"]:
-        factor = true_scale_factor(V, uv_out, F, flat.importance)
+        factor = true_scale_factor(V, uv_out, F, flat.importance, reference=surface)
         uv_out = centre + (uv_out - centre) * factor
     before = after = stress = None
     if summaries:
-        before = summarize(V, uv, F)
-        after = summarize(V, uv_out, F)
-        stress = vertex_stress(V, uv_out, F, flat.mesh.mm_per_unit)
+        before = surface.summarize(uv)
+        after = surface.summarize(uv_out)
+        stress = surface.vertex_stress(uv_out, flat.mesh.mm_per_unit)
     t_end = time.perf_counter()
     return RelaxResult(
         flat=flat.replace(uv=uv_out, stress=stress),
