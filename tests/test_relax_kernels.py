@@ -129,3 +129,49 @@ def test_neighbour_means_count_each_edge_neighbour_once():
     for v in verts:
         nbrs = {int(u) for f in faces if v in f for u in f if u != v}
         np.testing.assert_allclose(out[v], x[sorted(nbrs)].mean(axis=0), rtol=1e-14)
+
+
+@pytest.mark.parametrize("dtype", [np.int32, np.int64])
+def test_faces_by_first_vertex_is_a_stable_sort_by_the_smallest_corner(dtype):
+    from potflat.relax._kernels.springs import faces_by_first_vertex
+
+    rng = np.random.default_rng(7)
+    faces = rng.integers(0, 40, size=(300, 3)).astype(dtype)  # many ties, unused vertices
+    order = faces_by_first_vertex(50, faces)
+    np.testing.assert_array_equal(order, np.argsort(faces.min(axis=1), kind="stable"))
+    assert len(faces_by_first_vertex(5, np.empty((0, 3), dtype))) == 0
+
+
+def test_face_barrier_visits_only_blocks_with_squeezed_faces_and_matches_the_full_scan():
+    from potflat.relax._kernels import springs as ks
+
+    rng = np.random.default_rng(3)
+    n, m = 3000, 3 * ks.BLOCK + 17  # several blocks, the last one short
+    x = rng.random((n, 2))
+    faces = rng.integers(0, n, size=(2 * m, 3)).astype(np.int32)
+    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])][:m]
+    areas = np.empty(m)
+    ks.face_areas(x, faces, areas)
+    faces[areas < 0] = faces[areas < 0][:, ::-1]  # positively oriented
+    faces[m - 1] = faces[m - 1, ::-1]  # but the last face: flipped (infinite barrier)
+    a_ref = np.full(m, 0.02)
+    a_ref[: 2 * ks.BLOCK] = 1e-30  # the first two blocks: every face far above the barrier
+    a_ref[100] = 1e3  # ... but one
+    below = np.empty(-(-m // ks.BLOCK), np.int64)
+    ks.face_areas_below(x, faces, a_ref, 0.5, areas, below)
+    want = np.empty(m)
+    ks.face_areas(x, faces, want)
+    np.testing.assert_array_equal(areas, want)
+    squeezed = ~(areas >= 0.5 * a_ref)
+    np.testing.assert_array_equal(below, np.add.reduceat(squeezed.astype(np.int64), np.arange(0, m, ks.BLOCK)))
+    assert below[0] == 1 and below[1] == 0 and below[-1] > 0
+    weight = rng.random(n)
+    x = np.ascontiguousarray(x)
+    results = []
+    for blocks in (below, np.ones_like(below)):  # the skipping scan and the full scan
+        grad, diag = np.zeros((n, 2)), np.zeros(n)
+        energy = ks.face_barrier(x, faces, areas, a_ref, 1.0, 1.0, 0.5, True, weight, grad, diag, blocks)
+        results.append((energy, grad, diag))
+    assert results[0][0] == results[1][0] == np.inf  # the flipped face
+    np.testing.assert_array_equal(results[0][1], results[1][1])
+    np.testing.assert_array_equal(results[0][2], results[1][2])

@@ -447,7 +447,8 @@ def zone_figures(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, import
     return out
 
 
-def true_scale_factor(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, importance: np.ndarray | None) -> float:
+def true_scale_factor(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, importance: np.ndarray | None, *,
+                      reference: SurfaceReference | None = None) -> float:
     """The uniform factor that brings the area-weighted median linear scale of the important
     zone (the whole surface when ``importance`` is None) to 1; 1 when it is undefined.
 
@@ -457,8 +458,10 @@ def true_scale_factor(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, i
     uv : (n, 2) float64
     faces : (m, 3) int64
     importance : (n,) float64 or None
+    reference : SurfaceReference or None
+        The 3D side of ``vertices`` and ``faces`` when the caller has it already.
     """
-    fd = face_distortion(vertices, uv, faces)
+    fd = (reference or SurfaceReference(vertices, faces)).face_distortion(uv)
     zone = important_faces(faces, importance) & fd.valid
     if not zone.any():
         zone = fd.valid

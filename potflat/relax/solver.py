@@ -36,11 +36,10 @@ import numpy as np
 
 from potflat.mesh.distortion import (
     DistortionSummary,
+    SurfaceReference,
     face_areas,
     row_blocks,
-    summarize,
     true_scale_factor,
-    vertex_stress,
 )
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
 from potflat.mesh.boundary import crossing_pairs
@@ -285,6 +284,7 @@ class _Springs:
         self._areas = np.empty(self.m)
         self.diag = np.empty(n)
         self._blocks = np.empty(max(1, -(-self.m // ks.BLOCK)))
+        self._below = np.zeros(len(self._blocks), np.int64)  # faces near the barrier per block
 
     def guard_boundary(self, x: np.ndarray) -> int:
         """Guard the angle sum of every boundary vertex below ``2 pi`` from ``x`` on.
@@ -311,7 +311,7 @@ class _Springs:
         the Hessian diagonal bound at ``x``."""
         g = np.empty((self.n, 2)) if out is None else out
         if barrier:
-            self.ks.face_areas(x, self.faces, self._areas)
+            self.ks.face_areas_below(x, self.faces, self.a_ref, ENERGY.barrier_eps, self._areas, self._below)
             if len(self.bverts):
                 self.ks.boundary_angle_sums(x, self.bverts, self.vf_ptr, self.vf_tri, self.faces, self.theta)
         self.ks.energy_gradient(x, self.ptr, self.nbr, self.rst, self.k, self.relative, ENERGY.length_floor,
@@ -323,7 +323,7 @@ class _Springs:
             return es, es, g
         eb = float(np.sum(self._eb))
         ef = self.ks.face_barrier(x, self.faces, self._areas, self.a_ref, ENERGY.barrier_mu, self.k, ENERGY.barrier_eps,
-                                  self.relative, self.weight, g, self.diag)
+                                  self.relative, self.weight, g, self.diag, self._below)
         ec = 0.0
         if self.contact:
             ec = self.ko.contact_barrier(x, self.boundary_segments, self.bprev, self.bnext, ENERGY.contact_gap,
@@ -360,16 +360,6 @@ class _Springs:
             self.ks.boundary_max_step(x, d, self.bverts, self.bprev, self.bnext, self._bblocks)
             t = min(t, float(self._bblocks.min()))
         return t
-
-    def dot(self, a: np.ndarray, b: np.ndarray) -> float:
-        """Deterministic dot product of two arrays of equal shape."""
-        a, b = a.reshape(-1), b.reshape(-1)
-        out = np.empty(max(1, -(-len(a) // self.ks.BLOCK)))
-        if len(a) > 16 * self.ks.BLOCK:
-            self.ks.block_dot(a, b, out)
-        else:
-            self.ks.block_dot_serial(a, b, out)
-        return float(np.sum(out))
 
     def signed_areas(self, x: np.ndarray) -> np.ndarray:
         """Signed area of every face at ``x``, shape (m,)."""
@@ -564,7 +554,9 @@ class _LBFGS:
         for _ in range(SOLVER.smooth_rounds):
             sp.ks.neighbour_means(dx, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
             dx[verts] = mean
-        gd_smooth = sp.dot(self.g, self.q)
+        # g . q changed at verts only (no pass over the whole mesh)
+        g = self.g.reshape(-1, 2)[verts]
+        gd_smooth = gd + float(np.sum(g * (dx[verts] - before)))
         t_smooth = SOLVER.step_fraction * sp.max_step_near(self.x, dx, verts, 1.0 / SOLVER.step_fraction, SOLVER.step_shrink)
         if gd_smooth < 0.0 and t_smooth > t:
             self.smoothed += 1
@@ -804,10 +796,10 @@ def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
         if flat.importance is not None:  # a coarse vertex is as important as its cluster on average
             count = np.bincount(simple.cluster, minlength=len(simple.vertices))
             importance = np.bincount(simple.cluster, flat.importance, len(simple.vertices)) / np.maximum(count, 1)
-        sub = relax(FlatMesh(Mesh(simple.vertices, simple.faces, units=flat.mesh.units), simple.uv,
-                             importance=importance),
-                    options=replace(options, simplify_mm=0.0, time_budget=budget, true_scale=False), progress=progress,
-                    callback=tagged)
+        sub = _relax(FlatMesh(Mesh(simple.vertices, simple.faces, units=flat.mesh.units), simple.uv,
+                              importance=importance),
+                     replace(options, simplify_mm=0.0, time_budget=budget, true_scale=False), progress, tagged,
+                     summaries=False)
     except FoldedResultError as exc:
         return _CoarseStart(result=None, uv=None, final=False, notes=[
             f"the {len(simple.vertices)}-vertex coarse copy could not be relaxed fold-free ({exc}); "
@@ -896,6 +888,12 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
         options = RelaxOptions(**kwargs)
     elif kwargs:
         raise InvalidOptionError("give either options= or option keywords to relax(), not both")
+    return _relax(flat, options, progress, callback, summaries=True)
+
+
+def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, summaries: bool) -> RelaxResult:
+    """:func:`relax`; without ``summaries`` (a coarse copy, whose layout is all its caller
+    reads) the result's distortion summaries are None and its stress is not computed."""
     settings = options.resolved()
     V = np.ascontiguousarray(flat.mesh.vertices, dtype=np.float64)
     uv = np.ascontiguousarray(flat.uv, dtype=np.float64)
@@ -924,6 +922,7 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
         centre = 0.5 * (uv.min(axis=0) + uv.max(axis=0))
         x_in = (uv - centre) / unit
         from potflat.relax.hierarchy import GridHierarchy
+        from potflat.relax._kernels.springs import faces_by_first_vertex
 
         # locality-preserving order (Morton curve of the layout) and the preconditioner's grids
         hier = GridHierarchy.build(x_in, min_vertices_per_cell=settings.get("cell_vertices", 8.0))
@@ -931,7 +930,10 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
         inverse = np.empty(n, np.int64)
         inverse[order] = np.arange(n)
         Vs = np.ascontiguousarray(V[order] / unit)
-        Fs = np.ascontiguousarray(inverse[F])
+        Fs = inverse[F]
+        # faces in the vertices' order too: the face passes and gathers read nearby memory
+        # (2.5M benchmark vessel: an evaluation of the energy and gradient 1.6x faster)
+        Fs = np.ascontiguousarray(Fs[faces_by_first_vertex(n, Fs)])
         weight = None
         if fold_free and flat.importance is not None and settings["importance_contrast"] > 1:
             weight = _importance_weights(flat.importance[order], settings["importance_contrast"])
@@ -1003,12 +1005,15 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
     uv_out = np.empty_like(x)
     uv_out[order] = x * unit + centre
     factor = 1.0
+    surface = SurfaceReference(V, F)  # the 3D side of every figure below, computed once
     if settings["true_scale"]:
-        factor = true_scale_factor(V, uv_out, F, flat.importance)
+        factor = true_scale_factor(V, uv_out, F, flat.importance, reference=surface)
         uv_out = centre + (uv_out - centre) * factor
-    before = summarize(V, uv, F)
-    after = summarize(V, uv_out, F)
-    stress = vertex_stress(V, uv_out, F, flat.mesh.mm_per_unit)
+    before = after = stress = None
+    if summaries:
+        before = surface.summarize(uv)
+        after = surface.summarize(uv_out)
+        stress = surface.vertex_stress(uv_out, flat.mesh.mm_per_unit)
     t_end = time.perf_counter()
     return RelaxResult(
         flat=flat.replace(uv=uv_out, stress=stress),

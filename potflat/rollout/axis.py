@@ -72,6 +72,38 @@ HUBER_K = 1.345
 #: fit equally (eigenvalues within this relative spread).
 DEGENERATE_ABS = 1e-4
 DEGENERATE_SPREAD = 0.1
+
+
+@dataclass(frozen=True)
+class AxisFitTolerances:
+    """The axis fits' numerical settings, in one place.
+
+    Attributes
+    ----------
+    pinv_rcond : float
+        Relative cut-off of the pseudo-inverse in the line-complex fit.
+    scale_floor : float
+        Smallest robust scale of the residuals (IRLS and the profile polish's Huber scale).
+    converged : float
+        The IRLS stops when the axis moves less than this (direction plus offset, scan units
+        relative to the scan's size).
+    polish_x_scale : float
+        Typical size of the profile polish's four parameters (tilt and shift, radians and
+        scan-size units).
+    polish_diff_step : float
+        Relative finite-difference step of the profile polish.
+    polish_max_evaluations : int
+    """
+
+    pinv_rcond: float = 1e-10
+    scale_floor: float = 1e-9
+    converged: float = 1e-12
+    polish_x_scale: float = 1e-3
+    polish_diff_step: float = 1e-7
+    polish_max_evaluations: int = 200
+
+
+AXIS_FIT = AxisFitTolerances()
 #: The mouth is the end where the inner wall (area facing the axis) is reached: the fraction
 #: of the area facing the axis within INNER_WALL_END of the height at each end must differ
 #: by at least INNER_WALL_FRACTION.
@@ -224,7 +256,7 @@ def _line_complex_fit(c: np.ndarray, n: np.ndarray, w: np.ndarray) -> tuple[np.n
     A = (mom * w[:, None]).T @ mom
     B = (mom * w[:, None]).T @ n
     N = wn.T @ n
-    N_pinv = np.linalg.pinv(N, rcond=1e-10, hermitian=True)
+    N_pinv = np.linalg.pinv(N, rcond=AXIS_FIT.pinv_rcond, hermitian=True)
     S = A - B @ N_pinv @ B.T
     S = 0.5 * (S + S.T)
     evals, evecs = np.linalg.eigh(S)
@@ -319,7 +351,7 @@ def _irls(c, n, area, point, direction, *, iterations: int = 40):
         r_floor = 0.05 * np.median(r) + 1e-300
         s = det / np.maximum(r, r_floor)
         sigma = 1.4826 * np.median(np.abs(s))
-        scale = max(sigma, 1e-9)
+        scale = max(sigma, AXIS_FIT.scale_floor)
         huber = np.minimum(1.0, HUBER_K * scale / np.maximum(np.abs(s), 1e-300))
         w = area * huber / np.maximum(r, r_floor) ** 2
         new_dir, new_point, _ = _line_complex_fit(c, n, w / w.sum())
@@ -328,7 +360,7 @@ def _irls(c, n, area, point, direction, *, iterations: int = 40):
         change = np.linalg.norm(new_dir - direction) + np.linalg.norm(
             np.cross(new_point - point, new_dir))
         direction, point = new_dir, new_point
-        if change < 1e-12:
+        if change < AXIS_FIT.converged:
             break
     return point, direction
 
@@ -371,9 +403,10 @@ def _profile_refine(vertices: np.ndarray, weights: np.ndarray, point, direction,
         return sw * (r - prof) / size
 
     start = residual(np.zeros(4))
-    f_scale = max(HUBER_K * 1.4826 * float(np.median(np.abs(start))), 1e-9)
+    f_scale = max(HUBER_K * 1.4826 * float(np.median(np.abs(start))), AXIS_FIT.scale_floor)
     sol = scipy.optimize.least_squares(residual, np.zeros(4), loss="huber", f_scale=f_scale,
-                                       x_scale=np.full(4, 1e-3), diff_step=1e-7, max_nfev=200)
+                                       x_scale=np.full(4, AXIS_FIT.polish_x_scale),
+                                       diff_step=AXIS_FIT.polish_diff_step, max_nfev=AXIS_FIT.polish_max_evaluations)
     return geometry(sol.x)
 
 

@@ -34,6 +34,8 @@ from potflat._jit import leaf, parallel, prange
 
 #: Block size of the deterministic reductions (independent of the thread count).
 BLOCK = 4096
+#: Each corner's share of its face's shape energy.
+THIRD = 1.0 / 3.0
 
 
 #: A vertex's half-edges are sorted by insertion up to this many, by merge sort above (a fan
@@ -361,6 +363,39 @@ def vertex_faces(n, faces):
     return ptr, tri
 
 
+@leaf
+def faces_by_first_vertex(n, faces):
+    """An order of the faces by their smallest vertex index (stable: ties keep their order).
+
+    With vertices in a locality-preserving order, the faces in this order are local too:
+    the per-face passes and the per-vertex gathers over incident faces then read nearby
+    memory (a counting sort, ``O(n + m)``; equal to ``np.argsort(faces.min(axis=1),
+    kind="stable")``).
+
+    Parameters
+    ----------
+    n : int
+        Number of vertices (every index in ``faces`` is below it).
+    faces : (m, 3) int32 or int64
+
+    Returns
+    -------
+    order : (m,) int64
+    """
+    m = faces.shape[0]
+    start = np.zeros(n + 1, np.int64)
+    for f in range(m):
+        start[min(faces[f, 0], faces[f, 1], faces[f, 2]) + 1] += 1
+    for i in range(n):
+        start[i + 1] += start[i]
+    order = np.empty(m, np.int64)
+    for f in range(m):
+        v = min(faces[f, 0], faces[f, 1], faces[f, 2])
+        order[start[v]] = f
+        start[v] += 1
+    return order
+
+
 @parallel
 def neighbour_means(x, verts, vf_ptr, vf_tri, faces, out):
     """Mean of ``x`` (positions, or a search direction) over each listed vertex's edge
@@ -431,6 +466,37 @@ def face_areas(x, faces, out):
         a2 = faces[t, 2]
         out[t] = 0.5 * ((x[a1, 0] - x[a0, 0]) * (x[a2, 1] - x[a0, 1])
                         - (x[a1, 1] - x[a0, 1]) * (x[a2, 0] - x[a0, 0]))
+
+
+@parallel
+def face_areas_below(x, faces, a_ref, eps, out, below):
+    """:func:`face_areas`, and per block of :data:`BLOCK` faces how many are not above ``eps``
+    of their reference area (the faces :func:`face_barrier` acts on; NaN areas count).
+
+    Parameters
+    ----------
+    x : (n, 2) float64
+    faces : (m, 3) int32 or int64
+    a_ref : (m,) float64
+    eps : float
+    out : (m,) float64
+        Output: signed areas.
+    below : (ceil(m / BLOCK),) int64
+        Output: counts per block.
+    """
+    m = faces.shape[0]
+    for b in prange(below.shape[0]):
+        count = 0
+        for t in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
+            a0 = faces[t, 0]
+            a1 = faces[t, 1]
+            a2 = faces[t, 2]
+            area = 0.5 * ((x[a1, 0] - x[a0, 0]) * (x[a2, 1] - x[a0, 1])
+                          - (x[a1, 1] - x[a0, 1]) * (x[a2, 0] - x[a0, 0]))
+            out[t] = area
+            if not area >= eps * a_ref[t]:
+                count += 1
+        below[b] = count
 
 
 @leaf
@@ -550,19 +616,25 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
                 # the flat area's gradient at i
                 agx = 0.5 * (x[j, 1] - x[l, 1])
                 agy = 0.5 * (x[l, 0] - x[j, 0])
-                es += wa * (dir_ / area - 1.0) / 3.0
-                gx += wa * (dgx * area - dir_ * agx) / (area * area)
-                gy += wa * (dgy * area - dir_ * agy) / (area * area)
-                hd += wa * 0.5 * (ct_l + ct_j) / area
+                # one division per corner (the gradient is wa (dgx A - D agx) / A^2)
+                inv = 1.0 / area
+                wi = wa * inv
+                ratio = dir_ * inv
+                es += wa * (ratio - 1.0) * THIRD
+                gx += wi * (dgx - ratio * agx)
+                gy += wi * (dgy - ratio * agy)
+                hd += 0.5 * wi * (ct_l + ct_j)
                 if rigid:
                     # ARAP energy rho ((s1 - 1)^2 + (s2 - 1)^2), s1 + s2 = q = sqrt(2 (D + A_flat) / A)
                     rho = shape[t, 4]
-                    a_rest = shape[t, 5]
-                    q = math.sqrt(2.0 * (dir_ + area) / a_rest)
-                    es += rho * (2.0 * dir_ / a_rest - 2.0 * q + 2.0) / 3.0
-                    gx += 2.0 * rho * (dgx - (dgx + agx) / q) / a_rest
-                    gy += 2.0 * rho * (dgy - (dgy + agy) / q) / a_rest
-                    hd += rho * (ct_l + ct_j) / a_rest
+                    ia = 1.0 / shape[t, 5]  # 1 / A_rest: two divisions per corner in all
+                    ra = rho * ia
+                    q = math.sqrt(2.0 * (dir_ + area) * ia)
+                    iq = 1.0 / q
+                    es += rho * (2.0 * dir_ * ia - 2.0 * q + 2.0) * THIRD
+                    gx += 2.0 * ra * (dgx - (dgx + agx) * iq)
+                    gy += 2.0 * ra * (dgy - (dgy + agy) * iq)
+                    hd += ra * (ct_l + ct_j)
         eb = 0.0
         if mu_b > 0.0 and (bprev[i] >= 0 or bnext[i] >= 0):
             sb = mu_b * k
@@ -690,12 +762,13 @@ def shape_coefficients(V, faces, weight, scale, rigid_scale, area_floor, out):
 
 
 @leaf
-def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, weight, grad, diag):
+def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, weight, grad, diag, below):
     """Add the face barrier to ``grad`` and ``diag``; return its energy.
 
     Serial over the faces in order (deterministic); only faces squeezed below ``eps`` of
-    their reference area contribute, usually a small fraction, so this costs one pass over
-    ``areas`` and ``a_ref`` instead of a gather over every vertex's incident faces.
+    their reference area contribute, usually a small fraction, so only the blocks that
+    hold one (``below``, from :func:`face_areas_below`) are visited, instead of a gather
+    over every vertex's incident faces.
 
     Parameters
     ----------
@@ -715,6 +788,9 @@ def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, weight, grad, dia
         corners' weights, like its springs. Empty: every weight is 1.
     grad, diag : (n, 2), (n,) float64
         Updated in place: gradient and Hessian diagonal bound.
+    below : (ceil(m / BLOCK),) int64
+        Faces not above ``eps a_ref`` per block of :data:`BLOCK` (:func:`face_areas_below`):
+        blocks with none are skipped.
 
     Returns
     -------
@@ -723,30 +799,34 @@ def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, weight, grad, dia
         non-positive area.
     """
     total = 0.0
-    for t in range(faces.shape[0]):
-        area = areas[t]
-        th = eps * a_ref[t]
-        if area >= th:
+    m = faces.shape[0]
+    for b in range(below.shape[0]):
+        if below[b] == 0:
             continue
-        if area <= 0.0:
-            total = np.inf
-            continue
-        a = area / th
-        scale = mu * k if relative else mu * k * a_ref[t]
-        if weight.shape[0] > 0:
-            scale *= (weight[faces[t, 0]] + weight[faces[t, 1]] + weight[faces[t, 2]]) / 3.0
-        total += scale * (a - 1.0 - math.log(a))
-        dphi = scale * (1.0 - 1.0 / a) / th
-        h = scale / (area * area)
-        for c in range(3):
-            i = faces[t, c]
-            j1 = faces[t, (c + 1) % 3]
-            j2 = faces[t, (c + 2) % 3]
-            ax = 0.5 * (x[j1, 1] - x[j2, 1])
-            ay = 0.5 * (x[j2, 0] - x[j1, 0])
-            grad[i, 0] += dphi * ax
-            grad[i, 1] += dphi * ay
-            diag[i] += h * (ax * ax + ay * ay)
+        for t in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
+            area = areas[t]
+            th = eps * a_ref[t]
+            if area >= th:
+                continue
+            if area <= 0.0:
+                total = np.inf
+                continue
+            a = area / th
+            scale = mu * k if relative else mu * k * a_ref[t]
+            if weight.shape[0] > 0:
+                scale *= (weight[faces[t, 0]] + weight[faces[t, 1]] + weight[faces[t, 2]]) / 3.0
+            total += scale * (a - 1.0 - math.log(a))
+            dphi = scale * (1.0 - 1.0 / a) / th
+            h = scale / (area * area)
+            for c in range(3):
+                i = faces[t, c]
+                j1 = faces[t, (c + 1) % 3]
+                j2 = faces[t, (c + 2) % 3]
+                ax = 0.5 * (x[j1, 1] - x[j2, 1])
+                ay = 0.5 * (x[j2, 0] - x[j1, 0])
+                grad[i, 0] += dphi * ax
+                grad[i, 1] += dphi * ay
+                diag[i] += h * (ax * ax + ay * ay)
     return total
 
 
@@ -1087,30 +1167,3 @@ def dynamics_step(x, v, ptr, nbr, rst, k, relative, r_floor, friction, dt, x_out
         x_out[i, 1] = yi + dt * vy
         e_spring[i] = es
 
-
-@parallel
-def block_dot(a, b, out):
-    """Partial dot products of two flat vectors over fixed blocks (sum ``out`` serially).
-
-    Parameters
-    ----------
-    a, b : (N,) float64
-    out : (ceil(N / BLOCK),) float64
-    """
-    N = a.shape[0]
-    for blk in prange(out.shape[0]):
-        acc = 0.0
-        for i in range(blk * BLOCK, min(N, (blk + 1) * BLOCK)):
-            acc += a[i] * b[i]
-        out[blk] = acc
-
-
-@leaf
-def block_dot_serial(a, b, out):
-    """:func:`block_dot` without threads (same blocks, same result), for short vectors."""
-    N = a.shape[0]
-    for blk in range(out.shape[0]):
-        acc = 0.0
-        for i in range(blk * BLOCK, min(N, (blk + 1) * BLOCK)):
-            acc += a[i] * b[i]
-        out[blk] = acc
