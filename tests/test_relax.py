@@ -549,6 +549,28 @@ def test_boundary_max_step_stops_before_the_fan_wraps():
     assert sp.evaluate(np.ascontiguousarray(x + 1.001 * t * d))[0] == np.inf
 
 
+def test_following_a_coarse_copy_uncrosses_a_wrapped_boundary(monkeypatch):
+    """A layout followed from a coarse copy whose boundary wraps over itself at one vertex
+    (angle sum 2 pi + 0.6, every face positive) is moved back to a fold-free, uncrossed
+    start; with no repair rounds the copy is given up (None, and a note says so)."""
+    from dataclasses import replace
+
+    from potflat.relax import solver as relax_module
+
+    fan = _saddle_fan(flat_gap=-0.6)
+    F = fan.mesh.faces
+    sp = spring_system(fan.mesh.vertices, F, k=1.0, relative=True)
+    x = np.ascontiguousarray(fan.uv)
+    assert sp.overlap(x) > 0 and (signed_areas(x, F) > 0).all()
+    notes: list[str] = []
+    y = relax_module._follow(sp, x, notes)
+    assert y is not None and sp.overlap(y) == 0 and (signed_areas(y, F) > 0).all()
+    assert _angle_sum(y, F) < 2 * np.pi and "cross itself" in notes[0]
+    monkeypatch.setattr(relax_module, "COARSE", replace(relax_module.COARSE, follow_repair_rounds=0))
+    notes.clear()
+    assert relax_module._follow(sp, x, notes) is None and "from the rollout" in notes[-1]
+
+
 def test_boundary_vertex_with_a_large_angle_sum_does_not_wrap(monkeypatch):
     from potflat.relax import solver as relax_module
 

@@ -812,15 +812,48 @@ def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
 
 
 def _follow(sp: _Springs, x: np.ndarray, notes: list[str]) -> np.ndarray | None:
-    """The full mesh's layout ``x`` following a relaxed coarse copy, untangled; None (with a
-    note) when it cannot be made fold-free."""
+    """The full mesh's layout ``x`` following a relaxed coarse copy, untangled and with its
+    boundary uncrossed (:func:`_uncross_boundary`); None (with a note) when it cannot be made
+    fold-free."""
     x, n_bad = _untangle(sp, x)
     if n_bad:
         notes.append(f"untangled {n_bad} triangles flipped by following the coarse copy")
+    if not (sp.signed_areas(x) <= 0).any() and sp.overlap(x):
+        x, n_crossing = _uncross_boundary(sp, x)
+        if n_crossing:
+            notes.append(f"moved the boundary back where following the coarse copy made it cross itself "
+                         f"({n_crossing} crossing pairs of boundary segments)")
     if (sp.signed_areas(x) <= 0).any() or sp.overlap(x):
         notes.append("following the coarse copy folded the full mesh; relaxed the full mesh from the rollout")
         return None
     return x
+
+
+def _uncross_boundary(sp: _Springs, x: np.ndarray) -> tuple[np.ndarray, int]:
+    """Move the vertices of crossing boundary segments to their edge neighbours' mean (which
+    pulls a kinked boundary vertex inside), untangling after each round, until the boundary
+    no longer crosses itself or ``COARSE.follow_repair_rounds`` have passed; the moved region
+    widens by a ring every ``COARSE.follow_repair_widen`` rounds.
+    Returns the positions and the number of crossing pairs at the start (the caller checks
+    the result)."""
+    seg = sp.boundary_segments
+    pairs = crossing_pairs(x, seg)
+    n_crossing = len(pairs)
+    x = x.copy()
+    region = np.zeros(sp.n, bool)
+    for r in range(COARSE.follow_repair_rounds):
+        if not len(pairs):
+            break
+        region[seg[pairs.ravel()].ravel()] = True
+        if r % COARSE.follow_repair_widen == COARSE.follow_repair_widen - 1:
+            region[sp.faces[region[sp.faces].any(axis=1)].ravel()] = True
+        verts = np.nonzero(region)[0]
+        mean = np.empty((len(verts), 2))
+        sp.ks.neighbour_means(x, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
+        x[verts] = mean
+        x, _ = _untangle(sp, x)
+        pairs = crossing_pairs(x, seg)
+    return x, n_crossing
 
 
 def _importance_weights(importance: np.ndarray, contrast: float) -> np.ndarray:
