@@ -64,10 +64,13 @@ def _run(values: dict[str, Any]) -> None:
     options = {stage: options_from_cli(stage, values) for stage in STAGES}
     scan = Path(values["scan"])
     err = Console(stderr=True, quiet=values["quiet"] or values["json"])
-    say_compiling(err)
+    started = []
     with err.status(f"{scan.name}: starting") as status:
         def progress(stage: str) -> None:
             check_stop()
+            if not started:  # after run_scan checked the input: a refusal stays one line
+                started.append(stage)
+                say_compiling(err)
             status.update(with_compile_note(f"{scan.name}: {stage}"))
         out_dir = values["output"] or Path(values["name"] or scan.stem)  # ./NAME/, never the scan's folder
         result = run_scan(scan, out_dir, name=values["name"], progress=progress, **options)
