@@ -69,6 +69,15 @@ def test_as_stored_is_what_the_file_reads_back(tmp_path, with_texture, with_colo
     assert back.comments == stored.comments == ("from the scan", "", "made by test")
 
 
+def test_as_stored_shares_texture_coordinates_already_at_the_files_precision(tmp_path):
+    flat = _flat(tmp_path, True)
+    first = as_stored(flat, tmp_path / "out" / "x.rollout.ply")  # rounded to float32: a new array
+    assert first.mesh.texcoords is not flat.mesh.texcoords
+    assert not np.array_equal(first.mesh.texcoords, flat.mesh.texcoords)
+    second = as_stored(first, tmp_path / "out" / "x.relaxed.ply")  # nothing to round: the same array
+    assert second.mesh.texcoords is first.mesh.texcoords
+
+
 def test_truncated_file_is_rejected(tmp_path):
     out = tmp_path / "x.rollout.ply"
     write_flat_ply(out, _flat(tmp_path))
