@@ -71,6 +71,7 @@ def test_as_stored_is_what_the_file_reads_back(tmp_path, with_texture, with_colo
 
 def test_as_stored_shares_texture_coordinates_already_at_the_files_precision(tmp_path):
     flat = _flat(tmp_path, True)
+    (tmp_path / "out").mkdir()
     first = as_stored(flat, tmp_path / "out" / "x.rollout.ply")  # rounded to float32: a new array
     assert first.mesh.texcoords is not flat.mesh.texcoords
     assert not np.array_equal(first.mesh.texcoords, flat.mesh.texcoords)
