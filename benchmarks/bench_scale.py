@@ -186,9 +186,10 @@ def _verdicts(rows: list[dict]) -> list[str]:
             out.append(f"{v / 1e6:.1f}M vertices: the whole run takes {ratio:.1f}x the trimesh load "
                        f"(goal at most {GOAL_RATIO_1M:g}x): {'met' if ratio <= GOAL_RATIO_1M else 'NOT met'}.")
         if v >= 2e6:
-            ok = res["total_wall_s"] <= GOAL_S_3M and res["peak_gb"] <= GOAL_GB_3M
-            out.append(f"{v / 1e6:.1f}M vertices: {res['total_wall_s']:.0f} s and {res['peak_gb']:.2f} GB "
-                       f"(goal at most {GOAL_S_3M:g} s and {GOAL_GB_3M:g} GB): {'met' if ok else 'NOT met'}.")
+            fast, small = res["total_wall_s"] <= GOAL_S_3M, res["peak_gb"] <= GOAL_GB_3M
+            out.append(f"{v / 1e6:.1f}M vertices: {res['total_wall_s']:.0f} s (goal at most {GOAL_S_3M:g} s: "
+                       f"{'met' if fast else 'NOT met'}) and {res['peak_gb']:.2f} GB (goal at most "
+                       f"{GOAL_GB_3M:g} GB: {'met' if small else 'NOT met'}).")
     return out
 
 
