@@ -84,6 +84,21 @@ def test_report_links_resolve_and_thumbnails_decode(batch_out):
         assert max(img.size) <= 360 and min(img.size) > 10
 
 
+def test_report_shows_no_thumbnail_of_a_planted_link(batch_out, tmp_path):
+    from types import SimpleNamespace
+
+    from potflat.stages.report import _card
+
+    folder = tmp_path / "cup"
+    shutil.copytree(batch_out / "cup", folder)
+    Image.new("RGB", (40, 30), (200, 0, 0)).save(tmp_path / "private.png")
+    (folder / "cup.png").unlink()
+    (folder / "cup.png").symlink_to(tmp_path / "private.png")
+    report = SimpleNamespace(output=str(folder), name="cup", figures={}, status="done", seconds=1.0, error=None)
+    card = _card(report, tmp_path)
+    assert card.count("<img ") == 1 and 'alt="stress of cup"' in card  # the stress map only
+
+
 def _browser() -> str | None:
     return next((path for name in BROWSERS if (path := shutil.which(name))), None)
 

@@ -110,7 +110,9 @@ def _card(report, base: Path) -> str:
         if folder.is_dir() else []
     thumbs = []
     for label, file in (("painting", folder / f"{name}.png"), ("stress", folder / f"{name}.stress.png")):
-        uri = _thumbnail(file) if file.is_file() else None
+        # potflat writes no links: one in an output folder was put there, and the report (often
+        # shared) would carry a picture of whatever it points at
+        uri = _thumbnail(file) if file.is_file() and not file.is_symlink() else None
         if uri is not None:
             thumbs.append(f'<figure><a href="{_href(file, base)}"><img src="{uri}" alt="{html.escape(label)} of '
                           f'{html.escape(name)}"></a><figcaption>{html.escape(label)}</figcaption></figure>')
