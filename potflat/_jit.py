@@ -41,6 +41,12 @@ def numba_threads(n: int | None):
         numba.set_num_threads(old)
 
 
+def worker_threads() -> int:
+    """Threads a library call outside Numba may use (scipy's ``workers=``): the Numba thread
+    count in force, so :func:`numba_threads` (``--threads``) limits those calls too."""
+    return numba.get_num_threads()
+
+
 def kernels_cached() -> bool:
     """Whether the kernels were compiled and cached by an earlier run (else the first call of
     each compiles it: about a minute in all, worth telling the user)."""
@@ -53,4 +59,4 @@ def kernels_cached() -> bool:
         return True  # cannot tell: say nothing
 
 
-__all__ = ["kernels_cached", "leaf", "numba_threads", "parallel", "prange"]
+__all__ = ["kernels_cached", "leaf", "numba_threads", "parallel", "prange", "worker_threads"]

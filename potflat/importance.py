@@ -361,7 +361,9 @@ def image_mask_importance(flat: FlatMesh, mask_path: str | Path, reference: str 
     centroids = RV[RF].mean(axis=1)
     points = flat.mesh.vertices
     k = min(8, len(RF))
-    _, cand = cKDTree(centroids).query(points, k=k)
+    from potflat._jit import worker_threads
+
+    _, cand = cKDTree(centroids).query(points, k=k, workers=worker_threads())
     cand = np.asarray(cand, np.int64).reshape(len(points), k)
     # a vertex of the same scan finds itself: take its own position where it is a corner
     face, bary = _closest_on_faces(points, RV, RF, cand)

@@ -175,3 +175,14 @@ def test_face_barrier_visits_only_blocks_with_squeezed_faces_and_matches_the_ful
     assert results[0][0] == results[1][0] == np.inf  # the flipped face
     np.testing.assert_array_equal(results[0][1], results[1][1])
     np.testing.assert_array_equal(results[0][2], results[1][2])
+
+
+def test_library_calls_take_the_thread_limit_of_numba_threads():
+    import numba
+
+    from potflat._jit import numba_threads, worker_threads
+
+    assert worker_threads() == numba.get_num_threads()
+    with numba_threads(1):
+        assert worker_threads() == 1  # scipy's workers= follow --threads
+    assert worker_threads() == numba.get_num_threads()

@@ -368,11 +368,13 @@ def _distance_to_curve(reps: np.ndarray, pts: np.ndarray, join: float) -> np.nda
     segment to its two nearest representatives when they are closer than ``join``."""
     if len(reps) == 0:
         return np.full(len(pts), np.nan)
+    from potflat._jit import worker_threads
+
     tree = cKDTree(reps)
     if len(reps) == 1:
-        d, _ = tree.query(pts, k=1)
+        d, _ = tree.query(pts, k=1, workers=worker_threads())
         return d
-    d, idx = tree.query(pts, k=2)
+    d, idx = tree.query(pts, k=2, workers=worker_threads())  # the same answer from any number of threads
     p1, p2 = reps[idx[:, 0]], reps[idx[:, 1]]
     seg = p2 - p1
     L2 = np.einsum("ij,ij->i", seg, seg)
