@@ -984,10 +984,10 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         t_follow = time.perf_counter()
         if coarse is not None:
             followed = _follow(sp, np.ascontiguousarray(((coarse.uv - centre) / unit)[order]), notes)
-            # only the copy's result is read from here on (peak memory: the solve comes next)
-            coarse = None if followed is None else replace(coarse, uv=None)
-            if followed is not None:
-                x = followed
+            if followed is None:
+                coarse = None
+            else:  # only the copy's result is read from here on (peak memory: the solve comes next)
+                x, coarse = followed, replace(coarse, uv=None)
         t_follow = time.perf_counter() - t_follow
         folded_start = None
         if fold_free:
