@@ -45,7 +45,7 @@ def relax_command(
         "0: the full mesh \\[default: 0.5 for preview (2 px at 4 px/mm), else 0].")] = None,
     shape: Annotated[float | None, typer.Option(
         "--shape", help="Weight of the shape term (>= 0): rounder figures and straighter lines at some cost in "
-                        "area; 0: the springs alone \\[default: 0.2, 0 for paper].")] = None,
+                        "area; 0: the springs alone \\[default: 0.25, 0 for paper].")] = None,
     rigidity: Annotated[float | None, typer.Option(
         "--rigidity", help="Weight of the rigidity (as-rigid-as-possible) term (>= 0): evens out shear from "
                            "triangle to triangle; 0: none \\[default: 2, 0 for paper].")] = None,

@@ -52,7 +52,7 @@ class RelaxPreset:
     simplify_mm: float = 0.0
     friction_inside: float | None = None
     friction_boundary: float | None = None
-    shape: float = 0.2
+    shape: float = 0.25
     rigidity: float = 2.0
     importance_contrast: float = 100.0
     true_scale: bool = True
