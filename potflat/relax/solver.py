@@ -130,22 +130,10 @@ class RelaxOptions:
             val = getattr(self, name)
             if val is not None and (isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1):
                 raise InvalidOptionError(f"{name.replace('_', '-')} must be a whole number >= 1, got {val!r}")
-        if self.simplify_mm is not None and not (
-                isinstance(self.simplify_mm, (int, float, np.floating, np.integer)) and not isinstance(self.simplify_mm, bool)
-                and math.isfinite(self.simplify_mm) and self.simplify_mm >= 0):
-            raise InvalidOptionError(f"simplify-mm must be a number >= 0 (0: no simplification), got {self.simplify_mm!r}")
-        if self.shape is not None and (isinstance(self.shape, bool) or not isinstance(self.shape, (int, float, np.floating, np.integer))
-                                       or not (math.isfinite(self.shape) and self.shape >= 0)):
-            raise InvalidOptionError(f"shape must be a number >= 0 (0: springs only), got {self.shape!r}")
-        if self.rigidity is not None and (isinstance(self.rigidity, bool) or not isinstance(self.rigidity, (int, float, np.floating, np.integer))
-                                          or not (math.isfinite(self.rigidity) and self.rigidity >= 0)):
-            raise InvalidOptionError(f"rigidity must be a number >= 0 (0: no rigidity term), got {self.rigidity!r}")
-        if self.importance_contrast is not None and (
-                isinstance(self.importance_contrast, bool)
-                or not isinstance(self.importance_contrast, (int, float, np.floating, np.integer))
-                or not (math.isfinite(self.importance_contrast) and self.importance_contrast >= 1)):
-            raise InvalidOptionError(
-                f"importance-contrast must be a number >= 1 (1: the whole surface alike), got {self.importance_contrast!r}")
+        _at_least("simplify_mm", self.simplify_mm, 0, "0: no simplification")
+        _at_least("shape", self.shape, 0, "0: springs only")
+        _at_least("rigidity", self.rigidity, 0, "0: no rigidity term")
+        _at_least("importance_contrast", self.importance_contrast, 1, "1: the whole surface alike")
         if self.true_scale is not None and not isinstance(self.true_scale, (bool, np.bool_)):
             raise InvalidOptionError(f"true-scale must be true or false, got {self.true_scale!r}")
         if self.weighting is not None and self.weighting not in WEIGHTINGS:
@@ -162,12 +150,23 @@ class RelaxOptions:
         return out
 
 
+def _finite_number(val) -> bool:
+    """Whether ``val`` is a finite real number (not a bool)."""
+    return (not isinstance(val, bool) and isinstance(val, (int, float, np.floating, np.integer))
+            and math.isfinite(val))
+
+
 def _positive(name: str, val) -> None:
-    if val is None:
-        return
-    if isinstance(val, bool) or not isinstance(val, (int, float, np.floating, np.integer)) or not (
-            math.isfinite(val) and val > 0):
+    """``val`` is None or a finite number > 0; else the option's one-line error."""
+    if val is not None and not (_finite_number(val) and val > 0):
         raise InvalidOptionError(f"{name.replace('_', '-')} must be a positive number, got {val!r}")
+
+
+def _at_least(name: str, val, low: float, meaning: str) -> None:
+    """``val`` is None or a finite number >= ``low``; else the option's one-line error, saying
+    what ``low`` means (``meaning``)."""
+    if val is not None and not (_finite_number(val) and val >= low):
+        raise InvalidOptionError(f"{name.replace('_', '-')} must be a number >= {low:g} ({meaning}), got {val!r}")
 
 
 @dataclass(frozen=True)
@@ -823,27 +822,27 @@ def _follow(sp: _Springs, x: np.ndarray, notes: list[str]) -> np.ndarray | None:
     x, n_bad = _untangle(sp, x)
     if n_bad:
         notes.append(f"untangled {n_bad} triangles flipped by following the coarse copy")
-    if not (sp.signed_areas(x) <= 0).any() and sp.overlap(x):
-        x, n_crossing = _uncross_boundary(sp, x)
-        if n_crossing:
-            notes.append(f"moved the boundary back where following the coarse copy made it cross itself "
-                         f"({n_crossing} crossing pairs of boundary segments)")
-    if (sp.signed_areas(x) <= 0).any() or sp.overlap(x):
+    folded = bool((sp.signed_areas(x) <= 0).any())
+    pairs = np.zeros((0, 2), np.int64) if folded else crossing_pairs(x, sp.boundary_segments)
+    if len(pairs):
+        x = _uncross_boundary(sp, x, pairs)
+        notes.append(f"moved the boundary back where following the coarse copy made it cross itself "
+                     f"({len(pairs)} crossing pairs of boundary segments)")
+        folded = bool((sp.signed_areas(x) <= 0).any()) or sp.overlap(x) > 0
+    if folded:
         notes.append("following the coarse copy folded the full mesh; relaxed the full mesh from the rollout")
         return None
     return x
 
 
-def _uncross_boundary(sp: _Springs, x: np.ndarray) -> tuple[np.ndarray, int]:
-    """Move the vertices of crossing boundary segments to their edge neighbours' mean (which
-    pulls a kinked boundary vertex inside), untangling after each round, until the boundary
-    no longer crosses itself or ``COARSE.follow_repair_rounds`` have passed; the moved region
-    widens by a ring every ``COARSE.follow_repair_widen`` rounds.
-    Returns the positions and the number of crossing pairs at the start (the caller checks
-    the result)."""
+def _uncross_boundary(sp: _Springs, x: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Move the vertices of crossing boundary segments (``pairs`` (k, 2) of
+    ``sp.boundary_segments``, crossing at ``x``) to their edge neighbours' mean, which pulls a
+    kinked boundary vertex inside, untangling after each round, until the boundary no longer
+    crosses itself or ``COARSE.follow_repair_rounds`` have passed; the moved region widens by
+    a ring every ``COARSE.follow_repair_widen`` rounds. Returns the positions (the caller
+    checks them)."""
     seg = sp.boundary_segments
-    pairs = crossing_pairs(x, seg)
-    n_crossing = len(pairs)
     x = x.copy()
     region = np.zeros(sp.n, bool)
     for r in range(COARSE.follow_repair_rounds):
@@ -858,7 +857,7 @@ def _uncross_boundary(sp: _Springs, x: np.ndarray) -> tuple[np.ndarray, int]:
         x[verts] = mean
         x, _ = _untangle(sp, x)
         pairs = crossing_pairs(x, seg)
-    return x, n_crossing
+    return x
 
 
 def _importance_weights(importance: np.ndarray, contrast: float) -> np.ndarray:
