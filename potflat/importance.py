@@ -13,8 +13,9 @@ draws the zone's outline on the maps. Ways to obtain it:
   :data:`DETAIL_OVER_NOISE`, and at least :data:`DETAIL_MIN_DELTA_E`): brush strokes,
   figure outlines and bands have it; glaze, clay, a lighting gradient across the vessel and
   scanner noise do not. Detail closer than :data:`GAP_MM` is joined into one zone, enclosed
-  plain areas are filled, specks below :data:`MIN_ZONE_MM` across are dropped, and the zone
-  is grown by :data:`MARGIN_MM` and softened. Rendering on the surface's own layout makes it
+  plain areas are filled, specks below :data:`MIN_ZONE_MM` across are dropped, the zone's
+  edge is pulled back by :data:`DETAIL_REACH_MM` (how far the detail window reaches past the
+  painting's outermost stroke), grown by :data:`MARGIN_MM` and softened outwards. Rendering on the surface's own layout makes it
   blind to texture-atlas seams. A scan painted nearly all over
   (:data:`ALL_OVER_FRACTION`) or showing no painting gets no importance: the whole surface
   counts alike, exactly as without importance.
@@ -52,10 +53,16 @@ DETAIL_MIN_DELTA_E = 5.0
 GAP_MM = 25.0
 #: Painted zones smaller than a disc of this diameter (mm) are dropped (specks, scratches, noise).
 MIN_ZONE_MM = 12.0
-#: The zone is grown by this margin (mm), so figures at its edge lie well inside.
-MARGIN_MM = 4.0
-#: Width (Gaussian sigma, mm) of the zone's soft edge.
-SOFT_EDGE_MM = 2.0
+#: Detail is found up to about this far (mm) outside a painting's outermost stroke: the colour
+#: statistics' window (:data:`DETAIL_MM`) straddles a strong edge (glaze against clay) out to
+#: about two sigmas. The found zone is pulled back by it (a zone thinner than that keeps its
+#: own extent), so that the zone hugs the painting: every mm of plain surface inside the stiff
+#: zone is curved surface the painting must share its distortion with.
+DETAIL_REACH_MM = 2.0 * DETAIL_MM
+#: The zone is then grown by this margin (mm), so the outermost strokes lie inside it.
+MARGIN_MM = 1.5
+#: Width (Gaussian sigma, mm) of the zone's soft edge, outside the zone (inside, importance is 1).
+SOFT_EDGE_MM = 1.0
 #: A zone covering at least this share of the surface means: painted all over (no importance).
 ALL_OVER_FRACTION = 0.8
 
@@ -171,7 +178,7 @@ def painted_zone_image(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray |
     detail = ((deviation > threshold) & covered).astype(np.uint8)
     if not detail.any():
         return None, f"no painting found (no colour detail above {threshold:.1f} CIELAB units)"
-    # join detail into zones, fill enclosed plain areas, drop specks, add a margin
+    # join detail into zones, fill enclosed plain areas, drop specks, hug the painting, add a margin
     zone = cv2.morphologyEx(detail, cv2.MORPH_CLOSE, _disc(0.5 * GAP_MM * px_per_mm))
     zone &= covered.astype(np.uint8)
     outside = np.zeros((zone.shape[0] + 2, zone.shape[1] + 2), np.uint8)
@@ -185,12 +192,41 @@ def painted_zone_image(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray |
     zone = keep[labels].astype(np.uint8)
     if not zone.any():
         return None, "no painted zone found (only specks of colour detail)"
+    zone = _pulled_back(zone, covered, labels, DETAIL_REACH_MM * px_per_mm)
     zone = cv2.dilate(zone, _disc(MARGIN_MM * px_per_mm)) & covered.astype(np.uint8)
     fraction = float(zone.sum()) / float(covered.sum())
     if fraction >= ALL_OVER_FRACTION:
         return None, f"painted all over ({100 * fraction:.0f}% of the surface): the whole surface counts alike"
-    soft = np.clip(_gaussian(zone.astype(np.float32), SOFT_EDGE_MM * px_per_mm), 0.0, 1.0)
+    hard = zone.astype(np.float32)
+    soft = np.maximum(hard, np.clip(_gaussian(hard, SOFT_EDGE_MM * px_per_mm), 0.0, 1.0))
     return soft, f"painted zone found in the colours (detail above {threshold:.1f} CIELAB units)"
+
+
+def _pulled_back(zone: np.ndarray, covered: np.ndarray, labels: np.ndarray, reach_px: float) -> np.ndarray:
+    """The zone eroded by ``reach_px`` away from plain surface (not from the layout's own
+    border: a painting cut by the seam keeps its extent there); a zone component that the
+    erosion would remove keeps its own extent.
+
+    Parameters
+    ----------
+    zone : (h, w) uint8
+        1 in the zone.
+    covered : (h, w) bool
+    labels : (h, w) int32
+        Component labels of ``zone`` (0 outside it).
+    reach_px : float
+
+    Returns
+    -------
+    (h, w) uint8
+    """
+    import cv2
+
+    core = cv2.erode(zone | (~covered).astype(np.uint8), _disc(reach_px)) & zone
+    survives = np.zeros(int(labels.max()) + 1, bool)
+    survives[labels[core > 0]] = True
+    survives[0] = False
+    return np.where(survives[labels], core, zone).astype(np.uint8)
 
 
 def sample_image(image: np.ndarray, px: np.ndarray) -> np.ndarray:

@@ -156,6 +156,38 @@ def test_weights_at_the_extremes_stay_fold_free():
     assert fd.sigma_max[face] / fd.sigma_min[face] < 1.05
 
 
+def test_a_high_contrast_is_reached_from_a_softer_solve_to_the_same_layout(monkeypatch):
+    """Above ``SOLVER.contrast_start`` the relaxation first solves at that contrast, then at
+    the full one from there; it ends where a direct solve ends, fold-free. At or below it,
+    or with every vertex wholly important, there is one solve."""
+    from dataclasses import replace
+
+    import potflat.relax.solver as solver
+    from potflat.relax.parameters import SOLVER
+
+    flat = meshes.vessel_rollout(1500, seed=3)
+    height = flat.uv[:, 1]
+    importance = np.clip((height - np.quantile(height, 0.4)) / (0.05 * np.ptp(height)), 0.0, 1.0)
+    flat = flat.replace(importance=importance)
+    kw = {"preset": "archival", "importance_contrast": 1000.0, "true_scale": False}
+    two = relax(flat, **kw)
+    softer = [lv for lv in two.levels if lv.get("importance_contrast") == SOLVER.contrast_start]
+    assert softer and any("softer than the painting" in note for note in two.notes)
+    assert two.flipped == 0 and two.boundary_overlap == 0
+    monkeypatch.setattr(solver, "SOLVER", replace(SOLVER, contrast_start=1000.0))
+    one = relax(flat, **kw)
+    assert not any("importance_contrast" in lv for lv in one.levels)
+    F, V = flat.mesh.faces, flat.mesh.vertices
+    zone = important_faces(F, importance)
+    a, b = face_distortion(V, two.flat.uv, F), face_distortion(V, one.flat.uv, F)
+    assert np.allclose(a.sigma_max[zone] / a.sigma_min[zone], b.sigma_max[zone] / b.sigma_min[zone], atol=2e-3)
+    assert np.allclose(a.sigma_max[zone] * a.sigma_min[zone], b.sigma_max[zone] * b.sigma_min[zone], atol=2e-3)
+    monkeypatch.undo()
+    for other in ({**kw, "importance_contrast": SOLVER.contrast_start}, kw):
+        got = relax(flat.replace(importance=np.ones(len(importance))) if other is kw else flat, **other)
+        assert not any("importance_contrast" in lv for lv in got.levels)
+
+
 def test_a_mask_that_marks_nothing_or_everything_means_no_importance(tmp_path):
     import cv2
 
@@ -199,6 +231,48 @@ def test_painted_zone_is_found_against_lighting_and_noise():
     assert np.all(zone[circles] > 0.99)  # every painted pixel is in the zone
     h, w = circles.shape
     assert zone[:, : int(0.2 * w)].max() < 0.01 and zone[:, int(0.8 * w):].max() < 0.01  # plain stays plain
+
+
+def test_the_zone_hugs_a_panel_past_its_edge_by_the_margin():
+    """A reserved clay panel (with detail inside) on black glaze: the stiff zone covers the
+    panel whole and ends at most the margin past its edge (the detail window reaches about
+    3 mm past a strong edge; it is pulled back by that before the margin is added)."""
+    from scipy import ndimage
+
+    px_per_mm = 2.0
+    h, w = 300, 600
+    img = np.zeros((h, w, 4), np.uint8)
+    img[..., :3], img[..., 3] = (24, 20, 18), 255
+    panel = np.zeros((h, w), bool)
+    panel[100:200, 150:450] = True
+    img[panel, :3] = (188, 94, 52)
+    yy, xx = np.mgrid[0:h, 0:w]
+    stripes = panel & ((xx // 8) % 3 == 0) & (yy > 120) & (yy < 180)  # figures in the panel
+    img[stripes, :3] = (28, 22, 20)
+    zone, reason = imp.painted_zone_image(img, px_per_mm)
+    assert zone is not None, reason
+    assert zone[panel].min() == 1.0  # the whole panel is wholly important
+    outside_mm = ndimage.distance_transform_edt(~panel) / px_per_mm
+    hard = zone >= 1.0
+    assert outside_mm[hard].max() <= imp.MARGIN_MM + 1.0  # it was 7.5 mm with the zone not pulled back
+    assert zone[outside_mm > imp.MARGIN_MM + 4 * imp.SOFT_EDGE_MM].max() < 0.01
+
+
+def test_a_zone_thinner_than_the_detail_reach_keeps_its_extent():
+    """A faint painted line, whose detail is narrower than twice the reach, is not eroded away."""
+    px_per_mm = 2.0
+    h, w = 200, 400
+    img = np.zeros((h, w, 4), np.uint8)
+    img[..., :3], img[..., 3] = (188, 94, 52), 255
+    line = np.zeros((h, w), bool)
+    line[99:101, 100:300] = True  # 1 mm wide, 100 mm long, a few CIELAB units darker
+    img[line, :3] = (150, 70, 35)
+    deviation, _ = imp.detail_map(img, px_per_mm)
+    detail = deviation > imp.DETAIL_MIN_DELTA_E
+    assert detail.any() and detail.sum(axis=0).max() < 2 * imp.DETAIL_REACH_MM * px_per_mm  # thinner than the reach
+    zone, reason = imp.painted_zone_image(img, px_per_mm)
+    assert zone is not None, reason
+    assert zone[line].min() == 1.0
 
 
 def test_no_painting_and_painted_all_over_give_no_importance():

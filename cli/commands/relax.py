@@ -51,7 +51,7 @@ def relax_command(
                            "triangle to triangle; 0: none \\[default: 2, 0 for paper].")] = None,
     importance_contrast: Annotated[float | None, typer.Option(
         "--importance-contrast", help="How much stiffer the painted zone is than plain surface (>= 1; 1: the whole "
-                                      "surface alike) \\[default: 100, 1 for paper].")] = None,
+                                      "surface alike) \\[default: 1000, 100 for preview, 1 for paper].")] = None,
     true_scale: Annotated[bool | None, typer.Option(
         "--true-scale/--no-true-scale", help="Scale the result so that the median length scale in the painted zone "
                                              "is 1 \\[default: on, off for paper].")] = None,

@@ -54,7 +54,7 @@ class RelaxPreset:
     friction_boundary: float | None = None
     shape: float = 0.25
     rigidity: float = 2.0
-    importance_contrast: float = 100.0
+    importance_contrast: float = 1000.0
     true_scale: bool = True
 
     def settings(self) -> dict:
@@ -69,7 +69,7 @@ _FOLD_FREE = {"solver": "lbfgs", "stretch": 1.0, "stiffness": 1.0, "weighting": 
               "coarse_start": True}
 #: The presets by name: three fold-free ones, increasingly thorough, and the paper's dynamics.
 PRESETS: dict[str, RelaxPreset] = {
-    "preview": RelaxPreset(**_FOLD_FREE, tol=1e-3, max_iter=300, simplify_mm=0.5),
+    "preview": RelaxPreset(**_FOLD_FREE, tol=1e-3, max_iter=300, simplify_mm=0.5, importance_contrast=100.0),
     "standard": RelaxPreset(**_FOLD_FREE, tol=1e-4, max_iter=2000),
     "archival": RelaxPreset(**_FOLD_FREE, tol=1e-7, max_iter=20000),
     "paper": RelaxPreset(solver="dynamics", stretch=2.0, stiffness=0.5, weighting="uniform", tol=1e-7,
@@ -142,6 +142,13 @@ class SolverParameters:
         Radians below 2 pi under which a boundary vertex's angle sum counts as open.
     min_time_budget : float
         Seconds a coarse copy gets at the least from what is left of the time budget.
+    contrast_start : float
+        A higher importance contrast is reached in two relaxations: the first at this
+        contrast, the second at the full one from the first's layout (with its own coarse
+        copy and preconditioner grids). With the plain surface a thousand times softer than
+        the painting, the preconditioner's coarse corrections (which average stiffness over
+        the zone's edge) barely move the plain surface: on the bundled amphora a direct solve
+        took 646 iterations against 145 + 121 this way, to the same figures.
     """
 
     lbfgs_memory: int = 6
@@ -155,6 +162,7 @@ class SolverParameters:
     window_dynamics: int = 100
     boundary_angle_slack: float = 1e-9
     min_time_budget: float = 1e-3
+    contrast_start: float = 100.0
 
 
 @dataclass(frozen=True, kw_only=True)

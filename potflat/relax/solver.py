@@ -766,6 +766,20 @@ class _CoarseStart:
     notes: list
 
 
+def _softer_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progress: bool,
+                  callback, deadline: float) -> RelaxResult | None:
+    """The relaxation at the lower importance contrast :attr:`SOLVER.contrast_start
+    <potflat.relax.parameters.SolverParameters.contrast_start>`, from which a higher one is
+    reached (None: the contrast is not higher, or every vertex is wholly important, so the
+    weights would not change)."""
+    low = SOLVER.contrast_start
+    if flat.importance is None or settings["importance_contrast"] <= low or flat.importance.min(initial=1.0) >= 1.0:
+        return None
+    budget = None if deadline == np.inf else max(deadline - time.perf_counter(), SOLVER.min_time_budget)
+    return _relax(flat, replace(options, importance_contrast=low, time_budget=budget, true_scale=False), progress,
+                  callback, summaries=False)
+
+
 def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progress: bool,
                   callback, deadline: float) -> _CoarseStart | None:
     """Relax a coarse copy of ``flat`` (grid clusters of its start layout, :mod:`potflat.relax.simplify`).
@@ -951,13 +965,19 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         unit = _mean_edge_length(V, F)
     if not unit > 0:
         raise InvalidInputError("all edges of the rollout have zero length; check the scan's units and faces")
-    coarse = _coarse_start(flat, options, settings, progress, callback, deadline) if fold_free else None
-    notes: list[str] = list(coarse.notes) if coarse is not None else []
+    softer = _softer_start(flat, options, settings, progress, callback, deadline) if fold_free else None
+    start = flat if softer is None else flat.replace(uv=softer.flat.uv)
+    coarse = _coarse_start(start, options, settings, progress, callback, deadline) if fold_free else None
+    notes: list[str] = [] if softer is None else [
+        f"relaxed first with plain surface {softer.settings['importance_contrast']:g}x softer than the painting "
+        f"({softer.iterations} iterations), then {settings['importance_contrast']:g}x"] + [
+        f"first solve: {note}" for note in softer.notes]
+    notes += list(coarse.notes) if coarse is not None else []
     if coarse is not None and coarse.result is None:
         coarse = None
     with numba_threads(options.threads):
-        centre = 0.5 * (uv.min(axis=0) + uv.max(axis=0))
-        x_in = (uv - centre) / unit
+        centre = 0.5 * (start.uv.min(axis=0) + start.uv.max(axis=0))
+        x_in = (start.uv - centre) / unit
         from potflat.relax.hierarchy import GridHierarchy
         from potflat.relax._kernels.springs import faces_by_first_vertex
 
@@ -978,8 +998,8 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
                       weight=weight, shape=settings["shape"] if fold_free else 0.0,
                       rigidity=settings["rigidity"] if fold_free else 0.0)
         del Vs, Fs, inverse
-        x = np.ascontiguousarray(x_in[order]) * settings["stretch"]
-        del x_in  # (the rollout's layout, the result's orientation, is formed again after the solve)
+        x = np.ascontiguousarray(x_in[order]) * (settings["stretch"] if softer is None else 1.0)
+        del x_in, start  # (the rollout's layout, the result's orientation, is formed again after the solve)
         t_follow = time.perf_counter()
         if coarse is not None:
             followed = _follow(sp, np.ascontiguousarray(((coarse.uv - centre) / unit)[order]), notes)
@@ -1008,9 +1028,13 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         bar = _progress_bar(settings["max_iter"]) if progress else contextlib.nullcontext(None)
         with bar as report:
             levels: list[dict] = []
-            prefix = [] if coarse is None else list(coarse.result.energy_history)
+            prefix = [] if softer is None else list(softer.energy_history)
+            prefix += [] if coarse is None else list(coarse.result.energy_history)
             run = _Run(settings["max_iter"] + len(prefix), deadline, callback, report)
             run.history.extend(prefix)
+            if softer is not None:
+                levels.extend({**level, "importance_contrast": softer.settings["importance_contrast"]}
+                              for level in softer.levels)
             if coarse is not None:
                 levels.extend({**level, "level": "coarse"} for level in coarse.result.levels)
             if coarse is not None and coarse.final:
