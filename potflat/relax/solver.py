@@ -766,8 +766,22 @@ class _CoarseStart:
     notes: list
 
 
+@dataclass(frozen=True)
+class _SofterStart:
+    """The relaxation at a lower importance contrast, the start of the one at the full contrast."""
+
+    uv: np.ndarray | None  # (n, 2) float64: its layout (None once the full solve has taken it)
+    contrast: float
+    result: RelaxResult  # without its layout (peak memory)
+
+    def note(self, contrast: float) -> list[str]:
+        return [f"relaxed first with plain surface {self.contrast:g}x softer than the painting "
+                f"({self.result.iterations} iterations), then {contrast:g}x"] + [
+                f"first solve: {note}" for note in self.result.notes]
+
+
 def _softer_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progress: bool,
-                  callback, deadline: float) -> RelaxResult | None:
+                  callback, deadline: float) -> _SofterStart | None:
     """The relaxation at the lower importance contrast :attr:`SOLVER.contrast_start
     <potflat.relax.parameters.SolverParameters.contrast_start>`, from which a higher one is
     reached (None: the contrast is not higher, or every vertex is wholly important, so the
@@ -776,8 +790,9 @@ def _softer_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
     if flat.importance is None or settings["importance_contrast"] <= low or flat.importance.min(initial=1.0) >= 1.0:
         return None
     budget = None if deadline == np.inf else max(deadline - time.perf_counter(), SOLVER.min_time_budget)
-    return _relax(flat, replace(options, importance_contrast=low, time_budget=budget, true_scale=False), progress,
-                  callback, summaries=False)
+    sub = _relax(flat, replace(options, importance_contrast=low, time_budget=budget, true_scale=False), progress,
+                 callback, summaries=False)
+    return _SofterStart(uv=sub.flat.uv, contrast=low, result=replace(sub, flat=None))
 
 
 def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progress: bool,
@@ -966,12 +981,9 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
     if not unit > 0:
         raise InvalidInputError("all edges of the rollout have zero length; check the scan's units and faces")
     softer = _softer_start(flat, options, settings, progress, callback, deadline) if fold_free else None
-    start = flat if softer is None else flat.replace(uv=softer.flat.uv)
+    start = flat if softer is None else flat.replace(uv=softer.uv)
     coarse = _coarse_start(start, options, settings, progress, callback, deadline) if fold_free else None
-    notes: list[str] = [] if softer is None else [
-        f"relaxed first with plain surface {softer.settings['importance_contrast']:g}x softer than the painting "
-        f"({softer.iterations} iterations), then {settings['importance_contrast']:g}x"] + [
-        f"first solve: {note}" for note in softer.notes]
+    notes: list[str] = [] if softer is None else softer.note(settings["importance_contrast"])
     notes += list(coarse.notes) if coarse is not None else []
     if coarse is not None and coarse.result is None:
         coarse = None
@@ -1000,6 +1012,8 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         del Vs, Fs, inverse
         x = np.ascontiguousarray(x_in[order]) * (settings["stretch"] if softer is None else 1.0)
         del x_in, start  # (the rollout's layout, the result's orientation, is formed again after the solve)
+        if softer is not None:
+            softer = replace(softer, uv=None)
         t_follow = time.perf_counter()
         if coarse is not None:
             followed = _follow(sp, np.ascontiguousarray(((coarse.uv - centre) / unit)[order]), notes)
@@ -1028,13 +1042,12 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         bar = _progress_bar(settings["max_iter"]) if progress else contextlib.nullcontext(None)
         with bar as report:
             levels: list[dict] = []
-            prefix = [] if softer is None else list(softer.energy_history)
+            prefix = [] if softer is None else list(softer.result.energy_history)
             prefix += [] if coarse is None else list(coarse.result.energy_history)
             run = _Run(settings["max_iter"] + len(prefix), deadline, callback, report)
             run.history.extend(prefix)
             if softer is not None:
-                levels.extend({**level, "importance_contrast": softer.settings["importance_contrast"]}
-                              for level in softer.levels)
+                levels.extend({**level, "importance_contrast": softer.contrast} for level in softer.result.levels)
             if coarse is not None:
                 levels.extend({**level, "level": "coarse"} for level in coarse.result.levels)
             if coarse is not None and coarse.final:
@@ -1068,7 +1081,8 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
     uv_out = np.empty_like(x)
     uv_out[order] = x * unit + centre
     factor = 1.0
-    surface = SurfaceReference(V, F)  # the 3D side of every figure below, computed once
+    # the 3D side of every figure below, computed once (not at all for a first or coarse solve)
+    surface = SurfaceReference(V, F) if settings["true_scale"] or summaries else None
     if settings["true_scale"]:
         factor = true_scale_factor(V, uv_out, F, flat.importance, reference=surface)
         uv_out = centre + (uv_out - centre) * factor
