@@ -796,7 +796,7 @@ def _softer_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
 
 
 def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progress: bool,
-                  callback, deadline: float) -> _CoarseStart | None:
+                  callback, deadline: float, *, softened: bool) -> _CoarseStart | None:
     """Relax a coarse copy of ``flat`` (grid clusters of its start layout, :mod:`potflat.relax.simplify`).
 
     With ``simplify_mm`` the cells have that side and the full mesh will only follow the
@@ -832,7 +832,7 @@ def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
         sub = _relax(FlatMesh(Mesh(simple.vertices, simple.faces, units=flat.mesh.units), simple.uv,
                               importance=importance),
                      replace(options, simplify_mm=0.0, time_budget=budget, true_scale=False), progress, tagged,
-                     summaries=False)
+                     summaries=False, softened=softened)
     except FoldedResultError as exc:
         return _CoarseStart(result=None, uv=None, final=False, notes=[
             f"the {len(simple.vertices)}-vertex coarse copy could not be relaxed fold-free ({exc}); "
@@ -957,9 +957,12 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
     return _relax(flat, options, progress, callback, summaries=True)
 
 
-def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, summaries: bool) -> RelaxResult:
+def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, summaries: bool,
+           softened: bool = False) -> RelaxResult:
     """:func:`relax`; without ``summaries`` (a coarse copy, whose layout is all its caller
-    reads) the result's distortion summaries are None and its stress is not computed."""
+    reads) the result's distortion summaries are None and its stress is not computed;
+    ``softened``: the start is already relaxed at a lower importance contrast (a coarse
+    copy of such a start), so no softer first solve."""
     settings = options.resolved()
     V = np.ascontiguousarray(flat.mesh.vertices, dtype=np.float64)
     uv = np.ascontiguousarray(flat.uv, dtype=np.float64)
@@ -980,9 +983,10 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         unit = _mean_edge_length(V, F)
     if not unit > 0:
         raise InvalidInputError("all edges of the rollout have zero length; check the scan's units and faces")
-    softer = _softer_start(flat, options, settings, progress, callback, deadline) if fold_free else None
+    softer = _softer_start(flat, options, settings, progress, callback, deadline) if fold_free and not softened else None
     start = flat if softer is None else flat.replace(uv=softer.uv)
-    coarse = _coarse_start(start, options, settings, progress, callback, deadline) if fold_free else None
+    coarse = (_coarse_start(start, options, settings, progress, callback, deadline, softened=softened or softer is not None)
+              if fold_free else None)
     notes: list[str] = [] if softer is None else softer.note(settings["importance_contrast"])
     notes += list(coarse.notes) if coarse is not None else []
     if coarse is not None and coarse.result is None:
