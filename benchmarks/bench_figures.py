@@ -16,7 +16,10 @@ Methods (one row each):
 * the variants of :data:`VARIANTS` (or ``--variant NAME=JSON``): the whole vessel, keyword
   dicts of ``RolloutOptions`` (``importance``, ...) and ``RelaxOptions`` (``shape``,
   ``importance_contrast``, ``true_scale``, ``preset``, ...); a variant with a keyword this
-  version does not have is skipped with a note.
+  version does not have is skipped with a note;
+* ``exact zone`` (vessels with a zone): the defaults with the painted zone itself (the panel
+  or belt, exactly, hard-edged) as the importance instead of the zone found in the colours:
+  what the detection could reach at best.
 
     python benchmarks/bench_figures.py                   # all vessels, about 40k vertices
     python benchmarks/bench_figures.py --quick           # 3 small cases, about a minute
@@ -195,6 +198,12 @@ def run_case(case: Case, variants: dict[str, dict], log=print) -> list[dict]:
     relaxed("relax (springs)", springs)
     for name, kw in variants.items():
         relaxed(name, kw)
+    if case.zone is not None:
+        r, _ = rolled({})
+        exact = case.zone(r.flat.mesh.vertices).astype(np.float64)
+        res = relax(r.flat.replace(importance=exact))
+        rows.append(_row(case, "exact zone", res.flat, res.timings["setup"] + res.timings["solve"],
+                         zone_fraction=float(exact.mean()), keywords={}))
     assert all(np.isfinite(row["area"]) for row in rows)
     return rows
 
