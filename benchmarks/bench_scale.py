@@ -33,6 +33,7 @@ import os
 import platform
 import re
 import resource
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -96,7 +97,10 @@ def child_load(scan: Path, code: str = TRIMESH_CHILD) -> dict:
 
 
 def run_benchmark(scan: Path, out: Path, *, preset: str, px_per_mm: float, interval: float = 0.1) -> dict:
-    """Run ``potflat run`` on ``scan`` in a child process; sample its memory; split by stage."""
+    """Run ``potflat run`` on ``scan`` in a child process; sample its memory; split by stage
+    (``out``, the benchmark's own folder, is emptied first: a stage ends when its sidecar appears)."""
+    if out.exists():
+        shutil.rmtree(out)
     cmd = [sys.executable, "-m", "potflat_cli", "run", str(scan), "-o", str(out), "--preset", preset,
            "--px-per-mm", str(px_per_mm), "--json"]
     samples: list[tuple[float, int]] = []

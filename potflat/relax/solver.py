@@ -994,6 +994,9 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
     with numba_threads(options.threads):
         centre = 0.5 * (start.uv.min(axis=0) + start.uv.max(axis=0))
         x_in = (start.uv - centre) / unit
+        del start  # the first solve's layout is in x_in now (peak memory)
+        if softer is not None:
+            softer = replace(softer, uv=None)
         from potflat.relax.hierarchy import GridHierarchy
         from potflat.relax._kernels.springs import faces_by_first_vertex
 
@@ -1015,9 +1018,7 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
                       rigidity=settings["rigidity"] if fold_free else 0.0)
         del Vs, Fs, inverse
         x = np.ascontiguousarray(x_in[order]) * (settings["stretch"] if softer is None else 1.0)
-        del x_in, start  # (the rollout's layout, the result's orientation, is formed again after the solve)
-        if softer is not None:
-            softer = replace(softer, uv=None)
+        del x_in  # (the rollout's layout, the result's orientation, is formed again after the solve)
         t_follow = time.perf_counter()
         if coarse is not None:
             followed = _follow(sp, np.ascontiguousarray(((coarse.uv - centre) / unit)[order]), notes)
