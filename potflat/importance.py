@@ -15,8 +15,8 @@ draws the zone's outline on the maps. Ways to obtain it:
   scanner noise do not. Detail closer than :data:`GAP_MM` is joined into one zone, enclosed
   plain areas are filled, specks below :data:`MIN_ZONE_MM` across are dropped, the zone's
   edge is pulled back by :data:`DETAIL_REACH_MM` (how far the detail window reaches past the
-  painting's outermost stroke), grown by :data:`MARGIN_MM` and softened outwards. Rendering on the surface's own layout makes it
-  blind to texture-atlas seams. A scan painted nearly all over
+  painting's outermost stroke), grown by :data:`MARGIN_MM` and softened outwards. Rendering
+  on the surface's own layout makes it blind to texture-atlas seams. A scan painted nearly all over
   (:data:`ALL_OVER_FRACTION`) or showing no painting gets no importance: the whole surface
   counts alike, exactly as without importance.
 * a mask painted over an image potflat made (white = important), mapped back to the surface

@@ -775,6 +775,7 @@ class _SofterStart:
     result: RelaxResult  # without its layout (peak memory)
 
     def note(self, contrast: float) -> list[str]:
+        """The notes of the relaxation at ``contrast`` that started from this one."""
         return [f"relaxed first with plain surface {self.contrast:g}x softer than the painting "
                 f"({self.result.iterations} iterations), then {contrast:g}x"] + [
                 f"first solve: {note}" for note in self.result.notes]
