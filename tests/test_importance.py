@@ -258,6 +258,23 @@ def test_the_zone_hugs_a_panel_past_its_edge_by_the_margin():
     assert zone[outside_mm > imp.MARGIN_MM + 4 * imp.SOFT_EDGE_MM].max() < 0.01
 
 
+def test_a_painting_cut_by_the_layout_border_keeps_its_extent_there():
+    """The zone is pulled back from plain surface only: where the painting runs into the
+    layout's border (the seam, the rim) it stays important up to the border."""
+    px_per_mm = 2.0
+    h, w = 300, 600
+    img = np.zeros((h, w, 4), np.uint8)
+    img[:, 50:, :3], img[:, 50:, 3] = (24, 20, 18), 255  # columns 0-49: outside the layout
+    panel = np.zeros((h, w), bool)
+    panel[100:200, 50:300] = True  # runs into the layout's left border
+    img[panel, :3] = (188, 94, 52)
+    yy, xx = np.mgrid[0:h, 0:w]
+    img[panel & ((xx // 8) % 3 == 0) & (yy > 120) & (yy < 180), :3] = (28, 22, 20)
+    zone, reason = imp.painted_zone_image(img, px_per_mm)
+    assert zone is not None, reason
+    assert zone[panel].min() == 1.0  # up to the border (pulled back from it, columns 50-55 would drop)
+
+
 def test_a_zone_thinner_than_the_detail_reach_keeps_its_extent():
     """A faint painted line, whose detail is narrower than twice the reach, is not eroded away."""
     px_per_mm = 2.0
