@@ -224,8 +224,7 @@ def _pulled_back(zone: np.ndarray, covered: np.ndarray, labels: np.ndarray, reac
 
     core = cv2.erode(zone | (~covered).astype(np.uint8), _disc(reach_px)) & zone
     survives = np.zeros(int(labels.max()) + 1, bool)
-    survives[labels[core > 0]] = True
-    survives[0] = False
+    survives[labels[core > 0]] = True  # (never label 0: the core lies in the zone)
     return np.where(survives[labels], core, zone).astype(np.uint8)
 
 

@@ -233,6 +233,21 @@ def test_painted_zone_is_found_against_lighting_and_noise():
     assert zone[:, : int(0.2 * w)].max() < 0.01 and zone[:, int(0.8 * w):].max() < 0.01  # plain stays plain
 
 
+def _panel_on_glaze(columns: slice, layout_from: int = 0):
+    """A reserved clay panel (rows 100-199, ``columns``) with dark figures in it, on black
+    glaze; columns left of ``layout_from`` lie outside the layout (alpha 0). Returns the
+    RGBA image (300, 600, 4) and the panel's mask."""
+    h, w = 300, 600
+    img = np.zeros((h, w, 4), np.uint8)
+    img[:, layout_from:, :3], img[:, layout_from:, 3] = (24, 20, 18), 255
+    panel = np.zeros((h, w), bool)
+    panel[100:200, columns] = True
+    img[panel, :3] = (188, 94, 52)
+    yy, xx = np.mgrid[0:h, 0:w]
+    img[panel & ((xx // 8) % 3 == 0) & (yy > 120) & (yy < 180), :3] = (28, 22, 20)  # figures
+    return img, panel
+
+
 def test_the_zone_hugs_a_panel_past_its_edge_by_the_margin():
     """A reserved clay panel (with detail inside) on black glaze: the stiff zone covers the
     panel whole and ends at most the margin past its edge (the detail window reaches about
@@ -240,15 +255,7 @@ def test_the_zone_hugs_a_panel_past_its_edge_by_the_margin():
     from scipy import ndimage
 
     px_per_mm = 2.0
-    h, w = 300, 600
-    img = np.zeros((h, w, 4), np.uint8)
-    img[..., :3], img[..., 3] = (24, 20, 18), 255
-    panel = np.zeros((h, w), bool)
-    panel[100:200, 150:450] = True
-    img[panel, :3] = (188, 94, 52)
-    yy, xx = np.mgrid[0:h, 0:w]
-    stripes = panel & ((xx // 8) % 3 == 0) & (yy > 120) & (yy < 180)  # figures in the panel
-    img[stripes, :3] = (28, 22, 20)
+    img, panel = _panel_on_glaze(slice(150, 450))
     zone, reason = imp.painted_zone_image(img, px_per_mm)
     assert zone is not None, reason
     assert zone[panel].min() == 1.0  # the whole panel is wholly important
@@ -261,16 +268,8 @@ def test_the_zone_hugs_a_panel_past_its_edge_by_the_margin():
 def test_a_painting_cut_by_the_layout_border_keeps_its_extent_there():
     """The zone is pulled back from plain surface only: where the painting runs into the
     layout's border (the seam, the rim) it stays important up to the border."""
-    px_per_mm = 2.0
-    h, w = 300, 600
-    img = np.zeros((h, w, 4), np.uint8)
-    img[:, 50:, :3], img[:, 50:, 3] = (24, 20, 18), 255  # columns 0-49: outside the layout
-    panel = np.zeros((h, w), bool)
-    panel[100:200, 50:300] = True  # runs into the layout's left border
-    img[panel, :3] = (188, 94, 52)
-    yy, xx = np.mgrid[0:h, 0:w]
-    img[panel & ((xx // 8) % 3 == 0) & (yy > 120) & (yy < 180), :3] = (28, 22, 20)
-    zone, reason = imp.painted_zone_image(img, px_per_mm)
+    img, panel = _panel_on_glaze(slice(50, 300), layout_from=50)  # runs into the layout's left border
+    zone, reason = imp.painted_zone_image(img, 2.0)
     assert zone is not None, reason
     assert zone[panel].min() == 1.0  # up to the border (pulled back from it, columns 50-55 would drop)
 

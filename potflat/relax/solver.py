@@ -766,6 +766,12 @@ class _CoarseStart:
     notes: list
 
 
+def _budget_left(deadline: float) -> float | None:
+    """The time budget (s) of a first or coarse solve: what is left before ``deadline``, at
+    least ``SOLVER.min_time_budget``; None without a deadline."""
+    return None if deadline == np.inf else max(deadline - time.perf_counter(), SOLVER.min_time_budget)
+
+
 @dataclass(frozen=True)
 class _SofterStart:
     """The relaxation at a lower importance contrast, the start of the one at the full contrast."""
@@ -790,7 +796,7 @@ def _softer_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
     low = SOLVER.contrast_start
     if flat.importance is None or settings["importance_contrast"] <= low or flat.importance.min(initial=1.0) >= 1.0:
         return None
-    budget = None if deadline == np.inf else max(deadline - time.perf_counter(), SOLVER.min_time_budget)
+    budget = _budget_left(deadline)
     sub = _relax(flat, replace(options, importance_contrast=low, time_budget=budget, true_scale=False), progress,
                  callback, summaries=False)
     return _SofterStart(uv=sub.flat.uv, contrast=low, result=replace(sub, flat=None))
@@ -823,7 +829,7 @@ def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
         simple = grid_simplification(V, uv, cell_side(uv, COARSE.cell_vertices))
         if len(simple.vertices) < COARSE.min_copy:
             return None
-    budget = None if deadline == np.inf else max(deadline - time.perf_counter(), SOLVER.min_time_budget)
+    budget = _budget_left(deadline)
     tagged = None if callback is None else (lambda info: callback({**info, "level": "coarse"}))
     try:
         importance = None
