@@ -642,15 +642,15 @@ def _clean_regions(fr: FaceFrame, labels: np.ndarray, sign: float) -> np.ndarray
     comp, comp_label, area, border, border_up, border_outer = _region_stats(fr, labels, sign)
     up_mean = np.divide(border_up, border, out=np.zeros_like(border), where=border > 0)
     # 2. inward-facing regions: rim fold -> inner; downward fold -> outer; else inside/outside body
-    outer_faces = labels == OUTER
-    outside = _outside_body(fr, labels, comp, outer_faces)
     decide = comp_label.copy()
     inner_c = comp_label == INNER
     touches_outer = border_outer > 0
     rim = inner_c & touches_outer & (up_mean >= _FOLD_COSINE)
     foot = inner_c & touches_outer & (up_mean <= -_FOLD_COSINE)
     decide[foot] = OUTER
-    decide[inner_c & ~rim & ~foot & outside] = OUTER
+    undecided = inner_c & ~rim & ~foot
+    if undecided.any():  # the profile's medians only for regions the folds leave open (most scans have none)
+        decide[undecided & _outside_body(fr, labels, comp, labels == OUTER)] = OUTER
     labels = decide[comp]
     # 3. outward-facing regions cut off from the main outer wall and bordered mostly by the
     #    inner wall (e.g. a boss on a bowl's floor) belong to the inner wall
