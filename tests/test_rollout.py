@@ -3,6 +3,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.sparse
+import scipy.sparse.csgraph
 import trimesh
 
 from _revolve import cone, cylinder, vase
@@ -271,6 +273,62 @@ def test_cut_open_splits_only_disagreeing_corners():
     bow = np.array([[0, 1, 2], [0, 3, 4]])
     _, vidx, _, seam, split = cut_open(bow, np.zeros((2, 3)))
     assert seam == 0 and split == 1 and len(vidx) == 6
+
+
+def _cut_open_by_sorting(faces, corner_theta):
+    """cut_open as it was before the edge table's counting sort: half-edges sorted by
+    (lower vertex, higher vertex, turn at the lower vertex, id) with NumPy (the reference)."""
+    m = len(faces)
+    corner_v, th = faces.ravel(), corner_theta.ravel()
+    nxt = faces[:, [1, 2, 0]].ravel()
+    swap = corner_v > nxt
+    n = int(corner_v.max()) + 1
+    lower = np.arange(3 * m)
+    lower[swap] = lower[swap] - lower[swap] % 3 + (lower[swap] + 1) % 3
+    turn = np.clip(np.floor(th[lower] / (2 * np.pi) + 0.5), -4, 3).astype(np.int64) + 4
+    key = (np.minimum(corner_v, nxt) * n + np.maximum(corner_v, nxt)) * 8 + turn
+    order = np.argsort(key, kind="stable")
+    key = key[order] // 8
+    pair = np.flatnonzero(key[1:] == key[:-1])
+    h1, h2 = order[pair], order[pair + 1]
+
+    def ends(h):
+        nh = h - h % 3 + (h + 1) % 3
+        return np.where(swap[h], nh, h), np.where(swap[h], h, nh)
+
+    (lo1, hi1), (lo2, hi2) = ends(h1), ends(h2)
+    a, b = np.concatenate([lo1, hi1]), np.concatenate([lo2, hi2])
+    ok = np.abs(th[a] - th[b]) < np.pi
+    graph = scipy.sparse.coo_matrix((np.ones(int(ok.sum())), (a[ok], b[ok])), shape=(3 * m, 3 * m))
+    n_comp, labels = scipy.sparse.csgraph.connected_components(graph, directed=False)
+    by_label = np.argsort(labels, kind="stable")
+    first = by_label[np.searchsorted(labels[by_label], np.arange(n_comp))]
+    vertex_of = corner_v[first]
+    perm = np.lexsort((first, vertex_of))
+    rank = np.empty(n_comp, np.int64)
+    rank[perm] = np.arange(n_comp)
+    vertex_index, theta = vertex_of[perm], th[first][perm]
+    base = np.count_nonzero(np.bincount(corner_v))
+    turns = np.floor(theta / (2 * np.pi) + 0.5).astype(np.int64)
+    o = np.lexsort((turns, vertex_index))
+    seam = 1 + np.count_nonzero((np.diff(vertex_index[o]) != 0) | (np.diff(turns[o]) != 0)) - base
+    return rank[labels].reshape(m, 3), vertex_index, theta, int(seam), int(n_comp - base - seam)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_cut_open_matches_the_sorting_reference(seed):
+    """Random meshes with non-manifold edges, repeated faces (an overlap past 360 degrees)
+    and angles a turn or more apart: the same outputs, bit for bit, as the sorting version."""
+    rng = np.random.default_rng(seed)
+    faces = rng.integers(0, 30, size=(200, 3))
+    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])]
+    faces = np.concatenate([faces, faces[:40]])  # listed twice, one turn on
+    theta = rng.uniform(-0.5, 1.0, size=faces.shape) * (2 * np.pi if seed % 2 else 0.3)
+    theta[-40:] += 2 * np.pi
+    got, want = cut_open(faces, theta), _cut_open_by_sorting(faces, theta)
+    assert got[3] + got[4] > 0  # cuts and splits happened
+    for g, w in zip(got, want):
+        assert np.asarray(g).dtype == np.asarray(w).dtype and np.array_equal(g, w)
 
 
 @pytest.mark.parametrize("kwargs,match", [

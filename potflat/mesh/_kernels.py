@@ -576,6 +576,85 @@ def face_pairs(edges, count, halves, n):
 
 
 @leaf
+def _corner_ends(F, h):
+    """Corners of half-edge ``h`` at its lower and at its higher vertex (``h`` first on a tie)."""
+    nh = h - h % 3 + (h + 1) % 3
+    if F[h // 3, h % 3] > F[nh // 3, nh % 3]:
+        return nh, h
+    return h, nh
+
+
+@leaf
+def half_edge_keys(F, theta, n):
+    """Sort key of each half-edge: its edge's (lower, higher) endpoint, then the turn of the
+    angle at its lower vertex (``floor(theta / 2 pi + 1/2)``, clipped to [-4, 3]).
+
+    Parameters
+    ----------
+    F : (m, 3) int64
+        Faces; corner ``3 f + k`` is ``F[f, k]`` and half-edge ``3 f + k`` starts there.
+    theta : (3 m,) float64
+        Unwrapped angle of each corner.
+    n : int
+        Number of vertices (above every index in ``F``).
+
+    Returns
+    -------
+    (3 m,) int64
+        ``(lower * n + higher) * 8 + turn + 4``.
+    """
+    m3 = 3 * F.shape[0]
+    key = np.empty(m3, np.int64)
+    for h in range(m3):
+        lo, hi = _corner_ends(F, h)
+        t = np.floor(theta[lo] / (2.0 * np.pi) + 0.5)
+        key[h] = (F[lo // 3, lo % 3] * n + F[hi // 3, hi % 3]) * 8 + int(min(max(t, -4.0), 3.0)) + 4
+    return key
+
+
+@leaf
+def corner_joins(F, theta, key, order):
+    """Corners of the same vertex that agree on its unwrapped angle across a shared edge.
+
+    Two half-edges next to each other in ``order`` on the same edge join their corners at
+    the lower vertex, and those at the higher vertex, where the angles differ by less than pi.
+
+    Parameters
+    ----------
+    F : (m, 3) int64
+    theta : (3 m,) float64
+        Unwrapped angle of each corner.
+    key : (3 m,) int64
+        :func:`half_edge_keys`.
+    order : (3 m,) int64
+        The half-edges sorted by ``key`` (stably).
+
+    Returns
+    -------
+    a, b : (k,) int64
+        Corners to join.
+    """
+    m3 = order.shape[0]
+    a = np.empty(2 * m3, np.int64)
+    b = np.empty(2 * m3, np.int64)
+    k = 0
+    for i in range(m3 - 1):
+        if key[order[i]] // 8 != key[order[i + 1]] // 8:
+            continue
+        lo1, hi1 = _corner_ends(F, order[i])
+        lo2, hi2 = _corner_ends(F, order[i + 1])
+        if abs(theta[lo1] - theta[lo2]) < np.pi:
+            a[k] = lo1
+            b[k] = lo2
+            k += 1
+        if abs(theta[hi1] - theta[hi2]) < np.pi:
+            a[k] = hi1
+            b[k] = hi2
+            k += 1
+    return a[:k], b[:k]
+
+
+@leaf
 def radial_parts(d, height, direction):
     """Distance from an axis and unit radial direction of offsets from a point on it.
 

@@ -336,43 +336,25 @@ def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, n
     split_vertices : int
         Further copies made for separate fans.
     """
-    m = len(faces)
-    corner_v = faces.ravel()
-    th = corner_theta.ravel()
-    # half-edge h runs from corner h to the next corner of its face; half-edges on the same
-    # edge are neighbours when sorted by (lower vertex, higher vertex, turn of the angle at the
-    # lower vertex) (stable: by h on ties). The turn puts the faces of an edge listed twice (a
-    # rollout repeated past 360 degrees) next to those they join: 0+, 2 pi-, 2 pi+.
-    nxt = faces[:, [1, 2, 0]].ravel()
-    swap = corner_v > nxt
-    n = int(corner_v.max()) + 1 if m else 1
-    lower = np.arange(3 * m)
-    lower[swap] = lower[swap] - lower[swap] % 3 + (lower[swap] + 1) % 3
-    turn = np.clip(np.floor(th[lower] / TWO_PI + 0.5), -4, 3).astype(np.int64) + 4
-    key = (np.minimum(corner_v, nxt) * n + np.maximum(corner_v, nxt)) * 8 + turn
-    del nxt, lower, turn
-    order = np.argsort(key, kind="stable")
-    key = key[order] // 8
-    pair = np.flatnonzero(key[1:] == key[:-1])
-    del key
-    h1, h2 = order[pair], order[pair + 1]
-    del order, pair
-    # join the corners at the lower vertex of two such half-edges, and those at the higher
-    # one, where their faces agree on the angle
-    def ends(h):  # corners of half-edges h at their lower and at their higher vertex
-        nh = h - h % 3 + (h + 1) % 3
-        return np.where(swap[h], nh, h), np.where(swap[h], h, nh)
+    from potflat.mesh._kernels import corner_joins, half_edge_keys  # Numba: imported on first use
 
-    (lo1, hi1), (lo2, hi2) = ends(h1), ends(h2)
-    del h1, h2, swap
-    a, b = np.concatenate([lo1, hi1]), np.concatenate([lo2, hi2])
-    del lo1, hi1, lo2, hi2
-    ok = np.abs(th[a] - th[b]) < np.pi
-    labels, n_comp = union_find(3 * m, a[ok], b[ok])
-    del a, b, ok
-    by_label = np.argsort(labels, kind="stable")
-    starts = np.searchsorted(labels[by_label], np.arange(n_comp))
-    first = by_label[starts]  # lowest corner of each component
+    m = len(faces)
+    F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    corner_v = F.ravel()
+    th = np.ascontiguousarray(corner_theta, dtype=np.float64).ravel()
+    # half-edges on the same edge are neighbours when sorted by (lower vertex, higher vertex,
+    # turn of the angle at the lower vertex) (stable: by id on ties). The turn puts the faces of
+    # an edge listed twice (a rollout repeated past 360 degrees) next to those they join: 0+,
+    # 2 pi-, 2 pi+. Their corners at each end are joined where the faces agree on the angle.
+    # (NumPy's sort of the keys, nearly sorted in a scan's face order, is faster than a
+    # counting sort by edge, whose scattered writes miss the cache.)
+    key = half_edge_keys(F, th, int(corner_v.max()) + 1 if m else 1)
+    a, b = corner_joins(F, th, key, np.argsort(key, kind="stable"))
+    del key
+    labels, n_comp = union_find(3 * m, a, b)
+    del a, b
+    # components are numbered in order of their lowest corner: where the running maximum grows
+    first = np.flatnonzero(np.diff(np.maximum.accumulate(labels), prepend=-1))  # lowest corner of each
     vertex_of = corner_v[first]
     perm = np.lexsort((first, vertex_of))
     rank = np.empty(n_comp, np.int64)
