@@ -67,6 +67,14 @@ def test_distortion_figures_do_not_depend_on_the_blocks(monkeypatch, vessel, siz
     assert _same(small[8], ref_signed)
 
 
+@pytest.mark.parametrize("size", [1, 7, 1 << 18])
+def test_median_edge_length_matches_numpy(monkeypatch, vessel, size):
+    V, F = vessel.mesh.vertices, vessel.mesh.faces[:-1]  # an odd count of faces: 3 m lengths, an odd median
+    for faces in (F, vessel.mesh.faces):  # an even count: the mean of the two middle lengths
+        got = _in_blocks(monkeypatch, size, lambda: distortion.median_edge_length(V, faces))
+        assert got == float(np.median(np.linalg.norm(V[faces[:, [1, 2, 0]]] - V[faces], axis=2)))
+
+
 def test_unique_edges_match_numpy_unique():
     rng = np.random.default_rng(3)
     F = rng.integers(0, 40, size=(300, 3))

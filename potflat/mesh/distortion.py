@@ -238,6 +238,31 @@ def row_blocks(m: int, size: int | None = None) -> list[slice]:
     return [slice(a, min(a + size, m)) for a in range(0, m, size)]
 
 
+def median_edge_length(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Median length of the faces' edges, each edge once per face (3 m lengths; the parallel
+    :func:`potflat.mesh._kernels.edge_lengths` in blocks of :data:`BLOCK` faces).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    faces : (m, 3) int64
+        At least one face.
+
+    Returns
+    -------
+    float
+    """
+    from potflat.mesh._kernels import edge_lengths
+
+    V = np.ascontiguousarray(vertices, dtype=np.float64)
+    F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    length = np.empty(F.shape)
+    for s in row_blocks(len(F)):
+        f = F[s]
+        length[s] = edge_lengths(V, np.stack((f, f[:, [1, 2, 0]]), axis=2).reshape(-1, 2)).reshape(-1, 3)
+    return float(np.median(length))
+
+
 def _edge_vectors(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``p1 - p0`` and ``p2 - p0`` of each face ((k, d) float64 each)."""
     p0 = points[faces[:, 0]]

@@ -30,6 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.mesh.distortion import median_edge_length
 from potflat.types import Mesh
 from potflat.rollout.walls import (
     FaceGraph,
@@ -216,7 +217,7 @@ def detect_attachments(mesh: Mesh, axis_point, axis_direction, *, tolerance: flo
     h_all, r_all, _ = cylindrical(V, p, a)
     used = np.flatnonzero(np.bincount(F.ravel(), minlength=len(V)))
     h0 = float(h_all[used].min())
-    med_edge = float(np.median(np.linalg.norm(V[F[:, [1, 2, 0]]] - V[F], axis=2)))
+    med_edge = median_edge_length(V, F)
 
     hv = h_all[used] - h0
     rv = r_all[used]

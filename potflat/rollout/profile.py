@@ -22,7 +22,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from potflat.mesh.distortion import row_blocks
+from potflat.mesh.distortion import median_edge_length
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.atomic import write_bytes_atomic
 from potflat.types import Mesh
@@ -197,11 +197,7 @@ def vessel_profile(mesh: Mesh, axis_point, axis_direction, *, bins: int | None =
     h0 = float(h_v[used_v].min())
     h1 = float(h_v[used_v].max())
     if bins is None:
-        length = np.empty(F.shape)  # of each face's edges, in blocks of faces
-        for s in row_blocks(len(F)):
-            f = F[s]
-            length[s] = np.linalg.norm(mesh.vertices[f[:, [1, 2, 0]]] - mesh.vertices[f], axis=2)
-        med_edge = float(np.median(length))
+        med_edge = median_edge_length(mesh.vertices, F)
         bins = int(np.clip(math.ceil((h1 - h0) / max(_AUTO_BIN_EDGES * med_edge, 1e-300)),
                            _AUTO_BINS_MIN, _AUTO_BINS_MAX))
     span = h1 - h0 if h1 > h0 else 1.0
