@@ -331,6 +331,26 @@ def test_cut_open_matches_the_sorting_reference(seed):
         assert np.asarray(g).dtype == np.asarray(w).dtype and np.array_equal(g, w)
 
 
+@pytest.mark.parametrize("shape", [(64, 48), (7, 5), (1, 1)])
+def test_texel_spread_matches_numpy(shape):
+    """The seam's brightness spread per face: the same bits as NumPy's std of the four
+    texels (corners and their mean, coordinates wrapped), also outside [0, 1]."""
+    from potflat.mesh._kernels import texel_spread
+
+    rng = np.random.default_rng(len(shape) + shape[0])
+    img = rng.integers(0, 256, size=shape, dtype=np.uint8)
+    tc = rng.uniform(-2.0, 3.0, size=(500, 3, 2))
+    tc[:50] = np.round(tc[:50])  # corners exactly on a texel border, v = 0 and 1 included
+    faces = rng.permutation(500)[:400]
+    pts = np.concatenate([tc[faces], tc[faces].mean(axis=1, keepdims=True)], axis=1) % 1.0
+    col = np.minimum((pts[..., 0] * shape[1]).astype(np.int64), shape[1] - 1)
+    row = np.minimum(((1.0 - pts[..., 1]) * shape[0]).astype(np.int64), shape[0] - 1)
+    want = img[row, col].astype(np.float64).std(axis=1)
+    got = texel_spread(tc, faces, img)
+    assert got.tobytes() == want.tobytes()
+    assert shape == (1, 1) or np.count_nonzero(want) > 300
+
+
 @pytest.mark.parametrize("kwargs,match", [
     ({"units": "furlong"}, "units"),
     ({"proxy": "cyl"}, "proxy"),

@@ -655,6 +655,50 @@ def corner_joins(F, theta, key, order):
 
 
 @leaf
+def texel_spread(texcoords, faces, img):
+    """Spread of the grey levels under each face: the standard deviation of the texels at its
+    three corners and at their mean (nearest texel, texture coordinates wrapped into [0, 1)).
+
+    Parameters
+    ----------
+    texcoords : (m, 3, 2) float64
+        Texture coordinates of every face's corners, OBJ convention (v up).
+    faces : (k,) int64
+        The faces to measure.
+    img : (h, w) uint8
+        Grey levels, row 0 at the top.
+
+    Returns
+    -------
+    (k,) float64
+        Exact for 8-bit levels: sums of at most four of them and their squared deviations
+        (multiples of 1/16) are exact in any order, so this equals NumPy's ``std``.
+    """
+    k = faces.shape[0]
+    hgt, wid = img.shape
+    out = np.empty(k)
+    for i in range(k):
+        f = faces[i]
+        vals = np.empty(4)
+        for c in range(4):
+            if c < 3:
+                u = texcoords[f, c, 0]
+                v = texcoords[f, c, 1]
+            else:
+                u = (texcoords[f, 0, 0] + texcoords[f, 1, 0] + texcoords[f, 2, 0]) / 3.0
+                v = (texcoords[f, 0, 1] + texcoords[f, 1, 1] + texcoords[f, 2, 1]) / 3.0
+            col = min(int((u % 1.0) * wid), wid - 1)
+            row = min(int((1.0 - v % 1.0) * hgt), hgt - 1)
+            vals[c] = img[row, col]
+        mean = (vals[0] + vals[1] + vals[2] + vals[3]) / 4.0
+        ss = 0.0
+        for c in range(4):
+            ss += (vals[c] - mean) * (vals[c] - mean)
+        out[i] = np.sqrt(ss / 4.0)
+    return out
+
+
+@leaf
 def radial_parts(d, height, direction):
     """Distance from an axis and unit radial direction of offsets from a point on it.
 

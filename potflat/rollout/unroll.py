@@ -214,17 +214,12 @@ def _luminance_variation(mesh: Mesh, faces: np.ndarray) -> tuple[np.ndarray | No
     if mesh.texcoords is not None and mesh.texture_path is not None:
         from potflat.io.images import read_texture_grey_quarter
 
+        from potflat.mesh._kernels import texel_spread  # Numba: imported on first use
+
         img = read_texture_grey_quarter(mesh.texture_path)
         if img is not None and img.size:
-            hgt, wid = img.shape[:2]
-            out = np.empty(len(faces))
-            for s in row_blocks(len(faces)):
-                tc = mesh.texcoords[faces[s]]
-                pts = np.concatenate([tc, tc.mean(axis=1, keepdims=True)], axis=1) % 1.0
-                col = np.minimum((pts[..., 0] * wid).astype(np.int64), wid - 1)
-                row = np.minimum(((1.0 - pts[..., 1]) * hgt).astype(np.int64), hgt - 1)
-                out[s] = img[row, col].astype(np.float64).std(axis=1)
-            return out, "texture"
+            return texel_spread(np.ascontiguousarray(mesh.texcoords, dtype=np.float64),
+                                np.ascontiguousarray(faces, dtype=np.int64), np.ascontiguousarray(img)), "texture"
     if mesh.vertex_colors is not None:
         rgb = mesh.vertex_colors[:, :3].astype(np.float64)
         lum = rgb @ np.array([0.299, 0.587, 0.114])
