@@ -267,6 +267,46 @@ def test_face_graph_components_match_scipy():
         np.testing.assert_array_equal(comp, ref)
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_face_graph_matrix_matches_the_sorting_reference(seed):
+    """The CSR of pair_csr: the indices, row pointers and data of the former stable argsort of
+    ``i * m + j`` (repeated pairs and a face without neighbours included)."""
+    import scipy.sparse as sp
+
+    from potflat.rollout.walls import FaceGraph
+
+    rng = np.random.default_rng(seed)
+    m = 60
+    pairs = rng.integers(0, m - 1, size=(150, 2))  # node m - 1 has no neighbour
+    pairs = np.concatenate([pairs, pairs[:20], pairs[:10, ::-1]])
+    weights = rng.random(len(pairs))
+    weights[::7] = 0.0  # eliminated
+    i = np.concatenate([pairs[:, 0], pairs[:, 1]])
+    j = np.concatenate([pairs[:, 1], pairs[:, 0]])
+    order = np.argsort(i * m + j, kind="stable")
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(i, minlength=m))]).astype(np.int32)
+    for w in (None, weights):
+        data = np.ones(2 * len(pairs)) if w is None else np.concatenate([w, w])[order]
+        ref = sp.csr_matrix((data, j[order].astype(np.int32), indptr.copy()), shape=(m, m))
+        ref.eliminate_zeros()
+        got = FaceGraph(m, pairs).matrix(w)
+        for a, b in ((got.indptr, ref.indptr), (got.indices, ref.indices), (got.data, ref.data)):
+            assert a.dtype == b.dtype and np.array_equal(a, b)
+
+
+def test_select_wall_takes_the_callers_face_graph():
+    from potflat.rollout.walls import FaceGraph
+
+    V, F, _, _ = vm.cup(n_theta=16)
+    mesh, p, a = _posed(V, F)
+    own = select_wall(mesh, p, a, side="inner")
+    given = select_wall(mesh, p, a, side="inner", graph=FaceGraph.of(mesh.faces))
+    assert own.two_walled and np.array_equal(own.labels, given.labels)
+    assert np.array_equal(own.face_mask, given.face_mask)
+    with pytest.raises(InvalidInputError, match="FaceGraph"):
+        select_wall(mesh, p, a, graph=FaceGraph.of(mesh.faces[:-1]))
+
+
 def test_cylindrical_matches_numpy_reference():
     from potflat.rollout.walls import cylindrical
 

@@ -699,6 +699,60 @@ def texel_spread(texcoords, faces, img):
 
 
 @leaf
+def pair_csr(pairs, m):
+    """Symmetric CSR adjacency of ``m`` nodes from node pairs, each pair once per endpoint.
+
+    Within a row the neighbours are sorted (stably: the pairs' order, the first endpoints'
+    entries before the second endpoints'), as a stable sort of ``i * m + j`` over
+    ``i = [pairs[:, 0], pairs[:, 1]]``, ``j = [pairs[:, 1], pairs[:, 0]]`` would give them.
+
+    Parameters
+    ----------
+    pairs : (p, 2) int64
+        Node pairs, in ``[0, m)``.
+    m : int
+        Number of nodes.
+
+    Returns
+    -------
+    indptr : (m + 1,) int64
+    indices : (2 p,) int64
+        Neighbour of each entry.
+    pair_of : (2 p,) int64
+        Pair of each entry.
+    """
+    p = pairs.shape[0]
+    # entry k is pair k % p at its endpoint k // p (the first endpoints' entries first)
+    indptr = np.zeros(m + 1, np.int64)
+    for k in range(2 * p):
+        indptr[pairs[k % p, k // p] + 1] += 1
+    for r in range(m):
+        indptr[r + 1] += indptr[r]
+    fill = indptr[:-1].copy()
+    indices = np.empty(2 * p, np.int64)
+    pair_of = np.empty(2 * p, np.int64)
+    for k in range(2 * p):
+        e = k % p
+        i = pairs[e, k // p]
+        indices[fill[i]] = pairs[e, 1 - k // p]
+        pair_of[fill[i]] = e
+        fill[i] += 1
+    for r in range(m):  # insertion sort by neighbour, stable (rows are short)
+        s = indptr[r]
+        for a in range(s + 1, indptr[r + 1]):
+            x = indices[a]
+            y = pair_of[a]
+            b = a - 1
+            while b >= s and indices[b] > x:
+                indices[b + 1] = indices[b]
+                pair_of[b + 1] = pair_of[b]
+                b -= 1
+            indices[b + 1] = x
+            pair_of[b + 1] = y
+    return indptr, indices, pair_of
+
+
+@leaf
 def radial_parts(d, height, direction):
     """Distance from an axis and unit radial direction of offsets from a point on it.
 

@@ -35,9 +35,9 @@ from potflat.types import Mesh
 from potflat.rollout.walls import (
     FaceGraph,
     check_axis,
+    check_graph,
     check_mesh,
     cylindrical,
-    face_adjacency,
     unique_ints,
     weighted_quantiles,
 )
@@ -178,7 +178,7 @@ def _check_positive(name: str, value, *, upper: float | None = None) -> float:
 
 
 def detect_attachments(mesh: Mesh, axis_point, axis_direction, *, tolerance: float | None = None,
-                       coverage_ratio: float = 0.3) -> AttachmentSelection:
+                       coverage_ratio: float = 0.3, graph: FaceGraph | None = None) -> AttachmentSelection:
     """Detect handles, spouts, knobs and other parts off the surface of revolution.
 
     Parameters
@@ -196,6 +196,8 @@ def detect_attachments(mesh: Mesh, axis_point, axis_direction, *, tolerance: flo
     coverage_ratio : float
         A vertex is an attachment core when its cell is covered over less than this
         fraction (0-1) of the angles covered at the best-covered cell of its height.
+    graph : FaceGraph, optional
+        ``FaceGraph.of(mesh.faces)`` when the caller has it (built here when needed).
 
     Returns
     -------
@@ -212,6 +214,7 @@ def detect_attachments(mesh: Mesh, axis_point, axis_direction, *, tolerance: flo
         tolerance = _check_positive("tolerance", tolerance)
     coverage_ratio = _check_positive("coverage_ratio", coverage_ratio, upper=1.0)
     check_mesh(mesh)
+    check_graph(graph, mesh)
     p, a = check_axis(axis_point, axis_direction)
     V, F = mesh.vertices, mesh.faces
     h_all, r_all, _ = cylindrical(V, p, a)
@@ -248,7 +251,7 @@ def detect_attachments(mesh: Mesh, axis_point, axis_direction, *, tolerance: flo
     mask = np.zeros(len(F), dtype=bool)
     components: list[Attachment] = []
     if core_f.any():
-        graph = FaceGraph(len(F), face_adjacency(F))
+        graph = FaceGraph.of(F) if graph is None else graph
         adj = graph.pairs
         comp = graph.components(off_f[adj[:, 0]] & off_f[adj[:, 1]])
         seeded = np.zeros(int(comp.max()) + 1, dtype=bool)

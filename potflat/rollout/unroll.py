@@ -39,7 +39,7 @@ from potflat.mesh.distortion import DistortionSummary, face_areas, row_blocks, s
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import FlatMesh, Mesh, StepClock
 from potflat.rollout.options import RolloutOptions
-from potflat.rollout.walls import FaceGraph, WallSelection, face_adjacency, select_wall
+from potflat.rollout.walls import FaceGraph, WallSelection, select_wall
 from potflat.mesh.tolerances import ROUNDING
 
 TWO_PI = 2.0 * np.pi
@@ -431,10 +431,12 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
             other_objects = ~main
             face_mask = main if face_mask is None else face_mask & main
     clock.lap("axis")
-    attachments = detect_attachments(mesh, axis.point, axis.direction)
+    graph = FaceGraph.of(F)  # the face adjacency, for the attachments and the walls
+    attachments = detect_attachments(mesh, axis.point, axis.direction, graph=graph)
     clock.lap("attachments")
     walls = select_wall(mesh, axis.point, axis.direction, side=options.side,
-                        exclude=None if options.keep_attachments else attachments.face_mask)
+                        exclude=None if options.keep_attachments else attachments.face_mask, graph=graph)
+    del graph
     allowed = walls.face_mask if face_mask is None else walls.face_mask & face_mask
     clock.lap("walls")
 
@@ -724,7 +726,7 @@ def _edge_on_strips(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, seg:
         return out
     sel = np.flatnonzero(flat < EDGE_ON_RATIO * area_3d)
     sub = faces[sel]
-    comp = FaceGraph(len(sel), face_adjacency(sub)).components()
+    comp = FaceGraph.of(sub).components()
     on_border = np.zeros(len(uv), bool)
     on_border[seg.ravel()] = True
     k = int(comp.max()) + 1

@@ -28,6 +28,7 @@ flipped normals.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -93,6 +94,15 @@ def check_mesh(mesh: Mesh) -> None:
         raise InvalidInputError(f"the mesh{where} has face indices outside its vertex list")
 
 
+def check_graph(graph, mesh: Mesh) -> None:
+    """Raise :class:`InvalidInputError` unless ``graph`` is None or a :meth:`FaceGraph.of` of
+    ``mesh``'s faces (one node per face, with the shared edges)."""
+    if graph is not None and (not isinstance(graph, FaceGraph) or graph.m != len(mesh.faces)
+                              or graph.shared is None):
+        raise InvalidInputError(f"graph must be FaceGraph.of(mesh.faces) ({len(mesh.faces)} faces), "
+                                f"got {graph!r}")
+
+
 @dataclass(frozen=True)
 class FaceFrame:
     """Per-face geometry relative to the axis (shared by the analysis modules).
@@ -142,22 +152,36 @@ class FaceGraph:
         Number of faces.
     pairs : (p, 2) int64
         Adjacent face pairs.
+    shared : (p, 2) int64, optional
+        The edge each pair shares (:func:`face_adjacency` with ``return_edges``).
     """
 
-    def __init__(self, m: int, pairs: np.ndarray) -> None:
+    def __init__(self, m: int, pairs: np.ndarray, shared: np.ndarray | None = None) -> None:
         self.m = int(m)
         self.pairs = pairs
-        i = np.concatenate([pairs[:, 0], pairs[:, 1]])
-        j = np.concatenate([pairs[:, 1], pairs[:, 0]])
-        order = np.argsort(i * max(self.m, 1) + j, kind="stable")
-        self.indices = j[order].astype(np.int32 if self.m < 2**31 else np.int64)
-        self.edge_of = np.concatenate([np.arange(len(pairs)), np.arange(len(pairs))])[order]
-        self.indptr = np.concatenate([[0], np.cumsum(np.bincount(i, minlength=self.m))]).astype(self.indices.dtype)
+        self.shared = shared
+
+    @classmethod
+    def of(cls, faces: np.ndarray) -> FaceGraph:
+        """The graph of ``faces`` ((m, 3) int), with each pair's shared edge."""
+        pairs, shared = face_adjacency(faces, return_edges=True)
+        return cls(len(faces), pairs, shared)
+
+    @cached_property
+    def _csr(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(indptr, indices, pair of each entry)``, rows sorted (:func:`potflat.mesh._kernels.pair_csr`);
+        built on first use (only :meth:`matrix` needs it)."""
+        from potflat.mesh._kernels import pair_csr  # Numba: imported on first use
+
+        indptr, indices, pair_of = pair_csr(np.ascontiguousarray(self.pairs, dtype=np.int64).reshape(-1, 2), self.m)
+        dtype = np.int32 if self.m < 2**31 else np.int64
+        return indptr.astype(dtype), indices.astype(dtype), pair_of
 
     def matrix(self, weights: np.ndarray | None = None) -> sp.csr_matrix:
         """(m, m) CSR matrix with ``weights[pair]`` ((p,) float64, default 1) on both entries."""
-        data = np.ones(len(self.indices)) if weights is None else np.asarray(weights, np.float64)[self.edge_of]
-        A = sp.csr_matrix((data, self.indices.copy(), self.indptr.copy()), shape=(self.m, self.m))
+        indptr, indices, pair_of = self._csr
+        data = np.ones(len(indices)) if weights is None else np.asarray(weights, np.float64)[pair_of]
+        A = sp.csr_matrix((data, indices.copy(), indptr.copy()), shape=(self.m, self.m))
         A.eliminate_zeros()  # works in place on the index arrays, hence the copies
         return A
 
@@ -244,9 +268,10 @@ def cylindrical(points: np.ndarray, axis_point: np.ndarray, axis_direction: np.n
 
 
 def face_frame(mesh: Mesh, axis_point: np.ndarray, axis_direction: np.ndarray, *,
-               adjacency: bool = True) -> FaceFrame:
+               adjacency: bool = True, graph: FaceGraph | None = None) -> FaceFrame:
     """Compute :class:`FaceFrame` for a validated mesh and axis (``adjacency=False`` skips
-    the face adjacency, which only the wall labelling needs)."""
+    the face adjacency, which only the wall labelling needs; ``graph``: the mesh's
+    :meth:`FaceGraph.of` when the caller has it)."""
     V, F = mesh.vertices, mesh.faces
     # one parallel pass over the faces; the cross products become the unit normals in place
     normal, dbl, _, centroid = face_geometry(np.ascontiguousarray(V, dtype=np.float64),
@@ -256,9 +281,9 @@ def face_frame(mesh: Mesh, axis_point: np.ndarray, axis_direction: np.ndarray, *
     normal[~ok] = 0.0
     height, radius, radial = cylindrical(centroid, axis_point, axis_direction)
     if adjacency:
-        pairs, edges = face_adjacency(F, return_edges=True)
+        graph = FaceGraph.of(F) if graph is None else graph
+        pairs, edges = graph.pairs, graph.shared
         edge_length = np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1)
-        graph = FaceGraph(len(F), pairs)
     else:
         pairs, edge_length, graph = np.zeros((0, 2), np.int64), np.zeros(0), None
     return FaceFrame(
@@ -295,7 +320,7 @@ def largest_component(mesh: Mesh, face_mask: np.ndarray) -> np.ndarray:
         return mask.copy()
     V, F = mesh.vertices, mesh.faces
     area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
-    return _largest_region(mask, FaceGraph(len(F), face_adjacency(F)), area)
+    return _largest_region(mask, FaceGraph.of(F), area)
 
 
 def _largest_region(mask: np.ndarray, graph: FaceGraph, area: np.ndarray) -> np.ndarray:
@@ -444,7 +469,7 @@ class WallSelection:
 
 
 def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
-                exclude=None, flat_tolerance: float = 0.25) -> WallSelection:
+                exclude=None, flat_tolerance: float = 0.25, graph: FaceGraph | None = None) -> WallSelection:
     """Select the outer or the inner wall of a (possibly two-walled) vessel scan.
 
     Parameters
@@ -464,6 +489,8 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
     flat_tolerance : float
         Faces whose smoothed radial normal component is below this (0-1) are treated as
         horizontal (base, floor, rim top) and take the side of the wall they connect to.
+    graph : FaceGraph, optional
+        ``FaceGraph.of(mesh.faces)`` when the caller has it (built here otherwise).
 
     Returns
     -------
@@ -495,7 +522,8 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         if exclude.shape != (len(mesh.faces),) or exclude.dtype != bool:
             raise InvalidInputError(
                 f"exclude must be a boolean mask with one entry per face ({len(mesh.faces)}), got {exclude.shape}")
-    fr = face_frame(mesh, p, a)
+    check_graph(graph, mesh)
+    fr = face_frame(mesh, p, a, graph=graph)
     labels, inverted = wall_labels(fr, flat_tolerance=float(flat_tolerance))
     want = OUTER if side == "outer" else INNER
     outer_area = float(fr.area[labels == OUTER].sum())
