@@ -349,7 +349,9 @@ def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, n
     labels, n_comp = union_find(3 * m, a, b)
     del a, b
     # components are numbered in order of their lowest corner: where the running maximum grows
-    first = np.flatnonzero(np.diff(np.maximum.accumulate(labels), prepend=-1))  # lowest corner of each
+    run = np.maximum.accumulate(labels)
+    first = np.flatnonzero(np.concatenate([[m > 0], run[1:] != run[:-1]]))  # lowest corner of each
+    del run
     vertex_of = corner_v[first]
     perm = np.lexsort((first, vertex_of))
     rank = np.empty(n_comp, np.int64)
