@@ -295,7 +295,7 @@ def test_face_graph_matrix_matches_the_sorting_reference(seed):
 
 
 def test_select_wall_takes_the_callers_face_graph():
-    from potflat.rollout.walls import FaceGraph
+    from potflat.rollout.walls import FaceGraph, face_adjacency
 
     V, F, _, _ = vm.cup(n_theta=16)
     mesh, p, a = _posed(V, F)
@@ -303,8 +303,24 @@ def test_select_wall_takes_the_callers_face_graph():
     given = select_wall(mesh, p, a, side="inner", graph=FaceGraph.of(mesh.faces))
     assert own.two_walled and np.array_equal(own.labels, given.labels)
     assert np.array_equal(own.face_mask, given.face_mask)
-    with pytest.raises(InvalidInputError, match="FaceGraph"):
-        select_wall(mesh, p, a, graph=FaceGraph.of(mesh.faces[:-1]))
+    for wrong in (FaceGraph.of(mesh.faces[:-1]), FaceGraph(len(mesh.faces), face_adjacency(mesh.faces))):
+        with pytest.raises(InvalidInputError, match="FaceGraph"):
+            select_wall(mesh, p, a, graph=wrong)
+
+
+def test_face_graph_of_finds_the_adjacency_once_on_first_use(monkeypatch):
+    from potflat.rollout import walls
+
+    calls = []
+    real = walls.face_adjacency
+    monkeypatch.setattr(walls, "face_adjacency", lambda *a, **k: calls.append(1) or real(*a, **k))
+    F = np.asarray(vm.cup(n_theta=16)[1], np.int64)
+    graph = walls.FaceGraph.of(F)
+    assert not calls and graph.m == len(F)
+    pairs, shared = real(F, return_edges=True)
+    assert np.array_equal(graph.pairs, pairs) and np.array_equal(graph.shared, shared)
+    graph.components()
+    assert len(calls) == 1
 
 
 def test_cylindrical_matches_numpy_reference():

@@ -433,7 +433,7 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
             other_objects = ~main
             face_mask = main if face_mask is None else face_mask & main
     clock.lap("axis")
-    graph = FaceGraph.of(F)  # the face adjacency, for the attachments and the walls
+    graph = FaceGraph.of(F)  # the face adjacency, found once for the attachments (if they need it) and the walls
     attachments = detect_attachments(mesh, axis.point, axis.direction, graph=graph)
     clock.lap("attachments")
     walls = select_wall(mesh, axis.point, axis.direction, side=options.side,

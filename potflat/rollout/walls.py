@@ -96,9 +96,8 @@ def check_mesh(mesh: Mesh) -> None:
 
 def check_graph(graph, mesh: Mesh) -> None:
     """Raise :class:`InvalidInputError` unless ``graph`` is None or a :meth:`FaceGraph.of` of
-    ``mesh``'s faces (one node per face, with the shared edges)."""
-    if graph is not None and (not isinstance(graph, FaceGraph) or graph.m != len(mesh.faces)
-                              or graph.shared is None):
+    ``mesh``'s faces (one node per face; the shared edges come with it)."""
+    if graph is not None and (not isinstance(graph, _LazyFaceGraph) or graph.m != len(mesh.faces)):
         raise InvalidInputError(f"graph must be FaceGraph.of(mesh.faces) ({len(mesh.faces)} faces), "
                                 f"got {graph!r}")
 
@@ -163,9 +162,10 @@ class FaceGraph:
 
     @classmethod
     def of(cls, faces: np.ndarray) -> FaceGraph:
-        """The graph of ``faces`` ((m, 3) int), with each pair's shared edge."""
-        pairs, shared = face_adjacency(faces, return_edges=True)
-        return cls(len(faces), pairs, shared)
+        """The graph of ``faces`` ((m, 3) int), with each pair's shared edge: :func:`face_adjacency`
+        runs when :attr:`pairs` or :attr:`shared` is first read (a caller may hand the graph on
+        to steps that need it or not)."""
+        return _LazyFaceGraph(faces)
 
     @cached_property
     def _csr(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -194,6 +194,28 @@ class FaceGraph:
         comp, _ = union_find(self.m, np.ascontiguousarray(pairs[:, 0], dtype=np.int64),
                              np.ascontiguousarray(pairs[:, 1], dtype=np.int64))
         return comp
+
+
+class _LazyFaceGraph(FaceGraph):
+    """:meth:`FaceGraph.of`: the adjacency of ``faces`` found on first use."""
+
+    def __init__(self, faces: np.ndarray) -> None:
+        self.m = len(faces)
+        self._faces = faces
+
+    @cached_property
+    def _adjacency(self) -> tuple[np.ndarray, np.ndarray]:
+        return face_adjacency(self._faces, return_edges=True)
+
+    @property
+    def pairs(self) -> np.ndarray:
+        """Adjacent face pairs (p, 2) int64."""
+        return self._adjacency[0]
+
+    @property
+    def shared(self) -> np.ndarray:
+        """The edge each pair shares (p, 2) int64."""
+        return self._adjacency[1]
 
 
 def unique_ints(x: np.ndarray, return_counts: bool = False):
