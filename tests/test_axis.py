@@ -169,3 +169,24 @@ def test_real_scanned_vases_axis(name):
     fit = estimate_axis(mesh)
     assert abs(fit.direction[2]) > np.cos(np.radians(3.0))
     assert fit.median_angle_deg < 10 and fit.profile_deviation < 0.05
+
+
+def test_normal_lines_match_the_bincount_reference():
+    """The vertex sums of the serial kernel: the same bits as NumPy's cross products and
+    bincounts (a vertex without faces and a degenerate face included)."""
+    from potflat.rollout.axis import normal_lines
+
+    mesh, *_ = vase(seed=3)
+    rng = np.random.default_rng(4)
+    V = np.concatenate([mesh.vertices, [[1e3, 0.0, 0.0]]])  # unused: left out
+    F = mesh.faces[rng.permutation(len(mesh.faces))]
+    F = np.concatenate([F, [[0, 0, 1]]])  # no area
+    cross = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    acc = np.stack([np.bincount(F.ravel(), np.repeat(cross[:, k], 3), len(V)) for k in range(3)], axis=1)
+    area = np.bincount(F.ravel(), np.repeat(np.linalg.norm(cross, axis=1) / 6.0, 3), len(V))
+    norm = np.linalg.norm(acc, axis=1)
+    ok = (norm > 0) & (area > 0)
+    want = (V[ok], acc[ok] / norm[ok, None], area[ok])
+    got = normal_lines(Mesh(V, F))
+    assert not ok[-1] and ok.sum() == len(mesh.vertices)
+    assert all(g.dtype == w.dtype and g.tobytes() == w.tobytes() for g, w in zip(got, want))

@@ -753,6 +753,50 @@ def pair_csr(pairs, m):
 
 
 @leaf
+def vertex_normal_sums(V, F):
+    """Sum of the adjacent faces' cross products and a third of their areas at each vertex.
+
+    Serial, face by face and corner by corner: the sums of ``np.bincount`` over ``F.ravel()``
+    with the face values repeated three times, bit for bit.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+    F : (m, 3) int64
+        Faces; the cross products follow their winding.
+
+    Returns
+    -------
+    acc : (n, 3) float64
+        ``sum (V[F1] - V[F0]) x (V[F2] - V[F0])`` over each vertex's faces.
+    area : (n,) float64
+        ``sum |cross| / 6`` over each vertex's faces.
+    """
+    n = V.shape[0]
+    acc = np.zeros((n, 3))
+    area = np.zeros(n)
+    for f in range(F.shape[0]):
+        a = F[f, 0]
+        ax = V[F[f, 1], 0] - V[a, 0]
+        ay = V[F[f, 1], 1] - V[a, 1]
+        az = V[F[f, 1], 2] - V[a, 2]
+        bx = V[F[f, 2], 0] - V[a, 0]
+        by = V[F[f, 2], 1] - V[a, 1]
+        bz = V[F[f, 2], 2] - V[a, 2]
+        cx = ay * bz - az * by
+        cy = az * bx - ax * bz
+        cz = ax * by - ay * bx
+        w = np.sqrt(cx * cx + cy * cy + cz * cz) / 6.0
+        for c in range(3):
+            v = F[f, c]
+            acc[v, 0] += cx
+            acc[v, 1] += cy
+            acc[v, 2] += cz
+            area[v] += w
+    return acc, area
+
+
+@leaf
 def radial_parts(d, height, direction):
     """Distance from an axis and unit radial direction of offsets from a point on it.
 

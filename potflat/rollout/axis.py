@@ -218,11 +218,10 @@ def normal_lines(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     revolution sampled exactly, these lines meet the axis far more closely than face normals
     through face centroids (which are tilted by the faceting).
     """
-    V, F = mesh.vertices, mesh.faces
-    cross = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    n = len(V)
-    acc = np.stack([np.bincount(F.ravel(), np.repeat(cross[:, k], 3), n) for k in range(3)], axis=1)
-    area = np.bincount(F.ravel(), np.repeat(np.linalg.norm(cross, axis=1) / 6.0, 3), n)
+    from potflat.mesh._kernels import vertex_normal_sums  # Numba: imported on first use
+
+    V = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
+    acc, area = vertex_normal_sums(V, np.ascontiguousarray(mesh.faces, dtype=np.int64).reshape(-1, 3))
     norm = np.linalg.norm(acc, axis=1)
     ok = (norm > 0) & (area > 0)
     return V[ok], acc[ok] / norm[ok, None], area[ok]
