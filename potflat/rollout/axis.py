@@ -328,13 +328,14 @@ def _profile_deviation(points: np.ndarray, point, direction, *, slices: int = 32
     r = np.linalg.norm(points - point - h[:, None] * direction, axis=1)
     lo, hi = h.min(), h.max()
     idx = np.clip(((h - lo) / max(hi - lo, 1e-300) * slices).astype(np.int64), 0, slices - 1)
-    order = np.lexsort((r, idx))
-    r_sorted, idx_sorted = r[order], idx[order]
-    starts = np.searchsorted(idx_sorted, np.arange(slices))
-    ends = np.searchsorted(idx_sorted, np.arange(slices), side="right")
-    have = ends > starts
-    med = r_sorted[(starts + ends - 1)[have] // 2]
-    count = np.bincount(idx, minlength=slices)[have]
+    # the lower median radius of each slice: its radii grouped (a radix sort of the slice
+    # numbers) and partitioned, not all sorted
+    count = np.bincount(idx, minlength=slices)
+    grouped = r[np.argsort(idx.astype(np.int16), kind="stable")]
+    have = count > 0
+    med = np.array([np.partition(grouped[s:s + c], (c - 1) // 2)[(c - 1) // 2]
+                    for s, c in zip(np.cumsum(count) - count, count) if c])
+    count = count[have]
     mean_h = np.bincount(idx, h, slices)[have] / count
     scale = float(np.median(r))
     if scale <= 0:
