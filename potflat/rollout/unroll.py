@@ -449,10 +449,12 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         centroid[s] = (V[f[:, 0]] + V[f[:, 1]] + V[f[:, 2]]) / 3.0
     h_c, _, theta_c = axis.cylindrical(centroid)
     del centroid
+    theta_v = axis.cylindrical(V)[2]  # once for every unrolling and the seam
     band = options.band or (0.0, 1.0)
-    landmark, landmark_notes = _find_landmark(mesh, axis, options, attachments, allowed, band, h_c, theta_c, area)
+    landmark, landmark_notes = _find_landmark(mesh, axis, options, attachments, allowed, band, h_c, theta_c,
+                                              theta_v, area)
     trimmed = np.zeros(len(F), bool)
-    un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, area, landmark=landmark)
+    un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area, landmark=landmark)
     table = None
     for rnd in range(TRIM_ROUNDS):
         # the development's edges and boundary, computed once for each face set
@@ -463,7 +465,7 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         table = None
         trimmed[un.face_index[fold]] = True
         if rnd < TRIM_ROUNDS - 1:
-            un = _unroll(mesh, axis, options, allowed & ~trimmed, band, h_c, theta_c, area,
+            un = _unroll(mesh, axis, options, allowed & ~trimmed, band, h_c, theta_c, theta_v, area,
                          seam=(un.seam, un.seam_method), landmark=landmark)
         else:
             un = _without(un, ~fold)
@@ -547,13 +549,13 @@ class _Unrolled:
 
 
 def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndarray, band, h_c, theta_c,
-            area, seam: tuple[float, str] | None = None, landmark=None) -> _Unrolled:
+            theta_v, area, seam: tuple[float, str] | None = None, landmark=None) -> _Unrolled:
     """Select the region within ``allowed``, cut it open and develop it on the proxy (with
     ``seam`` = (radians, method) from an earlier unrolling, or a seam chosen here; angles
-    measured from ``landmark``)."""
+    measured from ``landmark``; ``theta_v``: the angle of every scan vertex)."""
     V = mesh.vertices
     face_index, seam, seam_method, corner_theta, origin = _select(
-        mesh, axis, options, allowed, band, h_c, theta_c, area, seam, landmark)
+        mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area, seam, landmark)
     sub_f = mesh.faces[face_index]
     inner = options.side == "inner"
 
@@ -803,7 +805,7 @@ _PLACED_SEAMS = ("user", "point", "handle", "opposite painted zone")
 
 
 def _find_landmark(mesh: Mesh, axis: AxisFit, options: RolloutOptions, attachments, face_mask, band, h_c,
-                   theta_c, area):
+                   theta_c, theta_v, area):
     """The landmark the options name (:func:`potflat.rollout.landmarks.find_landmark`), or None when
     seam and angles are measured as before (from the reference direction, angles from the seam)."""
     from potflat.rollout.landmarks import find_landmark
@@ -815,18 +817,18 @@ def _find_landmark(mesh: Mesh, axis: AxisFit, options: RolloutOptions, attachmen
         raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
     return find_landmark(
         mesh, axis, seam_at=options.seam_at, landmark=options.landmark, attachments=attachments,
-        painted_zone=lambda: _painted_zone_centre(mesh, axis, options, face_mask, band, h_c, theta_c, area),
-        auto_seam=lambda: _auto_seam(mesh, axis, keep, theta_c, area)[0])
+        painted_zone=lambda: _painted_zone_centre(mesh, axis, options, face_mask, band, h_c, theta_c, theta_v, area),
+        auto_seam=lambda: _auto_seam(mesh, keep, theta_c, theta_v, area)[0])
 
 
 def _painted_zone_centre(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c,
-                         area) -> tuple[float | None, str]:
+                         theta_v, area) -> tuple[float | None, str]:
     """Centre angle of the importance zone (:func:`_find_importance` on an all-round unrolling
     with the automatic seam), or None and why."""
     from potflat.rollout.landmarks import zone_centre
 
     plain = dataclasses.replace(options, seam=None, angles=None, seam_at=None, landmark=None, overlap=0.0)
-    un = _unroll(mesh, axis, plain, face_mask, band, h_c, theta_c, area)
+    un = _unroll(mesh, axis, plain, face_mask, band, h_c, theta_c, theta_v, area)
     flat = un.flat
     if mesh.texcoords is not None:
         flat = flat.replace(mesh=flat.mesh.replace(texcoords=mesh.texcoords[un.face_index]))
@@ -845,21 +847,19 @@ def _in_band(axis: AxisFit, band, h_c) -> np.ndarray:
     return (frac >= band[0]) & (frac <= band[1])
 
 
-def _auto_seam(mesh: Mesh, axis: AxisFit, sel: np.ndarray, theta_c, area) -> tuple[float, str]:
-    theta_v = axis.cylindrical(mesh.vertices)[2]
+def _auto_seam(mesh: Mesh, sel: np.ndarray, theta_c, theta_v, area) -> tuple[float, str]:
     corners = _corner_angles(theta_v, mesh.faces, sel, theta_c[sel])
     return choose_seam(mesh, sel, theta_c[sel], area[sel], _covered(theta_c[sel], corners))
 
 
-def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c, area,
+def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c, theta_v, area,
             seam_given: tuple[float, str] | None = None, landmark=None):
     """Faces of the region, the seam (radians, and how it was chosen), the corners' unwrapped
     angles and the angle (radians) they are measured from.
 
     With an overlap the faces within ``overlap`` degrees after the seam are listed twice, the
     repeats last, their angles one turn on."""
-    V, F = mesh.vertices, mesh.faces
-    theta_v = axis.cylindrical(V)[2]
+    F = mesh.faces
     keep = _in_band(axis, band, h_c) & face_mask
     placed = landmark is not None and (options.seam_at is not None or options.landmark is not None)
     if seam_given is not None:
@@ -875,7 +875,7 @@ def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band,
         sel = np.flatnonzero(keep)
         if len(sel) == 0:
             raise InvalidOptionError(f"band {band[0]:g} {band[1]:g} selects no faces; widen it")
-        seam, seam_method = _auto_seam(mesh, axis, sel, theta_c, area)
+        seam, seam_method = _auto_seam(mesh, sel, theta_c, theta_v, area)
     seam %= TWO_PI
     # angles are measured from the landmark, else from the seam
     origin = landmark.angle if options.angles is not None and landmark is not None else seam
