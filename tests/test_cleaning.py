@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from potflat.mesh._kernels import edge_table, union_find
+from potflat.mesh._kernels import edge_table, fan_joins, union_find
 from potflat.mesh.cleaning import CleaningReport, clean_mesh, weld_vertices
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
@@ -61,6 +61,27 @@ def test_edge_table_matches_reference():
         assert count[e] == len(ref[key])
         assert list(halves[e][:min(2, len(ref[key]))]) == ref[key][:2]
         assert all(edge_of[h] == e for h in ref[key])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_corner_fans_match_the_numpy_reference(seed):
+    """fan_joins: the corner pairs (and so the fan labels) of the former NumPy expressions, on
+    meshes with non-manifold edges and faces of both windings."""
+    from potflat.mesh.cleaning import _corner_fans, _topology
+
+    rng = np.random.default_rng(seed)
+    F = rng.integers(0, 25, (150, 3))
+    F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])]
+    topo = _topology(F, 25)
+    h1, h2, same = topo.h1, topo.h2, topo.same
+    nxt1, nxt2 = h1 - h1 % 3 + (h1 + 1) % 3, h2 - h2 % 3 + (h2 + 1) % 3
+    a = np.concatenate([h1, nxt1])
+    b = np.concatenate([np.where(same, h2, nxt2), np.where(same, nxt2, h2)])
+    assert same.any() and not same.all() and (topo.count > 2).any()
+    assert np.array_equal(fan_joins(h1, h2, same)[0], a) and np.array_equal(fan_joins(h1, h2, same)[1], b)
+    label, count = _corner_fans(F, topo)
+    want, n_want = union_find(3 * len(F), a, b)
+    assert count == n_want and np.array_equal(label, want)
 
 
 def test_union_find_matches_scipy():

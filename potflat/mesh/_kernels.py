@@ -363,6 +363,43 @@ def propagate_orientation(nbr, same):
 
 
 @leaf
+def fan_joins(h1, h2, same):
+    """Face corners joined across manifold edges (the fans around each vertex).
+
+    Parameters
+    ----------
+    h1, h2 : (k,) int64
+        The two half-edges of each manifold edge; half-edge ``3 f + j`` runs from corner
+        ``3 f + j`` to corner ``3 f + (j + 1) % 3``.
+    same : (k,) bool
+        True when both run the edge the same way.
+
+    Returns
+    -------
+    a, b : (2 k,) int64
+        Corners at the same vertex: first each edge's start corner of ``h1``, then its end
+        corner, each with the corner of ``h2`` at that vertex.
+    """
+    k = h1.shape[0]
+    a = np.empty(2 * k, np.int64)
+    b = np.empty(2 * k, np.int64)
+    for i in range(k):
+        g = h1[i]
+        h = h2[i]
+        g_end = g - g % 3 + (g + 1) % 3
+        h_end = h - h % 3 + (h + 1) % 3
+        a[i] = g
+        a[k + i] = g_end
+        if same[i]:
+            b[i] = h
+            b[k + i] = h_end
+        else:
+            b[i] = h_end
+            b[k + i] = h
+    return a, b
+
+
+@leaf
 def _find(parent, x):
     while parent[x] != x:
         parent[x] = parent[parent[x]]

@@ -28,6 +28,7 @@ import numpy as np
 from potflat.mesh._kernels import (
     edge_table,
     face_geometry,
+    fan_joins,
     propagate_orientation,
     union_find,
     weld_representatives,
@@ -264,14 +265,7 @@ def _orient_components(topo: _Topology, m: int) -> tuple[np.ndarray, np.ndarray,
 
 def _corner_fans(F: np.ndarray, topo: _Topology) -> tuple[np.ndarray, int]:
     """Fan label of each face corner (3m,): corners joined across manifold edges."""
-    h1, h2, same = topo.h1, topo.h2, topo.same
-    nxt1 = h1 - h1 % 3 + (h1 + 1) % 3  # corner at the end of half-edge h1
-    nxt2 = h2 - h2 % 3 + (h2 + 1) % 3
-    a = np.concatenate([h1, nxt1])
-    del nxt1
-    b = np.concatenate([np.where(same, h2, nxt2), np.where(same, nxt2, h2)])
-    del nxt2
-    return union_find(3 * len(F), a, b)
+    return union_find(3 * len(F), *fan_joins(topo.h1, topo.h2, topo.same))
 
 
 def _split_nonmanifold(mesh: Mesh, topo: _Topology, apply: bool) -> tuple[Mesh, int, int]:
