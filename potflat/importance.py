@@ -13,10 +13,11 @@ draws the zone's outline on the maps. Ways to obtain it:
   :data:`DETAIL_OVER_NOISE`, and at least :data:`DETAIL_MIN_DELTA_E`): brush strokes,
   figure outlines and bands have it; glaze, clay, a lighting gradient across the vessel and
   scanner noise do not. Detail closer than :data:`GAP_MM` is joined into one zone, enclosed
-  plain areas are filled, specks below :data:`MIN_ZONE_MM` across are dropped, the zone's
-  edge is pulled back through pixels of the plain surface's colour, at most
-  :data:`DETAIL_REACH_MM` (how far the detail window reaches past the painting's outermost
-  stroke), so that it ends on that stroke, and is softened outwards. Rendering
+  plain areas are filled, specks below :data:`MIN_ZONE_MM` across are dropped. The zone is
+  then made again, the same way, from the strokes within :data:`DETAIL_REACH_MM` of it
+  (pixels whose colour is unlike the plain surface's around it), so that it ends on the
+  outermost strokes rather than where the detail window stops seeing them, and is softened
+  outwards. Rendering
   on the surface's own layout makes it blind to texture-atlas seams. A scan painted nearly all over
   (:data:`ALL_OVER_FRACTION`) or showing no painting gets no importance: the whole surface
   counts alike, exactly as without importance.
@@ -57,11 +58,10 @@ MIN_ZONE_MM = 12.0
 #: Detail is found up to about this far (mm) outside a painting's outermost stroke: the colour
 #: statistics' window (:data:`DETAIL_MM`) straddles an edge out to where the far side's share
 #: of the window, p, has ``sqrt(p (1 - p))`` times the edge's colour difference below the
-#: threshold: 2.8 sigmas for black against white (100 CIELAB units). The found zone is pulled
-#: back up to this far through pixels of the plain surface's colour, so it ends where the
-#: painting's outermost stroke is half way to its own colour; every mm of plain surface inside
-#: the stiff zone is curved surface the painting must share its distortion with. A zone
-#: component that would vanish keeps its own extent.
+#: threshold: 2.8 sigmas for black against white (100 CIELAB units). So the zone is not the
+#: detail itself: it is made again from the strokes (pixels unlike the plain surface) within
+#: this distance of the detail, and ends on them; every mm of plain surface inside the stiff
+#: zone is curved surface the painting must share its distortion with.
 DETAIL_REACH_MM = 3.0 * DETAIL_MM
 #: Width (Gaussian sigma, mm) of the zone's soft edge, outside the zone (inside, importance is 1).
 SOFT_EDGE_MM = 1.0
@@ -189,13 +189,8 @@ def painted_zone_image(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray |
     detail = ((deviation > threshold) & covered).astype(np.uint8)
     if not detail.any():
         return None, f"no painting found (no colour detail above {threshold:.1f} CIELAB units)"
-    # join detail into zones, fill enclosed plain areas, drop specks, end the zone on the painting
-    zone = cv2.morphologyEx(detail, cv2.MORPH_CLOSE, _disc(0.5 * GAP_MM * px_per_mm))
-    zone &= covered.astype(np.uint8)
-    outside = np.zeros((zone.shape[0] + 2, zone.shape[1] + 2), np.uint8)
-    outside[1:-1, 1:-1] = zone
-    cv2.floodFill(outside, None, (0, 0), 2)
-    zone = (outside[1:-1, 1:-1] != 2).astype(np.uint8)  # zone and what it encloses
+    # join detail into zones, fill enclosed plain areas, drop specks, then the same on the strokes
+    zone = _joined(detail, covered, px_per_mm)
     count, labels, stats, _ = cv2.connectedComponentsWithStats(zone, connectivity=8)
     min_area = math.pi * (0.5 * MIN_ZONE_MM * px_per_mm) ** 2
     keep = np.zeros(count, bool)
@@ -203,8 +198,8 @@ def painted_zone_image(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray |
     zone = keep[labels].astype(np.uint8)
     if not zone.any():
         return None, "no painted zone found (only specks of colour detail)"
-    zone = _on_the_painting(zone, covered, labels, _unlike_plain(rgba, zone, covered, threshold, px_per_mm),
-                            DETAIL_REACH_MM * px_per_mm)
+    zone = _on_the_strokes(zone, covered, labels, _unlike_plain(rgba, zone, covered, threshold, px_per_mm),
+                           px_per_mm)
     fraction = float(zone.sum()) / float(covered.sum())
     if fraction >= ALL_OVER_FRACTION:
         return None, f"painted all over ({100 * fraction:.0f}% of the surface): the whole surface counts alike"
@@ -217,7 +212,9 @@ def _unlike_plain(rgba: np.ndarray, zone: np.ndarray, covered: np.ndarray, thres
                   px_per_mm: float) -> np.ndarray:
     """Pixels whose colour differs by more than ``threshold`` (CIELAB units) from the plain
     surface around the zone (its mean colour within :data:`DETAIL_REACH_MM`, so that a lighting
-    gradient does not count); where no plain surface is that near, every pixel differs.
+    gradient does not count), and by more than half the difference of the painting nearby (a
+    stroke's edge pixel counts by its larger part); where no plain surface is that near, every
+    pixel differs.
 
     Returns
     -------
@@ -230,18 +227,29 @@ def _unlike_plain(rgba: np.ndarray, zone: np.ndarray, covered: np.ndarray, thres
     sigma = DETAIL_REACH_MM * px_per_mm
     near = _gaussian(plain, sigma) > 1e-3
     difference = np.sqrt(((lab - _masked_mean(lab, plain, sigma)) ** 2).sum(axis=2))
-    # half way to the painting's colour nearby: a stroke's edge pixel counts by its larger part
     halfway = 0.5 * cv2.dilate(difference, _disc(DETAIL_MM * px_per_mm))
     return ~near | (difference > np.maximum(halfway, threshold))
 
 
-def _on_the_painting(zone: np.ndarray, covered: np.ndarray, labels: np.ndarray, painted: np.ndarray,
-                     reach_px: float) -> np.ndarray:
-    """The zone's edge moved onto the painting's outermost strokes, by at most ``reach_px``:
-    pulled back from plain surface through zone pixels of the plain surface's colour, then
-    grown through pixels unlike it (a stroke's faint end, whose detail the window missed).
-    Not pulled back from the layout's own border (a painting cut by the seam keeps its
-    extent there); a zone component that the pull-back would remove keeps its own extent.
+def _joined(mask: np.ndarray, covered: np.ndarray, px_per_mm: float) -> np.ndarray:
+    """``mask`` (h, w) uint8 with gaps narrower than :data:`GAP_MM` closed and the plain areas
+    it encloses filled, on the covered pixels (h, w) bool."""
+    import cv2
+
+    zone = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, _disc(0.5 * GAP_MM * px_per_mm))
+    zone &= covered.astype(np.uint8)
+    outside = np.zeros((zone.shape[0] + 2, zone.shape[1] + 2), np.uint8)
+    outside[1:-1, 1:-1] = zone
+    cv2.floodFill(outside, None, (0, 0), 2)
+    return (outside[1:-1, 1:-1] != 2).astype(np.uint8)  # zone and what it encloses
+
+
+def _on_the_strokes(zone: np.ndarray, covered: np.ndarray, labels: np.ndarray, painted: np.ndarray,
+                    px_per_mm: float) -> np.ndarray:
+    """The zone made again from the strokes themselves: the pixels unlike the plain surface
+    within :data:`DETAIL_REACH_MM` of the zone, joined and filled as the detail was
+    (:func:`_joined`). Its edge then lies on the outermost strokes, while the background
+    between figures stays in it; a zone component without such pixels keeps its own extent.
 
     Parameters
     ----------
@@ -252,31 +260,19 @@ def _on_the_painting(zone: np.ndarray, covered: np.ndarray, labels: np.ndarray, 
         Component labels of ``zone`` (0 outside it).
     painted : (h, w) bool
         Pixels unlike the plain surface (:func:`_unlike_plain`).
-    reach_px : float
+    px_per_mm : float
 
     Returns
     -------
     (h, w) uint8
     """
-    plain = (covered & (zone == 0)).astype(np.uint8)
-    reached = _geodesic_dilation(plain, ((zone > 0) & ~painted).astype(np.uint8) | plain, reach_px)
-    core = zone & (1 - reached)
-    survives = np.zeros(int(labels.max()) + 1, bool)
-    survives[labels[core > 0]] = True  # (never label 0: the core lies in the zone)
-    core = np.where(survives[labels], core, zone).astype(np.uint8)
-    return _geodesic_dilation(core, (painted & covered).astype(np.uint8) | core, reach_px)
-
-
-def _geodesic_dilation(seed: np.ndarray, allowed: np.ndarray, reach_px: float) -> np.ndarray:
-    """``seed`` (h, w) uint8 grown by up to ``reach_px`` pixels through ``allowed`` (h, w) uint8
-    (which holds ``seed``): steps alternating the 3 x 3 square and cross, a near-round reach."""
     import cv2
 
-    square, cross = np.ones((3, 3), np.uint8), cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
-    grown = seed
-    for step in range(int(round(reach_px))):
-        grown = cv2.dilate(grown, cross if step % 2 else square) & allowed
-    return grown
+    strokes = painted & covered & (cv2.dilate(zone, _disc(DETAIL_REACH_MM * px_per_mm)) > 0)
+    found = np.zeros(int(labels.max()) + 1, bool)
+    found[labels[strokes & (zone > 0)]] = True
+    found[0] = False
+    return _joined(strokes.astype(np.uint8), covered, px_per_mm) | (zone & ~found[labels])
 
 
 def sample_image(image: np.ndarray, px: np.ndarray) -> np.ndarray:

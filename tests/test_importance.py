@@ -283,6 +283,24 @@ def test_the_zone_ends_on_a_panels_edge_through_noise_and_a_lighting_gradient():
     assert zone[outside_mm > 4 * imp.SOFT_EDGE_MM].max() < 0.01
 
 
+def test_the_ground_between_figures_at_the_zones_edge_stays_in_it():
+    """The zone ends on the outermost strokes but keeps the plain ground between figures: two
+    bars 6 mm apart hanging from a band keep the ground between them down to their ends
+    (pulling the zone back from the plain surface ate into it from below)."""
+    px_per_mm = 2.0
+    h, w = 300, 600
+    img = np.zeros((h, w, 4), np.uint8)
+    img[..., :3], img[..., 3] = (188, 94, 52), 255
+    img[100:110, 50:550, :3] = (28, 22, 20)  # a band
+    img[110:170, 200:208, :3] = (28, 22, 20)  # two bars hanging from it
+    img[110:170, 220:228, :3] = (28, 22, 20)
+    zone, reason = imp.painted_zone_image(img, px_per_mm)
+    assert zone is not None, reason
+    assert zone[110:168, 208:220].min() == 1.0  # the ground between them, to their ends (was 0.4 there)
+    assert zone[175:185, 200:228].max() < 0.1  # not the plain surface below them
+    assert zone[90:96, 200:228].max() < 0.1  # nor above the band
+
+
 def test_a_painting_cut_by_the_layout_border_keeps_its_extent_there():
     """The zone is pulled back from plain surface only: where the painting runs into the
     layout's border (the seam, the rim) it stays important up to the border."""
