@@ -188,6 +188,37 @@ def test_a_high_contrast_is_reached_from_a_softer_solve_to_the_same_layout(monke
         assert not any("importance_contrast" in lv for lv in got.levels)
 
 
+def test_a_softer_first_solve_with_a_coarse_copy_only_smooths_the_full_mesh(monkeypatch):
+    """When the first (softer) solve started from a relaxed coarse copy, it spends
+    ``SOLVER.contrast_start_iterations`` on the full mesh and stops there without a note;
+    the second still ends where a first solve run to convergence leads, fold-free."""
+    from dataclasses import replace
+
+    import potflat.relax.solver as solver
+    from potflat.relax.parameters import COARSE, SOLVER
+
+    flat = meshes.vessel_rollout(3000, seed=3)
+    height = flat.uv[:, 1]
+    importance = np.clip((height - np.quantile(height, 0.4)) / (0.05 * np.ptp(height)), 0.0, 1.0)
+    flat = flat.replace(importance=importance)
+    kw = {"preset": "archival", "importance_contrast": 1000.0, "true_scale": False}
+    monkeypatch.setattr(solver, "COARSE", replace(COARSE, min_vertices=1000))
+    capped = relax(flat, **kw)
+    first = [lv for lv in capped.levels if lv.get("importance_contrast") == SOLVER.contrast_start]
+    assert [lv["level"] for lv in first] == ["coarse", "fine"]  # a coarse copy, then the full mesh
+    assert first[-1]["iterations"] == SOLVER.contrast_start_iterations
+    assert not any("stopped by" in note for note in capped.notes)
+    assert capped.flipped == 0 and capped.boundary_overlap == 0 and capped.converged
+    monkeypatch.setattr(solver, "SOLVER", replace(SOLVER, contrast_start_iterations=10**6))
+    full = relax(flat, **kw)
+    assert [lv for lv in full.levels if lv.get("importance_contrast")][-1]["iterations"] > SOLVER.contrast_start_iterations
+    F, V = flat.mesh.faces, flat.mesh.vertices
+    zone = important_faces(F, importance)
+    a, b = face_distortion(V, capped.flat.uv, F), face_distortion(V, full.flat.uv, F)
+    assert np.allclose(a.sigma_max[zone] / a.sigma_min[zone], b.sigma_max[zone] / b.sigma_min[zone], atol=2e-3)
+    assert np.allclose(a.sigma_max[zone] * a.sigma_min[zone], b.sigma_max[zone] * b.sigma_min[zone], atol=2e-3)
+
+
 def test_a_mask_that_marks_nothing_or_everything_means_no_importance(tmp_path):
     import cv2
 
