@@ -13,9 +13,11 @@ draws the zone's outline on the maps. Ways to obtain it:
   :data:`DETAIL_OVER_NOISE`, and at least :data:`DETAIL_MIN_DELTA_E`): brush strokes,
   figure outlines and bands have it; glaze, clay, a lighting gradient across the vessel and
   scanner noise do not. Detail closer than :data:`GAP_MM` is joined into one zone, enclosed
-  plain areas are filled, specks below :data:`MIN_ZONE_MM` across are dropped, the zone's
-  edge is pulled back by :data:`DETAIL_REACH_MM` (how far the detail window reaches past the
-  painting's outermost stroke), grown by :data:`MARGIN_MM` and softened outwards. Rendering
+  plain areas are filled, specks below :data:`MIN_ZONE_MM` across are dropped. The zone is
+  then made again, the same way, from the strokes within :data:`DETAIL_REACH_MM` of it
+  (pixels whose colour is unlike the plain surface's around it), so that it ends on the
+  outermost strokes rather than where the detail window stops seeing them, and is softened
+  outwards. Rendering
   on the surface's own layout makes it blind to texture-atlas seams. A scan painted nearly all over
   (:data:`ALL_OVER_FRACTION`) or showing no painting gets no importance: the whole surface
   counts alike, exactly as without importance.
@@ -54,13 +56,13 @@ GAP_MM = 25.0
 #: Painted zones smaller than a disc of this diameter (mm) are dropped (specks, scratches, noise).
 MIN_ZONE_MM = 12.0
 #: Detail is found up to about this far (mm) outside a painting's outermost stroke: the colour
-#: statistics' window (:data:`DETAIL_MM`) straddles a strong edge (glaze against clay) out to
-#: about two sigmas. The found zone is pulled back by it (a zone thinner than that keeps its
-#: own extent), so that the zone hugs the painting: every mm of plain surface inside the stiff
+#: statistics' window (:data:`DETAIL_MM`) straddles an edge out to where the far side's share
+#: of the window, p, has ``sqrt(p (1 - p))`` times the edge's colour difference below the
+#: threshold: 2.8 sigmas for black against white (100 CIELAB units). So the zone is not the
+#: detail itself: it is made again from the strokes (pixels unlike the plain surface) within
+#: this distance of the detail, and ends on them; every mm of plain surface inside the stiff
 #: zone is curved surface the painting must share its distortion with.
-DETAIL_REACH_MM = 2.0 * DETAIL_MM
-#: The zone is then grown by this margin (mm), so the outermost strokes lie inside it.
-MARGIN_MM = 1.5
+DETAIL_REACH_MM = 3.0 * DETAIL_MM
 #: Width (Gaussian sigma, mm) of the zone's soft edge, outside the zone (inside, importance is 1).
 SOFT_EDGE_MM = 1.0
 #: A zone covering at least this share of the surface means: painted all over (no importance).
@@ -140,18 +142,27 @@ def detail_map(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray, np.ndarr
         normalised over the covered pixels only, so the outline adds none).
     covered : (h, w) bool
     """
-    import cv2
-
-    alpha = rgba[..., 3].astype(np.float32) / 255.0
-    covered = alpha > 0.5
-    lab = cv2.cvtColor(rgba[..., :3].astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
+    lab, covered = _lab(rgba)
     w = covered.astype(np.float32)
     sigma = DETAIL_MM * px_per_mm
-    norm = np.maximum(_gaussian(w, sigma), 1e-6)
-    mean = _gaussian(lab * w[..., None], sigma) / norm[..., None]
-    mean_sq = _gaussian((lab * lab) * w[..., None], sigma) / norm[..., None]
+    mean = _masked_mean(lab, w, sigma)
+    mean_sq = _masked_mean(lab * lab, w, sigma)
     var = np.maximum(mean_sq - mean * mean, 0.0).sum(axis=2)
     return np.sqrt(var).astype(np.float32), covered
+
+
+def _lab(rgba: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """CIELAB colours (h, w, 3) float32 of an RGBA image and its covered pixels (h, w) bool."""
+    import cv2
+
+    covered = rgba[..., 3] > 127
+    return cv2.cvtColor(rgba[..., :3].astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB), covered
+
+
+def _masked_mean(values: np.ndarray, weight: np.ndarray, sigma_px: float) -> np.ndarray:
+    """Gaussian-windowed mean (h, w, c) of ``values`` (h, w, c) over the pixels of ``weight`` (h, w)."""
+    norm = np.maximum(_gaussian(weight, sigma_px), 1e-6)
+    return _gaussian(values * weight[..., None], sigma_px) / norm[..., None]
 
 
 def painted_zone_image(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray | None, str]:
@@ -174,17 +185,12 @@ def painted_zone_image(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray |
     if covered.sum() < 16:
         return None, "too little surface to look for a painting"
     noise = float(np.percentile(deviation[covered], NOISE_PERCENTILE))
-    threshold = max(DETAIL_OVER_NOISE * noise, DETAIL_MIN_DELTA_E)
+    threshold = max(DETAIL_OVER_NOISE * noise, DETAIL_MIN_DELTA_E)  # (CIELAB units, as a colour difference too)
     detail = ((deviation > threshold) & covered).astype(np.uint8)
     if not detail.any():
         return None, f"no painting found (no colour detail above {threshold:.1f} CIELAB units)"
-    # join detail into zones, fill enclosed plain areas, drop specks, hug the painting, add a margin
-    zone = cv2.morphologyEx(detail, cv2.MORPH_CLOSE, _disc(0.5 * GAP_MM * px_per_mm))
-    zone &= covered.astype(np.uint8)
-    outside = np.zeros((zone.shape[0] + 2, zone.shape[1] + 2), np.uint8)
-    outside[1:-1, 1:-1] = zone
-    cv2.floodFill(outside, None, (0, 0), 2)
-    zone = (outside[1:-1, 1:-1] != 2).astype(np.uint8)  # zone and what it encloses
+    # join detail into zones, fill enclosed plain areas, drop specks, then the same on the strokes
+    zone = _joined(detail, covered, px_per_mm)
     count, labels, stats, _ = cv2.connectedComponentsWithStats(zone, connectivity=8)
     min_area = math.pi * (0.5 * MIN_ZONE_MM * px_per_mm) ** 2
     keep = np.zeros(count, bool)
@@ -192,8 +198,8 @@ def painted_zone_image(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray |
     zone = keep[labels].astype(np.uint8)
     if not zone.any():
         return None, "no painted zone found (only specks of colour detail)"
-    zone = _pulled_back(zone, covered, labels, DETAIL_REACH_MM * px_per_mm)
-    zone = cv2.dilate(zone, _disc(MARGIN_MM * px_per_mm)) & covered.astype(np.uint8)
+    zone = _on_the_strokes(zone, covered, labels, _unlike_plain(rgba, zone, covered, threshold, px_per_mm),
+                           px_per_mm)
     fraction = float(zone.sum()) / float(covered.sum())
     if fraction >= ALL_OVER_FRACTION:
         return None, f"painted all over ({100 * fraction:.0f}% of the surface): the whole surface counts alike"
@@ -202,10 +208,48 @@ def painted_zone_image(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray |
     return soft, f"painted zone found in the colours (detail above {threshold:.1f} CIELAB units)"
 
 
-def _pulled_back(zone: np.ndarray, covered: np.ndarray, labels: np.ndarray, reach_px: float) -> np.ndarray:
-    """The zone eroded by ``reach_px`` away from plain surface (not from the layout's own
-    border: a painting cut by the seam keeps its extent there); a zone component that the
-    erosion would remove keeps its own extent.
+def _unlike_plain(rgba: np.ndarray, zone: np.ndarray, covered: np.ndarray, threshold: float,
+                  px_per_mm: float) -> np.ndarray:
+    """Pixels whose colour differs by more than ``threshold`` (CIELAB units) from the plain
+    surface around the zone (its mean colour within :data:`DETAIL_REACH_MM`, so that a lighting
+    gradient does not count), and by more than half the difference of the painting nearby (a
+    stroke's edge pixel counts by its larger part); where no plain surface is that near, every
+    pixel differs.
+
+    Returns
+    -------
+    (h, w) bool
+    """
+    import cv2
+
+    lab = _gaussian(_lab(rgba)[0], 0.5)  # half a pixel: less noise, and an edge's half way stays put
+    plain = (covered & (zone == 0)).astype(np.float32)
+    sigma = DETAIL_REACH_MM * px_per_mm
+    near = _gaussian(plain, sigma) > 1e-3
+    difference = np.sqrt(((lab - _masked_mean(lab, plain, sigma)) ** 2).sum(axis=2))
+    halfway = 0.5 * cv2.dilate(difference, _disc(DETAIL_MM * px_per_mm))
+    return ~near | (difference > np.maximum(halfway, threshold))
+
+
+def _joined(mask: np.ndarray, covered: np.ndarray, px_per_mm: float) -> np.ndarray:
+    """``mask`` (h, w) uint8 with gaps narrower than :data:`GAP_MM` closed and the plain areas
+    it encloses filled, on the covered pixels (h, w) bool."""
+    import cv2
+
+    zone = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, _disc(0.5 * GAP_MM * px_per_mm))
+    zone &= covered.astype(np.uint8)
+    outside = np.zeros((zone.shape[0] + 2, zone.shape[1] + 2), np.uint8)
+    outside[1:-1, 1:-1] = zone
+    cv2.floodFill(outside, None, (0, 0), 2)
+    return (outside[1:-1, 1:-1] != 2).astype(np.uint8)  # zone and what it encloses
+
+
+def _on_the_strokes(zone: np.ndarray, covered: np.ndarray, labels: np.ndarray, painted: np.ndarray,
+                    px_per_mm: float) -> np.ndarray:
+    """The zone made again from the strokes themselves: the pixels unlike the plain surface
+    within :data:`DETAIL_REACH_MM` of the zone, joined and filled as the detail was
+    (:func:`_joined`). Its edge then lies on the outermost strokes, while the background
+    between figures stays in it; a zone component without such pixels keeps its own extent.
 
     Parameters
     ----------
@@ -214,7 +258,9 @@ def _pulled_back(zone: np.ndarray, covered: np.ndarray, labels: np.ndarray, reac
     covered : (h, w) bool
     labels : (h, w) int32
         Component labels of ``zone`` (0 outside it).
-    reach_px : float
+    painted : (h, w) bool
+        Pixels unlike the plain surface (:func:`_unlike_plain`).
+    px_per_mm : float
 
     Returns
     -------
@@ -222,10 +268,11 @@ def _pulled_back(zone: np.ndarray, covered: np.ndarray, labels: np.ndarray, reac
     """
     import cv2
 
-    core = cv2.erode(zone | (~covered).astype(np.uint8), _disc(reach_px)) & zone
-    survives = np.zeros(int(labels.max()) + 1, bool)
-    survives[labels[core > 0]] = True  # (never label 0: the core lies in the zone)
-    return np.where(survives[labels], core, zone).astype(np.uint8)
+    strokes = painted & covered & (cv2.dilate(zone, _disc(DETAIL_REACH_MM * px_per_mm)) > 0)
+    found = np.zeros(int(labels.max()) + 1, bool)
+    found[labels[strokes & (zone > 0)]] = True
+    found[0] = False
+    return _joined(strokes.astype(np.uint8), covered, px_per_mm) | (zone & ~found[labels])
 
 
 def sample_image(image: np.ndarray, px: np.ndarray) -> np.ndarray:

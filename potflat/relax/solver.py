@@ -798,7 +798,7 @@ def _softer_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
         return None
     budget = _budget_left(deadline)
     sub = _relax(flat, replace(options, importance_contrast=low, time_budget=budget, true_scale=False), progress,
-                 callback, summaries=False)
+                 callback, summaries=False, fine_iterations=SOLVER.contrast_start_iterations)
     return _SofterStart(uv=sub.flat.uv, contrast=low, result=replace(sub, flat=None))
 
 
@@ -965,11 +965,13 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
 
 
 def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, summaries: bool,
-           softened: bool = False) -> RelaxResult:
+           softened: bool = False, fine_iterations: int | None = None) -> RelaxResult:
     """:func:`relax`; without ``summaries`` (a coarse copy, whose layout is all its caller
     reads) the result's distortion summaries are None and its stress is not computed;
     ``softened``: the start is already relaxed at a lower importance contrast (a coarse
-    copy of such a start), so no softer first solve."""
+    copy of such a start), so no softer first solve; ``fine_iterations``: when a coarse copy
+    was relaxed, at most this many iterations on ``flat`` itself (a first solve that only
+    smooths)."""
     settings = options.resolved()
     V = np.ascontiguousarray(flat.mesh.vertices, dtype=np.float64)
     uv = np.ascontiguousarray(flat.uv, dtype=np.float64)
@@ -1056,7 +1058,9 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
             levels: list[dict] = []
             prefix = [] if softer is None else list(softer.result.energy_history)
             prefix += [] if coarse is None else list(coarse.result.energy_history)
-            run = _Run(settings["max_iter"] + len(prefix), deadline, callback, report)
+            # (a first solve without a coarse copy must converge: nothing else moves its plain surface far)
+            capped = coarse is not None and fine_iterations is not None and fine_iterations < settings["max_iter"]
+            run = _Run((fine_iterations if capped else settings["max_iter"]) + len(prefix), deadline, callback, report)
             run.history.extend(prefix)
             if softer is not None:
                 levels.extend({**level, "importance_contrast": softer.contrast} for level in softer.result.levels)
@@ -1119,7 +1123,8 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         levels=tuple(levels),
         settings=settings,
         scale_factor=factor,
-        notes=tuple(notes + ([f"stopped by {run.stopped}"] if run.stopped else [])),
+        notes=tuple(notes + ([f"stopped by {run.stopped}"] if run.stopped and not (capped and run.stopped == "max_iter")
+                             else [])),
     )
 
 
