@@ -44,7 +44,7 @@ def test_springs_and_cross_rest_lengths_match_reference(bumpy):
     from potflat.relax._kernels.springs import cross_rest_lengths, halfedge_springs, vertex_faces
 
     V, F = bumpy.mesh.vertices, bumpy.mesh.faces
-    edges, cross, boundary = halfedge_springs(F, *vertex_faces(len(V), F))
+    edges, cross, boundary = halfedge_springs(F, *vertex_faces(len(V), F), True)
     r_cross = cross_rest_lengths(V, cross)
     want_pairs, want_rest = ref.springs(V, F)
     got = np.concatenate([edges, np.sort(cross[:, :2], axis=1)])

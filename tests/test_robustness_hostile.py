@@ -631,6 +631,36 @@ def test_compile_note_is_a_plain_line_when_stderr_is_not_a_terminal(tmp_path, mo
     assert log.getvalue() == ""
 
 
+def test_the_main_command_compiles_each_kernel_for_one_argument_type(tmp_path):
+    """A second type specialisation of a kernel is a second compile on a first run: an
+    omitted default argument in one call and not in another, or read-only rows for the PNG
+    filter, each cost seconds (issue 15). Specialisations to constants passed between
+    kernels (Numba's literal types) are left aside."""
+    sample = Path(__file__).resolve().parents[1] / "samples" / "data" / "amphora.obj"
+    code = f"""
+import sys, numba
+from numba.core import types
+from potflat_cli.main import app
+sys.argv = ["potflat", "run", {str(sample)!r}, "-o", {str(tmp_path / "out")!r}]
+try:
+    app()
+except SystemExit as stop:
+    assert not stop.code, stop.code
+twice = []
+for name, module in list(sys.modules.items()):
+    if not name.startswith("potflat"):
+        continue
+    for kname, kernel in vars(module).items():
+        if isinstance(kernel, numba.core.registry.CPUDispatcher) and kernel.__module__ == name:
+            plain = [s for s in kernel.signatures if not any(isinstance(a, types.Literal) for a in s)]
+            if len(plain) > 1:
+                twice.append(f"{{name}}.{{kname}}: {{plain}}")
+print("KERNELS OF MORE THAN ONE TYPE:", twice)
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert "KERNELS OF MORE THAN ONE TYPE: []" in out, out[-2000:]
+
+
 def test_a_refused_run_does_not_announce_compiling_first(tmp_path, fake_stages, monkeypatch):
     import numba
 

@@ -45,8 +45,8 @@ def _meshes() -> dict[str, tuple[np.ndarray, int]]:
         "bowtie vertex": (np.array([[0, 1, 2], [0, 3, 4]]), 5),
         "fan of valence 8": _fan(8),
         "fan of valence 16 (insertion sort)": _fan(16),
-        "fan of valence 17 (merge sort)": _fan(17),
-        "fan of valence 100 (merge sort)": _fan(100),
+        "fan of valence 17 (heap sort)": _fan(17),
+        "fan of valence 100 (heap sort)": _fan(100),
         "vessel": (vessel.faces, len(vessel.vertices)),
     }
     rng = np.random.default_rng(7)
@@ -66,7 +66,7 @@ def _same(a, b):
 
 def test_awkward_cases_cover_each_kind_of_edge():
     """The cases contain self-loop edges, p == q pairs, cross springs, edges of 3+ faces,
-    and vertices on both sides of the switch from insertion to merge sort."""
+    and vertices on both sides of the switch from insertion to heap sort."""
     F, n = MESHES["degenerate faces"]
     edges, _, _ = ref.halfedge_springs(F, n)
     assert np.any(edges[:, 0] == edges[:, 1])
@@ -85,19 +85,19 @@ def test_halfedge_springs_equal_the_sorting_reference(name):
     for threads in (1, 2):
         with numba_threads(threads):
             for faces in (np.ascontiguousarray(F, np.int64), np.ascontiguousarray(F, np.int32)):
-                got = ks.halfedge_springs(faces, *ks.vertex_faces(n, faces))
+                got = ks.halfedge_springs(faces, *ks.vertex_faces(n, faces), True)
                 assert all(_same(g, w) for g, w in zip(got, want)), name
                 edges, cross, boundary = ks.halfedge_springs(faces, *ks.vertex_faces(n, faces), False)
                 assert _same(edges, want[0]) and cross.shape == (0, 4) and boundary.shape == (0, 2)
 
 
 @pytest.mark.parametrize("name", ["two triangles", "non-manifold edge (3 faces)", "degenerate faces",
-                                  "duplicate face", "fan of valence 100 (merge sort)", "vessel", "random soup 3"])
+                                  "duplicate face", "fan of valence 100 (heap sort)", "vessel", "random soup 3"])
 def test_spring_csr_equals_the_numpy_assembly(name):
     F, n = MESHES[name]
     V = np.random.default_rng(1).normal(size=(n, 3))
     F = np.asarray(F, np.int64)
-    edges, cross, _ = ks.halfedge_springs(F, *ks.vertex_faces(n, F))
+    edges, cross, _ = ks.halfedge_springs(F, *ks.vertex_faces(n, F), True)
     cross_rest = ks.cross_rest_lengths(V, cross)
     want = ref.spring_csr(V, edges, cross, cross_rest)
     assert all(_same(g, w) for g, w in zip(ks.build_csr(V, edges, cross, cross_rest), want))

@@ -173,7 +173,7 @@ class PngWriter:
             raw = raw.astype(">u2").view(np.uint8).reshape(len(rows), -1)
         from potflat.io._kernels import paeth_filter
 
-        raw = np.ascontiguousarray(raw)
+        raw = np.require(raw, requirements=["C", "W"])  # one kernel signature (read-only rows: copied)
         filtered = np.empty((raw.shape[0], raw.shape[1] + 1), np.uint8)
         paeth_filter(raw, self._prev, self.channels * self.bits // 8, filtered)
         self._prev = raw[-1].copy()

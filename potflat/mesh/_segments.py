@@ -102,7 +102,9 @@ def crossing_pairs(x, seg, cell, max_pairs):
                 if _segments_cross(x[seg[a, 0]], x[seg[a, 1]], x[seg[b, 0]], x[seg[b, 1]]):
                     if count == len(pairs):  # grow: a ragged border may cross itself often
                         grown = np.empty((min(2 * count, max_pairs), 2), np.int64)
-                        grown[:count] = pairs
+                        for r in range(count):  # (a slice assignment costs seconds of compiling)
+                            grown[r, 0] = pairs[r, 0]
+                            grown[r, 1] = pairs[r, 1]
                         pairs = grown
                     pairs[count, 0] = a
                     pairs[count, 1] = b

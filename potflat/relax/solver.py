@@ -248,7 +248,7 @@ class _Springs:
 
         self.ks, self.ko = ks, relax_overlap
         self.vf_ptr, self.vf_tri = ks.vertex_faces(n, faces)
-        edges, cross, self.boundary_segments = ks.halfedge_springs(faces, self.vf_ptr, self.vf_tri)
+        edges, cross, self.boundary_segments = ks.halfedge_springs(faces, self.vf_ptr, self.vf_tri, True)
         self.ptr, self.nbr, self.rst = ks.build_csr(V, edges, cross, ks.cross_rest_lengths(V, cross))
         del edges, cross  # peak memory: the spring lists are only needed for the CSR
         areas = face_areas(V, faces)

@@ -38,13 +38,13 @@ BLOCK = 4096
 THIRD = 1.0 / 3.0
 
 
-#: A vertex's half-edges are sorted by insertion up to this many, by merge sort above (a fan
+#: A vertex's half-edges are sorted by insertion up to this many, by heap sort above (a fan
 #: of thousands of faces stays ``O(d log d)``).
 INSERTION_MAX = 32
 
 
 @parallel
-def halfedge_springs(faces, vf_ptr, vf_tri, springs=True):
+def halfedge_springs(faces, vf_ptr, vf_tri, springs):
     """Unique edges and cross springs of a triangle mesh.
 
     Count-then-fill over the vertices (no global sort): each vertex ``i`` groups the
@@ -56,7 +56,7 @@ def halfedge_springs(faces, vf_ptr, vf_tri, springs=True):
     ----------
     faces : (m, 3) int32 or int64
     vf_ptr, vf_tri : CSR from :func:`vertex_faces` (its length gives the number of vertices)
-    springs : bool, optional
+    springs : bool
         False: only the edges (``cross`` and ``boundary`` come back empty).
 
     Returns
@@ -110,6 +110,30 @@ def halfedge_springs(faces, vf_ptr, vf_tri, springs=True):
 
 
 @leaf
+def _swap(hj, hh, a, b):
+    hj[a], hj[b] = hj[b], hj[a]
+    hh[a], hh[b] = hh[b], hh[a]
+
+
+@leaf
+def _sift_down(hj, hh, root, end):
+    """Restore the max-heap by ``(hj, hh)`` of slots ``[0, end)`` below ``root``.
+
+    (A hand-written heap sort: NumPy's argsort and slice assignments inside a kernel took
+    seconds to compile on a first run, for a branch only big fans take.)"""
+    while True:
+        child = 2 * root + 1
+        if child >= end:
+            return
+        if child + 1 < end and (hj[child] < hj[child + 1] or (hj[child] == hj[child + 1] and hh[child] < hh[child + 1])):
+            child += 1
+        if hj[root] > hj[child] or (hj[root] == hj[child] and hh[root] > hh[child]):
+            return
+        _swap(hj, hh, root, child)
+        root = child
+
+
+@leaf
 def _lower_halfedges(i, vf_ptr, vf_tri, faces, hj, hh):
     """The half-edges whose smaller endpoint is vertex ``i``, sorted by ``(j, h)``.
 
@@ -142,10 +166,12 @@ def _lower_halfedges(i, vf_ptr, vf_tri, faces, hj, hh):
                 hh[k] = 3 * f + c
                 k += 1
     # the faces come in increasing order, so h does: a stable sort by j sorts by (j, h)
-    if k > INSERTION_MAX:
-        order = np.argsort(hj[:k], kind="mergesort")
-        hj[:k] = hj[order]
-        hh[:k] = hh[order]
+    if k > INSERTION_MAX:  # a big fan: heap sort by (j, h), h unique
+        for root in range(k // 2 - 1, -1, -1):
+            _sift_down(hj, hh, root, k)
+        for end in range(k - 1, 0, -1):
+            _swap(hj, hh, 0, end)
+            _sift_down(hj, hh, 0, end)
         return k
     for s in range(1, k):
         j = hj[s]
