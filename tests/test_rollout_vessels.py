@@ -9,7 +9,7 @@ from typer.testing import CliRunner
 
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.flat_ply import read_flat_ply
-from potflat.mesh.boundary import boundary_segments, edges_and_boundary
+from potflat.mesh.boundary import edges_and_boundary
 from potflat.rollout.unroll import (
     RolloutOptions,
     border_folds,
@@ -152,7 +152,7 @@ def test_border_folds_keeps_enclosed_folds_and_untangle_fixes_them():
     assert not border_folds(faces, folded, area).any()  # enclosed: left to untangle
     fixed, n_bad, moved = untangle(faces, folded)
     assert n_bad > 0 and moved >= 1 and np.all(signed_areas(faces, fixed) > 0)
-    border = np.unique(boundary_segments(faces, 36)[0])
+    border = np.unique(edges_and_boundary(faces, 36)[1])
     np.testing.assert_array_equal(fixed[border], folded[border])
     # the same fold on the border is trimmed
     edge = uv.copy()

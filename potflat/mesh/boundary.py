@@ -83,15 +83,3 @@ def edges_and_boundary(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarra
     owner, k = half // 3, half % 3
     return edges, np.stack([F[owner, k], F[owner, (k + 1) % 3]], axis=1), owner
 
-
-def boundary_segments(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Edges used by one face only (:func:`edges_and_boundary` without the edges).
-
-    Returns
-    -------
-    segments : (b, 2) int64
-        Vertex pairs, in their face's order.
-    owner : (b,) int64
-        The face of each segment.
-    """
-    return edges_and_boundary(faces, n)[1:]
