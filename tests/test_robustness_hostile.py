@@ -441,6 +441,7 @@ def test_an_interrupted_batch_records_cancelled_and_interrupted_scans(tmp_path, 
 def test_stopping_the_pool_ends_its_workers_and_cancels_the_queue():
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
+    from multiprocessing.connection import wait
 
     from potflat.stages.batch import START_METHOD, _stop_workers, _worker_start
 
@@ -454,7 +455,9 @@ def test_stopping_the_pool_ends_its_workers_and_cancels_the_queue():
     start = time.monotonic()
     _stop_workers(pool)
     assert time.monotonic() - start < 30
-    assert processes and not any(p.is_alive() for p in processes)
+    # ended: each sentinel is ready (is_alive can read True for a moment while the executor's
+    # own thread reaps the process)
+    assert processes and len(wait([p.sentinel for p in processes], timeout=0)) == len(processes)
     time.sleep(0.5)  # the executor's own thread marks what was left
     finished = [f for f in queued if f.done() and not f.cancelled() and f.exception(timeout=0) is None]
     assert not finished  # no queued scan ran after the stop

@@ -977,17 +977,23 @@ def _run_pool(todo: list, workers: int, record: Callable[[int, ScanReport], None
 def _stop_workers(pool) -> None:
     """Cancel the queued scans and end the workers of ``pool`` (SIGTERM: they remove their
     temporaries), killing those still alive after :data:`WORKER_STOP_SECONDS`."""
+    from multiprocessing.connection import wait
+
     processes = list((getattr(pool, "_processes", None) or {}).values())  # shutdown() forgets them
     pool.shutdown(wait=False, cancel_futures=True)
-    for proc in processes:
+    running = {}  # sentinel -> process: the sentinel is ready once the process has ended, whichever
+    for proc in processes:  # thread reaps it (the executor's own thread may, so join can return early)
         with contextlib.suppress(Exception):
             proc.terminate()
+            running[proc.sentinel] = proc
     deadline = time.monotonic() + WORKER_STOP_SECONDS
-    for proc in processes:
+    with contextlib.suppress(OSError, ValueError):  # a sentinel closed meanwhile: kill what is left
+        while running and time.monotonic() < deadline:
+            for sentinel in wait(list(running), max(0.0, deadline - time.monotonic())):
+                running.pop(sentinel)
+    for proc in running.values():
         with contextlib.suppress(Exception):
-            proc.join(max(0.0, deadline - time.monotonic()))
-            if proc.is_alive():
-                proc.kill()
+            proc.kill()
 
 
 def _dask_client(address: str):
