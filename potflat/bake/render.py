@@ -290,7 +290,7 @@ def _pull_fill(levels: list, valids: list) -> None:
         hole = ~valids[k]
         if hole.any():
             up = cv2.resize(levels[k + 1], levels[k].shape[1::-1], interpolation=cv2.INTER_LINEAR)
-            levels[k][hole] = up.reshape(levels[k].shape)[hole]
+            np.copyto(levels[k], up.reshape(levels[k].shape), where=hole[..., None])  # (no gather of the holes)
 
 
 @dataclass(frozen=True)
