@@ -11,6 +11,8 @@ EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 #: Signals received (SIGINT, SIGTERM): checked between stages, between a batch's results and
 #: at the end, since the KeyboardInterrupt the handler raises is lost when it lands in a finaliser.
 STOP: list[int] = []
+#: What an interrupted command says.
+INTERRUPTED = "interrupted; outputs already finished are kept, none is half-written"
 
 
 def check_stop() -> None:
@@ -41,17 +43,21 @@ def user_errors(func):
             result = func(*args, **kwargs)
             check_stop()
             return result
-        except PotflatError as exc:
-            raise fail(str(exc)) from None
-        except (FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError) as exc:
-            # e.g. an output folder under a regular file: -o notes.txt/out
-            raise fail(f"{exc.filename}: {exc.strerror}; check the path (every folder in it must be a "
-                       "writable folder)") from None
-        except OSError as exc:  # disk full, file too large, I/O error: outputs are never left half-written
-            where = f"{exc.filename}: " if exc.filename else "writing the outputs: "
-            raise fail(f"{where}{exc.strerror or exc}; check the free disk space, quotas and the output "
-                       "folder, then run again") from None
         except KeyboardInterrupt:
-            raise fail("interrupted; outputs already finished are kept, none is half-written", 130) from None
+            raise fail(INTERRUPTED, 130) from None
+        except Exception as exc:
+            if STOP:  # whatever the interrupt broke: e.g. a Numba call it landed in raises SystemError
+                raise fail(INTERRUPTED, 130) from None
+            if isinstance(exc, PotflatError):
+                raise fail(str(exc)) from None
+            if isinstance(exc, (FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError)):
+                # e.g. an output folder under a regular file: -o notes.txt/out
+                raise fail(f"{exc.filename}: {exc.strerror}; check the path (every folder in it must be a "
+                           "writable folder)") from None
+            if isinstance(exc, OSError):  # disk full, file too large, I/O error: outputs are never left half-written
+                where = f"{exc.filename}: " if exc.filename else "writing the outputs: "
+                raise fail(f"{where}{exc.strerror or exc}; check the free disk space, quotas and the output "
+                           "folder, then run again") from None
+            raise
 
     return wrapper

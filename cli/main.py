@@ -57,7 +57,7 @@ class _Group(TyperGroup):
         except ImportError:
             import click
 
-        from potflat_cli._errors import EXIT_USAGE, STOP, fail
+        from potflat_cli._errors import EXIT_USAGE, INTERRUPTED, STOP, fail
 
         STOP.clear()
         args = list(sys.argv[1:] if args is None else args)
@@ -77,7 +77,7 @@ class _Group(TyperGroup):
             fail(f"{message[:1].lower()}{message[1:]}; see '{command} --help'", exc.exit_code)
             code = exc.exit_code
         except typer.Abort:
-            fail("interrupted; outputs already finished are kept, none is half-written", 130)
+            fail(INTERRUPTED, 130)
             code = 130
         sys.exit(code or 0)
 

@@ -512,6 +512,52 @@ def test_an_interrupt_python_swallowed_still_stops_with_130(capsys):
     assert exit_.value.exit_code == 130 and "interrupted" in capsys.readouterr().err
 
 
+def test_an_interrupt_that_broke_a_numba_call_stops_with_130_not_a_traceback(capsys):
+    """A signal handled while a Numba dispatcher calls back into Python makes the call raise
+    SystemError ("returned a result with an exception set"); after a stop signal, any error
+    is the interrupt's."""
+    import typer
+
+    from potflat_cli._errors import STOP, user_errors
+
+    @user_errors
+    def command():
+        STOP.append(signal.SIGTERM)
+        raise SystemError("CPUDispatcher(<function build_csr>) returned a result with an exception set")
+
+    try:
+        with pytest.raises(typer.Exit) as exit_:
+            command()
+    finally:
+        STOP.clear()
+    assert exit_.value.exit_code == 130 and "interrupted" in capsys.readouterr().err
+
+    @user_errors
+    def broken():  # without a stop signal the error is a bug, and is not hidden
+        raise SystemError("a bug")
+
+    with pytest.raises(SystemError):
+        broken()
+
+
+def test_python_m_ends_an_interrupt_that_left_an_exec_with_130(tmp_path):
+    """Under ``python -m``, a KeyboardInterrupt that left an ``exec`` of a string (where a
+    dataclass or a Numba wrapper is made) made CPython end the process by SIGINT (-2), not
+    with the exit code 130. The rollout is replaced (``sitecustomize``) by one that is
+    interrupted inside an ``exec``."""
+    (tmp_path / "sitecustomize.py").write_text(
+        "import potflat.rollout\n"
+        "def _interrupted(*args, **kwargs):\n"
+        "    exec('import os, signal\\nos.kill(os.getpid(), signal.SIGTERM)\\nfor _ in range(10 ** 7): pass')\n"
+        "potflat.rollout.run_rollout_stage = _interrupted\n")
+    scan = _tube_obj(tmp_path / "vase.obj")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")])}
+    r = subprocess.run([sys.executable, "-m", "potflat_cli", "rollout", str(scan), "-o", str(tmp_path / "out")],
+                       capture_output=True, text=True, env=env, timeout=120)
+    assert r.returncode == 130 and "error: interrupted" in r.stderr and "Traceback" not in r.stderr, (r.returncode,
+                                                                                                     r.stderr[-1000:])
+
+
 def test_sigterm_ends_a_run_like_ctrl_c(tmp_path):
     """SIGTERM mid-run: exit 130, the interrupt message, no .part temporaries left."""
     scan = _tube_obj(tmp_path / "vase.obj", radius=60, height=200)
