@@ -118,3 +118,23 @@ def test_edge_kernels_and_shared_reference_match_numpy():
             den[v] += a
     ref_stress = np.sqrt(num / den)
     np.testing.assert_allclose(vertex_stress(V, uv, F), ref_stress, rtol=1e-12)
+
+
+def test_weighted_percentiles_match_a_slow_reference():
+    """Integer weights: the weighted percentile is the plain one of the values repeated
+    by their weights (the smallest value whose cumulative share reaches q); several from
+    one sort equal one at a time."""
+    from potflat.mesh.distortion import weighted_percentile, weighted_percentiles
+
+    rng = np.random.default_rng(3)
+    for _ in range(30):
+        values = rng.integers(0, 20, int(rng.integers(1, 40))).astype(float)
+        weights = rng.integers(0, 4, len(values)).astype(float)
+        qs = (0.0, 12.5, 50.0, 95.0, 100.0)
+        if not weights.any():
+            assert all(np.isnan(weighted_percentiles(values, weights, qs)))
+            continue
+        repeated = np.repeat(values, weights.astype(int))
+        want = [float(np.percentile(repeated, q, method="inverted_cdf")) for q in qs]
+        assert weighted_percentiles(values, weights, qs) == want
+        assert [weighted_percentile(values, weights, q) for q in qs] == want

@@ -384,13 +384,18 @@ def important_faces(faces: np.ndarray, importance: np.ndarray | None) -> np.ndar
 def weighted_percentile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
     """The ``q``-th percentile (0-100) of ``values`` where each counts with its weight (the
     smallest value at or above ``q`` % of the total weight). NaN for no positive weight."""
+    return weighted_percentiles(values, weights, (q,))[0]
+
+
+def weighted_percentiles(values: np.ndarray, weights: np.ndarray, qs) -> list[float]:
+    """:func:`weighted_percentile` for each of ``qs``, from one sort of ``values``."""
     values, weights = np.asarray(values, float), np.asarray(weights, float)
     keep = weights > 0
     if not keep.any():
-        return float("nan")
+        return [float("nan")] * len(qs)
     order = np.argsort(values[keep], kind="stable")
     v, cum = values[keep][order], np.cumsum(weights[keep][order])
-    return float(v[min(np.searchsorted(cum, q / 100.0 * cum[-1]), len(v) - 1)])
+    return [float(v[min(np.searchsorted(cum, q / 100.0 * cum[-1]), len(v) - 1)]) for q in qs]
 
 
 def length_scale(fd: FaceDistortion) -> np.ndarray:
@@ -461,12 +466,13 @@ def zone_figures(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, import
         if not sel.any() or w.sum() <= 0:
             out[key] = ZoneFigures(0.0, int(sel.sum()), float("nan"), float("nan"), float("nan"), None)
             continue
+        err_median, err_p95 = weighted_percentiles(err, w, (50.0, 95.0))
         out[key] = ZoneFigures(
             area_fraction=float(w.sum()) / total,
             faces=int(sel.sum()),
             scale_median=weighted_percentile(scale, w, 50.0),
-            length_error_median_pct=100.0 * weighted_percentile(err, w, 50.0),
-            length_error_p95_pct=100.0 * weighted_percentile(err, w, 95.0),
+            length_error_median_pct=100.0 * err_median,
+            length_error_p95_pct=100.0 * err_p95,
             distortion=summarize(vertices, uv, faces[sel]),
         )
     return out
