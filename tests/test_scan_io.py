@@ -178,6 +178,35 @@ def test_obj_welds_atlas_seam_and_keeps_corner_texcoords(tmp_path):
     assert mesh.units == "mm" and mesh.source == obj.resolve()
 
 
+def test_a_repeating_texture_is_read_in_its_one_image(tmp_path):
+    """Texture coordinates past [0, 1] (the image repeats, as renderers read them): each face
+    is moved by whole images into the first, so it reads its painting and not the image's
+    border; a face across the border of two copies is counted in the warning; coordinates
+    already in the image are untouched."""
+    _png(tmp_path / "t.png")
+    (tmp_path / "t.mtl").write_text("newmtl m\nmap_Kd t.png\n")
+    head = "mtllib t.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 2 0 0\nv 0 2 0\n"
+    inside = "vt 0.1 0.2\nvt 0.4 0.2\nvt 0.1 0.6\nvt 0.4 0.6\nvt 0.9 0.2\nvt 0.1 0.9\n"
+    faces = "f 1/1 2/2 3/3\nf 2/2 4/4 3/3\nf 2/2 5/5 4/4\nf 3/3 4/4 6/6\n"
+    (tmp_path / "a.obj").write_text(head + inside + faces)
+    plain = load_scan(tmp_path / "a.obj", clean=False)
+    assert not any("repeating" in w for w in plain.report.warnings)
+
+    moved = "".join(f"vt {u + 3:g} {v - 2:g}\n" for u, v in [(0.1, 0.2), (0.4, 0.2), (0.1, 0.6), (0.4, 0.6),
+                                                           (0.9, 0.2), (0.1, 0.9)])
+    (tmp_path / "b.obj").write_text(head + moved + faces)
+    tiled = load_scan(tmp_path / "b.obj", clean=False)
+    assert np.allclose(tiled.mesh.texcoords, plain.mesh.texcoords, atol=1e-12)
+    assert any("4 faces were moved" in w for w in tiled.report.warnings)
+
+    across = "vt 0.1 0.2\nvt 0.4 0.2\nvt 0.1 0.6\nvt 0.4 0.6\nvt 2.5 0.2\nvt 0.1 0.9\n"  # face 3: centre at u 1.1
+    (tmp_path / "c.obj").write_text(head + across + faces)
+    straddling = load_scan(tmp_path / "c.obj", clean=False)
+    assert any("1 faces were moved" in w and "1 faces cross its border" in w for w in straddling.report.warnings)
+    centres = straddling.mesh.texcoords.mean(axis=1)
+    assert (centres >= 0.0).all() and (centres < 1.0).all()
+
+
 def test_obj_negative_indices_polygons_and_slash_forms(tmp_path):
     text = """# a unit cube as quads, relative indices, v//vn and v/vt/vn forms
 v 0 0 0

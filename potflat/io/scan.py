@@ -52,6 +52,9 @@ MAX_COORDINATE = 1e50
 MAX_TEXTURE_PIXELS = 32768 * 32768
 _TEXTURE_MODES = ("use", "ignore")
 _IGNORE_HINT = "or pass texture='ignore' (CLI --no-texture) to load it untextured"
+#: How far past the image (in image widths) a moved face may reach before it counts as
+#: crossing into the next copy of a repeating texture (exporters round coordinates).
+TILE_SLACK = 1e-6
 
 
 @dataclass(frozen=True)
@@ -276,6 +279,7 @@ def _validate(raw: _Raw, path: Path, units: str | None, texture: str, max_pixels
         tex = None
     if tex is not None:
         tex = _check_texture(tex, path, max_pixels)[0]
+        tc = _into_the_tile(tc, raw.warnings)
     declared = raw.units
     if units is None:
         units = declared or "mm"
@@ -283,6 +287,28 @@ def _validate(raw: _Raw, path: Path, units: str | None, texture: str, max_pixels
         raw.warnings.append(f"the file declares units {declared!r} but units={units!r} was given; using {units!r}")
     colors = raw.colors
     return Mesh(V, F, texcoords=tc, texture_path=tex, vertex_colors=colors, units=units, source=path)
+
+
+def _into_the_tile(texcoords: np.ndarray, warnings: list[str]) -> np.ndarray:
+    """Texture coordinates (m, 3, 2) of a repeating texture moved into its one tile.
+
+    Coordinates past [0, 1] mean that the image repeats (as renderers read them). Each face
+    whose centre lies in another copy of the image is moved by whole images into the first,
+    where the sampler reads it (else it would read the image's border: a painting lost). A
+    face across the border of two copies still reads the border texels there (a warning says
+    how many). Faces already in the image are untouched.
+    """
+    centre = texcoords.mean(axis=1)
+    shift = np.where((centre >= 0.0) & (centre <= 1.0), 0.0, np.floor(centre))  # (a centre at 1 is in the image)
+    moved = (shift != 0.0).any(axis=1)
+    if not moved.any():
+        return texcoords
+    texcoords = texcoords - shift[:, None, :]
+    across = int(((texcoords < -TILE_SLACK) | (texcoords > 1.0 + TILE_SLACK)).any(axis=(1, 2)).sum())
+    warnings.append(f"texture coordinates past [0, 1] (a repeating texture): {int(moved.sum())} faces were moved "
+                    "into the image" + (f"; {across} faces cross its border and read the border texels there"
+                                        if across else ""))
+    return texcoords
 
 
 def _check_texture(tex: Path, source: Path, max_pixels: int) -> tuple[Path, tuple[int, int]]:
