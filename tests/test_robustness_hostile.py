@@ -493,31 +493,37 @@ def test_batch_force_redoes_a_scan_interrupted_in_its_bake(tmp_path, fake_stages
         assert read_manifest(folder)["complete"] is True
 
 
-def test_an_interrupt_python_swallowed_still_stops_with_130(capsys):
-    """A KeyboardInterrupt raised inside a finaliser is only printed by Python; the signal is
-    remembered and the command still ends as interrupted."""
+def _exit_code_of_stopped(command) -> int:
+    """Run ``command`` (a :func:`user_errors` command that records a stop signal) and return
+    the exit code it ends with; the recorded signals are cleared afterwards."""
     import typer
 
-    from potflat_cli._errors import STOP, user_errors
-
-    @user_errors
-    def command():
-        STOP.append(signal.SIGTERM)  # the handler ran, its KeyboardInterrupt was lost
+    from potflat_cli._errors import STOP
 
     try:
         with pytest.raises(typer.Exit) as exit_:
             command()
     finally:
         STOP.clear()
-    assert exit_.value.exit_code == 130 and "interrupted" in capsys.readouterr().err
+    return exit_.value.exit_code
+
+
+def test_an_interrupt_python_swallowed_still_stops_with_130(capsys):
+    """A KeyboardInterrupt raised inside a finaliser is only printed by Python; the signal is
+    remembered and the command still ends as interrupted."""
+    from potflat_cli._errors import STOP, user_errors
+
+    @user_errors
+    def command():
+        STOP.append(signal.SIGTERM)  # the handler ran, its KeyboardInterrupt was lost
+
+    assert _exit_code_of_stopped(command) == 130 and "interrupted" in capsys.readouterr().err
 
 
 def test_an_interrupt_that_broke_a_numba_call_stops_with_130_not_a_traceback(capsys):
     """A signal handled while a Numba dispatcher calls back into Python makes the call raise
     SystemError ("returned a result with an exception set"); after a stop signal, any error
     is the interrupt's."""
-    import typer
-
     from potflat_cli._errors import STOP, user_errors
 
     @user_errors
@@ -525,12 +531,7 @@ def test_an_interrupt_that_broke_a_numba_call_stops_with_130_not_a_traceback(cap
         STOP.append(signal.SIGTERM)
         raise SystemError("CPUDispatcher(<function build_csr>) returned a result with an exception set")
 
-    try:
-        with pytest.raises(typer.Exit) as exit_:
-            command()
-    finally:
-        STOP.clear()
-    assert exit_.value.exit_code == 130 and "interrupted" in capsys.readouterr().err
+    assert _exit_code_of_stopped(command) == 130 and "interrupted" in capsys.readouterr().err
 
     @user_errors
     def broken():  # without a stop signal the error is a bug, and is not hidden
