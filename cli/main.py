@@ -39,6 +39,19 @@ def _interrupt(signum, frame) -> None:
     raise KeyboardInterrupt
 
 
+def _quiet_unraisable(unraisable) -> None:
+    """``sys.unraisablehook``: an interrupt raised where Python cannot raise it (a finaliser, a
+    weakref callback) is remembered (:data:`STOP`) and ends the command with its one line, so
+    Python's "Exception ignored ... Traceback" is not printed for it; anything else is."""
+    import sys
+
+    from potflat_cli._errors import STOP
+
+    if isinstance(unraisable.exc_value, KeyboardInterrupt) and STOP:
+        return
+    sys.__unraisablehook__(unraisable)
+
+
 class _Group(TyperGroup):
     """Builds the full ``run`` command (every stage option) only when ``run`` is invoked.
 
@@ -64,6 +77,7 @@ class _Group(TyperGroup):
         if threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(sig, _interrupt)
+            sys.unraisablehook = _quiet_unraisable
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         try:

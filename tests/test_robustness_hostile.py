@@ -520,6 +520,31 @@ def test_an_interrupt_python_swallowed_still_stops_with_130(capsys):
     assert _exit_code_of_stopped(command) == 130 and "interrupted" in capsys.readouterr().err
 
 
+def test_an_interrupt_inside_a_finaliser_prints_no_traceback(capsys, monkeypatch):
+    """The handler's KeyboardInterrupt raised inside a weakref callback or a finaliser is
+    "unraisable": Python printed "Exception ignored in ... Traceback" (1 SIGTERM in 40 at a
+    random moment); the command's one line says it all. Other unraisable errors are printed."""
+    from potflat_cli._errors import STOP
+    from potflat_cli.main import _quiet_unraisable
+
+    class Finalised:
+        def __init__(self, error):
+            self.error = error
+
+        def __del__(self):
+            raise self.error
+
+    monkeypatch.setattr(sys, "unraisablehook", _quiet_unraisable)
+    STOP.append(signal.SIGTERM)
+    try:
+        Finalised(KeyboardInterrupt())
+    finally:
+        STOP.clear()
+    assert capsys.readouterr().err == ""
+    Finalised(ValueError("a real error"))
+    assert "a real error" in capsys.readouterr().err
+
+
 def test_an_interrupt_that_broke_a_numba_call_stops_with_130_not_a_traceback(capsys):
     """A signal handled while a Numba dispatcher calls back into Python makes the call raise
     SystemError ("returned a result with an exception set"); after a stop signal, any error
