@@ -145,8 +145,9 @@ def detail_map(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray, np.ndarr
     lab, covered = _lab(rgba)
     w = covered.astype(np.float32)
     sigma = DETAIL_MM * px_per_mm
-    mean = _masked_mean(lab, w, sigma)
-    mean_sq = _masked_mean(lab * lab, w, sigma)
+    window = _gaussian(w, sigma)
+    mean = _masked_mean(lab, w, sigma, window)
+    mean_sq = _masked_mean(lab * lab, w, sigma, window)
     var = np.maximum(mean_sq - mean * mean, 0.0).sum(axis=2)
     return np.sqrt(var).astype(np.float32), covered
 
@@ -159,9 +160,13 @@ def _lab(rgba: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return cv2.cvtColor(rgba[..., :3].astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB), covered
 
 
-def _masked_mean(values: np.ndarray, weight: np.ndarray, sigma_px: float) -> np.ndarray:
-    """Gaussian-windowed mean (h, w, c) of ``values`` (h, w, c) over the pixels of ``weight`` (h, w)."""
-    norm = np.maximum(_gaussian(weight, sigma_px), 1e-6)
+def _masked_mean(values: np.ndarray, weight: np.ndarray, sigma_px: float,
+                 window_weight: np.ndarray | None = None) -> np.ndarray:
+    """Gaussian-windowed mean (h, w, c) of ``values`` (h, w, c) over the pixels of ``weight``
+    (h, w); ``window_weight``: ``_gaussian(weight, sigma_px)`` when the caller has it."""
+    if window_weight is None:
+        window_weight = _gaussian(weight, sigma_px)
+    norm = np.maximum(window_weight, 1e-6)
     return _gaussian(values * weight[..., None], sigma_px) / norm[..., None]
 
 
@@ -225,8 +230,9 @@ def _unlike_plain(rgba: np.ndarray, zone: np.ndarray, covered: np.ndarray, thres
     lab = _gaussian(_lab(rgba)[0], 0.5)  # half a pixel: less noise, and an edge's half way stays put
     plain = (covered & (zone == 0)).astype(np.float32)
     sigma = DETAIL_REACH_MM * px_per_mm
-    near = _gaussian(plain, sigma) > 1e-3
-    difference = np.sqrt(((lab - _masked_mean(lab, plain, sigma)) ** 2).sum(axis=2))
+    window = _gaussian(plain, sigma)
+    near = window > 1e-3
+    difference = np.sqrt(((lab - _masked_mean(lab, plain, sigma, window)) ** 2).sum(axis=2))
     halfway = 0.5 * cv2.dilate(difference, _disc(DETAIL_MM * px_per_mm))
     return ~near | (difference > np.maximum(halfway, threshold))
 

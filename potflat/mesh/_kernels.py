@@ -714,9 +714,9 @@ def texel_spread(texcoords, faces, img):
     k = faces.shape[0]
     hgt, wid = img.shape
     out = np.empty(k)
+    vals = np.empty(4)
     for i in range(k):
         f = faces[i]
-        vals = np.empty(4)
         for c in range(4):
             if c < 3:
                 u = texcoords[f, c, 0]
