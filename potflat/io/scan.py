@@ -118,6 +118,7 @@ class _Raw:
     vertices: np.ndarray
     faces: np.ndarray
     texcoords: np.ndarray | None = None
+    untextured: np.ndarray | None = None  # (m,) bool: faces without texture coordinates
     texture: Path | None = None
     colors: np.ndarray | None = None
     units: str | None = None
@@ -286,7 +287,8 @@ def _validate(raw: _Raw, path: Path, units: str | None, texture: str, max_pixels
     elif declared is not None and declared != units:
         raw.warnings.append(f"the file declares units {declared!r} but units={units!r} was given; using {units!r}")
     colors = raw.colors
-    return Mesh(V, F, texcoords=tc, texture_path=tex, vertex_colors=colors, units=units, source=path)
+    return Mesh(V, F, texcoords=tc, texture_path=tex, vertex_colors=colors, units=units, source=path,
+                untextured_faces=raw.untextured if tc is not None else None)
 
 
 def _into_the_tile(texcoords: np.ndarray, warnings: list[str]) -> np.ndarray:
@@ -594,9 +596,7 @@ def _read_obj(path: Path, texture: str, max_pixels: int) -> _Raw:
         raw.texture, raw.texcoords, note = _merge_textures([inv[int(k)] for k in used], np.where(ok, which, -1),
                                                            uv, path, max_pixels)
         raw.warnings.append(note)
-        if not ok.all():
-            raw.warnings.append(f"{int((~ok).sum())} faces have no texture coordinates or no textured "
-                                "material; they get texture coordinate (0, 0)")
+        _flag_untextured(raw, ~ok, "have no texture coordinates or no textured material")
         return raw
     if len(used) == 0:
         if lib_spans.shape[0] == 0:
@@ -611,10 +611,19 @@ def _read_obj(path: Path, texture: str, max_pixels: int) -> _Raw:
     else:
         uv = np.zeros((len(poly), 3, 2))
         uv[ok] = VT[tri_vt[ok]]
-        raw.warnings.append(f"{int((~ok).sum())} faces have no texture coordinates or another "
-                            "material; they get texture coordinate (0, 0)")
+        _flag_untextured(raw, ~ok, "have no texture coordinates or another material")
     raw.texcoords = uv
     return raw
+
+
+def _flag_untextured(raw: _Raw, untextured: np.ndarray, why: str) -> None:
+    """Record the faces ``untextured`` ((m,) bool) of a textured scan that have no texture
+    coordinates (their coordinates are zeros that mean nothing), with the load warning."""
+    count = int(untextured.sum())
+    if count:
+        raw.untextured = untextured
+        raw.warnings.append(f"{count} faces {why}; they are drawn as untextured surface (a shaded relief) "
+                            "and left out of the painted-zone detection")
 
 
 _MAP_OPTION_ARGS = {"-blendu": 1, "-blendv": 1, "-cc": 1, "-clamp": 1, "-texres": 1, "-imfchan": 1,
@@ -1036,9 +1045,9 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
     if not images:
         raw.warnings.append("texture coordinates but no texture image; loaded untextured")
         return raw
-    if any(u is None for u in uvs):
-        raw.warnings.append("some meshes have no texture coordinates; they get texture coordinate (0, 0)")
     raw.texcoords = np.concatenate([u if u is not None else np.zeros((len(f), 3, 2)) for u, f in zip(uvs, faces)])
+    _flag_untextured(raw, np.concatenate([np.full(len(f), u is None) for u, f in zip(uvs, faces)]),
+                     "(meshes without TEXCOORD_0) have no texture coordinates")
     raw.texture = images[0]
     return raw
 
