@@ -732,6 +732,34 @@ def test_ply_texnumber_atlas_colours(tmp_path):
             assert _sample(atlas, mesh.texcoords[f, c]) == want
 
 
+@pytest.mark.parametrize("images", [1, 2])
+def test_ply_texnumber_minus_one_flags_untextured_faces(tmp_path, images):
+    """MeshLab's texnumber -1 (a face without texture): flagged, never given a texture image."""
+    V, F = _grid()
+    tc = np.tile([0.25, 0.5], (len(F), 3, 1))
+    names = [f"t{k}.png" for k in range(images)]
+    for name in names:
+        _paint(tmp_path / name, (8, 8), [(255, 0, 0), (0, 255, 0)])
+    which = np.arange(len(F)) % images
+    which[::3] = -1
+    head = ["ply", "format ascii 1.0", *[f"comment TextureFile {n}" for n in names],
+            f"element vertex {len(V)}", "property float x", "property float y", "property float z",
+            f"element face {len(F)}", "property list uchar int vertex_indices", "property list uchar float texcoord",
+            "property int texnumber", "end_header"]
+    rows = [" ".join(map(str, v)) for v in V]
+    rows += [f"3 {a} {b} {c} 6 " + " ".join(map(str, tc[f].ravel())) + f" {which[f]}" for f, (a, b, c) in enumerate(F)]
+    (tmp_path / "tn.ply").write_text("\n".join(head + rows) + "\n")
+    scan = load_scan(tmp_path / "tn.ply")
+    ref = _match_faces(scan.mesh, V[F])
+    np.testing.assert_array_equal(scan.mesh.untextured_faces, which[ref] < 0)
+    assert np.all(scan.mesh.texcoords[scan.mesh.untextured_faces] == 0.0)
+    assert any(w.startswith(f"{int((which < 0).sum())} faces have texnumber -1") for w in scan.report.warnings)
+    rows[len(V):] = [r.rsplit(" ", 1)[0] + " -1" for r in rows[len(V):]]
+    (tmp_path / "tn.ply").write_text("\n".join(head + rows) + "\n")
+    scan = load_scan(tmp_path / "tn.ply")
+    assert scan.mesh.texcoords is None and any("texnumber -1" in w for w in scan.report.warnings)
+
+
 def test_truncated_binary_stl(tmp_path):
     _trimesh_half_cylinder().export(tmp_path / "h.stl")
     data = (tmp_path / "h.stl").read_bytes()

@@ -935,25 +935,33 @@ def _read_ply(path: Path, texture: str, max_pixels: int) -> _Raw:
             tc = uv[np.clip(raw.faces, 0, len(uv) - 1)]
     if tc is None:
         return raw
+    tn = face.data.get("texnumber")
+    which = np.asarray(tn, np.int64)[poly] if isinstance(tn, np.ndarray) else None
+    untextured = which < 0 if which is not None else np.zeros(len(poly), bool)  # texnumber -1: no texture
+    if untextured.all():
+        raw.warnings.append("every face has texnumber -1 (no texture); loaded untextured")
+        return raw
+    if untextured.any():
+        tc = np.where(untextured[:, None, None], 0.0, tc)  # (their coordinates mean nothing)
     if len(names) > 1:
-        tn = face.data.get("texnumber")
-        if not isinstance(tn, np.ndarray):
+        if which is None:
             raise InvalidInputError(f"{path} names {len(names)} texture images but its faces do not say which "
                                     f"(no texnumber); re-export with a single texture {_IGNORE_HINT}")
-        which = np.asarray(tn, np.int64)[poly]
-        if which.min() < 0 or which.max() >= len(names):
+        if which.min() < -1 or which.max() >= len(names):
             raise InvalidInputError(f"{path}: face texnumber out of range (the file names {len(names)} "
                                     f"textures); export it again {_IGNORE_HINT}")
-        used = np.unique(which)
+        used = np.unique(which[~untextured])
         if len(used) > 1:
             raw.texture, raw.texcoords, note = _merge_textures(
-                [_find_file(names[k], path.parent) for k in used], np.searchsorted(used, which), tc, path,
-                max_pixels)
+                [_find_file(names[k], path.parent) for k in used],
+                np.where(untextured, -1, np.searchsorted(used, which)), tc, path, max_pixels)
             raw.warnings.append(note)
+            _flag_untextured(raw, untextured, "have texnumber -1 (no texture)")
             return raw
         names = [names[int(used[0])]]
     raw.texture = _find_file(names[0], path.parent)
     raw.texcoords = tc
+    _flag_untextured(raw, untextured, "have texnumber -1 (no texture)")
     return raw
 
 
