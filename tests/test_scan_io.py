@@ -364,6 +364,25 @@ def test_stl_soup_is_welded(tmp_path):
     assert scan.report.kept_component_area_fractions == (1.0,)
 
 
+def test_glb_mesh_without_texcoords_is_flagged_untextured(tmp_path):
+    """A scene of a textured mesh and one without TEXCOORD_0: the second's faces are flagged."""
+    import trimesh
+    from PIL import Image
+
+    V, F = _grid()
+    Vs, Fs = V[F].reshape(-1, 3), np.arange(3 * len(F)).reshape(-1, 3)
+    textured = trimesh.Trimesh(Vs, Fs, process=False, visual=trimesh.visual.TextureVisuals(
+        uv=_uv_of(Vs), image=Image.new("RGB", (16, 16), (1, 2, 3))))
+    plain = trimesh.Trimesh(Vs + [0.0, 0.0, 2.0], Fs, process=False)  # the grid again, above the first
+    trimesh.Scene([textured, plain]).export(tmp_path / "h.glb")
+    scan = load_scan(tmp_path / "h.glb")
+    mesh = scan.mesh
+    assert mesh.texcoords is not None and mesh.untextured_faces is not None
+    upper = mesh.vertices[mesh.faces].mean(axis=1)[:, 2] > 2.0
+    np.testing.assert_array_equal(mesh.untextured_faces, upper)
+    assert any(w.startswith(f"{len(F)} faces (meshes without TEXCOORD_0)") for w in scan.report.warnings)
+
+
 def test_off(tmp_path):
     V, F = _grid()
     lines = ["OFF", f"{len(V)} {len(F)} 0"] + [f"{x} {y} {z}" for x, y, z in V] + [f"3 {a} {b} {c}" for a, b, c in F]
