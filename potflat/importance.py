@@ -18,7 +18,10 @@ draws the zone's outline on the maps. Ways to obtain it:
   (pixels whose colour is unlike the plain surface's around it), so that it ends on the
   outermost strokes rather than where the detail window stops seeing them, and is softened
   outwards. Rendering
-  on the surface's own layout makes it blind to texture-atlas seams. A scan painted nearly all over
+  on the surface's own layout makes it blind to texture-atlas seams. Faces without texture
+  coordinates (:attr:`potflat.types.Mesh.untextured_faces`) hold no colour evidence: they are
+  left out of the rendering like the space outside the surface, so they neither show detail
+  nor make an edge with their textured neighbours. A scan painted nearly all over
   (:data:`ALL_OVER_FRACTION`) or showing no painting gets no importance: the whole surface
   counts alike, exactly as without importance.
 * a mask painted over an image potflat made (white = important), mapped back to the surface
@@ -330,7 +333,7 @@ def auto_importance(flat: FlatMesh) -> Importance:
     from potflat.bake.render import paint
 
     px_per_mm = DETECT_PX_PER_MM
-    image, origin = paint(flat, px_per_mm)
+    image, origin = paint(flat, px_per_mm, leave_out_untextured=True)  # no colour evidence there
     zone, reason = painted_zone_image(image, px_per_mm)
     if zone is None:
         return Importance(None, "auto", 1.0, reason)
@@ -463,7 +466,9 @@ def image_mask_importance(flat: FlatMesh, mask_path: str | Path, reference: str 
 def texture_mask_importance(flat: FlatMesh, mask_path: str | Path) -> Importance:
     """Importance from a mask in the texture's own space (white = important, any size).
 
-    Each vertex takes the mean of the mask at its face corners' texture coordinates.
+    Each vertex takes the mean of the mask at its face corners' texture coordinates (the
+    corners of untextured faces have none and count for nothing; a vertex of those alone is
+    plain).
     """
     mesh = flat.mesh
     if mesh.texcoords is None:
@@ -478,6 +483,9 @@ def texture_mask_importance(flat: FlatMesh, mask_path: str | Path) -> Importance
     px = np.stack([tc[:, 0] * w, (1.0 - tc[:, 1]) * h], axis=1)
     corner = sample_image(mask, px)
     idx = mesh.faces.ravel()
+    if mesh.untextured_faces is not None:
+        textured = np.repeat(~mesh.untextured_faces, 3)
+        idx, corner = idx[textured], corner[textured]
     count = np.bincount(idx, minlength=len(mesh.vertices))
     values = np.bincount(idx, corner, len(mesh.vertices)) / np.maximum(count, 1)
     return _result(flat, values, "texture-mask", f"texture-space mask {Path(mask_path).name}")

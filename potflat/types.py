@@ -6,7 +6,9 @@ Conventions (see ``docs/formats.md``):
   :attr:`Mesh.mm_per_unit` converts to millimetres. Nothing is rescaled silently.
 * Faces are counter-clockwise seen from outside the vessel (outward normals).
 * Texture coordinates are per face corner, OBJ convention: ``(0, 0)`` is the bottom-left
-  of the texture image, ``v`` points up.
+  of the texture image, ``v`` points up. A textured scan's faces that have none (another
+  material without an image, filled holes) are flagged in :attr:`Mesh.untextured_faces`:
+  their coordinates mean nothing and are never read.
 * Flattened coordinates ``uv`` are in the same units as the 3D positions, ``u`` to the
   right and ``v`` up (towards the vessel's mouth), seen from outside: a flattened face
   keeps its counter-clockwise orientation, so a flipped triangle has negative signed area.
@@ -86,6 +88,12 @@ class Mesh:
         Vertex indices, counter-clockwise seen from outside.
     texcoords : (m, 3, 2) float64 or None
         Texture coordinate of each face corner (OBJ convention, v up).
+    untextured_faces : (m,) bool or None
+        True for the faces that have no texture coordinates (their ``texcoords`` rows mean
+        nothing): they are drawn as untextured surface (a shaded relief) and hold no colour
+        evidence of painting. None: every face is textured (an all-False flag becomes None);
+        only with ``texcoords``. Follows the faces wherever ``texcoords`` does
+        (:meth:`face_fields`).
     texture_path : Path or None
         Absolute path of the texture image that ``texcoords`` refer to.
     vertex_colors : (n, 4) uint8 or None
@@ -103,6 +111,7 @@ class Mesh:
     vertex_colors: np.ndarray | None = None
     units: str = "mm"
     source: Path | None = None
+    untextured_faces: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "vertices", _as_array("vertices", self.vertices, np.float64, (3,)))
@@ -113,6 +122,9 @@ class Mesh:
             if len(tc) != len(self.faces):
                 raise InvalidInputError("texcoords must have one (3, 2) entry per face")
             object.__setattr__(self, "texcoords", tc)
+        if self.untextured_faces is not None:
+            object.__setattr__(self, "untextured_faces", _untextured_flag(self.untextured_faces, self.texcoords,
+                                                                          len(self.faces)))
         if self.vertex_colors is not None:
             vc = np.asarray(self.vertex_colors)
             if vc.ndim == 2 and vc.shape[1] == 3:
@@ -133,6 +145,37 @@ class Mesh:
     def replace(self, **changes) -> "Mesh":
         """A copy with some fields replaced (validated again)."""
         return replace(self, **changes)
+
+    def face_fields(self, index: np.ndarray) -> dict:
+        """The per-face fields of the faces ``index`` selects, for :meth:`replace` with those faces.
+
+        Parameters
+        ----------
+        index : (k,) int64 or (m,) bool
+            Faces to keep, in their new order.
+
+        Returns
+        -------
+        dict
+            ``texcoords`` ((k, 3, 2) float64 or None) and ``untextured_faces`` ((k,) bool or None).
+        """
+        return {"texcoords": None if self.texcoords is None else self.texcoords[index],
+                "untextured_faces": None if self.untextured_faces is None else self.untextured_faces[index]}
+
+
+def _untextured_flag(flag, texcoords: np.ndarray | None, m: int) -> np.ndarray | None:
+    """``flag`` as a C-contiguous (m,) bool array, or None when no face is flagged."""
+    arr = np.asarray(flag)
+    if arr.shape != (m,):
+        raise InvalidInputError(f"untextured_faces must have one flag per face, shape ({m},), got {arr.shape}")
+    if arr.dtype != np.bool_:
+        if not (np.issubdtype(arr.dtype, np.integer) and np.isin(arr, (0, 1)).all()):
+            raise InvalidInputError(f"untextured_faces must be booleans (or 0 and 1), got {arr.dtype} values")
+        arr = arr.astype(bool)
+    if texcoords is None:
+        raise InvalidInputError("untextured_faces flags faces of a textured mesh; give texcoords too "
+                                "(or no flag: without texture coordinates every face is untextured)")
+    return np.ascontiguousarray(arr) if arr.any() else None
 
 
 @dataclass(frozen=True, eq=False)

@@ -364,6 +364,25 @@ def test_stl_soup_is_welded(tmp_path):
     assert scan.report.kept_component_area_fractions == (1.0,)
 
 
+def test_glb_mesh_without_texcoords_is_flagged_untextured(tmp_path):
+    """A scene of a textured mesh and one without TEXCOORD_0: the second's faces are flagged."""
+    import trimesh
+    from PIL import Image
+
+    V, F = _grid()
+    Vs, Fs = V[F].reshape(-1, 3), np.arange(3 * len(F)).reshape(-1, 3)
+    textured = trimesh.Trimesh(Vs, Fs, process=False, visual=trimesh.visual.TextureVisuals(
+        uv=_uv_of(Vs), image=Image.new("RGB", (16, 16), (1, 2, 3))))
+    plain = trimesh.Trimesh(Vs + [0.0, 0.0, 2.0], Fs, process=False)  # the grid again, above the first
+    trimesh.Scene([textured, plain]).export(tmp_path / "h.glb")
+    scan = load_scan(tmp_path / "h.glb")
+    mesh = scan.mesh
+    assert mesh.texcoords is not None and mesh.untextured_faces is not None
+    upper = mesh.vertices[mesh.faces].mean(axis=1)[:, 2] > 2.0
+    np.testing.assert_array_equal(mesh.untextured_faces, upper)
+    assert any(w.startswith(f"{len(F)} faces (meshes without TEXCOORD_0)") for w in scan.report.warnings)
+
+
 def test_off(tmp_path):
     V, F = _grid()
     lines = ["OFF", f"{len(V)} {len(F)} 0"] + [f"{x} {y} {z}" for x, y, z in V] + [f"3 {a} {b} {c}" for a, b, c in F]
@@ -730,6 +749,34 @@ def test_ply_texnumber_atlas_colours(tmp_path):
         want = (255, 0, 0) if which[r] == 0 else (0, 0, 255)
         for c in range(3):
             assert _sample(atlas, mesh.texcoords[f, c]) == want
+
+
+@pytest.mark.parametrize("images", [1, 2])
+def test_ply_texnumber_minus_one_flags_untextured_faces(tmp_path, images):
+    """MeshLab's texnumber -1 (a face without texture): flagged, never given a texture image."""
+    V, F = _grid()
+    tc = np.tile([0.25, 0.5], (len(F), 3, 1))
+    names = [f"t{k}.png" for k in range(images)]
+    for name in names:
+        _paint(tmp_path / name, (8, 8), [(255, 0, 0), (0, 255, 0)])
+    which = np.arange(len(F)) % images
+    which[::3] = -1
+    head = ["ply", "format ascii 1.0", *[f"comment TextureFile {n}" for n in names],
+            f"element vertex {len(V)}", "property float x", "property float y", "property float z",
+            f"element face {len(F)}", "property list uchar int vertex_indices", "property list uchar float texcoord",
+            "property int texnumber", "end_header"]
+    rows = [" ".join(map(str, v)) for v in V]
+    rows += [f"3 {a} {b} {c} 6 " + " ".join(map(str, tc[f].ravel())) + f" {which[f]}" for f, (a, b, c) in enumerate(F)]
+    (tmp_path / "tn.ply").write_text("\n".join(head + rows) + "\n")
+    scan = load_scan(tmp_path / "tn.ply")
+    ref = _match_faces(scan.mesh, V[F])
+    np.testing.assert_array_equal(scan.mesh.untextured_faces, which[ref] < 0)
+    assert np.all(scan.mesh.texcoords[scan.mesh.untextured_faces] == 0.0)
+    assert any(w.startswith(f"{int((which < 0).sum())} faces have texnumber -1") for w in scan.report.warnings)
+    rows[len(V):] = [r.rsplit(" ", 1)[0] + " -1" for r in rows[len(V):]]
+    (tmp_path / "tn.ply").write_text("\n".join(head + rows) + "\n")
+    scan = load_scan(tmp_path / "tn.ply")
+    assert scan.mesh.texcoords is None and any("texnumber -1" in w for w in scan.report.warnings)
 
 
 def test_truncated_binary_stl(tmp_path):

@@ -246,7 +246,7 @@ def _tap(buf, off, h, w, nch, x, y, weight, acc):
 
 
 @parallel
-def sample_texture(face, bary, texcoords, lod, tex0, mips, mip_offsets, mip_shapes, n, out):
+def sample_texture(face, bary, texcoords, untextured, lod, tex0, mips, mip_offsets, mip_shapes, n, out):
     """Trilinear texture sampling through per-corner texture coordinates, averaged per pixel.
 
     Parameters
@@ -256,6 +256,8 @@ def sample_texture(face, bary, texcoords, lod, tex0, mips, mip_offsets, mip_shap
     bary : (k n, w n, 2) float64
     texcoords : (m, 3, 2) float64
         Per-corner texture coordinates, OBJ convention ((0, 0) bottom-left, v up).
+    untextured : (m,) bool
+        Faces without texture coordinates: their sub-samples are left out (not read, not counted).
     lod : (m,) float64
         Mip level of detail per face (0: full resolution; fractions blend two levels).
     tex0 : (H * W * C,) uint8 or uint16
@@ -269,7 +271,8 @@ def sample_texture(face, bary, texcoords, lod, tex0, mips, mip_offsets, mip_shap
     n : int
         Sub-samples per pixel side.
     out : (k, w, C) float32
-        Mean over the covered sub-samples, in the texture's value range; NaN where none.
+        Mean over the covered sub-samples of textured faces, in the texture's value range;
+        NaN where none.
     """
     k, w, nch = out.shape
     top = mip_shapes.shape[0] - 1
@@ -285,7 +288,7 @@ def sample_texture(face, bary, texcoords, lod, tex0, mips, mip_offsets, mip_shap
             for i in range(r * n, r * n + n):
                 for q in range(c * n, c * n + n):
                     f = face[i, q]
-                    if f < 0:
+                    if f < 0 or untextured[f]:
                         continue
                     cnt += 1
                     w1 = bary[i, q, 0]

@@ -208,7 +208,7 @@ def outside_view(flat, rollout_summary: dict, px_per_mm: float):
     if len(front) == 0:
         raise InvalidInputError(f"{mesh.source or 'the flattening'} shows no face towards the viewer; "
                                 "cannot draw its outside view")
-    sub = mesh.replace(faces=F[front], texcoords=None if mesh.texcoords is None else mesh.texcoords[front])
+    sub = mesh.replace(faces=F[front], **mesh.face_fields(front))
     rel = V - origin
     uv = np.stack([rel @ right, rel @ a], axis=1)
     return bake(FlatMesh(sub, uv), px_per_mm=px_per_mm, maps=(), max_megapixels=200.0)

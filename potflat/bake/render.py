@@ -8,7 +8,9 @@ outline, alpha = covered fraction) and, where the texture is still finer than a
 sub-sample, a mip level chosen per triangle from its texture-coordinate Jacobian
 (trilinear). Sampling per face through its own texture coordinates keeps atlas chart
 borders seamless. Vertex-coloured scans bake their colours; untextured scans bake a
-shaded relief.
+shaded relief, and so do the faces of a textured scan that have no texture coordinates
+(:attr:`potflat.types.Mesh.untextured_faces`): they never read the texture, and the
+texture's mip levels are made from the other faces' charts only.
 
 The pixel grid: ``px_per_mm`` pixels per millimetre, row 0 at the largest ``v`` (the
 mouth up), column 0 at the smallest ``u`` (not mirrored); :attr:`BakeResult.origin`
@@ -348,8 +350,9 @@ class Renderer:
     """Rasterises a flattening strip by strip and produces every bake layer.
 
     The strip API: :attr:`grid` (the pixel grid), :meth:`strips` (row ranges ``r0, r1``),
-    and per strip :meth:`coverage`, :meth:`painting`, :meth:`scalar` (a distortion map or a
-    per-face field put in :attr:`face_values`), :meth:`zone_outline` and :meth:`position`;
+    and per strip :meth:`coverage`, :meth:`painting` (with :meth:`untextured_share`),
+    :meth:`scalar` (a distortion map or a per-face field put in :attr:`face_values`),
+    :meth:`zone_outline` and :meth:`position`;
     :func:`image_figures` sums them up. Every layer of one strip has ``r1 - r0`` rows of
     ``grid.width`` pixels.
     """
@@ -380,14 +383,23 @@ class Renderer:
         pix[:, 1] = (g.origin[1] - flat.uv[:, 1]) * g.scale
         self.texture = None
         self.texels_per_pixel = None
-        if mesh.texcoords is not None and mesh.texture_path is not None:
+        self.texels_per_pixel_median = None
+        untextured = mesh.untextured_faces
+        if mesh.texcoords is not None and mesh.texture_path is not None and (untextured is None
+                                                                             or not untextured.all()):
             from potflat.io.images import read_texture
 
             self.texture = read_texture(mesh.texture_path)
             self.texels_per_pixel = self._texel_ratio(pix)
+            self.texels_per_pixel_median = float(np.median(
+                self.texels_per_pixel if untextured is None else self.texels_per_pixel[~untextured]))
+        #: whether some faces of a textured painting are drawn as shaded relief (untextured faces)
+        self.has_untextured = self.texture is not None and untextured is not None
+        # the kernel's flag of those faces: always an array (all False without them)
+        self._untextured = untextured if self.has_untextured else np.zeros(len(self.faces), bool)
         n = supersample
         if n == 0:
-            ratio = float(np.median(self.texels_per_pixel)) if self.texels_per_pixel is not None else 1.0
+            ratio = self.texels_per_pixel_median if self.texels_per_pixel_median is not None else 1.0
             n = int(np.clip(math.ceil(ratio - 0.01), 2, MAX_AUTO_SUPERSAMPLE))
             while n > 1 and g.width * g.height * n * n > AUTO_SUPERSAMPLE_BUDGET:
                 n -= 1
@@ -402,7 +414,8 @@ class Renderer:
         self._ptr, self._idx = raster.bin_triangles(self._pix, self.faces, float(self._block), nblocks)
         self._raster_mod = raster
         self._cache = None
-        self._vertex_paint = None  # per-vertex field of an untextured painting, made on first use
+        self._vertex_paint = None  # per-vertex colours of a vertex-coloured painting, made on first use
+        self._relief_field = None  # per-vertex normal and light of the shaded relief, made on first use
 
     # -- setup ---------------------------------------------------------------------
     def _texel_ratio(self, pix: np.ndarray, chunk: int = 1 << 20) -> np.ndarray:
@@ -434,7 +447,7 @@ class Renderer:
         """Mip levels down to the coarsest level any face needs.
 
         Each level averages the texels of the level above that lie in an atlas chart
-        (the texture-space footprint of the triangles, grown by one texel), and the texels
+        (the texture-space footprint of the textured triangles, grown by one texel), and the texels
         outside every chart are then filled from the coarser levels (push-pull), so a
         coarse tap at a chart border never mixes in the atlas background: no seams.
         """
@@ -442,7 +455,9 @@ class Renderer:
         top = math.ceil(min(np.max(lod), math.log2(max(min(self.texture.shape[:2]), 1))))
         levels, valids = [], []
         if top > 0:
-            cur, valid = self.texture, _chart_mask(self.flat.mesh.texcoords, *self.texture.shape[:2])
+            tc = self.flat.mesh.texcoords
+            cur, valid = self.texture, _chart_mask(tc[~self._untextured] if self.has_untextured else tc,
+                                                   *self.texture.shape[:2])
             for _ in range(top):
                 cur, valid = _halve_masked(cur, valid)
                 levels.append(cur)
@@ -490,28 +505,55 @@ class Renderer:
         self._raster_mod.interpolate_vertex_attr(face, bary, self.faces, attr, self.n, out)
         return out
 
-    def painting(self, r0: int, r1: int) -> np.ndarray:
-        """RGB in [0, 1] (NaN outside). Shape (k, w, 3) float32."""
+    def painting(self, r0: int, r1: int, *, relief_on_untextured: bool = True) -> np.ndarray:
+        """RGB in [0, 1] (NaN outside). Shape (k, w, 3) float32.
+
+        ``relief_on_untextured``: the sub-samples on untextured faces of a textured painting
+        are shaded relief (True: the painting's pixels), or are left out (False: a pixel is the
+        mean of its textured sub-samples, NaN where it has none; the colour evidence alone,
+        with :meth:`untextured_share` to leave those pixels uncovered).
+        """
         face, bary = self._raster(r0, r1)
         mesh = self.flat.mesh
         if self.texture is not None:
             out = np.empty((r1 - r0, self.grid.width, 3), np.float32)
-            self._raster_mod.sample_texture(face, bary, mesh.texcoords, self.lod, self.texture.reshape(-1), self._mips,
-                                            self._mip_offsets, self._mip_shapes, self.n, out)
+            self._raster_mod.sample_texture(face, bary, mesh.texcoords, self._untextured, self.lod,
+                                            self.texture.reshape(-1), self._mips, self._mip_offsets,
+                                            self._mip_shapes, self.n, out)
             out /= np.float32(np.iinfo(self.texture.dtype).max)
+            if self.has_untextured and relief_on_untextured:
+                share = self.untextured_share(r0, r1)
+                mixed = share > 0.0  # (NaN outside: False)
+                if mixed.any():
+                    s = share[mixed][:, None]
+                    out[mixed] = np.nan_to_num(out[mixed]) * (1.0 - s) + self._relief(r0, r1)[mixed] * s
             return out
         if mesh.vertex_colors is not None:
             if self._vertex_paint is None:
                 self._vertex_paint = mesh.vertex_colors[:, :3] / 255.0
             return self._vertex_field(self._vertex_paint, r0, r1)
-        if self._vertex_paint is None:
-            self._vertex_paint = _relief_normals_and_light(mesh.vertices, self.flat.uv, self.faces, mesh.mm_per_unit)
-        nl = self._vertex_field(self._vertex_paint, r0, r1)
+        return self._relief(r0, r1)
+
+    def _relief(self, r0: int, r1: int) -> np.ndarray:
+        """Shaded relief, grey in [0, 1] (NaN outside). Shape (k, w, 3) float32."""
+        mesh = self.flat.mesh
+        if self._relief_field is None:
+            self._relief_field = _relief_normals_and_light(mesh.vertices, self.flat.uv, self.faces, mesh.mm_per_unit)
+        nl = self._vertex_field(self._relief_field, r0, r1)
         nrm, light = nl[..., :3], nl[..., 3:]
         dot = np.einsum("...i,...i->...", nrm, light) / np.maximum(
             np.linalg.norm(nrm, axis=-1) * np.linalg.norm(light, axis=-1), 1e-30)
         shade = 0.15 + 0.85 * np.clip(dot, 0.0, 1.0)
         return np.repeat(shade[..., None], 3, axis=-1).astype(np.float32)
+
+    def untextured_share(self, r0: int, r1: int) -> np.ndarray:
+        """Share of each pixel's covered sub-samples that lie on untextured faces of a textured
+        painting (0 everywhere without such faces, :attr:`has_untextured`; NaN outside).
+        Shape (k, w) float32."""
+        face, _ = self._raster(r0, r1)
+        out = np.empty((r1 - r0, self.grid.width), np.float32)
+        self._raster_mod.face_values(face, self._untextured.astype(np.float64), self.n, out)
+        return out
 
     def scalar(self, name: str, r0: int, r1: int) -> np.ndarray:
         """A distortion map's values (NaN outside). Shape (k, w) float32."""
@@ -568,7 +610,7 @@ def image_figures(r: Renderer, covered_px: float) -> dict:
         "mip_levels": r.mip_levels,
         "texture": str(flat.mesh.texture_path) if r.texture is not None else None,
         "texture_px": list(r.texture.shape[1::-1]) if r.texture is not None else None,
-        "texels_per_pixel_median": float(np.median(r.texels_per_pixel)) if r.texels_per_pixel is not None else None,
+        "texels_per_pixel_median": r.texels_per_pixel_median,
         "painting": "texture" if r.texture is not None else "vertex colours" if flat.mesh.vertex_colors is not None
         else "shaded relief",
         "stress": {**_stats(r.vertex_stress), "unit": "sqrt(mm)"},
@@ -587,7 +629,8 @@ def image_figures(r: Renderer, covered_px: float) -> dict:
 # library entry point
 
 
-def paint(flat: FlatMesh, px_per_mm: float, *, supersample: int = 2) -> tuple[np.ndarray, np.ndarray]:
+def paint(flat: FlatMesh, px_per_mm: float, *, supersample: int = 2,
+          leave_out_untextured: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The painting of a flattening alone (no distortion maps or figures), in memory.
 
     Parameters
@@ -596,6 +639,10 @@ def paint(flat: FlatMesh, px_per_mm: float, *, supersample: int = 2) -> tuple[np
     px_per_mm : float
     supersample : int
         Sub-samples per pixel side (1-8).
+    leave_out_untextured : bool
+        False: untextured faces of a textured scan are drawn as shaded relief, as :func:`bake`
+        draws them. True: they count as not covered (alpha 0 for their share of a pixel, whose
+        colour is then its textured part's alone): the colour evidence of the painting only.
 
     Returns
     -------
@@ -606,9 +653,13 @@ def paint(flat: FlatMesh, px_per_mm: float, *, supersample: int = 2) -> tuple[np
     """
     r = Renderer(flat, px_per_mm, supersample=supersample, distortion_maps=False)
     g = r.grid
+    leave_out = leave_out_untextured and r.has_untextured
     image = np.zeros((g.height, g.width, 4), np.uint8)
     for r0, r1 in r.strips():
-        image[r0:r1] = rgba8(r.painting(r0, r1), r.coverage(r0, r1))
+        coverage = r.coverage(r0, r1)
+        if leave_out:
+            coverage *= 1.0 - np.nan_to_num(r.untextured_share(r0, r1), nan=0.0)
+        image[r0:r1] = rgba8(r.painting(r0, r1, relief_on_untextured=not leave_out), coverage)
     return image, g.origin.copy()
 
 

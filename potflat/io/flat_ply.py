@@ -5,7 +5,8 @@ The PLY is binary little-endian with vertex properties ``x y z u v`` (double), o
 painted: :attr:`potflat.types.FlatMesh.importance`); faces carry
 ``vertex_indices`` (uchar count, int indices) and optionally ``texcoord`` (uchar count,
 6 floats: MeshLab's convention), with ``comment TextureFile NAME`` naming the texture
-image relative to the PLY. ``comment units mm`` records the length unit. See
+image relative to the PLY, and ``untextured`` (uchar, 1 for a face without texture
+coordinates: :attr:`potflat.types.Mesh.untextured_faces`; only when some face has none). ``comment units mm`` records the length unit. See
 ``docs/formats.md``.
 """
 from __future__ import annotations
@@ -94,6 +95,9 @@ def write_flat_ply(path: str | os.PathLike, flat: FlatMesh, *, comments: tuple[s
     ffields = [("n", "u1"), ("idx", "<i4", (3,))]
     if texture_name is not None:
         ffields += [("nt", "u1"), ("tc", "<f4", (6,))]
+    untextured = mesh.untextured_faces if texture_name is not None else None
+    if untextured is not None:
+        ffields.append(("untextured", "u1"))
 
     header = ["ply", "format binary_little_endian 1.0", f"comment units {mesh.units}"]
     header += [f"comment {c}" for c in _header_comments(flat, comments)]
@@ -106,6 +110,8 @@ def write_flat_ply(path: str | os.PathLike, flat: FlatMesh, *, comments: tuple[s
     header.append("property list uchar int vertex_indices")
     if texture_name is not None:
         header.append("property list uchar float texcoord")
+    if untextured is not None:
+        header.append("property uchar untextured")
     header.append("end_header")
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
@@ -129,6 +135,8 @@ def write_flat_ply(path: str | os.PathLike, flat: FlatMesh, *, comments: tuple[s
                 if texture_name is not None:
                     face["nt"] = 6
                     face["tc"] = mesh.texcoords[rows].reshape(-1, 6)
+                if untextured is not None:
+                    face["untextured"] = untextured[rows]
                 fh.write(face.data)
             fh.flush()
             os.fsync(fh.fileno())
@@ -160,14 +168,15 @@ def as_stored(flat: FlatMesh, path: str | os.PathLike, *, comments: tuple[str, .
     """
     path = Path(path)
     mesh = flat.mesh
-    texcoords, texture_path = None, None
+    texcoords, texture_path, untextured = None, None, None
     if mesh.texture_path is not None and mesh.texcoords is not None:
         texcoords = mesh.texcoords.astype(np.float32).astype(np.float64)
         if np.array_equal(texcoords, mesh.texcoords):  # stored before (a rollout's): share it
             texcoords = mesh.texcoords  # (3M vertices: 275 MB less while the next stages run)
         texture_path = (path.parent / _texture_target(mesh.texture_path, path).name).resolve()
+        untextured = mesh.untextured_faces
     stored = Mesh(mesh.vertices, mesh.faces, texcoords=texcoords, texture_path=texture_path,
-                  vertex_colors=mesh.vertex_colors, units=mesh.units, source=path)
+                  vertex_colors=mesh.vertex_colors, units=mesh.units, source=path, untextured_faces=untextured)
     return FlatMesh(stored, flat.uv, stress=flat.stress, comments=_header_comments(flat, comments),
                     importance=flat.importance)
 
@@ -258,10 +267,14 @@ def read_flat_ply(path: str | os.PathLike) -> FlatMesh:
     if {"red", "green", "blue"} <= set(vert.dtype.names):
         alpha = vert["alpha"] if "alpha" in vert.dtype.names else np.full(len(vert), 255, np.uint8)
         colors = np.stack([vert["red"], vert["green"], vert["blue"], alpha], axis=1).astype(np.uint8)
-    texcoords, texture_path = None, None
+    texcoords, texture_path, untextured = None, None, None
     if texture_name is not None and "texcoord" in face.dtype.names:
         texcoords = face["texcoord"].reshape(-1, 3, 2).astype(np.float64)
         texture_path = (path.parent / texture_name).resolve()
+        if "untextured" in face.dtype.names:
+            if not np.isin(face["untextured"], (0, 1)).all():
+                raise InvalidInputError(f"{path} has face untextured flags other than 0 and 1; write it again")
+            untextured = face["untextured"] == 1
     stress = np.asarray(vert["stress"], dtype=np.float64) if "stress" in vert.dtype.names else None
     importance = None
     if "importance" in vert.dtype.names:
@@ -269,5 +282,5 @@ def read_flat_ply(path: str | os.PathLike) -> FlatMesh:
         if not (np.isfinite(importance).all() and importance.min(initial=0.0) >= 0 and importance.max(initial=0.0) <= 1):
             raise InvalidInputError(f"{path} has importance values outside 0..1; write it again")
     mesh = Mesh(xyz, faces, texcoords=texcoords, texture_path=texture_path,
-                vertex_colors=colors, units=units, source=path)
+                vertex_colors=colors, units=units, source=path, untextured_faces=untextured)
     return FlatMesh(mesh, uv, stress=stress, comments=tuple(comments), importance=importance)

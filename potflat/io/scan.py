@@ -118,6 +118,7 @@ class _Raw:
     vertices: np.ndarray
     faces: np.ndarray
     texcoords: np.ndarray | None = None
+    untextured: np.ndarray | None = None  # (m,) bool: faces without texture coordinates
     texture: Path | None = None
     colors: np.ndarray | None = None
     units: str | None = None
@@ -286,7 +287,8 @@ def _validate(raw: _Raw, path: Path, units: str | None, texture: str, max_pixels
     elif declared is not None and declared != units:
         raw.warnings.append(f"the file declares units {declared!r} but units={units!r} was given; using {units!r}")
     colors = raw.colors
-    return Mesh(V, F, texcoords=tc, texture_path=tex, vertex_colors=colors, units=units, source=path)
+    return Mesh(V, F, texcoords=tc, texture_path=tex, vertex_colors=colors, units=units, source=path,
+                untextured_faces=raw.untextured if tc is not None else None)
 
 
 def _into_the_tile(texcoords: np.ndarray, warnings: list[str]) -> np.ndarray:
@@ -594,9 +596,7 @@ def _read_obj(path: Path, texture: str, max_pixels: int) -> _Raw:
         raw.texture, raw.texcoords, note = _merge_textures([inv[int(k)] for k in used], np.where(ok, which, -1),
                                                            uv, path, max_pixels)
         raw.warnings.append(note)
-        if not ok.all():
-            raw.warnings.append(f"{int((~ok).sum())} faces have no texture coordinates or no textured "
-                                "material; they get texture coordinate (0, 0)")
+        _flag_untextured(raw, ~ok, "have no texture coordinates or no textured material")
         return raw
     if len(used) == 0:
         if lib_spans.shape[0] == 0:
@@ -611,10 +611,19 @@ def _read_obj(path: Path, texture: str, max_pixels: int) -> _Raw:
     else:
         uv = np.zeros((len(poly), 3, 2))
         uv[ok] = VT[tri_vt[ok]]
-        raw.warnings.append(f"{int((~ok).sum())} faces have no texture coordinates or another "
-                            "material; they get texture coordinate (0, 0)")
+        _flag_untextured(raw, ~ok, "have no texture coordinates or another material")
     raw.texcoords = uv
     return raw
+
+
+def _flag_untextured(raw: _Raw, untextured: np.ndarray, why: str) -> None:
+    """Record the faces ``untextured`` ((m,) bool) of a textured scan that have no texture
+    coordinates (their coordinates are zeros that mean nothing), with the load warning."""
+    count = int(untextured.sum())
+    if count:
+        raw.untextured = untextured
+        raw.warnings.append(f"{count} faces {why}; they are drawn as untextured surface (a shaded relief) "
+                            "and left out of the painted-zone detection")
 
 
 _MAP_OPTION_ARGS = {"-blendu": 1, "-blendv": 1, "-cc": 1, "-clamp": 1, "-texres": 1, "-imfchan": 1,
@@ -926,25 +935,33 @@ def _read_ply(path: Path, texture: str, max_pixels: int) -> _Raw:
             tc = uv[np.clip(raw.faces, 0, len(uv) - 1)]
     if tc is None:
         return raw
+    tn = face.data.get("texnumber")
+    which = np.asarray(tn, np.int64)[poly] if isinstance(tn, np.ndarray) else None
+    untextured = which < 0 if which is not None else np.zeros(len(poly), bool)  # texnumber -1: no texture
+    if untextured.all():
+        raw.warnings.append("every face has texnumber -1 (no texture); loaded untextured")
+        return raw
+    if untextured.any():
+        tc = np.where(untextured[:, None, None], 0.0, tc)  # (their coordinates mean nothing)
     if len(names) > 1:
-        tn = face.data.get("texnumber")
-        if not isinstance(tn, np.ndarray):
+        if which is None:
             raise InvalidInputError(f"{path} names {len(names)} texture images but its faces do not say which "
                                     f"(no texnumber); re-export with a single texture {_IGNORE_HINT}")
-        which = np.asarray(tn, np.int64)[poly]
-        if which.min() < 0 or which.max() >= len(names):
+        if which.min() < -1 or which.max() >= len(names):
             raise InvalidInputError(f"{path}: face texnumber out of range (the file names {len(names)} "
                                     f"textures); export it again {_IGNORE_HINT}")
-        used = np.unique(which)
+        used = np.unique(which[~untextured])
         if len(used) > 1:
             raw.texture, raw.texcoords, note = _merge_textures(
-                [_find_file(names[k], path.parent) for k in used], np.searchsorted(used, which), tc, path,
-                max_pixels)
+                [_find_file(names[k], path.parent) for k in used],
+                np.where(untextured, -1, np.searchsorted(used, which)), tc, path, max_pixels)
             raw.warnings.append(note)
+            _flag_untextured(raw, untextured, "have texnumber -1 (no texture)")
             return raw
         names = [names[int(used[0])]]
     raw.texture = _find_file(names[0], path.parent)
     raw.texcoords = tc
+    _flag_untextured(raw, untextured, "have texnumber -1 (no texture)")
     return raw
 
 
@@ -1036,9 +1053,9 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
     if not images:
         raw.warnings.append("texture coordinates but no texture image; loaded untextured")
         return raw
-    if any(u is None for u in uvs):
-        raw.warnings.append("some meshes have no texture coordinates; they get texture coordinate (0, 0)")
     raw.texcoords = np.concatenate([u if u is not None else np.zeros((len(f), 3, 2)) for u, f in zip(uvs, faces)])
+    _flag_untextured(raw, np.concatenate([np.full(len(f), u is None) for u, f in zip(uvs, faces)]),
+                     "(meshes without TEXCOORD_0) have no texture coordinates")
     raw.texture = images[0]
     return raw
 

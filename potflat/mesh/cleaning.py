@@ -197,8 +197,7 @@ def weld_vertices(mesh: Mesh, *, tolerance: float = 0.0) -> tuple[Mesh, int]:
 def _select_faces(mesh: Mesh, keep: np.ndarray) -> Mesh:
     if keep.all():
         return mesh
-    tc = mesh.texcoords[keep] if mesh.texcoords is not None else None
-    return mesh.replace(faces=mesh.faces[keep], texcoords=tc)
+    return mesh.replace(faces=mesh.faces[keep], **mesh.face_fields(keep))
 
 
 def _reverse_faces(mesh: Mesh, flip: np.ndarray) -> Mesh:
@@ -362,7 +361,8 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
     Returns
     -------
     mesh : Mesh
-        The cleaned mesh (texcoords and vertex colours follow their faces and vertices).
+        The cleaned mesh (texcoords, untextured-face flags and vertex colours follow their
+        faces and vertices).
     report : CleaningReport
         Every action with counts.
 

@@ -509,7 +509,7 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         overlap_deg=options.overlap if repeated_from is not None else 0.0, repeated_from=repeated_from)
     cut = un.flat.mesh
     if mesh.texcoords is not None:  # attached once, to the final faces (see _unroll)
-        cut = cut.replace(texcoords=mesh.texcoords[un.face_index])
+        cut = cut.replace(**mesh.face_fields(un.face_index))
     flat = un.flat.replace(mesh=cut, uv=uv)
     clock.lap("checks")
     importance = _find_importance(flat, options, axis, theta_deg)
@@ -571,8 +571,8 @@ def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndar
         new_faces, vertex_index, theta_new, n_seam, n_split = cut_open(sub_f, corner_theta)
 
     del sub_f, corner_theta
-    # without texture coordinates: rollout() attaches them to the final faces only (a copy
-    # per unrolling would be the largest array here)
+    # without texture coordinates (and untextured-face flags): rollout() attaches them to the
+    # final faces only (a copy per unrolling would be the largest array here)
     cut_mesh = Mesh(
         V[vertex_index], new_faces, texture_path=mesh.texture_path,
         vertex_colors=None if mesh.vertex_colors is None else mesh.vertex_colors[vertex_index],
@@ -831,7 +831,7 @@ def _painted_zone_centre(mesh: Mesh, axis: AxisFit, options: RolloutOptions, fac
     un = _unroll(mesh, axis, plain, face_mask, band, h_c, theta_c, theta_v, area)
     flat = un.flat
     if mesh.texcoords is not None:
-        flat = flat.replace(mesh=flat.mesh.replace(texcoords=mesh.texcoords[un.face_index]))
+        flat = flat.replace(mesh=flat.mesh.replace(**mesh.face_fields(un.face_index)))
     importance = _find_importance(flat, options, axis, np.degrees(un.theta))
     if importance.values is None:
         return None, importance.reason

@@ -72,7 +72,7 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     clock.lap("rollout")
     if check is not None:
         check(result.flat)
-    mesh = mesh.replace(texcoords=None)  # the rollout has its own; the profile needs none
+    mesh = mesh.replace(texcoords=None, untextured_faces=None)  # the rollout has its own; the profile needs none
     body = None if result.attachments_kept or not result.attachments.n_faces else ~result.attachments.face_mask
     bins = None
     if options.profile_mm is not None:
