@@ -9,7 +9,7 @@ import pytest
 
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
-from potflat.rollout.walls import INNER, OUTER, check_axis, largest_component, select_wall
+from potflat.rollout.walls import INNER, OUTER, FaceGraph, check_axis, largest_component, select_wall
 
 
 def _posed(V, F, seed=1, units="mm"):
@@ -253,11 +253,9 @@ def test_face_graph_components_match_scipy():
     import scipy.sparse as sp
     from scipy.sparse.csgraph import connected_components
 
-    from potflat.rollout.walls import FaceGraph, face_adjacency
-
     rng = np.random.default_rng(5)
     F = np.asarray(vm.cup(n_theta=16)[1], np.int64)
-    graph = FaceGraph(len(F), face_adjacency(F))
+    graph = FaceGraph(F)
     for mask in (None, rng.random(len(graph.pairs)) < 0.5, np.zeros(len(graph.pairs), bool)):
         pairs = graph.pairs if mask is None else graph.pairs[mask]
         A = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(F), len(F)))
@@ -267,13 +265,23 @@ def test_face_graph_components_match_scipy():
         np.testing.assert_array_equal(comp, ref)
 
 
+class _GivenPairs(FaceGraph):
+    """A face graph of given pairs (any multigraph), for testing :meth:`FaceGraph.matrix`."""
+
+    def __init__(self, m, pairs):
+        self.m = m
+        self._given = pairs
+
+    @property
+    def pairs(self):
+        return self._given
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_face_graph_matrix_matches_the_sorting_reference(seed):
     """The CSR of pair_csr: the indices, row pointers and data of the former stable argsort of
     ``i * m + j`` (repeated pairs and a face without neighbours included)."""
     import scipy.sparse as sp
-
-    from potflat.rollout.walls import FaceGraph
 
     rng = np.random.default_rng(seed)
     m = 60
@@ -289,33 +297,31 @@ def test_face_graph_matrix_matches_the_sorting_reference(seed):
         data = np.ones(2 * len(pairs)) if w is None else np.concatenate([w, w])[order]
         ref = sp.csr_matrix((data, j[order].astype(np.int32), indptr.copy()), shape=(m, m))
         ref.eliminate_zeros()
-        got = FaceGraph(m, pairs).matrix(w)
+        got = _GivenPairs(m, pairs).matrix(w)
         for a, b in ((got.indptr, ref.indptr), (got.indices, ref.indices), (got.data, ref.data)):
             assert a.dtype == b.dtype and np.array_equal(a, b)
 
 
 def test_select_wall_takes_the_callers_face_graph():
-    from potflat.rollout.walls import FaceGraph, face_adjacency
-
     V, F, _, _ = vm.cup(n_theta=16)
     mesh, p, a = _posed(V, F)
     own = select_wall(mesh, p, a, side="inner")
-    given = select_wall(mesh, p, a, side="inner", graph=FaceGraph.of(mesh.faces))
+    given = select_wall(mesh, p, a, side="inner", graph=FaceGraph(mesh.faces))
     assert own.two_walled and np.array_equal(own.labels, given.labels)
     assert np.array_equal(own.face_mask, given.face_mask)
-    for wrong in (FaceGraph.of(mesh.faces[:-1]), FaceGraph(len(mesh.faces), face_adjacency(mesh.faces))):
+    for wrong in (FaceGraph(mesh.faces[:-1]), mesh.faces):
         with pytest.raises(InvalidInputError, match="FaceGraph"):
             select_wall(mesh, p, a, graph=wrong)
 
 
-def test_face_graph_of_finds_the_adjacency_once_on_first_use(monkeypatch):
+def test_face_graph_finds_the_adjacency_once_on_first_use(monkeypatch):
     from potflat.rollout import walls
 
     calls = []
     real = walls.face_adjacency
     monkeypatch.setattr(walls, "face_adjacency", lambda *a, **k: calls.append(1) or real(*a, **k))
     F = np.asarray(vm.cup(n_theta=16)[1], np.int64)
-    graph = walls.FaceGraph.of(F)
+    graph = walls.FaceGraph(F)
     assert not calls and graph.m == len(F)
     pairs, shared = real(F, return_edges=True)
     assert np.array_equal(graph.pairs, pairs) and np.array_equal(graph.shared, shared)

@@ -197,7 +197,7 @@ def detect_attachments(mesh: Mesh, axis_point, axis_direction, *, tolerance: flo
         A vertex is an attachment core when its cell is covered over less than this
         fraction (0-1) of the angles covered at the best-covered cell of its height.
     graph : FaceGraph, optional
-        ``FaceGraph.of(mesh.faces)`` when the caller has it (built here when needed).
+        ``FaceGraph(mesh.faces)`` when the caller has it (built here when needed).
 
     Returns
     -------
@@ -251,7 +251,7 @@ def detect_attachments(mesh: Mesh, axis_point, axis_direction, *, tolerance: flo
     mask = np.zeros(len(F), dtype=bool)
     components: list[Attachment] = []
     if core_f.any():
-        graph = FaceGraph.of(F) if graph is None else graph
+        graph = FaceGraph(F) if graph is None else graph
         adj = graph.pairs
         comp = graph.components(off_f[adj[:, 0]] & off_f[adj[:, 1]])
         seeded = np.zeros(int(comp.max()) + 1, dtype=bool)

@@ -433,7 +433,7 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
             other_objects = ~main
             face_mask = main if face_mask is None else face_mask & main
     clock.lap("axis")
-    graph = FaceGraph.of(F)  # the face adjacency, found once for the attachments (if they need it) and the walls
+    graph = FaceGraph(F)  # the face adjacency, found once for the attachments (if they need it) and the walls
     attachments = detect_attachments(mesh, axis.point, axis.direction, graph=graph)
     clock.lap("attachments")
     walls = select_wall(mesh, axis.point, axis.direction, side=options.side,
@@ -730,7 +730,7 @@ def _edge_on_strips(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, seg:
         return out
     sel = np.flatnonzero(flat < EDGE_ON_RATIO * area_3d)
     sub = faces[sel]
-    comp = FaceGraph.of(sub).components()
+    comp = FaceGraph(sub).components()
     on_border = np.zeros(len(uv), bool)
     on_border[seg.ravel()] = True
     k = int(comp.max()) + 1

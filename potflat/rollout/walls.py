@@ -95,10 +95,10 @@ def check_mesh(mesh: Mesh) -> None:
 
 
 def check_graph(graph, mesh: Mesh) -> None:
-    """Raise :class:`InvalidInputError` unless ``graph`` is None or a :meth:`FaceGraph.of` of
-    ``mesh``'s faces (one node per face; the shared edges come with it)."""
-    if graph is not None and (not isinstance(graph, _LazyFaceGraph) or graph.m != len(mesh.faces)):
-        raise InvalidInputError(f"graph must be FaceGraph.of(mesh.faces) ({len(mesh.faces)} faces), "
+    """Raise :class:`InvalidInputError` unless ``graph`` is None or a :class:`FaceGraph` of
+    ``mesh``'s faces (one node per face)."""
+    if graph is not None and (not isinstance(graph, FaceGraph) or graph.m != len(mesh.faces)):
+        raise InvalidInputError(f"graph must be FaceGraph(mesh.faces) ({len(mesh.faces)} faces), "
                                 f"got {graph!r}")
 
 
@@ -143,29 +143,33 @@ class FaceFrame:
 
 
 class FaceGraph:
-    """Face adjacency (faces sharing an edge) as a symmetric sparse graph, built once.
+    """Face adjacency (faces sharing an edge used by exactly two faces) of ``faces`` ((m, 3)
+    int), as a symmetric sparse graph: :func:`face_adjacency` runs when :attr:`pairs` or
+    :attr:`shared` is first read, so a caller may build it once and hand it on to steps that
+    need it or not.
 
     Parameters
     ----------
-    m : int
-        Number of faces.
-    pairs : (p, 2) int64
-        Adjacent face pairs.
-    shared : (p, 2) int64, optional
-        The edge each pair shares (:func:`face_adjacency` with ``return_edges``).
+    faces : (m, 3) int
     """
 
-    def __init__(self, m: int, pairs: np.ndarray, shared: np.ndarray | None = None) -> None:
-        self.m = int(m)
-        self.pairs = pairs
-        self.shared = shared
+    def __init__(self, faces: np.ndarray) -> None:
+        self.m = len(faces)
+        self._faces = faces
 
-    @classmethod
-    def of(cls, faces: np.ndarray) -> FaceGraph:
-        """The graph of ``faces`` ((m, 3) int), with each pair's shared edge: :func:`face_adjacency`
-        runs when :attr:`pairs` or :attr:`shared` is first read (a caller may hand the graph on
-        to steps that need it or not)."""
-        return _LazyFaceGraph(faces)
+    @cached_property
+    def _adjacency(self) -> tuple[np.ndarray, np.ndarray]:
+        return face_adjacency(self._faces, return_edges=True)
+
+    @property
+    def pairs(self) -> np.ndarray:
+        """Adjacent face pairs (p, 2) int64."""
+        return self._adjacency[0]
+
+    @property
+    def shared(self) -> np.ndarray:
+        """The edge each pair shares (p, 2) int64."""
+        return self._adjacency[1]
 
     @cached_property
     def _csr(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -194,28 +198,6 @@ class FaceGraph:
         comp, _ = union_find(self.m, np.ascontiguousarray(pairs[:, 0], dtype=np.int64),
                              np.ascontiguousarray(pairs[:, 1], dtype=np.int64))
         return comp
-
-
-class _LazyFaceGraph(FaceGraph):
-    """:meth:`FaceGraph.of`: the adjacency of ``faces`` found on first use."""
-
-    def __init__(self, faces: np.ndarray) -> None:
-        self.m = len(faces)
-        self._faces = faces
-
-    @cached_property
-    def _adjacency(self) -> tuple[np.ndarray, np.ndarray]:
-        return face_adjacency(self._faces, return_edges=True)
-
-    @property
-    def pairs(self) -> np.ndarray:
-        """Adjacent face pairs (p, 2) int64."""
-        return self._adjacency[0]
-
-    @property
-    def shared(self) -> np.ndarray:
-        """The edge each pair shares (p, 2) int64."""
-        return self._adjacency[1]
 
 
 def unique_ints(x: np.ndarray, return_counts: bool = False):
@@ -293,7 +275,7 @@ def face_frame(mesh: Mesh, axis_point: np.ndarray, axis_direction: np.ndarray, *
                adjacency: bool = True, graph: FaceGraph | None = None) -> FaceFrame:
     """Compute :class:`FaceFrame` for a validated mesh and axis (``adjacency=False`` skips
     the face adjacency, which only the wall labelling needs; ``graph``: the mesh's
-    :meth:`FaceGraph.of` when the caller has it)."""
+    :class:`FaceGraph` when the caller has it)."""
     V, F = mesh.vertices, mesh.faces
     # one parallel pass over the faces; the cross products become the unit normals in place
     normal, dbl, _, centroid = face_geometry(np.ascontiguousarray(V, dtype=np.float64),
@@ -303,7 +285,7 @@ def face_frame(mesh: Mesh, axis_point: np.ndarray, axis_direction: np.ndarray, *
     normal[~ok] = 0.0
     height, radius, radial = cylindrical(centroid, axis_point, axis_direction)
     if adjacency:
-        graph = FaceGraph.of(F) if graph is None else graph
+        graph = FaceGraph(F) if graph is None else graph
         pairs, edges = graph.pairs, graph.shared
         edge_length = np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1)
     else:
@@ -342,7 +324,7 @@ def largest_component(mesh: Mesh, face_mask: np.ndarray) -> np.ndarray:
         return mask.copy()
     V, F = mesh.vertices, mesh.faces
     area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
-    return _largest_region(mask, FaceGraph.of(F), area)
+    return _largest_region(mask, FaceGraph(F), area)
 
 
 def _largest_region(mask: np.ndarray, graph: FaceGraph, area: np.ndarray) -> np.ndarray:
@@ -512,7 +494,7 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         Faces whose smoothed radial normal component is below this (0-1) are treated as
         horizontal (base, floor, rim top) and take the side of the wall they connect to.
     graph : FaceGraph, optional
-        ``FaceGraph.of(mesh.faces)`` when the caller has it (built here otherwise).
+        ``FaceGraph(mesh.faces)`` when the caller has it (built here otherwise).
 
     Returns
     -------
