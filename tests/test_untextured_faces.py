@@ -185,6 +185,26 @@ def test_a_flattening_without_untextured_faces_writes_no_flag(tmp_path, small_ve
     assert read_flat_ply(tmp_path / "a.rollout.ply").mesh.untextured_faces is None
 
 
+def test_the_seam_choice_reads_no_colour_on_untextured_faces(tmp_path):
+    """The brightness spread that steers the seam away from painting is 0 on flagged faces,
+    whatever their (meaningless) texture coordinates point at."""
+    import cv2
+
+    from potflat.rollout.unroll import _luminance_variation
+
+    halves = np.zeros((64, 64, 3), np.uint8)
+    halves[:, 32:] = 255  # black left, white right: a face reading both halves has spread
+    tex = tmp_path / "halves.png"
+    cv2.imwrite(str(tex), halves)
+    tc = np.array([[[0.1, 0.1], [0.9, 0.1], [0.9, 0.9]], [[0.1, 0.1], [0.9, 0.9], [0.1, 0.9]]])
+    faces = np.arange(2)
+    plain = _square(texcoords=tc, texture_path=tex)
+    spread, source = _luminance_variation(plain, faces)
+    assert source == "texture" and (spread > 0).all()
+    flagged, _ = _luminance_variation(plain.replace(untextured_faces=[False, True]), faces)
+    assert flagged[0] == spread[0] and flagged[1] == 0.0
+
+
 # --- validation -----------------------------------------------------------------------------
 
 def _square(**fields) -> Mesh:

@@ -218,8 +218,11 @@ def _luminance_variation(mesh: Mesh, faces: np.ndarray) -> tuple[np.ndarray | No
 
         img = read_texture_grey_quarter(mesh.texture_path)
         if img is not None and img.size:
-            return texel_spread(np.ascontiguousarray(mesh.texcoords, dtype=np.float64),
-                                np.ascontiguousarray(faces, dtype=np.int64), np.ascontiguousarray(img)), "texture"
+            spread = texel_spread(np.ascontiguousarray(mesh.texcoords, dtype=np.float64),
+                                  np.ascontiguousarray(faces, dtype=np.int64), np.ascontiguousarray(img))
+            if mesh.untextured_faces is not None:  # no colour, no painting to keep whole
+                spread[mesh.untextured_faces[faces]] = 0.0
+            return spread, "texture"
     if mesh.vertex_colors is not None:
         rgb = mesh.vertex_colors[:, :3].astype(np.float64)
         lum = rgb @ np.array([0.299, 0.587, 0.114])
