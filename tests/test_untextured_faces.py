@@ -185,6 +185,21 @@ def test_a_flattening_without_untextured_faces_writes_no_flag(tmp_path, small_ve
     assert read_flat_ply(tmp_path / "a.rollout.ply").mesh.untextured_faces is None
 
 
+@pytest.mark.parametrize("command", ["rollout", "run"])
+def test_the_command_line_says_which_faces_have_no_texture(tmp_path, small_vessel, command):
+    """The loader's warnings reach the user on the terminal, not only the JSON."""
+    from typer.testing import CliRunner
+
+    from potflat_cli.main import app
+
+    untextured = _patches(small_vessel)
+    scan = _obj_with_untextured(small_vessel, tmp_path / "pot.obj", untextured, "no vt")
+    result = CliRunner().invoke(app, [command, str(scan), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.output.split())  # rich wraps long lines
+    assert f"warning: {int(untextured.sum())} faces have no texture coordinates" in said
+
+
 def test_the_seam_choice_reads_no_colour_on_untextured_faces(tmp_path):
     """The brightness spread that steers the seam away from painting is 0 on flagged faces,
     whatever their (meaningless) texture coordinates point at."""

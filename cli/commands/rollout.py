@@ -147,6 +147,8 @@ def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quie
     out.print(f"profile: {result.paths['profile_csv'].name}, {result.paths['profile_svg'].name}")
     for note in s["notes"]:
         out.print(f"[yellow]note:[/] {note}")
+    for warning in s["cleaning"]["warnings"]:  # what loading the scan found (no texture, repeats, ...)
+        out.print(f"[yellow]warning:[/] {warning}")
     if s.get("importance"):
         out.print(f"importance ({s['importance']['method']}): {s['importance']['reason']}")
     flipped = f"[red]{d['flipped']} flipped[/]" if d["flipped"] else "0 flipped"

@@ -95,5 +95,6 @@ def _run(values: dict[str, Any]) -> None:
         out.print(f"  {relaxed['lengths']}")
     for key, path in result.paths.items():
         out.print(f"  {key:<16} {path}", highlight=False)
-    for note in result.stages["rollout"].summary.get("notes", []):
+    rolled = result.stages["rollout"].summary
+    for note in rolled.get("notes", []) + rolled["cleaning"]["warnings"]:  # and what loading the scan found
         out.print(f"[yellow]warning:[/] {note}", highlight=False)
