@@ -125,7 +125,7 @@ def run_rollout_stage(scan_path, out_dir, options, *, name=None, check=None):
     inputs = [scan] + [p for p in [scan.with_suffix(".png")] if p.exists()]
     texture = b"".join(p.read_bytes() for p in inputs[1:])
     ply = write_bytes_atomic(out / f"{name}.rollout.ply", _digest(data, texture, _opts(options)))
-    summary = {"distortion": {"edge_rms": 0.2, "flipped": 0},
+    summary = {"distortion": {"edge_rms": 0.2, "flipped": 0}, "cleaning": {"warnings": []},
                "provenance": provenance(stage="rollout", inputs=inputs, options=asdict(options))}
     js = write_json_atomic(out / f"{name}.rollout.json", summary)
     return StageOutput(paths={"ply": ply, "json": js}, summary=summary)
