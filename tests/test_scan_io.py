@@ -725,6 +725,18 @@ def test_several_texture_images_packed_into_one_atlas(tmp_path):
     _one_line(e, "b.png", "not a readable image")
 
 
+def _write_texnumber_ply(path, V, F, tc, textures, which):
+    """An ascii PLY naming the ``textures`` in comments, with per-face texture coordinates
+    ``tc`` (m, 3, 2) and each face's ``texnumber`` ``which`` (m,) int (-1: no texture)."""
+    head = ["ply", "format ascii 1.0", *[f"comment TextureFile {n}" for n in textures],
+            f"element vertex {len(V)}", "property float x", "property float y", "property float z",
+            f"element face {len(F)}", "property list uchar int vertex_indices", "property list uchar float texcoord",
+            "property int texnumber", "end_header"]
+    rows = [" ".join(map(str, v)) for v in V]
+    rows += [f"3 {a} {b} {c} 6 " + " ".join(map(str, tc[f].ravel())) + f" {which[f]}" for f, (a, b, c) in enumerate(F)]
+    path.write_text("\n".join(head + rows) + "\n")
+
+
 def test_ply_texnumber_atlas_colours(tmp_path):
     from PIL import Image
 
@@ -734,13 +746,7 @@ def test_ply_texnumber_atlas_colours(tmp_path):
     _paint(tmp_path / "t0.png", (8, 8), [(255, 0, 0), (0, 255, 0)])
     _paint(tmp_path / "t1.png", (4, 16), [(0, 0, 255), (255, 255, 0)])
     which = np.arange(len(F)) % 2
-    head = ["ply", "format ascii 1.0", "comment TextureFile t0.png", "comment TextureFile t1.png",
-            f"element vertex {len(V)}", "property float x", "property float y", "property float z",
-            f"element face {len(F)}", "property list uchar int vertex_indices", "property list uchar float texcoord",
-            "property int texnumber", "end_header"]
-    rows = [" ".join(map(str, v)) for v in V]
-    rows += [f"3 {a} {b} {c} 6 " + " ".join(map(str, tc[f].ravel())) + f" {which[f]}" for f, (a, b, c) in enumerate(F)]
-    (tmp_path / "tn.ply").write_text("\n".join(head + rows) + "\n")
+    _write_texnumber_ply(tmp_path / "tn.ply", V, F, tc, ["t0.png", "t1.png"], which)
     mesh = load_scan(tmp_path / "tn.ply").mesh
     atlas = Image.open(mesh.texture_path)
     assert atlas.size == (16, 16)
@@ -761,20 +767,13 @@ def test_ply_texnumber_minus_one_flags_untextured_faces(tmp_path, images):
         _paint(tmp_path / name, (8, 8), [(255, 0, 0), (0, 255, 0)])
     which = np.arange(len(F)) % images
     which[::3] = -1
-    head = ["ply", "format ascii 1.0", *[f"comment TextureFile {n}" for n in names],
-            f"element vertex {len(V)}", "property float x", "property float y", "property float z",
-            f"element face {len(F)}", "property list uchar int vertex_indices", "property list uchar float texcoord",
-            "property int texnumber", "end_header"]
-    rows = [" ".join(map(str, v)) for v in V]
-    rows += [f"3 {a} {b} {c} 6 " + " ".join(map(str, tc[f].ravel())) + f" {which[f]}" for f, (a, b, c) in enumerate(F)]
-    (tmp_path / "tn.ply").write_text("\n".join(head + rows) + "\n")
+    _write_texnumber_ply(tmp_path / "tn.ply", V, F, tc, names, which)
     scan = load_scan(tmp_path / "tn.ply")
     ref = _match_faces(scan.mesh, V[F])
     np.testing.assert_array_equal(scan.mesh.untextured_faces, which[ref] < 0)
     assert np.all(scan.mesh.texcoords[scan.mesh.untextured_faces] == 0.0)
     assert any(w.startswith(f"{int((which < 0).sum())} faces have texnumber -1") for w in scan.report.warnings)
-    rows[len(V):] = [r.rsplit(" ", 1)[0] + " -1" for r in rows[len(V):]]
-    (tmp_path / "tn.ply").write_text("\n".join(head + rows) + "\n")
+    _write_texnumber_ply(tmp_path / "tn.ply", V, F, tc, names, np.full(len(F), -1))
     scan = load_scan(tmp_path / "tn.ply")
     assert scan.mesh.texcoords is None and any("texnumber -1" in w for w in scan.report.warnings)
 
