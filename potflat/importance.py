@@ -146,13 +146,19 @@ def detail_map(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray, np.ndarr
     covered : (h, w) bool
     """
     lab, covered = _lab(rgba)
+    return _deviation(lab, covered, px_per_mm), covered
+
+
+def _deviation(lab: np.ndarray, covered: np.ndarray, px_per_mm: float) -> np.ndarray:
+    """:func:`detail_map`'s deviation (h, w) float32 from the CIELAB colours (h, w, 3) float32
+    and the covered pixels (h, w) bool."""
     w = covered.astype(np.float32)
     sigma = DETAIL_MM * px_per_mm
     window = _gaussian(w, sigma)
     mean = _masked_mean(lab, w, sigma, window)
     mean_sq = _masked_mean(lab * lab, w, sigma, window)
     var = np.maximum(mean_sq - mean * mean, 0.0).sum(axis=2)
-    return np.sqrt(var).astype(np.float32), covered
+    return np.sqrt(var).astype(np.float32)
 
 
 def _lab(rgba: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -189,7 +195,8 @@ def painted_zone_image(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray |
     """
     import cv2
 
-    deviation, covered = detail_map(rgba, px_per_mm)
+    lab, covered = _lab(rgba)
+    deviation = _deviation(lab, covered, px_per_mm)
     if covered.sum() < 16:
         return None, "too little surface to look for a painting"
     noise = float(np.percentile(deviation[covered], NOISE_PERCENTILE))
@@ -206,7 +213,7 @@ def painted_zone_image(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray |
     zone = keep[labels].astype(np.uint8)
     if not zone.any():
         return None, "no painted zone found (only specks of colour detail)"
-    zone = _on_the_strokes(zone, covered, labels, _unlike_plain(rgba, zone, covered, threshold, px_per_mm),
+    zone = _on_the_strokes(zone, covered, labels, _unlike_plain(lab, zone, covered, threshold, px_per_mm),
                            px_per_mm)
     fraction = float(zone.sum()) / float(covered.sum())
     if fraction >= ALL_OVER_FRACTION:
@@ -216,9 +223,9 @@ def painted_zone_image(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray |
     return soft, f"painted zone found in the colours (detail above {threshold:.1f} CIELAB units)"
 
 
-def _unlike_plain(rgba: np.ndarray, zone: np.ndarray, covered: np.ndarray, threshold: float,
+def _unlike_plain(lab: np.ndarray, zone: np.ndarray, covered: np.ndarray, threshold: float,
                   px_per_mm: float) -> np.ndarray:
-    """Pixels whose colour differs by more than ``threshold`` (CIELAB units) from the plain
+    """Pixels whose CIELAB colour (``lab`` (h, w, 3) float32) differs by more than ``threshold`` (CIELAB units) from the plain
     surface around the zone (its mean colour within :data:`DETAIL_REACH_MM`, so that a lighting
     gradient does not count), and by more than half the difference of the painting nearby (a
     stroke's edge pixel counts by its larger part); where no plain surface is that near, every
@@ -230,7 +237,7 @@ def _unlike_plain(rgba: np.ndarray, zone: np.ndarray, covered: np.ndarray, thres
     """
     import cv2
 
-    lab = _gaussian(_lab(rgba)[0], 0.5)  # half a pixel: less noise, and an edge's half way stays put
+    lab = _gaussian(lab, 0.5)  # half a pixel: less noise, and an edge's half way stays put
     plain = (covered & (zone == 0)).astype(np.float32)
     sigma = DETAIL_REACH_MM * px_per_mm
     window = _gaussian(plain, sigma)

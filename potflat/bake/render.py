@@ -25,6 +25,7 @@ import math
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -552,8 +553,13 @@ class Renderer:
         Shape (k, w) float32."""
         face, _ = self._raster(r0, r1)
         out = np.empty((r1 - r0, self.grid.width), np.float32)
-        self._raster_mod.face_values(face, self._untextured.astype(np.float64), self.n, out)
+        self._raster_mod.face_values(face, self._untextured_value, self.n, out)
         return out
+
+    @cached_property
+    def _untextured_value(self) -> np.ndarray:
+        """The untextured-face flag as a face value (m,) float64 (0 or 1), made on first use."""
+        return self._untextured.astype(np.float64)
 
     def scalar(self, name: str, r0: int, r1: int) -> np.ndarray:
         """A distortion map's values (NaN outside). Shape (k, w) float32."""
