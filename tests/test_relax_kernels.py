@@ -131,15 +131,16 @@ def test_neighbour_means_count_each_edge_neighbour_once():
         np.testing.assert_allclose(out[v], x[sorted(nbrs)].mean(axis=0), rtol=1e-14)
 
 
-@pytest.mark.parametrize("dtype", [np.int32, np.int64])
-def test_faces_by_first_vertex_is_a_stable_sort_by_the_smallest_corner(dtype):
-    from potflat.relax._kernels.springs import faces_by_first_vertex
+def test_faces_in_vertex_order_renumber_and_sort_stably_by_the_smallest_corner():
+    from potflat.relax._kernels.springs import faces_in_vertex_order
 
     rng = np.random.default_rng(7)
-    faces = rng.integers(0, 40, size=(300, 3)).astype(dtype)  # many ties, unused vertices
-    order = faces_by_first_vertex(50, faces)
-    np.testing.assert_array_equal(order, np.argsort(faces.min(axis=1), kind="stable"))
-    assert len(faces_by_first_vertex(5, np.empty((0, 3), dtype))) == 0
+    faces = rng.integers(0, 40, size=(300, 3)).astype(np.int64)  # many ties, unused vertices
+    new_index = rng.permutation(50).astype(np.int64)
+    renumbered = new_index[faces]
+    expected = renumbered[np.argsort(renumbered.min(axis=1), kind="stable")]
+    np.testing.assert_array_equal(faces_in_vertex_order(faces, new_index), expected)
+    assert faces_in_vertex_order(np.empty((0, 3), np.int64), new_index).shape == (0, 3)
 
 
 def test_face_barrier_visits_only_blocks_with_squeezed_faces_and_matches_the_full_scan():

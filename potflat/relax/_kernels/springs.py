@@ -390,36 +390,44 @@ def vertex_faces(n, faces):
 
 
 @leaf
-def faces_by_first_vertex(n, faces):
-    """An order of the faces by their smallest vertex index (stable: ties keep their order).
+def faces_in_vertex_order(faces, new_index):
+    """The faces with their corners renumbered by ``new_index``, ordered by their smallest
+    new corner index (stable: ties keep their order).
 
-    With vertices in a locality-preserving order, the faces in this order are local too:
-    the per-face passes and the per-vertex gathers over incident faces then read nearby
-    memory (a counting sort, ``O(n + m)``; equal to ``np.argsort(faces.min(axis=1),
-    kind="stable")``).
+    With the vertices renumbered in a locality-preserving order, the faces in this order are
+    local too: the per-face passes and the per-vertex gathers over incident faces then read
+    nearby memory. One counting sort, ``O(n + m)`` (equal to ``G[np.argsort(G.min(axis=1),
+    kind="stable")]`` for ``G = new_index[faces]``, without its temporaries).
 
     Parameters
     ----------
-    n : int
-        Number of vertices (every index in ``faces`` is below it).
-    faces : (m, 3) int32 or int64
+    faces : (m, 3) int64
+    new_index : (n,) int64
+        The new index of every vertex (a permutation of ``range(n)``).
 
     Returns
     -------
-    order : (m,) int64
+    (m, 3) int64
     """
+    n = new_index.shape[0]
     m = faces.shape[0]
     start = np.zeros(n + 1, np.int64)
     for f in range(m):
-        start[min(faces[f, 0], faces[f, 1], faces[f, 2]) + 1] += 1
+        start[min(new_index[faces[f, 0]], new_index[faces[f, 1]], new_index[faces[f, 2]]) + 1] += 1
     for i in range(n):
         start[i + 1] += start[i]
-    order = np.empty(m, np.int64)
+    out = np.empty((m, 3), np.int64)
     for f in range(m):
-        v = min(faces[f, 0], faces[f, 1], faces[f, 2])
-        order[start[v]] = f
+        a = new_index[faces[f, 0]]
+        b = new_index[faces[f, 1]]
+        c = new_index[faces[f, 2]]
+        v = min(a, b, c)
+        row = start[v]
+        out[row, 0] = a
+        out[row, 1] = b
+        out[row, 2] = c
         start[v] += 1
-    return order
+    return out
 
 
 @parallel
