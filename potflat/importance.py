@@ -225,11 +225,11 @@ def painted_zone_image(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray |
 
 def _unlike_plain(lab: np.ndarray, zone: np.ndarray, covered: np.ndarray, threshold: float,
                   px_per_mm: float) -> np.ndarray:
-    """Pixels whose CIELAB colour (``lab`` (h, w, 3) float32) differs by more than ``threshold`` (CIELAB units) from the plain
-    surface around the zone (its mean colour within :data:`DETAIL_REACH_MM`, so that a lighting
-    gradient does not count), and by more than half the difference of the painting nearby (a
-    stroke's edge pixel counts by its larger part); where no plain surface is that near, every
-    pixel differs.
+    """Pixels whose CIELAB colour (``lab`` (h, w, 3) float32) differs by more than
+    ``threshold`` (CIELAB units) from the plain surface around the zone (its mean colour
+    within :data:`DETAIL_REACH_MM`, so that a lighting gradient does not count), and by more
+    than half the difference of the painting nearby (a stroke's edge pixel counts by its
+    larger part); where no plain surface is that near, every pixel differs.
 
     Returns
     -------

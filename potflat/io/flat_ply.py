@@ -6,8 +6,8 @@ painted: :attr:`potflat.types.FlatMesh.importance`); faces carry
 ``vertex_indices`` (uchar count, int indices) and optionally ``texcoord`` (uchar count,
 6 floats: MeshLab's convention), with ``comment TextureFile NAME`` naming the texture
 image relative to the PLY, and ``untextured`` (uchar, 1 for a face without texture
-coordinates: :attr:`potflat.types.Mesh.untextured_faces`; only when some face has none). ``comment units mm`` records the length unit. See
-``docs/formats.md``.
+coordinates: :attr:`potflat.types.Mesh.untextured_faces`; only when some face has none).
+``comment units mm`` records the length unit. See ``docs/formats.md``.
 """
 from __future__ import annotations
 

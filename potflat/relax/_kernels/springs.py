@@ -116,6 +116,12 @@ def _swap(hj, hh, a, b):
 
 
 @leaf
+def _before(hj, hh, a, b):
+    """Whether slot ``a`` sorts before slot ``b`` by ``(hj, hh)``."""
+    return hj[a] < hj[b] or (hj[a] == hj[b] and hh[a] < hh[b])
+
+
+@leaf
 def _sift_down(hj, hh, root, end):
     """Restore the max-heap by ``(hj, hh)`` of slots ``[0, end)`` below ``root``.
 
@@ -125,9 +131,9 @@ def _sift_down(hj, hh, root, end):
         child = 2 * root + 1
         if child >= end:
             return
-        if child + 1 < end and (hj[child] < hj[child + 1] or (hj[child] == hj[child + 1] and hh[child] < hh[child + 1])):
+        if child + 1 < end and _before(hj, hh, child, child + 1):
             child += 1
-        if hj[root] > hj[child] or (hj[root] == hj[child] and hh[root] > hh[child]):
+        if _before(hj, hh, child, root):
             return
         _swap(hj, hh, root, child)
         root = child
