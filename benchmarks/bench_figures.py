@@ -59,11 +59,16 @@ VARIANTS: dict[str, dict] = {
     "rigidity 0": {"rigidity": 0.0},
     "rigidity 1": {"rigidity": 1.0},
     "rigidity 4": {"rigidity": 4.0},
+    "area 0": {"area": 0.0},
+    "area 1": {"area": 1.0},
+    "area 4": {"area": 4.0},
+    "limit 1.3": {"max_anisotropy": 1.3},
+    "limit 1.45": {"max_anisotropy": 1.45},
     "no importance": {"importance": "none"},
 }
 #: The relax of the springs alone (the result before importance and shape existed): the keywords
 #: this version has are used.
-SPRINGS_ALONE = {"importance": "none", "shape": 0.0, "rigidity": 0.0, "importance_contrast": 1.0, "true_scale": False}
+SPRINGS_ALONE = {"importance": "none", "shape": 0.0, "rigidity": 0.0, "area": 0.0, "importance_contrast": 1.0, "true_scale": False}
 #: (kind, painting) of the generated vessels.
 CASES = [(k, p) for k in ("hydria", "aryballos", "amphora") for p in ("panel", "belt", "allover")] + [
     ("alabastron", "allover")]

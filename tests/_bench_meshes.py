@@ -23,7 +23,18 @@ figures = _load("_figures")
 
 #: Relax options of the springs alone (no shape term, no final scaling): what the tests of the
 #: springs' edge-length figures run.
-SPRINGS_ONLY = {"shape": 0.0, "rigidity": 0.0, "true_scale": False}
+SPRINGS_ONLY = {"shape": 0.0, "rigidity": 0.0, "area": 0.0, "true_scale": False}
+
+
+def energy_never_increases(result) -> bool:
+    """Each level of a relax result (its ``levels``, in order) never increased its energy:
+    each minimises its own (the area term joins after a first solve without it)."""
+    h, start = result.energy_history, 0
+    for level in result.levels:
+        if np.any(np.diff(h[start:start + level["iterations"]]) > 0):
+            return False
+        start += level["iterations"]
+    return start == len(h)
 
 
 def signed_areas(uv: np.ndarray, F: np.ndarray) -> np.ndarray:

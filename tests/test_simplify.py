@@ -87,8 +87,9 @@ def test_standard_starts_from_a_coarse_copy(vessel, monkeypatch):
     nested = relax(vessel, preset="standard")
     monkeypatch.setattr(relax_module, "COARSE", dataclasses.replace(relax_module.COARSE, min_vertices=10**9))
     plain = relax(vessel, preset="standard")
-    assert [lv["level"] for lv in nested.levels] == ["coarse", "fine"]
-    assert [lv["level"] for lv in plain.levels] == ["fine"]
+    # the area term joins after a first solve without it, on the coarsest mesh solved
+    assert [lv["level"] for lv in nested.levels] == ["coarse, shape first", "coarse", "fine"]
+    assert [lv["level"] for lv in plain.levels] == ["fine, shape first", "fine"]
     assert nested.levels[0]["vertices"] < len(vessel.uv) / 8
     for r in (nested, plain):
         assert r.converged and r.flipped == 0 and r.boundary_overlap == 0
@@ -100,7 +101,7 @@ def test_preview_follows_a_coarse_copy_and_scales_with_units(vessel):
     r = relax(vessel, preset="preview", simplify_mm=6.0)
     assert relax(vessel, preset="preview", simplify_mm=6.0, **SPRINGS_ONLY).distortion.edge_rms < (
         0.6 * r.distortion_before.edge_rms)
-    assert [lv["level"] for lv in r.levels] == ["coarse", "follow"]
+    assert [lv["level"] for lv in r.levels] == ["coarse, shape first", "coarse", "follow"]
     assert r.levels[0]["vertices"] <= 0.7 * len(vessel.uv)
     assert r.flipped == 0 and r.boundary_overlap == 0 and np.all(signed_areas(r.flat.uv, vessel.mesh.faces) > 0)
     assert any("follows it" in note for note in r.notes)
@@ -117,4 +118,4 @@ def test_a_copy_too_coarse_or_too_fine_is_not_followed(vessel, simplify_mm):
     # 500 mm: one cell, nothing to relax; 1 mm: cells smaller than the edges (about 2.6 mm),
     # most fine vertices outside the copy. Both relax the full mesh (from a 16-per-cell copy).
     r = relax(vessel, preset="preview", simplify_mm=simplify_mm)
-    assert [lv["level"] for lv in r.levels] == ["coarse", "fine"] and r.flipped == 0
+    assert [lv["level"] for lv in r.levels] == ["coarse, shape first", "coarse", "fine"] and r.flipped == 0

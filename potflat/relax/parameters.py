@@ -54,6 +54,8 @@ class RelaxPreset:
     friction_boundary: float | None = None
     shape: float = 0.25
     rigidity: float = 2.0
+    area: float = 2.0
+    max_anisotropy: float | str = "auto"
     importance_contrast: float = 1000.0
     true_scale: bool = True
 
@@ -74,7 +76,7 @@ PRESETS: dict[str, RelaxPreset] = {
     "archival": RelaxPreset(**_FOLD_FREE, tol=1e-7, max_iter=20000),
     "paper": RelaxPreset(solver="dynamics", stretch=2.0, stiffness=0.5, weighting="uniform", tol=1e-7,
                          max_iter=100000, friction_inside=0.01, friction_boundary=1.0, coarse_start=False,
-                         shape=0.0, rigidity=0.0, importance_contrast=1.0, true_scale=False),
+                         shape=0.0, rigidity=0.0, area=0.0, importance_contrast=1.0, true_scale=False),
 }
 
 
@@ -106,6 +108,9 @@ class EnergyParameters:
     contact_gap: float = 0.5
     area_floor: float = 1e-2
     length_floor: float = 1e-3
+    limit_mu: float = 100.0
+    limit_percentile: float = 80.0
+    area_eps: float = 0.05
 
 
 @dataclass(frozen=True, kw_only=True)

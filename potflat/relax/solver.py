@@ -38,8 +38,10 @@ from potflat.mesh.distortion import (
     DistortionSummary,
     SurfaceReference,
     face_areas,
+    face_distortion,
     row_blocks,
     true_scale_factor,
+    weighted_percentile,
 )
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
 from potflat.mesh.boundary import crossing_pairs
@@ -116,6 +118,8 @@ class RelaxOptions:
     simplify_mm: float | None = None
     shape: float | None = None
     rigidity: float | None = None
+    area: float | None = None
+    max_anisotropy: float | str | None = None
     importance_contrast: float | None = None
     true_scale: bool | None = None
 
@@ -133,6 +137,11 @@ class RelaxOptions:
         _at_least("simplify_mm", self.simplify_mm, 0, "0: no simplification")
         _at_least("shape", self.shape, 0, "0: springs only")
         _at_least("rigidity", self.rigidity, 0, "0: no rigidity term")
+        _at_least("area", self.area, 0, "0: no area term")
+        lim = self.max_anisotropy
+        if lim is not None and lim != "auto" and not (
+                isinstance(lim, (int, float, np.floating)) and not isinstance(lim, bool) and lim > 1):
+            raise InvalidOptionError(f"max-anisotropy must be 'auto' or a number above 1 (inf: no limit), got {lim!r}")
         _at_least("importance_contrast", self.importance_contrast, 1, "1: the whole surface alike")
         if self.true_scale is not None and not isinstance(self.true_scale, (bool, np.bool_)):
             raise InvalidOptionError(f"true-scale must be true or false, got {self.true_scale!r}")
@@ -143,7 +152,7 @@ class RelaxOptions:
         """The preset's settings with the options given here applied."""
         out = PRESETS[self.preset].settings()
         for name in ("tol", "max_iter", "stretch", "stiffness", "weighting", "simplify_mm", "shape",
-                     "rigidity", "importance_contrast", "true_scale"):
+                     "rigidity", "area", "max_anisotropy", "importance_contrast", "true_scale"):
             if getattr(self, name) is not None:
                 out[name] = getattr(self, name)
         out["time_budget"] = self.time_budget
@@ -210,6 +219,8 @@ class RelaxResult:
     scale_factor : float
         The uniform factor applied after solving for true scale (``true_scale``; 1 without):
         the median length scale in the important zone (the whole surface without one) is 1.
+    anisotropy_limit : float or None
+        The anisotropy limit the solve used (``max_anisotropy`` resolved; None: none).
     notes : tuple of str
         What the solver had to do beyond the plan (untangling, fallback), for the JSON.
     """
@@ -228,21 +239,24 @@ class RelaxResult:
     settings: dict = field(default_factory=dict)
     scale_factor: float = 1.0
     notes: tuple = ()
+    anisotropy_limit: float | None = None
 
 
 _NO_FLAGS = np.empty(0, bool)
 _NO_WEIGHTS = np.empty(0)
-_NO_SHAPE = np.empty((0, 4))
+_NO_SHAPE = np.empty((0, 5))
 
 
 class _Springs:
     """Spring system and triangles of a mesh in normalised, Morton-sorted form."""
 
     def __init__(self, V: np.ndarray, faces: np.ndarray, n: int, *, k: float, relative: bool,
-                 weight: np.ndarray | None = None, shape: float = 0.0, rigidity: float = 0.0):
+                 weight: np.ndarray | None = None, shape: float = 0.0, rigidity: float = 0.0,
+                 area: float = 0.0):
         """``V`` (n, 3) rest positions and ``faces`` (m, 3) in normalised units; ``weight``
-        (n,) the vertices' importance weights (None: all 1), ``shape`` and ``rigidity`` the
-        shape and rigidity terms' weights (0: none)."""
+        (n,) the vertices' importance weights (None: all 1), ``shape``, ``rigidity`` and
+        ``area`` the per-face terms' weights (0: none); no anisotropy limit until
+        :meth:`limit_area` sets one."""
         from potflat.relax._kernels import overlap as relax_overlap
         from potflat.relax._kernels import springs as ks
 
@@ -256,12 +270,13 @@ class _Springs:
         self.faces = np.ascontiguousarray(faces, dtype=np.int32)  # half the memory traffic
         self.weight = _NO_WEIGHTS if weight is None else np.ascontiguousarray(weight, dtype=np.float64)
         self.shape = _NO_SHAPE
-        if (shape > 0 or rigidity > 0) and len(faces):
-            # per unit rest area: a triangle of mean area weighs ``shape`` against its springs
-            self.shape = np.empty((len(faces), 6 if rigidity > 0 else 4))
-            mean_area = float(np.mean(areas))
-            ks.shape_coefficients(V, self.faces, self.weight, float(shape) / mean_area,
-                                  float(rigidity) / mean_area, ENERGY.area_floor, self.shape)
+        # per unit rest area: a triangle of mean area weighs ``shape`` against its springs
+        self.terms = np.array([shape, rigidity, 0.0, 0.0, math.inf, ENERGY.area_eps])
+        if (shape > 0 or rigidity > 0 or area > 0) and len(faces):
+            self.shape = np.empty((len(faces), 6))
+            ks.shape_coefficients(V, self.faces, self.weight, 1.0 / float(np.mean(areas)), ENERGY.area_floor,
+                                  self.shape)
+        self.limit_area(area, None)
         del areas
         self.k, self.relative = float(k), bool(relative)
         self.n, self.m = n, len(faces)
@@ -284,6 +299,20 @@ class _Springs:
         self.diag = np.empty(n)
         self._blocks = np.empty(max(1, -(-self.m // ks.BLOCK)))
         self._below = np.zeros(len(self._blocks), np.int64)  # faces near the barrier per block
+
+    def limit_area(self, area: float, limit: float | None) -> None:
+        """Set the area term's weight and the anisotropy limit (None: none). Without per-face
+        coefficients (no shape, rigidity or area term at construction) there is neither."""
+        shaped = len(self.shape) > 0
+        self.terms[2] = area if shaped else 0.0
+        self.terms[3] = ENERGY.limit_mu if limit is not None and shaped else 0.0
+        self.terms[4] = math.log(limit) if limit is not None else math.inf
+
+    def anisotropy_percentile(self, V: np.ndarray, x: np.ndarray, q: float) -> float:
+        """The ``q``-th percentile (0-100) of the faces' anisotropy ``sigma_1 / sigma_2`` in the
+        layout ``x`` of the rest positions ``V`` (n, 3) (any scales), weighted by rest area."""
+        fd = face_distortion(V, x, self.faces.astype(np.int64))
+        return weighted_percentile(fd.anisotropy, fd.area_3d, q)
 
     def guard_boundary(self, x: np.ndarray) -> int:
         """Guard the angle sum of every boundary vertex below ``2 pi`` from ``x`` on.
@@ -315,7 +344,7 @@ class _Springs:
                 self.ks.boundary_angle_sums(x, self.bverts, self.vf_ptr, self.vf_tri, self.faces, self.theta)
         self.ks.energy_gradient(x, self.ptr, self.nbr, self.rst, self.k, self.relative, ENERGY.length_floor,
                                 self.weight, self.vf_ptr, self.vf_tri, self.faces,
-                                self.shape, self.bprev, self.bnext, self.bguard, self.theta, ENERGY.boundary_mu if barrier else 0.0,
+                                self.shape, self.terms, self.bprev, self.bnext, self.bguard, self.theta, ENERGY.boundary_mu if barrier else 0.0,
                                 ENERGY.boundary_gap, g, self._es, self._eb, self.diag)
         es = float(np.sum(self._es))
         if not barrier:
@@ -619,8 +648,10 @@ class _LBFGS:
         return converged, it
 
 
-def _minimise(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, levels_out: list, notes: list):
-    """The fold-free solve: preconditioned L-BFGS on the whole mesh.
+def _minimise(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, levels_out: list, notes: list, *,
+              level: str = "fine"):
+    """The fold-free solve: preconditioned L-BFGS on the whole mesh (``level`` its name in
+    ``levels_out``).
 
     When the start's boundary does not overlap itself, no accepted step lets it: a trial
     point whose boundary segments cross is treated like one of higher energy (the step is
@@ -629,7 +660,7 @@ def _minimise(sp: _Springs, x: np.ndarray, hier, settings: dict, run: _Run, leve
     from potflat.relax.hierarchy import MultilevelPreconditioner
 
     t0 = time.perf_counter()
-    run.level = "fine"
+    run.level = level
     precond = MultilevelPreconditioner(hier, theta=SOLVER.precond_theta) if hier.levels else None
     solver = _LBFGS(sp, x, precond, guard_overlap=sp.overlap(x) == 0)
     del x
@@ -788,7 +819,7 @@ class _SofterStart:
 
 
 def _softer_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progress: bool,
-                  callback, deadline: float) -> _SofterStart | None:
+                  callback, deadline: float, limit) -> _SofterStart | None:
     """The relaxation at the lower importance contrast :attr:`SOLVER.contrast_start
     <potflat.relax.parameters.SolverParameters.contrast_start>`, from which a higher one is
     reached (None: the contrast is not higher, or every vertex is wholly important, so the
@@ -798,12 +829,12 @@ def _softer_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
         return None
     budget = _budget_left(deadline)
     sub = _relax(flat, replace(options, importance_contrast=low, time_budget=budget, true_scale=False), progress,
-                 callback, summaries=False, fine_iterations=SOLVER.contrast_start_iterations)
+                 callback, summaries=False, fine_iterations=SOLVER.contrast_start_iterations, limit=limit)
     return _SofterStart(uv=sub.flat.uv, contrast=low, result=replace(sub, flat=None))
 
 
 def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progress: bool,
-                  callback, deadline: float, *, softened: bool) -> _CoarseStart | None:
+                  callback, deadline: float, limit, *, softened: bool) -> _CoarseStart | None:
     """Relax a coarse copy of ``flat`` (grid clusters of its start layout, :mod:`potflat.relax.simplify`).
 
     With ``simplify_mm`` the cells have that side and the full mesh will only follow the
@@ -839,7 +870,7 @@ def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
         sub = _relax(FlatMesh(Mesh(simple.vertices, simple.faces, units=flat.mesh.units), simple.uv,
                               importance=importance),
                      replace(options, simplify_mm=0.0, time_budget=budget, true_scale=False), progress, tagged,
-                     summaries=False, softened=softened)
+                     summaries=False, softened=softened, limit=limit)
     except FoldedResultError as exc:
         return _CoarseStart(result=None, uv=None, final=False, notes=[
             f"the {len(simple.vertices)}-vertex coarse copy could not be relaxed fold-free ({exc}); "
@@ -894,6 +925,15 @@ def _uncross_boundary(sp: _Springs, x: np.ndarray, pairs: np.ndarray) -> np.ndar
         x, _ = _untangle(sp, x)
         pairs = crossing_pairs(x, seg)
     return x
+
+
+def _limit(settings: dict, area: float):
+    """The anisotropy limit the settings ask for with the area term's weight ``area``:
+    ``"auto"`` (found by a first solve without the area term), a number, or None (no limit)."""
+    lim = settings["max_anisotropy"]
+    if lim == "auto":
+        return "auto" if area > 0 else None
+    return float(lim) if math.isfinite(lim) else None
 
 
 def _importance_weights(importance: np.ndarray, contrast: float) -> np.ndarray:
@@ -965,13 +1005,14 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
 
 
 def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, summaries: bool,
-           softened: bool = False, fine_iterations: int | None = None) -> RelaxResult:
+           softened: bool = False, fine_iterations: int | None = None, limit="auto") -> RelaxResult:
     """:func:`relax`; without ``summaries`` (a coarse copy, whose layout is all its caller
     reads) the result's distortion summaries are None and its stress is not computed;
     ``softened``: the start is already relaxed at a lower importance contrast (a coarse
     copy of such a start), so no softer first solve; ``fine_iterations``: when a coarse copy
     was relaxed, at most this many iterations on ``flat`` itself (a first solve that only
-    smooths)."""
+    smooths); ``limit``: the anisotropy limit found by an earlier solve (see :func:`_limit`;
+    ``"auto"``: from the settings)."""
     settings = options.resolved()
     V = np.ascontiguousarray(flat.mesh.vertices, dtype=np.float64)
     uv = np.ascontiguousarray(flat.uv, dtype=np.float64)
@@ -992,10 +1033,22 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         unit = _mean_edge_length(V, F)
     if not unit > 0:
         raise InvalidInputError("all edges of the rollout have zero length; check the scan's units and faces")
-    softer = _softer_start(flat, options, settings, progress, callback, deadline) if fold_free and not softened else None
+    # a painted zone (plain surface weighted less) takes no area term: the plain surface takes
+    # the distortion already, and the area term would trade the painting's shape for its area
+    zoned = (flat.importance is not None and settings["importance_contrast"] > 1
+             and float(flat.importance.min()) < 1.0)
+    area = settings["area"] if fold_free and not zoned else 0.0
+    if limit == "auto":  # (not passed down by the caller)
+        limit = _limit(settings, area) if fold_free else None
+    softer = (_softer_start(flat, options, settings, progress, callback, deadline, limit)
+              if fold_free and not softened else None)
+    if limit == "auto" and softer is not None:  # the first solve found it: every later solve uses it
+        limit = softer.result.anisotropy_limit
     start = flat if softer is None else flat.replace(uv=softer.uv)
-    coarse = (_coarse_start(start, options, settings, progress, callback, deadline, softened=softened or softer is not None)
-              if fold_free else None)
+    coarse = (_coarse_start(start, options, settings, progress, callback, deadline, limit,
+                            softened=softened or softer is not None) if fold_free else None)
+    if limit == "auto" and coarse is not None and coarse.result is not None:
+        limit = coarse.result.anisotropy_limit
     notes: list[str] = [] if softer is None else softer.note(settings["importance_contrast"])
     notes += list(coarse.notes) if coarse is not None else []
     if coarse is not None and coarse.result is None:
@@ -1023,7 +1076,9 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
             weight = _importance_weights(flat.importance[order], settings["importance_contrast"])
         sp = _Springs(Vs, Fs, n, k=settings["stiffness"], relative=settings["weighting"] == "relative",
                       weight=weight, shape=settings["shape"] if fold_free else 0.0,
-                      rigidity=settings["rigidity"] if fold_free else 0.0)
+                      rigidity=settings["rigidity"] if fold_free else 0.0, area=area)
+        if limit != "auto":
+            sp.limit_area(area, limit)
         del Vs, Fs, inverse
         x = np.ascontiguousarray(x_in[order]) * (settings["stretch"] if softer is None else 1.0)
         del x_in  # (the rollout's layout, the result's orientation, is formed again after the solve)
@@ -1064,11 +1119,20 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
             if softer is not None:
                 levels.extend({**level, "importance_contrast": softer.contrast} for level in softer.result.levels)
             if coarse is not None:
-                levels.extend({**level, "level": "coarse"} for level in coarse.result.levels)
+                levels.extend({**level, "level": level["level"].replace("fine", "coarse")} for level in coarse.result.levels)
             if coarse is not None and coarse.final:
                 levels.append({"level": "follow", "vertices": n, "iterations": 0, "energy": sp.spring_energy(x),
                                "seconds": t_follow})
                 converged = coarse.result.converged
+            elif fold_free and limit == "auto":
+                # the energy without the area term first: its anisotropy sets the limit
+                sp.limit_area(0.0, None)
+                x, converged = _minimise(sp, x, hier, settings, run, levels, notes, level="fine, shape first")
+                limit = None
+                if not run.stopped:
+                    limit = sp.anisotropy_percentile(V[order], x, ENERGY.limit_percentile)
+                    sp.limit_area(area, limit)
+                    x, converged = _minimise(sp, x, hier, settings, run, levels, notes)
             elif fold_free:
                 x, converged = _minimise(sp, x, hier, settings, run, levels, notes)
             else:
@@ -1122,6 +1186,7 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         levels=tuple(levels),
         settings=settings,
         scale_factor=factor,
+        anisotropy_limit=limit,
         notes=tuple(notes + ([f"stopped by {run.stopped}"] if run.stopped and not (capped and run.stopped == "max_iter")
                              else [])),
     )

@@ -550,7 +550,7 @@ def _angle_barrier_slope(theta, sb, gap):
 
 
 @parallel
-def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_tri, faces, shape,
+def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_tri, faces, shape, terms,
                     bprev, bnext, bguard, theta, mu_b, gap, grad, e_spring, e_barrier, diag):
     """Spring + shape term + boundary angle barrier energy per vertex and the gradient,
     gathered per vertex.
@@ -574,10 +574,13 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
         is multiplied by the mean of its endpoints' weights. Empty: every weight is 1.
     vf_ptr, vf_tri : CSR from :func:`vertex_faces`
     faces : (m, 3) int32 or int64
-    shape : (m, 4), (m, 6) or (0, 4) float64
-        Shape term coefficients (:func:`shape_coefficients`; six columns: with the rigidity
-        term). Empty: no shape term. A face with non-positive flat area makes the energy
-        infinite.
+    shape : (m, 5) or (0, 5) float64
+        Each face's rest angles and weight (:func:`shape_coefficients`). Empty: no per-face
+        terms. A face with non-positive flat area makes the energy infinite.
+    terms : (6,) float64
+        The per-face terms' weights per unit rest area (:func:`shape_coefficients`): shape
+        ``s``, rigidity ``r``, area ``a``, anisotropy limit ``b``; then the limit ``S_lim``
+        and the area term's smoothing ``eps``.
     bprev, bnext : (n,) int32
         Each vertex's unique boundary predecessor and successor (-1: none or not unique).
     bguard : (n,) bool
@@ -597,7 +600,12 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
     n = x.shape[0]
     weighted = weight.shape[0] > 0
     shaped = shape.shape[0] > 0
-    rigid = shape.shape[1] > 4
+    s_shape = 2.0 * terms[0]
+    s_rigid = terms[1]
+    s_area = terms[2]
+    s_limit = terms[3]
+    s_lim = terms[4]
+    eps2 = terms[5] * terms[5]
     for i in prange(n):
         gx = 0.0
         gy = 0.0
@@ -634,7 +642,7 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
                     ci = 2
                 j = faces[t, (ci + 1) % 3]
                 l = faces[t, (ci + 2) % 3]
-                # cotangents of the rest angles at i, j, l, and 2 s w A_rest
+                # cotangents of the rest angles at i, j, l, and w A_rest per mean rest area
                 ct_i = shape[t, ci]
                 ct_j = shape[t, (ci + 1) % 3]
                 ct_l = shape[t, (ci + 2) % 3]
@@ -656,18 +664,28 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
                 # the flat area's gradient at i
                 agx = 0.5 * (x[j, 1] - x[l, 1])
                 agy = 0.5 * (x[l, 0] - x[j, 0])
-                # one division per corner (the gradient is wa (dgx A - D agx) / A^2)
+                # the MIPS value M = D / A_flat = (s1^2 + s2^2) / (2 s1 s2) = cosh S, S =
+                # log(s1 / s2): shape term 2 s wa (M - 1) and limit b wa max(0, S - S_lim)^2,
+                # both with dE/dM times dM = (dD - M dA_flat) / A_flat (one division per corner)
                 inv = 1.0 / area
-                wi = wa * inv
                 ratio = dir_ * inv
-                es += wa * (ratio - 1.0) * THIRD
+                cm = s_shape * wa
+                em = cm * (ratio - 1.0)
+                if s_limit > 0.0 and ratio > 1.0:
+                    over = math.acosh(ratio) - s_lim
+                    if over > 0.0:
+                        em += s_limit * wa * over * over
+                        cm += 2.0 * s_limit * wa * over / math.sqrt(ratio * ratio - 1.0)
+                es += em * THIRD
+                wi = cm * inv
                 gx += wi * (dgx - ratio * agx)
                 gy += wi * (dgy - ratio * agy)
                 hd += 0.5 * wi * (ct_l + ct_j)
-                if rigid:
-                    # ARAP energy rho ((s1 - 1)^2 + (s2 - 1)^2), s1 + s2 = q = sqrt(2 (D + A_flat) / A)
-                    rho = shape[t, 4]
-                    ia = 1.0 / shape[t, 5]  # 1 / A_rest: two divisions per corner in all
+                if s_rigid > 0.0 or s_area > 0.0:
+                    ia = 1.0 / shape[t, 4]  # 1 / A_rest: two divisions per corner in all
+                if s_rigid > 0.0:
+                    # ARAP energy r wa ((s1 - 1)^2 + (s2 - 1)^2), s1 + s2 = q = sqrt(2 (D + A_flat) / A)
+                    rho = s_rigid * wa
                     ra = rho * ia
                     q = math.sqrt(2.0 * (dir_ + area) * ia)
                     iq = 1.0 / q
@@ -675,6 +693,16 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
                     gx += 2.0 * ra * (dgx - (dgx + agx) * iq)
                     gy += 2.0 * ra * (dgy - (dgy + agy) * iq)
                     hd += ra * (ct_l + ct_j)
+                if s_area > 0.0:
+                    # a wa (sqrt(L^2 + eps^2) - eps), L = log(A_flat / A): about a wa |L|;
+                    # the diagonal takes its majorising curvature a wa / sqrt(L^2 + eps^2)
+                    lg = math.log(area * ia)
+                    root = math.sqrt(lg * lg + eps2)
+                    ca = s_area * wa / root
+                    es += s_area * wa * (root - math.sqrt(eps2)) * THIRD
+                    gx += ca * lg * inv * agx
+                    gy += ca * lg * inv * agy
+                    hd += ca * inv * inv * (agx * agx + agy * agy)
         eb = 0.0
         if mu_b > 0.0 and (bprev[i] >= 0 or bnext[i] >= 0):
             sb = mu_b * k
@@ -731,21 +759,27 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
 
 
 @parallel
-def shape_coefficients(V, faces, weight, scale, rigid_scale, area_floor, out):
-    """Coefficients of the shape term: each face's symmetric anisotropy energy, and its
-    rigidity energy.
+def shape_coefficients(V, faces, weight, inv_mean_area, area_floor, out):
+    """Rest angles and weights of the per-face terms of :func:`energy_gradient`.
 
     For a face with rest (3D) triangle of area ``A`` and the linear map ``J`` from it to
-    the flat triangle (singular values ``sigma_1 >= sigma_2 > 0``), the term is
-    ``s w A (sigma_1 / sigma_2 + sigma_2 / sigma_1 - 2)`` (the MIPS energy): zero for a
-    similarity, so it charges shear but neither scale nor rotation, about ``s w A S^2`` for
-    a small ``S = log(sigma_1 / sigma_2)`` (the anisotropy the maps show) and infinite for a
-    collapsed triangle. With ``|J|^2 / det J = 2 D / A_flat``, ``D = 1/4 sum_edges
-    cot(opposite angle) |x_a - x_b|^2`` the map's Dirichlet energy, it is
-    ``2 s w A (D / A_flat - 1)``. The rigidity term is the as-rigid-as-possible energy
-    ``r w A ((sigma_1 - 1)^2 + (sigma_2 - 1)^2)``: it charges shear and scale alike (about
-    ``2 r w A (a^2 + s^2)`` for an area change ``a`` and a shear ``s``), with
-    ``sigma_1 + sigma_2 = sqrt(2 (D + A_flat) / A)``.
+    the flat triangle (singular values ``sigma_1 >= sigma_2 > 0``, flat area ``A_flat``),
+    with ``w`` its importance weight and every weight per mean rest area:
+
+    * shape: ``s w A (sigma_1 / sigma_2 + sigma_2 / sigma_1 - 2)`` (the MIPS energy): zero
+      for a similarity, so it charges shear but neither scale nor rotation, about
+      ``s w A S^2`` for a small ``S = log(sigma_1 / sigma_2)`` (the anisotropy the maps
+      show) and infinite for a collapsed triangle. With ``M = |J|^2 / (2 det J) = D /
+      A_flat``, ``D = 1/4 sum_edges cot(opposite angle) |x_a - x_b|^2`` the map's Dirichlet
+      energy, it is ``2 s w A (M - 1)``;
+    * rigidity: the as-rigid-as-possible energy ``r w A ((sigma_1 - 1)^2 + (sigma_2 -
+      1)^2)``: it charges shear and scale alike (about ``2 r w A (a^2 + s^2)`` for an area
+      change ``a`` and a shear ``s``), with ``sigma_1 + sigma_2 = sqrt(2 (D + A_flat) / A)``;
+    * area: ``a w A (sqrt(L^2 + eps^2) - eps)``, ``L = log(A_flat / A)``: the area change
+      in proportion (not squared), so area distortion gathers where the shape needs it
+      rather than spreading over the surface;
+    * anisotropy limit: ``b w A max(0, S - S_lim)^2``, ``S = log(sigma_1 / sigma_2)``
+      (``M = cosh S``): nothing up to the limit ``S_lim``, a steep price above it.
 
     Parameters
     ----------
@@ -754,15 +788,13 @@ def shape_coefficients(V, faces, weight, scale, rigid_scale, area_floor, out):
     faces : (m, 3) int32 or int64
     weight : (n,) or (0,) float64
         Importance weight per vertex (a face takes its corners' mean); empty: 1.
-    scale : float
-        ``s``: the anisotropy term's weight per unit rest area.
-    rigid_scale : float
-        ``r``: the rigidity term's weight per unit rest area (used when ``out`` has six columns).
+    inv_mean_area : float
+        One over the mean rest area.
     area_floor : float
-        Faces with a smaller rest area (degenerate, their angles meaningless) get no term.
-    out : (m, 4) or (m, 6) float64
-        Output: the cotangents of the rest angles at corners 0, 1, 2 and ``2 s w A``; with
-        six columns also ``r w A`` and ``A``.
+        Faces with a smaller rest area (degenerate, their angles meaningless) get no terms.
+    out : (m, 5) float64
+        Output: the cotangents of the rest angles at corners 0, 1, 2, ``w A`` over the mean
+        rest area, and ``A``.
     """
     for t in prange(faces.shape[0]):
         a0 = faces[t, 0]
@@ -779,15 +811,13 @@ def shape_coefficients(V, faces, weight, scale, rigid_scale, area_floor, out):
         nz = e1x * e2y - e1y * e2x
         twice = math.sqrt(nx * nx + ny * ny + nz * nz)
         if 0.5 * twice <= area_floor:
-            for c in range(out.shape[1]):
+            for c in range(4):
                 out[t, c] = 0.0
-            if out.shape[1] > 4:
-                out[t, 5] = 1.0
+            out[t, 4] = 1.0
             continue
         w_imp = 1.0
         if weight.shape[0] > 0:
             w_imp = (weight[a0] + weight[a1] + weight[a2]) / 3.0
-        w = scale * w_imp
         e3x = V[a2, 0] - V[a1, 0]
         e3y = V[a2, 1] - V[a1, 1]
         e3z = V[a2, 2] - V[a1, 2]
@@ -795,10 +825,8 @@ def shape_coefficients(V, faces, weight, scale, rigid_scale, area_floor, out):
         out[t, 0] = (e1x * e2x + e1y * e2y + e1z * e2z) / twice
         out[t, 1] = (-e1x * e3x - e1y * e3y - e1z * e3z) / twice
         out[t, 2] = (e2x * e3x + e2y * e3y + e2z * e3z) / twice
-        out[t, 3] = w * twice
-        if out.shape[1] > 4:
-            out[t, 4] = rigid_scale * w_imp * 0.5 * twice
-            out[t, 5] = 0.5 * twice
+        out[t, 3] = w_imp * 0.5 * twice * inv_mean_area
+        out[t, 4] = 0.5 * twice
 
 
 @leaf
