@@ -223,25 +223,31 @@ def weighted_spring_energy(x: np.ndarray, pairs: np.ndarray, rest: np.ndarray, k
 
 
 def shape_energy(V: np.ndarray, F: np.ndarray, x: np.ndarray, weight: np.ndarray, scale: float,
-                 rigidity: float = 0.0) -> float:
+                 rigidity: float = 0.0, area: float = 0.0, limit: tuple[float, float] | None = None,
+                 eps: float = 0.05) -> float:
     """``sum_f w_f A_f (s (sigma_1 / sigma_2 + sigma_2 / sigma_1 - 2) + r ((sigma_1 - 1)^2 +
-    (sigma_2 - 1)^2))`` by an SVD of each face's map from its rest triangle (in a 2D frame of
-    its plane) to the flat one; ``w_f`` the mean of the corners' weights, ``s`` the scale and
-    ``r`` the rigidity (per unit area)."""
+    (sigma_2 - 1)^2) + a (sqrt(L^2 + eps^2) - eps) + b max(0, log(sigma_1 / sigma_2) -
+    log(lim))^2)`` by an SVD of each face's map from its rest triangle (in a 2D frame of its
+    plane) to the flat one; ``w_f`` the mean of the corners' weights, ``s`` the scale, ``r``
+    the rigidity, ``a`` the area weight (per unit area), ``L = log(A_flat / A_f)``, and
+    ``limit = (b, lim)`` (b per unit area)."""
     total = 0.0
     for f in F:
         p0, p1, p2 = V[f]
         e1, e2 = p1 - p0, p2 - p0
-        a = np.linalg.norm(e1)
+        length = np.linalg.norm(e1)
         n = np.cross(e1, e2)
-        area = 0.5 * np.linalg.norm(n)
-        b1 = e1 / a
+        rest_area = 0.5 * np.linalg.norm(n)
+        b1 = e1 / length
         b2 = np.cross(n / np.linalg.norm(n), b1)
-        rest = np.array([[a, e2 @ b1], [0.0, e2 @ b2]])
+        rest = np.array([[length, e2 @ b1], [0.0, e2 @ b2]])
         flat = np.column_stack([x[f[1]] - x[f[0]], x[f[2]] - x[f[0]]])
         s = np.linalg.svd(flat @ np.linalg.inv(rest), compute_uv=False)
         if np.linalg.det(flat) <= 0:
             return np.inf
-        total += weight[f].mean() * area * (scale * (s[0] / s[1] + s[1] / s[0] - 2.0)
-                                            + rigidity * ((s[0] - 1.0) ** 2 + (s[1] - 1.0) ** 2))
+        log_area = np.log(s[0] * s[1])
+        over = 0.0 if limit is None else max(0.0, np.log(s[0] / s[1]) - np.log(limit[1]))
+        total += weight[f].mean() * rest_area * (
+            scale * (s[0] / s[1] + s[1] / s[0] - 2.0) + rigidity * ((s[0] - 1.0) ** 2 + (s[1] - 1.0) ** 2)
+            + area * (np.sqrt(log_area**2 + eps**2) - eps) + (0.0 if limit is None else limit[0] * over**2))
     return float(total)

@@ -12,7 +12,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 import reference as ref
-from _bench_meshes import bumpy_patch, meshes, signed_areas, spring_system
+from _bench_meshes import bumpy_patch, energy_never_increases, meshes, signed_areas, spring_system
 
 from potflat import importance as imp
 from potflat.mesh.distortion import face_distortion, important_faces, true_scale_factor, zone_figures
@@ -28,20 +28,28 @@ def bumpy():
 
 # --- the energy -----------------------------------------------------------------------------
 
-@pytest.mark.parametrize("relative, shape, rigidity", [(False, 0.3, 0.0), (True, 0.3, 0.0), (True, 0.3, 0.8),
-                                                        (False, 0.0, 0.8)])
-def test_weighted_springs_and_shape_term_match_reference(bumpy, relative, shape, rigidity):
+@pytest.mark.parametrize("relative, shape, rigidity, area, limit", [
+    (False, 0.3, 0.0, 0.0, None), (True, 0.3, 0.0, 0.0, None), (True, 0.3, 0.8, 0.0, None),
+    (False, 0.0, 0.8, 0.0, None), (True, 0.3, 0.8, 1.5, None), (True, 0.0, 0.0, 1.5, 1.2), (True, 0.3, 0.8, 1.5, 1.2)])
+def test_weighted_springs_and_shape_term_match_reference(bumpy, relative, shape, rigidity, area, limit):
+    from potflat.relax.parameters import ENERGY
+
     V, F = bumpy.mesh.vertices, bumpy.mesh.faces
     pairs, rest = ref.springs(V, F)
     weight = np.random.default_rng(4).uniform(0.05, 1.0, len(V))
-    sp = spring_system(V, F, k=0.7, relative=relative, weight=weight, shape=shape, rigidity=rigidity)
+    sp = spring_system(V, F, k=0.7, relative=relative, weight=weight, shape=shape, rigidity=rigidity, area=area)
+    sp.limit_area(area, limit)
     x = np.ascontiguousarray(bumpy.uv * np.array([1.1, 0.93]))
     E, Es, g = sp.evaluate(x, barrier=False)
     from potflat.mesh.distortion import face_areas
 
     mean_area = float(np.mean(face_areas(V, F)))
+    if limit is not None:  # the test's layout must reach past the limit on some faces, not on all
+        aniso = face_distortion(V, x, F).anisotropy
+        assert 0 < np.count_nonzero(aniso > limit) < len(F)
     want = ref.weighted_spring_energy(x, pairs, rest, 0.7, relative, weight) + ref.shape_energy(
-        V, F, x, weight, shape / mean_area, rigidity / mean_area)
+        V, F, x, weight, shape / mean_area, rigidity / mean_area, area / mean_area,
+        None if limit is None else (ENERGY.limit_mu / mean_area, limit), ENERGY.area_eps)
     assert Es == pytest.approx(want, rel=1e-10)
     num = ref.numeric_gradient(lambda y: sp.evaluate(np.ascontiguousarray(y), barrier=False)[0], x)
     np.testing.assert_allclose(g, num, atol=1e-6 * np.abs(num).max())
@@ -107,6 +115,57 @@ def test_shape_term_keeps_figures_rounder_and_never_folds():
     assert shaped.distortion.anisotropy_p95 < springs.distortion.anisotropy_p95 - 0.1
     assert rigid.distortion.anisotropy_p95 < springs.distortion.anisotropy_p95 - 0.1
     assert shaped.distortion.area_mean_abs_log > springs.distortion.area_mean_abs_log  # the trade
+
+
+def test_area_term_gathers_area_distortion_within_the_anisotropy_of_a_solve_without_it():
+    from potflat.mesh.distortion import weighted_percentile
+    from potflat.relax.parameters import ENERGY
+
+    flat = meshes.vessel_rollout(1500, seed=1)
+    F = flat.mesh.faces
+    without = relax(flat, area=0.0)
+    r = relax(flat)  # the default: the area term, its limit found by a first solve without it
+    assert [lv["level"] for lv in without.levels] == ["fine"]
+    assert [lv["level"] for lv in r.levels] == ["fine, shape first", "fine"]
+    assert without.anisotropy_limit is None
+    # that first solve is the solve without the area term: the limit is its 80th percentile
+    fd = face_distortion(flat.mesh.vertices, without.flat.uv, F)
+    assert r.anisotropy_limit == pytest.approx(
+        weighted_percentile(fd.anisotropy, fd.area_3d, ENERGY.limit_percentile), rel=1e-9)
+    # less area distortion (about 20% here), figures no less round
+    assert r.distortion.area_mean_abs_log < 0.9 * without.distortion.area_mean_abs_log
+    assert r.distortion.anisotropy_p95 <= without.distortion.anisotropy_p95
+    assert r.flipped == 0 and r.boundary_overlap == 0 and np.all(signed_areas(r.flat.uv, F) > 0)
+    assert energy_never_increases(r)
+
+
+def test_a_given_anisotropy_limit_holds_and_inf_means_none():
+    from potflat.mesh.distortion import weighted_percentile
+
+    flat = meshes.vessel_rollout(1500, seed=1)
+    F = flat.mesh.faces
+    free = relax(flat, area=0.0)
+    limited = relax(flat, max_anisotropy=1.2)
+    assert limited.anisotropy_limit == 1.2 and [lv["level"] for lv in limited.levels] == ["fine"]
+    aniso = {name: face_distortion(flat.mesh.vertices, res.flat.uv, F) for name, res in
+             (("free", free), ("limited", limited))}
+    p90 = {name: weighted_percentile(fd.anisotropy, fd.area_3d, 90.0) for name, fd in aniso.items()}
+    assert p90["free"] > 1.4 and p90["limited"] < 1.25  # a steep price above the limit (soft: the area term pulls)
+    assert limited.flipped == 0 and np.all(signed_areas(limited.flat.uv, F) > 0)
+    unlimited = relax(flat, max_anisotropy=float("inf"))  # the area term alone
+    assert unlimited.anisotropy_limit is None and [lv["level"] for lv in unlimited.levels] == ["fine"]
+    assert unlimited.distortion.area_mean_abs_log < 0.7 * free.distortion.area_mean_abs_log
+
+
+def test_a_painted_zone_takes_no_area_term():
+    flat = meshes.vessel_rollout(1500, seed=1)
+    zone = (flat.uv[:, 1] > np.percentile(flat.uv[:, 1], 40)) & (flat.uv[:, 1] < np.percentile(flat.uv[:, 1], 60))
+    painted = flat.replace(importance=zone.astype(np.float64))
+    r = relax(painted)
+    assert r.anisotropy_limit is None and not any("shape first" in lv["level"] for lv in r.levels)
+    np.testing.assert_array_equal(r.flat.uv, relax(painted, area=0.0).flat.uv)
+    # painted all over (uniform importance): no zone, the area term applies
+    assert relax(flat.replace(importance=np.ones(len(flat.uv)))).anisotropy_limit is not None
 
 
 def test_true_scale_sets_the_zone_median_scale_to_one():

@@ -308,7 +308,9 @@ def test_stretch_factors_never_nan(vessel, stretch, preset):
                                  {"weighting": "cubic"}, {"stiffness": float("nan")}, {"max_iter": 2.5},
                                  {"simplify_mm": -0.5}, {"simplify_mm": float("inf")}, {"shape": -0.1},
                                  {"shape": float("nan")}, {"importance_contrast": 0.5}, {"importance_contrast": True},
-                                 {"true_scale": "yes"}])
+                                 {"true_scale": "yes"}, {"area": -1.0}, {"area": float("nan")},
+                                 {"max_anisotropy": 1.0}, {"max_anisotropy": "round"}, {"max_anisotropy": True},
+                                 {"max_anisotropy": float("nan")}])
 def test_invalid_options_raise_one_line_errors(bad):
     with pytest.raises(InvalidOptionError) as err:
         RelaxOptions(**bad)

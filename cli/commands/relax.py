@@ -49,6 +49,13 @@ def relax_command(
     rigidity: Annotated[float | None, typer.Option(
         "--rigidity", help="Weight of the rigidity (as-rigid-as-possible) term (>= 0): evens out shear from "
                            "triangle to triangle; 0: none \\[default: 2, 0 for paper].")] = None,
+    area: Annotated[float | None, typer.Option(
+        "--area", help="Weight of the area term (>= 0) on vessels without a painted zone: area distortion gathered "
+                       "where the shape can take it, not spread evenly; 0: none \\[default: 2, 0 for paper].")] = None,
+    max_anisotropy: Annotated[str | None, typer.Option(
+        "--max-anisotropy", help="Anisotropy (long/short axis) above which a steep price starts: a number > 1, inf "
+                                 "(none) or auto (what a solve without the area term reaches, 80th percentile) "
+                                 "\\[default: auto].")] = None,
     importance_contrast: Annotated[float | None, typer.Option(
         "--importance-contrast", help="How much stiffer the painted zone is than plain surface (>= 1; 1: the whole "
                                       "surface alike) \\[default: 1000, 100 for preview, 1 for paper].")] = None,
@@ -67,7 +74,8 @@ def relax_command(
     options = options_from_cli("relax", {
         "preset": preset, "tol": tol, "max_iter": max_iter, "time_budget": time_budget, "threads": threads,
         "stretch": stretch, "stiffness": stiffness, "weighting": weighting, "simplify_mm": simplify_mm,
-        "shape": shape, "rigidity": rigidity, "importance_contrast": importance_contrast, "true_scale": true_scale})
+        "shape": shape, "rigidity": rigidity, "area": area, "max_anisotropy": max_anisotropy,
+        "importance_contrast": importance_contrast, "true_scale": true_scale})
     show_progress = sys.stderr.isatty() and not (quiet or json)
     if show_progress and with_compile_note("") != "":
         print(f"note: {with_compile_note('').strip(' ()')}", file=sys.stderr)

@@ -30,6 +30,7 @@ import contextlib
 import math
 import time
 from collections.abc import Callable
+from typing import Literal
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -96,6 +97,19 @@ class RelaxOptions:
         and the shape term. It charges shear and area change alike, per triangle, which the
         springs of an irregular mesh do not: it evens out triangle-to-triangle shear (the
         speckle of the anisotropy map). 0: none. None: the preset's (2; 0 for ``paper``).
+    area : float or None
+        Weight of the area term (>= 0): each triangle's ``A (sqrt(L^2 + 0.05^2) - 0.05)`` per
+        mean triangle area, ``L = log(A_flat / A)``: area change in proportion, not squared,
+        so the area distortion gathers where the shape can take it (within the anisotropy
+        limit) instead of spreading evenly. Used on vessels without a painted zone (painted
+        all over, or no colours): with one, the plain surface takes the distortion already.
+        0: none. None: the preset's (2; 0 for ``paper``).
+    max_anisotropy : float, "auto" or None
+        The anisotropy (long over short axis of a triangle's map) above which a steep price
+        starts (``100 A (log(sigma_1 / sigma_2) - log(limit))^2`` per mean triangle area; soft:
+        the area term can push a little past it). ``"auto"``: with the area term, the 80th
+        percentile of the anisotropy a first solve without the area term reaches (figures
+        no less round than without it); inf: no limit. None: the preset's (``"auto"``).
     importance_contrast : float or None
         How much stiffer the important (painted) zone is than plain surface (>= 1): springs,
         barrier and shape term of plain surface are weighted ``1 / importance_contrast``, so
@@ -119,7 +133,7 @@ class RelaxOptions:
     shape: float | None = None
     rigidity: float | None = None
     area: float | None = None
-    max_anisotropy: float | str | None = None
+    max_anisotropy: float | Literal["auto"] | None = None
     importance_contrast: float | None = None
     true_scale: bool | None = None
 

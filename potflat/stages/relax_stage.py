@@ -88,6 +88,7 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
                        f"1/{result.settings['importance_contrast']:g}"),
         **zone_summary(flat.mesh.vertices, result.flat.uv, flat.mesh.faces, result.flat.importance),
         "true_scale_factor": result.scale_factor,
+        "anisotropy_limit": result.anisotropy_limit,
         "timings": result.timings,
         "units": flat.mesh.units,
         "vertices": len(flat.mesh.vertices),
