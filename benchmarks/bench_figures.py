@@ -307,7 +307,7 @@ def plot(rows: list[dict], path: Path) -> None:
             ax.plot(r["anisotropy_p95"], r["area"], style[0], c=style[1])
             ax.annotate(r["method"], (r["anisotropy_p95"], r["area"]), fontsize=6, xytext=(3, 2),
                         textcoords="offset points")
-        for knob, colour in (("shape", "tab:blue"), ("rigidity", "tab:green")):
+        for knob, colour in (("shape", "tab:blue"), ("rigidity", "tab:green"), ("area", "tab:orange")):
             curve = sorted((r["keywords"][knob], r["anisotropy_p95"], r["area"]) for r in sel
                            if set(r.get("keywords") or {}) == {knob})
             if len(curve) > 1:  # one setting's trade, the other at its default

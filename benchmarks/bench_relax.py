@@ -84,8 +84,8 @@ def _worker(size_m: float, method: str, budget: float, target: float | None) -> 
             trace.append((time.perf_counter() - t0, info["energy"]))
 
         kw = {"preset": preset, "time_budget": budget}
-        if weighting == "springs":  # the springs alone: no shape or rigidity term, no final scaling (before issue 13)
-            kw.update(shape=0.0, rigidity=0.0, true_scale=False)
+        if weighting == "springs":  # the springs alone: no per-face terms, no final scaling (before issue 13)
+            kw.update(shape=0.0, rigidity=0.0, area=0.0, true_scale=False)
         elif weighting:
             kw["weighting"] = weighting
         r = relax(flat, callback=cb if preset == "paper" else None, **kw)

@@ -105,9 +105,9 @@ def test_uniform_weights_reproduce_the_result_without_importance_exactly():
 
 def test_shape_term_keeps_figures_rounder_and_never_folds():
     flat = meshes.vessel_rollout(3000, seed=1)
-    springs = relax(flat, shape=0.0, rigidity=0.0)
-    shaped = relax(flat, shape=0.5, rigidity=0.0)
-    rigid = relax(flat, shape=0.0, rigidity=2.0)
+    springs = relax(flat, shape=0.0, rigidity=0.0, area=0.0)
+    shaped = relax(flat, shape=0.5, rigidity=0.0, area=0.0)
+    rigid = relax(flat, shape=0.0, rigidity=2.0, area=0.0)
     for r in (springs, shaped, rigid):
         assert r.flipped == 0 and r.boundary_overlap == 0
         assert np.all(signed_areas(r.flat.uv, flat.mesh.faces) > 0)

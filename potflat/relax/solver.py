@@ -1133,7 +1133,8 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
             if softer is not None:
                 levels.extend({**level, "importance_contrast": softer.contrast} for level in softer.result.levels)
             if coarse is not None:
-                levels.extend({**level, "level": level["level"].replace("fine", "coarse")} for level in coarse.result.levels)
+                levels.extend({**level, "level": level["level"].replace("fine", "coarse")}
+                              for level in coarse.result.levels)
             if coarse is not None and coarse.final:
                 levels.append({"level": "follow", "vertices": n, "iterations": 0, "energy": sp.spring_energy(x),
                                "seconds": t_follow})
@@ -1142,11 +1143,12 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
                 # the energy without the area term first: its anisotropy sets the limit
                 sp.limit_area(0.0, None)
                 x, converged = _minimise(sp, x, hier, settings, run, levels, notes, level="fine, shape first")
-                limit = None
-                if not run.stopped:
-                    limit = sp.anisotropy_percentile(V[order], x, ENERGY.limit_percentile)
+                limit = None if run.stopped else sp.anisotropy_percentile(V[order], x, ENERGY.limit_percentile)
+                if limit is not None and math.isfinite(limit):  # (nan: no face with a rest area)
                     sp.limit_area(area, limit)
                     x, converged = _minimise(sp, x, hier, settings, run, levels, notes)
+                else:
+                    limit = None
             elif fold_free:
                 x, converged = _minimise(sp, x, hier, settings, run, levels, notes)
             else:
@@ -1200,7 +1202,7 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         levels=tuple(levels),
         settings=settings,
         scale_factor=factor,
-        anisotropy_limit=limit,
+        anisotropy_limit=None if limit == "auto" else limit,
         notes=tuple(notes + ([f"stopped by {run.stopped}"] if run.stopped and not (capped and run.stopped == "max_iter")
                              else [])),
     )
