@@ -30,8 +30,8 @@ import contextlib
 import math
 import time
 from collections.abc import Callable
-from typing import Literal
 from dataclasses import dataclass, field, replace
+from typing import Literal
 
 import numpy as np
 
@@ -287,7 +287,7 @@ class _Springs:
         # per unit rest area: a triangle of mean area weighs ``shape`` against its springs
         self.terms = np.array([shape, rigidity, 0.0, 0.0, math.inf, ENERGY.area_eps])
         if (shape > 0 or rigidity > 0 or area > 0) and len(faces):
-            self.shape = np.empty((len(faces), 6))
+            self.shape = np.empty((len(faces), 5))
             ks.shape_coefficients(V, self.faces, self.weight, 1.0 / float(np.mean(areas)), ENERGY.area_floor,
                                   self.shape)
         self.limit_area(area, None)
@@ -1056,13 +1056,14 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         limit = _limit(settings, area) if fold_free else None
     softer = (_softer_start(flat, options, settings, progress, callback, deadline, limit)
               if fold_free and not softened else None)
-    if limit == "auto" and softer is not None:  # the first solve found it: every later solve uses it
-        limit = softer.result.anisotropy_limit
+    if limit == "auto" and softer is not None and softer.result.anisotropy_limit is not None:
+        limit = softer.result.anisotropy_limit  # the first solve found it: every later solve uses it
     start = flat if softer is None else flat.replace(uv=softer.uv)
     coarse = (_coarse_start(start, options, settings, progress, callback, deadline, limit,
                             softened=softened or softer is not None) if fold_free else None)
-    if limit == "auto" and coarse is not None and coarse.result is not None:
-        limit = coarse.result.anisotropy_limit
+    found = None if coarse is None or coarse.result is None else coarse.result.anisotropy_limit
+    if limit == "auto" and found is not None:  # (None: the copy stopped early; this solve finds it)
+        limit = found
     notes: list[str] = [] if softer is None else softer.note(settings["importance_contrast"])
     notes += list(coarse.notes) if coarse is not None else []
     if coarse is not None and coarse.result is None:
