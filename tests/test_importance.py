@@ -164,8 +164,9 @@ def test_a_painted_zone_takes_no_area_term():
     r = relax(painted)
     assert r.anisotropy_limit is None and not any("shape first" in lv["level"] for lv in r.levels)
     np.testing.assert_array_equal(r.flat.uv, relax(painted, area=0.0).flat.uv)
-    # painted all over (uniform importance): no zone, the area term applies
-    assert relax(flat.replace(importance=np.ones(len(flat.uv)))).anisotropy_limit is not None
+    # painted all over, or a mask that is all black (uniform importance): no zone, the area term applies
+    for uniform in (np.ones(len(flat.uv)), np.zeros(len(flat.uv))):
+        assert relax(flat.replace(importance=uniform)).anisotropy_limit is not None
 
 
 def test_true_scale_sets_the_zone_median_scale_to_one():

@@ -1050,7 +1050,7 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
     # a painted zone (plain surface weighted less) takes no area term: the plain surface takes
     # the distortion already, and the area term would trade the painting's shape for its area
     zoned = (flat.importance is not None and settings["importance_contrast"] > 1
-             and float(flat.importance.min()) < 1.0)
+             and float(flat.importance.min()) < float(flat.importance.max()))
     area = settings["area"] if fold_free and not zoned else 0.0
     if limit == "auto":  # (not passed down by the caller)
         limit = _limit(settings, area) if fold_free else None
