@@ -34,11 +34,12 @@ class RelaxPreset:
         Relax only a copy with cells of this side (mm); 0: the full mesh.
     friction_inside, friction_boundary : float or None
         The dynamics' friction inside and on the boundary (``dynamics`` only).
-    shape, rigidity, importance_contrast, true_scale
+    shape, rigidity, area, max_anisotropy, importance_contrast, true_scale
         The painted figures' defaults (measured in ``docs/performance.md``, "Painted
-        figures"): the shape and rigidity terms' weights, how much stiffer the important
-        zone is than plain surface, and the final scaling to true scale in the important
-        zone.
+        figures"): the shape, rigidity and area terms' weights, the anisotropy limit
+        (``"auto"``: found by a first solve without the area term), how much stiffer the
+        important zone is than plain surface, and the final scaling to true scale in the
+        important zone.
     """
 
     solver: str
@@ -98,6 +99,14 @@ class EnergyParameters:
         boundary does not overlap itself).
     area_floor, length_floor : float
         Floor of rest areas (squared lengths) and of spring lengths.
+    limit_mu : float
+        Weight of the anisotropy limit per unit rest area (per mean face area).
+    limit_percentile : float
+        ``max_anisotropy="auto"``: the percentile (by rest area) of the anisotropy of the
+        solve without the area term that becomes the limit (80: the largest at which every
+        generated vessel's painted circles came out rounder than under libigl ARAP).
+    area_eps : float
+        Smoothing of the area term at zero log area ratio.
     """
 
     barrier_mu: float = 1.0
