@@ -226,8 +226,8 @@ def shape_energy(V: np.ndarray, F: np.ndarray, x: np.ndarray, weight: np.ndarray
                  rigidity: float = 0.0, area: float = 0.0, limit: tuple[float, float] | None = None,
                  eps: float = 0.05) -> float:
     """``sum_f w_f A_f (s (sigma_1 / sigma_2 + sigma_2 / sigma_1 - 2) + r ((sigma_1 - 1)^2 +
-    (sigma_2 - 1)^2) + a (sqrt(L^2 + eps^2) - eps) + b max(0, log(sigma_1 / sigma_2) -
-    log(lim))^2)`` by an SVD of each face's map from its rest triangle (in a 2D frame of its
+    (sigma_2 - 1)^2) + a (sqrt(L^2 + eps^2) - eps) + b max(0, u(sigma_1 / sigma_2) -
+    u(lim))^2)``, ``u(a) = sqrt(a) - 1 / sqrt(a)``, by an SVD of each face's map from its rest triangle (in a 2D frame of its
     plane) to the flat one; ``w_f`` the mean of the corners' weights, ``s`` the scale, ``r``
     the rigidity, ``a`` the area weight (per unit area), ``L = log(A_flat / A_f)``, and
     ``limit = (b, lim)`` (b per unit area)."""
@@ -246,7 +246,8 @@ def shape_energy(V: np.ndarray, F: np.ndarray, x: np.ndarray, weight: np.ndarray
         if np.linalg.det(flat) <= 0:
             return np.inf
         log_area = np.log(s[0] * s[1])
-        over = 0.0 if limit is None else max(0.0, np.log(s[0] / s[1]) - np.log(limit[1]))
+        u = np.sqrt(s[0] / s[1]) - np.sqrt(s[1] / s[0])
+        over = 0.0 if limit is None else max(0.0, u - (np.sqrt(limit[1]) - 1.0 / np.sqrt(limit[1])))
         total += weight[f].mean() * rest_area * (
             scale * (s[0] / s[1] + s[1] / s[0] - 2.0) + rigidity * ((s[0] - 1.0) ** 2 + (s[1] - 1.0) ** 2)
             + area * (np.sqrt(log_area**2 + eps**2) - eps) + (0.0 if limit is None else limit[0] * over**2))

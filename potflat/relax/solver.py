@@ -106,7 +106,8 @@ class RelaxOptions:
         0: none. None: the preset's (2; 0 for ``paper``).
     max_anisotropy : float, "auto" or None
         The anisotropy (long over short axis of a triangle's map) above which a steep price
-        starts (``100 A (log(sigma_1 / sigma_2) - log(limit))^2`` per mean triangle area; soft:
+        starts (``100 A (u(sigma_1 / sigma_2) - u(limit))^2`` per mean triangle area, ``u(a) =
+        sqrt(a) - 1 / sqrt(a)``, about ``log a``; soft:
         the area term can push a little past it). ``"auto"``: with the area term, the 80th
         percentile of the anisotropy a first solve without the area term reaches (figures
         no less round than without it); inf: no limit. None: the preset's (``"auto"``).
@@ -320,7 +321,7 @@ class _Springs:
         shaped = len(self.shape) > 0
         self.terms[2] = area if shaped else 0.0
         self.terms[3] = ENERGY.limit_mu if limit is not None and shaped else 0.0
-        self.terms[4] = math.log(limit) if limit is not None else math.inf
+        self.terms[4] = math.sqrt(limit) - 1.0 / math.sqrt(limit) if limit is not None else math.inf
 
     def anisotropy_percentile(self, V: np.ndarray, x: np.ndarray, q: float) -> float:
         """The ``q``-th percentile (0-100) of the faces' anisotropy ``sigma_1 / sigma_2`` in the

@@ -579,7 +579,7 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
         terms. A face with non-positive flat area makes the energy infinite.
     terms : (6,) float64
         The per-face terms' weights per unit rest area (:func:`shape_coefficients`): shape
-        ``s``, rigidity ``r``, area ``a``, anisotropy limit ``b``; then the limit ``S_lim``
+        ``s``, rigidity ``r``, area ``a``, anisotropy limit ``b``; then the limit ``u_lim``
         and the area term's smoothing ``eps``.
     bprev, bnext : (n,) int32
         Each vertex's unique boundary predecessor and successor (-1: none or not unique).
@@ -604,7 +604,7 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
     s_rigid = terms[1]
     s_area = terms[2]
     s_limit = terms[3]
-    s_lim = terms[4]
+    u_lim = terms[4]
     eps2 = terms[5] * terms[5]
     for i in prange(n):
         gx = 0.0
@@ -664,18 +664,19 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
                 # the flat area's gradient at i
                 agx = 0.5 * (x[j, 1] - x[l, 1])
                 agy = 0.5 * (x[l, 0] - x[j, 0])
-                # the MIPS value M = D / A_flat = (s1^2 + s2^2) / (2 s1 s2) = cosh S, S =
-                # log(s1 / s2): shape term 2 s wa (M - 1) and limit b wa max(0, S - S_lim)^2,
-                # both with dE/dM times dM = (dD - M dA_flat) / A_flat (one division per corner)
+                # the MIPS value M = D / A_flat = (s1^2 + s2^2) / (2 s1 s2): shape term
+                # 2 s wa (M - 1) and limit b wa max(0, u - u_lim)^2, u = sqrt(2 (M - 1)), both
+                # with dE/dM times dM = (dD - M dA_flat) / A_flat (one division per corner)
                 inv = 1.0 / area
                 ratio = dir_ * inv
                 cm = s_shape * wa
                 em = cm * (ratio - 1.0)
                 if s_limit > 0.0 and ratio > 1.0:
-                    over = math.acosh(ratio) - s_lim
+                    u = math.sqrt(2.0 * (ratio - 1.0))
+                    over = u - u_lim
                     if over > 0.0:
                         em += s_limit * wa * over * over
-                        cm += 2.0 * s_limit * wa * over / math.sqrt(ratio * ratio - 1.0)
+                        cm += 2.0 * s_limit * wa * over / u
                 es += em * THIRD
                 wi = cm * inv
                 gx += wi * (dgx - ratio * agx)
@@ -778,8 +779,10 @@ def shape_coefficients(V, faces, weight, inv_mean_area, area_floor, out):
     * area: ``a w A (sqrt(L^2 + eps^2) - eps)``, ``L = log(A_flat / A)``: the area change
       in proportion (not squared), so area distortion gathers where the shape needs it
       rather than spreading over the surface;
-    * anisotropy limit: ``b w A max(0, S - S_lim)^2``, ``S = log(sigma_1 / sigma_2)``
-      (``M = cosh S``): nothing up to the limit ``S_lim``, a steep price above it.
+    * anisotropy limit: ``b w A max(0, u - u_lim)^2``, ``u = sqrt(sigma_1 / sigma_2) -
+      sqrt(sigma_2 / sigma_1) = sqrt(2 (M - 1))`` (``log(sigma_1 / sigma_2)`` to within 1% up
+      to an anisotropy of 1.6, and a square root where the logarithm needs more): nothing up
+      to the limit ``u_lim``, a steep price above it.
 
     Parameters
     ----------
