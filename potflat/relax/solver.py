@@ -837,10 +837,10 @@ def _softer_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
                   callback, deadline: float, limit) -> _SofterStart | None:
     """The relaxation at the lower importance contrast :attr:`SOLVER.contrast_start
     <potflat.relax.parameters.SolverParameters.contrast_start>`, from which a higher one is
-    reached (None: the contrast is not higher, or every vertex is wholly important, so the
-    weights would not change)."""
+    reached (None: the contrast is not higher, or the importance is uniform, so the weights
+    would not change)."""
     low = SOLVER.contrast_start
-    if flat.importance is None or settings["importance_contrast"] <= low or flat.importance.min(initial=1.0) >= 1.0:
+    if not _painted_zone(flat, settings) or settings["importance_contrast"] <= low:
         return None
     budget = _budget_left(deadline)
     sub = _relax(flat, replace(options, importance_contrast=low, time_budget=budget, true_scale=False), progress,
@@ -940,6 +940,14 @@ def _uncross_boundary(sp: _Springs, x: np.ndarray, pairs: np.ndarray) -> np.ndar
         x, _ = _untangle(sp, x)
         pairs = crossing_pairs(x, seg)
     return x
+
+
+def _painted_zone(flat: FlatMesh, settings: dict) -> bool:
+    """Whether the importance weights set a painted zone apart from plain surface: an
+    importance that is not uniform, at a contrast above 1 (a uniform one, painted all over
+    or an all-black mask, weighs every vertex alike)."""
+    imp = flat.importance
+    return imp is not None and settings["importance_contrast"] > 1 and float(imp.min()) < float(imp.max())
 
 
 def _limit(settings: dict, area: float):
@@ -1048,11 +1056,9 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         unit = _mean_edge_length(V, F)
     if not unit > 0:
         raise InvalidInputError("all edges of the rollout have zero length; check the scan's units and faces")
-    # a painted zone (plain surface weighted less) takes no area term: the plain surface takes
-    # the distortion already, and the area term would trade the painting's shape for its area
-    zoned = (flat.importance is not None and settings["importance_contrast"] > 1
-             and float(flat.importance.min()) < float(flat.importance.max()))
-    area = settings["area"] if fold_free and not zoned else 0.0
+    # a painted zone takes no area term: the plain surface takes the distortion already, and
+    # the area term would trade the painting's shape for its area
+    area = settings["area"] if fold_free and not _painted_zone(flat, settings) else 0.0
     if limit == "auto":  # (not passed down by the caller)
         limit = _limit(settings, area) if fold_free else None
     softer = (_softer_start(flat, options, settings, progress, callback, deadline, limit)

@@ -605,7 +605,7 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
     s_area = terms[2]
     s_limit = terms[3]
     u_lim = terms[4]
-    eps2 = terms[5] * terms[5]
+    eps = terms[5]
     for i in prange(n):
         gx = 0.0
         gy = 0.0
@@ -698,9 +698,9 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
                     # a wa (sqrt(L^2 + eps^2) - eps), L = log(A_flat / A): about a wa |L|;
                     # the diagonal takes its majorising curvature a wa / sqrt(L^2 + eps^2)
                     lg = math.log(area * ia)
-                    root = math.sqrt(lg * lg + eps2)
+                    root = math.sqrt(lg * lg + eps * eps)
                     ca = s_area * wa / root
-                    es += s_area * wa * (root - math.sqrt(eps2)) * THIRD
+                    es += s_area * wa * (root - eps) * THIRD
                     gx += ca * lg * inv * agx
                     gy += ca * lg * inv * agy
                     hd += ca * inv * inv * (agx * agx + agy * agy)
