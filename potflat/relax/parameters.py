@@ -138,9 +138,6 @@ class SolverParameters:
         Largest fraction of its area a triangle may lose in one step (the log barrier alone
         grows too slowly to stop steps that each go most of the way to collapse: at 2.5M
         vertices, 19 triangles ended below 1e-11 of their rest area without this limit).
-        0.3 rather than 0.8: fewer trial steps refused by the barrier, so fewer evaluations of
-        the energy (fourteenth session, 0.8 against 0.3: 28 against 25 at 2.5M without a
-        painted zone, 121 against 107 at 1M with one; relax 7-12% faster, the same figures).
     smooth_rounds, smooth_max_fraction : int, float
         Direction smoothing: when a few triangles hold the flip-free step below the natural
         one (typically slivers, whose area reacts to the smallest uneven move of their
@@ -181,7 +178,7 @@ class SolverParameters:
     lbfgs_memory: int = 6
     armijo: float = 1e-4
     step_fraction: float = 0.9
-    step_shrink: float = 0.3
+    step_shrink: float = 0.8
     smooth_rounds: int = 3
     smooth_max_fraction: float = 0.01
     precond_theta: float = 2.0
