@@ -38,7 +38,7 @@ def test_weighted_springs_and_shape_term_match_reference(bumpy, relative, shape,
     pairs, rest = ref.springs(V, F)
     weight = np.random.default_rng(4).uniform(0.05, 1.0, len(V))
     sp = spring_system(V, F, k=0.7, relative=relative, weight=weight, shape=shape, rigidity=rigidity, area=area)
-    sp.limit_area(area, limit)
+    sp.set_area_and_limit(area, limit)
     x = np.ascontiguousarray(bumpy.uv * np.array([1.1, 0.93]))
     E, Es, g = sp.evaluate(x, barrier=False)
     from potflat.mesh.distortion import face_areas

@@ -271,7 +271,7 @@ class _Springs:
         """``V`` (n, 3) rest positions and ``faces`` (m, 3) in normalised units; ``weight``
         (n,) the vertices' importance weights (None: all 1), ``shape``, ``rigidity`` and
         ``area`` the per-face terms' weights (0: none); no anisotropy limit until
-        :meth:`limit_area` sets one."""
+        :meth:`set_area_and_limit` sets one."""
         from potflat.relax._kernels import overlap as relax_overlap
         from potflat.relax._kernels import springs as ks
 
@@ -291,7 +291,7 @@ class _Springs:
             self.shape = np.empty((len(faces), 5))
             ks.shape_coefficients(V, self.faces, self.weight, 1.0 / float(np.mean(areas)), ENERGY.area_floor,
                                   self.shape)
-        self.limit_area(area, None)
+        self.set_area_and_limit(area, None)
         del areas
         self.k, self.relative = float(k), bool(relative)
         self.n, self.m = n, len(faces)
@@ -315,7 +315,7 @@ class _Springs:
         self._blocks = np.empty(max(1, -(-self.m // ks.BLOCK)))
         self._below = np.zeros(len(self._blocks), np.int64)  # faces near the barrier per block
 
-    def limit_area(self, area: float, limit: float | None) -> None:
+    def set_area_and_limit(self, area: float, limit: float | None) -> None:
         """Set the area term's weight and the anisotropy limit (None: none). Without per-face
         coefficients (no shape, rigidity or area term at construction) there is neither."""
         shaped = len(self.shape) > 0
@@ -1100,7 +1100,7 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
                       weight=weight, shape=settings["shape"] if fold_free else 0.0,
                       rigidity=settings["rigidity"] if fold_free else 0.0, area=area)
         if limit != "auto":
-            sp.limit_area(area, limit)
+            sp.set_area_and_limit(area, limit)
         del Vs, Fs, inverse
         x = np.ascontiguousarray(x_in[order]) * (settings["stretch"] if softer is None else 1.0)
         del x_in  # (the rollout's layout, the result's orientation, is formed again after the solve)
@@ -1149,11 +1149,11 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
                 converged = coarse.result.converged
             elif fold_free and limit == "auto":
                 # the energy without the area term first: its anisotropy sets the limit
-                sp.limit_area(0.0, None)
+                sp.set_area_and_limit(0.0, None)
                 x, converged = _minimise(sp, x, hier, settings, run, levels, notes, level="fine, shape first")
                 limit = None if run.stopped else sp.anisotropy_percentile(V[order], x, ENERGY.limit_percentile)
                 if limit is not None and math.isfinite(limit):  # (nan: no face with a rest area)
-                    sp.limit_area(area, limit)
+                    sp.set_area_and_limit(area, limit)
                     x, converged = _minimise(sp, x, hier, settings, run, levels, notes)
                 else:
                     limit = None
