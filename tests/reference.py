@@ -136,9 +136,10 @@ def forces(x: np.ndarray, pairs: np.ndarray, rest: np.ndarray, k: float, relativ
 
 
 def barrier_energy(x: np.ndarray, F: np.ndarray, a_ref: np.ndarray, k: float, mu: float, eps: float,
-                   relative: bool = False) -> float:
+                   relative: bool = False, weight: np.ndarray | None = None) -> float:
     """``sum mu k w phi(A / (eps a_ref))`` with ``phi(a) = a - 1 - log a`` below 1 and
-    ``w = 1`` (relative weighting) or ``a_ref``."""
+    ``w = 1`` (relative weighting) or ``a_ref``, times the mean importance weight of the
+    face's corners (``weight`` None: 1)."""
     e1 = x[F[:, 1]] - x[F[:, 0]]
     e2 = x[F[:, 2]] - x[F[:, 0]]
     A = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
@@ -146,7 +147,8 @@ def barrier_energy(x: np.ndarray, F: np.ndarray, a_ref: np.ndarray, k: float, mu
     if np.any(a <= 0):
         return np.inf
     phi = np.where(a < 1, a - 1 - np.log(np.minimum(a, 1)), 0.0)
-    return float(np.sum(mu * k * (1.0 if relative else a_ref) * phi))
+    w_face = 1.0 if weight is None else weight[F].mean(axis=1)
+    return float(np.sum(mu * k * (1.0 if relative else a_ref) * w_face * phi))
 
 
 def numeric_gradient(fun, x: np.ndarray, h: float = 1e-6) -> np.ndarray:
@@ -174,9 +176,11 @@ def max_step(x: np.ndarray, d: np.ndarray, F: np.ndarray, samples: int = 200001,
     return t_max if t_max < 10.0 else np.inf
 
 
-def boundary_angle_barrier(x: np.ndarray, F: np.ndarray, verts, k: float, mu: float, gap: float) -> float:
-    """``sum mu k phi((2 pi - Theta_b) / gap)`` over ``verts``, ``Theta_b`` the sum of the
-    angles at ``b`` of its faces (each from ``acos``, so only for positively oriented faces)."""
+def boundary_angle_barrier(x: np.ndarray, F: np.ndarray, verts, k: float, mu: float, gap: float,
+                           weight: np.ndarray | None = None) -> float:
+    """``sum mu k w_b phi((2 pi - Theta_b) / gap)`` over ``verts``, ``Theta_b`` the sum of the
+    angles at ``b`` of its faces (each from ``acos``, so only for positively oriented faces),
+    ``w_b`` the vertex's importance weight (None: 1)."""
     total = 0.0
     for b in verts:
         theta = 0.0
@@ -191,13 +195,14 @@ def boundary_angle_barrier(x: np.ndarray, F: np.ndarray, verts, k: float, mu: fl
         if a <= 0:
             return np.inf
         if a < 1:
-            total += mu * k * (a - 1 - np.log(a))
+            total += mu * k * (1.0 if weight is None else weight[b]) * (a - 1 - np.log(a))
     return total
 
 
 def contact_energy(x: np.ndarray, seg: np.ndarray, bprev: np.ndarray, bnext: np.ndarray, dhat: float,
-                   kappa: float) -> float:
-    """Boundary contact barrier by brute force over all (vertex, segment) pairs."""
+                   kappa: float, weight: np.ndarray | None = None) -> float:
+    """Boundary contact barrier by brute force over all (vertex, segment) pairs, each pair
+    weighted by the mean importance weight of its three vertices (None: 1)."""
     total = 0.0
     for v in seg[:, 0]:
         near = {int(v), int(bprev[v]), int(bnext[v])}
@@ -209,7 +214,8 @@ def contact_energy(x: np.ndarray, seg: np.ndarray, bprev: np.ndarray, bnext: np.
             d = np.linalg.norm(x[v] - (x[a] + w * e))
             if d < dhat:
                 r = d / dhat
-                total += kappa * (r - 1 - np.log(r))
+                w_pair = 1.0 if weight is None else (weight[v] + weight[a] + weight[b]) / 3
+                total += kappa * w_pair * (r - 1 - np.log(r))
     return total
 
 

@@ -421,18 +421,22 @@ def _notched_strip(gap):
     return FlatMesh(Mesh(V, np.array(faces)), uv)
 
 
-def test_contact_barrier_matches_reference():
+@pytest.mark.parametrize("weighted", [False, True])
+def test_contact_barrier_matches_reference(weighted):
+    """With importance weights each pair's barrier takes its three vertices' mean weight."""
     from potflat.relax.parameters import ENERGY
 
     strip = _notched_strip(0.3)
-    sp = spring_system(strip.mesh.vertices, strip.mesh.faces, k=1.0, relative=True)
+    weight = np.random.default_rng(3).uniform(0.001, 1.0, len(strip.uv)) if weighted else None
+    sp = spring_system(strip.mesh.vertices, strip.mesh.faces, k=1.0, relative=True, weight=weight)
     x = np.ascontiguousarray(strip.uv)
     sp.guard_boundary(x)
     assert sp.contact
     E, _, g = sp.evaluate(x)
     sp.contact = False
     E0 = sp.evaluate(x)[0]
-    want = ref.contact_energy(x, sp.boundary_segments, sp.bprev, sp.bnext, ENERGY.contact_gap, ENERGY.contact_mu)
+    want = ref.contact_energy(x, sp.boundary_segments, sp.bprev, sp.bnext, ENERGY.contact_gap, ENERGY.contact_mu,
+                              weight)
     assert want > 0 and E - E0 == pytest.approx(want, rel=1e-10)
     sp.contact = True
     num = ref.numeric_gradient(lambda y: sp.evaluate(np.ascontiguousarray(y))[0], x)
@@ -516,21 +520,25 @@ def _angle_sum(uv, F, b=0):
     return theta
 
 
-def test_boundary_angle_barrier_matches_reference():
+@pytest.mark.parametrize("weighted", [False, True])
+def test_boundary_angle_barrier_matches_reference(weighted):
+    """With importance weights a guarded vertex's barrier takes its own weight."""
     from potflat.relax.parameters import ENERGY
 
     fan = _saddle_fan(flat_gap=0.15)  # the centre's gap 0.15 < ENERGY.boundary_gap: its barrier is on
     V, F = fan.mesh.vertices, fan.mesh.faces
-    sp = spring_system(V, F, k=0.8, relative=True)
+    weight = np.random.default_rng(5).uniform(0.3, 1.0, len(V)) if weighted else None
+    sp = spring_system(V, F, k=0.8, relative=True, weight=weight)
     x = np.ascontiguousarray(fan.uv)
     assert sp.guard_boundary(x) == 0 and sp.bguard.all()
     E, Es, g = sp.evaluate(x)
     boundary = np.arange(len(V))
-    want = ref.boundary_angle_barrier(x, F, boundary, 0.8, ENERGY.boundary_mu, ENERGY.boundary_gap)
-    want += ref.barrier_energy(x, F, sp.a_ref, 0.8, ENERGY.barrier_mu, ENERGY.barrier_eps, relative=True)
+    want = ref.boundary_angle_barrier(x, F, boundary, 0.8, ENERGY.boundary_mu, ENERGY.boundary_gap, weight)
+    want += ref.barrier_energy(x, F, sp.a_ref, 0.8, ENERGY.barrier_mu, ENERGY.barrier_eps, relative=True,
+                               weight=weight)
     want += ref.contact_energy(x, sp.boundary_segments, sp.bprev, sp.bnext, ENERGY.contact_gap,
-                               0.8 * ENERGY.contact_mu)
-    assert want > 0.3
+                               0.8 * ENERGY.contact_mu, weight)
+    assert want > 0.3 * (0.3 if weighted else 1.0)
     assert E - Es == pytest.approx(want, rel=1e-10)
     num = ref.numeric_gradient(lambda y: sp.evaluate(np.ascontiguousarray(y))[0], x)
     np.testing.assert_allclose(g, num, atol=1e-6 * np.abs(num).max())
@@ -550,6 +558,41 @@ def test_boundary_max_step_stops_before_the_fan_wraps():
     assert t == pytest.approx(np.sin(gap), rel=1e-12)  # where the two boundary edges align
     assert _angle_sum(x + 0.999 * t * d, F) < 2 * np.pi < _angle_sum(x + 1.001 * t * d, F)
     assert sp.evaluate(np.ascontiguousarray(x + 1.001 * t * d))[0] == np.inf
+
+
+def _facing_triangles(gap):
+    """Two separate triangles, the tip of the second ``gap`` to the right of the first's
+    vertical edge (its foot half way along it): positions (6, 2), boundary segments and
+    boundary neighbours."""
+    x = np.array([[0.0, 0.0], [-1.0, 0.5], [0.0, 1.0], [gap, 0.5], [gap + 1.0, 1.0], [gap + 1.0, 0.0]])
+    seg = np.array([[0, 1], [1, 2], [2, 0], [3, 4], [4, 5], [5, 3]])
+    bprev = np.array([2, 0, 1, 5, 3, 4], np.int32)
+    bnext = np.array([1, 2, 0, 4, 5, 3], np.int32)
+    return x, seg, bprev, bnext
+
+
+@pytest.mark.parametrize("shrink", [1.0, 0.8, 0.3])
+def test_contact_max_step_lets_a_pair_lose_at_most_its_share_of_distance(shrink):
+    """The tip moving straight at the edge may close ``shrink`` of its gap; moving along it,
+    or from beyond the barrier's reach, it is not held; a pair whose foot falls outside its
+    segment is not bounded."""
+    from potflat.relax._kernels.overlap import contact_max_step
+
+    gap, dhat = 0.3, 0.5
+    x, seg, bprev, bnext = _facing_triangles(gap)
+    towards = np.zeros_like(x)
+    towards[3:] = (-1.0, 0.0)  # the second triangle moves left, into the first
+    t = contact_max_step(x, towards, seg, bprev, bnext, dhat, 1.0, np.inf, shrink)
+    assert t == pytest.approx(shrink * gap, rel=1e-12)
+    along = np.zeros_like(x)
+    along[3:] = (0.0, 0.2)
+    assert contact_max_step(x, along, seg, bprev, bnext, dhat, 1.0, np.inf, shrink) == np.inf
+    assert contact_max_step(x, towards, seg, bprev, bnext, dhat, 1.0, 0.05, shrink) == 0.05  # the cap
+    far, *_ = _facing_triangles(0.6)  # beyond dhat: the barrier does not act, nor does the bound
+    assert contact_max_step(far, towards, seg, bprev, bnext, dhat, 1.0, np.inf, shrink) == np.inf
+    high = x.copy()
+    high[3:, 1] += 0.7  # the tip's foot above the edge's end
+    assert contact_max_step(high, towards, seg, bprev, bnext, dhat, 1.0, np.inf, shrink) == np.inf
 
 
 def test_following_a_coarse_copy_uncrosses_a_wrapped_boundary(monkeypatch):

@@ -303,7 +303,9 @@ class _Springs:
         self.bguard = np.zeros(n, bool)  # set by guard_boundary()
         self.contact = False  # set by guard_boundary()
         seg = self.boundary_segments
-        self._contact_cell = 2.0 * float(np.mean(np.linalg.norm(V[seg[:, 0]] - V[seg[:, 1]], axis=1))) if len(seg) else 1.0
+        # the contact search's grid cell (at least the barrier's reach)
+        self._contact_cell = max(ENERGY.contact_gap, 2.0 * float(np.mean(np.linalg.norm(V[seg[:, 0]] - V[seg[:, 1]], axis=1)))
+                                 if len(seg) else 1.0)
         self.bverts = np.zeros(0, np.int64)
         self.theta = np.zeros(n)
         self._bblocks = np.empty(1)
@@ -370,7 +372,7 @@ class _Springs:
         ec = 0.0
         if self.contact:
             ec = self.ko.contact_barrier(x, self.boundary_segments, self.bprev, self.bnext, ENERGY.contact_gap,
-                                 ENERGY.contact_mu * self.k, max(ENERGY.contact_gap, self._contact_cell), g, self.diag)
+                                         ENERGY.contact_mu * self.k, self._contact_cell, self.weight, g, self.diag)
         return es + eb + ef + ec, es, g
 
     def spring_energy(self, x: np.ndarray) -> float:
@@ -381,27 +383,34 @@ class _Springs:
     def max_step(self, x: np.ndarray, d: np.ndarray, cap: float = np.inf, shrink: float = 1.0,
                  limiting: np.ndarray | None = None) -> float:
         """Largest ``t`` (at most ``cap``) keeping every face of ``x + t d`` above ``1 - shrink``
-        of its area at ``x`` (``shrink = 1``: positively oriented) and every guarded boundary
-        vertex's angle sum below ``2 pi``. With ``limiting`` ((m,) bool) also flag the faces
-        whose own bound is below ``cap``."""
+        of its area at ``x`` (``shrink = 1``: positively oriented), every guarded boundary
+        vertex's angle sum below ``2 pi`` and every boundary pair of the contact barrier above
+        ``1 - shrink`` of its distance (:meth:`_boundary_step`). With ``limiting`` ((m,) bool)
+        also flag the faces whose own bound is below ``cap``."""
         if self.m == 0:
             return cap
         self.ks.max_step(x, d, self.faces, float(cap), float(shrink), self._blocks,
                          _NO_FLAGS if limiting is None else limiting)
-        return self._boundary_step(x, d, float(self._blocks.min()))
+        return self._boundary_step(x, d, float(self._blocks.min()), float(shrink))
 
     def max_step_near(self, x: np.ndarray, d: np.ndarray, verts: np.ndarray, cap: float, shrink: float) -> float:
         """:meth:`max_step` for a direction ``d`` changed at ``verts`` only, from one for which
         no face away from them was limiting (its bound was at least ``cap``): only the faces
         around ``verts`` and the guarded boundary are tested."""
         faces = self.ks.incident_faces(verts, self.vf_ptr, self.vf_tri)
-        return self._boundary_step(x, d, self.ks.max_step_of(x, d, self.faces, faces, float(cap), float(shrink)))
+        return self._boundary_step(x, d, self.ks.max_step_of(x, d, self.faces, faces, float(cap), float(shrink)),
+                                   float(shrink))
 
-    def _boundary_step(self, x: np.ndarray, d: np.ndarray, t: float) -> float:
-        """``t`` limited by the guarded boundary vertices' angle sums along ``x + t d``."""
+    def _boundary_step(self, x: np.ndarray, d: np.ndarray, t: float, shrink: float) -> float:
+        """``t`` limited by the guarded boundary vertices' angle sums along ``x + t d`` and, while
+        the contact barrier is on, by the boundary pairs it acts on (each may lose at most
+        ``shrink`` of its distance, as a face of its area)."""
         if len(self.bverts):
             self.ks.boundary_max_step(x, d, self.bverts, self.bprev, self.bnext, self._bblocks)
             t = min(t, float(self._bblocks.min()))
+        if self.contact:
+            t = self.ko.contact_max_step(x, d, self.boundary_segments, self.bprev, self.bnext, ENERGY.contact_gap,
+                                         self._contact_cell, t, shrink)
         return t
 
     def signed_areas(self, x: np.ndarray) -> np.ndarray:

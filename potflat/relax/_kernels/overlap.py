@@ -1,4 +1,5 @@
-"""The contact barrier between a flattening's boundary vertices and its boundary segments.
+"""The contact barrier between a flattening's boundary vertices and its boundary segments,
+and the step bound that keeps a step from running deep into it.
 
 The segments are binned on the grid of :mod:`potflat.mesh._segments` (where crossing
 boundary segments are found, :func:`potflat.mesh.boundary.crossing_pairs`).
@@ -11,17 +12,43 @@ import numpy as np
 
 from potflat._jit import leaf
 from potflat.mesh._segments import bin_segments
+from potflat.relax._kernels.springs import _first_root, _no_root_up_to
 
 
 @leaf
-def contact_barrier(x, seg, bprev, bnext, dhat, kappa, cell, grad, diag):
+def _near_segments(x, seg, dhat, cell):
+    """The boundary segments binned on a grid of side ``cell`` over the boundary's bounding box
+    grown by ``dhat``: origin ``(ox, oy)``, width ``gx`` and the CSR ``start``, ``items`` of
+    :func:`~potflat.mesh._segments.bin_segments` (each segment in every cell within ``dhat``)."""
+    ox = np.inf
+    oy = np.inf
+    mx = -np.inf
+    my = -np.inf
+    for s in range(seg.shape[0]):
+        for e in range(2):
+            v = seg[s, e]
+            ox = min(ox, x[v, 0])
+            oy = min(oy, x[v, 1])
+            mx = max(mx, x[v, 0])
+            my = max(my, x[v, 1])
+    ox -= dhat
+    oy -= dhat
+    gx = int((mx + dhat - ox) / cell) + 1
+    gy = int((my + dhat - oy) / cell) + 1
+    start, items = bin_segments(x, seg, dhat, ox, oy, cell, gx, gy)
+    return ox, oy, gx, start, items
+
+
+@leaf
+def contact_barrier(x, seg, bprev, bnext, dhat, kappa, cell, weight, grad, diag):
     """Barrier between boundary vertices and the boundary segments that come near them.
 
     For every boundary vertex ``v`` (the first vertex of a segment) and every segment
     ``(a, b)`` not touching ``v`` or its boundary neighbours, at distance ``d < dhat``:
-    ``kappa * phi(d / dhat)`` with ``phi(s) = s - 1 - log s`` (zero and flat at ``d = dhat``,
-    infinite at contact). Serial over the vertices in order (deterministic); adds the
-    gradient and a Hessian diagonal bound in place.
+    ``kappa w phi(d / dhat)`` with ``phi(s) = s - 1 - log s`` (zero and flat at ``d = dhat``,
+    infinite at contact) and ``w`` the mean importance weight of ``v``, ``a`` and ``b``
+    (plain surface's contacts as soft as its springs). Serial over the vertices in order
+    (deterministic); adds the gradient and a Hessian diagonal bound in place.
 
     Parameters
     ----------
@@ -34,6 +61,8 @@ def contact_barrier(x, seg, bprev, bnext, dhat, kappa, cell, grad, diag):
         Activation distance and weight.
     cell : float
         Grid cell size of the search (at least ``dhat``).
+    weight : (n,) or (0,) float64
+        Importance weight of each vertex; empty: every weight is 1.
     grad : (n, 2) float64
     diag : (n,) float64
 
@@ -45,22 +74,8 @@ def contact_barrier(x, seg, bprev, bnext, dhat, kappa, cell, grad, diag):
     nb = seg.shape[0]
     if nb < 3:
         return 0.0
-    ox = np.inf
-    oy = np.inf
-    mx = -np.inf
-    my = -np.inf
-    for s in range(nb):
-        for e in range(2):
-            v = seg[s, e]
-            ox = min(ox, x[v, 0])
-            oy = min(oy, x[v, 1])
-            mx = max(mx, x[v, 0])
-            my = max(my, x[v, 1])
-    ox -= dhat
-    oy -= dhat
-    gx = int((mx + dhat - ox) / cell) + 1
-    gy = int((my + dhat - oy) / cell) + 1
-    start, items = bin_segments(x, seg, dhat, ox, oy, cell, gx, gy)
+    weighted = weight.shape[0] > 0
+    ox, oy, gx, start, items = _near_segments(x, seg, dhat, cell)
     total = 0.0
     for t in range(nb):
         v = seg[t, 0]
@@ -87,9 +102,10 @@ def contact_barrier(x, seg, bprev, bnext, dhat, kappa, cell, grad, diag):
             if d <= 0.0:
                 return np.inf
             r = d / dhat
-            total += kappa * (r - 1.0 - math.log(r))
-            f = kappa * (1.0 - 1.0 / r) / dhat / d  # dE/dd, per unit of (p - c)
-            h = kappa / (d * d)
+            kw = kappa * (weight[v] + weight[a] + weight[b]) / 3.0 if weighted else kappa
+            total += kw * (r - 1.0 - math.log(r))
+            f = kw * (1.0 - 1.0 / r) / dhat / d  # dE/dd, per unit of (p - c)
+            h = kw / (d * d)
             grad[v, 0] += f * nx
             grad[v, 1] += f * ny
             grad[a, 0] -= f * (1.0 - w) * nx
@@ -100,3 +116,62 @@ def contact_barrier(x, seg, bprev, bnext, dhat, kappa, cell, grad, diag):
             diag[a] += h * (1.0 - w) * (1.0 - w)
             diag[b] += h * w * w
     return total
+
+
+@leaf
+def contact_max_step(x, d, seg, bprev, bnext, dhat, cell, cap, shrink):
+    """Largest ``t <= cap`` for which no pair of :func:`contact_barrier` whose vertex's foot
+    lies inside the segment comes closer to the segment's line along ``x + t d`` than
+    ``1 - shrink`` of its distance at ``x``: the contact barrier's counterpart of the faces'
+    step bound (:func:`~potflat.relax._kernels.springs.max_step`). The pair's signed
+    distance times the segment's length is twice the signed area of the triangle of the
+    segment and the vertex, a quadratic in ``t``.
+
+    Parameters
+    ----------
+    x, d : (n, 2) float64
+        Positions and direction.
+    seg : (b, 2) int64
+    bprev, bnext : (n,) int32
+    dhat, cell : float
+        As in :func:`contact_barrier`: only pairs closer than ``dhat`` are bounded.
+    cap : float
+        Upper bound of interest.
+    shrink : float
+        Largest fraction of its distance a pair may lose, in (0, 1].
+    """
+    nb = seg.shape[0]
+    if nb < 3:
+        return cap
+    ox, oy, gx, start, items = _near_segments(x, seg, dhat, cell)
+    best = cap
+    for t in range(nb):
+        v = seg[t, 0]
+        px = x[v, 0]
+        py = x[v, 1]
+        c = int((py - oy) / cell) * gx + int((px - ox) / cell)
+        for u in range(start[c], start[c + 1]):
+            s = items[u]
+            a = seg[s, 0]
+            b = seg[s, 1]
+            if a == v or b == v or a == bprev[v] or b == bprev[v] or a == bnext[v] or b == bnext[v]:
+                continue
+            ex = x[b, 0] - x[a, 0]
+            ey = x[b, 1] - x[a, 1]
+            ee = ex * ex + ey * ey
+            rx = px - x[a, 0]
+            ry = py - x[a, 1]
+            cross = ex * ry - ey * rx  # |ab| times the signed distance of v from the line
+            if ee <= 0.0 or not 0.0 < rx * ex + ry * ey < ee or cross * cross >= dhat * dhat * ee:
+                continue
+            fx = d[b, 0] - d[a, 0]
+            fy = d[b, 1] - d[a, 1]
+            hx = d[v, 0] - d[a, 0]
+            hy = d[v, 1] - d[a, 1]
+            side = 1.0 if cross > 0.0 else -1.0
+            c0 = side * cross * shrink
+            c1 = side * (ex * hy - ey * hx + fx * ry - fy * rx)
+            c2 = side * (fx * hy - fy * hx)
+            if not _no_root_up_to(c0, c1, c2, best):
+                best = min(best, _first_root(c0, c1, c2))
+    return best

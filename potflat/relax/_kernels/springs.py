@@ -18,7 +18,8 @@ A second barrier keeps the boundary from wrapping over itself at a vertex: for e
 boundary vertex ``b`` (one incoming and one outgoing boundary half-edge, ``prv -> b -> nxt``)
 the flat interior angle sum ``Theta_b`` (the sum of its faces' angles at ``b``, which with
 positively oriented faces equals the angle swept from ``nxt - b`` counter-clockwise to
-``prv - b``) must stay below ``2 pi``: ``mu_b k phi((2 pi - Theta_b) / gap)``. Every face
+``prv - b``) must stay below ``2 pi``: ``mu_b k w_b phi((2 pi - Theta_b) / gap)``, ``w_b`` the
+vertex's importance weight (1 without importance). Every face
 may keep its orientation while a fan with ``Theta_b > 2 pi`` overlaps itself, so the face
 barrier alone does not prevent this. ``Theta_b`` depends only on ``b``, ``prv`` and ``nxt``
 (the inner fan edges cancel), so its gradient touches three boundary vertices and is
@@ -571,7 +572,8 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
     r_floor : float
     weight : (n,) or (0,) float64
         Importance weight of each vertex (:mod:`potflat.importance`): a spring's coefficient
-        is multiplied by the mean of its endpoints' weights. Empty: every weight is 1.
+        is multiplied by the mean of its endpoints' weights, a guarded vertex's angle barrier
+        by its own. Empty: every weight is 1.
     vf_ptr, vf_tri : CSR from :func:`vertex_faces`
     faces : (m, 3) int32 or int64
     shape : (m, 5) or (0, 5) float64
@@ -588,7 +590,8 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
     theta : (n,) float64
         Flat interior angle sums of the guarded vertices at ``x`` (:func:`boundary_angle_sums`).
     mu_b, gap : float
-        Angle barrier weight and activation (radians below ``2 pi``); ``mu_b = 0`` disables it.
+        Angle barrier weight (times ``k`` and the vertex's importance weight) and activation
+        (radians below ``2 pi``); ``mu_b = 0`` disables it.
     grad : (n, 2) float64
         Output: dE/dx.
     e_spring, e_barrier : (n,) float64
@@ -706,15 +709,16 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
                     hd += ca * inv * inv * (agx * agx + agy * agy)
         eb = 0.0
         if mu_b > 0.0 and (bprev[i] >= 0 or bnext[i] >= 0):
-            sb = mu_b * k
+            sb = mu_b * k  # times the guarded vertex's importance weight
             # own angle sum: depends on x_i through u = x_nxt - x_i and w = x_prv - x_i
             if bguard[i]:
                 a = (2.0 * math.pi - theta[i]) / gap
+                sw = sb * weight[i] if weighted else sb
                 if a <= 0.0:
                     eb = np.inf
                 elif a < 1.0:
-                    eb += sb * (a - 1.0 - math.log(a))
-                    cb, h = _angle_barrier_slope(theta[i], sb, gap)
+                    eb += sw * (a - 1.0 - math.log(a))
+                    cb, h = _angle_barrier_slope(theta[i], sw, gap)
                     ux = x[bnext[i], 0] - xi
                     uy = x[bnext[i], 1] - yi
                     wx = x[bprev[i], 0] - xi
@@ -729,7 +733,7 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
             # as the successor of its predecessor p: Theta_p grows with arg(x_i - x_p) decreasing
             pv = bprev[i]
             if pv >= 0 and bguard[pv]:
-                cb, h = _angle_barrier_slope(theta[pv], sb, gap)
+                cb, h = _angle_barrier_slope(theta[pv], sb * weight[pv] if weighted else sb, gap)
                 if h > 0.0:
                     ux = xi - x[pv, 0]
                     uy = yi - x[pv, 1]
@@ -742,7 +746,7 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
             # as the predecessor of its successor q
             qv = bnext[i]
             if qv >= 0 and bguard[qv]:
-                cb, h = _angle_barrier_slope(theta[qv], sb, gap)
+                cb, h = _angle_barrier_slope(theta[qv], sb * weight[qv] if weighted else sb, gap)
                 if h > 0.0:
                     wx = xi - x[qv, 0]
                     wy = yi - x[qv, 1]
