@@ -396,7 +396,7 @@ class _Springs:
     def max_step_near(self, x: np.ndarray, d: np.ndarray, verts: np.ndarray, cap: float, shrink: float) -> float:
         """:meth:`max_step` for a direction ``d`` changed at ``verts`` only, from one for which
         no face away from them was limiting (its bound was at least ``cap``): only the faces
-        around ``verts`` and the guarded boundary are tested."""
+        around ``verts``, the guarded boundary and the contact pairs are tested."""
         faces = self.ks.incident_faces(verts, self.vf_ptr, self.vf_tri)
         return self._boundary_step(x, d, self.ks.max_step_of(x, d, self.faces, faces, float(cap), float(shrink)),
                                    float(shrink))
