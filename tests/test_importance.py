@@ -248,10 +248,10 @@ def test_a_high_contrast_is_reached_from_a_softer_solve_to_the_same_layout(monke
         assert not any("importance_contrast" in lv for lv in got.levels)
 
 
-def test_a_softer_first_solve_with_a_coarse_copy_only_smooths_the_full_mesh(monkeypatch):
-    """When the first (softer) solve started from a relaxed coarse copy, it spends
-    ``SOLVER.contrast_start_iterations`` on the full mesh and stops there without a note;
-    the second still ends where a first solve run to convergence leads, fold-free."""
+def test_with_a_coarse_copy_only_the_copy_takes_the_softer_first_solve(monkeypatch):
+    """With a coarse copy, the lower contrast is solved on the copy only (the copy relaxes at
+    it, then at the full contrast) and the full mesh is solved once, at the full contrast; it
+    ends where the full mesh relaxed at both contrasts in turn (no copy) does, fold-free."""
     from dataclasses import replace
 
     import potflat.relax.solver as solver
@@ -263,19 +263,21 @@ def test_a_softer_first_solve_with_a_coarse_copy_only_smooths_the_full_mesh(monk
     flat = flat.replace(importance=importance)
     kw = {"preset": "archival", "importance_contrast": 1000.0, "true_scale": False}
     monkeypatch.setattr(solver, "COARSE", replace(COARSE, min_vertices=1000))
-    capped = relax(flat, **kw)
-    first = [lv for lv in capped.levels if lv.get("importance_contrast") == SOLVER.contrast_start]
-    assert [lv["level"] for lv in first] == ["coarse", "fine"]  # a coarse copy, then the full mesh
-    assert first[-1]["iterations"] == SOLVER.contrast_start_iterations
-    assert not any("stopped by" in note for note in capped.notes)
-    assert capped.flipped == 0 and capped.boundary_overlap == 0 and capped.converged
-    monkeypatch.setattr(solver, "SOLVER", replace(SOLVER, contrast_start_iterations=10**6))
-    full = relax(flat, **kw)
-    assert [lv for lv in full.levels if lv.get("importance_contrast")][-1]["iterations"] > SOLVER.contrast_start_iterations
+    staged = relax(flat, **kw)
+    first = [lv for lv in staged.levels if lv.get("importance_contrast") == SOLVER.contrast_start]
+    assert first and all(lv["vertices"] < len(flat.uv) for lv in first)  # the lower contrast on the copy only
+    assert [lv["level"] for lv in staged.levels].count("fine") == 1
+    assert staged.levels[-1]["vertices"] == len(flat.uv) and "importance_contrast" not in staged.levels[-1]
+    assert any(note.startswith("coarse copy: relaxed first with plain surface") for note in staged.notes)
+    assert staged.flipped == 0 and staged.boundary_overlap == 0 and staged.converged
+    monkeypatch.setattr(solver, "COARSE", replace(COARSE, min_vertices=10**9))  # no copy
+    direct = relax(flat, **kw)
+    assert [lv["vertices"] for lv in direct.levels if lv.get("importance_contrast")] == [len(flat.uv)]
     F, V = flat.mesh.faces, flat.mesh.vertices
     zone = important_faces(F, importance)
-    a, b = face_distortion(V, capped.flat.uv, F), face_distortion(V, full.flat.uv, F)
-    assert np.allclose(a.sigma_max[zone] / a.sigma_min[zone], b.sigma_max[zone] / b.sigma_min[zone], atol=2e-3)
+    a, b = face_distortion(V, staged.flat.uv, F), face_distortion(V, direct.flat.uv, F)
+    # (the two converged layouts differ by at most 0.0024 in a face's anisotropy, 0.0005 at p99)
+    assert np.allclose(a.sigma_max[zone] / a.sigma_min[zone], b.sigma_max[zone] / b.sigma_min[zone], atol=3e-3)
     assert np.allclose(a.sigma_max[zone] * a.sigma_min[zone], b.sigma_max[zone] * b.sigma_min[zone], atol=2e-3)
 
 

@@ -162,17 +162,22 @@ class SolverParameters:
         copy and preconditioner grids). With the plain surface a thousand times softer than
         the painting, the preconditioner's coarse corrections (which average stiffness over
         the zone's edge) barely move the plain surface: on the bundled amphora a direct solve
-        took 646 iterations against 145 + 121 this way, to the same figures.
+        took 646 iterations against 145 + 121 this way, to the same figures. A mesh with a
+        coarse copy leaves both relaxations to the copy (which nests: the smallest copy
+        takes the first) and is solved once, at the full contrast, from the copy's layout:
+        2.5M textured amphora 16.5 s and 36 full-mesh iterations against 22.3 s and 10 + 34,
+        with lower edge-length RMS (docs/performance.md, fifteenth session).
     contrast_start_iterations : int
-        Iterations the first of those relaxations spends on the full mesh when it started
-        from a relaxed coarse copy (the copies converge): it only has to smooth the layout the
-        second's coarse copy starts from. (Without a coarse copy, below
+        Iterations the first of those relaxations spends on its mesh when it started from a
+        relaxed coarse copy (the copies converge): it only has to smooth the layout the
+        second's coarse copy starts from. Since the copies take the first relaxation this
+        applies only when the copy at the full contrast could not be relaxed fold-free and
+        the full mesh takes the first relaxation itself. (Without a coarse copy, below
         ``COARSE.min_vertices``, it converges: capped at 10, the bundled amphora took 355
-        iterations in all against 241.)
-        Iterations on the full mesh in all (first + second), on the 0.3M, 1M and 3M
-        textured amphorae of ``bench_scale``: converged first solve 104, 87, 53; 5 first
-        iterations 78, 85, 58; 10: 58, 55, 40; 20: 94, 84 (0.3M, 1M); painted zone's length
-        error and anisotropy the same to within 0.02 points and 0.001.
+        iterations in all against 241.) Iterations on the full mesh in all (first +
+        second), on the 0.3M, 1M and 3M textured amphorae of ``bench_scale`` when the full
+        mesh took both: converged first solve 104, 87, 53; 5 first iterations 78, 85, 58;
+        10: 58, 55, 40; 20: 94, 84 (0.3M, 1M).
     """
 
     lbfgs_memory: int = 6

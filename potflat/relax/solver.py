@@ -848,13 +848,20 @@ def _softer_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
     <potflat.relax.parameters.SolverParameters.contrast_start>`, from which a higher one is
     reached (None: the contrast is not higher, or the importance is uniform, so the weights
     would not change)."""
-    low = SOLVER.contrast_start
-    if not _painted_zone(flat, settings) or settings["importance_contrast"] <= low:
+    if not _contrast_staged(flat, settings):
         return None
+    low = SOLVER.contrast_start
     budget = _budget_left(deadline)
     sub = _relax(flat, replace(options, importance_contrast=low, time_budget=budget, true_scale=False), progress,
                  callback, summaries=False, fine_iterations=SOLVER.contrast_start_iterations, limit=limit)
     return _SofterStart(uv=sub.flat.uv, contrast=low, result=replace(sub, flat=None))
+
+
+def _contrast_staged(flat: FlatMesh, settings: dict) -> bool:
+    """Whether the full importance contrast is reached from a relaxation at the lower
+    :attr:`SOLVER.contrast_start <potflat.relax.parameters.SolverParameters.contrast_start>`:
+    a painted zone at a higher contrast (else the weights would not change)."""
+    return _painted_zone(flat, settings) and settings["importance_contrast"] > SOLVER.contrast_start
 
 
 def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progress: bool,
@@ -1070,13 +1077,19 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
     area = settings["area"] if fold_free and not _painted_zone(flat, settings) else 0.0
     if limit == "auto":  # (not passed down by the caller)
         limit = _limit(settings, area) if fold_free else None
-    softer = (_softer_start(flat, options, settings, progress, callback, deadline, limit)
-              if fold_free and not softened else None)
+    softer = coarse = None
+    if fold_free and not softened and _contrast_staged(flat, settings):
+        # the coarse copy relaxes at the lower contrast first, then at the full one (it is not
+        # softened), so the full mesh is solved once; without a relaxed copy (a small mesh, or
+        # one that could not be relaxed fold-free) the full mesh takes the first solve itself
+        coarse = _coarse_start(flat, options, settings, progress, callback, deadline, limit, softened=False)
+        if coarse is None or coarse.result is None:
+            softer = _softer_start(flat, options, settings, progress, callback, deadline, limit)
+    elif fold_free:
+        coarse = _coarse_start(flat, options, settings, progress, callback, deadline, limit, softened=softened)
     if limit == "auto" and softer is not None and softer.result.anisotropy_limit is not None:
         limit = softer.result.anisotropy_limit  # the first solve found it: every later solve uses it
     start = flat if softer is None else flat.replace(uv=softer.uv)
-    coarse = (_coarse_start(start, options, settings, progress, callback, deadline, limit,
-                            softened=softened or softer is not None) if fold_free else None)
     found = None if coarse is None or coarse.result is None else coarse.result.anisotropy_limit
     if limit == "auto" and found is not None:  # (None: the copy stopped early; this solve finds it)
         limit = found
