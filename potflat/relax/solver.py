@@ -843,13 +843,11 @@ class _SofterStart:
 
 
 def _softer_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progress: bool,
-                  callback, deadline: float, limit) -> _SofterStart | None:
-    """The relaxation at the lower importance contrast :attr:`SOLVER.contrast_start
-    <potflat.relax.parameters.SolverParameters.contrast_start>`, from which a higher one is
-    reached (None: the contrast is not higher, or the importance is uniform, so the weights
-    would not change)."""
-    if not _contrast_staged(flat, settings):
-        return None
+                  callback, deadline: float, limit) -> _SofterStart:
+    """The relaxation of the full mesh at the lower importance contrast
+    :attr:`SOLVER.contrast_start <potflat.relax.parameters.SolverParameters.contrast_start>`,
+    from which the higher one is reached (when :func:`_contrast_staged` and no relaxed coarse
+    copy takes it)."""
     low = SOLVER.contrast_start
     budget = _budget_left(deadline)
     sub = _relax(flat, replace(options, importance_contrast=low, time_budget=budget, true_scale=False), progress,
