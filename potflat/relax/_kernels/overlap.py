@@ -16,15 +16,18 @@ from potflat.relax._kernels.springs import _first_root, _no_root_up_to
 
 
 @leaf
-def _near_segments(x, seg, dhat, cell):
-    """The boundary segments binned on a grid of side ``cell`` over the boundary's bounding box
-    grown by ``dhat``: origin ``(ox, oy)``, width ``gx`` and the CSR ``start``, ``items`` of
-    :func:`~potflat.mesh._segments.bin_segments` (each segment in every cell within ``dhat``)."""
+def _near_pairs(x, seg, bprev, bnext, dhat, cell):
+    """The (vertex, segment) pairs the contact terms look at: every boundary vertex ``v`` (the
+    first vertex of a segment, in the segments' order) with every segment binned within
+    ``dhat`` of its grid cell (:func:`~potflat.mesh._segments.bin_segments`, cells of side
+    ``cell``) that touches neither ``v`` nor its boundary neighbours. Returns the vertices
+    and the segments' indices, (k,) int64 each (count, then fill: the same order)."""
+    nb = seg.shape[0]
     ox = np.inf
     oy = np.inf
     mx = -np.inf
     my = -np.inf
-    for s in range(seg.shape[0]):
+    for s in range(nb):
         for e in range(2):
             v = seg[s, e]
             ox = min(ox, x[v, 0])
@@ -36,7 +39,27 @@ def _near_segments(x, seg, dhat, cell):
     gx = int((mx + dhat - ox) / cell) + 1
     gy = int((my + dhat - oy) / cell) + 1
     start, items = bin_segments(x, seg, dhat, ox, oy, cell, gx, gy)
-    return ox, oy, gx, start, items
+    verts = np.empty(0, np.int64)
+    segs = np.empty(0, np.int64)
+    for fill in range(2):  # count, then fill
+        k = 0
+        for t in range(nb):
+            v = seg[t, 0]
+            c = int((x[v, 1] - oy) / cell) * gx + int((x[v, 0] - ox) / cell)
+            for u in range(start[c], start[c + 1]):
+                s = items[u]
+                a = seg[s, 0]
+                b = seg[s, 1]
+                if a == v or b == v or a == bprev[v] or b == bprev[v] or a == bnext[v] or b == bnext[v]:
+                    continue
+                if fill:
+                    verts[k] = v
+                    segs[k] = s
+                k += 1
+        if not fill:
+            verts = np.empty(k, np.int64)
+            segs = np.empty(k, np.int64)
+    return verts, segs
 
 
 @leaf
@@ -75,46 +98,41 @@ def contact_barrier(x, seg, bprev, bnext, dhat, kappa, cell, weight, grad, diag)
     if nb < 3:
         return 0.0
     weighted = weight.shape[0] > 0
-    ox, oy, gx, start, items = _near_segments(x, seg, dhat, cell)
+    verts, segs = _near_pairs(x, seg, bprev, bnext, dhat, cell)
     total = 0.0
-    for t in range(nb):
-        v = seg[t, 0]
+    for p in range(verts.shape[0]):
+        v = verts[p]
+        a = seg[segs[p], 0]
+        b = seg[segs[p], 1]
         px = x[v, 0]
         py = x[v, 1]
-        c = int((py - oy) / cell) * gx + int((px - ox) / cell)
-        for u in range(start[c], start[c + 1]):
-            s = items[u]
-            a = seg[s, 0]
-            b = seg[s, 1]
-            if a == v or b == v or a == bprev[v] or b == bprev[v] or a == bnext[v] or b == bnext[v]:
-                continue
-            ex = x[b, 0] - x[a, 0]
-            ey = x[b, 1] - x[a, 1]
-            ee = ex * ex + ey * ey
-            w = 0.0
-            if ee > 0.0:
-                w = min(max(((px - x[a, 0]) * ex + (py - x[a, 1]) * ey) / ee, 0.0), 1.0)
-            nx = px - (x[a, 0] + w * ex)
-            ny = py - (x[a, 1] + w * ey)
-            d = math.sqrt(nx * nx + ny * ny)
-            if d >= dhat:
-                continue
-            if d <= 0.0:
-                return np.inf
-            r = d / dhat
-            kw = kappa * (weight[v] + weight[a] + weight[b]) / 3.0 if weighted else kappa
-            total += kw * (r - 1.0 - math.log(r))
-            f = kw * (1.0 - 1.0 / r) / dhat / d  # dE/dd, per unit of (p - c)
-            h = kw / (d * d)
-            grad[v, 0] += f * nx
-            grad[v, 1] += f * ny
-            grad[a, 0] -= f * (1.0 - w) * nx
-            grad[a, 1] -= f * (1.0 - w) * ny
-            grad[b, 0] -= f * w * nx
-            grad[b, 1] -= f * w * ny
-            diag[v] += h
-            diag[a] += h * (1.0 - w) * (1.0 - w)
-            diag[b] += h * w * w
+        ex = x[b, 0] - x[a, 0]
+        ey = x[b, 1] - x[a, 1]
+        ee = ex * ex + ey * ey
+        w = 0.0
+        if ee > 0.0:
+            w = min(max(((px - x[a, 0]) * ex + (py - x[a, 1]) * ey) / ee, 0.0), 1.0)
+        nx = px - (x[a, 0] + w * ex)
+        ny = py - (x[a, 1] + w * ey)
+        d = math.sqrt(nx * nx + ny * ny)
+        if d >= dhat:
+            continue
+        if d <= 0.0:
+            return np.inf
+        r = d / dhat
+        kw = kappa * (weight[v] + weight[a] + weight[b]) / 3.0 if weighted else kappa
+        total += kw * (r - 1.0 - math.log(r))
+        f = kw * (1.0 - 1.0 / r) / dhat / d  # dE/dd, per unit of (p - c)
+        h = kw / (d * d)
+        grad[v, 0] += f * nx
+        grad[v, 1] += f * ny
+        grad[a, 0] -= f * (1.0 - w) * nx
+        grad[a, 1] -= f * (1.0 - w) * ny
+        grad[b, 0] -= f * w * nx
+        grad[b, 1] -= f * w * ny
+        diag[v] += h
+        diag[a] += h * (1.0 - w) * (1.0 - w)
+        diag[b] += h * w * w
     return total
 
 
@@ -143,35 +161,28 @@ def contact_max_step(x, d, seg, bprev, bnext, dhat, cell, cap, shrink):
     nb = seg.shape[0]
     if nb < 3:
         return cap
-    ox, oy, gx, start, items = _near_segments(x, seg, dhat, cell)
+    verts, segs = _near_pairs(x, seg, bprev, bnext, dhat, cell)
     best = cap
-    for t in range(nb):
-        v = seg[t, 0]
-        px = x[v, 0]
-        py = x[v, 1]
-        c = int((py - oy) / cell) * gx + int((px - ox) / cell)
-        for u in range(start[c], start[c + 1]):
-            s = items[u]
-            a = seg[s, 0]
-            b = seg[s, 1]
-            if a == v or b == v or a == bprev[v] or b == bprev[v] or a == bnext[v] or b == bnext[v]:
-                continue
-            ex = x[b, 0] - x[a, 0]
-            ey = x[b, 1] - x[a, 1]
-            ee = ex * ex + ey * ey
-            rx = px - x[a, 0]
-            ry = py - x[a, 1]
-            cross = ex * ry - ey * rx  # |ab| times the signed distance of v from the line
-            if ee <= 0.0 or not 0.0 < rx * ex + ry * ey < ee or cross * cross >= dhat * dhat * ee:
-                continue
-            fx = d[b, 0] - d[a, 0]
-            fy = d[b, 1] - d[a, 1]
-            hx = d[v, 0] - d[a, 0]
-            hy = d[v, 1] - d[a, 1]
-            side = 1.0 if cross > 0.0 else -1.0
-            c0 = side * cross * shrink
-            c1 = side * (ex * hy - ey * hx + fx * ry - fy * rx)
-            c2 = side * (fx * hy - fy * hx)
-            if not _no_root_up_to(c0, c1, c2, best):
-                best = min(best, _first_root(c0, c1, c2))
+    for p in range(verts.shape[0]):
+        v = verts[p]
+        a = seg[segs[p], 0]
+        b = seg[segs[p], 1]
+        rx = x[v, 0] - x[a, 0]
+        ry = x[v, 1] - x[a, 1]
+        ex = x[b, 0] - x[a, 0]
+        ey = x[b, 1] - x[a, 1]
+        ee = ex * ex + ey * ey
+        cross = ex * ry - ey * rx  # |ab| times the signed distance of v from the line
+        if ee <= 0.0 or not 0.0 < rx * ex + ry * ey < ee or cross * cross >= dhat * dhat * ee:
+            continue
+        fx = d[b, 0] - d[a, 0]
+        fy = d[b, 1] - d[a, 1]
+        hx = d[v, 0] - d[a, 0]
+        hy = d[v, 1] - d[a, 1]
+        side = 1.0 if cross > 0.0 else -1.0
+        c0 = side * cross * shrink
+        c1 = side * (ex * hy - ey * hx + fx * ry - fy * rx)
+        c2 = side * (fx * hy - fy * hx)
+        if not _no_root_up_to(c0, c1, c2, best):
+            best = min(best, _first_root(c0, c1, c2))
     return best
