@@ -863,7 +863,7 @@ def _contrast_staged(flat: FlatMesh, settings: dict) -> bool:
 
 
 def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progress: bool,
-                  callback, deadline: float, limit, *, softened: bool) -> _CoarseStart | None:
+                  callback, deadline: float, limit) -> _CoarseStart | None:
     """Relax a coarse copy of ``flat`` (grid clusters of its start layout, :mod:`potflat.relax.simplify`).
 
     With ``simplify_mm`` the cells have that side and the full mesh will only follow the
@@ -899,7 +899,7 @@ def _coarse_start(flat: FlatMesh, options: RelaxOptions, settings: dict, progres
         sub = _relax(FlatMesh(Mesh(simple.vertices, simple.faces, units=flat.mesh.units), simple.uv,
                               importance=importance),
                      replace(options, simplify_mm=0.0, time_budget=budget, true_scale=False), progress, tagged,
-                     summaries=False, softened=softened, limit=limit)
+                     summaries=False, limit=limit)
     except FoldedResultError as exc:
         return _CoarseStart(result=None, uv=None, final=False, notes=[
             f"the {len(simple.vertices)}-vertex coarse copy could not be relaxed fold-free ({exc}); "
@@ -1042,11 +1042,10 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
 
 
 def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, summaries: bool,
-           softened: bool = False, fine_iterations: int | None = None, limit="auto") -> RelaxResult:
+           fine_iterations: int | None = None, limit="auto") -> RelaxResult:
     """:func:`relax`; without ``summaries`` (a coarse copy, whose layout is all its caller
     reads) the result's distortion summaries are None and its stress is not computed;
-    ``softened``: the start is already relaxed at a lower importance contrast (a coarse
-    copy of such a start), so no softer first solve; ``fine_iterations``: when a coarse copy
+    ``fine_iterations``: when a coarse copy
     was relaxed, at most this many iterations on ``flat`` itself (a first solve that only
     smooths); ``limit``: the anisotropy limit found by an earlier solve (see :func:`_limit`;
     ``"auto"``: from the settings)."""
@@ -1075,16 +1074,14 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
     area = settings["area"] if fold_free and not _painted_zone(flat, settings) else 0.0
     if limit == "auto":  # (not passed down by the caller)
         limit = _limit(settings, area) if fold_free else None
-    softer = coarse = None
-    if fold_free and not softened and _contrast_staged(flat, settings):
-        # the coarse copy relaxes at the lower contrast first, then at the full one (it is not
-        # softened), so the full mesh is solved once; without a relaxed copy (a small mesh, or
-        # one that could not be relaxed fold-free) the full mesh takes the first solve itself
-        coarse = _coarse_start(flat, options, settings, progress, callback, deadline, limit, softened=False)
-        if coarse is None or coarse.result is None:
-            softer = _softer_start(flat, options, settings, progress, callback, deadline, limit)
-    elif fold_free:
-        coarse = _coarse_start(flat, options, settings, progress, callback, deadline, limit, softened=softened)
+    # a coarse copy reaches a higher importance contrast by itself (in turn, its smallest copy
+    # relaxes at the lower contrast first), so the full mesh is solved once; without a relaxed
+    # copy (a small mesh, or one that could not be relaxed fold-free) the full mesh takes the
+    # lower contrast's first solve itself
+    coarse = _coarse_start(flat, options, settings, progress, callback, deadline, limit) if fold_free else None
+    softer = None
+    if fold_free and _contrast_staged(flat, settings) and (coarse is None or coarse.result is None):
+        softer = _softer_start(flat, options, settings, progress, callback, deadline, limit)
     if limit == "auto" and softer is not None and softer.result.anisotropy_limit is not None:
         limit = softer.result.anisotropy_limit  # the first solve found it: every later solve uses it
     start = flat if softer is None else flat.replace(uv=softer.uv)
