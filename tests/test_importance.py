@@ -281,6 +281,35 @@ def test_with_a_coarse_copy_only_the_copy_takes_the_softer_first_solve(monkeypat
     assert np.allclose(a.sigma_max[zone] * a.sigma_min[zone], b.sigma_max[zone] * b.sigma_min[zone], atol=2e-3)
 
 
+def test_without_a_relaxed_copy_the_full_mesh_takes_the_softer_first_solve(monkeypatch):
+    """A coarse copy that cannot be relaxed fold-free leaves the lower contrast's first solve
+    to the full mesh (a note for each), and the result is fold-free."""
+    from dataclasses import replace
+
+    import potflat.relax.solver as solver
+    from potflat.errors import FoldedResultError
+    from potflat.relax.parameters import COARSE, SOLVER
+
+    flat = meshes.vessel_rollout(3000, seed=3)
+    height = flat.uv[:, 1]
+    flat = flat.replace(importance=np.clip((height - np.quantile(height, 0.4)) / (0.05 * np.ptp(height)), 0.0, 1.0))
+    monkeypatch.setattr(solver, "COARSE", replace(COARSE, min_vertices=1000))
+    real = solver._relax
+
+    def copies_fold(sub, *args, **kw):
+        if len(sub.uv) < len(flat.uv):
+            raise FoldedResultError("the copy folds (test)")
+        return real(sub, *args, **kw)
+
+    monkeypatch.setattr(solver, "_relax", copies_fold)
+    r = relax(flat, importance_contrast=1000.0, true_scale=False)
+    first = [lv for lv in r.levels if lv.get("importance_contrast") == SOLVER.contrast_start]
+    assert [lv["vertices"] for lv in first] == [len(flat.uv)]
+    assert any("could not be relaxed fold-free" in note for note in r.notes)
+    assert any(note.startswith("relaxed first with plain surface") for note in r.notes)
+    assert r.flipped == 0 and r.boundary_overlap == 0
+
+
 def test_a_mask_that_marks_nothing_or_everything_means_no_importance(tmp_path):
     import cv2
 
