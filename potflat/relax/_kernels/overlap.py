@@ -12,7 +12,7 @@ import numpy as np
 
 from potflat._jit import leaf
 from potflat.mesh._segments import bin_segments
-from potflat.relax._kernels.springs import _first_root, _no_root_up_to
+from potflat.relax._kernels.springs import _first_root, _no_root_up_to, triangle_area_polynomial
 
 
 @leaf
@@ -143,7 +143,7 @@ def contact_max_step(x, d, seg, bprev, bnext, dhat, cell, cap, shrink):
     ``1 - shrink`` of its distance at ``x``: the contact barrier's counterpart of the faces'
     step bound (:func:`~potflat.relax._kernels.springs.max_step`). The pair's signed
     distance times the segment's length is twice the signed area of the triangle of the
-    segment and the vertex, a quadratic in ``t``.
+    segment and the vertex, a quadratic in ``t`` (:func:`~potflat.relax._kernels.springs.triangle_area_polynomial`).
 
     Parameters
     ----------
@@ -175,14 +175,9 @@ def contact_max_step(x, d, seg, bprev, bnext, dhat, cell, cap, shrink):
         cross = ex * ry - ey * rx  # |ab| times the signed distance of v from the line
         if ee <= 0.0 or not 0.0 < rx * ex + ry * ey < ee or cross * cross >= dhat * dhat * ee:
             continue
-        fx = d[b, 0] - d[a, 0]
-        fy = d[b, 1] - d[a, 1]
-        hx = d[v, 0] - d[a, 0]
-        hy = d[v, 1] - d[a, 1]
-        side = 1.0 if cross > 0.0 else -1.0
-        c0 = side * cross * shrink
-        c1 = side * (ex * hy - ey * hx + fx * ry - fy * rx)
-        c2 = side * (fx * hy - fy * hx)
+        c0, c1, c2 = triangle_area_polynomial(x, d, a, b, v, shrink)
+        if cross < 0.0:  # v on the right of a -> b: the area is negative, and must stay so
+            c0, c1, c2 = -c0, -c1, -c2
         if not _no_root_up_to(c0, c1, c2, best):
             best = min(best, _first_root(c0, c1, c2))
     return best

@@ -909,9 +909,15 @@ def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, weight, grad, dia
 def _area_polynomial(x, d, faces, f, shrink):
     """Coefficients ``(c0, c1, c2)`` of face ``f``'s signed area (doubled) along ``x + t d``
     minus ``1 - shrink`` of its area at ``x``: ``c0 + c1 t + c2 t^2``."""
-    a0 = faces[f, 0]
-    a1 = faces[f, 1]
-    a2 = faces[f, 2]
+    # (int64 corners: one compiled type for the faces' int32 and the contact bound's int64)
+    return triangle_area_polynomial(x, d, np.int64(faces[f, 0]), np.int64(faces[f, 1]), np.int64(faces[f, 2]),
+                                    shrink)
+
+
+@leaf
+def triangle_area_polynomial(x, d, a0, a1, a2, shrink):
+    """:func:`_area_polynomial` of the triangle of vertices ``a0, a1, a2`` (any three; the
+    contact step bound's vertex and segment too)."""
     e1x = x[a1, 0] - x[a0, 0]
     e1y = x[a1, 1] - x[a0, 1]
     e2x = x[a2, 0] - x[a0, 0]
