@@ -243,12 +243,16 @@ class StageOutput:
         :func:`potflat.run_scan` hands to the next stage instead of reading the file.
     distortion : DistortionSummary or None
         Distortion figures of that flattening (:class:`potflat.mesh.distortion.DistortionSummary`).
+    zone : dict or None
+        Its painted zone's figures (:func:`potflat.mesh.distortion.zone_summary`; relax),
+        which the bake stage takes instead of computing them again.
     """
 
     paths: dict
     summary: dict
     flat: FlatMesh | None = None
     distortion: Any = None
+    zone: dict | None = None
 
 
 class StepClock:

@@ -189,3 +189,35 @@ def test_every_stage_json_records_its_timings_by_step(tmp_path):
     for timings in (rollout, rollout["rollout_steps"], bake):
         steps = [v for k, v in timings.items() if k != "total" and isinstance(v, float)]
         assert all(v >= 0 for v in steps) and sum(steps) <= timings["total"] + 1e-6
+
+
+def test_run_scan_bakes_with_the_relax_stage_figures(tmp_path, monkeypatch):
+    """bake takes the relaxed flattening's figures (whole surface and painted zone) from the
+    relax stage instead of computing them again, and they are what a bake of the file gives."""
+    import potflat.mesh.distortion as distortion
+    import potflat.stages.relax_stage as relax_stage
+    from potflat.stages.bake_stage import run_bake_stage
+    from potflat_synthetic.vessels import make_vessel, write_obj
+
+    scan = write_obj(make_vessel("amphora", n_vertices=3000, seed=2, texture_size=64), tmp_path / "in" / "a.obj")
+    stage, computed = ["before"], []
+    summarize, zone_summary = distortion.SurfaceReference.summarize, distortion.zone_summary
+
+    def zone_counted(*args):
+        computed.append((stage[-1], "zone"))
+        return zone_summary(*args)
+
+    monkeypatch.setattr(distortion.SurfaceReference, "summarize",
+                        lambda self, uv: computed.append((stage[-1], "summarize")) or summarize(self, uv))
+    monkeypatch.setattr(distortion, "zone_summary", zone_counted)
+    monkeypatch.setattr(relax_stage, "zone_summary", zone_counted)
+    bake = {"px_per_mm": 1.0, "maps": ("stress",)}
+    result = run_scan(scan, tmp_path / "out", relax={"preset": "preview"}, bake=bake, progress=stage.append)
+    assert ("relax", "zone") in computed and ("relax", "summarize") in computed
+    assert not [c for c in computed if c[0] == "bake"]
+    stage.append("bake again")
+    again = run_bake_stage(result.paths["relax.ply"], tmp_path / "again", resolve_options(bake=bake)["bake"])
+    assert ("bake again", "zone") in computed and ("bake again", "summarize") in computed  # (the check can fail)
+    for key in ("distortion", "important_zone", "rest", "lengths"):
+        assert result.stages["bake"].summary[key] == again.summary[key]
+    assert result.stages["bake"].summary["important_zone"] == result.stages["relax"].summary["important_zone"]

@@ -356,10 +356,23 @@ class Renderer:
     :meth:`zone_outline` and :meth:`position`;
     :func:`image_figures` sums them up. Every layer of one strip has ``r1 - r0`` rows of
     ``grid.width`` pixels.
+
+    Parameters
+    ----------
+    flat : FlatMesh
+    px_per_mm : float
+    supersample : int
+        Sub-samples per pixel side; 0: from the texture's resolution.
+    max_megapixels : float
+    distortion_maps : bool
+        False: the painting only (no distortion maps, no :attr:`summary`).
+    summary : DistortionSummary, optional
+        ``flat``'s whole-surface figures when the caller has them (``potflat run``: the relax
+        stage's, of the same flattening); computed when not given.
     """
 
     def __init__(self, flat: FlatMesh, px_per_mm: float, *, supersample: int = 0, max_megapixels: float = 1000.0,
-                 distortion_maps: bool = True):
+                 distortion_maps: bool = True, summary: distortion.DistortionSummary | None = None):
         from potflat.bake import _kernels as raster
 
         self.flat = flat
@@ -369,7 +382,7 @@ class Renderer:
         g = self.grid
         if distortion_maps:  # first: their temporaries come and go before the texture is loaded
             reference = distortion.SurfaceReference(mesh.vertices, self.faces)  # the 3D side once
-            self.summary = reference.summarize(flat.uv)
+            self.summary = summary if summary is not None else reference.summarize(flat.uv)
             fd = reference.face_distortion(flat.uv)
             self.area_3d, self.area_2d, self.valid = fd.area_3d, fd.area_2d, fd.valid
             self.face_values = {"area": fd.log_area_ratio, "anisotropy": np.minimum(fd.anisotropy, 1e6)}
@@ -595,7 +608,11 @@ def _stats(values: np.ndarray, weights: np.ndarray | None = None) -> dict:
     return {"mean": mean, "p95": float(np.percentile(values, 95)), "max": float(values.max())}
 
 
-def image_figures(r: Renderer, covered_px: float) -> dict:
+def image_figures(r: Renderer, covered_px: float, zone: dict | None = None) -> dict:
+    """The figures of ``NAME.bake.json``: the image's grid and texture, the distortion maps'
+    statistics, the whole surface's figures (``r.summary``) and the painted zone's
+    (``zone``: :func:`potflat.mesh.distortion.zone_summary` of ``r.flat`` when the caller has
+    it, computed when None); ``covered_px``: the painting's covered pixels, summed."""
     g, flat = r.grid, r.flat
     mpu = flat.mesh.mm_per_unit
     fv = r.face_values
@@ -623,7 +640,8 @@ def image_figures(r: Renderer, covered_px: float) -> dict:
         "area": {**_stats(np.abs(fv["area"][valid]), w), "unit": "|ln(flat area / 3D area)|"},
         "anisotropy": {**_stats(fv["anisotropy"][valid], w), "unit": "sigma_max / sigma_min"},
         "distortion": summary,
-        **distortion.zone_summary(flat.mesh.vertices, flat.uv, flat.mesh.faces, flat.importance),
+        **(zone if zone is not None else
+           distortion.zone_summary(flat.mesh.vertices, flat.uv, flat.mesh.faces, flat.importance)),
         "covered_area_mm2": covered_px / g.px_per_mm ** 2,
         "flattened_area_mm2": float(np.abs(r.area_2d).sum()) * mpu ** 2,
         "surface_area_mm2": float(r.area_3d.sum()) * mpu ** 2,

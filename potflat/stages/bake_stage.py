@@ -34,6 +34,7 @@ from potflat.types import FlatMesh, StageOutput, StepClock
 
 if TYPE_CHECKING:
     from potflat.bake.render import _Grid
+    from potflat.mesh.distortion import DistortionSummary
 
 
 def _rollout_sidecar(flat_ply: Path, rollout_summary: dict | None = None) -> tuple[dict, Path | None]:
@@ -124,7 +125,8 @@ def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: li
 
 def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, options: BakeOptions | None = None, *,
                    name: str | None = None, flat: FlatMesh | None = None,
-                   rollout_summary: dict | None = None) -> StageOutput:
+                   rollout_summary: dict | None = None, distortion: DistortionSummary | None = None,
+                   zone: dict | None = None) -> StageOutput:
     """Bake ``NAME.relaxed.ply`` (or a rollout) into images and ``NAME.bake.json``.
 
     Files (in ``out_dir``): ``NAME.png`` (painting, RGBA, resolution in the file),
@@ -152,6 +154,12 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     rollout_summary : dict, optional
         The rollout stage's summary in memory (where attachments met the wall); read from
         ``NAME.rollout.json`` beside the input when not given.
+    distortion : DistortionSummary, optional
+        The whole-surface figures of ``flat`` when the caller has them (:func:`potflat.run_scan`:
+        the relax stage's); computed when not given.
+    zone : dict, optional
+        :func:`potflat.mesh.distortion.zone_summary` of ``flat`` when the caller has it (the
+        relax stage's ``important_zone``, ``rest`` and ``lengths``); computed when not given.
 
     Returns
     -------
@@ -186,7 +194,8 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     repeated = _repeated_faces(sidecar, len(flat.mesh.faces))
     folded = _folded_faces(sidecar, len(flat.mesh.faces))
     ppm = options.resolution
-    r = Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels)
+    r = Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels,
+                 summary=distortion)
     g = r.grid
     clock.lap("prepare")
     if len(attachment_marks):
@@ -255,7 +264,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
                                             shape=(g.height, g.width, 3), dtype=np.float32, px_per_mm=ppm,
                                             photometric="rgb")
     clock.lap("tiff")
-    figures = image_figures(r, covered)
+    figures = image_figures(r, covered, zone)
     clock.lap("figures")
     if options.obj:
         paths["obj"] = _write_flat_obj(out_dir / f"{name}.flat.obj", flat, g, band, paths["png"].name)

@@ -354,6 +354,8 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
             # (and the stage commands' input)
             handed = ({"flat": stages[stage].flat, "rollout_summary": stages["rollout"].summary}
                       if stages[stage].flat is not None else {})
+            if handed and stage == "relax":  # and its figures, computed once (bake takes them)
+                handed.update(distortion=stages[stage].distortion, zone=stages[stage].zone)
             seconds[stage] = time.perf_counter() - t
         marker.unlink()
     seconds["total"] = time.perf_counter() - start

@@ -49,7 +49,7 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     -------
     StageOutput
         ``paths`` with ``ply`` and ``json``; ``summary`` the JSON content; the relaxed
-        ``flat`` as written and its ``distortion``.
+        ``flat`` as written, its ``distortion`` and its painted ``zone``'s figures.
     """
     from potflat.io.atomic import write_json_atomic
     from potflat.io.flat_ply import as_stored, read_flat_ply, write_flat_ply
@@ -65,6 +65,7 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     result = relax(flat, options=options, progress=progress)
     ply_path = out_dir / f"{name}.relaxed.ply"
     json_path = out_dir / f"{name}.relaxed.json"
+    zone = zone_summary(flat.mesh.vertices, result.flat.uv, flat.mesh.faces, result.flat.importance)
     summary = {
         "preset": result.preset,
         "options": asdict(options),
@@ -86,7 +87,7 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         "importance": ("none: the whole surface counts alike" if result.flat.importance is None else
                        f"per vertex in {ply_path.name}; springs, barrier and shape term of plain surface weighted "
                        f"1/{result.settings['importance_contrast']:g}"),
-        **zone_summary(flat.mesh.vertices, result.flat.uv, flat.mesh.faces, result.flat.importance),
+        **zone,
         "true_scale_factor": result.scale_factor,
         "anisotropy_limit": result.anisotropy_limit,
         "timings": result.timings,
@@ -115,4 +116,5 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     write_flat_ply(ply_path, result.flat, comments=comments)
     write_json_atomic(json_path, summary)
     return StageOutput(paths={"ply": ply_path, "json": json_path}, summary=summary,
-                       flat=as_stored(result.flat, ply_path, comments=comments), distortion=result.distortion)
+                       flat=as_stored(result.flat, ply_path, comments=comments), distortion=result.distortion,
+                       zone=zone)
