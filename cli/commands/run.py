@@ -56,6 +56,7 @@ def _run(values: dict[str, Any]) -> None:
 
     from rich.console import Console
 
+    import potflat._warmup as potflat_warmup
     from potflat.mesh.distortion import distortion_words
     from potflat.stages.pipeline import STAGES, run_scan
     from potflat_cli._options import options_from_cli
@@ -64,16 +65,23 @@ def _run(values: dict[str, Any]) -> None:
     options = {stage: options_from_cli(stage, values) for stage in STAGES}
     scan = Path(values["scan"])
     err = Console(stderr=True, quiet=values["quiet"] or values["json"])
-    started = []
+    started, warmup = [], None
     with err.status(f"{scan.name}: starting") as status:
         def progress(stage: str) -> None:
+            nonlocal warmup
             check_stop()
             if not started:  # after run_scan checked the input: a refusal stays one line
                 started.append(stage)
                 say_compiling(err)
+                # on a first run the relax and bake kernels compile in a child process meanwhile
+                warmup = potflat_warmup.start()
             status.update(with_compile_note(f"{scan.name}: {stage}"))
         out_dir = values["output"] or Path(values["name"] or scan.stem)  # ./NAME/, never the scan's folder
-        result = run_scan(scan, out_dir, name=values["name"], progress=progress, **options)
+        try:
+            result = run_scan(scan, out_dir, name=values["name"], progress=progress, **options)
+        finally:
+            if warmup is not None:
+                warmup.stop()
     figures = result.figures
     if values["json"]:
         print(json_module.dumps({

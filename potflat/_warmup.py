@@ -1,0 +1,128 @@
+"""Compile the relax and bake stages' kernels in a second process while a first run rolls out.
+
+A first run (no kernels in Numba's disk cache yet) compiles some seventy kernels one after
+the other, each on first use, on one core: the rollout's, then the relax stage's, then the
+bake stage's. :func:`start` runs this module in a child process that relaxes and bakes a
+small generated vessel in a temporary folder, so that the relax and bake kernels are
+compiled, and cached on disk (``cache=True``, :mod:`potflat._jit`), on the second core while
+the run compiles and runs the rollout; the run then loads them from the cache. Best effort:
+a kernel the child has not cached yet when the run needs it is compiled by the run as before.
+The child writes nothing but Numba's cache and its own temporary folder (removed when it
+ends, also when it is stopped).
+"""
+from __future__ import annotations
+
+import math
+import signal
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+#: The generated vessel: radius (mm) at mid-height, bulge (mm), height (mm), and the grid
+#: (around, along the height). Enough vertices for the relax stage's coarse copies
+#: (``COARSE.min_vertices``), so their kernels are compiled too.
+RADIUS_MM, BULGE_MM, HEIGHT_MM = 40.0, 12.0, 100.0
+AROUND, ALONG = 240, 100
+#: Painted band (fraction of the height): the relax stage's painted-zone path.
+BAND = (0.35, 0.65)
+#: Seconds the run waits for a stopped child to end before killing it.
+STOP_TIMEOUT_S = 5.0
+
+
+class Warmup:
+    """The child process of :func:`start`; :meth:`stop` ends it (idempotent)."""
+
+    def __init__(self, process: subprocess.Popen):
+        self.process = process
+
+    def stop(self) -> None:
+        """End the child if it still runs (SIGTERM: it removes its folder), then reap it."""
+        if self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(STOP_TIMEOUT_S)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+
+
+def start() -> Warmup | None:
+    """Start compiling the relax and bake kernels in a child process when they are not
+    cached yet (a first run); None when they are, or when no child can be started."""
+    from potflat._jit import kernels_cached
+
+    if kernels_cached():
+        return None
+    try:
+        process = subprocess.Popen([sys.executable, "-m", "potflat._warmup"], stdin=subprocess.DEVNULL,
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    except OSError:
+        return None
+    return Warmup(process)
+
+
+def vessel(folder: Path):
+    """A small textured vessel unrolled onto its mean cylinder, painted in a band.
+
+    A surface of revolution bulging by :data:`BULGE_MM`, cut open along one meridian (the
+    seam's vertices appear once per side), its start layout the unrolled cylinder (fold-free,
+    not yet relaxed), a 64 x 64 texture written into ``folder``.
+
+    Returns
+    -------
+    FlatMesh
+    """
+    from potflat.io.images import write_png
+    from potflat.types import FlatMesh, Mesh
+
+    theta = np.linspace(0.0, 2.0 * math.pi, AROUND + 1)
+    z = np.linspace(0.0, HEIGHT_MM, ALONG)
+    T, Z = np.meshgrid(theta, z)  # (ALONG, AROUND + 1)
+    R = RADIUS_MM + BULGE_MM * np.sin(math.pi * Z / HEIGHT_MM)
+    vertices = np.stack((R * np.cos(T), R * np.sin(T), Z), axis=-1).reshape(-1, 3)
+    uv = np.stack((RADIUS_MM * T, Z), axis=-1).reshape(-1, 2)
+    idx = np.arange(vertices.shape[0]).reshape(ALONG, AROUND + 1)
+    a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:], idx[1:, :-1]  # counter-clockwise from outside
+    faces = np.concatenate((np.stack((a, b, c), -1).reshape(-1, 3), np.stack((a, c, d), -1).reshape(-1, 3)))
+    tex = np.stack((T / (2.0 * math.pi), Z / HEIGHT_MM), axis=-1).reshape(-1, 2)
+    texture = np.zeros((64, 64, 4), np.uint8)
+    texture[..., :3] = 90
+    texture[24:40, ::4, :3] = (200, 120, 40)  # strokes in the band
+    texture[..., 3] = 255
+    path = write_png(folder / "warmup.texture.png", texture, px_per_mm=None)
+    h = Z.reshape(-1) / HEIGHT_MM
+    importance = ((h >= BAND[0]) & (h <= BAND[1])).astype(np.float64)
+    mesh = Mesh(vertices, faces, texcoords=tex[faces], texture_path=path.resolve())
+    return FlatMesh(mesh, uv, importance=importance)
+
+
+def warm(folder: Path) -> None:
+    """Relax and bake :func:`vessel` in ``folder`` with the stages' default options, as a run does."""
+    from potflat.bake import BakeOptions, run_bake_stage
+    from potflat.io.flat_ply import write_flat_ply
+    from potflat.relax import RelaxOptions, run_relax_stage
+
+    rollout_ply = write_flat_ply(folder / "warmup.rollout.ply", vessel(folder))
+    relaxed = run_relax_stage(rollout_ply, folder, RelaxOptions())
+    run_bake_stage(relaxed.paths["ply"], folder, BakeOptions(), flat=relaxed.flat,
+                   distortion=relaxed.distortion, zone=relaxed.zone)
+
+
+def _main() -> int:
+    def stopped(signum, frame):
+        raise SystemExit(1)
+
+    signal.signal(signal.SIGTERM, stopped)
+    try:
+        with tempfile.TemporaryDirectory(prefix="potflat-warmup-") as folder:
+            warm(Path(folder))
+    except (Exception, KeyboardInterrupt):
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_main())
