@@ -1,0 +1,81 @@
+"""potflat._warmup: the child process that compiles the relax and bake kernels on a first run."""
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+import pytest
+
+import potflat._jit
+import potflat._warmup as warmup
+from potflat.mesh.embedding import signed_areas
+from potflat.relax.parameters import COARSE
+
+
+def test_the_vessel_is_a_fold_free_painted_start_with_coarse_copies(tmp_path):
+    flat = warmup.vessel(tmp_path)
+    assert len(flat.uv) >= COARSE.min_vertices  # so the coarse copies' kernels compile too
+    assert (signed_areas(flat.mesh.faces, flat.uv) > 0).all()
+    normals = np.cross(*(flat.mesh.vertices[flat.mesh.faces[:, k]] - flat.mesh.vertices[flat.mesh.faces[:, 0]]
+                         for k in (1, 2)))
+    centres = flat.mesh.vertices[flat.mesh.faces].mean(axis=1)
+    assert (np.einsum("ij,ij->i", normals[:, :2], centres[:, :2]) > 0).all()  # facing outwards
+    assert 0 < flat.importance.mean() < 1  # a painted zone: the relax stage's zone path
+    assert flat.mesh.texture_path.parent == tmp_path and flat.mesh.texture_path.is_file()
+
+
+def test_warm_relaxes_and_bakes_like_a_run(tmp_path):
+    warmup.warm(tmp_path)
+    relaxed = json.loads((tmp_path / "warmup.relaxed.json").read_text())
+    assert relaxed["fold_free"] and relaxed["important_zone"]["area_fraction"] < 1
+    assert any("coarse copy" in note for note in relaxed["notes"])
+    assert (tmp_path / "warmup.png").is_file() and (tmp_path / "warmup.bake.json").is_file()
+
+
+def test_no_child_when_the_kernels_are_cached(monkeypatch):
+    monkeypatch.setattr(potflat._jit, "kernels_cached", lambda: True)
+    assert warmup.start() is None
+
+
+def test_a_stopped_child_leaves_nothing_behind(tmp_path, monkeypatch):
+    monkeypatch.setattr(potflat._jit, "kernels_cached", lambda: False)
+    monkeypatch.setenv("TMPDIR", str(tmp_path))  # the child's temporary folder goes here
+    child = warmup.start()
+    assert child is not None
+    deadline = time.monotonic() + 120
+    while not list(tmp_path.glob("potflat-warmup-*/warmup.texture.png")):  # at work in its folder
+        assert child.process.poll() is None, "the child ended before it made its folder"
+        if time.monotonic() > deadline:
+            pytest.fail("the child made no folder in 120 s")
+        time.sleep(0.05)
+    child.stop()
+    child.stop()  # again: nothing to do
+    assert child.process.returncode is not None
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("fails", [False, True])
+def test_a_first_run_starts_the_child_and_ends_it_with_the_run(tmp_path, monkeypatch, fails):
+    import test_batch_fakes as fakes
+    from typer.testing import CliRunner
+
+    from potflat_cli.main import app
+
+    fakes.install(monkeypatch)
+    started = []
+    real_start = warmup.start
+
+    def start():
+        started.append(real_start())
+        return started[-1]
+
+    monkeypatch.setattr(potflat._jit, "kernels_cached", lambda: False)
+    monkeypatch.setattr(warmup, "start", start)
+    scan = fakes.write_scan(tmp_path / "pot.obj")
+    if fails:
+        fakes.SABOTAGE["pot"] = ("raise", "relax")
+    result = CliRunner().invoke(app, ["run", str(scan), "-o", str(tmp_path / "out")])
+    assert (result.exit_code != 0) == fails, result.output
+    assert len(started) == 1 and started[0] is not None
+    assert started[0].process.returncode is not None  # ended (stopped, or done) when the command returned
