@@ -23,7 +23,7 @@ Reproduce (the table in docs/performance.md, section "End to end at scale")::
 
 Options: ``--vertices`` (sizes, default 0.3e6 1e6 3e6), ``--preset`` (relax preset, default
 standard), ``--px-per-mm`` (default 4), ``--texture-size`` (atlas side, default 8192),
-``--keep DIR`` (keep the scans and outputs).
+``--keep DIR`` (keep the scans and outputs; a later run with the same DIR reuses the scans).
 """
 from __future__ import annotations
 
@@ -51,15 +51,23 @@ SECTION = "## End to end at scale"
 
 
 def make_scan(n_vertices: int, folder: Path, *, texture_size: int, seed: int = 0) -> tuple[Path, dict]:
-    """Write the synthetic amphora into ``folder``; return the OBJ path and its figures."""
+    """Write the synthetic amphora into ``folder``; return the OBJ path and its figures. A
+    scan this function wrote there before with the same settings (``--keep``) is reused."""
     from potflat_synthetic.vessels import make_vessel, write_obj
 
+    settings = {"n_vertices": n_vertices, "seed": seed, "texture_size": texture_size}
+    record = folder / "scan.json"
+    if record.is_file() and (folder / "amphora.obj").is_file():
+        kept = json.loads(record.read_text())
+        if kept.get("settings") == settings:
+            return folder / "amphora.obj", kept["info"]
     t = time.perf_counter()
     vessel = make_vessel("amphora", n_vertices=n_vertices, seed=seed, texture_size=texture_size)
     path = write_obj(vessel, folder / "amphora.obj")
     info = {"vertices": len(vessel.mesh.vertices), "faces": len(vessel.mesh.faces),
             "texture": f"{texture_size} x {texture_size}", "obj_mb": path.stat().st_size / 1e6,
             "generate_s": time.perf_counter() - t}
+    record.write_text(json.dumps({"settings": settings, "info": info}))
     return path, info
 
 
