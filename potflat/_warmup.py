@@ -18,8 +18,12 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from potflat.types import FlatMesh
 
 #: The generated vessel: radius (mm) at mid-height, bulge (mm), height (mm), and the grid
 #: (around, along the height). Enough vertices for the relax stage's coarse copies
@@ -64,7 +68,7 @@ def start() -> Warmup | None:
     return Warmup(process)
 
 
-def vessel(folder: Path):
+def vessel(folder: Path) -> FlatMesh:
     """A small textured vessel unrolled onto its mean cylinder, painted in a band.
 
     A surface of revolution bulging by :data:`BULGE_MM`, cut open along one meridian (the
