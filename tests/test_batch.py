@@ -11,6 +11,7 @@ from typer.testing import CliRunner
 import test_batch_fakes as fakes
 from potflat.stages import batch as batch_mod
 from potflat.stages.batch import MANIFEST, BatchFileError, load_batch, read_manifest, run_batch
+from potflat.stages.pipeline import ZONE_FIGURES
 from potflat_cli.main import app
 
 
@@ -61,10 +62,16 @@ def test_batch_isolates_the_corrupt_scan(three):
     assert [r["status"] for r in summary["scans"]] == ["done", "done", "failed"]
     assert rows["hydria"]["error"].count("\n") == 0 and "hydria.ply" in rows["hydria"]["error"]
     assert rows["amphora-1"]["flipped"] == 0 and rows["amphora-1"]["edge_rms"] > 0
+    relaxed = json.loads((res / "amphora-1" / "amphora-1.relaxed.json").read_text())
+    for column, (key, figure) in ZONE_FIGURES.items():  # the painted zone's figures and the plain surface's
+        assert rows["amphora-1"][column] == relaxed[key][figure]
+    assert 0 < rows["amphora-1"]["painted_area_fraction"] <= 1
+    assert rows["amphora-1"]["painted_length_error_p95_pct"] >= rows["amphora-1"]["painted_length_error_median_pct"]
     assert summary["counts"] == {"done": 2, "skipped": 0, "failed": 1, "interrupted": 0, "cancelled": 0}
     with open(res / "summary.csv", newline="") as fh:
         table = list(csv.DictReader(fh))
     assert [r["status"] for r in table] == ["done", "done", "failed"]
+    assert float(table[0]["painted_length_error_median_pct"]) == rows["amphora-1"]["painted_length_error_median_pct"]
     assert "hydria" in result.stdout and "failed" in result.stdout  # the rich table
 
 

@@ -139,6 +139,9 @@ def run_relax_stage(rollout_ply, out_dir, options, *, name=None):
     ply = write_bytes_atomic(out / f"{name}.relaxed.ply", _digest(data, _opts(options)))
     summary = {"distortion": {"edge_rms": round(0.01 + data[0] / 1e4, 6), "area_mean_abs_log": 0.02,
                               "anisotropy_p95": 1.1, "flipped": 0},
+               "important_zone": {"area_fraction": 0.25, "length_error_median_pct": 1.0 + data[1] / 1e3,
+                                  "length_error_p95_pct": 2.5},
+               "rest": {"area_fraction": 0.75, "length_error_median_pct": 30.0, "length_error_p95_pct": 55.0},
                "provenance": provenance(stage="relax", inputs=[src], options=asdict(options))}
     js = write_json_atomic(out / f"{name}.relaxed.json", summary)
     return StageOutput(paths={"ply": ply, "json": js}, summary=summary,

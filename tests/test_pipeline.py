@@ -221,3 +221,8 @@ def test_run_scan_bakes_with_the_relax_stage_figures(tmp_path, monkeypatch):
     for key in ("distortion", "important_zone", "rest", "lengths"):
         assert result.stages["bake"].summary[key] == again.summary[key]
     assert result.stages["bake"].summary["important_zone"] == result.stages["relax"].summary["important_zone"]
+    zone = result.stages["relax"].summary["important_zone"]
+    assert result.zone_figures["painted_length_error_median_pct"] == zone["length_error_median_pct"] > 0
+    assert result.zone_figures["painted_area_fraction"] == zone["area_fraction"] < 1  # the sample's frieze
+    assert result.zone_figures["plain_length_error_p95_pct"] == result.stages["relax"].summary["rest"][
+        "length_error_p95_pct"]

@@ -39,6 +39,7 @@ import yaml
 from potflat._jit import numba_threads
 from potflat.errors import InvalidInputError, InvalidOptionError, PotflatError
 from potflat.io.atomic import check_output_name
+from potflat.stages.pipeline import FIGURES, ZONE_FIGURES
 
 #: Top-level keys of a batch file.
 TOP_KEYS = ("output", "defaults", "scans")
@@ -61,8 +62,7 @@ MAX_YAML_SCALAR = 4096
 #: Most files a ``path:`` pattern may match (a pattern over a whole disk is a mistake).
 MAX_GLOB_MATCHES = 100_000
 #: Columns of ``summary.csv``.
-CSV_COLUMNS = ("name", "status", "seconds", "edge_rms", "area_mean_abs_log", "anisotropy_p95",
-               "flipped", "error", "scan", "output")
+CSV_COLUMNS = ("name", "status", "seconds", *FIGURES, *ZONE_FIGURES, "error", "scan", "output")
 
 
 class BatchFileError(InvalidInputError):
@@ -641,7 +641,8 @@ class ScanReport:
     seconds : float
         Wall time spent on this scan in this run.
     figures : dict
-        Distortion figures of the relaxed result (:data:`potflat.stages.pipeline.FIGURES`).
+        Distortion figures of the relaxed result (:data:`potflat.stages.pipeline.FIGURES`), and
+        of its painted zone and plain surface (:data:`potflat.stages.pipeline.ZONE_FIGURES`).
     error : str
         One-line error message for failed scans, else ``""``.
     """
@@ -656,10 +657,8 @@ class ScanReport:
 
     def row(self) -> dict[str, Any]:
         """The report as a flat dict (the summary's columns)."""
-        from potflat.stages.pipeline import FIGURES
-
         row = {"name": self.name, "status": self.status, "seconds": round(self.seconds, 3)}
-        row.update({k: self.figures.get(k) for k in FIGURES})
+        row.update({k: self.figures.get(k) for k in (*FIGURES, *ZONE_FIGURES)})
         row.update(error=self.error, scan=self.scan, output=self.output)
         return row
 
@@ -713,7 +712,7 @@ def run_job(job: ScanJob, key: str, *, threads: int | None = None) -> ScanReport
         with contextlib.suppress(FileNotFoundError):
             (job.out_dir / "error.log").unlink()
         seconds = time.perf_counter() - start
-        figures = result.figures
+        figures = {**result.figures, **result.zone_figures}
         write_json_atomic(job.out_dir / MANIFEST, {
             "complete": True, "key": key, "name": job.name, "scan": str(job.scan), "potflat": __version__,
             "options": job.options_json(), "outputs": outputs,

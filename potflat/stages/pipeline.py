@@ -28,6 +28,16 @@ STAGES: tuple[str, ...] = ("rollout", "relax", "bake")
 
 #: The distortion figures a batch summary reports (keys of DistortionSummary).
 FIGURES: tuple[str, ...] = ("edge_rms", "area_mean_abs_log", "anisotropy_p95", "flipped")
+#: ... and the painted zone's and the plain surface's: the share of the surface that is painted,
+#: and how far lengths read off the image are off there and on the plain surface (median and
+#: 95th percentile, %): column name to (key in ``NAME.relaxed.json``, figure).
+ZONE_FIGURES: dict[str, tuple[str, str]] = {
+    "painted_area_fraction": ("important_zone", "area_fraction"),
+    "painted_length_error_median_pct": ("important_zone", "length_error_median_pct"),
+    "painted_length_error_p95_pct": ("important_zone", "length_error_p95_pct"),
+    "plain_length_error_median_pct": ("rest", "length_error_median_pct"),
+    "plain_length_error_p95_pct": ("rest", "length_error_p95_pct"),
+}
 
 
 def options_class(stage: str) -> type:
@@ -104,6 +114,14 @@ class ScanResult:
     def figures(self) -> dict[str, Any]:
         """Distortion figures of the final flattening (:data:`FIGURES`, from the relax stage)."""
         return {k: getattr(self.stages["relax"].distortion, k) for k in FIGURES}
+
+    @property
+    def zone_figures(self) -> dict[str, Any]:
+        """The painted zone's and the plain surface's figures (:data:`ZONE_FIGURES`, from the
+        relax stage; without a painted zone the whole surface is the painted zone and the plain
+        surface's figures are None)."""
+        summary = self.stages["relax"].summary
+        return {column: (summary.get(key) or {}).get(figure) for column, (key, figure) in ZONE_FIGURES.items()}
 
 
 def option_types(cls: type) -> dict[str, Any]:
