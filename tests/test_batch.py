@@ -73,6 +73,7 @@ def test_batch_isolates_the_corrupt_scan(three):
     assert [r["status"] for r in table] == ["done", "done", "failed"]
     assert float(table[0]["painted_length_error_median_pct"]) == rows["amphora-1"]["painted_length_error_median_pct"]
     assert "hydria" in result.stdout and "failed" in result.stdout  # the rich table
+    assert f"{rows['amphora-1']['painted_length_error_median_pct']:.1f} / 2.5" in result.stdout
 
 
 def test_manifest_records_key_options_and_outputs(three):

@@ -102,13 +102,16 @@ def _print_table(summary) -> None:
 
     table = Table(title=f"potflat batch: {summary.batch}", title_justify="left")
     for column, justify in (("scan", "left"), ("status", "left"), ("time s", "right"),
-                            ("edge RMS", "right"), ("flipped", "right"), ("error", "left")):
+                            ("painted: lengths off % (median / p95)", "right"), ("edge RMS", "right"),
+                            ("flipped", "right"), ("error", "left")):
         table.add_column(column, justify=justify, overflow="fold")
     styles = {"done": "green", "skipped": "dim", "failed": "red", "interrupted": "yellow", "cancelled": "yellow"}
     for r in summary.reports:
         rms, flips = r.figures.get("edge_rms"), r.figures.get("flipped")
+        median, p95 = r.figures.get("painted_length_error_median_pct"), r.figures.get("painted_length_error_p95_pct")
         table.add_row(r.name, f"[{styles[r.status]}]{r.status}[/]",
                       f"{r.seconds:.1f}" if r.status != "skipped" else "",
+                      "" if median is None or p95 is None else f"{median:.1f} / {p95:.1f}",
                       "" if rms is None else f"{rms:.4f}", "" if flips is None else str(flips),
                       r.error)
     out = Console()
