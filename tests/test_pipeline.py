@@ -4,6 +4,7 @@ from __future__ import annotations
 import typing
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import test_batch_fakes as fakes
@@ -191,9 +192,10 @@ def test_every_stage_json_records_its_timings_by_step(tmp_path):
         assert all(v >= 0 for v in steps) and sum(steps) <= timings["total"] + 1e-6
 
 
-def test_run_scan_bakes_with_the_relax_stage_figures(tmp_path, monkeypatch):
-    """bake takes the relaxed flattening's figures (whole surface and painted zone) from the
-    relax stage instead of computing them again, and they are what a bake of the file gives."""
+def test_run_scan_computes_each_flattenings_figures_once(tmp_path, monkeypatch):
+    """relax takes the rollout's figures from the rollout stage, and bake the relaxed
+    flattening's (whole surface and painted zone) from the relax stage, instead of computing
+    them again; they are what the stage commands compute from the files."""
     import potflat.mesh.distortion as distortion
     import potflat.stages.relax_stage as relax_stage
     from potflat.stages.bake_stage import run_bake_stage
@@ -207,14 +209,24 @@ def test_run_scan_bakes_with_the_relax_stage_figures(tmp_path, monkeypatch):
         computed.append((stage[-1], "zone"))
         return zone_summary(*args)
 
-    monkeypatch.setattr(distortion.SurfaceReference, "summarize",
-                        lambda self, uv: computed.append((stage[-1], "summarize")) or summarize(self, uv))
+    layouts = []  # the layouts summarised in the relax stage
+
+    def summarize_counted(self, uv):
+        computed.append((stage[-1], "summarize"))
+        if stage[-1] == "relax":
+            layouts.append(np.array(uv))
+        return summarize(self, uv)
+
+    monkeypatch.setattr(distortion.SurfaceReference, "summarize", summarize_counted)
     monkeypatch.setattr(distortion, "zone_summary", zone_counted)
     monkeypatch.setattr(relax_stage, "zone_summary", zone_counted)
     bake = {"px_per_mm": 1.0, "maps": ("stress",)}
     result = run_scan(scan, tmp_path / "out", relax={"preset": "preview"}, bake=bake, progress=stage.append)
     assert ("relax", "zone") in computed and ("relax", "summarize") in computed
     assert not [c for c in computed if c[0] == "bake"]
+    rollout_uv = result.stages["rollout"].flat.uv
+    assert layouts and not any(uv.shape == rollout_uv.shape and np.array_equal(uv, rollout_uv) for uv in layouts)
+    assert result.stages["relax"].summary["distortion_before"] == result.stages["rollout"].summary["distortion"]
     stage.append("bake again")
     again = run_bake_stage(result.paths["relax.ply"], tmp_path / "again", resolve_options(bake=bake)["bake"])
     assert ("bake again", "zone") in computed and ("bake again", "summarize") in computed  # (the check can fail)

@@ -1006,7 +1006,8 @@ def _mean_edge_length(V: np.ndarray, F: np.ndarray) -> float:
 
 
 def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool = False,
-          callback: Callable[[dict], bool | None] | None = None, **kwargs) -> RelaxResult:
+          callback: Callable[[dict], bool | None] | None = None,
+          distortion_before: DistortionSummary | None = None, **kwargs) -> RelaxResult:
     """Relax a rollout's flattening by minimising the paper's spring energy.
 
     Parameters
@@ -1021,6 +1022,9 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
     callback : callable, optional
         Called after every iteration with ``{"iteration", "energy", "level"}``; return True
         to stop early.
+    distortion_before : DistortionSummary, optional
+        The figures of ``flat`` as given, when the caller has them (:func:`potflat.run_scan`:
+        the rollout stage's); :attr:`RelaxResult.distortion_before` then, else computed.
 
     Returns
     -------
@@ -1038,13 +1042,15 @@ def relax(flat: FlatMesh, *, options: RelaxOptions | None = None, progress: bool
         options = RelaxOptions(**kwargs)
     elif kwargs:
         raise InvalidOptionError("give either options= or option keywords to relax(), not both")
-    return _relax(flat, options, progress, callback, summaries=True)
+    return _relax(flat, options, progress, callback, summaries=True, before=distortion_before)
 
 
 def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, summaries: bool,
+           before: DistortionSummary | None = None,
            fine_iterations: int | None = None, limit="auto") -> RelaxResult:
     """:func:`relax`; without ``summaries`` (a coarse copy, whose layout is all its caller
     reads) the result's distortion summaries are None and its stress is not computed;
+    ``before``: the start's summary when the caller has it;
     ``fine_iterations``: when a coarse copy
     was relaxed, at most this many iterations on ``flat`` itself (a first solve that only
     smooths); ``limit``: the anisotropy limit found by an earlier solve (see :func:`_limit`;
@@ -1206,11 +1212,13 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
     if settings["true_scale"]:
         factor = true_scale_factor(V, uv_out, F, flat.importance, reference=surface)
         uv_out = centre + (uv_out - centre) * factor
-    before = after = stress = None
+    after = stress = None
     if summaries:
-        before = surface.summarize(uv)
+        before = before if before is not None else surface.summarize(uv)
         after = surface.summarize(uv_out)
         stress = surface.vertex_stress(uv_out, flat.mesh.mm_per_unit)
+    else:
+        before = None
     t_end = time.perf_counter()
     return RelaxResult(
         flat=flat.replace(uv=uv_out, stress=stress),

@@ -368,12 +368,13 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
             if stage == "rollout":
                 handed = {"check": _image_check(options["bake"])}
             stages[stage] = run(source, out, options[stage], name=name, **handed)
-            # the flattening and the rollout's summary go on in memory; the files are the record
-            # (and the stage commands' input)
-            handed = ({"flat": stages[stage].flat, "rollout_summary": stages["rollout"].summary}
+            # the flattening, its figures and the rollout's summary go on in memory (computed
+            # once, not again); the files are the record (and the stage commands' input)
+            handed = ({"flat": stages[stage].flat, "rollout_summary": stages["rollout"].summary,
+                       "distortion": stages[stage].distortion}
                       if stages[stage].flat is not None else {})
-            if handed and stage == "relax":  # and its figures, computed once (bake takes them)
-                handed.update(distortion=stages[stage].distortion, zone=stages[stage].zone)
+            if handed and stage == "relax":
+                handed["zone"] = stages[stage].zone
             seconds[stage] = time.perf_counter() - t
         marker.unlink()
     seconds["total"] = time.perf_counter() - start

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from potflat.mesh.distortion import zone_summary
+from potflat.mesh.distortion import DistortionSummary, zone_summary
 from potflat.relax.solver import RelaxOptions, relax
 from potflat.stages.names import relax_name
 from potflat.types import FlatMesh, StageOutput
@@ -24,7 +24,7 @@ def _history_for_json(h: np.ndarray, limit: int = 1000) -> list[float]:
 
 def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: RelaxOptions | None = None, *,
                     name: str | None = None, progress: bool = False, flat: FlatMesh | None = None,
-                    rollout_summary: dict | None = None) -> StageOutput:
+                    rollout_summary: dict | None = None, distortion: DistortionSummary | None = None) -> StageOutput:
     """Relax ``NAME.rollout.ply`` and write ``NAME.relaxed.ply`` and ``NAME.relaxed.json``.
 
     Parameters
@@ -44,6 +44,9 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     rollout_summary : dict, optional
         The rollout stage's summary in memory (its axis, proxy and units go into the JSON);
         read from ``NAME.rollout.json`` beside the input when not given.
+    distortion : DistortionSummary, optional
+        The figures of ``flat`` when the caller has them (:func:`potflat.run_scan`: the rollout
+        stage's); computed when not given.
 
     Returns
     -------
@@ -62,7 +65,7 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     name = name or stem
     if flat is None:
         flat = read_flat_ply(rollout_ply)
-    result = relax(flat, options=options, progress=progress)
+    result = relax(flat, options=options, progress=progress, distortion_before=distortion)
     ply_path = out_dir / f"{name}.relaxed.ply"
     json_path = out_dir / f"{name}.relaxed.json"
     zone = zone_summary(flat.mesh.vertices, result.flat.uv, flat.mesh.faces, result.flat.importance)
