@@ -7,12 +7,13 @@ small generated vessel in a temporary folder, so that the relax and bake kernels
 compiled, and cached on disk (``cache=True``, :mod:`potflat._jit`), on the second core while
 the run compiles and runs the rollout; the run then loads them from the cache. Best effort:
 a kernel the child has not cached yet when the run needs it is compiled by the run as before.
-The child writes nothing but Numba's cache and its own temporary folder (removed when it
-ends, also when it is stopped).
+The child writes nothing but Numba's cache and a temporary folder, which the run makes and
+removes when the child has ended (the child removes it too when it ends by itself).
 """
 from __future__ import annotations
 
 import math
+import shutil
 import signal
 import subprocess
 import sys
@@ -37,13 +38,15 @@ STOP_TIMEOUT_S = 5.0
 
 
 class Warmup:
-    """The child process of :func:`start`; :meth:`stop` ends it (idempotent)."""
+    """The child process of :func:`start` and its folder; :meth:`stop` ends both (idempotent)."""
 
-    def __init__(self, process: subprocess.Popen):
+    def __init__(self, process: subprocess.Popen, folder: Path):
         self.process = process
+        self.folder = folder
 
     def stop(self) -> None:
-        """End the child if it still runs (SIGTERM: it removes its folder), then reap it."""
+        """End the child if it still runs (SIGTERM, then SIGKILL: a kernel being compiled
+        holds off the signal), reap it and remove its folder."""
         if self.process.poll() is None:
             self.process.terminate()
             try:
@@ -51,6 +54,7 @@ class Warmup:
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait()
+        shutil.rmtree(self.folder, ignore_errors=True)
 
 
 def start() -> Warmup | None:
@@ -61,11 +65,16 @@ def start() -> Warmup | None:
     if kernels_cached():
         return None
     try:
-        process = subprocess.Popen([sys.executable, "-m", "potflat._warmup"], stdin=subprocess.DEVNULL,
-                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        folder = Path(tempfile.mkdtemp(prefix="potflat-warmup-"))
     except OSError:
         return None
-    return Warmup(process)
+    try:
+        process = subprocess.Popen([sys.executable, "-m", "potflat._warmup", str(folder)],
+                                   stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    except OSError:
+        shutil.rmtree(folder, ignore_errors=True)
+        return None
+    return Warmup(process, folder)
 
 
 def vessel(folder: Path) -> FlatMesh:
@@ -115,18 +124,19 @@ def warm(folder: Path) -> None:
                    distortion=relaxed.distortion, zone=relaxed.zone)
 
 
-def _main() -> int:
+def _main(folder: str) -> int:
     def stopped(signum, frame):
         raise SystemExit(1)
 
     signal.signal(signal.SIGTERM, stopped)
     try:
-        with tempfile.TemporaryDirectory(prefix="potflat-warmup-") as folder:
-            warm(Path(folder))
+        warm(Path(folder))
     except (Exception, KeyboardInterrupt):
         return 1
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(_main())
+    sys.exit(_main(sys.argv[1]))

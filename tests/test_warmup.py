@@ -38,9 +38,13 @@ def test_no_child_when_the_kernels_are_cached(monkeypatch):
     assert warmup.start() is None
 
 
-def test_a_stopped_child_leaves_nothing_behind(tmp_path, monkeypatch):
+@pytest.mark.parametrize("patience_s", [warmup.STOP_TIMEOUT_S, 0.0])  # 0: killed at once, mid-work
+def test_a_stopped_child_leaves_nothing_behind(tmp_path, monkeypatch, patience_s):
+    import tempfile
+
     monkeypatch.setattr(potflat._jit, "kernels_cached", lambda: False)
-    monkeypatch.setenv("TMPDIR", str(tmp_path))  # the child's temporary folder goes here
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # the child's temporary folder goes here
+    monkeypatch.setattr(warmup, "STOP_TIMEOUT_S", patience_s)
     child = warmup.start()
     assert child is not None
     deadline = time.monotonic() + 120
