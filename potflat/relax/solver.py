@@ -1050,7 +1050,7 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
            fine_iterations: int | None = None, limit="auto") -> RelaxResult:
     """:func:`relax`; without ``summaries`` (a coarse copy, whose layout is all its caller
     reads) the result's distortion summaries are None and its stress is not computed;
-    ``before``: the start's summary when the caller has it;
+    ``before``: the start's summary when the caller has it (with ``summaries`` only);
     ``fine_iterations``: when a coarse copy
     was relaxed, at most this many iterations on ``flat`` itself (a first solve that only
     smooths); ``limit``: the anisotropy limit found by an earlier solve (see :func:`_limit`;
@@ -1217,8 +1217,6 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         before = before if before is not None else surface.summarize(uv)
         after = surface.summarize(uv_out)
         stress = surface.vertex_stress(uv_out, flat.mesh.mm_per_unit)
-    else:
-        before = None
     t_end = time.perf_counter()
     return RelaxResult(
         flat=flat.replace(uv=uv_out, stress=stress),

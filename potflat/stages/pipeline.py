@@ -370,11 +370,10 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
             stages[stage] = run(source, out, options[stage], name=name, **handed)
             # the flattening, its figures and the rollout's summary go on in memory (computed
             # once, not again); the files are the record (and the stage commands' input)
-            handed = ({"flat": stages[stage].flat, "rollout_summary": stages["rollout"].summary,
-                       "distortion": stages[stage].distortion}
-                      if stages[stage].flat is not None else {})
-            if handed and stage == "relax":
-                handed["zone"] = stages[stage].zone
+            done = stages[stage]
+            handed = ({"flat": done.flat, "rollout_summary": stages["rollout"].summary, "distortion": done.distortion,
+                       **({"zone": done.zone} if done.zone is not None else {})}
+                      if done.flat is not None else {})
             seconds[stage] = time.perf_counter() - t
         marker.unlink()
     seconds["total"] = time.perf_counter() - start
