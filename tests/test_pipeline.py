@@ -238,3 +238,24 @@ def test_run_scan_computes_each_flattenings_figures_once(tmp_path, monkeypatch):
     assert result.zone_figures["painted_area_fraction"] == zone["area_fraction"] < 1  # the sample's frieze
     assert result.zone_figures["plain_length_error_p95_pct"] == result.stages["relax"].summary["rest"][
         "length_error_p95_pct"]
+
+
+def test_the_painted_zone_outline_stands_out_on_every_map(tmp_path):
+    """The zone is drawn in the map's colour for no distortion; its outline is white on the
+    stress and anisotropy maps (dark at no distortion) and black on the area map (white at an
+    unchanged area), and each legend names its colour."""
+    from PIL import Image
+
+    from potflat_synthetic.vessels import make_vessel, write_obj
+
+    scan = write_obj(make_vessel("amphora", n_vertices=3000, seed=2, texture_size=64), tmp_path / "in" / "a.obj")
+    result = run_scan(scan, tmp_path / "out", relax={"preset": "preview"},
+                      bake={"px_per_mm": 2.0, "maps": ("stress", "area", "anisotropy")})
+    assert result.stages["relax"].summary["important_zone"]["area_fraction"] < 1  # a painted zone was found
+    labels = result.stages["bake"].summary["maps"]
+    for name, colour in (("stress", (255, 255, 255, 255)), ("anisotropy", (255, 255, 255, 255)),
+                         ("area", (0, 0, 0, 255))):
+        image = np.asarray(Image.open(result.paths[f"bake.{name}"]).convert("RGBA"))
+        height = Image.open(result.paths["bake.png"]).height  # the map above its legend band
+        assert (image[:height] == colour).all(axis=2).sum() > 50, name
+        assert f"{'black' if colour[0] == 0 else 'white'} line: painted zone" in labels[name]["label"]

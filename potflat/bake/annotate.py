@@ -40,6 +40,9 @@ class MapScale:
         Matplotlib colour map name.
     label : str
         Quantity and unit, shown under the colour bar.
+    outline : str
+        Colour of the painted zone's outline (a key of :data:`OUTLINE_RGBA`): one that stands
+        out against the map's colour for no distortion, which fills the zone.
     """
 
     name: str
@@ -47,6 +50,7 @@ class MapScale:
     hi: float
     cmap: str
     label: str
+    outline: str = "white"
 
     def lut(self) -> np.ndarray:
         """(256, 3) uint8 colour table."""
@@ -83,7 +87,8 @@ def map_scale(name: str, values: np.ndarray, *, hi: float | None = None) -> MapS
                         "length error around each point, %")
     if name == "area":
         half = hi if hi is not None else max(p99(np.abs(v)), 0.035)
-        return MapScale(name, -half, half, "RdBu_r", "area ratio flat / 3D (log scale)")
+        return MapScale(name, -half, half, "RdBu_r", "area ratio flat / 3D (log scale)",
+                        outline="black")  # (white at ratio 1)
     if name == "anisotropy":
         top = hi if hi is not None else max(p99(v), 1.05)
         return MapScale(name, 1.0, top, "viridis", "anisotropy σmax / σmin (1 = no shear)")
@@ -112,13 +117,14 @@ def overlay(rgb: np.ndarray, values: np.ndarray, scale: MapScale, coverage: np.n
     return out
 
 
-#: Colour of the important zone's outline on the maps (RGBA).
-OUTLINE_RGBA = (255, 255, 255, 255)
+#: Colours of the important zone's outline on the maps (RGBA), by :attr:`MapScale.outline`.
+OUTLINE_RGBA = {"white": (255, 255, 255, 255), "black": (0, 0, 0, 255)}
 
 
-def draw_outline(rows: np.ndarray, outline: np.ndarray | None, rgba=OUTLINE_RGBA) -> np.ndarray:
+def draw_outline(rows: np.ndarray, outline: np.ndarray | None, rgba=OUTLINE_RGBA["white"]) -> np.ndarray:
     """Map rows (k, w, 4) uint8 with an outline (k, w) bool drawn in ``rgba`` (the important
-    zone's: :data:`OUTLINE_RGBA`) (in place; returned). ``None``: unchanged."""
+    zone's: :data:`OUTLINE_RGBA` of the map's :attr:`MapScale.outline`) (in place; returned).
+    ``None``: unchanged."""
     if outline is not None:
         rows[outline] = rgba
     return rows

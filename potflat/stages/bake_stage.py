@@ -208,7 +208,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     scales = {m: annotate.map_scale(m, r.vertex_length_error if m == "stress" else r.face_values[m])
               for m in options.maps}
     if flat.importance is not None:
-        scales = {m: replace(sc, label=f"{sc.label}; white line: painted zone") for m, sc in scales.items()}
+        scales = {m: replace(sc, label=f"{sc.label}; {sc.outline} line: painted zone") for m, sc in scales.items()}
     if len(folded):
         scales = {m: replace(sc, label=f"{sc.label}; hatched: folded scan") for m, sc in scales.items()}
     legends = {m: annotate.legend_band(scales[m], g.width) for m in options.maps}
@@ -241,10 +241,12 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
             hatch = folded_hatch(r.scalar("folded", r0, r1), r0) if options.maps and len(folded) else None
             for m in options.maps:
                 values = r.scalar(m, r0, r1)
-                rows = annotate.draw_outline(annotate.colorize(values, scales[m], cov), outline)
+                rows = annotate.draw_outline(annotate.colorize(values, scales[m], cov), outline,
+                                             annotate.OUTLINE_RGBA[scales[m].outline])
                 writers[m].write(annotate.draw_outline(rows, hatch, FOLDED_COLOUR))
                 if m == "stress":
-                    rows = annotate.draw_outline(annotate.overlay(rgb, values, scales[m], cov), outline)
+                    rows = annotate.draw_outline(annotate.overlay(rgb, values, scales[m], cov), outline,
+                                                 annotate.OUTLINE_RGBA[scales[m].outline])
                     writers["overlay"].write(annotate.draw_outline(rows, hatch, FOLDED_COLOUR))
             layer_png.write(layer.rows(r0, r1))
             if len(attachment_marks):
