@@ -159,7 +159,7 @@ def test_face_barrier_visits_only_blocks_with_squeezed_faces_and_matches_the_ful
     a_ref[: 2 * ks.BLOCK] = 1e-30  # the first two blocks: every face far above the barrier
     a_ref[100] = 1e3  # ... but one
     below = np.empty(-(-m // ks.BLOCK), np.int64)
-    ks.face_areas_below(x, faces, a_ref, 0.5, areas, below)
+    ks.face_terms(x, faces, a_ref, 0.5, np.empty((0, 5)), np.zeros(6), areas, below, np.empty((0, 4)), np.empty(0))
     want = np.empty(m)
     ks.face_areas(x, faces, want)
     np.testing.assert_array_equal(areas, want)

@@ -123,6 +123,56 @@ def rasterize_rows(pix, faces, ptr, idx, block_rows, row0, nrows, width, eps, fa
 
 
 @parallel
+def cover_rows(pix, faces, ptr, idx, block_rows, eps, out):
+    """Mark the samples under any triangle: :func:`rasterize_rows` over the whole raster,
+    keeping only whether a face was found (no face index, no barycentric weights).
+
+    Parameters
+    ----------
+    pix : (n, 2) float64
+        Vertex positions in raster coordinates.
+    faces : (m, 3) int64
+    ptr, idx : int64 arrays
+        Row-block bins from :func:`bin_triangles` (blocks of ``block_rows`` rows).
+    block_rows : int
+    eps : float
+        Barycentric tolerance, as in :func:`rasterize_rows`.
+    out : (h, w) uint8
+        Output: 1 under a triangle; must be filled with 0.
+    """
+    nrows, width = out.shape
+    nblk = (nrows + block_rows - 1) // block_rows
+    for b in prange(nblk):
+        ylo = b * block_rows
+        yhi = min(ylo + block_rows, nrows)
+        for k in range(ptr[b], ptr[b + 1]):
+            f = idx[k]
+            x0 = pix[faces[f, 0], 0]
+            y0 = pix[faces[f, 0], 1]
+            x1 = pix[faces[f, 1], 0]
+            y1 = pix[faces[f, 1], 1]
+            x2 = pix[faces[f, 2], 0]
+            y2 = pix[faces[f, 2], 1]
+            d = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+            if d == 0.0:
+                continue
+            rlo = max(ylo, int(np.ceil(min(y0, min(y1, y2)) - 0.5 - eps)))
+            rhi = min(yhi - 1, int(np.floor(max(y0, max(y1, y2)) - 0.5 + eps)))
+            clo = max(0, int(np.ceil(min(x0, min(x1, x2)) - 0.5 - eps)))
+            chi = min(width - 1, int(np.floor(max(x0, max(x1, x2)) - 0.5 + eps)))
+            for r in range(rlo, rhi + 1):
+                py = r + 0.5
+                for c in range(clo, chi + 1):
+                    if out[r, c]:
+                        continue
+                    px = c + 0.5
+                    w1 = ((px - x0) * (y2 - y0) - (x2 - x0) * (py - y0)) / d
+                    w2 = ((x1 - x0) * (py - y0) - (px - x0) * (y1 - y0)) / d
+                    if 1.0 - w1 - w2 >= -eps and w1 >= -eps and w2 >= -eps:
+                        out[r, c] = 1
+
+
+@parallel
 def coverage(face, n, out):
     """Covered fraction of each pixel from its ``n x n`` sub-samples.
 

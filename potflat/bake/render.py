@@ -257,13 +257,7 @@ def _chart_mask(texcoords: np.ndarray, height: int, width: int) -> np.ndarray:
     tri = np.arange(3 * m, dtype=np.int64).reshape(m, 3)
     ptr, idx = raster.bin_triangles(pts, tri, float(BLOCK_ROWS), (height + BLOCK_ROWS - 1) // BLOCK_ROWS)
     mask = np.zeros((height, width), np.uint8)
-    rows = max(BLOCK_ROWS, STRIP_SAMPLES // max(width, 1) // BLOCK_ROWS * BLOCK_ROWS)
-    for r0 in range(0, height, rows):
-        r1 = min(height, r0 + rows)
-        face = np.full((r1 - r0, width), -1, np.int32)
-        raster.rasterize_rows(pts, tri, ptr, idx, BLOCK_ROWS, r0, r1 - r0, width, ROUNDING, face,
-                              np.zeros(face.shape + (2,)))
-        mask[r0:r1] = face >= 0
+    raster.cover_rows(pts, tri, ptr, idx, BLOCK_ROWS, ROUNDING, mask)
     return cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool)
 
 

@@ -309,13 +309,14 @@ class _Springs:
         self.bverts = np.zeros(0, np.int64)
         self.theta = np.zeros(n)
         self._bblocks = np.empty(1)
-        self._g = np.empty((n, 2))
         self._es = np.empty(n)
         self._eb = np.empty(n)
         self._areas = np.empty(self.m)
         self.diag = np.empty(n)
         self._blocks = np.empty(max(1, -(-self.m // ks.BLOCK)))
         self._below = np.zeros(len(self._blocks), np.int64)  # faces near the barrier per block
+        self._coef = np.empty((len(self.shape), 4))  # the per-face terms' gradient coefficients
+        self._e_face = np.zeros(len(self._blocks))  # and their energy per block
 
     def set_area_and_limit(self, area: float, limit: float | None) -> None:
         """Set the area term's weight and the anisotropy limit (None: none). Without per-face
@@ -355,15 +356,15 @@ class _Springs:
         (written into ``out`` (n, 2) when given, else a fresh array). Also sets ``diag``,
         the Hessian diagonal bound at ``x``."""
         g = np.empty((self.n, 2)) if out is None else out
-        if barrier:
-            self.ks.face_areas_below(x, self.faces, self.a_ref, ENERGY.barrier_eps, self._areas, self._below)
-            if len(self.bverts):
-                self.ks.boundary_angle_sums(x, self.bverts, self.vf_ptr, self.vf_tri, self.faces, self.theta)
+        self.ks.face_terms(x, self.faces, self.a_ref, ENERGY.barrier_eps, self.shape, self.terms, self._areas,
+                           self._below, self._coef, self._e_face)
+        if barrier and len(self.bverts):
+            self.ks.boundary_angle_sums(x, self.bverts, self.vf_ptr, self.vf_tri, self.faces, self.theta)
         self.ks.energy_gradient(x, self.ptr, self.nbr, self.rst, self.k, self.relative, ENERGY.length_floor,
                                 self.weight, self.vf_ptr, self.vf_tri, self.faces,
-                                self.shape, self.terms, self.bprev, self.bnext, self.bguard, self.theta, ENERGY.boundary_mu if barrier else 0.0,
+                                self.shape, self._coef, self.bprev, self.bnext, self.bguard, self.theta, ENERGY.boundary_mu if barrier else 0.0,
                                 ENERGY.boundary_gap, g, self._es, self._eb, self.diag)
-        es = float(np.sum(self._es))
+        es = float(np.sum(self._es)) + (float(np.sum(self._e_face)) if len(self._coef) else 0.0)
         if not barrier:
             return es, es, g
         eb = float(np.sum(self._eb))

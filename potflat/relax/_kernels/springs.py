@@ -35,8 +35,6 @@ from potflat._jit import leaf, parallel, prange
 
 #: Block size of the deterministic reductions (independent of the thread count).
 BLOCK = 4096
-#: Each corner's share of its face's shape energy.
-THIRD = 1.0 / 3.0
 
 
 #: A vertex's half-edges are sorted by insertion up to this many, by heap sort above (a fan
@@ -510,9 +508,17 @@ def face_areas(x, faces, out):
 
 
 @parallel
-def face_areas_below(x, faces, a_ref, eps, out, below):
-    """:func:`face_areas`, and per block of :data:`BLOCK` faces how many are not above ``eps``
-    of their reference area (the faces :func:`face_barrier` acts on; NaN areas count).
+def face_terms(x, faces, a_ref, eps, shape, terms, areas, below, coef, e_face):
+    """One pass over the faces: signed areas, per block of :data:`BLOCK` faces how many are
+    not above ``eps`` of their reference area (the faces :func:`face_barrier` acts on; NaN
+    areas count), and the per-face terms' energy and the coefficients with which
+    :func:`energy_gradient` gathers their gradient at each corner.
+
+    A face's terms depend on its flat area ``A_f``, its map's Dirichlet energy ``D`` and
+    ``M = D / A_f`` (:func:`shape_coefficients`); their gradient at a corner ``i`` is
+    ``P dD_i + Q dA_i``, ``dD_i`` and ``dA_i`` the gradients of ``D`` and ``A_f`` at ``i``,
+    and the Hessian diagonal bound at ``i`` takes ``R (cot_j + cot_l) + S |dA_i|^2``. So the
+    divisions, square roots and logarithm of a face are taken once, not once per corner.
 
     Parameters
     ----------
@@ -520,24 +526,105 @@ def face_areas_below(x, faces, a_ref, eps, out, below):
     faces : (m, 3) int32 or int64
     a_ref : (m,) float64
     eps : float
-    out : (m,) float64
+    shape : (m, 5) or (0, 5) float64
+        :func:`shape_coefficients`; empty: no per-face terms (``coef`` and ``e_face`` untouched).
+    terms : (6,) float64
+        The per-face terms' weights per unit rest area: shape ``s``, rigidity ``r``, area
+        ``a``, anisotropy limit ``b``; then the limit ``u_lim`` and the area term's
+        smoothing ``eps``.
+    areas : (m,) float64
         Output: signed areas.
     below : (ceil(m / BLOCK),) int64
         Output: counts per block.
+    coef : (m, 4) or (0, 4) float64
+        Output: ``P, Q, R, S`` per face (zeros for a face with non-positive flat area).
+    e_face : (ceil(m / BLOCK),) float64
+        Output: the per-face terms' energy per block (infinite when a face has non-positive
+        flat area).
     """
     m = faces.shape[0]
+    shaped = shape.shape[0] > 0
+    s_shape = 2.0 * terms[0]
+    s_rigid = terms[1]
+    s_area = terms[2]
+    s_limit = terms[3]
+    u_lim = terms[4]
+    a_eps = terms[5]
     for b in prange(below.shape[0]):
         count = 0
+        eb = 0.0
         for t in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
             a0 = faces[t, 0]
             a1 = faces[t, 1]
             a2 = faces[t, 2]
             area = 0.5 * ((x[a1, 0] - x[a0, 0]) * (x[a2, 1] - x[a0, 1])
                           - (x[a1, 1] - x[a0, 1]) * (x[a2, 0] - x[a0, 0]))
-            out[t] = area
+            areas[t] = area
             if not area >= eps * a_ref[t]:
                 count += 1
+            if not shaped:
+                continue
+            if area <= 0.0:
+                eb = np.inf
+                for c in range(4):
+                    coef[t, c] = 0.0
+                continue
+            # edges opposite corners 0, 1, 2 and the map's Dirichlet energy
+            e0x = x[a2, 0] - x[a1, 0]
+            e0y = x[a2, 1] - x[a1, 1]
+            e1x = x[a0, 0] - x[a2, 0]
+            e1y = x[a0, 1] - x[a2, 1]
+            e2x = x[a1, 0] - x[a0, 0]
+            e2y = x[a1, 1] - x[a0, 1]
+            dir_ = 0.25 * (shape[t, 0] * (e0x * e0x + e0y * e0y) + shape[t, 1] * (e1x * e1x + e1y * e1y)
+                           + shape[t, 2] * (e2x * e2x + e2y * e2y))
+            wa = shape[t, 3]
+            # shape term 2 s wa (M - 1) and limit b wa max(0, u - u_lim)^2, u = sqrt(2 (M - 1)):
+            # dE/dM times dM = (dD - M dA) / A
+            inv = 1.0 / area
+            ratio = dir_ * inv
+            cm = s_shape * wa
+            energy = cm * (ratio - 1.0)
+            if s_limit > 0.0 and ratio > 1.0:
+                u = math.sqrt(2.0 * (ratio - 1.0))
+                over = u - u_lim
+                if over > 0.0:
+                    energy += s_limit * wa * over * over
+                    cm += 2.0 * s_limit * wa * over / u
+            wi = cm * inv
+            cp = wi
+            cq = -wi * ratio
+            cr = 0.5 * wi
+            cs = 0.0
+            if s_rigid > 0.0 or s_area > 0.0:
+                ia = 1.0 / shape[t, 4]
+            if s_rigid > 0.0:
+                # ARAP energy r wa ((s1 - 1)^2 + (s2 - 1)^2), s1 + s2 = q = sqrt(2 (D + A) / A_rest)
+                rho = s_rigid * wa
+                ra = rho * ia
+                q = math.sqrt(2.0 * (dir_ + area) * ia)
+                iq = 1.0 / q
+                energy += rho * (2.0 * dir_ * ia - 2.0 * q + 2.0)
+                cp += 2.0 * ra * (1.0 - iq)
+                cq -= 2.0 * ra * iq
+                cr += ra
+            if s_area > 0.0:
+                # a wa (sqrt(L^2 + eps^2) - eps), L = log(A / A_rest): about a wa |L|; the
+                # diagonal takes its majorising curvature a wa / sqrt(L^2 + eps^2)
+                lg = math.log(area * ia)
+                root = math.sqrt(lg * lg + a_eps * a_eps)
+                ca = s_area * wa / root
+                energy += s_area * wa * (root - a_eps)
+                cq += ca * lg * inv
+                cs = ca * inv * inv
+            coef[t, 0] = cp
+            coef[t, 1] = cq
+            coef[t, 2] = cr
+            coef[t, 3] = cs
+            eb += energy
         below[b] = count
+        if shaped:
+            e_face[b] = eb
 
 
 @leaf
@@ -551,14 +638,14 @@ def _angle_barrier_slope(theta, sb, gap):
 
 
 @parallel
-def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_tri, faces, shape, terms,
+def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_tri, faces, shape, coef,
                     bprev, bnext, bguard, theta, mu_b, gap, grad, e_spring, e_barrier, diag):
-    """Spring + shape term + boundary angle barrier energy per vertex and the gradient,
-    gathered per vertex.
+    """Spring and boundary angle barrier energy per vertex, and the gradient of these and of
+    the per-face terms, gathered per vertex.
 
     The face barrier is added afterwards by :func:`face_barrier` (it acts on few faces).
-    The shape term of each face (:func:`shape_coefficients`) is gathered from its three
-    corners, each taking a third of its energy.
+    The per-face terms' gradient is gathered from the coefficients :func:`face_terms`
+    computed for each face at ``x``; their energy is :func:`face_terms`' too.
 
     Parameters
     ----------
@@ -578,11 +665,9 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
     faces : (m, 3) int32 or int64
     shape : (m, 5) or (0, 5) float64
         Each face's rest angles and weight (:func:`shape_coefficients`). Empty: no per-face
-        terms. A face with non-positive flat area makes the energy infinite.
-    terms : (6,) float64
-        The per-face terms' weights per unit rest area (:func:`shape_coefficients`): shape
-        ``s``, rigidity ``r``, area ``a``, anisotropy limit ``b``; then the limit ``u_lim``
-        and the area term's smoothing ``eps``.
+        terms.
+    coef : (m, 4) or (0, 4) float64
+        The per-face terms' coefficients at ``x`` (:func:`face_terms`).
     bprev, bnext : (n,) int32
         Each vertex's unique boundary predecessor and successor (-1: none or not unique).
     bguard : (n,) bool
@@ -603,12 +688,6 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
     n = x.shape[0]
     weighted = weight.shape[0] > 0
     shaped = shape.shape[0] > 0
-    s_shape = 2.0 * terms[0]
-    s_rigid = terms[1]
-    s_area = terms[2]
-    s_limit = terms[3]
-    u_lim = terms[4]
-    eps = terms[5]
     for i in prange(n):
         gx = 0.0
         gy = 0.0
@@ -645,68 +724,17 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
                     ci = 2
                 j = faces[t, (ci + 1) % 3]
                 l = faces[t, (ci + 2) % 3]
-                # cotangents of the rest angles at i, j, l, and w A_rest per mean rest area
-                ct_i = shape[t, ci]
+                # cotangents of the rest angles at j and l
                 ct_j = shape[t, (ci + 1) % 3]
                 ct_l = shape[t, (ci + 2) % 3]
-                wa = shape[t, 3]
-                ax = xi - x[j, 0]
-                ay = yi - x[j, 1]
-                bx = xi - x[l, 0]
-                by = yi - x[l, 1]
-                cx = x[j, 0] - x[l, 0]
-                cy = x[j, 1] - x[l, 1]
-                area = 0.5 * (ax * by - ay * bx)
-                if area <= 0.0:
-                    es = np.inf
-                    continue
-                # Dirichlet energy of the face's map, and its gradient at i
-                dir_ = 0.25 * (ct_l * (ax * ax + ay * ay) + ct_j * (bx * bx + by * by) + ct_i * (cx * cx + cy * cy))
-                dgx = 0.5 * (ct_l * ax + ct_j * bx)
-                dgy = 0.5 * (ct_l * ay + ct_j * by)
-                # the flat area's gradient at i
+                # the gradients at i of the map's Dirichlet energy and of the flat area
+                dgx = 0.5 * (ct_l * (xi - x[j, 0]) + ct_j * (xi - x[l, 0]))
+                dgy = 0.5 * (ct_l * (yi - x[j, 1]) + ct_j * (yi - x[l, 1]))
                 agx = 0.5 * (x[j, 1] - x[l, 1])
                 agy = 0.5 * (x[l, 0] - x[j, 0])
-                # the MIPS value M = D / A_flat = (s1^2 + s2^2) / (2 s1 s2): shape term
-                # 2 s wa (M - 1) and limit b wa max(0, u - u_lim)^2, u = sqrt(2 (M - 1)), both
-                # with dE/dM times dM = (dD - M dA_flat) / A_flat (one division per corner)
-                inv = 1.0 / area
-                ratio = dir_ * inv
-                cm = s_shape * wa
-                em = cm * (ratio - 1.0)
-                if s_limit > 0.0 and ratio > 1.0:
-                    u = math.sqrt(2.0 * (ratio - 1.0))
-                    over = u - u_lim
-                    if over > 0.0:
-                        em += s_limit * wa * over * over
-                        cm += 2.0 * s_limit * wa * over / u
-                es += em * THIRD
-                wi = cm * inv
-                gx += wi * (dgx - ratio * agx)
-                gy += wi * (dgy - ratio * agy)
-                hd += 0.5 * wi * (ct_l + ct_j)
-                if s_rigid > 0.0 or s_area > 0.0:
-                    ia = 1.0 / shape[t, 4]  # 1 / A_rest: two divisions per corner in all
-                if s_rigid > 0.0:
-                    # ARAP energy r wa ((s1 - 1)^2 + (s2 - 1)^2), s1 + s2 = q = sqrt(2 (D + A_flat) / A)
-                    rho = s_rigid * wa
-                    ra = rho * ia
-                    q = math.sqrt(2.0 * (dir_ + area) * ia)
-                    iq = 1.0 / q
-                    es += rho * (2.0 * dir_ * ia - 2.0 * q + 2.0) * THIRD
-                    gx += 2.0 * ra * (dgx - (dgx + agx) * iq)
-                    gy += 2.0 * ra * (dgy - (dgy + agy) * iq)
-                    hd += ra * (ct_l + ct_j)
-                if s_area > 0.0:
-                    # a wa (sqrt(L^2 + eps^2) - eps), L = log(A_flat / A): about a wa |L|;
-                    # the diagonal takes its majorising curvature a wa / sqrt(L^2 + eps^2)
-                    lg = math.log(area * ia)
-                    root = math.sqrt(lg * lg + eps * eps)
-                    ca = s_area * wa / root
-                    es += s_area * wa * (root - eps) * THIRD
-                    gx += ca * lg * inv * agx
-                    gy += ca * lg * inv * agy
-                    hd += ca * inv * inv * (agx * agx + agy * agy)
+                gx += coef[t, 0] * dgx + coef[t, 1] * agx
+                gy += coef[t, 0] * dgy + coef[t, 1] * agy
+                hd += coef[t, 2] * (ct_l + ct_j) + coef[t, 3] * (agx * agx + agy * agy)
         eb = 0.0
         if mu_b > 0.0 and (bprev[i] >= 0 or bnext[i] >= 0):
             sb = mu_b * k  # times the guarded vertex's importance weight
@@ -842,7 +870,7 @@ def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, weight, grad, dia
 
     Serial over the faces in order (deterministic); only faces squeezed below ``eps`` of
     their reference area contribute, usually a small fraction, so only the blocks that
-    hold one (``below``, from :func:`face_areas_below`) are visited, instead of a gather
+    hold one (``below``, from :func:`face_terms`) are visited, instead of a gather
     over every vertex's incident faces.
 
     Parameters
@@ -864,7 +892,7 @@ def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, weight, grad, dia
     grad, diag : (n, 2), (n,) float64
         Updated in place: gradient and Hessian diagonal bound.
     below : (ceil(m / BLOCK),) int64
-        Faces not above ``eps a_ref`` per block of :data:`BLOCK` (:func:`face_areas_below`):
+        Faces not above ``eps a_ref`` per block of :data:`BLOCK` (:func:`face_terms`):
         blocks with none are skipped.
 
     Returns
