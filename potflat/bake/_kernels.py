@@ -81,7 +81,8 @@ def rasterize_rows(pix, faces, ptr, idx, block_rows, row0, nrows, width, eps, fa
     face_out : (nrows, width) int32
         Output: face index under each sample, -1 where none (must be filled with -1).
     bary_out : (nrows, width, 2) float64
-        Output: barycentric weights of corners 1 and 2 (clamped into the triangle).
+        Output: barycentric weights of corners 1 and 2 (clamped into the triangle), written
+        only where ``face_out`` gets a face.
     """
     nblk = (nrows + block_rows - 1) // block_rows
     first = row0 // block_rows

@@ -493,7 +493,7 @@ class Renderer:
             return self._cache[1]
         n, g = self.n, self.grid
         face = np.full(((r1 - r0) * n, g.width * n), -1, np.int32)
-        bary = np.zeros(face.shape + (2,), np.float64)
+        bary = np.empty(face.shape + (2,), np.float64)  # read only where a face is
         self._raster_mod.rasterize_rows(self._pix, self.faces, self._ptr, self._idx, self._block, r0 * n,
                                         face.shape[0], face.shape[1], ROUNDING, face, bary)
         self._cache = ((r0, r1), (face, bary))

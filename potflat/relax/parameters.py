@@ -180,7 +180,7 @@ class SolverParameters:
         10: 58, 55, 40; 20: 94, 84 (0.3M, 1M).
     """
 
-    lbfgs_memory: int = 6
+    lbfgs_memory: int = 4
     armijo: float = 1e-4
     step_fraction: float = 0.9
     step_shrink: float = 0.8
