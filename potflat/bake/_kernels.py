@@ -281,19 +281,22 @@ def _bilinear_taps(x, y, h, w):
 
 
 @leaf
-def _tap(buf, off, h, w, nch, x, y, weight, acc):
-    """Add ``weight`` x the bilinear sample of the level stored at ``buf[off:]`` ((h, w, nch), row-major) to ``acc``."""
+def _tap_rgb(buf, off, h, w, x, y, weight):
+    """``weight`` x the bilinear sample (red, green, blue) of the level stored at ``buf[off:]``
+    ((h, w, 3), row-major)."""
     i0, i1, j0, j1, tx, ty = _bilinear_taps(x, y, h, w)
     w00 = (1.0 - tx) * (1.0 - ty) * weight
     w01 = tx * (1.0 - ty) * weight
     w10 = (1.0 - tx) * ty * weight
     w11 = tx * ty * weight
-    p00 = off + (j0 * w + i0) * nch
-    p01 = off + (j0 * w + i1) * nch
-    p10 = off + (j1 * w + i0) * nch
-    p11 = off + (j1 * w + i1) * nch
-    for ch in range(acc.shape[0]):
-        acc[ch] += w00 * buf[p00 + ch] + w01 * buf[p01 + ch] + w10 * buf[p10 + ch] + w11 * buf[p11 + ch]
+    p00 = off + (j0 * w + i0) * 3
+    p01 = off + (j0 * w + i1) * 3
+    p10 = off + (j1 * w + i0) * 3
+    p11 = off + (j1 * w + i1) * 3
+    red = w00 * buf[p00] + w01 * buf[p01] + w10 * buf[p10] + w11 * buf[p11]
+    green = w00 * buf[p00 + 1] + w01 * buf[p01 + 1] + w10 * buf[p10 + 1] + w11 * buf[p11 + 1]
+    blue = w00 * buf[p00 + 2] + w01 * buf[p01 + 2] + w10 * buf[p10 + 2] + w11 * buf[p11 + 2]
+    return red, green, blue
 
 
 @parallel
@@ -311,8 +314,8 @@ def sample_texture(face, bary, texcoords, untextured, lod, tex0, mips, mip_offse
         Faces without texture coordinates: their sub-samples are left out (not read, not counted).
     lod : (m,) float64
         Mip level of detail per face (0: full resolution; fractions blend two levels).
-    tex0 : (H * W * C,) uint8 or uint16
-        Level 0 (the texture, row 0 at the top), flattened.
+    tex0 : (H * W * 3,) uint8 or uint16
+        Level 0 (the RGB texture, row 0 at the top), flattened.
     mips : (t,) same dtype
         Levels 1, 2, ... flattened one after the other.
     mip_offsets : (L,) int64
@@ -321,20 +324,19 @@ def sample_texture(face, bary, texcoords, untextured, lod, tex0, mips, mip_offse
         ``(height, width)`` of each level.
     n : int
         Sub-samples per pixel side.
-    out : (k, w, C) float32
+    out : (k, w, 3) float32
         Mean over the covered sub-samples of textured faces, in the texture's value range;
         NaN where none.
     """
-    k, w, nch = out.shape
+    k, w = out.shape[:2]
     top = mip_shapes.shape[0] - 1
     H0 = mip_shapes[0, 0]
     W0 = mip_shapes[0, 1]
-    acc = np.empty((k, nch))
     for r in prange(k):
-        a = acc[r]
         for c in range(w):
-            for j in range(nch):
-                a[j] = 0.0
+            red = 0.0
+            green = 0.0
+            blue = 0.0
             cnt = 0
             for i in range(r * n, r * n + n):
                 for q in range(c * n, c * n + n):
@@ -362,11 +364,20 @@ def sample_texture(face, bary, texcoords, untextured, lod, tex0, mips, mip_offse
                         xs = x * wl / W0
                         ys = y * h / H0
                         if level == 0:
-                            _tap(tex0, 0, h, wl, nch, xs, ys, weight, a)
+                            dr, dg, db = _tap_rgb(tex0, 0, h, wl, xs, ys, weight)
                         else:
-                            _tap(mips, mip_offsets[level], h, wl, nch, xs, ys, weight, a)
-            for j in range(nch):
-                out[r, c, j] = a[j] / cnt if cnt > 0 else np.nan
+                            dr, dg, db = _tap_rgb(mips, mip_offsets[level], h, wl, xs, ys, weight)
+                        red += dr
+                        green += dg
+                        blue += db
+            if cnt > 0:
+                out[r, c, 0] = red / cnt
+                out[r, c, 1] = green / cnt
+                out[r, c, 2] = blue / cnt
+            else:
+                out[r, c, 0] = np.nan
+                out[r, c, 1] = np.nan
+                out[r, c, 2] = np.nan
 
 
 @parallel
