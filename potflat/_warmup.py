@@ -1,14 +1,15 @@
-"""Compile the relax and bake stages' kernels in a second process while a first run rolls out.
+"""Compile the relax and bake stages' kernels early on a first run, on both cores.
 
 A first run (no kernels in Numba's disk cache yet) compiles some seventy kernels one after
 the other, each on first use, on one core: the rollout's, then the relax stage's, then the
-bake stage's. :func:`start` runs this module in a child process that relaxes and bakes a
-small generated vessel in a temporary folder, so that the relax and bake kernels are
-compiled, and cached on disk (``cache=True``, :mod:`potflat._jit`), on the second core while
-the run compiles and runs the rollout; the run then loads them from the cache. Best effort:
-a kernel the child has not cached yet when the run needs it is compiled by the run as before.
-The child writes nothing but Numba's cache and a temporary folder, which the run makes and
-removes when the child has ended (the child removes it too when it ends by itself).
+bake stage's. :func:`start` runs this module in a child process that relaxes a small
+generated vessel (:func:`vessel`) in a temporary folder, so that the relax kernels are
+compiled, and cached on disk (``cache=True``, :mod:`potflat._jit`), on the second core; the
+run meanwhile bakes the same vessel itself (:func:`bake_here`: the bake kernels, which the
+rollout's search for the painted zone uses too), then rolls out its scan and loads the relax
+kernels from the cache. Best effort: a kernel the child has not cached yet when the run needs
+it is compiled by the run as before. Nothing is written but Numba's cache and temporary
+folders, which the run removes (the child removes its own too when it ends by itself).
 """
 from __future__ import annotations
 
@@ -58,8 +59,8 @@ class Warmup:
 
 
 def start() -> Warmup | None:
-    """Start compiling the relax and bake kernels in a child process when they are not
-    cached yet (a first run); None when they are, or when no child can be started."""
+    """Start compiling the relax kernels in a child process when they are not cached yet (a
+    first run); None when they are, or when no child can be started."""
     from potflat._jit import kernels_cached
 
     if kernels_cached():
@@ -112,16 +113,36 @@ def vessel(folder: Path) -> FlatMesh:
     return FlatMesh(mesh, uv, importance=importance)
 
 
-def warm(folder: Path) -> None:
-    """Relax and bake :func:`vessel` in ``folder`` with the stages' default options, as a run does."""
-    from potflat.bake import BakeOptions, run_bake_stage
+def warm(folder: Path, stage: str) -> None:
+    """Relax (``stage`` "relax") or bake ("bake") :func:`vessel` in ``folder`` with the
+    stage's default options, as a run does."""
     from potflat.io.flat_ply import write_flat_ply
-    from potflat.relax import RelaxOptions, run_relax_stage
 
-    rollout_ply = write_flat_ply(folder / "warmup.rollout.ply", vessel(folder))
-    relaxed = run_relax_stage(rollout_ply, folder, RelaxOptions())
-    run_bake_stage(relaxed.paths["ply"], folder, BakeOptions(), flat=relaxed.flat,
-                   distortion=relaxed.distortion, zone=relaxed.zone)
+    flat = vessel(folder)
+    rollout_ply = write_flat_ply(folder / "warmup.rollout.ply", flat)
+    if stage == "relax":
+        from potflat.relax import RelaxOptions, run_relax_stage
+
+        run_relax_stage(rollout_ply, folder, RelaxOptions())
+    else:
+        from potflat.bake import BakeOptions, run_bake_stage
+
+        run_bake_stage(rollout_ply, folder, BakeOptions(), flat=flat)
+
+
+def bake_here() -> None:
+    """Compile the bake kernels in this process (:func:`warm` "bake" in a temporary folder,
+    removed afterwards); a failure is ignored: the run compiles what it needs as before."""
+    try:
+        folder = Path(tempfile.mkdtemp(prefix="potflat-warmup-"))
+    except OSError:
+        return
+    try:
+        warm(folder, "bake")
+    except Exception:  # noqa: BLE001 - best effort, never the run's failure
+        pass
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def _main(folder: str) -> int:
@@ -130,7 +151,7 @@ def _main(folder: str) -> int:
 
     signal.signal(signal.SIGTERM, stopped)
     try:
-        warm(Path(folder))
+        warm(Path(folder), "relax")
     except (Exception, KeyboardInterrupt):
         return 1
     finally:

@@ -1,4 +1,5 @@
-"""potflat._warmup: the child process that compiles the relax and bake kernels on a first run."""
+"""potflat._warmup: the child process that compiles the relax kernels on a first run, and
+the bake kernels compiled in the run first."""
 from __future__ import annotations
 
 import json
@@ -25,12 +26,35 @@ def test_the_vessel_is_a_fold_free_painted_start_with_coarse_copies(tmp_path):
     assert flat.mesh.texture_path.parent == tmp_path and flat.mesh.texture_path.is_file()
 
 
-def test_warm_relaxes_and_bakes_like_a_run(tmp_path):
-    warmup.warm(tmp_path)
+def test_warm_relaxes_like_a_run(tmp_path):
+    warmup.warm(tmp_path, "relax")
     relaxed = json.loads((tmp_path / "warmup.relaxed.json").read_text())
     assert relaxed["fold_free"] and relaxed["important_zone"]["area_fraction"] < 1
     assert any("coarse copy" in note for note in relaxed["notes"])
-    assert (tmp_path / "warmup.png").is_file() and (tmp_path / "warmup.bake.json").is_file()
+    assert not (tmp_path / "warmup.png").exists()
+
+
+def test_warm_bakes_like_a_run(tmp_path):
+    warmup.warm(tmp_path, "bake")
+    baked = json.loads((tmp_path / "warmup.rollout.bake.json").read_text())
+    assert baked["painting"] == "texture" and (tmp_path / "warmup.rollout.png").is_file()
+    assert not (tmp_path / "warmup.relaxed.json").exists()
+
+
+def test_bake_here_leaves_nothing_behind_and_never_fails_the_run(tmp_path, monkeypatch):
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    warmup.bake_here()
+    assert not list(tmp_path.iterdir())
+
+    def broken(folder, stage):
+        (folder / "half-written").write_text("x")
+        raise RuntimeError("no bake")
+
+    monkeypatch.setattr(warmup, "warm", broken)
+    warmup.bake_here()  # no exception
+    assert not list(tmp_path.iterdir())
 
 
 def test_no_child_when_the_kernels_are_cached(monkeypatch):

@@ -73,8 +73,11 @@ def _run(values: dict[str, Any]) -> None:
             if not started:  # after run_scan checked the input: a refusal stays one line
                 started.append(stage)
                 say_compiling(err)
-                # on a first run the relax and bake kernels compile in a child process meanwhile
+                # on a first run the relax kernels compile in a child process meanwhile, and
+                # the bake kernels here first
                 warmup = potflat_warmup.start()
+                if warmup is not None:
+                    potflat_warmup.bake_here()
             status.update(with_compile_note(f"{scan.name}: {stage}"))
         out_dir = values["output"] or Path(values["name"] or scan.stem)  # ./NAME/, never the scan's folder
         try:
