@@ -8,6 +8,8 @@ the lowest face index wins, whatever the number of threads.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from potflat._jit import leaf, parallel, prange
@@ -262,6 +264,47 @@ def face_values(face, values, n, out):
                         acc += values[f]
                         cnt += 1
             out[r, c] = acc / cnt if cnt > 0 else np.nan
+
+
+@parallel
+def texel_ratio(pix, faces, texcoords, height, width, degenerate, out):
+    """Texels per output pixel of each face: the largest singular value of the linear map
+    from the face's pixels to its texels (closed form, no SVD).
+
+    Parameters
+    ----------
+    pix : (n, 2) float64
+        Vertex positions in pixels.
+    faces : (m, 3) int64
+    texcoords : (m, 3, 2) float64
+        Per-corner texture coordinates, OBJ convention (v up).
+    height, width : int
+        Texture size.
+    degenerate : float
+        A face whose pixel triangle has ``|det|`` at most this gets 1.
+    out : (m,) float64
+        Output.
+    """
+    for f in prange(faces.shape[0]):
+        a = faces[f, 0]
+        p1x = pix[faces[f, 1], 0] - pix[a, 0]
+        p1y = pix[faces[f, 1], 1] - pix[a, 1]
+        p2x = pix[faces[f, 2], 0] - pix[a, 0]
+        p2y = pix[faces[f, 2], 1] - pix[a, 1]
+        t1x = (texcoords[f, 1, 0] - texcoords[f, 0, 0]) * width
+        t1y = (texcoords[f, 0, 1] - texcoords[f, 1, 1]) * height
+        t2x = (texcoords[f, 2, 0] - texcoords[f, 0, 0]) * width
+        t2y = (texcoords[f, 0, 1] - texcoords[f, 2, 1]) * height
+        det = p1x * p2y - p2x * p1y
+        if not abs(det) > degenerate:
+            out[f] = 1.0
+            continue
+        # J = [t1 t2] [p1 p2]^-1, then its largest singular value
+        a11 = (t1x * p2y - t2x * p1y) / det
+        a12 = (t2x * p1x - t1x * p2x) / det
+        a21 = (t1y * p2y - t2y * p1y) / det
+        a22 = (t2y * p1x - t1y * p2x) / det
+        out[f] = math.hypot(0.5 * (a11 + a22), 0.5 * (a21 - a12)) + math.hypot(0.5 * (a11 - a22), 0.5 * (a21 + a12))
 
 
 @leaf

@@ -426,30 +426,14 @@ class Renderer:
         self._relief_field = None  # per-vertex normal and light of the shaded relief, made on first use
 
     # -- setup ---------------------------------------------------------------------
-    def _texel_ratio(self, pix: np.ndarray, chunk: int = 1 << 20) -> np.ndarray:
-        """Texels per output pixel (largest singular value of the pixel-to-texel map) per face.
+    def _texel_ratio(self, pix: np.ndarray) -> np.ndarray:
+        """Texels per output pixel (largest singular value of the pixel-to-texel map) per face."""
+        from potflat.bake import _kernels as raster
 
-        Computed in chunks of faces so no (m, 3, 2) temporaries are made for big meshes.
-        """
-        F, tc = self.faces, self.flat.mesh.texcoords
         H0, W0 = self.texture.shape[:2]
-        ratio = np.ones(len(F))
-        for a in range(0, len(F), chunk):
-            f, t = F[a:a + chunk], tc[a:a + chunk]
-            p1, p2 = pix[f[:, 1]] - pix[f[:, 0]], pix[f[:, 2]] - pix[f[:, 0]]
-            t1 = np.stack([(t[:, 1, 0] - t[:, 0, 0]) * W0, (t[:, 0, 1] - t[:, 1, 1]) * H0], axis=1)
-            t2 = np.stack([(t[:, 2, 0] - t[:, 0, 0]) * W0, (t[:, 0, 1] - t[:, 2, 1]) * H0], axis=1)
-            det = p1[:, 0] * p2[:, 1] - p2[:, 0] * p1[:, 1]
-            ok = np.abs(det) > DEGENERATE
-            det = np.where(ok, det, 1.0)
-            # J = [t1 t2] [p1 p2]^-1, then its largest singular value in closed form
-            a11 = (t1[:, 0] * p2[:, 1] - t2[:, 0] * p1[:, 1]) / det
-            a12 = (t2[:, 0] * p1[:, 0] - t1[:, 0] * p2[:, 0]) / det
-            a21 = (t1[:, 1] * p2[:, 1] - t2[:, 1] * p1[:, 1]) / det
-            a22 = (t2[:, 1] * p1[:, 0] - t1[:, 1] * p2[:, 0]) / det
-            smax = np.hypot(0.5 * (a11 + a22), 0.5 * (a21 - a12)) + np.hypot(0.5 * (a11 - a22), 0.5 * (a21 + a12))
-            ratio[a:a + chunk] = np.where(ok, smax, 1.0)
-        return ratio
+        out = np.empty(len(self.faces))
+        raster.texel_ratio(pix, self.faces, self.flat.mesh.texcoords, H0, W0, DEGENERATE, out)
+        return out
 
     def _build_mips(self) -> None:
         """Mip levels down to the coarsest level any face needs.
