@@ -13,6 +13,10 @@ stages by the appearance of each stage's JSON sidecar (``NAME.rollout.json``,
 and the peak memory; for the whole run the wall time (start-up included), the CPU time of the
 child (user + system, all threads) and its peak (``VmHWM``).
 The rollout's own steps (load, axis, walls, unroll, ...) come from its JSON's timings.
+Before the first size, ``potflat run`` on the bundled amphora compiles and caches every kernel
+the runs use (:func:`warm_kernels`): the rows measure runs with warm kernels; a first run's
+compile time is measured apart (docs/performance.md, "Loaders, first run and the rollout's
+steps").
 
 Goals (issue 15): at 1M vertices the whole run at most 2x the trimesh load; at 3M at most
 60 s and 3 GB.
@@ -242,6 +246,16 @@ def table(rows: list[dict], *, command: str, preset: str, px_per_mm: float, text
     return "\n".join(lines)
 
 
+def warm_kernels() -> None:
+    """Run the bundled amphora through ``potflat run`` once (in a temporary folder), so that no
+    row of the table pays for compiling a kernel (a kernel is compiled again after its source
+    file changed)."""
+    sample = Path(__file__).resolve().parents[1] / "samples" / "data" / "amphora.obj"
+    with tempfile.TemporaryDirectory(prefix="potflat-scale-warm-") as tmp:
+        subprocess.run([sys.executable, "-m", "potflat_cli", "run", str(sample), "-o", tmp, "--quiet"],
+                       check=True, stdin=subprocess.DEVNULL)
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--vertices", type=float, nargs="+", default=[0.3e6, 1e6, 3e6])
@@ -252,6 +266,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--write", action="store_true", help="update the section in docs/performance.md")
     args = ap.parse_args(argv)
 
+    print("compiling the kernels (potflat run on the bundled amphora) ...", flush=True)
+    warm_kernels()
     rows = []
     for n in args.vertices:
         with tempfile.TemporaryDirectory(prefix="potflat-scale-") as tmp:
