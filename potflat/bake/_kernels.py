@@ -63,6 +63,37 @@ def bin_triangles(pix: np.ndarray, faces: np.ndarray, block_rows: float, nblocks
     return ptr, idx
 
 
+@leaf
+def _corners(pix, faces, f):
+    """Raster positions of face ``f``'s corners and twice its signed area ``d``."""
+    x0 = pix[faces[f, 0], 0]
+    y0 = pix[faces[f, 0], 1]
+    x1 = pix[faces[f, 1], 0]
+    y1 = pix[faces[f, 1], 1]
+    x2 = pix[faces[f, 2], 0]
+    y2 = pix[faces[f, 2], 1]
+    return x0, y0, x1, y1, x2, y2, (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+
+
+@leaf
+def _sample_box(x0, y0, x1, y1, x2, y2, ylo, yhi, width, eps):
+    """Rows ``rlo..rhi`` (within ``[ylo, yhi)``) and columns ``clo..chi`` of the samples whose
+    centres may lie in the triangle."""
+    rlo = max(ylo, int(np.ceil(min(y0, min(y1, y2)) - 0.5 - eps)))
+    rhi = min(yhi - 1, int(np.floor(max(y0, max(y1, y2)) - 0.5 + eps)))
+    clo = max(0, int(np.ceil(min(x0, min(x1, x2)) - 0.5 - eps)))
+    chi = min(width - 1, int(np.floor(max(x0, max(x1, x2)) - 0.5 + eps)))
+    return rlo, rhi, clo, chi
+
+
+@leaf
+def _barycentric(px, py, x0, y0, x1, y1, x2, y2, d):
+    """Barycentric weights of the point ``(px, py)`` in the triangle (``d`` from :func:`_corners`)."""
+    w1 = ((px - x0) * (y2 - y0) - (x2 - x0) * (py - y0)) / d
+    w2 = ((x1 - x0) * (py - y0) - (px - x0) * (y1 - y0)) / d
+    return 1.0 - w1 - w2, w1, w2
+
+
 @parallel
 def rasterize_rows(pix, faces, ptr, idx, block_rows, row0, nrows, width, eps, face_out, bary_out):
     """Find the triangle under each sample of raster rows ``[row0, row0 + nrows)``.
@@ -94,29 +125,17 @@ def rasterize_rows(pix, faces, ptr, idx, block_rows, row0, nrows, width, eps, fa
         yhi = min(ylo + block_rows, row0 + nrows)
         for k in range(ptr[b], ptr[b + 1]):
             f = idx[k]
-            x0 = pix[faces[f, 0], 0]
-            y0 = pix[faces[f, 0], 1]
-            x1 = pix[faces[f, 1], 0]
-            y1 = pix[faces[f, 1], 1]
-            x2 = pix[faces[f, 2], 0]
-            y2 = pix[faces[f, 2], 1]
-            d = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+            x0, y0, x1, y1, x2, y2, d = _corners(pix, faces, f)
             if d == 0.0:
                 continue
-            rlo = max(ylo, int(np.ceil(min(y0, min(y1, y2)) - 0.5 - eps)))
-            rhi = min(yhi - 1, int(np.floor(max(y0, max(y1, y2)) - 0.5 + eps)))
-            clo = max(0, int(np.ceil(min(x0, min(x1, x2)) - 0.5 - eps)))
-            chi = min(width - 1, int(np.floor(max(x0, max(x1, x2)) - 0.5 + eps)))
+            rlo, rhi, clo, chi = _sample_box(x0, y0, x1, y1, x2, y2, ylo, yhi, width, eps)
             for r in range(rlo, rhi + 1):
                 py = r + 0.5
                 rr = r - row0
                 for c in range(clo, chi + 1):
                     if face_out[rr, c] >= 0:
                         continue
-                    px = c + 0.5
-                    w1 = ((px - x0) * (y2 - y0) - (x2 - x0) * (py - y0)) / d
-                    w2 = ((x1 - x0) * (py - y0) - (px - x0) * (y1 - y0)) / d
-                    w0 = 1.0 - w1 - w2
+                    w0, w1, w2 = _barycentric(c + 0.5, py, x0, y0, x1, y1, x2, y2, d)
                     if w0 >= -eps and w1 >= -eps and w2 >= -eps:
                         w1 = min(max(w1, 0.0), 1.0)
                         w2 = min(max(w2, 0.0), 1.0 - w1)
@@ -150,28 +169,17 @@ def cover_rows(pix, faces, ptr, idx, block_rows, eps, out):
         yhi = min(ylo + block_rows, nrows)
         for k in range(ptr[b], ptr[b + 1]):
             f = idx[k]
-            x0 = pix[faces[f, 0], 0]
-            y0 = pix[faces[f, 0], 1]
-            x1 = pix[faces[f, 1], 0]
-            y1 = pix[faces[f, 1], 1]
-            x2 = pix[faces[f, 2], 0]
-            y2 = pix[faces[f, 2], 1]
-            d = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+            x0, y0, x1, y1, x2, y2, d = _corners(pix, faces, f)
             if d == 0.0:
                 continue
-            rlo = max(ylo, int(np.ceil(min(y0, min(y1, y2)) - 0.5 - eps)))
-            rhi = min(yhi - 1, int(np.floor(max(y0, max(y1, y2)) - 0.5 + eps)))
-            clo = max(0, int(np.ceil(min(x0, min(x1, x2)) - 0.5 - eps)))
-            chi = min(width - 1, int(np.floor(max(x0, max(x1, x2)) - 0.5 + eps)))
+            rlo, rhi, clo, chi = _sample_box(x0, y0, x1, y1, x2, y2, ylo, yhi, width, eps)
             for r in range(rlo, rhi + 1):
                 py = r + 0.5
                 for c in range(clo, chi + 1):
                     if out[r, c]:
                         continue
-                    px = c + 0.5
-                    w1 = ((px - x0) * (y2 - y0) - (x2 - x0) * (py - y0)) / d
-                    w2 = ((x1 - x0) * (py - y0) - (px - x0) * (y1 - y0)) / d
-                    if 1.0 - w1 - w2 >= -eps and w1 >= -eps and w2 >= -eps:
+                    w0, w1, w2 = _barycentric(c + 0.5, py, x0, y0, x1, y1, x2, y2, d)
+                    if w0 >= -eps and w1 >= -eps and w2 >= -eps:
                         out[r, c] = 1
 
 
