@@ -48,15 +48,28 @@ def worker_threads() -> int:
 
 
 def kernels_cached() -> bool:
-    """Whether the kernels were compiled and cached by an earlier run (else the first call of
-    each compiles it: about a minute in all, worth telling the user)."""
+    """Whether the kernels were compiled and cached by an earlier run of this potflat with this
+    Numba (else the first call of each compiles it: about a minute in all, worth telling the user).
+
+    Read from the spring kernels' cache index files (in the package's ``__pycache__`` folders,
+    or under ``NUMBA_CACHE_DIR``): an index counts when it was written after the source file
+    (an upgrade of potflat writes newer sources, and Numba then compiles again) and by this
+    version of Numba (the first item pickled in it).
+    """
+    import pickle
     from pathlib import Path
 
-    place = Path(numba.config.CACHE_DIR) if numba.config.CACHE_DIR else Path(__file__).resolve().parent
-    try:  # the spring kernels' index files (in the package's __pycache__ folders, or NUMBA_CACHE_DIR)
-        return place.is_dir() and next(place.rglob("springs.*.nbi"), None) is not None
-    except OSError:
+    package = Path(__file__).resolve().parent
+    place = Path(numba.config.CACHE_DIR) if numba.config.CACHE_DIR else package
+    try:
+        written = (package / "relax" / "_kernels" / "springs.py").stat().st_mtime
+        indexes = list(place.rglob("springs.*.nbi")) if place.is_dir() else []
+        for index in indexes:
+            if index.stat().st_mtime < written:
+                continue
+            with open(index, "rb") as f:
+                if pickle.load(f) == numba.__version__:
+                    return True
+    except (OSError, pickle.UnpicklingError, EOFError):
         return True  # cannot tell: say nothing
-
-
-__all__ = ["kernels_cached", "leaf", "numba_threads", "parallel", "prange", "worker_threads"]
+    return False

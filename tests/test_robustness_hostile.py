@@ -674,16 +674,29 @@ def test_a_foot_unrolled_into_a_flange_is_warned_with_the_option():
 
 
 def test_compile_note_on_a_first_run(tmp_path, monkeypatch):
+    import os
+    import pickle
+
     import numba
 
+    import potflat.relax._kernels.springs
     from potflat_cli._stage import with_compile_note
 
     monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "empty"))
     assert "first run: compiling" in with_compile_note("rolling out")
     (tmp_path / "full" / "x").mkdir(parents=True)
-    (tmp_path / "full" / "x" / "springs.f-1.py311.nbi").write_bytes(b"")
+    index = tmp_path / "full" / "x" / "springs.f-1.py311.nbi"
+    with open(index, "wb") as f:  # how Numba starts an index: its version
+        pickle.dump(numba.__version__, f)
     monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "full"))
     assert with_compile_note("rolling out") == "rolling out"
+    # written before the source (an upgrade of potflat since): Numba compiles again
+    source = os.path.getmtime(potflat.relax._kernels.springs.__file__)
+    os.utime(index, (source - 60, source - 60))
+    assert "first run: compiling" in with_compile_note("rolling out")
+    with open(index, "wb") as f:  # written by another version of Numba
+        pickle.dump("0.0.0", f)
+    assert "first run: compiling" in with_compile_note("rolling out")
 
 
 def test_compile_note_is_a_plain_line_when_stderr_is_not_a_terminal(tmp_path, monkeypatch):
