@@ -630,3 +630,18 @@ def test_boundary_vertex_with_a_large_angle_sum_does_not_wrap(monkeypatch):
     monkeypatch.setattr(relax_module._Springs, "guard_boundary", lambda self, x: 0)
     r = relax(fan, preset="standard")
     assert any("touched" in n for n in r.notes) and r.boundary_overlap == 0
+
+
+def test_a_boundary_left_touching_itself_is_not_a_crossing_after_the_final_turn(tmp_path):
+    """The solve may leave a boundary vertex on a segment of the boundary to within rounding
+    (touching, which the line search allows); the final rigid turn to the rollout's orientation
+    then made that pair test as crossing, and relax refused its own fold-free result. Seen on
+    the painted-figures benchmark's aryballos panel with ``max_anisotropy`` 1.3."""
+    from potflat.io.scan import load_scan
+    from potflat.rollout import rollout
+    from potflat_synthetic.vessels import make_vessel, write_obj
+
+    vessel = make_vessel("aryballos", n_vertices=40000, seed=0, painting="panel", texture_size=2048)
+    rolled = rollout(load_scan(write_obj(vessel, tmp_path / "aryballos.obj")).mesh)
+    result = relax(rolled.flat, max_anisotropy=1.3)  # raised FoldedResultError: 1 boundary crossing
+    assert result.flipped == 0 and result.boundary_overlap == 0

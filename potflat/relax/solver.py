@@ -1187,6 +1187,12 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
                 x, converged = _dynamics(sp, x, settings, run, levels)
         t_solve = time.perf_counter()
 
+        # checked as solved: the turn below moves the layout rigidly, which makes or undoes no fold
+        # or crossing, but its rounding can make a boundary vertex that the solve left touching a
+        # segment within 1e-15 test as crossing it (an aryballos panel with max_anisotropy 1.3)
+        finite = bool(np.isfinite(x).all())
+        flipped = int((sp.signed_areas(x) <= 0).sum()) if finite else len(F)
+        overlap = sp.overlap(x) if finite else 1
         if fold_free:  # back to the rollout's orientation, the painting counting most
             turn = np.ones(n) if weight is None else weight.copy()
             if folded_start is not None:  # relaxed from Tutte's disc: only what was not folded counts
@@ -1194,9 +1200,6 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
             # the rollout's layout (its orientation is the result's) or the folded start
             start = ((uv - centre) / unit)[order] if folded_start is None else folded_start
             x = _turned_like(x, start, turn)
-        finite = bool(np.isfinite(x).all())
-        flipped = int((sp.signed_areas(x) <= 0).sum()) if finite else len(F)
-        overlap = sp.overlap(x) if finite else 1
         del sp, hier  # release the spring system before the distortion summaries (peak memory)
     if fold_free and (flipped or overlap or not finite):
         raise FoldedResultError(
