@@ -4,10 +4,11 @@ A first run (no kernels in Numba's disk cache yet) compiles some seventy kernels
 the other, each on first use, on one core: the rollout's, then the relax stage's, then the
 bake stage's. :func:`start` runs this module in a child process that relaxes a small
 generated vessel (:func:`vessel`) in a temporary folder, so that the relax kernels are
-compiled, and cached on disk (``cache=True``, :mod:`potflat._jit`), on the second core; the
-run meanwhile bakes the same vessel itself (:func:`bake_here`: the bake kernels, which the
-rollout's search for the painted zone uses too), then rolls out its scan and loads the relax
-kernels from the cache. Best effort: a kernel the child has not cached yet when the run needs
+compiled, and cached on disk (``cache=True``, :mod:`potflat._jit`), on the second core while
+the run compiles and runs its rollout; then the run bakes the same vessel itself
+(:func:`bake_here`: the bake kernels) while the child finishes, and loads the relax kernels
+from the cache. (Baking first, before the rollout, was as fast but kept a bad scan's one-line
+refusal waiting for the bake kernels.) Best effort: a kernel the child has not cached yet when the run needs
 it is compiled by the run as before. Nothing is written but Numba's cache and temporary
 folders, which the run removes (the child removes its own too when it ends by itself).
 """

@@ -107,3 +107,23 @@ def test_a_first_run_starts_the_child_and_ends_it_with_the_run(tmp_path, monkeyp
     assert (result.exit_code != 0) == fails, result.output
     assert len(started) == 1 and started[0] is not None
     assert started[0].process.returncode is not None  # ended (stopped, or done) when the command returned
+
+
+@pytest.mark.parametrize("refused_at", [None, "rollout"])
+def test_the_run_compiles_the_bake_kernels_only_after_its_rollout(tmp_path, monkeypatch, refused_at):
+    """A scan the rollout refuses gets its one line at once, not after the bake kernels compile."""
+    import test_batch_fakes as fakes
+    from typer.testing import CliRunner
+
+    from potflat_cli.main import app
+
+    fakes.install(monkeypatch)
+    baked = []
+    monkeypatch.setattr(potflat._jit, "kernels_cached", lambda: False)
+    monkeypatch.setattr(warmup, "bake_here", lambda: baked.append(True))
+    scan = fakes.write_scan(tmp_path / "pot.obj")
+    if refused_at:
+        fakes.SABOTAGE["pot"] = ("raise", refused_at)
+    result = CliRunner().invoke(app, ["run", str(scan), "-o", str(tmp_path / "out")])
+    assert (result.exit_code != 0) == bool(refused_at), result.output
+    assert baked == ([] if refused_at else [True])

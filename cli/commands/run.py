@@ -73,12 +73,13 @@ def _run(values: dict[str, Any]) -> None:
             if not started:  # after run_scan checked the input: a refusal stays one line
                 started.append(stage)
                 say_compiling(err)
-                # on a first run the relax kernels compile in a child process meanwhile, and
-                # the bake kernels here first
+                # on a first run the relax kernels compile in a child process meanwhile
                 warmup = potflat_warmup.start()
-                if warmup is not None:
-                    potflat_warmup.bake_here()
             status.update(with_compile_note(f"{scan.name}: {stage}"))
+            if stage == "relax" and warmup is not None:
+                # the scan rolled out (bad input is refused before this): the bake kernels
+                # compile here while the child finishes the relax kernels
+                potflat_warmup.bake_here()
         out_dir = values["output"] or Path(values["name"] or scan.stem)  # ./NAME/, never the scan's folder
         try:
             result = run_scan(scan, out_dir, name=values["name"], progress=progress, **options)
