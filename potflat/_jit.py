@@ -73,3 +73,6 @@ def kernels_cached() -> bool:
     except (OSError, pickle.UnpicklingError, EOFError):
         return True  # cannot tell: say nothing
     return False
+
+
+__all__ = ["kernels_cached", "leaf", "numba_threads", "parallel", "prange", "worker_threads"]

@@ -8,9 +8,10 @@ compiled, and cached on disk (``cache=True``, :mod:`potflat._jit`), on the secon
 the run compiles and runs its rollout; then the run bakes the same vessel itself
 (:func:`bake_here`: the bake kernels) while the child finishes, and loads the relax kernels
 from the cache. (Baking first, before the rollout, was as fast but kept a bad scan's one-line
-refusal waiting for the bake kernels.) Best effort: a kernel the child has not cached yet when the run needs
-it is compiled by the run as before. Nothing is written but Numba's cache and temporary
-folders, which the run removes (the child removes its own too when it ends by itself).
+refusal waiting for the bake kernels.) Best effort: a kernel the child has not cached yet
+when the run needs it is compiled by the run as before. Nothing is written but Numba's cache
+and temporary folders, which the run removes (the child removes its own too when it ends by
+itself).
 """
 from __future__ import annotations
 

@@ -364,7 +364,7 @@ class _Springs:
                                 self.weight, self.vf_ptr, self.vf_tri, self.faces,
                                 self.shape, self._coef, self.bprev, self.bnext, self.bguard, self.theta, ENERGY.boundary_mu if barrier else 0.0,
                                 ENERGY.boundary_gap, g, self._es, self._eb, self.diag)
-        es = float(np.sum(self._es)) + (float(np.sum(self._e_face)) if len(self._coef) else 0.0)
+        es = float(np.sum(self._es)) + float(np.sum(self._e_face))  # (zeros without per-face terms)
         if not barrier:
             return es, es, g
         eb = float(np.sum(self._eb))
