@@ -8,7 +8,9 @@ import tifffile
 from PIL import Image
 
 from potflat.errors import InvalidInputError
-from potflat.io.images import PngWriter, read_texture, write_png, write_tiff_rows
+from potflat.io import images
+from potflat.io.images import (PngWriter, read_ahead, read_texture, read_texture_grey_quarter, write_png,
+                               write_tiff_rows)
 
 
 def _paeth_reference(raw, prev, bpp):
@@ -109,4 +111,44 @@ def test_read_texture_rgb_order_and_errors(tmp_path):
         read_texture(tmp_path / "missing.png")
     (tmp_path / "bad.png").write_bytes(b"not an image")
     with pytest.raises(InvalidInputError, match="cannot decode"):
+        read_texture(tmp_path / "bad.png")
+
+
+def _noise_png(path, h, w, seed=0):
+    cv2.imwrite(str(path), np.random.default_rng(seed).integers(0, 256, (h, w, 3), dtype=np.uint8))
+
+
+def test_reads_inside_a_read_ahead_take_its_decodes(tmp_path):
+    _noise_png(tmp_path / "t.png", 64, 48)
+    plain, grey = read_texture(tmp_path / "t.png"), read_texture_grey_quarter(tmp_path / "t.png")
+    with read_ahead(tmp_path / "t.png", grey_quarter=True, rgb=True):
+        assert len(images._AHEAD) == 2
+        with read_ahead(tmp_path / "t.png", rgb=True):  # an inner block leaves the outer one's decode alone
+            assert len(images._AHEAD) == 2
+        assert len(images._AHEAD) == 2
+        assert np.array_equal(read_texture_grey_quarter(tmp_path / "t.png"), grey)
+        assert np.array_equal(read_texture(tmp_path / "t.png"), plain)
+        assert not images._AHEAD  # taken: a second read decodes again
+        assert np.array_equal(read_texture(tmp_path / "t.png"), plain)
+
+
+def test_a_read_ahead_not_taken_is_dropped_at_the_block_end(tmp_path):
+    _noise_png(tmp_path / "t.png", 16, 16)
+    with read_ahead(tmp_path / "t.png", rgb=True):
+        assert len(images._AHEAD) == 1
+    assert not images._AHEAD
+    with read_ahead(None, rgb=True), read_ahead(tmp_path / "missing.png", rgb=True):
+        assert not images._AHEAD  # nothing to read ahead: the reader reports a missing file itself
+
+
+def test_a_texture_changed_after_its_read_ahead_is_read_anew(tmp_path):
+    _noise_png(tmp_path / "t.png", 16, 16)
+    with read_ahead(tmp_path / "t.png", rgb=True):
+        _noise_png(tmp_path / "t.png", 20, 12, seed=1)
+        assert read_texture(tmp_path / "t.png").shape == (20, 12, 3)
+
+
+def test_a_read_ahead_of_a_bad_texture_reports_like_a_plain_read(tmp_path):
+    (tmp_path / "bad.png").write_bytes(b"not an image")
+    with read_ahead(tmp_path / "bad.png", rgb=True), pytest.raises(InvalidInputError, match="cannot decode"):
         read_texture(tmp_path / "bad.png")

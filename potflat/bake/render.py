@@ -32,6 +32,7 @@ import numpy as np
 
 from potflat.mesh import distortion
 from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.io.images import read_ahead, read_texture
 from potflat.types import FlatMesh
 from potflat.mesh.tolerances import DEGENERATE, ROUNDING
 
@@ -374,30 +375,30 @@ class Renderer:
         self.faces = mesh.faces
         self.grid = _make_grid(flat, px_per_mm, max_megapixels)
         g = self.grid
-        if distortion_maps:  # first: their temporaries come and go before the texture is loaded
-            reference = distortion.SurfaceReference(mesh.vertices, self.faces)  # the 3D side once
-            self.summary = summary if summary is not None else reference.summarize(flat.uv)
-            fd = reference.face_distortion(flat.uv)
-            self.area_3d, self.area_2d, self.valid = fd.area_3d, fd.area_2d, fd.valid
-            self.face_values = {"area": fd.log_area_ratio, "anisotropy": np.minimum(fd.anisotropy, 1e6)}
-            del fd
-            self.vertex_stress = flat.stress if flat.stress is not None else reference.vertex_stress(
-                flat.uv, mesh.mm_per_unit)
-            # the stress map shows it in words people read: % length error around each point
-            self.vertex_length_error = reference.vertex_length_error(flat.uv)
-            del reference
+        untextured = mesh.untextured_faces
+        textured = mesh.texcoords is not None and mesh.texture_path is not None and (untextured is None
+                                                                                     or not untextured.all())
+        # the texture is decoded on a second core while the distortion maps are computed
+        with read_ahead(mesh.texture_path if textured else None, rgb=True):
+            if distortion_maps:
+                reference = distortion.SurfaceReference(mesh.vertices, self.faces)  # the 3D side once
+                self.summary = summary if summary is not None else reference.summarize(flat.uv)
+                fd = reference.face_distortion(flat.uv)
+                self.area_3d, self.area_2d, self.valid = fd.area_3d, fd.area_2d, fd.valid
+                self.face_values = {"area": fd.log_area_ratio, "anisotropy": np.minimum(fd.anisotropy, 1e6)}
+                del fd
+                self.vertex_stress = flat.stress if flat.stress is not None else reference.vertex_stress(
+                    flat.uv, mesh.mm_per_unit)
+                # the stress map shows it in words people read: % length error around each point
+                self.vertex_length_error = reference.vertex_length_error(flat.uv)
+                del reference
+            self.texture = read_texture(mesh.texture_path) if textured else None
         pix = np.empty_like(flat.uv)
         pix[:, 0] = (flat.uv[:, 0] - g.origin[0]) * g.scale
         pix[:, 1] = (g.origin[1] - flat.uv[:, 1]) * g.scale
-        self.texture = None
         self.texels_per_pixel = None
         self.texels_per_pixel_median = None
-        untextured = mesh.untextured_faces
-        if mesh.texcoords is not None and mesh.texture_path is not None and (untextured is None
-                                                                             or not untextured.all()):
-            from potflat.io.images import read_texture
-
-            self.texture = read_texture(mesh.texture_path)
+        if self.texture is not None:
             self.texels_per_pixel = self._texel_ratio(pix)
             self.texels_per_pixel_median = float(np.median(
                 self.texels_per_pixel if untextured is None else self.texels_per_pixel[~untextured]))

@@ -10,9 +10,10 @@ from __future__ import annotations
 import contextlib
 import os
 import struct
+import threading
 import zlib
 from collections.abc import Iterable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Self
 
@@ -63,6 +64,9 @@ def check_texture_budget(path: str | os.PathLike, width: int, height: int, mode:
 def read_texture(path: str | os.PathLike) -> np.ndarray:
     """Read a texture image as RGB, within :data:`TEXTURE_BUDGET_BYTES`.
 
+    Inside a :func:`read_ahead` block of the same file (unchanged since), the image decoded
+    ahead in the background is taken (waiting for it if need be) instead of decoding it again.
+
     Parameters
     ----------
     path : path-like
@@ -73,7 +77,18 @@ def read_texture(path: str | os.PathLike) -> np.ndarray:
     (h, w, 3) uint8 or uint16
         Row 0 is the top of the image. An alpha channel is dropped; grey is expanded to RGB.
         Decoded straight to three channels: the peak memory is the returned image.
+
+    Raises
+    ------
+    InvalidInputError
+        When the file is missing, over the budget or not an image.
     """
+    ahead = _take_ahead("rgb", path)
+    return ahead.result() if ahead is not None else _decode_texture(path)
+
+
+def _decode_texture(path: str | os.PathLike) -> np.ndarray:
+    """:func:`read_texture` without the read-ahead."""
     import cv2
     from PIL import Image
 
@@ -304,7 +319,74 @@ def read_mask(path: str | Path) -> np.ndarray:
 
 def read_texture_grey_quarter(path: str | os.PathLike) -> np.ndarray | None:
     """A texture in grey levels at a quarter of its size (h/4, w/4) uint8 (OpenCV's reduced
-    read: cheap on large atlases), or None when it cannot be read."""
+    read), or None when it cannot be read; taken from a :func:`read_ahead` of the same file
+    when there is one."""
+    ahead = _take_ahead("grey_quarter", path)
+    return ahead.result() if ahead is not None else _decode_grey_quarter(path)
+
+
+def _decode_grey_quarter(path: str | os.PathLike) -> np.ndarray | None:
     import cv2
 
     return cv2.imread(str(path), cv2.IMREAD_REDUCED_GRAYSCALE_4)
+
+
+_DECODERS = {"grey_quarter": _decode_grey_quarter, "rgb": _decode_texture}
+#: Decodes started by :func:`read_ahead` and not taken yet, by (kind, file, its mtime, its size).
+_AHEAD: dict[tuple, Future] = {}
+_AHEAD_LOCK = threading.Lock()
+
+
+def _ahead_key(kind: str, path: str | os.PathLike) -> tuple | None:
+    try:
+        stat = os.stat(path)
+    except (OSError, TypeError, ValueError):  # missing: the reader itself says so, in the caller's thread
+        return None
+    return kind, os.path.realpath(path), stat.st_mtime_ns, stat.st_size
+
+
+def _take_ahead(kind: str, path: str | os.PathLike) -> Future | None:
+    if not _AHEAD:
+        return None
+    key = _ahead_key(kind, path)
+    with _AHEAD_LOCK:
+        return _AHEAD.pop(key, None)
+
+
+@contextlib.contextmanager
+def read_ahead(path: str | os.PathLike | None, *, grey_quarter: bool = False, rgb: bool = False):
+    """Decode a texture in a background thread while the block does other work.
+
+    The block's later :func:`read_texture_grey_quarter` (``grey_quarter``) and
+    :func:`read_texture` (``rgb``) of the same, unchanged file take the decoded images
+    instead of decoding (the decoders release the GIL, so the decoding runs beside the
+    block's own work on a second core). The two are decoded one after the other, in that
+    order; what the block did not take is dropped at its end (a decode still running
+    finishes in its thread, and its result is freed). A decode already ahead for the file
+    (an enclosing block) is left to that block. Errors reach the reader that takes the
+    decode, as if it had decoded itself.
+
+    Parameters
+    ----------
+    path : path-like or None
+        The texture; None: nothing is read ahead.
+    grey_quarter, rgb : bool
+        Which reads to decode ahead.
+    """
+    wanted = [kind for kind, want in (("grey_quarter", grey_quarter), ("rgb", rgb)) if want and path is not None]
+    keys = [key for key in (_ahead_key(kind, path) for kind in wanted) if key is not None]
+    worker = None
+    with _AHEAD_LOCK:
+        keys = [key for key in keys if key not in _AHEAD]
+        if keys:
+            worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="potflat-read-ahead")
+            for key in keys:
+                _AHEAD[key] = worker.submit(_DECODERS[key[0]], path)
+    try:
+        yield
+    finally:
+        if worker is not None:
+            with _AHEAD_LOCK:
+                for key in keys:
+                    _AHEAD.pop(key, None)
+            worker.shutdown(wait=False, cancel_futures=True)

@@ -31,6 +31,7 @@ from potflat import importance as _importance
 from potflat.rollout import proxy as _proxy
 from potflat.mesh._kernels import union_find
 from potflat.mesh.boundary import crossing_pairs, edges_and_boundary
+from potflat.io.images import read_ahead
 from potflat.mesh.embedding import signed_areas
 from potflat.rollout.attachments import AttachmentSelection, detect_attachments
 from potflat.rollout.folds import ScanFolds, fold_masks, scan_folds
@@ -417,12 +418,23 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         raise InvalidInputError(f"rollout needs a potflat Mesh, got {type(mesh).__name__}")
     if len(mesh.faces) == 0:
         raise InvalidInputError(f"{mesh.source or 'mesh'} has no faces; give a triangle mesh of the vessel")
-    V, F = mesh.vertices, mesh.faces
+    F = mesh.faces
     if face_mask is not None:
         face_mask = np.asarray(face_mask)
         if face_mask.dtype != bool or face_mask.shape != (len(F),):
             raise InvalidInputError(f"face_mask must be a bool array of shape ({len(F)},), got "
                                     f"{face_mask.dtype} {face_mask.shape}")
+    textured = mesh.texcoords is not None and mesh.texture_path is not None
+    # the texture's decodes (the seam's brightness, the painted zone's colours) run on the second
+    # core while the axis and the attachments are found, steps that keep about one core busy
+    with read_ahead(mesh.texture_path if textured else None, grey_quarter=options.seam is None,
+                    rgb=options.importance == "auto"):
+        return _rollout_steps(mesh, options, face_mask)
+
+
+def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | None) -> RolloutResult:
+    """:func:`rollout` after its checks of the input."""
+    V, F = mesh.vertices, mesh.faces
     clock = StepClock()
     other_objects = np.zeros(len(F), bool)
     if options.axis is not None:
