@@ -1,13 +1,14 @@
 """Compare two output folders of ``potflat run`` (before and after a change).
 
-Usage: ``python benchmarks/compare_outputs.py BEFORE AFTER``
+Usage: ``python benchmarks/compare_outputs.py [--pixels] BEFORE AFTER``
 
 Every PLY, PNG, TIFF, CSV and SVG must be byte-identical; every JSON equal once timings
 (keys ``seconds`` and ``timings``), the versions of the provenance record and the folder
 part of file paths (the file's own folder and the folder compared) are set aside, and with
 them what follows only from a JSON file's timings: the SHA-256 of a JSON input and a JSON
 file's size in a batch manifest. A CSV with a ``seconds`` column (the batch summary) is
-compared with that column and the folders set aside. Prints one line per file and exits 1 on any difference or on a file that is in one
+compared with that column and the folders set aside. With ``--pixels`` a PNG is compared by
+its decoded pixels and resolution (across a change of the deflate library). Prints one line per file and exits 1 on any difference or on a file that is in one
 folder only.
 """
 from __future__ import annotations
@@ -77,8 +78,18 @@ def _csv_rows(path: Path, folder: str) -> list[list[str]]:
                          for i, cell in enumerate(row)] for row in rows[1:]]
 
 
-def compare(before: Path, after: Path) -> list[str]:
-    """Lines describing every difference between the two folders (empty: none)."""
+def _same_png_pixels(a: Path, b: Path) -> bool:
+    import numpy as np
+    from PIL import Image
+
+    with Image.open(a) as x, Image.open(b) as y:
+        return (x.mode, x.size, x.info.get("dpi")) == (y.mode, y.size, y.info.get("dpi")) and np.array_equal(
+            np.asarray(x), np.asarray(y))
+
+
+def compare(before: Path, after: Path, *, pixels: bool = False) -> list[str]:
+    """Lines describing every difference between the two folders (empty: none); ``pixels``:
+    PNGs compared by their pixels."""
     problems = []
     names = sorted({p.relative_to(before) for p in before.rglob("*") if p.is_file()}
                    | {p.relative_to(after) for p in after.rglob("*") if p.is_file()})
@@ -91,6 +102,11 @@ def compare(before: Path, after: Path) -> list[str]:
             print(f"{'equal    ' if same else 'DIFFERENT'}  {name}")
             if not same:
                 problems.append(f"{name}: rows differ beyond the seconds column")
+        elif pixels and name.suffix.lower() == ".png":
+            same = _same_png_pixels(a, b)
+            print(f"{'same px  ' if same else 'DIFFERENT'}  {name}")
+            if not same:
+                problems.append(f"{name}: pixels or resolution differ")
         elif name.suffix.lower() in BYTE_EXACT:
             same = a.read_bytes() == b.read_bytes()
             print(f"{'identical' if same else 'DIFFERENT'}  {name}")
@@ -106,10 +122,12 @@ def compare(before: Path, after: Path) -> list[str]:
 
 
 def main(argv: list[str]) -> int:
+    pixels = "--pixels" in argv
+    argv = [a for a in argv if a != "--pixels"]
     if len(argv) != 2:
         print(__doc__.strip().splitlines()[2], file=sys.stderr)
         return 2
-    problems = compare(Path(argv[0]), Path(argv[1]))
+    problems = compare(Path(argv[0]), Path(argv[1]), pixels=pixels)
     for line in problems:
         print(line)
     print("no differences" if not problems else f"{len(problems)} differences")

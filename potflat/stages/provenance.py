@@ -33,7 +33,7 @@ def versions() -> dict[str, str]:
 
     out = {"potflat": potflat.__version__, "python": sys.version.split()[0],
            "numpy": numpy.__version__, "platform": platform.platform()}
-    for name in ("numba", "scipy", "trimesh", "cv2"):
+    for name in ("numba", "scipy", "trimesh", "cv2", "zlib_ng"):
         mod = sys.modules.get(name)
         if mod is not None:
             out[name] = getattr(mod, "__version__", "?")
