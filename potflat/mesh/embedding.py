@@ -17,7 +17,6 @@ import math
 
 import numpy as np
 
-from potflat.mesh.distortion import row_blocks
 
 #: Rings by which a folded cluster is grown at most before giving up on local repair.
 REPAIR_MAX_RINGS = 12
@@ -34,13 +33,13 @@ def signed_areas(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
     Returns
     -------
     (m,) float64
-        Computed in blocks of rows (no (m, 3, 2) temporaries on big meshes).
+        ``((b - a) x (c - a)) / 2`` of the corners ``a, b, c``: the relax solver's parallel
+        kernel (:func:`potflat.relax._kernels.springs.face_areas`), with its face type (int32).
     """
+    from potflat.relax._kernels.springs import face_areas
+
     out = np.empty(len(faces))
-    for s in row_blocks(len(faces)):
-        f = faces[s]
-        a, b, c = uv[f[:, 0]], uv[f[:, 1]], uv[f[:, 2]]
-        out[s] = 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    face_areas(np.ascontiguousarray(uv, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int32), out)
     return out
 
 
