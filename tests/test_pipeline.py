@@ -184,10 +184,11 @@ def test_every_stage_json_records_its_timings_by_step(tmp_path):
     rollout = result.stages["rollout"].summary["timings"]
     assert {"load", "rollout", "profile", "write", "total"} <= set(rollout)
     assert {"axis", "walls", "unroll", "untangle", "importance", "total"} <= set(rollout["rollout_steps"])
-    assert {"setup", "solve", "total"} <= set(result.stages["relax"].summary["timings"])
+    relax = result.stages["relax"].summary["timings"]
+    assert {"setup", "solve", "check", "figures", "write", "total"} <= set(relax)
     bake = result.stages["bake"].summary["timings"]
     assert {"prepare", "render", "figures", "total"} <= set(bake)
-    for timings in (rollout, rollout["rollout_steps"], bake):
+    for timings in (rollout, rollout["rollout_steps"], relax, bake):
         steps = [v for k, v in timings.items() if k != "total" and isinstance(v, float)]
         assert all(v >= 0 for v in steps) and sum(steps) <= timings["total"] + 1e-6
 
