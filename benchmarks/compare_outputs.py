@@ -8,8 +8,8 @@ part of file paths (the file's own folder and the folder compared) are set aside
 them what follows only from a JSON file's timings: the SHA-256 of a JSON input and a JSON
 file's size in a batch manifest. A CSV with a ``seconds`` column (the batch summary) is
 compared with that column and the folders set aside. With ``--pixels`` a PNG is compared by
-its decoded pixels and resolution (across a change of the deflate library). Prints one line per file and exits 1 on any difference or on a file that is in one
-folder only.
+its decoded pixels and resolution (across a change of the deflate library). Prints one line
+per file and exits 1 on any difference or on a file that is in one folder only.
 """
 from __future__ import annotations
 

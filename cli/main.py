@@ -42,12 +42,15 @@ def _interrupt(signum, frame) -> None:
 def _quiet_unraisable(unraisable) -> None:
     """``sys.unraisablehook``: an interrupt raised where Python cannot raise it (a finaliser, a
     weakref callback) is remembered (:data:`STOP`) and ends the command with its one line, so
-    Python's "Exception ignored ... Traceback" is not printed for it; anything else is."""
+    Python's "Exception ignored ... Traceback" is not printed for it. Once stopping, neither is
+    a finaliser's error: an interrupt that landed while Numba compiled leaves half-made LLVM
+    objects whose finalisers fail (llvmlite's ``ValueRef`` without ``_as_parameter_``).
+    Before a stop, every unraisable error is printed."""
     import sys
 
     from potflat_cli._errors import STOP
 
-    if isinstance(unraisable.exc_value, KeyboardInterrupt) and STOP:
+    if STOP:
         return
     sys.__unraisablehook__(unraisable)
 
