@@ -151,39 +151,3 @@ def test_stage_commands_use_the_shared_option_names(stage):
                if f"--{f.name.replace('_', '-')}" not in text]
     missing += [flag for flag in ("--output", "-o", "--name", "--quiet", "--json") if f" {flag} " not in text]
     assert not missing, f"potflat {stage} lacks {', '.join(missing)}"
-
-
-@pytest.mark.parametrize(("environ", "platform", "libc", "expected"), [
-    ({}, "linux", ("glibc", "2.36"), "glibc.malloc.hugetlb=1"),
-    ({"GLIBC_TUNABLES": "glibc.malloc.arena_max=2"}, "linux", ("glibc", "2.35"),
-     "glibc.malloc.arena_max=2:glibc.malloc.hugetlb=1"),
-    ({"GLIBC_TUNABLES": "glibc.malloc.hugetlb=0"}, "linux", ("glibc", "2.39"), None),  # the user's choice
-    ({}, "linux", ("glibc", "2.34"), None),  # no such tunable yet
-    ({}, "linux", ("", ""), None),  # musl
-    ({}, "linux", ("glibc", "unknown"), None),
-    ({}, "darwin", ("", ""), None),
-])
-def test_the_command_restarts_with_huge_pages_only_where_glibc_has_them(environ, platform, libc, expected):
-    from potflat_cli._start import huge_pages_environment
-
-    out = huge_pages_environment(environ, platform, libc)
-    assert (out if out is None else out["GLIBC_TUNABLES"]) == expected
-
-
-def test_the_restarted_process_has_the_tunable_once():
-    import os
-    import platform
-
-    from potflat_cli._start import HUGE_PAGES_GLIBC
-
-    libc, version = platform.libc_ver()
-    if sys.platform != "linux" or libc != "glibc" or tuple(map(int, version.split(".")[:2])) < HUGE_PAGES_GLIBC:
-        pytest.skip("no glibc with the huge-page tunable here")
-    code = ("import os; from potflat_cli._start import restart_with_huge_pages; restart_with_huge_pages(); "
-            "print(os.environ.get('GLIBC_TUNABLES'))")
-    env = {k: v for k, v in os.environ.items() if k != "GLIBC_TUNABLES"}
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env)
-    assert out.stdout.strip() == "glibc.malloc.hugetlb=1"
-    env["GLIBC_TUNABLES"] = "glibc.malloc.hugetlb=0"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env)
-    assert out.stdout.strip() == "glibc.malloc.hugetlb=0"
