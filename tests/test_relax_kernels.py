@@ -82,7 +82,13 @@ def test_preconditioner_is_symmetric_positive_and_matches_its_parts(hier):
     aha = np.sum(a * ha)
     jacobi = np.sum(a * a / diag[:, None])
     assert aha > jacobi > 0
-    assert pc.coarse_norm(a) == pytest.approx(aha - jacobi, rel=1e-10)
+    assert pc.coarse_norm(pc.restrict(a)) == pytest.approx(aha - jacobi, rel=1e-10)
+    # the restriction is linear: H0 of a combination from the combined restrictions
+    c = 0.3 * a - 1.7 * b
+    hc, hc_nodes = np.empty_like(c), np.empty_like(c)
+    pc.apply(c, hc)
+    pc.apply(c, hc_nodes, restricted=0.3 * pc.restrict(a) - 1.7 * pc.restrict(b))
+    np.testing.assert_allclose(hc_nodes, hc, rtol=1e-12, atol=1e-12 * np.abs(hc).max())
     # a constant field is a coarse field: the coarse terms dominate it
     ones = np.ones((n, 2))
     h1 = np.empty_like(ones)

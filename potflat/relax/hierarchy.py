@@ -134,11 +134,15 @@ class MultilevelPreconditioner:
         self.frac = hier.fractions(self.finest)
         self._corners: dict[int, np.ndarray] = {}  # restriction work space per column count
         n = len(hier.un)
-        self.weight_sums = self._down(self._restrict(np.ones((n, 1))))
+        self.weight_sums = self._down(self.restrict(np.ones((n, 1))))
         self.inv_mean: list[np.ndarray] = []
 
-    def _restrict(self, g: np.ndarray) -> np.ndarray:
-        """Per-vertex values ``g`` (n, k) restricted to the finest level's nodes."""
+    def restrict(self, g: np.ndarray) -> np.ndarray:
+        """Per-vertex values ``g`` (n, k) restricted to the finest level's nodes, (nodes, k).
+
+        Linear: a caller that keeps the restrictions of vectors it combines can combine them
+        on the nodes (:meth:`apply` and :meth:`coarse_norm` take them) instead of passing
+        over the vertices again."""
         k = g.shape[1]
         if k not in self._corners:
             self._corners[k] = np.empty((1 << (2 * self.finest), 4, k))
@@ -156,20 +160,22 @@ class MultilevelPreconditioner:
     def refresh(self, diag: np.ndarray) -> None:
         """Take the Hessian diagonal bound ``diag`` (n,) of the current state."""
         self.diag = diag
-        sums = self._down(self._restrict(diag.reshape(-1, 1)))
+        sums = self._down(self.restrict(diag.reshape(-1, 1)))
         self.inv_mean = [np.where(s > 0, self.theta * w / np.where(s > 0, s, 1.0), 0.0)
                          for s, w in zip(sums, self.weight_sums)]
 
-    def coarse_norm(self, r: np.ndarray) -> float:
-        """``r . (H0 - D^-1) r``, the coarse levels' part of ``r . H0 r``, for ``r`` (n, 2)."""
-        parts = self._down(self._restrict(r))
+    def coarse_norm(self, restricted: np.ndarray) -> float:
+        """``r . (H0 - D^-1) r``, the coarse levels' part of ``r . H0 r``, for ``r`` (n, 2)
+        given by its restriction ``restricted`` (:meth:`restrict`)."""
+        parts = self._down(restricted)
         return float(sum(np.sum(p * p * inv) for p, inv in zip(parts, self.inv_mean)))
 
-    def apply(self, r: np.ndarray, out: np.ndarray) -> None:
-        """``out = H0 r`` for per-vertex vectors ``r``, ``out`` (n, 2) (distinct arrays)."""
+    def apply(self, r: np.ndarray, out: np.ndarray, *, restricted: np.ndarray | None = None) -> None:
+        """``out = H0 r`` for per-vertex vectors ``r``, ``out`` (n, 2) (distinct arrays);
+        ``restricted``: :meth:`restrict` of ``r`` when the caller has it."""
         from potflat.relax._kernels.lbfgs import add_jacobi
 
-        parts = self._down(self._restrict(r))
+        parts = self._down(self.restrict(r) if restricted is None else restricted)
         z = parts[0] * self.inv_mean[0]
         for i, level in enumerate(self.levels[:-1]):
             finer = parts[i + 1] * self.inv_mean[i + 1]

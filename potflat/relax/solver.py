@@ -545,16 +545,21 @@ class _LBFGS:
         self.g = g.reshape(-1)
         if precond is not None:
             precond.refresh(sp.diag)
+            # the restrictions of the gradient and of every pair's y: the two-loop recursion's
+            # vector, a combination of these, is restricted on the grid nodes (no vertex pass)
+            self.rg = precond.restrict(g)
+            self.RY = np.empty((SOLVER.lbfgs_memory,) + self.rg.shape)
 
     def _combine(self, q, c, src, a, y, diag, scale, s) -> float:
         self.kl.combine(q, c, src, a, y, diag, scale, s, self._part)
         return float(np.sum(self._part))
 
-    def _initial(self, r: np.ndarray, scale: float, s: np.ndarray) -> float:
-        """``q = scale H0 r``; returns ``s . q``."""
+    def _initial(self, r: np.ndarray, scale: float, s: np.ndarray, restricted: np.ndarray | None) -> float:
+        """``q = scale H0 r`` (``restricted``: the preconditioner's restriction of ``r``);
+        returns ``s . q``."""
         if self.precond is None:
             return self._combine(self.q, scale, r, 0.0, r, self.sp.diag, 1.0, s)
-        self.precond.apply(r.reshape(-1, 2), self.q.reshape(-1, 2))
+        self.precond.apply(r.reshape(-1, 2), self.q.reshape(-1, 2), restricted=restricted)
         return self._combine(self.q, scale, self.q, 0.0, self.q, _NO_VECTOR, 1.0, s)
 
     def _direction(self) -> float:
@@ -562,16 +567,20 @@ class _LBFGS:
         q, g, tmp, S, Y, rho = self.q, self.g, self._tmp, self.S, self.Y, self.rho
         tmp = q if tmp is None else tmp  # without a preconditioner H0 is applied in place
         order = self.slots[::-1]  # newest first
+        preconditioned = self.precond is not None
         if not order:
-            return self._initial(g, -1.0, g)
+            return self._initial(g, -1.0, g, self.rg if preconditioned else None)
         gamma = 1.0 / (rho[order[0]] * self.yhy[order[0]])  # s.y / y.H0.y of the newest pair
         alpha = {}
         part = self._combine(tmp, -1.0, g, 0.0, g, _NO_VECTOR, 1.0, S[order[0]])
+        rtmp = -self.rg if preconditioned else None
         for k, j in enumerate(order):
             alpha[j] = rho[j] * part
             nxt = S[order[k + 1]] if k + 1 < len(order) else _NO_VECTOR
             part = self._combine(tmp, 1.0, tmp, -alpha[j], Y[j], _NO_VECTOR, 1.0, nxt)
-        part = self._initial(tmp, gamma, Y[order[-1]])
+            if preconditioned:
+                rtmp -= alpha[j] * self.RY[j]
+        part = self._initial(tmp, gamma, Y[order[-1]], rtmp)
         for k, j in enumerate(order[::-1]):  # oldest first
             beta = rho[j] * part
             nxt = Y[order[-2 - k]] if k + 1 < len(order) else g
@@ -593,7 +602,10 @@ class _LBFGS:
         sy, yhy = float(np.sum(self._part)), float(np.sum(self._part2))
         if self.precond is not None:  # H0 = D^-1 (in yhy already) + the coarse terms
             self.precond.refresh(self.sp.diag)
-            yhy += self.precond.coarse_norm(self.Y[slot].reshape(-1, 2))
+            rg_new = self.precond.restrict(g_new.reshape(-1, 2))
+            np.subtract(rg_new, self.rg, out=self.RY[slot])
+            self.rg = rg_new  # (the new point's: the caller moves there next)
+            yhy += self.precond.coarse_norm(self.RY[slot])
         if sy > 1e-300 and yhy > 0.0:
             self.rho[slot], self.yhy[slot] = 1.0 / sy, yhy
             self.slots.append(slot)
