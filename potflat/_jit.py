@@ -8,6 +8,13 @@ Use these decorators instead of calling :func:`numba.njit` with options elsewher
 ``fastmath`` is off everywhere: solver loops must not produce NaN or depend on
 reassociation (see umap #1228). Results must be bit-for-bit deterministic run to run,
 so parallel kernels only write to per-iteration slots (gather, never scatter ``+=``).
+
+Hot loops index with unsigned integers (``np.uint32(faces[t, 0])``, ``range(np.uint64(lo),
+np.uint64(hi))``): Numba wraps a negative signed index at every read (Python semantics),
+which costs a compare and a select per read and keeps LLVM from vectorising a loop over
+contiguous entries (relax at 2.5M vertices: the energy and gradient 0.74-0.85x, the fused
+L-BFGS passes 0.6-0.8x, results bit-identical). Only for indexing: NumPy's rules make an
+unsigned and a signed integer combine into a float.
 """
 from __future__ import annotations
 

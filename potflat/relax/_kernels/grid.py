@@ -75,10 +75,10 @@ def prolong(un, level, c, out):
     for i in prange(un.shape[0]):
         cx, fx = _cell_and_frac(un[i, 0], level)
         cy, fy = _cell_and_frac(un[i, 1], level)
-        n00 = cy * w + cx
-        n10 = n00 + 1
-        n01 = n00 + w
-        n11 = n01 + 1
+        n00 = np.uint64(cy * w + cx)
+        n10 = n00 + np.uint64(1)
+        n01 = n00 + np.uint64(w)
+        n11 = n01 + np.uint64(1)
         w00 = (1.0 - fx) * (1.0 - fy)
         w10 = fx * (1.0 - fy)
         w01 = (1.0 - fx) * fy
@@ -135,7 +135,7 @@ def restrict(frac, level, cell_start, g, corners, out):
             s10 = 0.0
             s01 = 0.0
             s11 = 0.0
-            for i in range(lo, hi):
+            for i in range(np.uint64(lo), np.uint64(hi)):
                 fx = frac[i, 0]
                 fy = frac[i, 1]
                 v = g[i, c]

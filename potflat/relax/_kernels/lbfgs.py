@@ -9,6 +9,8 @@ blocks) are done without threads: starting the thread team would cost more than 
 """
 from __future__ import annotations
 
+import numpy as np
+
 from potflat._jit import leaf, parallel, prange
 
 #: Entries per block of the partial sums (also the unit of the dot products' order).
@@ -26,7 +28,7 @@ def _combine_block(q, c, src, a, y, diag, scale, s, blk):
     hi = min(q.shape[0], lo + BLOCK)
     precondition = diag.shape[0] > 0
     dotted = s.shape[0] > 0
-    for i in range(lo, hi):
+    for i in range(np.uint64(lo), np.uint64(hi)):
         v = c * src[i] + a * y[i]
         if precondition:
             v *= scale / max(diag[i >> 1], DIAG_FLOOR)
@@ -73,7 +75,7 @@ def _pair_block(q, t, g_new, g_old, diag, s_out, y_out, blk):
     lo = blk * BLOCK
     hi = min(q.shape[0], lo + BLOCK)
     precondition = diag.shape[0] > 0
-    for i in range(lo, hi):
+    for i in range(np.uint64(lo), np.uint64(hi)):
         sv = t * q[i]
         yv = g_new[i] - g_old[i]
         s_out[i] = sv

@@ -175,7 +175,7 @@ def contact_max_step(x, d, seg, bprev, bnext, dhat, cell, cap, shrink):
         cross = ex * ry - ey * rx  # |ab| times the signed distance of v from the line
         if ee <= 0.0 or not 0.0 < rx * ex + ry * ey < ee or cross * cross >= dhat * dhat * ee:
             continue
-        c0, c1, c2 = triangle_area_polynomial(x, d, a, b, v, shrink)
+        c0, c1, c2 = triangle_area_polynomial(x, d, np.uint32(a), np.uint32(b), np.uint32(v), shrink)
         if cross < 0.0:  # v on the right of a -> b: the area is negative, and must stay so
             c0, c1, c2 = -c0, -c1, -c2
         if not _no_root_up_to(c0, c1, c2, best):

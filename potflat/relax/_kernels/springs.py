@@ -500,9 +500,9 @@ def face_areas(x, faces, out):
     out : (m,) float64
     """
     for t in prange(faces.shape[0]):
-        a0 = faces[t, 0]
-        a1 = faces[t, 1]
-        a2 = faces[t, 2]
+        a0 = np.uint32(faces[t, 0])
+        a1 = np.uint32(faces[t, 1])
+        a2 = np.uint32(faces[t, 2])
         out[t] = 0.5 * ((x[a1, 0] - x[a0, 0]) * (x[a2, 1] - x[a0, 1])
                         - (x[a1, 1] - x[a0, 1]) * (x[a2, 0] - x[a0, 0]))
 
@@ -553,10 +553,10 @@ def face_terms(x, faces, a_ref, eps, shape, terms, areas, below, coef, e_face):
     for b in prange(below.shape[0]):
         count = 0
         eb = 0.0
-        for t in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
-            a0 = faces[t, 0]
-            a1 = faces[t, 1]
-            a2 = faces[t, 2]
+        for t in range(np.uint64(b * BLOCK), np.uint64(min(m, (b + 1) * BLOCK))):
+            a0 = np.uint32(faces[t, 0])
+            a1 = np.uint32(faces[t, 1])
+            a2 = np.uint32(faces[t, 2])
             area = 0.5 * ((x[a1, 0] - x[a0, 0]) * (x[a2, 1] - x[a0, 1])
                           - (x[a1, 1] - x[a0, 1]) * (x[a2, 0] - x[a0, 0]))
             areas[t] = area
@@ -695,8 +695,8 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
         hd = 0.0
         xi = x[i, 0]
         yi = x[i, 1]
-        for p in range(ptr[i], ptr[i + 1]):
-            j = nbr[p]
+        for p in range(np.uint64(ptr[i]), np.uint64(ptr[i + 1])):
+            j = np.uint32(nbr[p])  # (unsigned: no negative-index wraparound at each read)
             dx = xi - x[j, 0]
             dy = yi - x[j, 1]
             ln = math.sqrt(dx * dx + dy * dy)
@@ -715,18 +715,20 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
                 gx += f * dx
                 gy += f * dy
         if shaped:
-            for q in range(vf_ptr[i], vf_ptr[i + 1]):
-                t = vf_tri[q]
+            for q in range(np.uint64(vf_ptr[i]), np.uint64(vf_ptr[i + 1])):
+                t = np.uint32(vf_tri[q])
                 ci = 0
                 if faces[t, 1] == i:
                     ci = 1
                 elif faces[t, 2] == i:
                     ci = 2
-                j = faces[t, (ci + 1) % 3]
-                l = faces[t, (ci + 2) % 3]
+                c_j = np.uint32((ci + 1) % 3)
+                c_l = np.uint32((ci + 2) % 3)
+                j = np.uint32(faces[t, c_j])
+                l = np.uint32(faces[t, c_l])
                 # cotangents of the rest angles at j and l
-                ct_j = shape[t, (ci + 1) % 3]
-                ct_l = shape[t, (ci + 2) % 3]
+                ct_j = shape[t, c_j]
+                ct_l = shape[t, c_l]
                 # the gradients at i of the map's Dirichlet energy and of the flat area
                 dgx = 0.5 * (ct_l * (xi - x[j, 0]) + ct_j * (xi - x[l, 0]))
                 dgy = 0.5 * (ct_l * (yi - x[j, 1]) + ct_j * (yi - x[l, 1]))
@@ -937,8 +939,9 @@ def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, weight, grad, dia
 def _area_polynomial(x, d, faces, f, shrink):
     """Coefficients ``(c0, c1, c2)`` of face ``f``'s signed area (doubled) along ``x + t d``
     minus ``1 - shrink`` of its area at ``x``: ``c0 + c1 t + c2 t^2``."""
-    # (int64 corners: one compiled type for the faces' int32 and the contact bound's int64)
-    return triangle_area_polynomial(x, d, np.int64(faces[f, 0]), np.int64(faces[f, 1]), np.int64(faces[f, 2]),
+    # (uint32 corners: one compiled type for the faces' int32 and the contact bound's int64,
+    # and no negative-index wraparound at each read)
+    return triangle_area_polynomial(x, d, np.uint32(faces[f, 0]), np.uint32(faces[f, 1]), np.uint32(faces[f, 2]),
                                     shrink)
 
 
@@ -996,7 +999,7 @@ def max_step(x, d, faces, cap, shrink, out, limiting):
     flag = limiting.shape[0] > 0
     for b in prange(nb):
         best = cap
-        for f in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
+        for f in range(np.uint64(b * BLOCK), np.uint64(min(m, (b + 1) * BLOCK))):
             c0, c1, c2 = _area_polynomial(x, d, faces, f, shrink)
             if flag:
                 limiting[f] = not _no_root_up_to(c0, c1, c2, cap)
@@ -1018,7 +1021,7 @@ def max_step_of(x, d, faces, face_list, cap, shrink):
     """
     best = cap
     for p in range(face_list.shape[0]):
-        c0, c1, c2 = _area_polynomial(x, d, faces, face_list[p], shrink)
+        c0, c1, c2 = _area_polynomial(x, d, faces, np.uint64(face_list[p]), shrink)
         if not _no_root_up_to(c0, c1, c2, best):
             best = min(best, _first_root(c0, c1, c2))
     return best
@@ -1252,7 +1255,7 @@ def dynamics_step(x, v, ptr, nbr, rst, k, relative, r_floor, friction, dt, x_out
         xi = x[i, 0]
         yi = x[i, 1]
         for p in range(ptr[i], ptr[i + 1]):
-            j = nbr[p]
+            j = np.uint32(nbr[p])  # (unsigned: no negative-index wraparound at each read)
             dx = xi - x[j, 0]
             dy = yi - x[j, 1]
             ln = math.sqrt(dx * dx + dy * dy)
