@@ -336,36 +336,38 @@ def build_csr(V, edges, cross, cross_rest):
     nc = cross.shape[0]
     deg = np.zeros(n + 1, np.int64)
     for s in range(ne):
-        deg[edges[s, 0] + 1] += 1
-        deg[edges[s, 1] + 1] += 1
+        deg[np.uint64(edges[s, 0] + 1)] += 1
+        deg[np.uint64(edges[s, 1] + 1)] += 1
     for s in range(nc):
-        deg[cross[s, 0] + 1] += 1
-        deg[cross[s, 1] + 1] += 1
+        deg[np.uint64(cross[s, 0] + 1)] += 1
+        deg[np.uint64(cross[s, 1] + 1)] += 1
     ptr = np.cumsum(deg)
     fill = ptr[:-1].copy()
     nbr = np.empty(2 * (ne + nc), np.int32)
     rst = np.empty(2 * (ne + nc))
     for s in range(ne):
-        i = edges[s, 0]
-        j = edges[s, 1]
+        i = np.uint64(edges[s, 0])
+        j = np.uint64(edges[s, 1])
         acc = 0.0
         for d in range(V.shape[1]):
             t = V[i, d] - V[j, d]
             acc += t * t
         _put_spring(fill, nbr, rst, i, j, math.sqrt(acc))
     for s in range(nc):
-        _put_spring(fill, nbr, rst, cross[s, 0], cross[s, 1], cross_rest[s])
+        _put_spring(fill, nbr, rst, np.uint64(cross[s, 0]), np.uint64(cross[s, 1]), cross_rest[s])
     return ptr, nbr, rst
 
 
 @leaf
 def _put_spring(fill, nbr, rst, i, j, r):
-    """Store spring ``(i, j)`` of rest length ``r`` at both endpoints' next CSR slots."""
-    nbr[fill[i]] = j
-    rst[fill[i]] = r
+    """Store spring ``(i, j)`` (unsigned) of rest length ``r`` at both endpoints' next CSR slots."""
+    slot = np.uint64(fill[i])
+    nbr[slot] = j
+    rst[slot] = r
     fill[i] += 1
-    nbr[fill[j]] = i
-    rst[fill[j]] = r
+    slot = np.uint64(fill[j])
+    nbr[slot] = i
+    rst[slot] = r
     fill[j] += 1
 
 
@@ -382,14 +384,14 @@ def vertex_faces(n, faces):
     deg = np.zeros(n + 1, np.int64)
     for f in range(m):
         for c in range(3):
-            deg[faces[f, c] + 1] += 1
+            deg[np.uint64(faces[f, c] + 1)] += 1
     ptr = np.cumsum(deg)
     fill = ptr[:-1].copy()
     tri = np.empty(3 * m, np.int32)
     for f in range(m):
         for c in range(3):
-            v = faces[f, c]
-            tri[fill[v]] = f
+            v = np.uint64(faces[f, c])
+            tri[np.uint64(fill[v])] = f
             fill[v] += 1
     return ptr, tri
 
