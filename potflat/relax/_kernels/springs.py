@@ -253,8 +253,8 @@ def halfedge_lengths(V, faces, out):
     """
     for f in prange(faces.shape[0]):
         for c in range(3):
-            a = faces[f, c]
-            b = faces[f, (c + 1) % 3]
+            a = np.uint32(faces[f, c])
+            b = np.uint32(faces[f, (c + 1) % 3])
             acc = 0.0
             for d in range(V.shape[1]):
                 t = V[b, d] - V[a, d]
