@@ -66,12 +66,15 @@ def bin_triangles(pix: np.ndarray, faces: np.ndarray, block_rows: float, nblocks
 @leaf
 def _corners(pix, faces, f):
     """Raster positions of face ``f``'s corners and twice its signed area ``d``."""
-    x0 = pix[faces[f, 0], 0]
-    y0 = pix[faces[f, 0], 1]
-    x1 = pix[faces[f, 1], 0]
-    y1 = pix[faces[f, 1], 1]
-    x2 = pix[faces[f, 2], 0]
-    y2 = pix[faces[f, 2], 1]
+    a = np.uint64(faces[f, 0])
+    b = np.uint64(faces[f, 1])
+    c = np.uint64(faces[f, 2])
+    x0 = pix[a, 0]
+    y0 = pix[a, 1]
+    x1 = pix[b, 0]
+    y1 = pix[b, 1]
+    x2 = pix[c, 0]
+    y2 = pix[c, 1]
     return x0, y0, x1, y1, x2, y2, (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
 
 
@@ -123,16 +126,18 @@ def rasterize_rows(pix, faces, ptr, idx, block_rows, row0, nrows, width, eps, fa
         b = first + bi
         ylo = b * block_rows
         yhi = min(ylo + block_rows, row0 + nrows)
-        for k in range(ptr[b], ptr[b + 1]):
-            f = idx[k]
+        for k in range(np.uint64(ptr[b]), np.uint64(ptr[b + 1])):
+            f = np.uint64(idx[k])
             x0, y0, x1, y1, x2, y2, d = _corners(pix, faces, f)
             if d == 0.0:
                 continue
             rlo, rhi, clo, chi = _sample_box(x0, y0, x1, y1, x2, y2, ylo, yhi, width, eps)
+            if chi < clo:  # an empty box (unsigned columns below)
+                continue
             for r in range(rlo, rhi + 1):
                 py = r + 0.5
-                rr = r - row0
-                for c in range(clo, chi + 1):
+                rr = np.uint64(r - row0)
+                for c in range(np.uint64(clo), np.uint64(chi + 1)):
                     if face_out[rr, c] >= 0:
                         continue
                     w0, w1, w2 = _barycentric(c + 0.5, py, x0, y0, x1, y1, x2, y2, d)
@@ -167,15 +172,16 @@ def cover_rows(pix, faces, ptr, idx, block_rows, eps, out):
     for b in prange(nblk):
         ylo = b * block_rows
         yhi = min(ylo + block_rows, nrows)
-        for k in range(ptr[b], ptr[b + 1]):
-            f = idx[k]
-            x0, y0, x1, y1, x2, y2, d = _corners(pix, faces, f)
+        for k in range(np.uint64(ptr[b]), np.uint64(ptr[b + 1])):
+            x0, y0, x1, y1, x2, y2, d = _corners(pix, faces, np.uint64(idx[k]))
             if d == 0.0:
                 continue
             rlo, rhi, clo, chi = _sample_box(x0, y0, x1, y1, x2, y2, ylo, yhi, width, eps)
-            for r in range(rlo, rhi + 1):
+            if rhi < rlo or chi < clo:  # an empty box (unsigned rows and columns below)
+                continue
+            for r in range(np.uint64(rlo), np.uint64(rhi + 1)):
                 py = r + 0.5
-                for c in range(clo, chi + 1):
+                for c in range(np.uint64(clo), np.uint64(chi + 1)):
                     if out[r, c]:
                         continue
                     w0, w1, w2 = _barycentric(c + 0.5, py, x0, y0, x1, y1, x2, y2, d)
@@ -230,18 +236,18 @@ def interpolate_vertex_attr(face, bary, faces, attr, n, out):
             for j in range(d):
                 acc[r, j] = 0.0
             cnt = 0
-            for i in range(r * n, r * n + n):
-                for q in range(c * n, c * n + n):
-                    f = face[i, q]
-                    if f < 0:
+            for i in range(np.uint64(r * n), np.uint64(r * n + n)):
+                for q in range(np.uint64(c * n), np.uint64(c * n + n)):
+                    if face[i, q] < 0:
                         continue
+                    f = np.uint32(face[i, q])
                     cnt += 1
                     w1 = bary[i, q, 0]
                     w2 = bary[i, q, 1]
                     w0 = 1.0 - w1 - w2
-                    a = faces[f, 0]
-                    b = faces[f, 1]
-                    e = faces[f, 2]
+                    a = np.uint64(faces[f, 0])
+                    b = np.uint64(faces[f, 1])
+                    e = np.uint64(faces[f, 2])
                     for j in range(d):
                         acc[r, j] += w0 * attr[a, j] + w1 * attr[b, j] + w2 * attr[e, j]
             for j in range(d):
@@ -265,11 +271,10 @@ def face_values(face, values, n, out):
         for c in range(w):
             acc = 0.0
             cnt = 0
-            for i in range(r * n, r * n + n):
-                for q in range(c * n, c * n + n):
-                    f = face[i, q]
-                    if f >= 0:
-                        acc += values[f]
+            for i in range(np.uint64(r * n), np.uint64(r * n + n)):
+                for q in range(np.uint64(c * n), np.uint64(c * n + n)):
+                    if face[i, q] >= 0:
+                        acc += values[np.uint32(face[i, q])]
                         cnt += 1
             out[r, c] = acc / cnt if cnt > 0 else np.nan
 
@@ -340,13 +345,15 @@ def _tap_rgb(buf, off, h, w, x, y, weight):
     w01 = tx * (1.0 - ty) * weight
     w10 = (1.0 - tx) * ty * weight
     w11 = tx * ty * weight
-    p00 = off + (j0 * w + i0) * 3
-    p01 = off + (j0 * w + i1) * 3
-    p10 = off + (j1 * w + i0) * 3
-    p11 = off + (j1 * w + i1) * 3
+    p00 = np.uint64(off + (j0 * w + i0) * 3)
+    p01 = np.uint64(off + (j0 * w + i1) * 3)
+    p10 = np.uint64(off + (j1 * w + i0) * 3)
+    p11 = np.uint64(off + (j1 * w + i1) * 3)
+    one = np.uint64(1)
+    two = np.uint64(2)
     red = w00 * buf[p00] + w01 * buf[p01] + w10 * buf[p10] + w11 * buf[p11]
-    green = w00 * buf[p00 + 1] + w01 * buf[p01 + 1] + w10 * buf[p10 + 1] + w11 * buf[p11 + 1]
-    blue = w00 * buf[p00 + 2] + w01 * buf[p01 + 2] + w10 * buf[p10 + 2] + w11 * buf[p11 + 2]
+    green = w00 * buf[p00 + one] + w01 * buf[p01 + one] + w10 * buf[p10 + one] + w11 * buf[p11 + one]
+    blue = w00 * buf[p00 + two] + w01 * buf[p01 + two] + w10 * buf[p10 + two] + w11 * buf[p11 + two]
     return red, green, blue
 
 
@@ -389,10 +396,12 @@ def sample_texture(face, bary, texcoords, untextured, lod, tex0, mips, mip_offse
             green = 0.0
             blue = 0.0
             cnt = 0
-            for i in range(r * n, r * n + n):
-                for q in range(c * n, c * n + n):
-                    f = face[i, q]
-                    if f < 0 or untextured[f]:
+            for i in range(np.uint64(r * n), np.uint64(r * n + n)):
+                for q in range(np.uint64(c * n), np.uint64(c * n + n)):
+                    if face[i, q] < 0:
+                        continue
+                    f = np.uint32(face[i, q])
+                    if untextured[f]:
                         continue
                     cnt += 1
                     w1 = bary[i, q, 0]
@@ -490,7 +499,7 @@ def heat_rgba(values, lo, hi, lut, coverage, grey, mix, out):
         for c in range(w):
             v = values[r, c]
             t = 0.0 if np.isnan(v) else min(max((v - lo) * scale, 0.0), 255.0)
-            idx = int(t + 0.5)
+            idx = np.uint64(t + 0.5)
             g = grey[r, c] * 255.0 if mix < 1.0 else 0.0
             if np.isnan(g):
                 g = 0.0
