@@ -20,21 +20,21 @@ def _is_space(c):
 
 @leaf
 def _skip_spaces(buf, i, n):
-    while i < n and _is_space(buf[i]):
+    while i < n and _is_space(buf[np.uint64(i)]):
         i += 1
     return i
 
 
 @leaf
 def _skip_line(buf, i, n):
-    while i < n and buf[i] != 10:
+    while i < n and buf[np.uint64(i)] != 10:
         i += 1
     return i
 
 
 @leaf
 def _token_end(buf, i, n):
-    while i < n and buf[i] != 10 and not _is_space(buf[i]):
+    while i < n and buf[np.uint64(i)] != 10 and not _is_space(buf[np.uint64(i)]):
         i += 1
     return i
 
@@ -72,10 +72,10 @@ def _parse_float(buf, i, n):
     ndig = 0
     exp10 = 0
     seen = False
-    while i < n and 48 <= buf[i] <= 57:
+    while i < n and 48 <= buf[np.uint64(i)] <= 57:
         seen = True
         if ndig < 18:
-            mant = mant * 10 + (buf[i] - 48)
+            mant = mant * 10 + (buf[np.uint64(i)] - 48)
             if mant > 0:
                 ndig += 1
         else:
@@ -83,10 +83,10 @@ def _parse_float(buf, i, n):
         i += 1
     if i < n and buf[i] == 46:
         i += 1
-        while i < n and 48 <= buf[i] <= 57:
+        while i < n and 48 <= buf[np.uint64(i)] <= 57:
             seen = True
             if ndig < 18:
-                mant = mant * 10 + (buf[i] - 48)
+                mant = mant * 10 + (buf[np.uint64(i)] - 48)
                 if mant > 0:
                     ndig += 1
                 exp10 -= 1
@@ -131,9 +131,9 @@ def _parse_int(buf, i, n):
         i += 1
     v = 0
     seen = False
-    while i < n and 48 <= buf[i] <= 57:
+    while i < n and 48 <= buf[np.uint64(i)] <= 57:
         if v < 10**15:
-            v = v * 10 + (buf[i] - 48)
+            v = v * 10 + (buf[np.uint64(i)] - 48)
         seen = True
         i += 1
     return (-v if neg else v), i, seen
@@ -345,18 +345,20 @@ def propagate_orientation(nbr, same):
         queue[0] = seed
         while head < tail:
             f = queue[head]
+            fu = np.uint64(f)
             head += 1
             for k in range(3):
-                g = nbr[f, k]
+                g = nbr[fu, k]
                 if g < 0:
                     continue
-                want = flip[f] ^ same[f, k]
-                if component[g] < 0:
-                    component[g] = ncomp
-                    flip[g] = want
+                gu = np.uint64(g)
+                want = flip[fu] ^ same[fu, k]
+                if component[gu] < 0:
+                    component[gu] = ncomp
+                    flip[gu] = want
                     queue[tail] = g
                     tail += 1
-                elif flip[g] != want and g > f:
+                elif flip[gu] != want and g > f:
                     conflicts += 1
         ncomp += 1
     return flip, component, conflicts
@@ -401,9 +403,11 @@ def fan_joins(h1, h2, same):
 
 @leaf
 def _find(parent, x):
-    while parent[x] != x:
-        parent[x] = parent[parent[x]]
-        x = parent[x]
+    p = np.uint64(parent[x])
+    while p != x:
+        parent[x] = parent[p]
+        x = np.uint64(parent[x])
+        p = np.uint64(parent[x])
     return x
 
 
@@ -427,8 +431,8 @@ def union_find(n, a, b):
     """
     parent = np.arange(n)
     for i in range(a.shape[0]):
-        x = _find(parent, a[i])
-        y = _find(parent, b[i])
+        x = _find(parent, np.uint64(a[i]))
+        y = _find(parent, np.uint64(b[i]))
         if x < y:
             parent[y] = x
         elif y < x:
@@ -436,7 +440,7 @@ def union_find(n, a, b):
     label = np.full(n, -1, np.int64)
     count = 0
     for v in range(n):
-        r = _find(parent, v)
+        r = _find(parent, np.uint64(v))
         if label[r] < 0:
             label[r] = count
             count += 1
@@ -521,7 +525,7 @@ def edge_table(F, n):
     start = np.zeros(n + 1, np.int64)
     for f in range(m):
         for k in range(3):
-            start[min(F[f, k], F[f, (k + 1) % 3]) + 1] += 1
+            start[np.uint64(min(F[f, k], F[f, (k + 1) % 3]) + 1)] += 1
     for v in range(n):
         start[v + 1] += start[v]
     fill = start[:-1].copy()
@@ -531,10 +535,11 @@ def edge_table(F, n):
         for k in range(3):
             a = F[f, k]
             b = F[f, (k + 1) % 3]
-            p = fill[min(a, b)]
+            lo = np.uint64(min(a, b))
+            p = np.uint64(fill[lo])
             bucket[p] = 3 * f + k
             other[p] = max(a, b)
-            fill[min(a, b)] = p + 1
+            fill[lo] = p + np.uint64(1)
     # sort each bucket by the other endpoint (buckets are small) and number the edges
     edge_of = np.empty(3 * m, np.int64)
     ne = 0
@@ -554,14 +559,14 @@ def edge_table(F, n):
         for a in range(s, e):
             if a == s or other[a - 1] != other[a]:
                 ne += 1
-            edge_of[bucket[a]] = ne - 1
+            edge_of[np.uint64(bucket[a])] = ne - 1
     edges = np.empty((ne, 2), np.int64)
     count = np.zeros(ne, np.int64)
     halves = np.full((ne, 2), -1, np.int64)
     for v in range(n):
-        for a in range(start[v], start[v + 1]):
+        for a in range(np.uint64(start[v]), np.uint64(start[v + 1])):
             x = bucket[a]
-            k = edge_of[x]
+            k = np.uint64(edge_of[np.uint64(x)])
             edges[k, 0] = v
             edges[k, 1] = other[a]
             if count[k] < 2:
@@ -593,7 +598,7 @@ def face_pairs(edges, count, halves, n):
     start = np.zeros(n + 1, np.int64)
     for e in range(ne):
         if count[e] == 2 and halves[e, 0] // 3 != halves[e, 1] // 3:
-            start[edges[e, 1] + 1] += 1
+            start[np.uint64(edges[e, 1] + 1)] += 1
     for v in range(n):
         start[v + 1] += start[v]
     p = start[n]
@@ -603,8 +608,9 @@ def face_pairs(edges, count, halves, n):
         f0 = halves[e, 0] // 3
         f1 = halves[e, 1] // 3
         if count[e] == 2 and f0 != f1:
-            k = start[edges[e, 1]]
-            start[edges[e, 1]] += 1
+            hi = np.uint64(edges[e, 1])
+            k = np.uint64(start[hi])
+            start[hi] = k + np.uint64(1)
             pairs[k, 0] = min(f0, f1)
             pairs[k, 1] = max(f0, f1)
             shared[k, 0] = edges[e, 0]
@@ -614,9 +620,10 @@ def face_pairs(edges, count, halves, n):
 
 @leaf
 def _corner_ends(F, h):
-    """Corners of half-edge ``h`` at its lower and at its higher vertex (``h`` first on a tie)."""
-    nh = h - h % 3 + (h + 1) % 3
-    if F[h // 3, h % 3] > F[nh // 3, nh % 3]:
+    """Corners of half-edge ``h`` (uint64) at its lower and at its higher vertex (``h`` first on a tie)."""
+    three = np.uint64(3)  # unsigned division (an int64 literal would make it a float)
+    nh = h - h % three + (h + np.uint64(1)) % three
+    if F[h // three, h % three] > F[nh // three, nh % three]:
         return nh, h
     return h, nh
 
@@ -642,10 +649,11 @@ def half_edge_keys(F, theta, n):
     """
     m3 = 3 * F.shape[0]
     key = np.empty(m3, np.int64)
-    for h in range(m3):
+    three = np.uint64(3)
+    for h in range(np.uint64(m3)):
         lo, hi = _corner_ends(F, h)
         t = np.floor(theta[lo] / (2.0 * np.pi) + 0.5)
-        key[h] = (F[lo // 3, lo % 3] * n + F[hi // 3, hi % 3]) * 8 + int(min(max(t, -4.0), 3.0)) + 4
+        key[h] = (F[lo // three, lo % three] * n + F[hi // three, hi % three]) * 8 + int(min(max(t, -4.0), 3.0)) + 4
     return key
 
 
@@ -678,8 +686,8 @@ def corner_joins(F, theta, key, order):
     for i in range(m3 - 1):
         if key[order[i]] // 8 != key[order[i + 1]] // 8:
             continue
-        lo1, hi1 = _corner_ends(F, order[i])
-        lo2, hi2 = _corner_ends(F, order[i + 1])
+        lo1, hi1 = _corner_ends(F, np.uint64(order[i]))
+        lo2, hi2 = _corner_ends(F, np.uint64(order[i + 1]))
         if abs(theta[lo1] - theta[lo2]) < np.pi:
             a[k] = lo1
             b[k] = lo2
@@ -762,7 +770,7 @@ def pair_csr(pairs, m):
     # entry k is pair k % p at its endpoint k // p (the first endpoints' entries first)
     indptr = np.zeros(m + 1, np.int64)
     for k in range(2 * p):
-        indptr[pairs[k % p, k // p] + 1] += 1
+        indptr[np.uint64(pairs[k % p, k // p] + 1)] += 1
     for r in range(m):
         indptr[r + 1] += indptr[r]
     fill = indptr[:-1].copy()
@@ -770,10 +778,11 @@ def pair_csr(pairs, m):
     pair_of = np.empty(2 * p, np.int64)
     for k in range(2 * p):
         e = k % p
-        i = pairs[e, k // p]
-        indices[fill[i]] = pairs[e, 1 - k // p]
-        pair_of[fill[i]] = e
-        fill[i] += 1
+        i = np.uint64(pairs[e, k // p])
+        q = np.uint64(fill[i])
+        indices[q] = pairs[e, 1 - k // p]
+        pair_of[q] = e
+        fill[i] = q + np.uint64(1)
     for r in range(m):  # insertion sort by neighbour, stable (rows are short)
         s = indptr[r]
         for a in range(s + 1, indptr[r + 1]):
@@ -813,19 +822,21 @@ def vertex_normal_sums(V, F):
     acc = np.zeros((n, 3))
     area = np.zeros(n)
     for f in range(F.shape[0]):
-        a = F[f, 0]
-        ax = V[F[f, 1], 0] - V[a, 0]
-        ay = V[F[f, 1], 1] - V[a, 1]
-        az = V[F[f, 1], 2] - V[a, 2]
-        bx = V[F[f, 2], 0] - V[a, 0]
-        by = V[F[f, 2], 1] - V[a, 1]
-        bz = V[F[f, 2], 2] - V[a, 2]
+        v0 = np.uint64(F[f, 0])
+        v1 = np.uint64(F[f, 1])
+        v2 = np.uint64(F[f, 2])
+        ax = V[v1, 0] - V[v0, 0]
+        ay = V[v1, 1] - V[v0, 1]
+        az = V[v1, 2] - V[v0, 2]
+        bx = V[v2, 0] - V[v0, 0]
+        by = V[v2, 1] - V[v0, 1]
+        bz = V[v2, 2] - V[v0, 2]
         cx = ay * bz - az * by
         cy = az * bx - ax * bz
         cz = ax * by - ay * bx
         w = np.sqrt(cx * cx + cy * cy + cz * cz) / 6.0
         for c in range(3):
-            v = F[f, c]
+            v = np.uint64(F[f, c])
             acc[v, 0] += cx
             acc[v, 1] += cy
             acc[v, 2] += cz
@@ -886,9 +897,9 @@ def triangle_areas(V, F):
     m = F.shape[0]
     out = np.empty(m)
     for f in prange(m):
-        a = F[f, 0]
-        b = F[f, 1]
-        c = F[f, 2]
+        a = np.uint64(F[f, 0])
+        b = np.uint64(F[f, 1])
+        c = np.uint64(F[f, 2])
         d1x = V[b, 0] - V[a, 0]
         d1y = V[b, 1] - V[a, 1]
         d1z = V[b, 2] - V[a, 2]
@@ -930,9 +941,9 @@ def face_geometry(V, F):
     longest2 = np.empty(m)
     centroid = np.empty((m, 3))
     for f in prange(m):
-        a = F[f, 0]
-        b = F[f, 1]
-        c = F[f, 2]
+        a = np.uint64(F[f, 0])
+        b = np.uint64(F[f, 1])
+        c = np.uint64(F[f, 2])
         e0x = V[b, 0] - V[a, 0]
         e0y = V[b, 1] - V[a, 1]
         e0z = V[b, 2] - V[a, 2]
@@ -1030,11 +1041,13 @@ def flat_face_maps(uv, F, frames):
     sigma_max = np.empty(m)
     sigma_min = np.empty(m)
     for f in prange(m):
-        p = F[f, 0]
-        w1x = uv[F[f, 1], 0] - uv[p, 0]
-        w1y = uv[F[f, 1], 1] - uv[p, 1]
-        w2x = uv[F[f, 2], 0] - uv[p, 0]
-        w2y = uv[F[f, 2], 1] - uv[p, 1]
+        p = np.uint64(F[f, 0])
+        q1 = np.uint64(F[f, 1])
+        q2 = np.uint64(F[f, 2])
+        w1x = uv[q1, 0] - uv[p, 0]
+        w1y = uv[q1, 1] - uv[p, 1]
+        w2x = uv[q2, 0] - uv[p, 0]
+        w2y = uv[q2, 1] - uv[p, 1]
         area_2d[f] = 0.5 * (w1x * w2y - w1y * w2x)
         inv11 = frames[f, 0]
         inv12 = frames[f, 1]
@@ -1059,8 +1072,10 @@ def edge_lengths(P, E):
     out = np.empty(k)
     for i in prange(k):
         s = 0.0
+        e0 = np.uint64(E[i, 0])
+        e1 = np.uint64(E[i, 1])
         for j in range(d):
-            x = P[E[i, 0], j] - P[E[i, 1], j]
+            x = P[e0, j] - P[e1, j]
             s += x * x
         out[i] = np.sqrt(s)
     return out
@@ -1101,14 +1116,14 @@ def triangle_cells(faces, uv, ox, oy, cell, gx, gy, start, items):
         start[0] = 0
     total = 0
     for t in range(faces.shape[0]):
-        a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
+        a, b, c = np.uint64(faces[t, 0]), np.uint64(faces[t, 1]), np.uint64(faces[t, 2])
         x0, x1 = _cell_range(min(uv[a, 0], uv[b, 0], uv[c, 0]), max(uv[a, 0], uv[b, 0], uv[c, 0]), ox, cell, gx)
         y0, y1 = _cell_range(min(uv[a, 1], uv[b, 1], uv[c, 1]), max(uv[a, 1], uv[b, 1], uv[c, 1]), oy, cell, gy)
         for cx in range(x0, x1 + 1):
             for cy in range(y0, y1 + 1):
                 k = cx * gy + cy
                 if fill:
-                    items[start[k + 1]] = t
+                    items[np.uint64(start[k + 1])] = t
                     start[k + 1] += 1
                 else:
                     start[k + 1] += 1
@@ -1131,18 +1146,19 @@ def centres_in_faces(faces, uv, ox, oy, cell, gy, start, items, first, counts, p
     gx = (start.shape[0] - 1) // gy
     fill = first.shape[0] > 0
     for i in prange(faces.shape[0]):
-        a0, a1, a2 = faces[i, 0], faces[i, 1], faces[i, 2]
+        a0, a1, a2 = np.uint64(faces[i, 0]), np.uint64(faces[i, 1]), np.uint64(faces[i, 2])
         px = (uv[a0, 0] + uv[a1, 0] + uv[a2, 0]) / 3.0
         py = (uv[a0, 1] + uv[a1, 1] + uv[a2, 1]) / 3.0
         cx, _ = _cell_range(px, px, ox, cell, gx)
         cy, _ = _cell_range(py, py, oy, cell, gy)
         k = cx * gy + cy
         n_in = 0
-        for q in range(start[k], start[k + 1]):
+        for q in range(np.uint64(start[k]), np.uint64(start[k + 1])):
             j = items[q]
             if j == i:
                 continue
-            b0, b1, b2 = faces[j, 0], faces[j, 1], faces[j, 2]
+            ju = np.uint64(j)
+            b0, b1, b2 = np.uint64(faces[ju, 0]), np.uint64(faces[ju, 1]), np.uint64(faces[ju, 2])
             if (b0 == a0 or b0 == a1 or b0 == a2 or b1 == a0 or b1 == a1 or b1 == a2
                     or b2 == a0 or b2 == a1 or b2 == a2):
                 continue
