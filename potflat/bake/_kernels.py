@@ -424,7 +424,7 @@ def sample_texture(face, bary, texcoords, untextured, lod, tex0, mips, mip_offse
                         xs = x * wl / W0
                         ys = y * h / H0
                         if level == 0:
-                            dr, dg, db = _tap_rgb(tex0, 0, h, wl, xs, ys, weight)
+                            dr, dg, db = _tap_rgb(tex0, np.int64(0), h, wl, xs, ys, weight)  # (one signature)
                         else:
                             dr, dg, db = _tap_rgb(mips, mip_offsets[level], h, wl, xs, ys, weight)
                         red += dr

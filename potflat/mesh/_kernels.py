@@ -155,7 +155,7 @@ def obj_count(buf):
     """
     n = buf.shape[0]
     counts = np.zeros(6, np.int64)
-    i = 0
+    i = np.int64(0)  # (not a literal: one compiled signature of the helpers it is passed to)
     while i < n:
         i = _skip_spaces(buf, i, n)
         if i < n and buf[i] != 10 and buf[i] != 35:
@@ -228,7 +228,7 @@ def obj_fill(buf, counts):
     jl = 0
     line = 0
     bad_line = 0
-    i = 0
+    i = np.int64(0)  # (not a literal: one compiled signature of the helpers it is passed to)
     while i < n:
         line += 1
         i = _skip_spaces(buf, i, n)
