@@ -799,6 +799,19 @@ def pair_csr(pairs, m):
 
 
 @leaf
+def _face_cross(V, a, b, c):
+    """``(V[b] - V[a]) x (V[c] - V[a])`` of the triangle ``a, b, c`` (unsigned indices): its
+    normal times twice its area."""
+    d1x = V[b, 0] - V[a, 0]
+    d1y = V[b, 1] - V[a, 1]
+    d1z = V[b, 2] - V[a, 2]
+    d2x = V[c, 0] - V[a, 0]
+    d2y = V[c, 1] - V[a, 1]
+    d2z = V[c, 2] - V[a, 2]
+    return d1y * d2z - d1z * d2y, d1z * d2x - d1x * d2z, d1x * d2y - d1y * d2x
+
+
+@leaf
 def vertex_normal_sums(V, F):
     """Sum of the adjacent faces' cross products and a third of their areas at each vertex.
 
@@ -822,18 +835,7 @@ def vertex_normal_sums(V, F):
     acc = np.zeros((n, 3))
     area = np.zeros(n)
     for f in range(F.shape[0]):
-        v0 = np.uint64(F[f, 0])
-        v1 = np.uint64(F[f, 1])
-        v2 = np.uint64(F[f, 2])
-        ax = V[v1, 0] - V[v0, 0]
-        ay = V[v1, 1] - V[v0, 1]
-        az = V[v1, 2] - V[v0, 2]
-        bx = V[v2, 0] - V[v0, 0]
-        by = V[v2, 1] - V[v0, 1]
-        bz = V[v2, 2] - V[v0, 2]
-        cx = ay * bz - az * by
-        cy = az * bx - ax * bz
-        cz = ax * by - ay * bx
+        cx, cy, cz = _face_cross(V, np.uint64(F[f, 0]), np.uint64(F[f, 1]), np.uint64(F[f, 2]))
         w = np.sqrt(cx * cx + cy * cy + cz * cz) / 6.0
         for c in range(3):
             v = np.uint64(F[f, c])
@@ -897,18 +899,7 @@ def triangle_areas(V, F):
     m = F.shape[0]
     out = np.empty(m)
     for f in prange(m):
-        a = np.uint64(F[f, 0])
-        b = np.uint64(F[f, 1])
-        c = np.uint64(F[f, 2])
-        d1x = V[b, 0] - V[a, 0]
-        d1y = V[b, 1] - V[a, 1]
-        d1z = V[b, 2] - V[a, 2]
-        d2x = V[c, 0] - V[a, 0]
-        d2y = V[c, 1] - V[a, 1]
-        d2z = V[c, 2] - V[a, 2]
-        cx = d1y * d2z - d1z * d2y
-        cy = d1z * d2x - d1x * d2z
-        cz = d1x * d2y - d1y * d2x
+        cx, cy, cz = _face_cross(V, np.uint64(F[f, 0]), np.uint64(F[f, 1]), np.uint64(F[f, 2]))
         out[f] = 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz)
     return out
 
@@ -953,10 +944,7 @@ def face_geometry(V, F):
         e2x = V[a, 0] - V[c, 0]
         e2y = V[a, 1] - V[c, 1]
         e2z = V[a, 2] - V[c, 2]
-        # (b - a) x (c - a) = e0 x (-e2)
-        cx = e2y * e0z - e2z * e0y
-        cy = e2z * e0x - e2x * e0z
-        cz = e2x * e0y - e2y * e0x
+        cx, cy, cz = _face_cross(V, a, b, c)
         cross[f, 0] = cx
         cross[f, 1] = cy
         cross[f, 2] = cz
