@@ -455,22 +455,32 @@ def halve_masked(img, valid, out, out_valid):
     """
     H, W, C = img.shape
     h, w = out_valid.shape
-    acc = np.empty((h, C))
     for r in prange(h):
-        a = acc[r]
+        i0 = np.uint64(2 * r)
+        i1 = i0 + np.uint64(1)
+        row2 = 2 * r + 1 < H  # (the last block of an odd height has one row)
         for c in range(w):
-            for ch in range(C):
-                a[ch] = 0.0
-            cnt = 0
-            for i in range(2 * r, min(2 * r + 2, H)):
-                for j in range(2 * c, min(2 * c + 2, W)):
-                    if valid[i, j]:
-                        cnt += 1
-                        for ch in range(C):
-                            a[ch] += img[i, j, ch]
+            j0 = np.uint64(2 * c)
+            j1 = j0 + np.uint64(1)
+            col2 = 2 * c + 1 < W
+            v00 = valid[i0, j0]
+            v01 = col2 and valid[i0, j1]
+            v10 = row2 and valid[i1, j0]
+            v11 = row2 and col2 and valid[i1, j1]
+            cnt = int(v00) + int(v01) + int(v10) + int(v11)
             out_valid[r, c] = cnt > 0
             for ch in range(C):
-                out[r, c, ch] = int(a[ch] / cnt + 0.5) if cnt > 0 else 0
+                # the valid texels in row-major order, as a running sum
+                acc = 0.0
+                if v00:
+                    acc += img[i0, j0, ch]
+                if v01:
+                    acc += img[i0, j1, ch]
+                if v10:
+                    acc += img[i1, j0, ch]
+                if v11:
+                    acc += img[i1, j1, ch]
+                out[r, c, ch] = int(acc / cnt + 0.5) if cnt > 0 else 0
 
 
 @parallel
