@@ -1256,7 +1256,7 @@ def dynamics_step(x, v, ptr, nbr, rst, k, relative, r_floor, friction, dt, x_out
         es = 0.0
         xi = x[i, 0]
         yi = x[i, 1]
-        for p in range(ptr[i], ptr[i + 1]):
+        for p in range(np.uint64(ptr[i]), np.uint64(ptr[i + 1])):
             j = np.uint32(nbr[p])  # (unsigned: no negative-index wraparound at each read)
             dx = xi - x[j, 0]
             dy = yi - x[j, 1]
