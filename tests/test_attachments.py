@@ -133,3 +133,57 @@ def test_synthetic_handles_if_available():
     assert att.face_mask[handle].mean() > 0.85
     assert att.face_mask[~handle].mean() < 0.001
     assert len(att.components) == 2
+
+
+def _slow_coverage(ih, ir, tv, nh, nr, max_bins):
+    """angle_coverage by sets: the bins of each target cell and of each cell's own points."""
+    def n_bins(ring):
+        return int(min(max(np.floor(2 * np.pi * (ring + 0.5)), 6), max_bins))
+
+    def bin_of(t, ring):
+        return min(int(t / (2 * np.pi) * n_bins(ring)), n_bins(ring) - 1)
+
+    around, own = {}, {}
+    for h, r, t in zip(ih.tolist(), ir.tolist(), tv.tolist()):
+        own.setdefault((h, r), set()).add(bin_of(t, r))
+        for dh in (-1, 0, 1):
+            for dr in (-1, 0, 1):
+                if 0 <= h + dh < nh and r + dr >= 0:
+                    around.setdefault((h + dh, r + dr), set()).add(bin_of(t, r + dr))
+    return ({h * nr + r: len(b) for (h, r), b in around.items()}, {h * nr + r: len(b) for (h, r), b in own.items()})
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_angle_coverage_kernel_matches_sets(seed):
+    from potflat.mesh._kernels import angle_coverage
+
+    rng = np.random.default_rng(seed)
+    ih = rng.integers(0, 6, 400)
+    ir = rng.integers(0, 9, 400)
+    tv = rng.uniform(0, 2 * np.pi, 400)
+    tv[:5] = np.nextafter(2 * np.pi, 0)  # the last bin
+    nh, nr, max_bins = 6, 10, 16  # the outer rings hit the bin limit
+    own_cell = ih * nr + ir
+    order = np.argsort(own_cell, kind="stable")
+    cells, start = np.unique(own_cell[order], return_index=True)
+    ptr = np.append(start, len(order)).astype(np.int64)
+    around, own = _slow_coverage(ih, ir, tv, nh, nr, max_bins)
+    targets = np.array(sorted(around), dtype=np.int64)
+    count, own_count = np.empty(len(targets), np.int64), np.empty(len(cells), np.int64)
+    angle_coverage(cells.astype(np.int64), ptr, tv[order], targets, nh, nr, max_bins, count, own_count)
+    assert count.tolist() == [around[t] for t in targets.tolist()]
+    assert own_count.tolist() == [own[c] for c in cells.tolist()]
+
+
+def test_lower_medians_kernel():
+    from potflat.mesh._kernels import lower_medians
+
+    rng = np.random.default_rng(2)
+    values = rng.normal(size=60)
+    values[10:14] = 1.5  # ties
+    start = np.array([0, 7, 8, 10, 30], np.int64)
+    stop = np.array([7, 8, 10, 30, 60], np.int64)
+    out = np.empty(len(start))
+    lower_medians(values, start, stop, out)
+    expected = [np.sort(values[a:b])[(b - a + 1) // 2 - 1] for a, b in zip(start, stop)]
+    assert out.tolist() == expected

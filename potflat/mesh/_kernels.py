@@ -1156,3 +1156,89 @@ def centres_in_faces(faces, uv, ox, oy, cell, gy, start, items, first, counts, p
                 n_in += 1
         if not fill:
             counts[i] = n_in
+
+
+@leaf
+def _angle_bins(ring, max_bins):
+    """Angle bins of a cell ring: about one cell of arc each at the ring's mid radius."""
+    return min(max(np.floor((2.0 * np.pi) * (ring + 0.5)), 6.0), float(max_bins))
+
+
+@leaf
+def _distinct_bins(seen, tv, ptr, j, nbins):
+    """Mark in ``seen`` the angle bins (of ``nbins``) of cell ``j``'s points; the number newly marked."""
+    new = 0
+    for k in range(np.uint64(ptr[j]), np.uint64(ptr[j + 1])):
+        b = min(np.int64(tv[k] / (2.0 * np.pi) * nbins), nbins - 1)
+        if not seen[b]:
+            seen[b] = True
+            new += 1
+    return new
+
+
+@parallel
+def angle_coverage(cells, ptr, tv, targets, nh, nr, max_bins, target_count, own_count):
+    """Angle bins covered by the points of each meridian-plane cell and of its 3 x 3 cells.
+
+    Cells are numbered ``row * nr + ring`` (row in ``[0, nh)``, ring ``>= 0``); a ring has
+    ``clip(floor(2 pi (ring + 1/2)), 6, max_bins)`` angle bins, and a point at angle ``t``
+    lies in bin ``floor(t / (2 pi) * bins)`` of a ring (the last bin at most).
+
+    Parameters
+    ----------
+    cells : (u,) int64
+        The cells holding points, ascending.
+    ptr : (u + 1,) int64
+        Cell ``cells[i]`` holds the points ``ptr[i]:ptr[i + 1]`` of ``tv``.
+    tv : (s,) float64
+        Angle in ``[0, 2 pi)`` of each point, grouped by cell.
+    targets : (t,) int64
+        Cells to measure, each within one row and one ring of a cell in ``cells``.
+    nh, nr, max_bins : int
+        Rows, rings per row (every ring in ``cells`` below ``nr - 1``), largest bin count.
+    target_count : (t,) int64
+        Output: the bins of each target's ring holding a point of its 3 x 3 cells.
+    own_count : (u,) int64
+        Output: the bins of each cell's ring holding one of its own points.
+    """
+    u = cells.shape[0]
+    for i in prange(targets.shape[0]):
+        row = targets[i] // nr
+        ring = targets[i] % nr
+        nbins = np.int64(_angle_bins(ring, max_bins))
+        seen = np.zeros(nbins, np.bool_)
+        count = 0
+        for dh in range(-1, 2):
+            sh = row - dh
+            if sh < 0 or sh >= nh:
+                continue
+            for dr in range(-1, 2):
+                sr = ring - dr
+                if sr < 0 or sr >= nr:
+                    continue
+                j = np.searchsorted(cells, sh * nr + sr)
+                if j < u and cells[j] == sh * nr + sr:
+                    count += _distinct_bins(seen, tv, ptr, j, nbins)
+        target_count[i] = count
+    for j in prange(u):
+        nbins = np.int64(_angle_bins(cells[j] % nr, max_bins))
+        seen = np.zeros(nbins, np.bool_)
+        own_count[j] = _distinct_bins(seen, tv, ptr, j, nbins)
+
+
+@parallel
+def lower_medians(values, start, stop, out):
+    """The lower median of each segment of ``values``: its element of rank ``ceil(k / 2) - 1``
+    (from 0) among the segment's ``k`` values in ascending order.
+
+    Parameters
+    ----------
+    values : (s,) float64
+    start, stop : (g,) int64
+        Segment ``j`` is ``values[start[j]:stop[j]]`` (not empty).
+    out : (g,) float64
+        Output.
+    """
+    for j in prange(out.shape[0]):
+        segment = np.sort(values[start[j]:stop[j]])
+        out[j] = segment[(segment.shape[0] + 1) // 2 - 1]

@@ -39,7 +39,6 @@ from potflat.rollout.walls import (
     check_mesh,
     cylindrical,
     unique_ints,
-    weighted_quantiles,
 )
 
 #: Automatic cell size: at least this many median edge lengths ...
@@ -313,46 +312,56 @@ def _coverage_pass(hv: np.ndarray, rv: np.ndarray, tv: np.ndarray, cell: float,
     offset : (s,) float64
         Distance from the revolution surface in the meridian plane (NaN when none found).
     """
+    from potflat.mesh._kernels import angle_coverage, lower_medians  # Numba: imported on first use
+
     ih = np.floor(hv / cell).astype(np.int64)
     ir = np.floor(rv / cell).astype(np.int64)
     nh = int(ih.max()) + 1
     nr = int(ir.max()) + 2
 
     def n_ang(ring: np.ndarray) -> np.ndarray:
-        # angle bins about one cell of arc wide at the ring's mid radius
+        # angle bins about one cell of arc wide at the ring's mid radius (as angle_coverage counts them)
         return np.clip(np.floor(2 * np.pi * (ring + 0.5)), 6, _MAX_ANGLE_BINS).astype(np.int64)
 
-    def occupied(dh: int, dr: int) -> np.ndarray:
-        th, tr = ih + dh, ir + dr
-        ok = (th >= 0) & (th < nh) & (tr >= 0)
-        na = n_ang(tr[ok])
-        ia = np.minimum((tv[ok] / (2 * np.pi) * na).astype(np.int64), na - 1)
-        return unique_ints((th[ok] * nr + tr[ok]) * _MAX_ANGLE_BINS + ia)
-
-    own_keys = occupied(0, 0)
-    keys = unique_ints(np.concatenate([occupied(dh, dr) for dh in (-1, 0, 1) for dr in (-1, 0, 1)]))
-    cells, counts = unique_ints(keys // _MAX_ANGLE_BINS, return_counts=True)
+    # the vertices grouped by cell; the cells within one row and ring of them
+    own_cell = ih * nr + ir
+    order = np.argsort(own_cell)
+    grouped = own_cell[order]
+    first = np.empty(len(grouped), dtype=bool)
+    first[:1] = True
+    np.not_equal(grouped[1:], grouped[:-1], out=first[1:])
+    ocells = grouped[first]
+    ptr = np.append(np.flatnonzero(first), len(grouped))
+    cell_of = np.empty(len(own_cell), dtype=np.int64)  # index in ocells of each vertex's cell
+    cell_of[order] = np.repeat(np.arange(len(ocells)), np.diff(ptr))
+    th = (ocells // nr)[:, None] + np.repeat([-1, 0, 1], 3)
+    tr = (ocells % nr)[:, None] + np.tile([-1, 0, 1], 3)
+    ok = (th >= 0) & (th < nh) & (tr >= 0)
+    cells = unique_ints(th[ok] * nr + tr[ok])
+    counts = np.empty(len(cells), dtype=np.int64)
+    ocounts = np.empty(len(ocells), dtype=np.int64)
+    angle_coverage(ocells, ptr, np.ascontiguousarray(tv[order], dtype=np.float64), cells, nh, nr,
+                   _MAX_ANGLE_BINS, counts, ocounts)
     frac = counts / n_ang(cells % nr)
     row_ref = np.zeros(nh)
     np.maximum.at(row_ref, cells // nr, frac)
-    own_cell = ih * nr + ir
-    frac_v = frac[np.searchsorted(cells, own_cell)]
+    frac_v = frac[np.searchsorted(cells, ocells)][cell_of]
     core = frac_v < coverage_ratio * row_ref[ih]
 
     # revolution surface: median (r, h) of the vertices of each cell that the scan itself
     # covers over many angles (a handle's few vertices in a wall cell do not move the median)
-    ocells, ocounts = unique_ints(own_keys // _MAX_ANGLE_BINS, return_counts=True)
-    good_ids = ocells[ocounts / n_ang(ocells % nr) >= coverage_ratio * row_ref[ocells // nr]]
+    good = ocounts / n_ang(ocells % nr) >= coverage_ratio * row_ref[ocells // nr]
     offset = np.full(len(hv), np.nan)
-    if len(good_ids) == 0:
+    if not good.any():
         return core, offset
-    pos = np.minimum(np.searchsorted(good_ids, own_cell), len(good_ids) - 1)
-    in_good = good_ids[pos] == own_cell
-    ones = np.ones(int(in_good.sum()))
-    rep_r = weighted_quantiles(pos[in_good], rv[in_good], ones, len(good_ids), (0.5,))[0]
-    rep_h = weighted_quantiles(pos[in_good], hv[in_good], ones, len(good_ids), (0.5,))[0]
-    reps = np.column_stack([rep_r, rep_h])
-    reps = reps[np.isfinite(reps).all(axis=1)]
+    # (the lower median of each cell's vertices, grouped by cell in `order`)
+    cells_good = np.flatnonzero(good)
+    reps = []
+    for values in (rv, hv):
+        reps.append(np.empty(len(cells_good)))
+        lower_medians(np.ascontiguousarray(values[order], dtype=np.float64), ptr[cells_good], ptr[cells_good + 1],
+                      reps[-1])
+    reps = np.column_stack(reps)
     offset = _distance_to_curve(reps, np.column_stack([rv, hv]), 2.5 * cell)
     return core, offset
 

@@ -502,7 +502,10 @@ def orient(mesh: Mesh, point, direction, *, lines=None) -> tuple[np.ndarray, str
     return (direction if up else -direction), reason
 
 
-def _finish(mesh, point, direction, *, method, orientation, flip, note="", lines=None) -> AxisFit:
+def _finish(mesh, point, direction, *, method, orientation, flip, note="", lines=None,
+            residuals: tuple[float, float, float, float] | None = None) -> AxisFit:
+    """The :class:`AxisFit` of an axis line; ``residuals``: its :func:`axis_residuals` when the
+    caller has them (they do not depend on the point along the line or the direction's sign)."""
     direction = np.asarray(direction, float)
     direction = direction / np.linalg.norm(direction)
     if flip:
@@ -510,7 +513,8 @@ def _finish(mesh, point, direction, *, method, orientation, flip, note="", lines
         orientation += "; flipped on request"
     h = (mesh.vertices[_used(mesh)] - point) @ direction
     foot = np.asarray(point, float) + h.min() * direction
-    rms_angle, median_angle, rms_dist, prof = axis_residuals(mesh, foot, direction, lines=lines)
+    rms_angle, median_angle, rms_dist, prof = (axis_residuals(mesh, foot, direction, lines=lines)
+                                               if residuals is None else residuals)
     return AxisFit(point=foot, direction=direction, reference=reference_direction(direction),
                    height=float(h.max() - h.min()), method=method, orientation=orientation,
                    rms_angle_deg=rms_angle, median_angle_deg=median_angle, rms_distance=rms_dist,
@@ -622,12 +626,14 @@ def estimate_axis(mesh: Mesh, *, flip: bool = False, profile: bool = True,
                 if _median_sin(cs, n, area, p2, d2) <= 1.02 * _median_sin(cs, n, area, point, direction) + DEGENERATE:
                     point, direction, method = p2, d2, "normals+profile"
     point = centre + size * point
-    rms_angle, median_angle, _, prof = axis_residuals(mesh, point, direction, lines=lines)
+    residuals = axis_residuals(mesh, point, direction, lines=lines)
+    rms_angle, median_angle, _, prof = residuals
     if _unsymmetric(median_angle, prof, max_median_angle_deg):
         pc, pdir = _pca_axis(mesh.vertices[_used(mesh)])
-        p_rms, p_median, _, p_prof = axis_residuals(mesh, pc, pdir, lines=lines)
+        pca_residuals = axis_residuals(mesh, pc, pdir, lines=lines)
+        _, p_median, _, p_prof = pca_residuals
         if not _unsymmetric(p_median, p_prof, max_median_angle_deg):
-            point, direction, method = pc, pdir, "pca"
+            point, direction, method, residuals = pc, pdir, "pca", pca_residuals
         else:
             raise AxisNotFoundError(
                 f"{mesh.source or 'the scan'} is not rotationally symmetric enough to find its axis "
@@ -636,7 +642,7 @@ def estimate_axis(mesh: Mesh, *, flip: bool = False, profile: bool = True,
                 f"{median_angle:.1f} deg, RMS {rms_angle:.1f} deg); give --axis px,py,pz,dx,dy,dz")
     direction, orientation = orient(mesh, point, direction, lines=lines)
     return _finish(mesh, point, direction, method=method, orientation=orientation, flip=flip, note=note,
-                   lines=lines)
+                   lines=lines, residuals=residuals)
 
 
 def _used(mesh: Mesh) -> np.ndarray:
