@@ -131,11 +131,16 @@ class SurfaceReference:
         3D positions.
     faces : (m, 3) int64
         Triangles, counter-clockwise seen from outside.
+    edges : (e, 2) int64, optional
+        :func:`unique_edges` of ``faces`` when the caller has them (the first array of
+        :func:`potflat.mesh.boundary.edges_and_boundary` is the same); found when first needed.
     """
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, *, edges: np.ndarray | None = None):
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
         self.faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+        if edges is not None:  # (the cached property's value)
+            self.__dict__["edges"] = np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2)
 
     @cached_property
     def area_3d(self) -> np.ndarray:
@@ -349,10 +354,12 @@ def vertex_length_error(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray)
     return SurfaceReference(vertices, faces).vertex_length_error(uv)
 
 
-def summarize(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> DistortionSummary:
+def summarize(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, *,
+              edges: np.ndarray | None = None) -> DistortionSummary:
     """Scalar distortion figures of the map from ``vertices`` to ``uv`` (see module docs); to
-    compare several flattenings of one mesh, build one :class:`SurfaceReference`."""
-    return SurfaceReference(vertices, faces).summarize(uv)
+    compare several flattenings of one mesh, build one :class:`SurfaceReference`. ``edges``:
+    :func:`unique_edges` of ``faces`` when the caller has them."""
+    return SurfaceReference(vertices, faces, edges=edges).summarize(uv)
 
 
 def summarize_flat(flat: FlatMesh) -> DistortionSummary:

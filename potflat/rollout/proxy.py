@@ -219,7 +219,7 @@ def _figures(s: DistortionSummary) -> dict:
 
 
 def choose(vertices: np.ndarray, faces: np.ndarray, h: np.ndarray, r: np.ndarray, theta: np.ndarray,
-           weights: np.ndarray | None = None, kinds: tuple[str, ...] = DEVELOPABLE
+           weights: np.ndarray | None = None, kinds: tuple[str, ...] = DEVELOPABLE, *, edges: np.ndarray | None = None
            ) -> tuple[Proxy, np.ndarray, DistortionSummary]:
     """Fit every candidate proxy, unroll with each, and keep the least distorted.
 
@@ -240,6 +240,9 @@ def choose(vertices: np.ndarray, faces: np.ndarray, h: np.ndarray, r: np.ndarray
         Vertex areas for the fits.
     kinds : tuple of str
         Candidate kinds, simplest first.
+    edges : (e, 2) int64, optional
+        The undirected edges of ``faces`` (:func:`potflat.mesh.distortion.unique_edges`) when
+        the caller has them.
 
     Returns
     -------
@@ -249,7 +252,7 @@ def choose(vertices: np.ndarray, faces: np.ndarray, h: np.ndarray, r: np.ndarray
     summary : DistortionSummary
     """
     results = {}
-    reference = SurfaceReference(vertices, faces)  # the 3D side once for every candidate
+    reference = SurfaceReference(vertices, faces, edges=edges)  # the 3D side once for every candidate
     for kind in kinds:
         prox = fit(kind, h, r, theta, weights)
         uv = develop(prox, h, r, theta)

@@ -470,14 +470,10 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
                                               theta_v, area)
     trimmed = np.zeros(len(F), bool)
     un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area, landmark=landmark)
-    table = None
     for rnd in range(TRIM_ROUNDS):
-        # the development's edges and boundary, computed once for each face set
-        table = edges_and_boundary(un.flat.mesh.faces, len(un.flat.uv))
-        fold = border_folds(un.flat.mesh.faces, un.flat.uv, area[un.face_index], table=table)
+        fold = border_folds(un.flat.mesh.faces, un.flat.uv, area[un.face_index], table=un.table)
         if not fold.any() or fold.all():
             break
-        table = None
         trimmed[un.face_index[fold]] = True
         if rnd < TRIM_ROUNDS - 1:
             un = _unroll(mesh, axis, options, allowed & ~trimmed, band, h_c, theta_c, theta_v, area,
@@ -490,23 +486,20 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     for scan_mask, mask in zip((facing_in, overlapping), fold_masks(un.flat.mesh.faces, un.flat.uv)):
         scan_mask[un.face_index[mask]] = True
     clock.lap("folds")
-    if table is None:
-        table = edges_and_boundary(un.flat.mesh.faces, len(un.flat.uv))
-    uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv, table=table)
+    uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv, table=un.table)
     for _ in range(TRIM_ROUNDS):  # folds pushed against the border by untangling are trimmed
-        fold = border_folds(un.flat.mesh.faces, uv, area[un.face_index], table=table)
+        fold = border_folds(un.flat.mesh.faces, uv, area[un.face_index], table=un.table)
         if not fold.any() or fold.all():
             break
         trimmed[un.face_index[fold]] = True
         un = _without(dataclasses.replace(un, flat=un.flat.replace(uv=uv)), ~fold)
-        table = edges_and_boundary(un.flat.mesh.faces, len(un.flat.uv))
-        uv, more, moved_more = untangle(un.flat.mesh.faces, un.flat.uv, table=table)
+        uv, more, moved_more = untangle(un.flat.mesh.faces, un.flat.uv, table=un.table)
         n_untangled, moved = n_untangled + more, moved + moved_more
     clock.lap("untangle")
-    overlap = len(crossing_segments(uv, table[1])[0])
+    overlap = len(crossing_segments(uv, un.table[1])[0])
     distortion = un.distortion
     if n_untangled:
-        distortion = summarize(un.flat.mesh.vertices, uv, un.flat.mesh.faces)
+        distortion = summarize(un.flat.mesh.vertices, uv, un.flat.mesh.faces, edges=un.table[0])
     if options.keep_attachments or not attachments.n_faces:
         roots = np.zeros(0, np.int64)
     else:
@@ -561,6 +554,9 @@ class _Unrolled:
     seam_vertices: int
     split_vertices: int
     origin: float
+    #: ``edges_and_boundary`` of the development's faces (its edges, boundary segments and their
+    #: faces), found once for each face set
+    table: tuple
 
 
 def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndarray, band, h_c, theta_c,
@@ -586,6 +582,7 @@ def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndar
         new_faces, vertex_index, theta_new, n_seam, n_split = cut_open(sub_f, corner_theta)
 
     del sub_f, corner_theta
+    table = edges_and_boundary(new_faces, len(vertex_index))
     # without texture coordinates (and untextured-face flags): rollout() attaches them to the
     # final faces only (a copy per unrolling would be the largest array here)
     cut_mesh = Mesh(
@@ -606,16 +603,16 @@ def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndar
         prox = _proxy.ortho_proxy(axis.direction, axis.reference, np.asarray(view, float))
         prox = _proxy.Proxy(prox.kind, prox.params, reason="requested (orthographic projection)")
         uv = _proxy.project_ortho(prox, cut_mesh.vertices, axis.point)
-        summary = summarize(cut_mesh.vertices, uv, new_faces)
+        summary = summarize(cut_mesh.vertices, uv, new_faces, edges=table[0])
     elif options.proxy == "auto":
-        prox, uv, summary = _proxy.choose(cut_mesh.vertices, new_faces, h, r, dev_theta, vert_area)
+        prox, uv, summary = _proxy.choose(cut_mesh.vertices, new_faces, h, r, dev_theta, vert_area, edges=table[0])
     else:
         prox = _proxy.fit(options.proxy, h, r, dev_theta, vert_area)
         prox = _proxy.Proxy(prox.kind, prox.params, reason="requested")
         uv = _proxy.develop(prox, h, r, dev_theta)
-        summary = summarize(cut_mesh.vertices, uv, new_faces)
+        summary = summarize(cut_mesh.vertices, uv, new_faces, edges=table[0])
     return _Unrolled(FlatMesh(cut_mesh, uv), prox, summary, face_index, vertex_index, theta_new, seam,
-                     seam_method, n_seam, n_split, origin)
+                     seam_method, n_seam, n_split, origin, table)
 
 
 def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
@@ -631,8 +628,10 @@ def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
     vertex_index = un.vertex_index[used]
     copies = len(used) - len(np.unique(vertex_index))
     seam = min(un.seam_vertices, copies)
-    return _Unrolled(FlatMesh(cut, uv), un.proxy, summarize(cut.vertices, uv, cut.faces), un.face_index[keep],
-                     vertex_index, un.theta[used], un.seam, un.seam_method, seam, copies - seam, un.origin)
+    table = edges_and_boundary(cut.faces, len(used))
+    return _Unrolled(FlatMesh(cut, uv), un.proxy, summarize(cut.vertices, uv, cut.faces, edges=table[0]),
+                     un.face_index[keep], vertex_index, un.theta[used], un.seam, un.seam_method, seam, copies - seam,
+                     un.origin, table)
 
 
 def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *, table: tuple | None = None) -> np.ndarray:
