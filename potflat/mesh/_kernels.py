@@ -1161,22 +1161,23 @@ def centres_in_faces(faces, uv, ox, oy, cell, gy, start, items, first, counts, p
 @leaf
 def _angle_bins(ring, max_bins):
     """Angle bins of a cell ring: about one cell of arc each at the ring's mid radius."""
-    return min(max(np.floor((2.0 * np.pi) * (ring + 0.5)), 6.0), float(max_bins))
+    return np.int64(min(max(np.floor((2.0 * np.pi) * (ring + 0.5)), 6.0), float(max_bins)))
 
 
 @leaf
-def _distinct_bins(seen, tv, ptr, j, nbins):
-    """Mark in ``seen`` the angle bins (of ``nbins``) of cell ``j``'s points; the number newly marked."""
+def _mark_bins(stamp, mark, tv, lo, hi, nbins):
+    """Stamp with ``mark`` the angle bins (of ``nbins``) of the points ``lo:hi``; the number
+    of bins newly stamped."""
     new = 0
-    for k in range(np.uint64(ptr[j]), np.uint64(ptr[j + 1])):
-        b = min(np.int64(tv[k] / (2.0 * np.pi) * nbins), nbins - 1)
-        if not seen[b]:
-            seen[b] = True
+    for k in range(np.uint64(lo), np.uint64(hi)):
+        b = np.uint64(min(np.int64(tv[k] / (2.0 * np.pi) * nbins), nbins - 1))
+        if stamp[b] != mark:
+            stamp[b] = mark
             new += 1
     return new
 
 
-@parallel
+@leaf
 def angle_coverage(cells, ptr, tv, targets, nh, nr, max_bins, target_count, own_count):
     """Angle bins covered by the points of each meridian-plane cell and of its 3 x 3 cells.
 
@@ -1193,7 +1194,7 @@ def angle_coverage(cells, ptr, tv, targets, nh, nr, max_bins, target_count, own_
     tv : (s,) float64
         Angle in ``[0, 2 pi)`` of each point, grouped by cell.
     targets : (t,) int64
-        Cells to measure, each within one row and one ring of a cell in ``cells``.
+        Cells to measure, ascending, each within one row and one ring of a cell in ``cells``.
     nh, nr, max_bins : int
         Rows, rings per row (every ring in ``cells`` below ``nr - 1``), largest bin count.
     target_count : (t,) int64
@@ -1202,11 +1203,13 @@ def angle_coverage(cells, ptr, tv, targets, nh, nr, max_bins, target_count, own_
         Output: the bins of each cell's ring holding one of its own points.
     """
     u = cells.shape[0]
-    for i in prange(targets.shape[0]):
+    stamp = np.zeros(max_bins, np.int64)  # bin b was counted for the target stamped in it
+    mark = 0
+    for i in range(targets.shape[0]):
         row = targets[i] // nr
         ring = targets[i] % nr
-        nbins = np.int64(_angle_bins(ring, max_bins))
-        seen = np.zeros(nbins, np.bool_)
+        nbins = _angle_bins(ring, max_bins)
+        mark += 1
         count = 0
         for dh in range(-1, 2):
             sh = row - dh
@@ -1216,29 +1219,64 @@ def angle_coverage(cells, ptr, tv, targets, nh, nr, max_bins, target_count, own_
                 sr = ring - dr
                 if sr < 0 or sr >= nr:
                     continue
-                j = np.searchsorted(cells, sh * nr + sr)
-                if j < u and cells[j] == sh * nr + sr:
-                    count += _distinct_bins(seen, tv, ptr, j, nbins)
+                key = sh * nr + sr
+                lo = 0  # binary search of the source cell
+                hi = u
+                while lo < hi:
+                    mid = (lo + hi) >> 1
+                    if cells[mid] < key:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                if lo < u and cells[lo] == key:
+                    count += _mark_bins(stamp, mark, tv, ptr[lo], ptr[lo + 1], nbins)
         target_count[i] = count
-    for j in prange(u):
-        nbins = np.int64(_angle_bins(cells[j] % nr, max_bins))
-        seen = np.zeros(nbins, np.bool_)
-        own_count[j] = _distinct_bins(seen, tv, ptr, j, nbins)
+    for j in range(u):
+        mark += 1
+        own_count[j] = _mark_bins(stamp, mark, tv, ptr[j], ptr[j + 1], _angle_bins(cells[j] % nr, max_bins))
 
 
-@parallel
+@leaf
 def lower_medians(values, start, stop, out):
     """The lower median of each segment of ``values``: its element of rank ``ceil(k / 2) - 1``
-    (from 0) among the segment's ``k`` values in ascending order.
+    (from 0) among the segment's ``k`` values in ascending order (Hoare's selection on a copy).
 
     Parameters
     ----------
     values : (s,) float64
+        No NaN.
     start, stop : (g,) int64
         Segment ``j`` is ``values[start[j]:stop[j]]`` (not empty).
     out : (g,) float64
         Output.
     """
-    for j in prange(out.shape[0]):
-        segment = np.sort(values[start[j]:stop[j]])
-        out[j] = segment[(segment.shape[0] + 1) // 2 - 1]
+    buf = np.empty(values.shape[0])
+    for j in range(out.shape[0]):
+        k = stop[j] - start[j]
+        for q in range(k):
+            buf[q] = values[start[j] + q]
+        want = (k + 1) // 2 - 1
+        lo = 0
+        hi = k - 1
+        while lo < hi:
+            pivot = buf[(lo + hi) >> 1]
+            a = lo
+            b = hi
+            while a <= b:
+                while buf[a] < pivot:
+                    a += 1
+                while buf[b] > pivot:
+                    b -= 1
+                if a <= b:
+                    t = buf[a]
+                    buf[a] = buf[b]
+                    buf[b] = t
+                    a += 1
+                    b -= 1
+            if want <= b:
+                hi = b
+            elif want >= a:
+                lo = a
+            else:
+                break
+        out[j] = buf[want]
