@@ -32,6 +32,7 @@ from potflat.rollout.walls import (
     binned_median,
     check_axis,
     check_mesh,
+    FaceFrame,
     cylindrical,
     face_frame,
     wall_labels,
@@ -137,7 +138,7 @@ def _interp(x: np.ndarray, y: np.ndarray, at: np.ndarray) -> np.ndarray:
 
 
 def vessel_profile(mesh: Mesh, axis_point, axis_direction, *, bins: int | None = None,
-                   face_mask=None, labels=None) -> Profile:
+                   face_mask=None, labels=None, frame: FaceFrame | None = None) -> Profile:
     """Measure the vessel's profile (outer and inner radius against height).
 
     Parameters
@@ -156,6 +157,9 @@ def vessel_profile(mesh: Mesh, axis_point, axis_direction, *, bins: int | None =
     labels : (m,) int8, optional
         Wall side per face (``WallSelection.labels``: 1 outer, -1 inner), to reuse a
         :func:`potflat.rollout.walls.select_wall` result; computed when omitted.
+    frame : FaceFrame, optional
+        ``face_frame(mesh, axis_point, axis_direction)`` when the caller has it (with the
+        adjacency when ``labels`` is omitted); computed when omitted.
 
     Returns
     -------
@@ -181,7 +185,7 @@ def vessel_profile(mesh: Mesh, axis_point, axis_direction, *, bins: int | None =
             raise InvalidInputError(f"face_mask must have one entry per face ({m}), got shape {use.shape}")
         if not use.any():
             raise InvalidInputError("face_mask selects no faces; select at least part of the vessel")
-    fr = face_frame(mesh, p, a, adjacency=labels is None)
+    fr = face_frame(mesh, p, a, adjacency=labels is None) if frame is None else frame
     if labels is None:
         labels, _ = wall_labels(fr)
     else:

@@ -40,7 +40,8 @@ from potflat.mesh.distortion import DistortionSummary, face_areas, row_blocks, s
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import FlatMesh, Mesh, StepClock
 from potflat.rollout.options import RolloutOptions
-from potflat.rollout.walls import FaceGraph, WallSelection, select_wall
+from potflat.rollout.profile import Profile, vessel_profile
+from potflat.rollout.walls import FaceGraph, WallSelection, check_axis, face_frame, select_wall
 from potflat.mesh.tolerances import ROUNDING
 
 TWO_PI = 2.0 * np.pi
@@ -170,6 +171,10 @@ class RolloutResult:
     folds : ScanFolds or None
         Where the scan folds over itself in 3D (creases, flaps, duplicated sheets;
         :mod:`potflat.rollout.folds`).
+    profile : Profile or None
+        The vessel's profile (:func:`potflat.rollout.profile.vessel_profile` of both walls
+        around :attr:`axis`, attachments left out unless kept; height bins of
+        ``options.profile_mm``).
     """
 
     flat: FlatMesh
@@ -199,6 +204,7 @@ class RolloutResult:
     importance: _importance.Importance | None = None
     timings: dict = field(default_factory=dict)
     folds: ScanFolds | None = None
+    profile: Profile | None = None
 
     @property
     def side(self) -> str:
@@ -451,11 +457,19 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     graph = FaceGraph(F)  # the face adjacency, found once for the attachments (if they need it) and the walls
     attachments = detect_attachments(mesh, axis.point, axis.direction, graph=graph)
     clock.lap("attachments")
+    frame = face_frame(mesh, *check_axis(axis.point, axis.direction), graph=graph)  # the walls' and the profile's
     walls = select_wall(mesh, axis.point, axis.direction, side=options.side,
-                        exclude=None if options.keep_attachments else attachments.face_mask, graph=graph)
+                        exclude=None if options.keep_attachments else attachments.face_mask, graph=graph, frame=frame)
     del graph
     allowed = walls.face_mask if face_mask is None else walls.face_mask & face_mask
     clock.lap("walls")
+    # the vessel's profile, both walls, attachments left out (docs/profile.md)
+    bins = None if options.profile_mm is None else max(1, math.ceil(axis.height * mesh.mm_per_unit / options.profile_mm))
+    profile = vessel_profile(mesh, axis.point, axis.direction, bins=bins, labels=walls.labels, frame=frame,
+                             face_mask=None if options.keep_attachments or not attachments.n_faces
+                             else ~attachments.face_mask)
+    del frame
+    clock.lap("profile")
 
     area = face_areas(V, F)
     centroid = np.empty((len(F), 3))
@@ -536,7 +550,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         untangled_faces=n_untangled, untangled_vertices=moved, boundary_overlap=overlap,
         other_objects_faces=int(other_objects.sum()), landmark=landmark,
         theta_origin=float(math.degrees(un.origin) % 360.0), landmark_notes=tuple(landmark_notes),
-        timings=clock.total(), folds=folds)
+        timings=clock.total(), folds=folds, profile=profile)
 
 
 @dataclass(frozen=True, eq=False)

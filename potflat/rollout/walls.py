@@ -478,7 +478,8 @@ class WallSelection:
 
 
 def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
-                exclude=None, flat_tolerance: float = 0.25, graph: FaceGraph | None = None) -> WallSelection:
+                exclude=None, flat_tolerance: float = 0.25, graph: FaceGraph | None = None,
+                frame: FaceFrame | None = None) -> WallSelection:
     """Select the outer or the inner wall of a (possibly two-walled) vessel scan.
 
     Parameters
@@ -500,6 +501,9 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         horizontal (base, floor, rim top) and take the side of the wall they connect to.
     graph : FaceGraph, optional
         ``FaceGraph(mesh.faces)`` when the caller has it (built here otherwise).
+    frame : FaceFrame, optional
+        ``face_frame(mesh, axis_point, axis_direction)`` (with the adjacency) when the caller
+        has it (computed here otherwise).
 
     Returns
     -------
@@ -532,7 +536,7 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
             raise InvalidInputError(
                 f"exclude must be a boolean mask with one entry per face ({len(mesh.faces)}), got {exclude.shape}")
     check_graph(graph, mesh)
-    fr = face_frame(mesh, p, a, graph=graph)
+    fr = face_frame(mesh, p, a, graph=graph) if frame is None else frame
     labels, inverted = wall_labels(fr, flat_tolerance=float(flat_tolerance))
     want = OUTER if side == "outer" else INNER
     outer_area = float(fr.area[labels == OUTER].sum())

@@ -3,7 +3,6 @@
 ``NAME.profile.svg`` (see ``docs/profile.md``). The algorithm is :mod:`potflat.rollout`."""
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 from potflat.errors import InvalidOptionError
@@ -16,9 +15,9 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
                       name: str | None = None, check=None) -> StageOutput:
     """Read a scan, roll it out, write ``NAME.rollout.ply``, ``NAME.rollout.json`` and its profile.
 
-    The profile (:func:`potflat.rollout.profile.vessel_profile` of both walls around the rollout's
-    axis, attachments left out) is written as ``NAME.profile.csv`` and ``NAME.profile.svg``
-    (a section drawing, see ``docs/profile.md``).
+    The rollout's profile (:attr:`RolloutResult.profile`: both walls around its axis,
+    attachments left out) is written as ``NAME.profile.csv`` and ``NAME.profile.svg`` (a
+    section drawing, see ``docs/profile.md``).
 
     Parameters
     ----------
@@ -48,7 +47,7 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     from potflat.io.atomic import check_output_name, write_json_atomic
     from potflat.io.scan import check_plausible_size, load_scan
     from potflat.io.flat_ply import as_stored, write_flat_ply
-    from potflat.rollout.profile import vessel_profile, write_profile_csv, write_profile_svg
+    from potflat.rollout.profile import write_profile_csv, write_profile_svg
     from potflat.stages.provenance import provenance
 
     options = options or RolloutOptions()
@@ -72,15 +71,8 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     clock.lap("rollout")
     if check is not None:
         check(result.flat)
-    mesh = mesh.replace(texcoords=None, untextured_faces=None)  # the rollout has its own; the profile needs none
-    body = None if result.attachments_kept or not result.attachments.n_faces else ~result.attachments.face_mask
-    bins = None
-    if options.profile_mm is not None:
-        bins = max(1, math.ceil(result.axis.height * mesh.mm_per_unit / options.profile_mm))
-    profile = vessel_profile(mesh, result.axis.point, result.axis.direction, face_mask=body,
-                             labels=result.walls.labels, bins=bins)
     del mesh
-    clock.lap("profile")
+    profile = result.profile
     summary = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_summary(result),
                "profile": profile.summary(),
                "cleaning": cleaning,
