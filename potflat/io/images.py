@@ -92,14 +92,19 @@ def read_texture(path: str | os.PathLike) -> np.ndarray:
     return ahead.result() if ahead is not None else _decode_texture(path)
 
 
+def check_texture_file(path: str | os.PathLike) -> None:
+    """Raise :class:`InvalidInputError` when the texture a stage PLY names is not a file."""
+    if not Path(path).is_file():
+        raise InvalidInputError(f"texture {path} not found; put the texture image beside the stage PLY")
+
+
 def _decode_texture(path: str | os.PathLike) -> np.ndarray:
     """:func:`read_texture` without the read-ahead."""
     import cv2
     from PIL import Image
 
     path = Path(path)
-    if not path.is_file():
-        raise InvalidInputError(f"texture {path} not found; put the texture image beside the stage PLY")
+    check_texture_file(path)
     old = Image.MAX_IMAGE_PIXELS
     try:
         Image.MAX_IMAGE_PIXELS = None  # the budget below is the limit

@@ -56,6 +56,7 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     """
     from potflat.io.atomic import write_json_atomic
     from potflat.io.flat_ply import as_stored, read_flat_ply, write_flat_ply
+    from potflat.io.images import check_texture_file
     from potflat.stages.provenance import provenance
 
     options = options or RelaxOptions()
@@ -67,6 +68,8 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     if flat is None:
         flat = read_flat_ply(rollout_ply)
         clock.lap("read")
+    if flat.mesh.texture_path is not None:  # copied beside the output: missing, say so before relaxing
+        check_texture_file(flat.mesh.texture_path)
     result = relax(flat, options=options, progress=progress, distortion_before=distortion)
     clock.lap("relax")
     ply_path = out_dir / f"{name}.relaxed.ply"
