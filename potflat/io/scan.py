@@ -300,6 +300,8 @@ def _into_the_tile(texcoords: np.ndarray, warnings: list[str]) -> np.ndarray:
     face across the border of two copies still reads the border texels there (a warning says
     how many). Faces already in the image are untouched.
     """
+    if texcoords.min() >= 0.0 and texcoords.max() <= 1.0:  # (the common case: two passes, no per-face mean)
+        return texcoords
     centre = texcoords.mean(axis=1)
     shift = np.where((centre >= 0.0) & (centre <= 1.0), 0.0, np.floor(centre))  # (a centre at 1 is in the image)
     moved = (shift != 0.0).any(axis=1)

@@ -227,7 +227,9 @@ def vessel_profile(mesh: Mesh, axis_point, axis_direction, *, bins: int | None =
         out[name] = (_at_centres(centres, hmed, q50), (q75 - q25) / 1.349,
                      np.bincount(b, minlength=int(bins)).astype(np.int64))
     rmax = float(np.nanmax(np.r_[out["outer"][0], 0.0]))
-    near = use & (r_v[mesh.faces].min(axis=1) < _NEAR_AXIS_FRACTION * rmax)
+    r_f = r_v[mesh.faces]
+    near = use & (np.minimum(np.minimum(r_f[:, 0], r_f[:, 1]), r_f[:, 2]) < _NEAR_AXIS_FRACTION * rmax)
+    del r_f
     base = near & (labels == OUTER) & (fr.n_axial < -0.5)
     floor = near & (labels == INNER) & (fr.n_axial > 0.5)
     return Profile(

