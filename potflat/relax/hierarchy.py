@@ -65,7 +65,7 @@ class GridHierarchy:
             if len(ref) / occupied < min_vertices_per_cell:
                 break
             levels.append(level)
-        return cls(order=order, un=np.ascontiguousarray(un[order]), codes=codes, levels=tuple(levels))
+        return cls(order=order, un=np.take(un, order, axis=0), codes=codes, levels=tuple(levels))
 
     def cell_start(self, level: int) -> np.ndarray:
         """First sorted vertex of every cell of ``level`` (Morton order), shape (4^level + 1,)."""

@@ -1125,7 +1125,7 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         order = hier.order
         inverse = np.empty(n, np.int64)
         inverse[order] = np.arange(n)
-        Vs = np.ascontiguousarray(V[order] / unit)
+        Vs = np.take(V, order, axis=0) / unit  # (rows gathered by take: 2-4x faster than indexing)
         # faces in the vertices' order too: the face passes and gathers read nearby memory
         # (2.5M benchmark vessel: an evaluation of the energy and gradient 1.6x faster)
         Fs = faces_in_vertex_order(F, inverse)
@@ -1138,11 +1138,11 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         if limit != "auto":
             sp.set_area_and_limit(area, limit)
         del Vs, Fs, inverse
-        x = np.ascontiguousarray(x_in[order]) * (settings["stretch"] if softer is None else 1.0)
+        x = np.take(x_in, order, axis=0) * (settings["stretch"] if softer is None else 1.0)
         del x_in  # (the rollout's layout, the result's orientation, is formed again after the solve)
         t_follow = time.perf_counter()
         if coarse is not None:
-            followed = _follow(sp, np.ascontiguousarray(((coarse.uv - centre) / unit)[order]), notes)
+            followed = _follow(sp, np.take((coarse.uv - centre) / unit, order, axis=0), notes)
             if followed is None:
                 coarse = None
             else:  # only the copy's result is read from here on (peak memory: the solve comes next)
@@ -1187,7 +1187,7 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
                 # the energy without the area term first: its anisotropy sets the limit
                 sp.set_area_and_limit(0.0, None)
                 x, converged = _minimise(sp, x, hier, settings, run, levels, notes, level="fine, shape first")
-                limit = None if run.stopped else sp.anisotropy_percentile(V[order], x, ENERGY.limit_percentile)
+                limit = None if run.stopped else sp.anisotropy_percentile(np.take(V, order, axis=0), x, ENERGY.limit_percentile)
                 if limit is not None and math.isfinite(limit):  # (nan: no face with a rest area)
                     sp.set_area_and_limit(area, limit)
                     x, converged = _minimise(sp, x, hier, settings, run, levels, notes)
@@ -1210,7 +1210,7 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
             if folded_start is not None:  # relaxed from Tutte's disc: only what was not folded counts
                 turn[sp.faces[sp.signed_areas(folded_start) <= 0].ravel()] = 0.0
             # the rollout's layout (its orientation is the result's) or the folded start
-            start = ((uv - centre) / unit)[order] if folded_start is None else folded_start
+            start = np.take((uv - centre) / unit, order, axis=0) if folded_start is None else folded_start
             x = _turned_like(x, start, turn)
         del sp, hier  # release the spring system before the distortion summaries (peak memory)
     if fold_free and (flipped or overlap or not finite):
