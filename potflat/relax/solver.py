@@ -1187,7 +1187,8 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
                 # the energy without the area term first: its anisotropy sets the limit
                 sp.set_area_and_limit(0.0, None)
                 x, converged = _minimise(sp, x, hier, settings, run, levels, notes, level="fine, shape first")
-                limit = None if run.stopped else sp.anisotropy_percentile(np.take(V, order, axis=0), x, ENERGY.limit_percentile)
+                limit = None if run.stopped else sp.anisotropy_percentile(np.take(V, order, axis=0), x,
+                                                                          ENERGY.limit_percentile)
                 if limit is not None and math.isfinite(limit):  # (nan: no face with a rest area)
                     sp.set_area_and_limit(area, limit)
                     x, converged = _minimise(sp, x, hier, settings, run, levels, notes)

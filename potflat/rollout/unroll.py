@@ -464,7 +464,8 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     allowed = walls.face_mask if face_mask is None else walls.face_mask & face_mask
     clock.lap("walls")
     # the vessel's profile, both walls, attachments left out (docs/profile.md)
-    bins = None if options.profile_mm is None else max(1, math.ceil(axis.height * mesh.mm_per_unit / options.profile_mm))
+    bins = (None if options.profile_mm is None
+            else max(1, math.ceil(axis.height * mesh.mm_per_unit / options.profile_mm)))
     profile = vessel_profile(mesh, axis.point, axis.direction, bins=bins, labels=walls.labels, frame=frame,
                              face_mask=None if options.keep_attachments or not attachments.n_faces
                              else ~attachments.face_mask)
