@@ -1250,7 +1250,10 @@ def lower_medians(values, start, stop, out):
     out : (g,) float64
         Output.
     """
-    buf = np.empty(values.shape[0])
+    longest = 0
+    for j in range(out.shape[0]):
+        longest = max(longest, stop[j] - start[j])
+    buf = np.empty(longest)
     for j in range(out.shape[0]):
         k = stop[j] - start[j]
         for q in range(k):
