@@ -170,7 +170,8 @@ def test_angle_coverage_kernel_matches_sets(seed):
     around, own = _slow_coverage(ih, ir, tv, nh, nr, max_bins)
     targets = np.array(sorted(around), dtype=np.int64)
     count, own_count = np.empty(len(targets), np.int64), np.empty(len(cells), np.int64)
-    angle_coverage(cells.astype(np.int64), ptr, tv[order], targets, nh, nr, max_bins, count, own_count)
+    ring_bins = np.array([min(max(int(np.floor(2 * np.pi * (r + 0.5))), 6), max_bins) for r in range(nr)], np.int64)
+    angle_coverage(cells.astype(np.int64), ptr, tv[order], targets, nh, ring_bins, count, own_count)
     assert count.tolist() == [around[t] for t in targets.tolist()]
     assert own_count.tolist() == [own[c] for c in cells.tolist()]
 

@@ -1159,12 +1159,6 @@ def centres_in_faces(faces, uv, ox, oy, cell, gy, start, items, first, counts, p
 
 
 @leaf
-def _angle_bins(ring, max_bins):
-    """Angle bins of a cell ring: about one cell of arc each at the ring's mid radius."""
-    return np.int64(min(max(np.floor((2.0 * np.pi) * (ring + 0.5)), 6.0), float(max_bins)))
-
-
-@leaf
 def _mark_bins(stamp, mark, tv, lo, hi, nbins):
     """Stamp with ``mark`` the angle bins (of ``nbins``) of the points ``lo:hi``; the number
     of bins newly stamped."""
@@ -1178,12 +1172,12 @@ def _mark_bins(stamp, mark, tv, lo, hi, nbins):
 
 
 @leaf
-def angle_coverage(cells, ptr, tv, targets, nh, nr, max_bins, target_count, own_count):
+def angle_coverage(cells, ptr, tv, targets, nh, ring_bins, target_count, own_count):
     """Angle bins covered by the points of each meridian-plane cell and of its 3 x 3 cells.
 
-    Cells are numbered ``row * nr + ring`` (row in ``[0, nh)``, ring ``>= 0``); a ring has
-    ``clip(floor(2 pi (ring + 1/2)), 6, max_bins)`` angle bins, and a point at angle ``t``
-    lies in bin ``floor(t / (2 pi) * bins)`` of a ring (the last bin at most).
+    Cells are numbered ``row * nr + ring`` (row in ``[0, nh)``, ring in ``[0, nr)``); a point
+    at angle ``t`` lies in bin ``floor(t / (2 pi) * bins)`` of a ring of ``bins`` angle bins
+    (the last bin at most).
 
     Parameters
     ----------
@@ -1195,20 +1189,23 @@ def angle_coverage(cells, ptr, tv, targets, nh, nr, max_bins, target_count, own_
         Angle in ``[0, 2 pi)`` of each point, grouped by cell.
     targets : (t,) int64
         Cells to measure, ascending, each within one row and one ring of a cell in ``cells``.
-    nh, nr, max_bins : int
-        Rows, rings per row (every ring in ``cells`` below ``nr - 1``), largest bin count.
+    nh : int
+        Rows.
+    ring_bins : (nr,) int64
+        Angle bins of each ring (every ring in ``cells`` below ``nr - 1``).
     target_count : (t,) int64
         Output: the bins of each target's ring holding a point of its 3 x 3 cells.
     own_count : (u,) int64
         Output: the bins of each cell's ring holding one of its own points.
     """
     u = cells.shape[0]
-    stamp = np.zeros(max_bins, np.int64)  # bin b was counted for the target stamped in it
+    nr = ring_bins.shape[0]
+    stamp = np.zeros(ring_bins.max(), np.int64)  # bin b was counted for the target stamped in it
     mark = 0
     for i in range(targets.shape[0]):
         row = targets[i] // nr
         ring = targets[i] % nr
-        nbins = _angle_bins(ring, max_bins)
+        nbins = ring_bins[ring]
         mark += 1
         count = 0
         for dh in range(-1, 2):
@@ -1233,7 +1230,7 @@ def angle_coverage(cells, ptr, tv, targets, nh, nr, max_bins, target_count, own_
         target_count[i] = count
     for j in range(u):
         mark += 1
-        own_count[j] = _mark_bins(stamp, mark, tv, ptr[j], ptr[j + 1], _angle_bins(cells[j] % nr, max_bins))
+        own_count[j] = _mark_bins(stamp, mark, tv, ptr[j], ptr[j + 1], ring_bins[cells[j] % nr])
 
 
 @leaf

@@ -319,9 +319,8 @@ def _coverage_pass(hv: np.ndarray, rv: np.ndarray, tv: np.ndarray, cell: float,
     nh = int(ih.max()) + 1
     nr = int(ir.max()) + 2
 
-    def n_ang(ring: np.ndarray) -> np.ndarray:
-        # angle bins about one cell of arc wide at the ring's mid radius (as angle_coverage counts them)
-        return np.clip(np.floor(2 * np.pi * (ring + 0.5)), 6, _MAX_ANGLE_BINS).astype(np.int64)
+    # angle bins of each ring, about one cell of arc wide at the ring's mid radius
+    ring_bins = np.clip(np.floor(2 * np.pi * (np.arange(nr) + 0.5)), 6, _MAX_ANGLE_BINS).astype(np.int64)
 
     # the vertices grouped by cell; the cells within one row and ring of them
     own_cell = ih * nr + ir
@@ -340,9 +339,9 @@ def _coverage_pass(hv: np.ndarray, rv: np.ndarray, tv: np.ndarray, cell: float,
     cells = unique_ints(th[ok] * nr + tr[ok])
     counts = np.empty(len(cells), dtype=np.int64)
     ocounts = np.empty(len(ocells), dtype=np.int64)
-    angle_coverage(ocells, ptr, np.ascontiguousarray(tv[order], dtype=np.float64), cells, nh, nr,
-                   _MAX_ANGLE_BINS, counts, ocounts)
-    frac = counts / n_ang(cells % nr)
+    angle_coverage(ocells, ptr, np.ascontiguousarray(tv[order], dtype=np.float64), cells, nh, ring_bins,
+                   counts, ocounts)
+    frac = counts / ring_bins[cells % nr]
     row_ref = np.zeros(nh)
     np.maximum.at(row_ref, cells // nr, frac)
     frac_v = frac[np.searchsorted(cells, ocells)][cell_of]
@@ -350,7 +349,7 @@ def _coverage_pass(hv: np.ndarray, rv: np.ndarray, tv: np.ndarray, cell: float,
 
     # revolution surface: median (r, h) of the vertices of each cell that the scan itself
     # covers over many angles (a handle's few vertices in a wall cell do not move the median)
-    good = ocounts / n_ang(ocells % nr) >= coverage_ratio * row_ref[ocells // nr]
+    good = ocounts / ring_bins[ocells % nr] >= coverage_ratio * row_ref[ocells // nr]
     offset = np.full(len(hv), np.nan)
     if not good.any():
         return core, offset
