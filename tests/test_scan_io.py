@@ -278,7 +278,7 @@ def test_obj_same_texture_in_two_materials_is_one_atlas(tmp_path):
 
 
 def test_obj_float_parser_matches_python(tmp_path):
-    from potflat.mesh._kernels import obj_count, obj_fill
+    from potflat.io.scan import parse_obj
 
     rng = np.random.default_rng(3)
     vals = np.concatenate([rng.normal(0, 1e3, 60), rng.normal(0, 1e-4, 30), [0.0, -0.0, 1e-300, 123456789.0]])
@@ -287,9 +287,50 @@ def test_obj_float_parser_matches_python(tmp_path):
     for i in range(0, len(texts) - 2, 3):
         lines.append("v " + " ".join(texts[i:i + 3]))
     buf = np.frombuffer(("\n".join(lines) + "\n").encode(), np.uint8)
-    V = obj_fill(buf, obj_count(buf))[0][:, :3]
+    V = parse_obj(buf)[0][:, :3]
     want = np.array([[float(t) for t in ln.split()[1:]] for ln in lines])
     np.testing.assert_allclose(V, want, rtol=1e-15, atol=0)  # within a few ulp
+
+
+def _obj_of_every_kind(rng) -> bytes:
+    """OBJ text with every kind of line the parser reads (relative indices, polygons, materials,
+    comments, blank and CRLF lines, bad numbers), in random order of blocks."""
+    lines, nv, nvt = ["# made by a test", "mtllib a.mtl", ""], 0, 0
+    for block in range(300):
+        kind = rng.integers(6)
+        if kind == 0 or nv < 4:
+            for _ in range(rng.integers(1, 6)):
+                lines.append("v " + " ".join(f"{x:.6g}" for x in rng.normal(size=rng.choice([3, 6]))))
+                nv += 1
+        elif kind == 1:
+            lines.append(f"vt {rng.random():.5f} {rng.random():.5f}\r")
+            nvt += 1
+        elif kind == 2:  # polygons, absolute and relative corners, some with texture indices
+            k = int(rng.integers(3, 6))
+            corners = [int(rng.integers(1, nv + 1)) if rng.random() < 0.5 else -int(rng.integers(1, nv + 1))
+                       for _ in range(k)]
+            tex = [f"/{-int(rng.integers(1, nvt + 1))}" if nvt and rng.random() < 0.5 else "" for _ in range(k)]
+            lines.append("f " + " ".join(f"{c}{t}" for c, t in zip(corners, tex)) + "  # a comment")
+        elif kind == 3:
+            lines.append(f"usemtl m{block}  ")
+        elif kind == 4:
+            lines.append(rng.choice(["", "   ", "# note", "g group", "s off", "vn 0 0 1"]))
+        else:
+            lines.append("v 1 2 x3" if rng.random() < 0.3 else "f 0 1 2")  # a bad number, a zero index
+    return ("\n".join(lines) + "\n").encode()
+
+
+def test_obj_ranges_parse_like_one_range():
+    from potflat.io.scan import parse_obj
+
+    rng = np.random.default_rng(11)
+    for text in (_obj_of_every_kind(rng), _obj_of_every_kind(rng)[:-1], b"v 0 0 0", b""):
+        buf = np.frombuffer(text, np.uint8)
+        whole = parse_obj(buf, ranges=1)
+        for ranges in (2, 3, 7, 64):
+            for got, want in zip(parse_obj(buf, ranges=ranges), whole):
+                np.testing.assert_array_equal(got, want)
+    assert whole[-1] == 0 and parse_obj(np.frombuffer(_obj_of_every_kind(rng), np.uint8), ranges=5)[-1] > 0
 
 
 # ------------------------------------------------------------------ PLY

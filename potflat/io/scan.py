@@ -524,13 +524,86 @@ def _find_file(name: str, *dirs: Path) -> Path:
 # OBJ
 
 
-def _read_obj(path: Path, texture: str, max_pixels: int) -> _Raw:
-    from potflat.mesh._kernels import obj_count, obj_fill
+#: Bytes of an OBJ file per thread at least: smaller files are parsed in one range.
+OBJ_RANGE_BYTES = 4 << 20
 
+
+def parse_obj(buf: np.ndarray, ranges: int | None = None) -> tuple:
+    """Parse an OBJ file's bytes: ranges of whole lines side by side in threads (the serial
+    kernels :func:`potflat.mesh._kernels.obj_count` and ``obj_fill`` release the GIL), each
+    range counted, then filled at its rows; the result does not depend on the ranges.
+
+    Parameters
+    ----------
+    buf : (nbytes,) uint8
+        The file's content (after a byte-order mark).
+    ranges : int, optional
+        How many ranges; default one per Numba thread (``--threads``), at most one per
+        :data:`OBJ_RANGE_BYTES`.
+
+    Returns
+    -------
+    V : (nv, 6) float64
+    vcols : (nv,) int64
+    VT : (nvt, 2) float64
+    corner_v, corner_vt : (nc,) int64
+    face_ptr : (nf + 1,) int64
+    use_spans : (nuse, 3) int64
+    lib_spans : (nlib, 2) int64
+    bad_line : int
+        As :func:`potflat.mesh._kernels.obj_fill` describes them, for the whole file.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    from potflat._jit import worker_threads
+    from potflat.mesh._kernels import OBJ_CORNERS, OBJ_FACES, OBJ_MTLLIB, OBJ_TEXCOORDS, OBJ_USEMTL, \
+        OBJ_VERTICES, obj_count, obj_fill
+
+    n = len(buf)
+    if ranges is None:
+        ranges = min(worker_threads(), 1 + n // OBJ_RANGE_BYTES)
+    ranges = max(1, min(int(ranges), n))
+    cuts = [0]
+    for k in range(1, ranges):  # each range ends after a newline (a file of one line: one range)
+        cut = _line_start(buf, max(n * k // ranges, cuts[-1]))
+        if cut < n:
+            cuts.append(cut)
+    cuts = sorted(set(cuts + [n]))
+    spans = list(zip(cuts[:-1], cuts[1:])) or [(0, 0)]
+    with ThreadPoolExecutor(len(spans), thread_name_prefix="potflat-obj") as pool:
+        counts = list(pool.map(lambda span: obj_count(buf, *span), spans))
+        before = np.cumsum([np.zeros(7, np.int64)] + counts, axis=0)
+        total = before[-1]
+        V = np.full((total[OBJ_VERTICES], 6), np.nan)
+        vcols = np.zeros(total[OBJ_VERTICES], np.int64)
+        VT = np.zeros((total[OBJ_TEXCOORDS], 2))
+        corner_v = np.empty(total[OBJ_CORNERS], np.int64)
+        corner_vt = np.empty(total[OBJ_CORNERS], np.int64)
+        face_ptr = np.zeros(total[OBJ_FACES] + 1, np.int64)
+        use_spans = np.zeros((total[OBJ_USEMTL], 3), np.int64)
+        lib_spans = np.zeros((total[OBJ_MTLLIB], 2), np.int64)
+        bad = list(pool.map(lambda k: obj_fill(buf, *spans[k], before[k], V, vcols, VT, corner_v, corner_vt,
+                                               face_ptr, use_spans, lib_spans), range(len(spans))))
+    bad_line = next((b for b in bad if b), 0)  # the ranges in file order: the first bad line
+    return V, vcols, VT, corner_v, corner_vt, face_ptr, use_spans, lib_spans, bad_line
+
+
+def _line_start(buf: np.ndarray, pos: int) -> int:
+    """Index of the first byte after the first newline at or after ``pos`` (``len(buf)`` if none)."""
+    window = 1 << 12
+    while pos < len(buf):
+        hit = np.flatnonzero(buf[pos:pos + window] == 10)
+        if len(hit):
+            return pos + int(hit[0]) + 1
+        pos += window
+        window *= 2
+    return len(buf)
+
+
+def _read_obj(path: Path, texture: str, max_pixels: int) -> _Raw:
     data = _read_bytes(path)
     buf = np.frombuffer(data, dtype=np.uint8, offset=3 if data.startswith(b"\xef\xbb\xbf") else 0)  # BOM
-    counts = obj_count(buf)
-    V6, vcols, VT, cv, cvt, face_ptr, use_spans, lib_spans, bad_line = obj_fill(buf, counts)
+    V6, vcols, VT, cv, cvt, face_ptr, use_spans, lib_spans, bad_line = parse_obj(buf)
     names = [_text(buf[s:e].tobytes()) for s, e, _ in use_spans]
     libs = [_text(buf[s:e].tobytes()) for s, e in lib_spans]
     del buf, data  # the file's bytes are the largest array here

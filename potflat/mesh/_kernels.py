@@ -1,7 +1,8 @@
 """Numba kernels for mesh loading and cleaning: an OBJ tokenizer and orientation propagation.
 
 Arrays in, arrays out, no I/O. The OBJ kernels read the file's bytes (``uint8``) in two
-passes: :func:`obj_count` sizes the output, :func:`obj_fill` parses into preallocated arrays.
+passes over ranges of whole lines: :func:`obj_count` sizes the output, :func:`obj_fill` parses
+into preallocated arrays (the ranges of a file side by side, in threads).
 """
 from __future__ import annotations
 
@@ -139,96 +140,105 @@ def _parse_int(buf, i, n):
     return (-v if neg else v), i, seen
 
 
+#: The order of the counts of :func:`obj_count` (and of the running offsets of :func:`obj_fill`).
+OBJ_VERTICES, OBJ_TEXCOORDS, OBJ_FACES, OBJ_CORNERS, OBJ_USEMTL, OBJ_MTLLIB, OBJ_LINES = range(7)
+
+
 @leaf
-def obj_count(buf):
-    """Count the records of an OBJ file.
+def obj_count(buf, start, stop):
+    """Count the records of the lines of an OBJ file in ``buf[start:stop]``.
 
     Parameters
     ----------
     buf : (nbytes,) uint8
         The file's content.
+    start, stop : int
+        A range of whole lines: ``start`` is 0 or follows a newline, ``stop`` follows a
+        newline or is the end of the file.
 
     Returns
     -------
-    counts : (6,) int64
-        Vertices, texture coordinates, faces, face corners, ``usemtl`` lines, ``mtllib`` lines.
+    counts : (7,) int64
+        Vertices, texture coordinates, faces, face corners, ``usemtl`` lines, ``mtllib`` lines
+        and lines (the ``OBJ_*`` indices).
     """
-    n = buf.shape[0]
-    counts = np.zeros(6, np.int64)
-    i = np.int64(0)  # (not a literal: one compiled signature of the helpers it is passed to)
+    n = np.int64(stop)
+    counts = np.zeros(7, np.int64)
+    i = np.int64(start)
     while i < n:
+        counts[OBJ_LINES] += 1
         i = _skip_spaces(buf, i, n)
         if i < n and buf[i] != 10 and buf[i] != 35:
             kw, i = _keyword(buf, i, n)
             if kw == 1:
-                counts[0] += 1
+                counts[OBJ_VERTICES] += 1
             elif kw == 2:
-                counts[1] += 1
+                counts[OBJ_TEXCOORDS] += 1
             elif kw == 3:
-                counts[2] += 1
+                counts[OBJ_FACES] += 1
                 while True:
                     i = _skip_spaces(buf, i, n)
                     if i >= n or buf[i] == 10 or buf[i] == 35:
                         break
-                    counts[3] += 1
+                    counts[OBJ_CORNERS] += 1
                     i = _token_end(buf, i, n)
             elif kw == 4:
-                counts[4] += 1
+                counts[OBJ_USEMTL] += 1
             elif kw == 5:
-                counts[5] += 1
+                counts[OBJ_MTLLIB] += 1
         i = _skip_line(buf, i, n) + 1
     return counts
 
 
 @leaf
-def obj_fill(buf, counts):
-    """Parse an OBJ file into arrays sized by :func:`obj_count`.
+def obj_fill(buf, start, stop, before, V, vcols, VT, corner_v, corner_vt, face_ptr, use_spans, lib_spans):
+    """Parse the lines of an OBJ file in ``buf[start:stop]`` into arrays sized by
+    :func:`obj_count`, at the rows after the records of the lines before them.
+
+    Ranges of one file can be parsed in any order, also at the same time (each writes its
+    own rows; serial, without the GIL).
 
     Parameters
     ----------
     buf : (nbytes,) uint8
         The file's content.
-    counts : (6,) int64
-        From :func:`obj_count`.
+    start, stop : int
+        A range of whole lines (as in :func:`obj_count`).
+    before : (7,) int64
+        :func:`obj_count` of ``buf[:start]``: where the range's rows start, its first line's
+        number - 1, and the vertex and texture counts that relative (negative) indices count
+        back from.
+    V : (nv, 6) float64
+        Output (filled with NaN): up to six numbers per ``v`` line (x y z and optional r g b).
+    vcols : (nv,) int64
+        Output: how many numbers each ``v`` line had.
+    VT : (nvt, 2) float64
+        Output (filled with 0): the first two numbers of each ``vt`` line.
+    corner_v, corner_vt : (nc,) int64
+        Output: 0-based vertex and texture indices of each face corner; relative (negative)
+        indices resolved; ``-1`` = no texture index; :data:`BAD_INDEX` = malformed or zero index.
+    face_ptr : (nf + 1,) int64
+        Output (``face_ptr[0] = 0``): corners of face ``k`` are ``face_ptr[k]:face_ptr[k + 1]``.
+    use_spans : (nuse, 3) int64
+        Output: byte span of each ``usemtl`` line's argument and the index of the next face.
+    lib_spans : (nlib, 2) int64
+        Output: byte span of each ``mtllib`` line's argument.
 
     Returns
     -------
-    V : (nv, 6) float64
-        Up to six numbers per ``v`` line (x y z and optional r g b); missing ones NaN.
-    vcols : (nv,) int64
-        How many numbers each ``v`` line had.
-    VT : (nvt, 2) float64
-        First two numbers of each ``vt`` line (missing ones 0).
-    corner_v, corner_vt : (nc,) int64
-        0-based vertex and texture indices of each face corner; relative (negative) indices
-        resolved; ``-1`` = no texture index; :data:`BAD_INDEX` = malformed or zero index.
-    face_ptr : (nf + 1,) int64
-        Corners of face ``k`` are ``face_ptr[k]:face_ptr[k + 1]``.
-    use_spans : (nuse, 3) int64
-        Byte span of each ``usemtl`` line's argument and the index of the next face.
-    lib_spans : (nlib, 2) int64
-        Byte span of each ``mtllib`` line's argument.
     bad_line : int
-        1-based number of the first line with an unparsable number, 0 if none.
+        1-based number (in the file) of the range's first line with an unparsable number, 0 if none.
     """
-    n = buf.shape[0]
-    V = np.full((counts[0], 6), np.nan)
-    vcols = np.zeros(counts[0], np.int64)
-    VT = np.zeros((counts[1], 2))
-    corner_v = np.empty(counts[3], np.int64)
-    corner_vt = np.empty(counts[3], np.int64)
-    face_ptr = np.zeros(counts[2] + 1, np.int64)
-    use_spans = np.zeros((counts[4], 3), np.int64)
-    lib_spans = np.zeros((counts[5], 2), np.int64)
-    iv = 0
-    ivt = 0
-    jf = 0
-    jc = 0
-    ju = 0
-    jl = 0
-    line = 0
+    n = np.int64(stop)
+    iv = before[OBJ_VERTICES]
+    ivt = before[OBJ_TEXCOORDS]
+    jf = before[OBJ_FACES]
+    jc = before[OBJ_CORNERS]
+    ju = before[OBJ_USEMTL]
+    jl = before[OBJ_MTLLIB]
+    line = before[OBJ_LINES]
     bad_line = 0
-    i = np.int64(0)  # (not a literal: one compiled signature of the helpers it is passed to)
+    i = np.int64(start)
     while i < n:
         line += 1
         i = _skip_spaces(buf, i, n)
@@ -305,7 +315,7 @@ def obj_fill(buf, counts):
                     lib_spans[jl, 1] = e
                     jl += 1
         i = _skip_line(buf, i, n) + 1
-    return V, vcols, VT, corner_v, corner_vt, face_ptr, use_spans, lib_spans, bad_line
+    return bad_line
 
 
 @leaf
