@@ -138,3 +138,27 @@ def test_weighted_percentiles_match_a_slow_reference():
         want = [float(np.percentile(repeated, q, method="inverted_cdf")) for q in qs]
         assert weighted_percentiles(values, weights, qs) == want
         assert [weighted_percentile(values, weights, q) for q in qs] == want
+
+
+def test_a_part_of_the_faces_is_summarized_as_a_mesh_of_those_faces():
+    """``summarize_part`` takes a reference's arrays: the same figures, bit for bit, as a new
+    reference of the part's faces, also for a part with a face degenerate by its own mean
+    area only (the fallback), the empty part and the whole mesh."""
+    from potflat.mesh.distortion import zone_figures
+
+    rng = np.random.default_rng(8)
+    V, F = _grid(9, 7)
+    V = V + rng.normal(scale=0.2, size=V.shape)
+    V[-1] = V[-2] + 1e-13  # a sliver: degenerate by the mean area of all faces, not by its own
+    uv = V[:, :2] * [1.1, 0.8] + rng.normal(scale=0.05, size=(len(V), 2))
+    reference = SurfaceReference(V, F)
+    sliver = np.flatnonzero((F == len(V) - 1).any(axis=1))
+    parts = [rng.random(len(F)) < share for share in (0.1, 0.5, 0.9)]
+    parts += [np.zeros(len(F), bool), np.ones(len(F), bool), np.isin(np.arange(len(F)), sliver)]
+    for part in parts:
+        assert reference.summarize_part(uv, part) == summarize(V, uv, F[part]), part.sum()
+    importance = (V[:, 0] > 3).astype(float)
+    with_reference = zone_figures(V, uv, F, importance, reference=reference)
+    assert with_reference == zone_figures(V, uv, F, importance)
+    for key, sel in (("important", importance[F].mean(axis=1) >= 0.5), ("rest", importance[F].mean(axis=1) < 0.5)):
+        assert with_reference[key].distortion == summarize(V, uv, F[sel])

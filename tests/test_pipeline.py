@@ -198,7 +198,7 @@ def test_run_scan_computes_each_flattenings_figures_once(tmp_path, monkeypatch):
     flattening's (whole surface and painted zone) from the relax stage, instead of computing
     them again; they are what the stage commands compute from the files."""
     import potflat.mesh.distortion as distortion
-    import potflat.stages.relax_stage as relax_stage
+    import potflat.relax.solver as solver
     from potflat.stages.bake_stage import run_bake_stage
     from potflat_synthetic.vessels import make_vessel, write_obj
 
@@ -206,9 +206,9 @@ def test_run_scan_computes_each_flattenings_figures_once(tmp_path, monkeypatch):
     stage, computed = ["before"], []
     summarize, zone_summary = distortion.SurfaceReference.summarize, distortion.zone_summary
 
-    def zone_counted(*args):
+    def zone_counted(*args, **kwargs):
         computed.append((stage[-1], "zone"))
-        return zone_summary(*args)
+        return zone_summary(*args, **kwargs)
 
     layouts = []  # the layouts summarised in the relax stage
 
@@ -220,7 +220,7 @@ def test_run_scan_computes_each_flattenings_figures_once(tmp_path, monkeypatch):
 
     monkeypatch.setattr(distortion.SurfaceReference, "summarize", summarize_counted)
     monkeypatch.setattr(distortion, "zone_summary", zone_counted)
-    monkeypatch.setattr(relax_stage, "zone_summary", zone_counted)
+    monkeypatch.setattr(solver, "zone_summary", zone_counted)
     bake = {"px_per_mm": 1.0, "maps": ("stress",)}
     result = run_scan(scan, tmp_path / "out", relax={"preset": "preview"}, bake=bake, progress=stage.append)
     assert ("relax", "zone") in computed and ("relax", "summarize") in computed

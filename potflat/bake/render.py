@@ -362,14 +362,18 @@ class Renderer:
         Sub-samples per pixel side; 0: from the texture's resolution.
     max_megapixels : float
     distortion_maps : bool
-        False: the painting only (no distortion maps, no :attr:`summary`).
+        False: the painting only (no distortion maps, no :attr:`summary` or :attr:`zone`).
     summary : DistortionSummary, optional
         ``flat``'s whole-surface figures when the caller has them (``potflat run``: the relax
         stage's, of the same flattening); computed when not given.
+    zone : dict, optional
+        ``flat``'s painted-zone figures (:func:`potflat.mesh.distortion.zone_summary`) when the
+        caller has them (the relax stage's); computed when not given.
     """
 
     def __init__(self, flat: FlatMesh, px_per_mm: float, *, supersample: int = 0, max_megapixels: float = 1000.0,
-                 distortion_maps: bool = True, summary: distortion.DistortionSummary | None = None):
+                 distortion_maps: bool = True, summary: distortion.DistortionSummary | None = None,
+                 zone: dict | None = None):
         from potflat.bake import _kernels as raster
 
         self.flat = flat
@@ -385,6 +389,8 @@ class Renderer:
             if distortion_maps:
                 reference = distortion.SurfaceReference(mesh.vertices, self.faces)  # the 3D side once
                 self.summary = summary if summary is not None else reference.summarize(flat.uv)
+                self.zone = zone if zone is not None else distortion.zone_summary(
+                    mesh.vertices, flat.uv, self.faces, flat.importance, reference=reference)
                 fd = reference.face_distortion(flat.uv)
                 self.area_3d, self.area_2d, self.valid = fd.area_3d, fd.area_2d, fd.valid
                 self.face_values = {"area": fd.log_area_ratio, "anisotropy": np.minimum(fd.anisotropy, 1e6)}
@@ -589,11 +595,10 @@ def _stats(values: np.ndarray, weights: np.ndarray | None = None) -> dict:
     return {"mean": mean, "p95": float(np.percentile(values, 95)), "max": float(values.max())}
 
 
-def image_figures(r: Renderer, covered_px: float, zone: dict | None = None) -> dict:
+def image_figures(r: Renderer, covered_px: float) -> dict:
     """The figures of ``NAME.bake.json``: the image's grid and texture, the distortion maps'
     statistics, the whole surface's figures (``r.summary``) and the painted zone's
-    (``zone``: :func:`potflat.mesh.distortion.zone_summary` of ``r.flat`` when the caller has
-    it, computed when None); ``covered_px``: the painting's covered pixels, summed."""
+    (``r.zone``); ``covered_px``: the painting's covered pixels, summed."""
     g, flat = r.grid, r.flat
     mpu = flat.mesh.mm_per_unit
     fv = r.face_values
@@ -621,8 +626,7 @@ def image_figures(r: Renderer, covered_px: float, zone: dict | None = None) -> d
         "area": {**_stats(np.abs(fv["area"][valid]), w), "unit": "|ln(flat area / 3D area)|"},
         "anisotropy": {**_stats(fv["anisotropy"][valid], w), "unit": "sigma_max / sigma_min"},
         "distortion": summary,
-        **(zone if zone is not None else
-           distortion.zone_summary(flat.mesh.vertices, flat.uv, flat.mesh.faces, flat.importance)),
+        **r.zone,
         "covered_area_mm2": covered_px / g.px_per_mm ** 2,
         "flattened_area_mm2": float(np.abs(r.area_2d).sum()) * mpu ** 2,
         "surface_area_mm2": float(r.area_3d.sum()) * mpu ** 2,

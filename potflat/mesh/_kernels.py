@@ -1062,6 +1062,36 @@ def flat_face_maps(uv, F, frames):
     return area_2d, sigma_max, sigma_min
 
 
+@leaf
+def mark_face_edges(F, part, edges, first, out):
+    """Mark the edges of some faces among a mesh's sorted undirected edges.
+
+    Parameters
+    ----------
+    F : (m, 3) int64
+    part : (m,) bool
+        The faces whose edges to mark.
+    edges : (e, 2) int64
+        The undirected edges of ``F`` (smaller endpoint first), sorted (``unique_edges``).
+    first : (n + 1,) int64
+        Where each vertex's edges start in ``edges`` as their smaller endpoint.
+    out : (e,) bool
+        Output (filled with False): True on each edge of a face of ``part``.
+    """
+    for f in range(F.shape[0]):
+        if not part[f]:
+            continue
+        for k in range(3):
+            a = F[f, k]
+            b = F[f, (k + 1) % 3]
+            lo = np.uint64(min(a, b))
+            hi = max(a, b)
+            for e in range(np.uint64(first[lo]), np.uint64(first[lo + np.uint64(1)])):
+                if edges[e, 1] == hi:
+                    out[e] = True
+                    break
+
+
 @parallel
 def edge_lengths(P, E):
     """Length of each edge ``E`` (e, 2) int64 between points ``P`` (n, d) float64. Shape (e,)."""

@@ -149,9 +149,8 @@ class SurfaceReference:
 
     @cached_property
     def valid(self) -> np.ndarray:
-        """Non-degenerate faces (3D area above :data:`DEGENERATE_AREA_FRACTION` of the mean). Shape (m,) bool."""
-        mean_area = self.area_3d.mean() if len(self.faces) else 0.0
-        return self.area_3d > DEGENERATE_AREA_FRACTION * max(mean_area, np.finfo(float).tiny)
+        """Non-degenerate faces (:func:`_nondegenerate`). Shape (m,) bool."""
+        return _nondegenerate(self.area_3d)
 
     @cached_property
     def edges(self) -> np.ndarray:
@@ -203,29 +202,72 @@ class SurfaceReference:
 
     def summarize(self, uv: np.ndarray) -> DistortionSummary:
         """Scalar distortion figures of the map to ``uv`` ((n, 2) float64; see module docs)."""
-        fd = self.face_distortion(uv)
-        err = self.edge_length_error(uv) if len(self.faces) else np.zeros(1)
-        v = fd.valid
-        w = fd.area_3d[v]
-        la = np.abs(fd.log_area_ratio[v])
-        an = fd.anisotropy[v]
-        if not v.any():
-            la = an = w = np.ones(1)
-        total3 = fd.area_3d[v].sum()
-        return DistortionSummary(
-            edge_rms=float(np.sqrt(np.mean(err**2))),
-            edge_max=float(np.max(np.abs(err))),
-            area_mean_abs_log=float(np.average(la, weights=w)),
-            area_p95_abs_log=float(np.percentile(la, 95)),
-            area_max_abs_log=float(np.max(la)),
-            anisotropy_mean=float(np.average(an, weights=w)) if np.isfinite(an).all() else float("inf"),
-            # no interpolation across infinite values (inf - inf is NaN): collapsed faces give inf
-            anisotropy_p95=float(np.percentile(an, 95, method="linear" if np.isfinite(an).all() else "higher")),
-            anisotropy_max=float(np.max(an)),
-            scale=float(fd.area_2d[v].sum() / total3) if total3 > 0 else 0.0,
-            flipped=int(np.count_nonzero(v & (fd.area_2d <= 0))),
-            degenerate=int(np.count_nonzero(~v)),
-        )
+        return _summary(self.face_distortion(uv), self.edge_length_error(uv) if len(self.faces) else np.zeros(1))
+
+    @cached_property
+    def _edge_first(self) -> np.ndarray:
+        """Where each vertex's edges start in :attr:`edges` as their smaller endpoint. Shape (n + 1,) int64."""
+        first = np.zeros(len(self.vertices) + 1, np.int64)
+        np.cumsum(np.bincount(self.edges[:, 0], minlength=len(self.vertices)), out=first[1:])
+        return first
+
+    def summarize_part(self, uv: np.ndarray, part: np.ndarray, *, fd: FaceDistortion | None = None,
+                       edge_error: np.ndarray | None = None) -> DistortionSummary:
+        """The figures of the faces ``part`` alone: ``summarize(vertices, uv, faces[part])``,
+        taken from this reference's per-face and per-edge arrays instead of a new reference.
+
+        Parameters
+        ----------
+        uv : (n, 2) float64
+        part : (m,) bool
+        fd, edge_error : optional
+            :meth:`face_distortion` and :meth:`edge_length_error` of ``uv`` when the caller has them.
+        """
+        from potflat.mesh._kernels import mark_face_edges
+
+        part = np.asarray(part, bool)
+        area = self.area_3d[part]
+        valid = _nondegenerate(area)  # (by the part's own mean area, as a reference of its faces has it)
+        if not part.any() or not np.array_equal(valid, self.valid[part]):
+            # (a face degenerate by one of the two mean areas only: its frame differs)
+            return summarize(self.vertices, uv, self.faces[part])
+        fd = fd if fd is not None else self.face_distortion(uv)
+        err = edge_error if edge_error is not None else self.edge_length_error(uv)
+        on_part = np.zeros(len(self.edges), bool)
+        mark_face_edges(self.faces, part, self.edges, self._edge_first, on_part)
+        return _summary(FaceDistortion(area, fd.area_2d[part], fd.sigma_max[part], fd.sigma_min[part], valid),
+                        err[on_part])
+
+
+def _nondegenerate(area_3d: np.ndarray) -> np.ndarray:
+    """Faces whose 3D area is above :data:`DEGENERATE_AREA_FRACTION` of the mean. Shape (m,) bool."""
+    mean_area = area_3d.mean() if len(area_3d) else 0.0
+    return area_3d > DEGENERATE_AREA_FRACTION * max(mean_area, np.finfo(float).tiny)
+
+
+def _summary(fd: FaceDistortion, err: np.ndarray) -> DistortionSummary:
+    """:class:`DistortionSummary` of per-face figures ``fd`` and relative edge-length errors ``err`` ((e,))."""
+    v = fd.valid
+    w = fd.area_3d[v]
+    la = np.abs(fd.log_area_ratio[v])
+    an = fd.anisotropy[v]
+    if not v.any():
+        la = an = w = np.ones(1)
+    total3 = fd.area_3d[v].sum()
+    return DistortionSummary(
+        edge_rms=float(np.sqrt(np.mean(err**2))),
+        edge_max=float(np.max(np.abs(err))),
+        area_mean_abs_log=float(np.average(la, weights=w)),
+        area_p95_abs_log=float(np.percentile(la, 95)),
+        area_max_abs_log=float(np.max(la)),
+        anisotropy_mean=float(np.average(an, weights=w)) if np.isfinite(an).all() else float("inf"),
+        # no interpolation across infinite values (inf - inf is NaN): collapsed faces give inf
+        anisotropy_p95=float(np.percentile(an, 95, method="linear" if np.isfinite(an).all() else "higher")),
+        anisotropy_max=float(np.max(an)),
+        scale=float(fd.area_2d[v].sum() / total3) if total3 > 0 else 0.0,
+        flipped=int(np.count_nonzero(v & (fd.area_2d <= 0))),
+        degenerate=int(np.count_nonzero(~v)),
+    )
 
 
 def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -454,8 +496,8 @@ class ZoneFigures:
         return out
 
 
-def zone_figures(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, importance: np.ndarray | None,
-                 ) -> dict[str, ZoneFigures]:
+def zone_figures(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, importance: np.ndarray | None, *,
+                 reference: SurfaceReference | None = None) -> dict[str, ZoneFigures]:
     """:class:`ZoneFigures` of the important zone (``"important"``) and of the rest (``"rest"``).
 
     Parameters
@@ -465,8 +507,12 @@ def zone_figures(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, import
     faces : (m, 3) int64
     importance : (n,) float64 or None
         None: the whole surface is the important zone and the rest is empty.
+    reference : SurfaceReference, optional
+        The 3D side of ``vertices`` and ``faces`` when the caller has it already.
     """
-    fd = face_distortion(vertices, uv, faces)
+    reference = reference if reference is not None else SurfaceReference(vertices, faces)
+    fd = reference.face_distortion(uv)
+    edge_error = reference.edge_length_error(uv) if len(faces) else None
     zone = important_faces(faces, importance)
     scale, err = length_scale(fd), length_error(fd)
     total = float(fd.area_3d[fd.valid].sum()) or 1.0
@@ -483,7 +529,7 @@ def zone_figures(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, import
             scale_median=weighted_percentile(scale, w, 50.0),
             length_error_median_pct=100.0 * err_median,
             length_error_p95_pct=100.0 * err_p95,
-            distortion=summarize(vertices, uv, faces[sel]),
+            distortion=reference.summarize_part(uv, sel, fd=fd, edge_error=edge_error),
         )
     return out
 
@@ -510,7 +556,8 @@ def true_scale_factor(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, i
     return 1.0 / median if np.isfinite(median) and median > 0 else 1.0
 
 
-def zone_summary(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, importance: np.ndarray | None) -> dict:
+def zone_summary(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, importance: np.ndarray | None, *,
+                 reference: SurfaceReference | None = None) -> dict:
     """How true the flattening is inside the important zone and outside it, for the JSON.
 
     Parameters
@@ -519,6 +566,8 @@ def zone_summary(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, import
     uv : (n, 2) float64
     faces : (m, 3) int64
     importance : (n,) float64 or None
+    reference : SurfaceReference, optional
+        The 3D side of ``vertices`` and ``faces`` when the caller has it already.
 
     Returns
     -------
@@ -527,7 +576,7 @@ def zone_summary(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, import
         NaN as null) and ``lengths``: one sentence on how far lengths read off the image
         are off where the painting is.
     """
-    zones = zone_figures(vertices, uv, faces, importance)
+    zones = zone_figures(vertices, uv, faces, importance, reference=reference)
     imp = zones["important"]
     where = "in the painted zone" if importance is not None else "on the surface"
     words = (f"lengths measured on the image {where} are off by {imp.length_error_median_pct:.1f}% "

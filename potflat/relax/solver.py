@@ -43,6 +43,7 @@ from potflat.mesh.distortion import (
     row_blocks,
     true_scale_factor,
     weighted_percentile,
+    zone_summary,
 )
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
 from potflat.mesh.boundary import crossing_pairs
@@ -220,9 +221,12 @@ class RelaxResult:
         Distortion of the result.
     distortion_before : DistortionSummary
         Distortion of the input flattening.
+    zone : dict
+        How true the result is in the painted zone and in the rest
+        (:func:`potflat.mesh.distortion.zone_summary`: ``important_zone``, ``rest``, ``lengths``).
     timings : dict
         Seconds per phase: ``setup`` (springs, hierarchy, untangling), ``solve``, ``check``
-        (fold checks, distortion summaries, stress), ``total``.
+        (fold checks, distortion summaries, stress), ``figures`` (``zone``), ``total``.
     preset : str
     levels : tuple of dict
         Per level (``coarse`` copies, then ``fine`` for the full mesh, or ``follow`` when it
@@ -248,6 +252,7 @@ class RelaxResult:
     boundary_overlap: int
     distortion: DistortionSummary
     distortion_before: DistortionSummary
+    zone: dict | None
     timings: dict
     preset: str
     levels: tuple = ()
@@ -1229,11 +1234,14 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
     if settings["true_scale"]:
         factor = true_scale_factor(V, uv_out, F, flat.importance, reference=surface)
         uv_out = centre + (uv_out - centre) * factor
-    after = stress = None
+    after = stress = zone = None
     if summaries:
         before = before if before is not None else surface.summarize(uv)
         after = surface.summarize(uv_out)
         stress = surface.vertex_stress(uv_out, flat.mesh.mm_per_unit)
+    t_check = time.perf_counter()
+    if summaries:
+        zone = zone_summary(V, uv_out, F, flat.importance, reference=surface)
     t_end = time.perf_counter()
     return RelaxResult(
         flat=flat.replace(uv=uv_out, stress=stress),
@@ -1244,8 +1252,9 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         boundary_overlap=overlap,
         distortion=after,
         distortion_before=before,
-        timings={"setup": t_setup - t_start, "solve": t_solve - t_setup, "check": t_end - t_solve,
-                 "total": t_end - t_start},
+        zone=zone,
+        timings={"setup": t_setup - t_start, "solve": t_solve - t_setup, "check": t_check - t_solve,
+                 "figures": t_end - t_check, "total": t_end - t_start},
         preset=options.preset,
         levels=tuple(levels),
         settings=settings,

@@ -195,7 +195,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     folded = _folded_faces(sidecar, len(flat.mesh.faces))
     ppm = options.resolution
     r = Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels,
-                 summary=distortion)
+                 summary=distortion, zone=zone)
     g = r.grid
     clock.lap("prepare")
     if len(attachment_marks):
@@ -266,7 +266,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
                                             shape=(g.height, g.width, 3), dtype=np.float32, px_per_mm=ppm,
                                             photometric="rgb")
     clock.lap("tiff")
-    figures = image_figures(r, covered, zone)
+    figures = image_figures(r, covered)
     clock.lap("figures")
     if options.obj:
         paths["obj"] = _write_flat_obj(out_dir / f"{name}.flat.obj", flat, g, band, paths["png"].name)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from potflat.mesh.distortion import DistortionSummary, zone_summary
+from potflat.mesh.distortion import DistortionSummary
 from potflat.relax.solver import RelaxOptions, relax
 from potflat.stages.names import relax_name
 from potflat.types import FlatMesh, StageOutput, StepClock
@@ -74,8 +74,7 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     clock.lap("relax")
     ply_path = out_dir / f"{name}.relaxed.ply"
     json_path = out_dir / f"{name}.relaxed.json"
-    zone = zone_summary(flat.mesh.vertices, result.flat.uv, flat.mesh.faces, result.flat.importance)
-    clock.lap("figures")
+    zone = result.zone
     summary = {
         "preset": result.preset,
         "options": asdict(options),
