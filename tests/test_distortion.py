@@ -162,3 +162,42 @@ def test_a_part_of_the_faces_is_summarized_as_a_mesh_of_those_faces():
     assert with_reference == zone_figures(V, uv, F, importance)
     for key, sel in (("important", importance[F].mean(axis=1) >= 0.5), ("rest", importance[F].mean(axis=1) < 0.5)):
         assert with_reference[key].distortion == summarize(V, uv, F[sel])
+
+
+def test_summary_figures_match_numpy_reference():
+    """The valid faces' figures taken in one kernel pass give the figures of the NumPy
+    formulas, bit for bit: flipped, collapsed (sigma_min 0: anisotropy inf, or NaN for 0 / 0)
+    and zero-area faces among degenerate ones."""
+    from potflat.mesh.distortion import FaceDistortion, _summary
+
+    rng = np.random.default_rng(5)
+    m = 500
+    for case in range(4):
+        area_3d = rng.random(m) + 0.1
+        area_2d = area_3d * rng.lognormal(0.0, 0.3, m) * np.where(rng.random(m) < 0.05, -1.0, 1.0)
+        sigma_max = rng.random(m) + 1.0
+        sigma_min = rng.random(m) * np.sign(area_2d)
+        valid = rng.random(m) > 0.1
+        area_2d[rng.random(m) < 0.05] = 0.0
+        if case >= 2:  # a collapsed face: infinite anisotropy (case 3: also 0 / 0)
+            sigma_min[np.flatnonzero(valid)[:2]] = 0.0
+            if case == 3:
+                sigma_max[np.flatnonzero(valid)[1]] = 0.0
+        if case == 1:
+            valid[:] = False
+        fd = FaceDistortion(area_3d, area_2d, sigma_max, sigma_min, valid)
+        err = rng.normal(size=40)
+        got = _summary(fd, err)
+        v = valid
+        with np.errstate(invalid="ignore"):  # (0 / 0)
+            w, la, an = area_3d[v], np.abs(fd.log_area_ratio[v]), fd.anisotropy[v]
+        if not v.any():
+            la = an = w = np.ones(1)
+        finite = np.isfinite(an).all()
+        want = (float(np.sqrt(np.mean(err**2))), float(np.max(np.abs(err))), float(np.average(la, weights=w)),
+                float(np.percentile(la, 95)), float(np.max(la)),
+                float(np.average(an, weights=w)) if finite else float("inf"),
+                float(np.percentile(an, 95, method="linear" if finite else "higher")), float(np.max(an)),
+                float(area_2d[v].sum() / area_3d[v].sum()) if v.any() else 0.0,
+                int(np.count_nonzero(v & (area_2d <= 0))), int(np.count_nonzero(~v)))
+        np.testing.assert_array_equal(np.array(tuple(got.as_dict().values()), float), np.array(want, float))

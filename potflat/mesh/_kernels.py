@@ -1063,6 +1063,49 @@ def flat_face_maps(uv, F, frames):
 
 
 @leaf
+def valid_face_figures(area_3d, area_2d, sigma_max, sigma_min, valid, weight, area_2d_valid, area_ratio,
+                       anisotropy):
+    """The per-face figures of a distortion summary, for the valid faces only, in one pass.
+
+    Parameters
+    ----------
+    area_3d, area_2d, sigma_max, sigma_min : (m,) float64
+        As in :class:`potflat.mesh.distortion.FaceDistortion`.
+    valid : (m,) bool
+    weight, area_2d_valid, area_ratio, anisotropy : (m,) float64
+        Outputs, their first ``count`` entries written (the valid faces in order): the 3D area,
+        the signed flat area, ``|A_2d| / A_3d`` (1 where ``A_2d`` is 0, so its log is 0) and
+        ``sigma_max / |sigma_min|`` (inf, or NaN for ``0 / 0``, where ``sigma_min`` is 0, as
+        NumPy divides).
+
+    Returns
+    -------
+    count : int
+        Valid faces.
+    flipped : int
+        Valid faces whose flat area is not positive.
+    """
+    count = 0
+    flipped = 0
+    for f in range(area_3d.shape[0]):
+        if not valid[f]:
+            continue
+        a2 = area_2d[f]
+        weight[count] = area_3d[f]
+        area_2d_valid[count] = a2
+        area_ratio[count] = abs(a2) / area_3d[f] if a2 != 0.0 else 1.0
+        low = abs(sigma_min[f])
+        if low != 0.0:
+            anisotropy[count] = sigma_max[f] / low
+        else:
+            anisotropy[count] = np.inf if sigma_max[f] > 0.0 else np.nan
+        if a2 <= 0.0:
+            flipped += 1
+        count += 1
+    return count, flipped
+
+
+@leaf
 def mark_face_edges(F, part, edges, first, out):
     """Mark the edges of some faces among a mesh's sorted undirected edges.
 

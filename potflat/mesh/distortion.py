@@ -247,13 +247,17 @@ def _nondegenerate(area_3d: np.ndarray) -> np.ndarray:
 
 def _summary(fd: FaceDistortion, err: np.ndarray) -> DistortionSummary:
     """:class:`DistortionSummary` of per-face figures ``fd`` and relative edge-length errors ``err`` ((e,))."""
-    v = fd.valid
-    w = fd.area_3d[v]
-    la = np.abs(fd.log_area_ratio[v])
-    an = fd.anisotropy[v]
-    if not v.any():
+    from potflat.mesh._kernels import valid_face_figures
+
+    m = len(fd.area_3d)
+    w, area_2d, ratio, an = (np.empty(m) for _ in range(4))
+    count, flipped = valid_face_figures(fd.area_3d, fd.area_2d, fd.sigma_max, fd.sigma_min, fd.valid,
+                                        w, area_2d, ratio, an)
+    w, area_2d, an = w[:count], area_2d[:count], an[:count]
+    la = np.abs(np.log(ratio[:count]))  # (NumPy's log: the figures of FaceDistortion.log_area_ratio, bit for bit)
+    total3 = w.sum()
+    if not count:
         la = an = w = np.ones(1)
-    total3 = fd.area_3d[v].sum()
     return DistortionSummary(
         edge_rms=float(np.sqrt(np.mean(err**2))),
         edge_max=float(np.max(np.abs(err))),
@@ -264,9 +268,9 @@ def _summary(fd: FaceDistortion, err: np.ndarray) -> DistortionSummary:
         # no interpolation across infinite values (inf - inf is NaN): collapsed faces give inf
         anisotropy_p95=float(np.percentile(an, 95, method="linear" if np.isfinite(an).all() else "higher")),
         anisotropy_max=float(np.max(an)),
-        scale=float(fd.area_2d[v].sum() / total3) if total3 > 0 else 0.0,
-        flipped=int(np.count_nonzero(v & (fd.area_2d <= 0))),
-        degenerate=int(np.count_nonzero(~v)),
+        scale=float(area_2d.sum() / total3) if total3 > 0 else 0.0,
+        flipped=int(flipped),
+        degenerate=m - int(count),
     )
 
 
