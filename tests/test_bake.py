@@ -471,6 +471,28 @@ def test_masked_halving_matches_reference():
                 assert np.abs(out[r, c].astype(float) - want).max() <= 0.5
 
 
+def test_pull_fill_matches_reference():
+    """The texels outside the charts take the next coarser level's bilinear upsampling, the
+    coarsest level's the mean of its charts; the texels in the charts keep their values."""
+    import cv2
+
+    from potflat.bake.render import _pull_fill
+
+    rng = np.random.default_rng(6)
+    for dtype in (np.uint8, np.uint16):
+        shapes = [(13, 17), (7, 9), (4, 5)]
+        levels = [rng.integers(0, np.iinfo(dtype).max, s + (3,)).astype(dtype) for s in shapes]
+        valids = [rng.random(s) < 0.5 for s in shapes]
+        want = [lv.copy() for lv in levels]
+        want[-1][~valids[-1]] = want[-1][valids[-1]].mean(axis=0).round().astype(dtype)
+        for k in (1, 0):
+            up = cv2.resize(want[k + 1], shapes[k][::-1], interpolation=cv2.INTER_LINEAR)
+            want[k] = np.where(valids[k][..., None], want[k], up)
+        _pull_fill(levels, valids)
+        for got, ref in zip(levels, want):
+            np.testing.assert_array_equal(got, ref)
+
+
 def test_collapsed_flat_triangle_keeps_the_json_valid(tmp_path):
     V, F, uv = grid_mesh(10.0, 10.0, 5.0)
     uv = uv.copy()

@@ -441,6 +441,26 @@ def sample_texture(face, bary, texcoords, untextured, lod, tex0, mips, mip_offse
 
 
 @parallel
+def copy_where(dst, src, where):
+    """``dst[i, j] = src[i, j]`` where ``where[i, j]`` (every channel; NumPy's ``copyto`` with a
+    broadcast mask took 0.28 s on a 4096^2 RGB level).
+
+    Parameters
+    ----------
+    dst : (H, W, C) uint8 or uint16
+        Written in place.
+    src : (H, W, C), dtype of ``dst``
+    where : (H, W) bool
+    """
+    H, W, C = dst.shape
+    for r in prange(H):
+        for c in range(W):
+            if where[r, c]:
+                for ch in range(C):
+                    dst[r, c, ch] = src[r, c, ch]
+
+
+@parallel
 def halve_masked(img, valid, out, out_valid):
     """2 x 2 box average of the valid texels only (one mip level of a chart-masked atlas).
 

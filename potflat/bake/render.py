@@ -283,6 +283,8 @@ def _pull_fill(levels: list, valids: list) -> None:
     """Fill each level's texels outside the charts from the next coarser level (in place)."""
     import cv2
 
+    from potflat.bake._kernels import copy_where
+
     last, ok = levels[-1], valids[-1]
     if ok.any() and not ok.all():
         last[~ok] = last[ok].mean(axis=0).round().astype(last.dtype)
@@ -290,7 +292,7 @@ def _pull_fill(levels: list, valids: list) -> None:
         hole = ~valids[k]
         if hole.any():
             up = cv2.resize(levels[k + 1], levels[k].shape[1::-1], interpolation=cv2.INTER_LINEAR)
-            np.copyto(levels[k], up.reshape(levels[k].shape), where=hole[..., None])  # (no gather of the holes)
+            copy_where(levels[k], np.ascontiguousarray(up.reshape(levels[k].shape)), hole)
 
 
 @dataclass(frozen=True)
