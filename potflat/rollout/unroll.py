@@ -29,7 +29,7 @@ import scipy.sparse.csgraph
 
 from potflat import importance as _importance
 from potflat.rollout import proxy as _proxy
-from potflat.mesh._kernels import union_find
+from potflat.mesh._kernels import face_geometry, union_find
 from potflat.mesh.boundary import crossing_pairs, edges_and_boundary
 from potflat.io.images import read_ahead
 from potflat.mesh.embedding import signed_areas
@@ -1095,9 +1095,9 @@ def _notes(result: RolloutResult) -> list[str]:
 
 def _facing_axis_share(result: RolloutResult) -> float:
     """Share of the unrolled 3D area whose normal lies within :data:`FLANGE_ANGLE_DEG` of the axis."""
-    V, F = result.flat.mesh.vertices, result.flat.mesh.faces
-    normal = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])  # length = twice the area
-    twice = np.linalg.norm(normal, axis=1)
+    mesh = result.flat.mesh
+    normal, twice, _, _ = face_geometry(np.ascontiguousarray(mesh.vertices, dtype=np.float64),
+                                        np.ascontiguousarray(mesh.faces, dtype=np.int64))  # |normal| = twice
     along = np.abs(normal @ result.axis.direction) > math.cos(math.radians(FLANGE_ANGLE_DEG)) * twice
     total = float(twice.sum())
     return float(twice[along].sum()) / total if total > 0 else 0.0
