@@ -79,6 +79,18 @@ def test_as_stored_shares_texture_coordinates_already_at_the_files_precision(tmp
     assert second.mesh.texcoords is first.mesh.texcoords
 
 
+def test_float32_exactness_matches_numpy():
+    from potflat.io._kernels import float32_exact
+
+    rng = np.random.default_rng(2)
+    stored = rng.random(50).astype(np.float32).astype(np.float64)
+    for extra in ([], [np.inf, -np.inf, 0.0, -0.0, 1e-40], [0.1], [np.nan], [1e300], [1e-46], [2.0 ** -149]):
+        values = np.concatenate([stored, extra])
+        with np.errstate(over="ignore"):  # (1e300 -> inf)
+            want = np.array_equal(values.astype(np.float32).astype(np.float64), values)
+        assert float32_exact(values) == want, extra
+
+
 def test_truncated_file_is_rejected(tmp_path):
     out = tmp_path / "x.rollout.ply"
     write_flat_ply(out, _flat(tmp_path))

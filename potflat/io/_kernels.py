@@ -1,7 +1,30 @@
-"""PNG row filtering kernel (the streaming PNG encoder in :mod:`potflat.io.images`)."""
+"""Kernels of the file formats: PNG row filtering (the streaming PNG encoder in
+:mod:`potflat.io.images`) and the float32 precision of stage PLYs."""
 from __future__ import annotations
 
-from potflat._jit import parallel, prange
+import numpy as np
+
+from potflat._jit import leaf, parallel, prange
+
+
+@leaf
+def float32_exact(values):
+    """Whether every value is a float32 value (survives a round trip through float32, as the
+    texture coordinates a stage PLY stores do; NaN does not).
+
+    Parameters
+    ----------
+    values : (k,) float64
+
+    Returns
+    -------
+    bool
+    """
+    for i in range(values.shape[0]):
+        v = values[i]
+        if np.float64(np.float32(v)) != v:
+            return False
+    return True
 
 
 @parallel

@@ -170,9 +170,12 @@ def as_stored(flat: FlatMesh, path: str | os.PathLike, *, comments: tuple[str, .
     mesh = flat.mesh
     texcoords, texture_path, untextured = None, None, None
     if mesh.texture_path is not None and mesh.texcoords is not None:
-        texcoords = mesh.texcoords.astype(np.float32).astype(np.float64)
-        if np.array_equal(texcoords, mesh.texcoords):  # stored before (a rollout's): share it
-            texcoords = mesh.texcoords  # (3M vertices: 275 MB less while the next stages run)
+        from potflat.io._kernels import float32_exact
+
+        texcoords = mesh.texcoords
+        if not float32_exact(np.ascontiguousarray(texcoords, dtype=np.float64).reshape(-1)):
+            texcoords = texcoords.astype(np.float32).astype(np.float64)
+        # (else stored before, a rollout's: shared, 275 MB less at 3M vertices while the next stages run)
         texture_path = (path.parent / _texture_target(mesh.texture_path, path).name).resolve()
         untextured = mesh.untextured_faces
     stored = Mesh(mesh.vertices, mesh.faces, texcoords=texcoords, texture_path=texture_path,
