@@ -1062,6 +1062,33 @@ def flat_face_maps(uv, F, frames):
     return area_2d, sigma_max, sigma_min
 
 
+@parallel
+def corner_angles(theta_v, F, idx, centre, shift, out):
+    """Each corner's angle ``theta_v - shift`` of the faces ``F[idx]``, unwrapped to within pi
+    of its face's angle ``centre``: ``c + ((t - shift - c + pi) % 2 pi - pi)`` as NumPy
+    computes it (Python's float modulo).
+
+    Parameters
+    ----------
+    theta_v : (n,) float64
+        Vertex angles.
+    F : (m, 3) int64
+    idx : (k,) int64
+        The faces.
+    centre : (k,) float64
+        Their angles.
+    shift : float
+    out : (k, 3) float64
+        Output.
+    """
+    two_pi = 2.0 * np.pi
+    for s in prange(idx.shape[0]):
+        f = np.uint64(idx[s])
+        c = centre[s]
+        for j in range(3):
+            out[s, j] = c + ((theta_v[np.uint64(F[f, j])] - shift - c + np.pi) % two_pi - np.pi)
+
+
 @leaf
 def valid_face_figures(area_3d, area_2d, sigma_max, sigma_min, valid, weight, area_2d_valid, area_ratio,
                        anisotropy):

@@ -212,10 +212,6 @@ class RolloutResult:
         return self.walls.side
 
 
-def _wrap_pi(x: np.ndarray) -> np.ndarray:
-    return (x + np.pi) % TWO_PI - np.pi
-
-
 def _luminance_variation(mesh: Mesh, faces: np.ndarray) -> tuple[np.ndarray | None, str]:
     """Per-face spread of brightness (std of samples at its corners), and its source."""
     if mesh.texcoords is not None and mesh.texture_path is not None:
@@ -937,11 +933,13 @@ def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band,
 def _corner_angles(theta_v: np.ndarray, F: np.ndarray, idx: np.ndarray, centre: np.ndarray,
                    shift: float = 0.0) -> np.ndarray:
     """Corner angles of the faces ``F[idx]``, ``theta_v - shift`` unwrapped to within pi of
-    ``centre`` ((k,) angle of each face). Shape (k, 3); computed in blocks of faces."""
+    ``centre`` ((k,) angle of each face). Shape (k, 3)."""
+    from potflat.mesh._kernels import corner_angles
+
     out = np.empty((len(idx), 3))
-    for s in row_blocks(len(idx)):
-        c = centre[s, None]
-        out[s] = c + _wrap_pi(theta_v[F[idx[s]]] - shift - c)
+    corner_angles(np.ascontiguousarray(theta_v, dtype=np.float64), np.ascontiguousarray(F, dtype=np.int64),
+                  np.ascontiguousarray(idx, dtype=np.int64), np.ascontiguousarray(centre, dtype=np.float64),
+                  float(shift), out)
     return out
 
 
