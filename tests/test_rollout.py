@@ -480,3 +480,21 @@ def test_units_declared_by_the_file_are_kept_unless_given(tmp_path):
     out = run_rollout_stage(scan, tmp_path / "b", RolloutOptions(units="mm"))
     assert out.summary["units"] == "mm" and out.summary["mm_per_unit"] == 1.0
     assert read_flat_ply(out.paths["ply"]).mesh.units == "mm"
+
+
+def test_corner_angles_match_numpy_reference():
+    """Each corner's angle unwrapped to within pi of its face's, as the NumPy formula gives it
+    (Python's float modulo), at the wrap points too."""
+    from potflat.rollout.unroll import _corner_angles
+
+    rng = np.random.default_rng(4)
+    theta_v = rng.random(60) * 2 * np.pi
+    theta_v[:6] = [0.0, np.pi, -np.pi, 2 * np.pi, 3 * np.pi, 1e-300]
+    F = rng.integers(0, 60, (90, 3))
+    idx = np.sort(rng.choice(90, 70, replace=False))
+    centre = rng.random(70) * 8 - 2
+    centre[:3] = [np.pi, 0.0, -np.pi]
+    for shift in (0.0, 1.5, -7.0):
+        x = theta_v[F[idx]] - shift - centre[:, None]
+        want = centre[:, None] + ((x + np.pi) % (2 * np.pi) - np.pi)
+        np.testing.assert_array_equal(_corner_angles(theta_v, F, idx, centre, shift), want)
