@@ -201,3 +201,16 @@ def test_summary_figures_match_numpy_reference():
                 float(area_2d[v].sum() / area_3d[v].sum()) if v.any() else 0.0,
                 int(np.count_nonzero(v & (area_2d <= 0))), int(np.count_nonzero(~v)))
         np.testing.assert_array_equal(np.array(tuple(got.as_dict().values()), float), np.array(want, float))
+
+
+def test_important_faces_match_numpy_reference():
+    """A face is in the zone when its corners' mean importance reaches the threshold, as the
+    NumPy mean gives it (corner values in quarters: means at the threshold exactly)."""
+    from potflat.mesh.distortion import ZONE_THRESHOLD, important_faces
+
+    rng = np.random.default_rng(9)
+    F = rng.integers(0, 40, (300, 3))
+    for values in (rng.random(40), np.round(rng.random(40) * 4) / 4, np.full(40, ZONE_THRESHOLD)):
+        want = values[F].mean(axis=1) >= ZONE_THRESHOLD
+        np.testing.assert_array_equal(important_faces(F, values), want)
+    assert important_faces(F, None).all()

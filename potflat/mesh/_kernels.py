@@ -1089,6 +1089,26 @@ def corner_angles(theta_v, F, idx, centre, shift, out):
             out[s, j] = c + ((theta_v[np.uint64(F[f, j])] - shift - c + np.pi) % two_pi - np.pi)
 
 
+@parallel
+def faces_reaching(F, values, threshold, out):
+    """Whether each face's corner mean of a vertex value reaches a threshold:
+    ``(v[a] + v[b] + v[c]) / 3 >= threshold``, summed in NumPy's order.
+
+    Parameters
+    ----------
+    F : (m, 3) int64
+    values : (n,) float64
+    threshold : float
+    out : (m,) bool
+        Output.
+    """
+    for f in prange(F.shape[0]):
+        a = values[np.uint64(F[f, 0])]
+        b = values[np.uint64(F[f, 1])]
+        c = values[np.uint64(F[f, 2])]
+        out[f] = (a + b + c) / 3.0 >= threshold
+
+
 @leaf
 def valid_face_figures(area_3d, area_2d, sigma_max, sigma_min, valid, weight, area_2d_valid, area_ratio,
                        anisotropy):

@@ -430,9 +430,14 @@ def important_faces(faces: np.ndarray, importance: np.ndarray | None) -> np.ndar
     -------
     (m,) bool
     """
+    from potflat.mesh._kernels import faces_reaching
+
     if importance is None:
         return np.ones(len(faces), bool)
-    return importance[faces].mean(axis=1) >= ZONE_THRESHOLD
+    out = np.empty(len(faces), bool)
+    faces_reaching(np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3),
+                   np.ascontiguousarray(importance, dtype=np.float64), ZONE_THRESHOLD, out)
+    return out
 
 
 def weighted_percentile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
