@@ -454,9 +454,10 @@ def weighted_percentiles(values: np.ndarray, weights: np.ndarray, qs) -> list[fl
     keep = weights > 0
     if not keep.any():
         return [float("nan")] * len(qs)
-    order = np.argsort(values[keep])
-    v, cum = values[keep][order], np.cumsum(weights[keep][order])
-    return [float(v[min(np.searchsorted(cum, q / 100.0 * cum[-1]), len(v) - 1)]) for q in qs]
+    kept = values[keep]
+    order = np.argsort(kept)
+    cum = np.cumsum(weights[keep][order])
+    return [float(kept[order[min(np.searchsorted(cum, q / 100.0 * cum[-1]), len(kept) - 1)]]) for q in qs]
 
 
 def length_scale(fd: FaceDistortion) -> np.ndarray:
