@@ -65,10 +65,11 @@ class FaceDistortion:
 
     @property
     def anisotropy(self) -> np.ndarray:
-        """``sigma_max / |sigma_min|`` per face (inf for collapsed faces, 1 for degenerate ones). Shape (m,)."""
+        """``sigma_max / |sigma_min|`` per face (inf for faces collapsed to a segment, NaN to a
+        point, 1 for degenerate ones). Shape (m,)."""
         out = np.ones_like(self.area_3d)
         v = self.valid
-        with np.errstate(divide="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore"):  # (a collapsed face is not an error)
             out[v] = self.sigma_max[v] / np.abs(self.sigma_min[v])
         return out
 
