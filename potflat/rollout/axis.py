@@ -53,6 +53,7 @@ import scipy.sparse.csgraph
 
 from potflat.errors import AxisNotFoundError, InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
+from potflat.mesh.distortion import weighted_percentile
 from potflat.mesh.tolerances import DEGENERATE
 
 #: Largest relative profile deviation (median |r - slice median r| / median r) of a vessel.
@@ -273,12 +274,6 @@ def _meridian_residuals(c, n, point, direction):
     return det, r
 
 
-def _weighted_median(x: np.ndarray, w: np.ndarray) -> float:
-    order = np.argsort(x)
-    cw = np.cumsum(w[order])
-    return float(x[order][np.searchsorted(cw, 0.5 * cw[-1])])
-
-
 def axis_residuals(mesh: Mesh, point, direction, *, lines=None) -> tuple[float, float, float, float]:
     """Fit-quality figures of an axis on ``mesh`` (see module docs).
 
@@ -314,7 +309,7 @@ def axis_residuals(mesh: Mesh, point, direction, *, lines=None) -> tuple[float, 
     radial = c - point - hc[:, None] * direction
     outer = np.einsum("ij,ij->i", n, radial) > 0.3 * np.linalg.norm(radial, axis=1)
     prof = _profile_deviation(c[outer] if outer.sum() >= 20 else c, point, direction)
-    return float(np.sqrt(np.sum(w * ang**2))), _weighted_median(ang, w), rms_dist, prof
+    return float(np.sqrt(np.sum(w * ang**2))), weighted_percentile(ang, w, 50.0), rms_dist, prof
 
 
 def _profile_deviation(points: np.ndarray, point, direction, *, slices: int = 32) -> float:
@@ -657,7 +652,7 @@ def _unsymmetric(median_angle: float, profile_deviation: float, max_median_angle
 def _median_sin(c, n, area, point, direction) -> float:
     """Area-weighted median sine of the normal-to-meridian angle (normalised coordinates)."""
     det, r = _meridian_residuals(c, n, point, direction)
-    return _weighted_median(np.abs(det) / np.maximum(r, 0.05 * np.median(r) + 1e-300), area)
+    return weighted_percentile(np.abs(det) / np.maximum(r, 0.05 * np.median(r) + 1e-300), area, 50.0)
 
 
 def _closest_point_to_lines(c: np.ndarray, n: np.ndarray, w: np.ndarray) -> np.ndarray:
