@@ -247,12 +247,17 @@ def table(rows: list[dict], *, command: str, preset: str, px_per_mm: float, text
 
 
 def warm_kernels() -> None:
-    """Run the bundled amphora through ``potflat run`` once (in a temporary folder), so that no
-    row of the table pays for compiling a kernel (a kernel is compiled again after its source
-    file changed)."""
+    """Run the bundled amphora through ``potflat run`` once (in a temporary folder), then bake it
+    again at 0.5 px/mm, so that no row of the table pays for compiling a kernel (a kernel is
+    compiled again after its source file changed): the small atlas needs mip levels (the chart
+    mask's and the push-pull's kernels, which the big scans' painted-zone search and bake use)
+    only at a coarse resolution."""
     sample = Path(__file__).resolve().parents[1] / "samples" / "data" / "amphora.obj"
     with tempfile.TemporaryDirectory(prefix="potflat-scale-warm-") as tmp:
         subprocess.run([sys.executable, "-m", "potflat_cli", "run", str(sample), "-o", tmp, "--quiet"],
+                       check=True, stdin=subprocess.DEVNULL)
+        subprocess.run([sys.executable, "-m", "potflat_cli", "bake", str(Path(tmp) / "amphora.relaxed.ply"),
+                        "-o", str(Path(tmp) / "coarse"), "--px-per-mm", "0.5", "--quiet"],
                        check=True, stdin=subprocess.DEVNULL)
 
 
