@@ -188,3 +188,28 @@ def test_lower_medians_kernel():
     lower_medians(values, start, stop, out)
     expected = [np.sort(values[a:b])[(b - a + 1) // 2 - 1] for a, b in zip(start, stop)]
     assert out.tolist() == expected
+
+
+def test_segment_distances_match_numpy_reference():
+    """The distance to the segment between the two nearest representatives (where it is at
+    most ``join`` long) equals NumPy's vector formulas, bit for bit, a zero-length segment and
+    points beyond the ends included."""
+    from potflat.mesh._kernels import segment_distances
+
+    rng = np.random.default_rng(12)
+    reps = rng.normal(size=(30, 2))
+    reps[5] = reps[4]  # a zero-length segment
+    pts = rng.normal(scale=1.5, size=(400, 2))
+    idx = np.stack([rng.integers(0, 30, 400), rng.integers(0, 30, 400)], axis=1)
+    idx[:10] = [4, 5]
+    nearest = np.linalg.norm(pts - reps[idx[:, 0]], axis=1)
+    for join in (0.0, 0.8, np.inf):
+        p1, p2 = reps[idx[:, 0]], reps[idx[:, 1]]
+        seg = p2 - p1
+        L2 = np.einsum("ij,ij->i", seg, seg)
+        t = np.clip(np.einsum("ij,ij->i", pts - p1, seg) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+        dseg = np.linalg.norm(pts - (p1 + t[:, None] * seg), axis=1)
+        want = np.where(np.sqrt(L2) <= join, np.minimum(nearest, dseg), nearest)
+        out = np.empty(len(pts))
+        segment_distances(reps, pts, idx, nearest, join, out)
+        np.testing.assert_array_equal(out, want)

@@ -1363,6 +1363,42 @@ def angle_coverage(cells, ptr, tv, targets, nh, ring_bins, target_count, own_cou
         own_count[j] = _mark_bins(stamp, mark, tv, ptr[j], ptr[j + 1], ring_bins[cells[j] % nr])
 
 
+@parallel
+def segment_distances(reps, pts, idx, nearest, join, out):
+    """Distance of each point to the segment between its two nearest representatives, where
+    that segment is at most ``join`` long, else to the nearest one (the formulas, and their
+    order, of NumPy's vector form).
+
+    Parameters
+    ----------
+    reps : (q, 2) float64
+        The representatives (points of a curve).
+    pts : (k, 2) float64
+    idx : (k, 2) int64
+        Each point's two nearest representatives (a k-d tree's answer).
+    nearest : (k,) float64
+        The distance to the first of them.
+    join : float
+    out : (k,) float64
+        Output: ``min(nearest, segment distance)`` where the segment is at most ``join`` long,
+        else ``nearest``.
+    """
+    for i in prange(pts.shape[0]):
+        a = np.uint64(idx[i, 0])
+        b = np.uint64(idx[i, 1])
+        p1x = reps[a, 0]
+        p1y = reps[a, 1]
+        sx = reps[b, 0] - p1x
+        sy = reps[b, 1] - p1y
+        L2 = sx * sx + sy * sy
+        t = ((pts[i, 0] - p1x) * sx + (pts[i, 1] - p1y) * sy) / (L2 if L2 > 0.0 else 1.0)
+        t = min(max(t, 0.0), 1.0)
+        dx = pts[i, 0] - (p1x + t * sx)
+        dy = pts[i, 1] - (p1y + t * sy)
+        d = nearest[i]
+        out[i] = min(d, np.sqrt(dx * dx + dy * dy)) if np.sqrt(L2) <= join else d
+
+
 @leaf
 def lower_medians(values, start, stop, out):
     """The lower median of each segment of ``values``: its element of rank ``ceil(k / 2) - 1``

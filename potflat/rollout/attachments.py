@@ -381,15 +381,14 @@ def _distance_to_curve(reps: np.ndarray, pts: np.ndarray, join: float) -> np.nda
     if len(reps) == 0:
         return np.full(len(pts), np.nan)
     from potflat._jit import worker_threads
+    from potflat.mesh._kernels import segment_distances  # Numba: imported on first use
 
     tree = cKDTree(reps)
     if len(reps) == 1:
         d, _ = tree.query(pts, k=1, workers=worker_threads())
         return d
     d, idx = tree.query(pts, k=2, workers=worker_threads())  # the same answer from any number of threads
-    p1, p2 = reps[idx[:, 0]], reps[idx[:, 1]]
-    seg = p2 - p1
-    L2 = np.einsum("ij,ij->i", seg, seg)
-    t = np.clip(np.einsum("ij,ij->i", pts - p1, seg) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-    dseg = np.linalg.norm(pts - (p1 + t[:, None] * seg), axis=1)
-    return np.where(np.sqrt(L2) <= join, np.minimum(d[:, 0], dseg), d[:, 0])
+    out = np.empty(len(pts))
+    segment_distances(np.ascontiguousarray(reps, dtype=np.float64), np.ascontiguousarray(pts, dtype=np.float64),
+                      np.ascontiguousarray(idx, dtype=np.int64), np.ascontiguousarray(d[:, 0]), float(join), out)
+    return out
