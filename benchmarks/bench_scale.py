@@ -108,13 +108,15 @@ def child_load(scan: Path, code: str = TRIMESH_CHILD) -> dict:
     return {"load_s": float(out[0]), "peak_gb": int(out[1]) / 2**20}
 
 
-def run_benchmark(scan: Path, out: Path, *, preset: str, px_per_mm: float, interval: float = 0.1) -> dict:
-    """Run ``potflat run`` on ``scan`` in a child process; sample its memory; split by stage
-    (``out``, the benchmark's own folder, is emptied first: a stage ends when its sidecar appears)."""
+def run_benchmark(scan: Path, out: Path, *, preset: str, px_per_mm: float, extra: tuple[str, ...] = (),
+                  interval: float = 0.1) -> dict:
+    """Run ``potflat run`` on ``scan`` in a child process (``extra``: more of its options);
+    sample its memory; split by stage (``out``, the benchmark's own folder, is emptied first:
+    a stage ends when its sidecar appears)."""
     if out.exists():
         shutil.rmtree(out)
     cmd = [sys.executable, "-m", "potflat_cli", "run", str(scan), "-o", str(out), "--preset", preset,
-           "--px-per-mm", str(px_per_mm), "--json"]
+           "--px-per-mm", str(px_per_mm), *extra, "--json"]
     samples: list[tuple[float, int]] = []
     marks: dict[str, float] = {}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)

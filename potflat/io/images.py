@@ -28,11 +28,11 @@ from potflat.io.atomic import atomic_path
 
 #: Deflate level of the PNG encoder (6 is libpng's default; 9 is much slower for ~2% less).
 PNG_COMPRESSION = 6
-#: Deflate level above :data:`PNG_LARGE_PIXELS`. The six images of a 6.8 MP bake (1M-vertex
-#: benchmark vessel, 184 MB filtered): level 6 in 3.3 s of CPU for 22.3 MB, level 3 in 1.2 s
-#: for 23.6 MB (zlib itself: 8.3 s for 22.4 MB at level 6).
+#: Deflate level above :data:`PNG_LARGE_PIXELS`. The seven images of a 6.8 MP bake (1M-vertex
+#: benchmark vessel, 178 MB filtered), zlib-ng: level 6 in 2.5 s of CPU for 22.3 MB, level 3 in
+#: 0.9 s for 23.6 MB (+6%), level 1 in 0.5 s for 39.6 MB (zlib itself: 8.3 s at level 6).
 PNG_COMPRESSION_LARGE = 3
-PNG_LARGE_PIXELS = 16_000_000
+PNG_LARGE_PIXELS = 4_000_000
 #: Filtered row blocks a PNG writer may queue for its compression thread.
 PNG_QUEUE = 2
 
