@@ -256,27 +256,33 @@ def interpolate_vertex_attr(face, bary, faces, attr, n, out):
 
 @parallel
 def face_values(face, values, n, out):
-    """Per-face values averaged over each pixel's covered sub-samples.
+    """Per-face values averaged over each pixel's covered sub-samples, every column of
+    ``values`` in one pass over the sub-samples (each column summed as alone).
 
     Parameters
     ----------
     face : (k n, w n) int32
-    values : (m,) float64
+    values : (m, d) float64
     n : int
-    out : (k, w) float32
+    out : (k, w, d) float32
         NaN where no sub-sample is covered.
     """
-    k, w = out.shape
+    k, w, d = out.shape
+    acc = np.empty((k, d))
     for r in prange(k):
         for c in range(w):
-            acc = 0.0
+            for j in range(d):
+                acc[r, j] = 0.0
             cnt = 0
             for i in range(np.uint64(r * n), np.uint64(r * n + n)):
                 for q in range(np.uint64(c * n), np.uint64(c * n + n)):
                     if face[i, q] >= 0:
-                        acc += values[np.uint32(face[i, q])]
+                        f = np.uint32(face[i, q])
+                        for j in range(d):
+                            acc[r, j] += values[f, j]
                         cnt += 1
-            out[r, c] = acc / cnt if cnt > 0 else np.nan
+            for j in range(d):
+                out[r, c, j] = acc[r, j] / cnt if cnt > 0 else np.nan
 
 
 @parallel

@@ -433,6 +433,8 @@ class Renderer:
         self._ptr, self._idx = raster.bin_triangles(self._pix, self.faces, float(self._block), nblocks)
         self._raster_mod = raster
         self._cache = None
+        self._face_cache = self._vertex_cache = None  # the strip's fields (_face_fields, _vertex_fields)
+        self._face_columns = None  # face_values stacked (m, d), with their names
         self._vertex_paint = None  # per-vertex colours of a vertex-coloured painting, made on first use
         self._relief_field = None  # per-vertex normal and light of the shaded relief, made on first use
 
@@ -553,32 +555,57 @@ class Renderer:
         """Share of each pixel's covered sub-samples that lie on untextured faces of a textured
         painting (0 everywhere without such faces, :attr:`has_untextured`; NaN outside).
         Shape (k, w) float32."""
+        return self._face_field(self._untextured_value, r0, r1)[..., 0]
+
+    def _face_field(self, values: np.ndarray, r0: int, r1: int) -> np.ndarray:
+        """Per-face ``values`` ((m, d) float64) averaged per pixel. Shape (k, w, d) float32."""
         face, _ = self._raster(r0, r1)
-        out = np.empty((r1 - r0, self.grid.width), np.float32)
-        self._raster_mod.face_values(face, self._untextured_value, self.n, out)
+        out = np.empty((r1 - r0, self.grid.width, values.shape[1]), np.float32)
+        self._raster_mod.face_values(face, values, self.n, out)
         return out
 
     @cached_property
     def _untextured_value(self) -> np.ndarray:
-        """The untextured-face flag as a face value (m,) float64 (0 or 1), made on first use."""
-        return self._untextured.astype(np.float64)
+        """The untextured-face flag as a face value (m, 1) float64 (0 or 1), made on first use."""
+        return self._untextured.astype(np.float64)[:, None]
+
+    def _face_fields(self, r0: int, r1: int) -> dict[str, np.ndarray]:
+        """Every :attr:`face_values` field of the strip by name, (k, w) float32 each, from one
+        pass over its sub-samples (kept for the strip's other layers)."""
+        names = tuple(self.face_values)
+        if self._face_cache is not None and self._face_cache[0] == (r0, r1, names):
+            return self._face_cache[1]
+        if self._face_columns is None or self._face_columns[0] != names:  # a field added since: stacked again
+            self._face_columns = names, np.ascontiguousarray(
+                np.stack([self.face_values[k] for k in names], axis=1), dtype=np.float64)
+        both = self._face_field(self._face_columns[1], r0, r1)
+        found = {k: np.ascontiguousarray(both[..., j]) for j, k in enumerate(names)}
+        self._face_cache = (r0, r1, names), found
+        return found
+
+    def _vertex_fields(self, r0: int, r1: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """The stress map's values and the importance (None without) of the strip, (k, w)
+        float32 each, from one pass over its sub-samples (kept for the strip's other layers)."""
+        if self._vertex_cache is not None and self._vertex_cache[0] == (r0, r1):
+            return self._vertex_cache[1]
+        importance = self.flat.importance
+        columns = [self.vertex_length_error] + ([importance] if importance is not None else [])
+        both = self._vertex_field(np.stack(columns, axis=1), r0, r1)
+        found = (np.ascontiguousarray(both[..., 0]),
+                 np.ascontiguousarray(both[..., 1]) if importance is not None else None)
+        self._vertex_cache = (r0, r1), found
+        return found
 
     def scalar(self, name: str, r0: int, r1: int) -> np.ndarray:
         """A distortion map's values (NaN outside). Shape (k, w) float32."""
-        if name == "stress":
-            return self._vertex_field(self.vertex_length_error, r0, r1)[..., 0]
-        face, _ = self._raster(r0, r1)
-        out = np.empty((r1 - r0, self.grid.width), np.float32)
-        self._raster_mod.face_values(face, np.ascontiguousarray(self.face_values[name], dtype=np.float64), self.n, out)
-        return out
+        return self._vertex_fields(r0, r1)[0] if name == "stress" else self._face_fields(r0, r1)[name]
 
     def zone_outline(self, r0: int, r1: int) -> np.ndarray | None:
         """Pixels on the outline of the important zone (importance crossing
         :data:`potflat.mesh.distortion.ZONE_THRESHOLD`), shape (k, w) bool; None without importance."""
         if self.flat.importance is None:
             return None
-        field = self._vertex_field(self.flat.importance, r0, r1)[..., 0]
-        return _outline(field, distortion.ZONE_THRESHOLD)
+        return _outline(self._vertex_fields(r0, r1)[1], distortion.ZONE_THRESHOLD)
 
     def position(self, r0: int, r1: int) -> np.ndarray:
         """3D point under each pixel, scan units (NaN outside). Shape (k, w, 3) float32."""

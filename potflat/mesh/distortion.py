@@ -201,9 +201,15 @@ class SurfaceReference:
         return 100.0 * _vertex_root_ratio(self.edges, self.edge_length_error(uv) ** 2, np.ones(len(self.edges)),
                                           len(self.vertices))
 
-    def summarize(self, uv: np.ndarray) -> DistortionSummary:
-        """Scalar distortion figures of the map to ``uv`` ((n, 2) float64; see module docs)."""
-        return _summary(self.face_distortion(uv), self.edge_length_error(uv) if len(self.faces) else np.zeros(1))
+    def summarize(self, uv: np.ndarray, *, fd: FaceDistortion | None = None,
+                  edge_error: np.ndarray | None = None) -> DistortionSummary:
+        """Scalar distortion figures of the map to ``uv`` ((n, 2) float64; see module docs);
+        ``fd``, ``edge_error``: its :meth:`face_distortion` and :meth:`edge_length_error` when
+        the caller has them."""
+        if not len(self.faces):
+            edge_error = np.zeros(1)
+        return _summary(fd if fd is not None else self.face_distortion(uv),
+                        edge_error if edge_error is not None else self.edge_length_error(uv))
 
     @cached_property
     def _edge_first(self) -> np.ndarray:
@@ -508,7 +514,8 @@ class ZoneFigures:
 
 
 def zone_figures(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, importance: np.ndarray | None, *,
-                 reference: SurfaceReference | None = None) -> dict[str, ZoneFigures]:
+                 reference: SurfaceReference | None = None, fd: FaceDistortion | None = None,
+                 edge_error: np.ndarray | None = None) -> dict[str, ZoneFigures]:
     """:class:`ZoneFigures` of the important zone (``"important"``) and of the rest (``"rest"``).
 
     Parameters
@@ -520,10 +527,14 @@ def zone_figures(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, import
         None: the whole surface is the important zone and the rest is empty.
     reference : SurfaceReference, optional
         The 3D side of ``vertices`` and ``faces`` when the caller has it already.
+    fd, edge_error : optional
+        ``reference``'s :meth:`~SurfaceReference.face_distortion` and
+        :meth:`~SurfaceReference.edge_length_error` of ``uv`` when the caller has them.
     """
     reference = reference if reference is not None else SurfaceReference(vertices, faces)
-    fd = reference.face_distortion(uv)
-    edge_error = reference.edge_length_error(uv) if len(faces) else None
+    fd = fd if fd is not None else reference.face_distortion(uv)
+    if edge_error is None and len(faces):
+        edge_error = reference.edge_length_error(uv)
     zone = important_faces(faces, importance)
     scale, err = length_scale(fd), length_error(fd)
     total = float(fd.area_3d[fd.valid].sum()) or 1.0
@@ -568,7 +579,8 @@ def true_scale_factor(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, i
 
 
 def zone_summary(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, importance: np.ndarray | None, *,
-                 reference: SurfaceReference | None = None) -> dict:
+                 reference: SurfaceReference | None = None, fd: FaceDistortion | None = None,
+                 edge_error: np.ndarray | None = None) -> dict:
     """How true the flattening is inside the important zone and outside it, for the JSON.
 
     Parameters
@@ -579,6 +591,8 @@ def zone_summary(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, import
     importance : (n,) float64 or None
     reference : SurfaceReference, optional
         The 3D side of ``vertices`` and ``faces`` when the caller has it already.
+    fd, edge_error : optional
+        As for :func:`zone_figures`.
 
     Returns
     -------
@@ -587,7 +601,7 @@ def zone_summary(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, import
         NaN as null) and ``lengths``: one sentence on how far lengths read off the image
         are off where the painting is.
     """
-    zones = zone_figures(vertices, uv, faces, importance, reference=reference)
+    zones = zone_figures(vertices, uv, faces, importance, reference=reference, fd=fd, edge_error=edge_error)
     imp = zones["important"]
     where = "in the painted zone" if importance is not None else "on the surface"
     words = (f"lengths measured on the image {where} are off by {imp.length_error_median_pct:.1f}% "

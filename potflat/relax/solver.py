@@ -1237,11 +1237,15 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
     after = stress = zone = None
     if summaries:
         before = before if before is not None else surface.summarize(uv)
-        after = surface.summarize(uv_out)
+        # the relaxed map's per-face and per-edge figures, once for its summary and its zone's
+        fd = surface.face_distortion(uv_out)
+        edge_error = surface.edge_length_error(uv_out) if len(F) else None
+        after = surface.summarize(uv_out, fd=fd, edge_error=edge_error)
         stress = surface.vertex_stress(uv_out, flat.mesh.mm_per_unit)
     t_check = time.perf_counter()
     if summaries:
-        zone = zone_summary(V, uv_out, F, flat.importance, reference=surface)
+        zone = zone_summary(V, uv_out, F, flat.importance, reference=surface, fd=fd, edge_error=edge_error)
+        del fd, edge_error
     t_end = time.perf_counter()
     return RelaxResult(
         flat=flat.replace(uv=uv_out, stress=stress),
