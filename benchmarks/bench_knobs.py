@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _docs import command_line, publish  # noqa: E402
 from bench_scale import child_load, make_scan, run_benchmark, warm_kernels  # noqa: E402
 
 SECTION = "## Speed knobs"
@@ -137,18 +138,9 @@ def main(argv: list[str] | None = None) -> None:
         root.mkdir(parents=True, exist_ok=True)
         scan, info = make_scan(int(args.vertices), root / "scan", texture_size=args.texture_size)
         loads, knobs = measure(scan, root / "knobs", rounds=args.rounds, px_per_mm=args.px_per_mm)
-        given = list(argv if argv is not None else sys.argv[1:])
-        if "--keep" in given:  # where the files went is not part of the benchmark
-            del given[given.index("--keep"):given.index("--keep") + 2]
-        command = "python benchmarks/bench_knobs.py " + " ".join(a for a in given if not a.startswith("--keep="))
-        section = table(loads, knobs, command=command.strip(), info=info, px_per_mm=args.px_per_mm)
-    print(section)
-    if args.write:
-        sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-        from benchmarks._docs import PERFORMANCE_MD, write_section
-
-        write_section(section)
-        print(f"updated {PERFORMANCE_MD}")
+        command = command_line("bench_knobs.py", argv if argv is not None else sys.argv[1:])
+        section = table(loads, knobs, command=command, info=info, px_per_mm=args.px_per_mm)
+    publish(section, args.write)
 
 
 if __name__ == "__main__":

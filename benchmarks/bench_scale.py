@@ -45,6 +45,9 @@ import threading
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _docs import command_line, publish  # noqa: E402
+
 #: Issue 15's goals: the whole run at 1M vertices within this multiple of the trimesh load ...
 GOAL_RATIO_1M = 2.0
 #: ... and at 3M vertices within these seconds and GB.
@@ -282,19 +285,9 @@ def main(argv: list[str] | None = None) -> None:
             root.mkdir(parents=True, exist_ok=True)
             rows.append(measure(n, root, preset=args.preset, px_per_mm=args.px_per_mm,
                                 texture_size=args.texture_size))
-    given = list(argv if argv is not None else sys.argv[1:])
-    if "--keep" in given:  # where the files went is not part of the benchmark
-        del given[given.index("--keep"):given.index("--keep") + 2]
-    command = "python benchmarks/bench_scale.py " + " ".join(a for a in given if not a.startswith("--keep="))
-    section = table(rows, command=command.strip(), preset=args.preset, px_per_mm=args.px_per_mm,
-                    texture=f"{args.texture_size} x {args.texture_size}")
-    print(section)
-    if args.write:
-        sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-        from benchmarks._docs import PERFORMANCE_MD, write_section
-
-        write_section(section)
-        print(f"updated {PERFORMANCE_MD}")
+    command = command_line("bench_scale.py", argv if argv is not None else sys.argv[1:])
+    publish(table(rows, command=command, preset=args.preset, px_per_mm=args.px_per_mm,
+                  texture=f"{args.texture_size} x {args.texture_size}"), args.write)
 
 
 if __name__ == "__main__":
