@@ -212,11 +212,11 @@ def test_run_scan_computes_each_flattenings_figures_once(tmp_path, monkeypatch):
 
     layouts = []  # the layouts summarised in the relax stage
 
-    def summarize_counted(self, uv):
+    def summarize_counted(self, uv, **handed):
         computed.append((stage[-1], "summarize"))
         if stage[-1] == "relax":
             layouts.append(np.array(uv))
-        return summarize(self, uv)
+        return summarize(self, uv, **handed)
 
     monkeypatch.setattr(distortion.SurfaceReference, "summarize", summarize_counted)
     monkeypatch.setattr(distortion, "zone_summary", zone_counted)
