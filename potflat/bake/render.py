@@ -588,13 +588,18 @@ class Renderer:
         float32 each, from one pass over its sub-samples (kept for the strip's other layers)."""
         if self._vertex_cache is not None and self._vertex_cache[0] == (r0, r1):
             return self._vertex_cache[1]
-        importance = self.flat.importance
-        columns = [self.vertex_length_error] + ([importance] if importance is not None else [])
-        both = self._vertex_field(np.stack(columns, axis=1), r0, r1)
+        both = self._vertex_field(self._vertex_columns, r0, r1)
         found = (np.ascontiguousarray(both[..., 0]),
-                 np.ascontiguousarray(both[..., 1]) if importance is not None else None)
+                 np.ascontiguousarray(both[..., 1]) if self.flat.importance is not None else None)
         self._vertex_cache = (r0, r1), found
         return found
+
+    @cached_property
+    def _vertex_columns(self) -> np.ndarray:
+        """The stress map's values and the importance (when there is one) as columns (n, 1 or 2)
+        float64, stacked once for every strip."""
+        importance = self.flat.importance
+        return np.stack([self.vertex_length_error] + ([importance] if importance is not None else []), axis=1)
 
     def scalar(self, name: str, r0: int, r1: int) -> np.ndarray:
         """A distortion map's values (NaN outside). Shape (k, w) float32."""

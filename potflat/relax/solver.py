@@ -1239,7 +1239,7 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         before = before if before is not None else surface.summarize(uv)
         # the relaxed map's per-face and per-edge figures, once for its summary and its zone's
         fd = surface.face_distortion(uv_out)
-        edge_error = surface.edge_length_error(uv_out) if len(F) else None
+        edge_error = surface.edge_length_error(uv_out)
         after = surface.summarize(uv_out, fd=fd, edge_error=edge_error)
         stress = surface.vertex_stress(uv_out, flat.mesh.mm_per_unit)
     t_check = time.perf_counter()
