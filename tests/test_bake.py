@@ -268,6 +268,30 @@ def test_rasterizer_matches_reference():
                 assert np.allclose((1 - w1 - w2) * a + w1 * b + w2 * d, p)
 
 
+def test_chart_coverage_matches_reference():
+    """The atlas' chart coverage marks exactly the texels whose centres lie in some triangle,
+    with v up, on a texture that is not square, triangles overlapping, reaching past the
+    texture's edges, and one of zero area."""
+    from potflat.bake import _kernels as raster
+
+    rng = np.random.default_rng(11)
+    h, w = 23, 31
+    tc = rng.uniform(-0.1, 1.1, (12, 3, 2))
+    tc[1:] = tc[1:, :1] + 0.25 * (tc[1:] - tc[1:, :1])  # mostly small triangles, as in an atlas
+    tc[5, 2] = tc[5, 0]  # zero area
+    out = np.zeros((h, w), np.uint8)
+    raster.cover_texcoords(np.ascontiguousarray(tc), 1e-9, out)
+    want = np.zeros((h, w), np.uint8)
+    for a, b, d in tc[[i for i in range(len(tc)) if i != 5]] * [w, -h] + [0, h]:  # raster x right, y down
+        m = np.array([b - a, d - a]).T
+        for r in range(h):
+            for c in range(w):
+                w1, w2 = np.linalg.solve(m, np.array([c + 0.5, r + 0.5]) - a)
+                want[r, c] |= min(w1, w2, 1 - w1 - w2) >= 0
+    assert 0 < want.sum() < want.size
+    np.testing.assert_array_equal(out, want)
+
+
 def test_face_values_columns_match_reference():
     """Every column of the per-face fields averaged over each pixel's covered sub-samples as a
     slow loop does it, and as the column alone (the maps' fields share one pass)."""

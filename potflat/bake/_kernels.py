@@ -4,7 +4,8 @@ Raster coordinates: ``x`` to the right, ``y`` down, in samples; sample ``(r, c)`
 centre at ``(c + 0.5, r + 0.5)``. Triangles are binned into blocks of rows; a parallel
 loop runs over blocks, so every thread writes only its own rows (no races) and, within a
 block, triangles are visited in increasing face index: where triangles overlap (a fold)
-the lowest face index wins, whatever the number of threads.
+the lowest face index wins, whatever the number of threads. The atlas' chart coverage
+(:func:`cover_texcoords`) only marks texels, so its threads take ranges of faces instead.
 """
 from __future__ import annotations
 
@@ -150,43 +151,46 @@ def rasterize_rows(pix, faces, ptr, idx, block_rows, row0, nrows, width, eps, fa
 
 
 @parallel
-def cover_rows(pix, faces, ptr, idx, block_rows, eps, out):
-    """Mark the samples under any triangle: :func:`rasterize_rows` over the whole raster,
-    keeping only whether a face was found (no face index, no barycentric weights).
+def cover_texcoords(texcoords, eps, out):
+    """Mark the texels whose centres lie in any texture-space triangle (the atlas' charts).
+
+    Each thread takes its own range of faces and only ever writes 1, so where triangles
+    share texels the result is the same whichever thread writes first: no bins are needed
+    (a chart's triangles are a few texels each; binning them by rows cost more than the
+    coverage test itself).
 
     Parameters
     ----------
-    pix : (n, 2) float64
-        Vertex positions in raster coordinates.
-    faces : (m, 3) int64
-    ptr, idx : int64 arrays
-        Row-block bins from :func:`bin_triangles` (blocks of ``block_rows`` rows).
-    block_rows : int
+    texcoords : (m, 3, 2) float64
+        Texture coordinates in [0, 1] (OBJ convention: v up); texel ``(r, c)`` has its
+        centre at ``u = (c + 0.5) / w``, ``1 - v = (r + 0.5) / h``.
     eps : float
         Barycentric tolerance, as in :func:`rasterize_rows`.
     out : (h, w) uint8
         Output: 1 under a triangle; must be filled with 0.
     """
-    nrows, width = out.shape
-    nblk = (nrows + block_rows - 1) // block_rows
-    for b in prange(nblk):
-        ylo = b * block_rows
-        yhi = min(ylo + block_rows, nrows)
-        for k in range(np.uint64(ptr[b]), np.uint64(ptr[b + 1])):
-            x0, y0, x1, y1, x2, y2, d = _corners(pix, faces, np.uint64(idx[k]))
-            if d == 0.0:
-                continue
-            rlo, rhi, clo, chi = _sample_box(x0, y0, x1, y1, x2, y2, ylo, yhi, width, eps)
-            if rhi < rlo or chi < clo:  # an empty box (unsigned rows and columns below)
-                continue
-            for r in range(np.uint64(rlo), np.uint64(rhi + 1)):
-                py = r + 0.5
-                for c in range(np.uint64(clo), np.uint64(chi + 1)):
-                    if out[r, c]:
-                        continue
-                    w0, w1, w2 = _barycentric(c + 0.5, py, x0, y0, x1, y1, x2, y2, d)
-                    if w0 >= -eps and w1 >= -eps and w2 >= -eps:
-                        out[r, c] = 1
+    height, width = out.shape
+    for f in prange(texcoords.shape[0]):
+        x0 = texcoords[f, 0, 0] * width
+        y0 = (1.0 - texcoords[f, 0, 1]) * height
+        x1 = texcoords[f, 1, 0] * width
+        y1 = (1.0 - texcoords[f, 1, 1]) * height
+        x2 = texcoords[f, 2, 0] * width
+        y2 = (1.0 - texcoords[f, 2, 1]) * height
+        d = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+        if d == 0.0:
+            continue
+        rlo, rhi, clo, chi = _sample_box(x0, y0, x1, y1, x2, y2, 0, height, width, eps)
+        if rhi < rlo or chi < clo:  # an empty box (unsigned rows and columns below)
+            continue
+        for r in range(np.uint64(rlo), np.uint64(rhi + 1)):
+            py = r + 0.5
+            for c in range(np.uint64(clo), np.uint64(chi + 1)):
+                if out[r, c]:
+                    continue
+                w0, w1, w2 = _barycentric(c + 0.5, py, x0, y0, x1, y1, x2, y2, d)
+                if w0 >= -eps and w1 >= -eps and w2 >= -eps:
+                    out[r, c] = 1
 
 
 @parallel

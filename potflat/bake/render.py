@@ -251,16 +251,8 @@ def _chart_mask(texcoords: np.ndarray, height: int, width: int) -> np.ndarray:
 
     from potflat.bake import _kernels as raster
 
-    m = len(texcoords)
-    corners = texcoords.reshape(3 * m, 2)
-    pts = np.empty((3 * m, 2))
-    np.multiply(corners[:, 0], width, out=pts[:, 0])  # (strided, in place: no copies of the columns)
-    np.subtract(1.0, corners[:, 1], out=pts[:, 1])
-    pts[:, 1] *= height
-    tri = np.arange(3 * m, dtype=np.int64).reshape(m, 3)
-    ptr, idx = raster.bin_triangles(pts, tri, float(BLOCK_ROWS), (height + BLOCK_ROWS - 1) // BLOCK_ROWS)
     mask = np.zeros((height, width), np.uint8)
-    raster.cover_rows(pts, tri, ptr, idx, BLOCK_ROWS, ROUNDING, mask)
+    raster.cover_texcoords(np.ascontiguousarray(texcoords, dtype=np.float64).reshape(-1, 3, 2), ROUNDING, mask)
     return cv2.dilate(mask, np.ones((3, 3), np.uint8)).view(bool)  # (0 and 1: valid as bool, no copy)
 
 
