@@ -250,6 +250,9 @@ class StageOutput:
     zone : dict or None
         Its painted zone's figures (:func:`potflat.mesh.distortion.zone_summary`; relax),
         which the bake stage takes instead of computing them again.
+    reference : SurfaceReference or None
+        The 3D side of those figures (:class:`potflat.mesh.distortion.SurfaceReference` of the
+        flattening's vertices and faces; relax), which the bake stage takes too.
     """
 
     paths: dict
@@ -257,6 +260,7 @@ class StageOutput:
     flat: FlatMesh | None = None
     distortion: Any = None
     zone: dict | None = None
+    reference: Any = None
 
 
 class StepClock:

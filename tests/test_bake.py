@@ -360,6 +360,19 @@ def test_options_object_or_keywords_bake_the_same(painted_plane):
         bake(painted_plane, options=BakeOptions(), px_per_mm=3)
 
 
+def test_refuses_a_surface_reference_of_another_mesh(painted_plane):
+    """The 3D side handed to the renderer must be its mesh's (equal arrays count too)."""
+    from potflat.bake.render import Renderer
+    from potflat.errors import InvalidInputError
+    from potflat.mesh.distortion import SurfaceReference
+
+    V, F = painted_plane.mesh.vertices, painted_plane.mesh.faces
+    with pytest.raises(InvalidInputError, match="not of the flattening's mesh"):
+        Renderer(painted_plane, 1.0, reference=SurfaceReference(V * 2.0, F))
+    handed = Renderer(painted_plane, 1.0, reference=SurfaceReference(V.copy(), F.copy()))
+    np.testing.assert_array_equal(handed.vertex_length_error, Renderer(painted_plane, 1.0).vertex_length_error)
+
+
 def test_resolution_from_dpi_and_default():
     assert BakeOptions(dpi=254).resolution == pytest.approx(10.0)
     assert BakeOptions().resolution == 4.0

@@ -363,11 +363,15 @@ class Renderer:
     zone : dict, optional
         ``flat``'s painted-zone figures (:func:`potflat.mesh.distortion.zone_summary`) when the
         caller has them (the relax stage's); computed when not given.
+    reference : SurfaceReference, optional
+        The 3D side of ``flat``'s figures (:class:`potflat.mesh.distortion.SurfaceReference` of
+        its mesh's vertices and faces) when the caller has it (the relax stage's); built when
+        not given.
     """
 
     def __init__(self, flat: FlatMesh, px_per_mm: float, *, supersample: int = 0, max_megapixels: float = 1000.0,
                  distortion_maps: bool = True, summary: distortion.DistortionSummary | None = None,
-                 zone: dict | None = None):
+                 zone: dict | None = None, reference: distortion.SurfaceReference | None = None):
         from potflat.bake import _kernels as raster
 
         self.flat = flat
@@ -381,7 +385,11 @@ class Renderer:
         # the texture is decoded on a second core while the distortion maps are computed
         with read_ahead(mesh.texture_path if textured else None, rgb=True):
             if distortion_maps:
-                reference = distortion.SurfaceReference(mesh.vertices, self.faces)  # the 3D side once
+                if reference is None:
+                    reference = distortion.SurfaceReference(mesh.vertices, self.faces)  # the 3D side once
+                elif not reference.describes(mesh.vertices, self.faces):
+                    raise InvalidInputError("the surface reference handed to the bake is not of the flattening's "
+                                            "mesh; hand the relax stage's for its own result, or none")
                 self.summary = summary if summary is not None else reference.summarize(flat.uv)
                 self.zone = zone if zone is not None else distortion.zone_summary(
                     mesh.vertices, flat.uv, self.faces, flat.importance, reference=reference)

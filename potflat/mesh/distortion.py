@@ -143,6 +143,12 @@ class SurfaceReference:
         if edges is not None:  # (the cached property's value)
             self.__dict__["edges"] = np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2)
 
+    def describes(self, vertices: np.ndarray, faces: np.ndarray) -> bool:
+        """Whether this is the reference of ``vertices`` (n, 3) and ``faces`` (m, 3): the same
+        arrays (the usual case, checked first) or equal ones."""
+        return all(mine is theirs or (mine.shape == np.shape(theirs) and np.array_equal(mine, theirs))
+                   for mine, theirs in ((self.vertices, vertices), (self.faces, faces)))
+
     @cached_property
     def area_3d(self) -> np.ndarray:
         """3D face areas. Shape (m,) float64."""

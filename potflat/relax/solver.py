@@ -242,6 +242,9 @@ class RelaxResult:
         The anisotropy limit the solve used (``max_anisotropy`` resolved; None: none).
     notes : tuple of str
         What the solver had to do beyond the plan (untangling, fallback), for the JSON.
+    reference : SurfaceReference or None
+        The 3D side of the figures above (of ``flat``'s vertices and faces), for the bake of
+        the same mesh (:func:`potflat.run_scan`); None when no figures were computed.
     """
 
     flat: FlatMesh
@@ -260,6 +263,7 @@ class RelaxResult:
     scale_factor: float = 1.0
     notes: tuple = ()
     anisotropy_limit: float | None = None
+    reference: SurfaceReference | None = None
 
 
 _NO_FLAGS = np.empty(0, bool)
@@ -1266,6 +1270,7 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         anisotropy_limit=None if limit == "auto" else limit,
         notes=tuple(notes + ([f"stopped by {run.stopped}"] if run.stopped and not (capped and run.stopped == "max_iter")
                              else [])),
+        reference=surface if summaries else None,
     )
 
 

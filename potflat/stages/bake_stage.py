@@ -34,7 +34,7 @@ from potflat.types import FlatMesh, StageOutput, StepClock
 
 if TYPE_CHECKING:
     from potflat.bake.render import _Grid
-    from potflat.mesh.distortion import DistortionSummary
+    from potflat.mesh.distortion import DistortionSummary, SurfaceReference
 
 
 def _rollout_sidecar(flat_ply: Path, rollout_summary: dict | None = None) -> tuple[dict, Path | None]:
@@ -126,7 +126,7 @@ def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: li
 def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, options: BakeOptions | None = None, *,
                    name: str | None = None, flat: FlatMesh | None = None,
                    rollout_summary: dict | None = None, distortion: DistortionSummary | None = None,
-                   zone: dict | None = None) -> StageOutput:
+                   zone: dict | None = None, reference: SurfaceReference | None = None) -> StageOutput:
     """Bake ``NAME.relaxed.ply`` (or a rollout) into images and ``NAME.bake.json``.
 
     Files (in ``out_dir``): ``NAME.png`` (painting, RGBA, resolution in the file),
@@ -160,6 +160,9 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     zone : dict, optional
         :func:`potflat.mesh.distortion.zone_summary` of ``flat`` when the caller has it (the
         relax stage's ``important_zone``, ``rest`` and ``lengths``); computed when not given.
+    reference : SurfaceReference, optional
+        The 3D side of ``flat``'s figures (:class:`potflat.mesh.distortion.SurfaceReference`)
+        when the caller has it (:func:`potflat.run_scan`: the relax stage's); built when not given.
 
     Returns
     -------
@@ -195,7 +198,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     folded = _folded_faces(sidecar, len(flat.mesh.faces))
     ppm = options.resolution
     r = Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels,
-                 summary=distortion, zone=zone)
+                 summary=distortion, zone=zone, reference=reference)
     g = r.grid
     clock.lap("prepare")
     if len(attachment_marks):

@@ -372,7 +372,8 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
             # once, not again); the files are the record (and the stage commands' input)
             done = stages[stage]
             handed = ({"flat": done.flat, "rollout_summary": stages["rollout"].summary, "distortion": done.distortion,
-                       **({"zone": done.zone} if done.zone is not None else {})}
+                       **({"zone": done.zone} if done.zone is not None else {}),
+                       **({"reference": done.reference} if done.reference is not None else {})}
                       if done.flat is not None else {})
             seconds[stage] = time.perf_counter() - t
         marker.unlink()

@@ -130,4 +130,4 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     write_json_atomic(json_path, summary)
     return StageOutput(paths={"ply": ply_path, "json": json_path}, summary=summary,
                        flat=as_stored(result.flat, ply_path, comments=comments), distortion=result.distortion,
-                       zone=zone)
+                       zone=zone, reference=result.reference)
