@@ -375,6 +375,8 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
                        **({"zone": done.zone} if done.zone is not None else {}),
                        **({"reference": done.reference} if done.reference is not None else {})}
                       if done.flat is not None else {})
+            if done.reference is not None:  # (the next stage's alone: the result does not keep it)
+                stages[stage] = dataclasses.replace(done, reference=None)
             seconds[stage] = time.perf_counter() - t
         marker.unlink()
     seconds["total"] = time.perf_counter() - start
