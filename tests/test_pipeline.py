@@ -233,6 +233,7 @@ def test_run_scan_computes_each_flattenings_figures_once(tmp_path, monkeypatch):
     result = run_scan(scan, tmp_path / "out", relax={"preset": "preview"}, bake=bake, progress=stage.append)
     assert ("relax", "zone") in computed and ("relax", "summarize") in computed
     assert not [c for c in computed if c[0] == "bake"]
+    assert result.stages["relax"].reference is None  # handed to the bake, not kept by the result
     rollout_uv = result.stages["rollout"].flat.uv
     assert layouts and not any(uv.shape == rollout_uv.shape and np.array_equal(uv, rollout_uv) for uv in layouts)
     assert result.stages["relax"].summary["distortion_before"] == result.stages["rollout"].summary["distortion"]
