@@ -139,7 +139,8 @@ class SurfaceReference:
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, *, edges: np.ndarray | None = None):
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
-        self.faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+        F = np.ascontiguousarray(faces, dtype=np.int64)
+        self.faces = F if F.ndim == 2 and F.shape[1] == 3 else F.reshape(-1, 3)  # (the caller's array: describes)
         if edges is not None:  # (the cached property's value)
             self.__dict__["edges"] = np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2)
 
