@@ -37,7 +37,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _docs import command_line, publish  # noqa: E402
-from bench_scale import child_load, make_scan, run_benchmark, warm_kernels  # noqa: E402
+from bench_scale import add_scan_options, child_load, make_scan, run_benchmark, warm_kernels  # noqa: E402
 
 SECTION = "## Speed knobs"
 #: (name, relax preset, other ``potflat run`` options), the default first (the reference of the
@@ -125,13 +125,9 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--vertices", type=float, default=1e6)
     ap.add_argument("--rounds", type=int, default=2)
-    ap.add_argument("--px-per-mm", type=float, default=4.0)
-    ap.add_argument("--texture-size", type=int, default=8192)
-    ap.add_argument("--keep", type=Path, help="folder for the scan and outputs (kept)")
-    ap.add_argument("--write", action="store_true", help="update the section in docs/performance.md")
+    add_scan_options(ap)
     args = ap.parse_args(argv)
 
-    print("compiling the kernels (potflat run on the bundled amphora) ...", flush=True)
     warm_kernels()
     with tempfile.TemporaryDirectory(prefix="potflat-knobs-") as tmp:
         root = (args.keep / f"{args.vertices:.3g}") if args.keep else Path(tmp)

@@ -257,6 +257,7 @@ def warm_kernels() -> None:
     compiled again after its source file changed): the small atlas needs mip levels (the chart
     mask's and the push-pull's kernels, which the big scans' painted-zone search and bake use)
     only at a coarse resolution."""
+    print("compiling the kernels (potflat run on the bundled amphora) ...", flush=True)
     sample = Path(__file__).resolve().parents[1] / "samples" / "data" / "amphora.obj"
     with tempfile.TemporaryDirectory(prefix="potflat-scale-warm-") as tmp:
         subprocess.run([sys.executable, "-m", "potflat_cli", "run", str(sample), "-o", tmp, "--quiet"],
@@ -266,17 +267,22 @@ def warm_kernels() -> None:
                        check=True, stdin=subprocess.DEVNULL)
 
 
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--vertices", type=float, nargs="+", default=[0.3e6, 1e6, 3e6])
-    ap.add_argument("--preset", default="standard")
+def add_scan_options(ap: argparse.ArgumentParser) -> None:
+    """The options of a benchmark on generated scans: resolution, texture size, where to keep
+    the files, whether to write its section of docs/performance.md."""
     ap.add_argument("--px-per-mm", type=float, default=4.0)
     ap.add_argument("--texture-size", type=int, default=8192)
     ap.add_argument("--keep", type=Path, help="folder for the scans and outputs (kept)")
     ap.add_argument("--write", action="store_true", help="update the section in docs/performance.md")
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--vertices", type=float, nargs="+", default=[0.3e6, 1e6, 3e6])
+    ap.add_argument("--preset", default="standard")
+    add_scan_options(ap)
     args = ap.parse_args(argv)
 
-    print("compiling the kernels (potflat run on the bundled amphora) ...", flush=True)
     warm_kernels()
     rows = []
     for n in args.vertices:
