@@ -390,18 +390,21 @@ class Renderer:
                 elif not reference.describes(mesh.vertices, self.faces):
                     raise InvalidInputError("the surface reference handed to the bake is not of the flattening's "
                                             "mesh; hand the relax stage's for its own result, or none")
-                self.summary = summary if summary is not None else reference.summarize(flat.uv)
-                self.zone = zone if zone is not None else distortion.zone_summary(
-                    mesh.vertices, flat.uv, self.faces, flat.importance, reference=reference)
+                # the map's per-face and per-edge figures once, for the summaries and the maps
                 fd = reference.face_distortion(flat.uv)
+                edge_error = reference.edge_length_error(flat.uv)
+                self.summary = summary if summary is not None else reference.summarize(
+                    flat.uv, fd=fd, edge_error=edge_error)
+                self.zone = zone if zone is not None else distortion.zone_summary(
+                    mesh.vertices, flat.uv, self.faces, flat.importance, reference=reference, fd=fd,
+                    edge_error=edge_error)
                 self.area_3d, self.area_2d, self.valid = fd.area_3d, fd.area_2d, fd.valid
                 self.face_values = {"area": fd.log_area_ratio, "anisotropy": np.minimum(fd.anisotropy, 1e6)}
-                del fd
                 self.vertex_stress = flat.stress if flat.stress is not None else reference.vertex_stress(
                     flat.uv, mesh.mm_per_unit)
                 # the stress map shows it in words people read: % length error around each point
-                self.vertex_length_error = reference.vertex_length_error(flat.uv)
-                del reference
+                self.vertex_length_error = reference.vertex_length_error(flat.uv, edge_error=edge_error)
+                del reference, fd, edge_error
             self.texture = read_texture(mesh.texture_path) if textured else None
         pix = np.empty_like(flat.uv)
         pix[:, 0] = (flat.uv[:, 0] - g.origin[0]) * g.scale

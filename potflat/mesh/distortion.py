@@ -201,12 +201,13 @@ class SurfaceReference:
         l = self._flat_lengths(uv) * mm_per_unit
         return _vertex_root_ratio(self.edges, (l - r) ** 2, r, len(self.vertices))
 
-    def vertex_length_error(self, uv: np.ndarray) -> np.ndarray:
-        """:func:`vertex_length_error` of the map to ``uv``. Shape (n,) float64."""
+    def vertex_length_error(self, uv: np.ndarray, *, edge_error: np.ndarray | None = None) -> np.ndarray:
+        """:func:`vertex_length_error` of the map to ``uv`` (``edge_error``: its
+        :meth:`edge_length_error` when the caller has it). Shape (n,) float64."""
         if not len(self.edges):
             return np.zeros(len(self.vertices))
-        return 100.0 * _vertex_root_ratio(self.edges, self.edge_length_error(uv) ** 2, np.ones(len(self.edges)),
-                                          len(self.vertices))
+        err = edge_error if edge_error is not None else self.edge_length_error(uv)
+        return 100.0 * _vertex_root_ratio(self.edges, err ** 2, np.ones(len(self.edges)), len(self.vertices))
 
     def summarize(self, uv: np.ndarray, *, fd: FaceDistortion | None = None,
                   edge_error: np.ndarray | None = None) -> DistortionSummary:
