@@ -225,7 +225,10 @@ def normal_lines(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     acc, area = vertex_normal_sums(V, np.ascontiguousarray(mesh.faces, dtype=np.int64).reshape(-1, 3))
     norm = np.linalg.norm(acc, axis=1)
     ok = (norm > 0) & (area > 0)
-    return V[ok], acc[ok] / norm[ok, None], area[ok]
+    if ok.all():  # (the usual case: no row gathers)
+        return V, acc / norm[:, None], area
+    keep = np.flatnonzero(ok)
+    return np.take(V, keep, axis=0), np.take(acc, keep, axis=0) / norm[keep, None], area[keep]
 
 
 def _check_mesh(mesh: Mesh) -> None:
@@ -308,7 +311,7 @@ def axis_residuals(mesh: Mesh, point, direction, *, lines=None) -> tuple[float, 
     hc = (c - point) @ direction
     radial = c - point - hc[:, None] * direction
     outer = np.einsum("ij,ij->i", n, radial) > 0.3 * np.linalg.norm(radial, axis=1)
-    prof = _profile_deviation(c[outer] if outer.sum() >= 20 else c, point, direction)
+    prof = _profile_deviation(np.take(c, np.flatnonzero(outer), axis=0) if outer.sum() >= 20 else c, point, direction)
     return float(np.sqrt(np.sum(w * ang**2))), weighted_percentile(ang, w, 50.0), rms_dist, prof
 
 

@@ -194,9 +194,11 @@ class FaceGraph:
         (numbered in order of each component's lowest face, as scipy's connected_components)."""
         from potflat.mesh._kernels import union_find  # Numba: imported on first use
 
-        pairs = self.pairs if pair_mask is None else self.pairs[np.asarray(pair_mask, dtype=bool)]
-        comp, _ = union_find(self.m, np.ascontiguousarray(pairs[:, 0], dtype=np.int64),
-                             np.ascontiguousarray(pairs[:, 1], dtype=np.int64))
+        a, b = self.pairs[:, 0], self.pairs[:, 1]
+        if pair_mask is not None:  # (each column gathered alone: a row gather of the (p, 2) pairs is 5x slower)
+            keep = np.asarray(pair_mask, dtype=bool)
+            a, b = a[keep], b[keep]
+        comp, _ = union_find(self.m, np.ascontiguousarray(a, dtype=np.int64), np.ascontiguousarray(b, dtype=np.int64))
         return comp
 
 
