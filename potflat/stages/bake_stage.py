@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from potflat._heap import reuse_freed_memory
 from potflat.bake.render import (
     FOLDED_COLOUR,
     REPEAT_COLOUR,
@@ -123,6 +124,7 @@ def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: li
                                          "bake into another folder (-o) or give another --name")
 
 
+@reuse_freed_memory()  # (its many large temporaries; its peak is under the relax stage's)
 def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, options: BakeOptions | None = None, *,
                    name: str | None = None, flat: FlatMesh | None = None,
                    rollout_summary: dict | None = None, distortion: DistortionSummary | None = None,

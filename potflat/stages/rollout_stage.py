@@ -5,12 +5,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from potflat._heap import reuse_freed_memory
 from potflat.errors import InvalidOptionError
 from potflat.rollout.options import RolloutOptions
 from potflat.rollout.unroll import rollout, rollout_summary
 from potflat.types import StageOutput, StepClock
 
 
+@reuse_freed_memory()  # (its many large temporaries; its peak is under the relax stage's)
 def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None, *,
                       name: str | None = None, check=None) -> StageOutput:
     """Read a scan, roll it out, write ``NAME.rollout.ply``, ``NAME.rollout.json`` and its profile.
