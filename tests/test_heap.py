@@ -1,5 +1,6 @@
 """potflat._heap: large allocations from glibc's heap inside the block, mappings again after it."""
 import ctypes
+import os
 
 import numpy as np
 import pytest
@@ -48,7 +49,7 @@ def test_settings_restored_when_the_block_raises():
 
 def _resident_bytes() -> int:
     with open("/proc/self/statm") as f:
-        return int(f.read().split()[1]) * 4096
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
 def test_release_hands_the_kept_memory_back():
