@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from potflat.mesh._kernels import edge_table, fan_joins, union_find
+from potflat.mesh._kernels import edge_table, fan_joins, first_equal_rows, union_find
 from potflat.mesh.cleaning import CleaningReport, clean_mesh, weld_vertices
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
@@ -97,6 +97,22 @@ def test_union_find_matches_scipy():
     assert all((label == label[i]).tolist() == (ref == ref[i]).tolist() for i in range(50))
     first = [int(np.flatnonzero(label == k)[0]) for k in range(count)]
     assert first == sorted(first)
+
+
+@pytest.mark.parametrize("unordered", [False, True])
+def test_first_equal_rows_matches_a_dict(unordered):
+    # few distinct values: many equal rows, many hash collisions in the probe sequences
+    rng = np.random.default_rng(3)
+    K = rng.integers(-3, 4, (2000, 3))
+    skip = rng.random(2000) < 0.1
+    first: dict[tuple, int] = {}
+    ref = np.arange(2000)
+    for i, row in enumerate(K.tolist()):
+        if not skip[i]:
+            ref[i] = first.setdefault(tuple(sorted(row)) if unordered else tuple(row), i)
+    rep = first_equal_rows(K, unordered, skip)
+    np.testing.assert_array_equal(rep, ref)
+    assert (rep < np.arange(2000)).any() and (rep[skip] == np.flatnonzero(skip)).all()
 
 
 def test_propagate_orientation_fixes_random_flips():

@@ -459,47 +459,70 @@ def union_find(n, a, b):
 
 
 @leaf
-def weld_representatives(V, order, h):
-    """First occurrence of each exactly equal position.
+def _sorted3(a, b, c):
+    if a > b:
+        a, b = b, a
+    if b > c:
+        b, c = c, b
+    if a > b:
+        a, b = b, a
+    return a, b, c
+
+
+@leaf
+def first_equal_rows(K, unordered, skip):
+    """First occurrence of each row, by one pass through a hash table (linear time).
 
     Parameters
     ----------
-    V : (n, 3) float64
-        Positions (``-0.0`` already normalised to ``0.0``).
-    order : (n,) int64
-        Permutation sorting ``h``.
-    h : (n,) uint64
-        Hash of each position (equal positions have equal hashes).
+    K : (k, 3) int64
+        Rows compared value for value (positions as their bits: ``V.view(np.int64)`` with
+        ``-0.0`` already normalised to ``0.0``; or faces).
+    unordered : bool
+        Compare rows as sets of three values (a face and its reversed or rotated copies).
+    skip : (k,) bool
+        Rows left out: each is its own first occurrence and matches no other row.
 
     Returns
     -------
-    rep : (n,) int64
-        Lowest index of a vertex at exactly the same position (``rep[i] <= i``).
+    rep : (k,) int64
+        Lowest index of a row equal to each row (``rep[i] <= i``; ``i`` for skipped rows).
+
+    Notes
+    -----
+    Open addressing with linear probing, at most half full; the rows enter in index order,
+    so the first equal row met is the lowest. At 6M faces 0.35 s against 1.0 s for sorting
+    the rows' hashes (faces in shuffled order 0.43 s against 1.2 s).
     """
-    n = V.shape[0]
-    rep = np.arange(n)
-    s = 0
-    while s < n:
-        e = s + 1
-        while e < n and h[order[e]] == h[order[s]]:
-            e += 1
-        if e - s > 1:
-            for a in range(s, e):
-                rep[order[a]] = -1
-            for a in range(s, e):
-                i = order[a]
-                if rep[i] >= 0:
-                    continue
-                low = i
-                for b in range(a, e):
-                    j = order[b]
-                    if rep[j] < 0 and V[j, 0] == V[i, 0] and V[j, 1] == V[i, 1] and V[j, 2] == V[i, 2]:
-                        low = min(low, j)
-                for b in range(a, e):
-                    j = order[b]
-                    if rep[j] < 0 and V[j, 0] == V[i, 0] and V[j, 1] == V[i, 1] and V[j, 2] == V[i, 2]:
-                        rep[j] = low
-        s = e
+    k = K.shape[0]
+    size = 16
+    while size < 2 * k:
+        size *= 2
+    mask = np.uint64(size - 1)
+    table = np.full(size, -1, np.int64)
+    rep = np.empty(k, np.int64)
+    for i in range(k):
+        rep[i] = i
+        if skip[i]:
+            continue
+        a, b, c = K[i, 0], K[i, 1], K[i, 2]
+        if unordered:
+            a, b, c = _sorted3(a, b, c)
+        h = (np.uint64(a) * np.uint64(0x9E3779B97F4A7C15) ^ np.uint64(b) * np.uint64(0xC2B2AE3D27D4EB4F)
+             ^ np.uint64(c) * np.uint64(0x165667B19E3779F9))
+        slot = (h ^ (h >> np.uint64(29))) & mask
+        while True:
+            j = table[slot]
+            if j < 0:
+                table[slot] = i
+                break
+            x, y, z = K[j, 0], K[j, 1], K[j, 2]
+            if unordered:
+                x, y, z = _sorted3(x, y, z)
+            if x == a and y == b and z == c:
+                rep[i] = j
+                break
+            slot = (slot + np.uint64(1)) & mask
     return rep
 
 

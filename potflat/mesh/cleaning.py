@@ -29,15 +29,14 @@ from potflat.mesh._kernels import (
     edge_table,
     face_geometry,
     fan_joins,
+    first_equal_rows,
     propagate_orientation,
     union_find,
-    weld_representatives,
 )
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
 from potflat.mesh.tolerances import DEGENERATE
 
-_HASH = (np.uint64(0x9E3779B97F4A7C15), np.uint64(0xC2B2AE3D27D4EB4F), np.uint64(0x165667B19E3779F9))
 #: Removing more than this fraction of the total area as stray components adds a warning.
 REMOVED_AREA_WARNING = 0.05
 
@@ -123,19 +122,6 @@ def _name(mesh: Mesh) -> str:
     return str(mesh.source) if mesh.source is not None else "the mesh"
 
 
-def _hash_rows(A: np.ndarray) -> np.ndarray:
-    """64-bit hash of each row of a (k, 3) float64 array (equal rows, equal hashes)."""
-    bits = np.ascontiguousarray(A).view(np.uint64)
-    h = bits[:, 0] * _HASH[0] ^ bits[:, 1] * _HASH[1] ^ bits[:, 2] * _HASH[2]
-    return h ^ (h >> np.uint64(31))
-
-
-def _first_equal(A: np.ndarray) -> np.ndarray:
-    """For each row of ``A`` (k, 3) float64, the lowest index of an identical row."""
-    h = _hash_rows(A)
-    return weld_representatives(A, np.argsort(h).astype(np.int64), h)
-
-
 def _apply_vertex_map(mesh: Mesh, rep: np.ndarray) -> Mesh:
     """Replace each vertex by ``rep[v] <= v`` and drop the vertices that are no longer used
     as representatives (order of the remaining ones kept)."""
@@ -177,7 +163,7 @@ def weld_vertices(mesh: Mesh, *, tolerance: float = 0.0) -> tuple[Mesh, int]:
     if n == 0:
         return mesh, 0
     V = mesh.vertices + 0.0  # -0.0 -> 0.0 so that equal positions have equal bits
-    rep = _first_equal(V)
+    rep = first_equal_rows(V.view(np.int64), False, np.zeros(n, bool))
     if tolerance > 0.0:
         from scipy.spatial import cKDTree
 
@@ -389,14 +375,9 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
         raise InvalidInputError(f"{name}: all {len(F)} faces are degenerate (zero area); "
                                 "give a scan with a real surface")
     # duplicate faces (same vertex set, either winding): keep the first
-    keep = ~degenerate
-    corners = F[keep]
-    corners.sort(axis=1)
-    rep = _first_equal(corners.astype(np.float64))
-    del corners
-    dup = rep != np.arange(len(rep))
-    n_dup = int(dup.sum())
-    keep[np.flatnonzero(keep)[dup]] = False
+    dup = first_equal_rows(F, True, degenerate) != np.arange(len(F))
+    n_dup = int(np.count_nonzero(dup))
+    keep = ~(degenerate | dup)
     mesh = _select_faces(mesh, keep)
     if not keep.all():
         area2 = area2[keep]
