@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from potflat.mesh.distortion import percent_from_log
+from potflat.mesh.distortion import bounds, percent_from_log
 
 from potflat.types import FlatMesh
 from potflat.mesh.tolerances import ROUNDING
@@ -440,5 +440,6 @@ def comparison_sheet(path: str | Path, panels, *, title: str = "") -> Path:
 
 def sheet_px_per_mm(flat: FlatMesh, max_px: int = SHEET_PANEL_PX) -> float:
     """Resolution of a comparison-sheet panel: its longest side ``max_px`` pixels."""
-    ext = (flat.uv.max(axis=0) - flat.uv.min(axis=0)) * flat.mesh.mm_per_unit
+    lo, hi = bounds(flat.uv)
+    ext = (hi - lo) * flat.mesh.mm_per_unit
     return max(1e-3, max_px / max(ext.max(), 1e-9))

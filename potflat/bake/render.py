@@ -306,7 +306,7 @@ def _make_grid(flat: FlatMesh, px_per_mm: float, max_megapixels: float) -> _Grid
     uv = flat.uv[used]
     if not np.isfinite(uv).all():
         raise InvalidInputError(f"{flat.mesh.source or 'the flattening'} has NaN or infinite uv; flatten it again")
-    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    lo, hi = distortion.bounds(uv)
     scale = px_per_mm * flat.mesh.mm_per_unit
     width, height = image_size((hi - lo) * flat.mesh.mm_per_unit, px_per_mm, max_megapixels)
     origin = np.array([lo[0] - PAD_PX / scale, hi[1] + PAD_PX / scale])

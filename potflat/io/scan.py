@@ -40,6 +40,7 @@ from potflat.mesh.cleaning import (
     clean_mesh,
     weld_vertices,
 )
+from potflat.mesh.distortion import bounds
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import UNITS_MM, Mesh, canonical_units
 
@@ -96,7 +97,11 @@ def check_plausible_size(loaded: LoadedScan, path: str | os.PathLike) -> None:
     if loaded.units_from != "default":
         return
     mesh = loaded.mesh
-    side = float(np.ptp(mesh.vertices, axis=0).max()) if len(mesh.vertices) else 0.0
+    if len(mesh.vertices):
+        lo, hi = bounds(mesh.vertices)
+        side = float((hi - lo).max())
+    else:
+        side = 0.0
     lo, hi = PLAUSIBLE_SIZE_MM
     size_mm = side * mesh.mm_per_unit
     if lo <= size_mm <= hi:

@@ -1240,75 +1240,110 @@ def _cell_range(lo, hi, origin, cell, cells):
 
 
 @leaf
-def triangle_cells(faces, uv, ox, oy, cell, gx, gy, start, items):
-    """Bin triangles by their bounding boxes into a ``gx`` x ``gy`` grid of square cells of
-    side ``cell`` from (``ox``, ``oy``), as a CSR table: cell ``c`` (``cx * gy + cy``) holds
-    ``items[start[c]:start[c + 1]]``, in face order. With ``items`` empty, only counts.
+def _box_cells(faces, uv, t, ox, oy, cell, gx, gy):
+    """The grid cells ``x0..x1`` by ``y0..y1`` of the bounding box of face ``t``."""
+    a, b, c = np.uint64(faces[t, 0]), np.uint64(faces[t, 1]), np.uint64(faces[t, 2])
+    x0, x1 = _cell_range(min(uv[a, 0], uv[b, 0], uv[c, 0]), max(uv[a, 0], uv[b, 0], uv[c, 0]), ox, cell, gx)
+    y0, y1 = _cell_range(min(uv[a, 1], uv[b, 1], uv[c, 1]), max(uv[a, 1], uv[b, 1], uv[c, 1]), oy, cell, gy)
+    return x0, x1, y0, y1
 
-    faces (m, 3) int64, uv (n, 2) float64, start (gx * gy + 1,) int64 out, items (k,) int64
-    out or (0,). Returns the number of (cell, triangle) entries.
-    """
-    fill = items.shape[0] > 0
-    if not fill:
-        start[:] = 0
-    else:
-        for c in range(start.shape[0] - 1, 0, -1):  # to each cell's first slot, filled upwards
-            start[c] = start[c - 1]
-        start[0] = 0
-    total = 0
-    for t in range(faces.shape[0]):
-        a, b, c = np.uint64(faces[t, 0]), np.uint64(faces[t, 1]), np.uint64(faces[t, 2])
-        x0, x1 = _cell_range(min(uv[a, 0], uv[b, 0], uv[c, 0]), max(uv[a, 0], uv[b, 0], uv[c, 0]), ox, cell, gx)
-        y0, y1 = _cell_range(min(uv[a, 1], uv[b, 1], uv[c, 1]), max(uv[a, 1], uv[b, 1], uv[c, 1]), oy, cell, gy)
-        for cx in range(x0, x1 + 1):
-            for cy in range(y0, y1 + 1):
-                k = cx * gy + cy
-                if fill:
-                    items[np.uint64(start[k + 1])] = t
-                    start[k + 1] += 1
-                else:
-                    start[k + 1] += 1
-                total += 1
-    if not fill:
-        for k in range(1, start.shape[0]):
-            start[k] += start[k - 1]
-    return total
+
+@leaf
+def _centre_cell(faces, uv, t, ox, oy, cell, gx, gy):
+    """Centre (x, y) of face ``t`` and its grid cell ``cx * gy + cy``."""
+    a, b, c = np.uint64(faces[t, 0]), np.uint64(faces[t, 1]), np.uint64(faces[t, 2])
+    px = (uv[a, 0] + uv[b, 0] + uv[c, 0]) / 3.0
+    py = (uv[a, 1] + uv[b, 1] + uv[c, 1]) / 3.0
+    cx, _ = _cell_range(px, px, ox, cell, gx)
+    cy, _ = _cell_range(py, py, oy, cell, gy)
+    return px, py, cx * gy + cy
 
 
 @parallel
-def centres_in_faces(faces, uv, ox, oy, cell, gy, start, items, first, counts, pairs):
-    """Faces whose centre lies strictly inside another face sharing no vertex with it, through
-    the grid of :func:`triangle_cells`: per face the number of such faces (``first`` empty), or
-    their indices written to ``pairs[first[i]:first[i] + counts[i]]``.
+def box_cell_counts(faces, uv, ox, oy, cell, gx, gy, out):
+    """Number of grid cells (``gx`` x ``gy`` square cells of side ``cell`` from (``ox``,
+    ``oy``)) under each face's bounding box.
 
-    faces (m, 3) int64, uv (n, 2) float64, start/items the grid's CSR, first (m,) int64 or (0,),
-    counts (m,) int64 (out when counting), pairs (k,) int64 out.
+    faces (m, 3) int64, uv (n, 2) float64, out (m,) int64.
     """
-    gx = (start.shape[0] - 1) // gy
+    for t in prange(faces.shape[0]):
+        x0, x1, y0, y1 = _box_cells(faces, uv, t, ox, oy, cell, gx, gy)
+        out[t] = (x1 - x0 + 1) * (y1 - y0 + 1)
+
+
+@parallel
+def centre_grid(faces, uv, ox, oy, cell, gx, gy):
+    """The faces binned by the grid cell of their centre, as a CSR table (counting sort):
+    cell ``c`` (``cx * gy + cy``) holds ``items[start[c]:start[c + 1]]``, in face order, whose
+    centres are ``centres[start[c]:start[c + 1]]``.
+
+    faces (m, 3) int64, uv (n, 2) float64. Returns start (gx * gy + 1,) int64, items (m,) int64,
+    centres (m, 2) float64.
+    """
+    m = faces.shape[0]
+    where = np.empty(m, np.int64)
+    centre = np.empty((m, 2), np.float64)
+    for t in prange(m):
+        px, py, k = _centre_cell(faces, uv, t, ox, oy, cell, gx, gy)
+        centre[t, 0] = px
+        centre[t, 1] = py
+        where[t] = k
+    start = np.zeros(gx * gy + 1, np.int64)
+    for t in range(m):
+        start[np.uint64(where[t] + 1)] += 1
+    for k in range(1, start.shape[0]):
+        start[k] += start[k - 1]
+    fill = start[:-1].copy()
+    items = np.empty(m, np.int64)
+    centres = np.empty((m, 2), np.float64)
+    for t in range(m):
+        k = np.uint64(where[t])
+        q = np.uint64(fill[k])
+        items[q] = t
+        centres[q, 0] = centre[t, 0]
+        centres[q, 1] = centre[t, 1]
+        fill[k] = q + np.uint64(1)
+    return start, items, centres
+
+
+@parallel
+def centres_inside(faces, uv, gx, gy, ox, oy, cell, start, items, centres, first, counts, pairs):
+    """Faces whose centre lies strictly inside each face, sharing no vertex with it, through
+    the grid of :func:`centre_grid`: per face the number of such faces (``first`` empty), or
+    their indices written to ``pairs[first[j]:first[j] + counts[j]]`` (the faces counted
+    none skipped).
+
+    faces (m, 3) int64, uv (n, 2) float64, start/items/centres the grid's, first (m,) int64 or
+    (0,), counts (m,) int64 (out when counting), pairs (k,) int64 out.
+    """
     fill = first.shape[0] > 0
-    for i in prange(faces.shape[0]):
-        a0, a1, a2 = np.uint64(faces[i, 0]), np.uint64(faces[i, 1]), np.uint64(faces[i, 2])
-        px = (uv[a0, 0] + uv[a1, 0] + uv[a2, 0]) / 3.0
-        py = (uv[a0, 1] + uv[a1, 1] + uv[a2, 1]) / 3.0
-        cx, _ = _cell_range(px, px, ox, cell, gx)
-        cy, _ = _cell_range(py, py, oy, cell, gy)
-        k = cx * gy + cy
+    for j in prange(faces.shape[0]):
+        if fill and counts[j] == 0:
+            continue
+        b0, b1, b2 = np.uint64(faces[j, 0]), np.uint64(faces[j, 1]), np.uint64(faces[j, 2])
+        x0, x1, y0, y1 = _box_cells(faces, uv, j, ox, oy, cell, gx, gy)
         n_in = 0
-        for q in range(np.uint64(start[k]), np.uint64(start[k + 1])):
-            j = items[q]
-            if j == i:
-                continue
-            ju = np.uint64(j)
-            b0, b1, b2 = np.uint64(faces[ju, 0]), np.uint64(faces[ju, 1]), np.uint64(faces[ju, 2])
-            if (b0 == a0 or b0 == a1 or b0 == a2 or b1 == a0 or b1 == a1 or b1 == a2
-                    or b2 == a0 or b2 == a1 or b2 == a2):
-                continue
-            if _strictly_inside(px, py, uv[b0, 0], uv[b0, 1], uv[b1, 0], uv[b1, 1], uv[b2, 0], uv[b2, 1]):
-                if fill:
-                    pairs[first[i] + n_in] = j
-                n_in += 1
+        for cx in range(x0, x1 + 1):
+            for cy in range(y0, y1 + 1):
+                k = np.uint64(cx * gy + cy)
+                for q in range(np.uint64(start[k]), np.uint64(start[k + 1])):
+                    # the grid's centres in order first; the faces' corners only for a centre inside
+                    if not _strictly_inside(centres[q, 0], centres[q, 1], uv[b0, 0], uv[b0, 1], uv[b1, 0],
+                                            uv[b1, 1], uv[b2, 0], uv[b2, 1]):
+                        continue
+                    i = items[q]
+                    if i == j:
+                        continue
+                    iu = np.uint64(i)
+                    a0, a1, a2 = np.uint64(faces[iu, 0]), np.uint64(faces[iu, 1]), np.uint64(faces[iu, 2])
+                    if (b0 == a0 or b0 == a1 or b0 == a2 or b1 == a0 or b1 == a1 or b1 == a2
+                            or b2 == a0 or b2 == a1 or b2 == a2):
+                        continue
+                    if fill:
+                        pairs[first[j] + n_in] = i
+                    n_in += 1
         if not fill:
-            counts[i] = n_in
+            counts[j] = n_in
 
 
 @leaf

@@ -35,6 +35,7 @@ from potflat.mesh._kernels import (
 )
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
+from potflat.mesh.distortion import bounds
 from potflat.mesh.tolerances import DEGENERATE
 
 #: Removing more than this fraction of the total area as stray components adds a warning.
@@ -168,7 +169,8 @@ def weld_vertices(mesh: Mesh, *, tolerance: float = 0.0) -> tuple[Mesh, int]:
         from scipy.spatial import cKDTree
 
         uniq = np.flatnonzero(rep == np.arange(n))
-        diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+        lo, hi = bounds(V)
+        diag = float(np.linalg.norm(hi - lo))
         pairs = cKDTree(V[uniq]).query_pairs(tolerance * diag, output_type="ndarray")
         if len(pairs):
             label, _ = union_find(len(uniq), pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64))

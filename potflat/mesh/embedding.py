@@ -17,6 +17,8 @@ import math
 
 import numpy as np
 
+from potflat.mesh.distortion import bounds
+
 
 #: Rings by which a folded cluster is grown at most before giving up on local repair.
 REPAIR_MAX_RINGS = 12
@@ -218,7 +220,7 @@ def tutte_embedding(faces: np.ndarray, n: int, scale: float = 1.0) -> np.ndarray
         disc = _disc(part, len(verts), scale)
         if disc is None:
             return None
-        lo, hi = disc.min(axis=0), disc.max(axis=0)
+        lo, hi = bounds(disc)
         out[verts] = disc - [lo[0] - offset, 0.0]
         offset += (hi[0] - lo[0]) + 2.0 * scale
     return out

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from potflat.mesh.distortion import bounds
 from potflat.relax._kernels import grid as relax_grid
 
 
@@ -50,8 +51,8 @@ class GridHierarchy:
         coarsest : int
             Level of the coarsest grid.
         """
-        lo = ref.min(axis=0)
-        side = float((ref.max(axis=0) - lo).max())
+        lo, hi = bounds(ref)
+        side = float((hi - lo).max())
         side = side if side > 0 else 1.0
         un = np.ascontiguousarray((ref - lo) / side)
         codes = np.empty(len(ref), np.int64)

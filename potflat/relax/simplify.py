@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from potflat.mesh.distortion import bounds
+
 
 @dataclass(frozen=True)
 class Simplification:
@@ -44,7 +46,7 @@ def cell_side(uv: np.ndarray, vertices_per_cell: float) -> float:
     """Cell side giving about ``vertices_per_cell`` fine vertices per cell, from the layout's
     mean vertex density over its bounding box (occupied cells hold more when the layout
     fills its box only partly)."""
-    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    lo, hi = bounds(uv)
     area = float(np.prod(np.maximum(hi - lo, 1e-300)))
     return math.sqrt(vertices_per_cell * area / max(len(uv), 1))
 
@@ -64,7 +66,7 @@ def grid_simplification(vertices: np.ndarray, uv: np.ndarray, side: float) -> Si
     -------
     Simplification
     """
-    lo = uv.min(axis=0)
+    lo = bounds(uv)[0]
     ij = np.floor((uv - lo) / side).astype(np.int64) + 1  # a free row and column on every side
     nx = int(ij[:, 0].max()) + 2
     key = ij[:, 1] * nx + ij[:, 0]

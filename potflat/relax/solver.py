@@ -38,6 +38,7 @@ import numpy as np
 from potflat.mesh.distortion import (
     DistortionSummary,
     SurfaceReference,
+    bounds,
     face_areas,
     face_distortion,
     row_blocks,
@@ -1122,7 +1123,8 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
     if coarse is not None and coarse.result is None:
         coarse = None
     with numba_threads(options.threads):
-        centre = 0.5 * (start.uv.min(axis=0) + start.uv.max(axis=0))
+        lo, hi = bounds(start.uv)
+        centre = 0.5 * (lo + hi)
         x_in = (start.uv - centre) / unit
         del start  # the first solve's layout is in x_in now (peak memory)
         if softer is not None:

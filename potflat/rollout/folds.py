@@ -24,13 +24,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from potflat.mesh.distortion import face_areas
+from potflat.mesh.distortion import bounds, face_areas
 from potflat.mesh.embedding import signed_areas
 
 #: Grid cells per face of the overlap test (about one face per cell, a few per face's box).
 OVERLAP_CELLS_PER_FACE = 1.0
-#: A grid whose (cell, face) table grows past this many entries per face gets cells twice as
-#: large (long sliver triangles of a spike would otherwise fill many small cells).
+#: A grid whose faces' boxes cover more than this many cells per face gets cells twice as
+#: large (long sliver triangles of a spike would otherwise cover many small cells, each
+#: visited for the centres in it).
 OVERLAP_MAX_ENTRIES_PER_FACE = 16
 #: Folded regions listed one by one in the JSON (the largest first); the rest are counted.
 MAX_REGIONS = 20
@@ -106,7 +107,7 @@ def overlapping_faces(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
     -------
     (m,) bool
     """
-    from potflat.mesh._kernels import centres_in_faces, triangle_cells
+    from potflat.mesh._kernels import box_cell_counts, centre_grid, centres_inside
 
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     uv = np.ascontiguousarray(uv, dtype=np.float64)
@@ -117,29 +118,29 @@ def overlapping_faces(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
     in_use = np.zeros(len(uv), bool)
     in_use[faces.ravel()] = True
     used = uv[in_use]
-    lo, hi = used.min(axis=0), used.max(axis=0)
+    lo, hi = bounds(used)
     extent = float(max(hi[0] - lo[0], hi[1] - lo[1]))
     if not extent > 0:
         return out
     cell = max(math.sqrt(float((hi[0] - lo[0]) * (hi[1] - lo[1])) / (OVERLAP_CELLS_PER_FACE * m)), extent / 65536.0)
+    boxes = np.empty(m, np.int64)
     while True:
         gx, gy = int((hi[0] - lo[0]) / cell) + 1, int((hi[1] - lo[1]) / cell) + 1
-        start = np.empty(gx * gy + 1, np.int64)
-        total = triangle_cells(faces, uv, lo[0], lo[1], cell, gx, gy, start, np.empty(0, np.int64))
-        if total <= OVERLAP_MAX_ENTRIES_PER_FACE * m or gx * gy == 1:
+        box_cell_counts(faces, uv, lo[0], lo[1], cell, gx, gy, boxes)
+        if int(boxes.sum()) <= OVERLAP_MAX_ENTRIES_PER_FACE * m or gx * gy == 1:
             break
         cell *= 2.0
-    items = np.empty(total, np.int64)
-    triangle_cells(faces, uv, lo[0], lo[1], cell, gx, gy, start, items)
+    del boxes
+    start, items, centres = centre_grid(faces, uv, lo[0], lo[1], cell, gx, gy)
     counts = np.empty(m, np.int64)
     nothing = np.empty(0, np.int64)
-    centres_in_faces(faces, uv, lo[0], lo[1], cell, gy, start, items, nothing, counts, nothing)
+    centres_inside(faces, uv, gx, gy, lo[0], lo[1], cell, start, items, centres, nothing, counts, nothing)
     hit = counts > 0
     if hit.any():
         first = np.zeros(m, np.int64)
         np.cumsum(counts[:-1], out=first[1:])
         pairs = np.empty(int(counts.sum()), np.int64)
-        centres_in_faces(faces, uv, lo[0], lo[1], cell, gy, start, items, first, counts, pairs)
+        centres_inside(faces, uv, gx, gy, lo[0], lo[1], cell, start, items, centres, first, counts, pairs)
         out[hit] = True
         out[pairs] = True
     return out

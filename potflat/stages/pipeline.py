@@ -306,8 +306,10 @@ def _image_check(bake) -> Callable:
         used = np.zeros(len(flat.uv), bool)
         used[flat.mesh.faces.ravel()] = True
         if used.any():
-            uv = flat.uv[used]
-            image_size((uv.max(axis=0) - uv.min(axis=0)) * flat.mesh.mm_per_unit, bake.resolution,
+            from potflat.mesh.distortion import bounds
+
+            lo, hi = bounds(flat.uv[used])
+            image_size((hi - lo) * flat.mesh.mm_per_unit, bake.resolution,
                        bake.max_megapixels)
     return check
 
