@@ -35,7 +35,7 @@ from potflat.mesh.embedding import signed_areas
 from potflat.rollout.attachments import AttachmentSelection, detect_attachments
 from potflat.rollout.folds import ScanFolds, fold_masks, scan_folds
 from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
-from potflat.mesh.distortion import DistortionSummary, face_areas, row_blocks, summarize
+from potflat.mesh.distortion import DistortionSummary, face_areas, summarize
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import FlatMesh, Mesh, StepClock
 from potflat.rollout.options import RolloutOptions
@@ -464,14 +464,11 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     profile = vessel_profile(mesh, axis.point, axis.direction, bins=bins, labels=walls.labels, frame=frame,
                              face_mask=None if options.keep_attachments or not attachments.n_faces
                              else ~attachments.face_mask)
+    centroid = frame.centroid  # (the faces' centroids, computed with the frame)
     del frame
     clock.lap("profile")
 
     area = face_areas(V, F)
-    centroid = np.empty((len(F), 3))
-    for s in row_blocks(len(F)):
-        f = F[s]
-        centroid[s] = (V[f[:, 0]] + V[f[:, 1]] + V[f[:, 2]]) / 3.0
     h_c, _, theta_c = axis.cylindrical(centroid)
     del centroid
     theta_v = axis.cylindrical(V)[2]  # once for every unrolling and the seam
