@@ -1249,45 +1249,29 @@ def _box_cells(faces, uv, t, ox, oy, cell, gx, gy):
 
 
 @leaf
-def _centre_cell(faces, uv, t, ox, oy, cell, gx, gy):
-    """Centre (x, y) of face ``t`` and its grid cell ``cx * gy + cy``."""
-    a, b, c = np.uint64(faces[t, 0]), np.uint64(faces[t, 1]), np.uint64(faces[t, 2])
-    px = (uv[a, 0] + uv[b, 0] + uv[c, 0]) / 3.0
-    py = (uv[a, 1] + uv[b, 1] + uv[c, 1]) / 3.0
-    cx, _ = _cell_range(px, px, ox, cell, gx)
-    cy, _ = _cell_range(py, py, oy, cell, gy)
-    return px, py, cx * gy + cy
-
-
-@parallel
-def box_cell_counts(faces, uv, ox, oy, cell, gx, gy, out):
-    """Number of grid cells (``gx`` x ``gy`` square cells of side ``cell`` from (``ox``,
-    ``oy``)) under each face's bounding box.
-
-    faces (m, 3) int64, uv (n, 2) float64, out (m,) int64.
-    """
-    for t in prange(faces.shape[0]):
-        x0, x1, y0, y1 = _box_cells(faces, uv, t, ox, oy, cell, gx, gy)
-        out[t] = (x1 - x0 + 1) * (y1 - y0 + 1)
-
-
-@parallel
 def centre_grid(faces, uv, ox, oy, cell, gx, gy):
     """The faces binned by the grid cell of their centre, as a CSR table (counting sort):
     cell ``c`` (``cx * gy + cy``) holds ``items[start[c]:start[c + 1]]``, in face order, whose
-    centres are ``centres[start[c]:start[c + 1]]``.
+    centres are ``centres[start[c]:start[c + 1]]``; and the number of cells under the faces'
+    bounding boxes in all (the work of :func:`centres_inside`).
 
-    faces (m, 3) int64, uv (n, 2) float64. Returns start (gx * gy + 1,) int64, items (m,) int64,
-    centres (m, 2) float64.
+    faces (m, 3) int64, uv (n, 2) float64, a grid of ``gx`` x ``gy`` square cells of side
+    ``cell`` from (``ox``, ``oy``). Returns start (gx * gy + 1,) int64, items (m,) int64, centres
+    (m, 2) float64, covered int.
     """
     m = faces.shape[0]
     where = np.empty(m, np.int64)
     centre = np.empty((m, 2), np.float64)
-    for t in prange(m):
-        px, py, k = _centre_cell(faces, uv, t, ox, oy, cell, gx, gy)
+    covered = 0
+    for t in range(m):
+        a, b, c = np.uint64(faces[t, 0]), np.uint64(faces[t, 1]), np.uint64(faces[t, 2])
+        px = (uv[a, 0] + uv[b, 0] + uv[c, 0]) / 3.0
+        py = (uv[a, 1] + uv[b, 1] + uv[c, 1]) / 3.0
         centre[t, 0] = px
         centre[t, 1] = py
-        where[t] = k
+        where[t] = _cell_range(px, px, ox, cell, gx)[0] * gy + _cell_range(py, py, oy, cell, gy)[0]
+        x0, x1, y0, y1 = _box_cells(faces, uv, t, ox, oy, cell, gx, gy)
+        covered += (x1 - x0 + 1) * (y1 - y0 + 1)
     start = np.zeros(gx * gy + 1, np.int64)
     for t in range(m):
         start[np.uint64(where[t] + 1)] += 1
@@ -1303,7 +1287,7 @@ def centre_grid(faces, uv, ox, oy, cell, gx, gy):
         centres[q, 0] = centre[t, 0]
         centres[q, 1] = centre[t, 1]
         fill[k] = q + np.uint64(1)
-    return start, items, centres
+    return start, items, centres, covered
 
 
 @parallel

@@ -107,7 +107,7 @@ def overlapping_faces(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
     -------
     (m,) bool
     """
-    from potflat.mesh._kernels import box_cell_counts, centre_grid, centres_inside
+    from potflat.mesh._kernels import centre_grid, centres_inside
 
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     uv = np.ascontiguousarray(uv, dtype=np.float64)
@@ -123,15 +123,12 @@ def overlapping_faces(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
     if not extent > 0:
         return out
     cell = max(math.sqrt(float((hi[0] - lo[0]) * (hi[1] - lo[1])) / (OVERLAP_CELLS_PER_FACE * m)), extent / 65536.0)
-    boxes = np.empty(m, np.int64)
     while True:
         gx, gy = int((hi[0] - lo[0]) / cell) + 1, int((hi[1] - lo[1]) / cell) + 1
-        box_cell_counts(faces, uv, lo[0], lo[1], cell, gx, gy, boxes)
-        if int(boxes.sum()) <= OVERLAP_MAX_ENTRIES_PER_FACE * m or gx * gy == 1:
+        start, items, centres, covered = centre_grid(faces, uv, lo[0], lo[1], cell, gx, gy)
+        if covered <= OVERLAP_MAX_ENTRIES_PER_FACE * m or gx * gy == 1:
             break
         cell *= 2.0
-    del boxes
-    start, items, centres = centre_grid(faces, uv, lo[0], lo[1], cell, gx, gy)
     counts = np.empty(m, np.int64)
     nothing = np.empty(0, np.int64)
     centres_inside(faces, uv, gx, gy, lo[0], lo[1], cell, start, items, centres, nothing, counts, nothing)
