@@ -193,7 +193,7 @@ def vessel_profile(mesh: Mesh, axis_point, axis_direction, *, bins: int | None =
         if labels.shape != (m,) or not ((labels == OUTER) | (labels == INNER)).all():
             raise InvalidInputError("labels must hold 1 (outer) or -1 (inner) for every face")
 
-    F = mesh.faces[use]
+    F = mesh.faces if use.all() else np.take(mesh.faces, np.flatnonzero(use), axis=0)
     lab = labels[use]
     h_v, r_v, _ = cylindrical(mesh.vertices, p, a)
     n = len(mesh.vertices)
@@ -212,7 +212,7 @@ def vessel_profile(mesh: Mesh, axis_point, axis_direction, *, bins: int | None =
     out = {}
     for name, side in (("outer", OUTER), ("inner", INNER)):
         sel = lab == side
-        Fs = F[sel].ravel()
+        Fs = np.take(F, np.flatnonzero(sel), axis=0).ravel()
         # vertex weight: projected area of its faces that face away from (outer) / towards
         # (inner) the axis, i.e. their area on a cylinder around the axis
         wf = fr.area[use][sel] / 3.0 * np.maximum(side * fr.n_radial[use][sel], 0.0)
