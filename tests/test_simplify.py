@@ -41,6 +41,20 @@ def test_grid_simplification_clusters_and_blocks():
     assert np.all(signed_areas(s.uv, s.faces) > 0)
 
 
+def test_grid_simplification_same_by_counting_and_by_sorting(vessel, monkeypatch):
+    import potflat.relax.simplify as simplify
+
+    V, uv = vessel.mesh.vertices, vessel.uv
+    side = cell_side(uv, 8.0)
+    assert simplify.grid_simplification is grid_simplification
+    counted = grid_simplification(V, uv, side)  # the grid has about n / 8 cells: counted
+    monkeypatch.setattr(simplify, "DENSE_GRID_CELLS_PER_VERTEX", 0)  # every grid sorted
+    by_sort = grid_simplification(V, uv, side)
+    for name in ("vertices", "faces", "uv", "cluster"):
+        np.testing.assert_array_equal(getattr(counted, name), getattr(by_sort, name))
+    assert len(counted.faces) > len(counted.vertices)
+
+
 def test_cell_side_gives_the_asked_density():
     uv = np.random.default_rng(0).random((40_000, 2)) * [3.0, 1.0]
     s = grid_simplification(np.c_[uv, np.zeros(len(uv))], uv, cell_side(uv, 16.0))

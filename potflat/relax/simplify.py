@@ -19,6 +19,11 @@ import numpy as np
 
 from potflat.mesh.distortion import bounds
 
+#: A grid of at most this many cells per fine vertex is indexed directly (counting, no sort:
+#: at 3M vertices 0.33 against 1.1 s); a finer one (a tiny ``simplify_mm``) by sorting its
+#: occupied cells' keys.
+DENSE_GRID_CELLS_PER_VERTEX = 4
+
 
 @dataclass(frozen=True)
 class Simplification:
@@ -68,22 +73,42 @@ def grid_simplification(vertices: np.ndarray, uv: np.ndarray, side: float) -> Si
     """
     lo = bounds(uv)[0]
     ij = np.floor((uv - lo) / side).astype(np.int64) + 1  # a free row and column on every side
-    nx = int(ij[:, 0].max()) + 2
+    nx, ny = int(ij[:, 0].max()) + 2, int(ij[:, 1].max()) + 2
     key = ij[:, 1] * nx + ij[:, 0]
-    cells, cluster = np.unique(key, return_inverse=True)
+    # the occupied cells in key order, each vertex's cell among them, and the coarse vertex of
+    # a cell key (-1 when empty)
+    dense = nx * ny <= DENSE_GRID_CELLS_PER_VERTEX * len(key)
+    if dense:  # counted over the grid's cells (about n / 8 of them at the default side)
+        per_cell = np.bincount(key, minlength=nx * ny)
+        cells = np.flatnonzero(per_cell)
+        count = per_cell[cells].astype(np.float64)
+        del per_cell
+        coarse_of = np.full(nx * ny, -1, np.int64)
+        coarse_of[cells] = np.arange(len(cells))
+        cluster = coarse_of[key]
+        index = coarse_of.__getitem__
+    else:
+        cells, cluster = np.unique(key, return_inverse=True)
+        count = np.bincount(cluster, minlength=len(cells)).astype(np.float64)
+
+        def index(k: np.ndarray) -> np.ndarray:
+            p = np.minimum(np.searchsorted(cells, k), len(cells) - 1)
+            return np.where(cells[p] == k, p, -1)
     nc = len(cells)
-    count = np.bincount(cluster, minlength=nc).astype(np.float64)
 
     def mean(a: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(np.stack([np.bincount(cluster, a[:, j], minlength=nc) for j in range(a.shape[1])],
                                              axis=1) / count[:, None])
 
-    def index(k: np.ndarray) -> np.ndarray:  # coarse vertex of cell key k, -1 when empty
-        p = np.minimum(np.searchsorted(cells, k), nc - 1)
-        return np.where(cells[p] == k, p, -1)
-
-    # every 2 x 2 block with an occupied cell, named by its lower-left cell
-    block = np.unique(np.concatenate([cells, cells - 1, cells - nx, cells - nx - 1]))
+    # every 2 x 2 block with an occupied cell, named by its lower-left cell (in key order)
+    if dense:
+        in_block = np.zeros(nx * ny, bool)
+        for shift in (0, 1, nx, nx + 1):
+            in_block[cells - shift] = True
+        block = np.flatnonzero(in_block)
+        del in_block
+    else:
+        block = np.unique(np.concatenate([cells, cells - 1, cells - nx, cells - nx - 1]))
     a, b, c, d = index(block), index(block + 1), index(block + nx), index(block + nx + 1)  # ll, lr, ul, ur
     full = (a >= 0) & (b >= 0) & (c >= 0) & (d >= 0)
     faces = [np.stack([a, b, d], axis=1)[full], np.stack([a, d, c], axis=1)[full]]
