@@ -460,6 +460,7 @@ def union_find(n, a, b):
 
 @leaf
 def _sorted3(a, b, c):
+    """The three values in increasing order."""
     if a > b:
         a, b = b, a
     if b > c:

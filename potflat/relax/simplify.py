@@ -20,9 +20,10 @@ import numpy as np
 from potflat.mesh.distortion import bounds
 
 #: A grid of at most this many cells per fine vertex is indexed directly (counting, no sort:
-#: at 3M vertices 0.33 against 1.1 s); a finer one (a tiny ``simplify_mm``) by sorting its
-#: occupied cells' keys.
-DENSE_GRID_CELLS_PER_VERTEX = 4
+#: at 3M vertices 0.33 against 1.1 s; the default side gives about 1/8), a finer one (a tiny
+#: ``simplify_mm``) by sorting its occupied cells' keys: its per-cell arrays would outgrow
+#: the vertices'.
+DENSE_GRID_CELLS_PER_VERTEX = 1
 
 
 @dataclass(frozen=True)
