@@ -97,11 +97,10 @@ def check_plausible_size(loaded: LoadedScan, path: str | os.PathLike) -> None:
     if loaded.units_from != "default":
         return
     mesh = loaded.mesh
+    side = 0.0
     if len(mesh.vertices):
-        lo, hi = bounds(mesh.vertices)
-        side = float((hi - lo).max())
-    else:
-        side = 0.0
+        low, high = bounds(mesh.vertices)
+        side = float((high - low).max())
     lo, hi = PLAUSIBLE_SIZE_MM
     size_mm = side * mesh.mm_per_unit
     if lo <= size_mm <= hi:

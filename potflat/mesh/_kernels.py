@@ -1292,7 +1292,7 @@ def centre_grid(faces, uv, ox, oy, cell, gx, gy):
 
 
 @parallel
-def centres_inside(faces, uv, gx, gy, ox, oy, cell, start, items, centres, first, counts, pairs):
+def centres_inside(faces, uv, ox, oy, cell, gx, gy, start, items, centres, first, counts, pairs):
     """Faces whose centre lies strictly inside each face, sharing no vertex with it, through
     the grid of :func:`centre_grid`: per face the number of such faces (``first`` empty), or
     their indices written to ``pairs[first[j]:first[j] + counts[j]]`` (the faces counted

@@ -87,7 +87,9 @@ def grid_simplification(vertices: np.ndarray, uv: np.ndarray, side: float) -> Si
         coarse_of = np.full(nx * ny, -1, np.int64)
         coarse_of[cells] = np.arange(len(cells))
         cluster = coarse_of[key]
-        index = coarse_of.__getitem__
+
+        def index(k: np.ndarray) -> np.ndarray:
+            return coarse_of[k]
     else:
         cells, cluster = np.unique(key, return_inverse=True)
         count = np.bincount(cluster, minlength=len(cells)).astype(np.float64)

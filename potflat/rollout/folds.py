@@ -32,7 +32,7 @@ OVERLAP_CELLS_PER_FACE = 1.0
 #: A grid whose faces' boxes cover more than this many cells per face gets cells twice as
 #: large (long sliver triangles of a spike would otherwise cover many small cells, each
 #: visited for the centres in it).
-OVERLAP_MAX_ENTRIES_PER_FACE = 16
+OVERLAP_MAX_CELLS_PER_FACE = 16
 #: Folded regions listed one by one in the JSON (the largest first); the rest are counted.
 MAX_REGIONS = 20
 #: A note warns when more than this share (percent) of the unrolled surface is folded.
@@ -126,18 +126,18 @@ def overlapping_faces(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
     while True:
         gx, gy = int((hi[0] - lo[0]) / cell) + 1, int((hi[1] - lo[1]) / cell) + 1
         start, items, centres, covered = centre_grid(faces, uv, lo[0], lo[1], cell, gx, gy)
-        if covered <= OVERLAP_MAX_ENTRIES_PER_FACE * m or gx * gy == 1:
+        if covered <= OVERLAP_MAX_CELLS_PER_FACE * m or gx * gy == 1:
             break
         cell *= 2.0
     counts = np.empty(m, np.int64)
     nothing = np.empty(0, np.int64)
-    centres_inside(faces, uv, gx, gy, lo[0], lo[1], cell, start, items, centres, nothing, counts, nothing)
+    centres_inside(faces, uv, lo[0], lo[1], cell, gx, gy, start, items, centres, nothing, counts, nothing)
     hit = counts > 0
     if hit.any():
         first = np.zeros(m, np.int64)
         np.cumsum(counts[:-1], out=first[1:])
         pairs = np.empty(int(counts.sum()), np.int64)
-        centres_inside(faces, uv, gx, gy, lo[0], lo[1], cell, start, items, centres, first, counts, pairs)
+        centres_inside(faces, uv, lo[0], lo[1], cell, gx, gy, start, items, centres, first, counts, pairs)
         out[hit] = True
         out[pairs] = True
     return out
