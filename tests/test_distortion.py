@@ -1,6 +1,7 @@
 import warnings
 
 import numpy as np
+import pytest
 
 from potflat.mesh.distortion import (
     SurfaceReference,
@@ -140,6 +141,52 @@ def test_weighted_percentiles_match_a_slow_reference():
         want = [float(np.percentile(repeated, q, method="inverted_cdf")) for q in qs]
         assert weighted_percentiles(values, weights, qs) == want
         assert [weighted_percentile(values, weights, q) for q in qs] == want
+
+
+def _sorted_weighted_percentiles(values, weights, qs):
+    """Slow reference: sort the values of positive weight, the first whose cumulative weight
+    reaches q % of the total (the last when none does)."""
+    keep = weights > 0
+    kept = values[keep]
+    order = np.argsort(kept, kind="stable")
+    cum = np.cumsum(weights[keep][order])
+    return [float(kept[order[min(np.searchsorted(cum, q / 100.0 * cum[-1]), len(kept) - 1)]]) for q in qs]
+
+
+@pytest.mark.parametrize("case", ["spread", "narrow", "ties", "special", "boundary"])
+def test_weighted_percentiles_select_as_a_sort_would(case):
+    """Radix selection against a full sort on many values (several histogram passes): values
+    spread over decades, all within a few units in the last place (every pass down to the last
+    bits), with many equal values, with -0.0, 0.0, infinities and NaN (sorted last), and with
+    the median's threshold met exactly by the lower half (the answer is the lower value).
+    Integer weights sum exactly in any order, so the answers must be equal."""
+    from potflat.mesh.distortion import weighted_percentiles
+
+    rng = np.random.default_rng(11)
+    n = 50_000
+    if case == "spread":
+        values = rng.lognormal(0.0, 4.0, n) * rng.choice([-1.0, 1.0], n)
+    elif case == "narrow":
+        values = 1.0 + rng.integers(0, 3000, n) * np.finfo(float).eps
+    elif case == "ties":
+        values = rng.integers(0, 7, n).astype(float) / 3.0
+    elif case == "boundary":
+        values = np.repeat([1.0, 2.0, 4.0, 8.0], n // 4)
+    else:
+        values = rng.normal(size=n)
+        values[rng.integers(0, n, 3000)] = rng.choice([-0.0, 0.0, np.inf, -np.inf, np.nan], 3000)
+    weights = np.ones(n) if case == "boundary" else rng.integers(0, 5, n).astype(float)
+    qs = (0.0, 0.01, 25.0, 50.0, 95.0, 99.99, 100.0)
+    got = weighted_percentiles(values, weights, qs)
+    want = _sorted_weighted_percentiles(values, weights, qs)
+    assert np.array_equal(got, want, equal_nan=True)
+
+
+def test_weighted_percentiles_refuse_weights_of_another_length():
+    from potflat.mesh.distortion import weighted_percentiles
+
+    with pytest.raises(ValueError, match="differ in length"):
+        weighted_percentiles(np.arange(5.0), np.ones(4), (50.0,))
 
 
 def test_a_part_of_the_faces_is_summarized_as_a_mesh_of_those_faces():

@@ -1489,3 +1489,113 @@ def lower_medians(values, start, stop, out):
             else:
                 break
         out[j] = buf[want]
+
+
+#: Key of a NaN in :func:`weighted_quantiles` (after every number, as NumPy sorts NaN last).
+_NAN_KEY = np.uint64(0xFFFFFFFFFFFFFFFF)
+_SIGN_BIT = np.uint64(0x8000000000000000)
+#: Bits of the key sorted out per histogram pass, and the candidates below which the rest is sorted.
+_RADIX_BITS = 16
+_SORT_BELOW = 1 << 12
+
+
+@leaf
+def _order_key(bits):
+    """Unsigned key of a float64's bits that orders as the numbers do (NaN last)."""
+    if (bits & np.uint64(0x7FF0000000000000)) == np.uint64(0x7FF0000000000000) and \
+            (bits & np.uint64(0x000FFFFFFFFFFFFF)) != np.uint64(0):
+        return _NAN_KEY
+    if bits & _SIGN_BIT:
+        return ~bits
+    return bits | _SIGN_BIT
+
+
+@leaf
+def _pick_in_order(values, bits, weights, cand, below, target):
+    """The first of ``cand`` in value order whose cumulative weight (from ``below``) reaches
+    ``target``; the largest when rounding keeps it from being reached."""
+    keys = np.empty(cand.shape[0], np.uint64)
+    for j in range(cand.shape[0]):
+        keys[j] = _order_key(bits[cand[j]])
+    order = np.argsort(keys)
+    for j in range(order.shape[0]):
+        below += weights[cand[order[j]]]
+        if below >= target:
+            return values[cand[order[j]]]
+    return values[cand[order[-1]]]
+
+
+@leaf
+def _narrow(bits, weights, cand, shift, below, target):
+    """One radix pass: the candidates whose key bits ``shift .. shift + 16`` fall in the bucket
+    where the cumulative weight (from ``below``) reaches ``target`` (the last non-empty bucket
+    when rounding keeps it from being reached), and the weight below that bucket."""
+    nb = 1 << _RADIX_BITS
+    mask = np.uint64(nb - 1)
+    hist_w = np.zeros(nb)
+    hist_c = np.zeros(nb, np.int64)
+    for i in cand:
+        b = (_order_key(bits[i]) >> np.uint64(shift)) & mask
+        hist_w[b] += weights[i]
+        hist_c[b] += 1
+    chosen, last_below = -1, below
+    for b in range(nb):
+        if hist_c[b] == 0:
+            continue
+        if below + hist_w[b] >= target:
+            chosen = b
+            break
+        chosen, last_below = b, below
+        below += hist_w[b]
+    else:
+        below = last_below
+    out = np.empty(hist_c[chosen], np.int64)
+    j = 0
+    for i in cand:
+        if ((_order_key(bits[i]) >> np.uint64(shift)) & mask) == np.uint64(chosen):
+            out[j] = i
+            j += 1
+    return out, below
+
+
+@leaf
+def weighted_quantiles(values, weights, fractions, out):
+    """Weighted quantiles by radix selection (no sort of all values).
+
+    ``out[k]`` is the smallest value ``v`` among the entries of positive weight whose
+    cumulative weight ``W(<= v)`` reaches ``fractions[k] * W`` (``W`` the total positive weight,
+    summed in index order); the largest value when rounding keeps it from being reached.
+    NaN orders after every number, ``-0.0`` just before ``0.0``. Per fraction: histograms of the
+    weights over 16 bits of an order-preserving key at a time, narrowing to the bucket the
+    threshold falls in, then a sort of the last few thousand candidates.
+
+    Parameters
+    ----------
+    values : (n,) float64
+    weights : (n,) float64
+        Entries of weight <= 0 (or NaN) do not count; at least one must be positive.
+    fractions : (k,) float64
+        In [0, 1].
+    out : (k,) float64
+        Output.
+    """
+    bits = values.view(np.uint64)
+    total = 0.0
+    count = 0
+    for i in range(values.shape[0]):
+        if weights[i] > 0.0:
+            total += weights[i]
+            count += 1
+    kept = np.empty(count, np.int64)
+    j = 0
+    for i in range(values.shape[0]):
+        if weights[i] > 0.0:
+            kept[j] = i
+            j += 1
+    for k in range(fractions.shape[0]):
+        target = fractions[k] * total
+        cand, below, shift = kept, 0.0, 64
+        while cand.shape[0] > _SORT_BELOW and shift > 0:
+            shift -= _RADIX_BITS
+            cand, below = _narrow(bits, weights, cand, shift, below, target)
+        out[k] = _pick_in_order(values, bits, weights, cand, below, target)

@@ -482,17 +482,21 @@ def weighted_percentile(values: np.ndarray, weights: np.ndarray, q: float) -> fl
 
 
 def weighted_percentiles(values: np.ndarray, weights: np.ndarray, qs) -> list[float]:
-    """:func:`weighted_percentile` for each of ``qs``, from one sort of ``values`` (NumPy's
-    default sort: the order of equal values does not change the percentile, and the stable
-    sort took 4x as long)."""
-    values, weights = np.asarray(values, float), np.asarray(weights, float)
-    keep = weights > 0
-    if not keep.any():
+    """:func:`weighted_percentile` for each of ``qs``, by selection, not a sort of all values
+    (:func:`potflat.mesh._kernels.weighted_quantiles`; 6M values: 0.07 s a percentile against
+    0.7 s for a sort). Ties and NaN as a sort orders them (NaN last); the total weight is
+    summed in index order."""
+    from potflat.mesh._kernels import weighted_quantiles
+
+    values = np.ascontiguousarray(values, dtype=np.float64).ravel()
+    weights = np.ascontiguousarray(weights, dtype=np.float64).ravel()
+    if values.shape != weights.shape:
+        raise ValueError(f"values and weights differ in length ({len(values)} and {len(weights)})")
+    if not (weights > 0).any():
         return [float("nan")] * len(qs)
-    kept = values[keep]
-    order = np.argsort(kept)
-    cum = np.cumsum(weights[keep][order])
-    return [float(kept[order[min(np.searchsorted(cum, q / 100.0 * cum[-1]), len(kept) - 1)]]) for q in qs]
+    out = np.empty(len(qs))
+    weighted_quantiles(values, weights, np.asarray(qs, dtype=np.float64) / 100.0, out)
+    return [float(x) for x in out]
 
 
 def length_scale(fd: FaceDistortion) -> np.ndarray:
