@@ -1491,7 +1491,7 @@ def lower_medians(values, start, stop, out):
         out[j] = buf[want]
 
 
-#: Key of a NaN in :func:`weighted_quantiles` (after every number, as NumPy sorts NaN last).
+#: Key of a NaN in :func:`select_weighted_quantiles` (after every number, as NumPy sorts NaN last).
 _NAN_KEY = np.uint64(0xFFFFFFFFFFFFFFFF)
 _SIGN_BIT = np.uint64(0x8000000000000000)
 #: Bits of the key sorted out per histogram pass, and the candidates below which the rest is sorted.
@@ -1559,7 +1559,7 @@ def _narrow(bits, weights, cand, shift, below, target):
 
 
 @leaf
-def weighted_quantiles(values, weights, fractions, out):
+def select_weighted_quantiles(values, weights, fractions, out):
     """Weighted quantiles by radix selection (no sort of all values).
 
     ``out[k]`` is the smallest value ``v`` among the entries of positive weight whose

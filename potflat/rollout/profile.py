@@ -22,7 +22,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from potflat.mesh.distortion import median_edge_length
+from potflat.mesh.distortion import median_edge_length, weighted_percentile
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.atomic import write_bytes_atomic
 from potflat.types import Mesh
@@ -246,16 +246,9 @@ def vessel_profile(mesh: Mesh, axis_point, axis_direction, *, bins: int | None =
         units=mesh.units,
         mm_per_unit=mesh.mm_per_unit,
         two_walled=bool(np.isfinite(out["inner"][0]).any()),
-        base_height=_weighted_median(fr.height[base] - h0, fr.area[base]),
-        floor_height=_weighted_median(fr.height[floor] - h0, fr.area[floor]),
+        base_height=weighted_percentile(fr.height[base] - h0, fr.area[base], 50.0),
+        floor_height=weighted_percentile(fr.height[floor] - h0, fr.area[floor], 50.0),
     )
-
-
-def _weighted_median(x: np.ndarray, w: np.ndarray) -> float:
-    if len(x) == 0 or w.sum() <= 0:
-        return float("nan")
-    (q,), _ = binned_median(np.zeros(len(x)), x, w, np.array([-1.0, 1.0]))
-    return float(q[0])
 
 
 def _at_centres(centres: np.ndarray, h: np.ndarray, r: np.ndarray) -> np.ndarray:
