@@ -1526,10 +1526,8 @@ def _pick_in_order(values, bits, weights, cand, below, target):
 
 
 @leaf
-def _narrow(bits, weights, cand, shift, below, target):
-    """One radix pass: the candidates whose key bits ``shift .. shift + 16`` fall in the bucket
-    where the cumulative weight (from ``below``) reaches ``target`` (the last non-empty bucket
-    when rounding keeps it from being reached), and the weight below that bucket."""
+def _radix_histogram(bits, weights, cand, shift):
+    """Weight and count of the candidates in each bucket of their key bits ``shift .. shift + 16``."""
     nb = 1 << _RADIX_BITS
     mask = np.uint64(nb - 1)
     hist_w = np.zeros(nb)
@@ -1538,8 +1536,17 @@ def _narrow(bits, weights, cand, shift, below, target):
         b = (_order_key(bits[i]) >> np.uint64(shift)) & mask
         hist_w[b] += weights[i]
         hist_c[b] += 1
+    return hist_w, hist_c
+
+
+@leaf
+def _narrow(bits, cand, shift, hist_w, hist_c, below, target):
+    """One radix pass over :func:`_radix_histogram`'s buckets: the candidates in the bucket
+    where the cumulative weight (from ``below``) reaches ``target`` (the last non-empty bucket
+    when rounding keeps it from being reached), and the weight below that bucket."""
+    mask = np.uint64(hist_w.shape[0] - 1)
     chosen, last_below = -1, below
-    for b in range(nb):
+    for b in range(hist_w.shape[0]):
         if hist_c[b] == 0:
             continue
         if below + hist_w[b] >= target:
@@ -1592,10 +1599,19 @@ def select_weighted_quantiles(values, weights, fractions, out):
         if weights[i] > 0.0:
             kept[j] = i
             j += 1
+    top = 64 - _RADIX_BITS  # the first pass's histogram, the same for every fraction
+    if count > _SORT_BELOW:
+        top_w, top_c = _radix_histogram(bits, weights, kept, top)
+    else:
+        top_w, top_c = np.zeros(0), np.zeros(0, np.int64)
     for k in range(fractions.shape[0]):
         target = fractions[k] * total
         cand, below, shift = kept, 0.0, 64
         while cand.shape[0] > _SORT_BELOW and shift > 0:
             shift -= _RADIX_BITS
-            cand, below = _narrow(bits, weights, cand, shift, below, target)
+            if shift == top:
+                hist_w, hist_c = top_w, top_c
+            else:
+                hist_w, hist_c = _radix_histogram(bits, weights, cand, shift)
+            cand, below = _narrow(bits, cand, shift, hist_w, hist_c, below, target)
         out[k] = _pick_in_order(values, bits, weights, cand, below, target)
