@@ -49,11 +49,11 @@ def _paper_energy(flat, uv) -> float:
     """Paper Eq. 1 (k = 1, uniform, edge and cross springs) in normalised units, per spring."""
     import numpy as np
 
-    from potflat.relax.solver import _Springs
+    from potflat.relax.energy import SpringSystem
 
     V, F = flat.mesh.vertices, flat.mesh.faces
     unit = float(np.linalg.norm(V[F[:, [1, 2, 0]]] - V[F], axis=2).mean())
-    sp = _Springs(np.ascontiguousarray(V / unit), F, len(V), k=1.0, relative=False)
+    sp = SpringSystem(np.ascontiguousarray(V / unit), F, len(V), k=1.0, relative=False)
     return sp.spring_energy(np.ascontiguousarray(uv / unit)) / sp.n_springs
 
 
@@ -92,13 +92,13 @@ def _worker(size_m: float, method: str, budget: float, target: float | None) -> 
         uv = r.flat.uv
         out.update(seconds=r.timings["solve"] + r.timings["setup"], solve=r.timings["solve"],
                    setup=r.timings["setup"], iterations=r.iterations, converged=r.converged,
-                   levels=[(lv["level"], lv["iterations"]) for lv in r.levels], notes=list(r.notes))
+                   levels=[(lv.level, lv.iterations) for lv in r.levels], notes=list(r.notes))
         if preset == "paper" and target is not None and trace:
             # time at which the dynamics first reached the target energy (its own, per spring)
-            from potflat.relax.solver import _Springs
+            from potflat.relax.energy import SpringSystem
 
             unit = float(np.linalg.norm(V[F[:, [1, 2, 0]]] - V[F], axis=2).mean())
-            nspr = _Springs(np.ascontiguousarray(V / unit), F, len(V), k=1.0, relative=False).n_springs
+            nspr = SpringSystem(np.ascontiguousarray(V / unit), F, len(V), k=1.0, relative=False).n_springs
             hit = [t for t, e in trace if e / 0.5 / nspr <= target]
             out["paper_time_to_target"] = hit[0] if hit else None
             out["paper_energy_end"] = trace[-1][1] / 0.5 / nspr

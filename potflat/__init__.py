@@ -31,7 +31,7 @@ _LAZY = {
     "run_rollout_stage": "potflat.rollout",
     "RelaxOptions": "potflat.relax",
     "RelaxResult": "potflat.relax",
-    "run_relax_stage": "potflat.relax",
+    "run_relax_stage": "potflat.stages.relax_stage",
     "BakeOptions": "potflat.bake",
     "BakeResult": "potflat.bake",
     "run_bake_stage": "potflat.bake",

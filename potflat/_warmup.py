@@ -123,7 +123,8 @@ def warm(folder: Path, stage: str) -> None:
     flat = vessel(folder)
     rollout_ply = write_flat_ply(folder / "warmup.rollout.ply", flat)
     if stage == "relax":
-        from potflat.relax import RelaxOptions, run_relax_stage
+        from potflat.relax import RelaxOptions
+        from potflat.stages.relax_stage import run_relax_stage
 
         run_relax_stage(rollout_ply, folder, RelaxOptions())
     else:

@@ -31,9 +31,9 @@ def energy_never_increases(result) -> bool:
     each minimises its own (the area term joins after a first solve without it)."""
     h, start = result.energy_history, 0
     for level in result.levels:
-        if np.any(np.diff(h[start:start + level["iterations"]]) > 0):
+        if np.any(np.diff(h[start:start + level.iterations]) > 0):
             return False
-        start += level["iterations"]
+        start += level.iterations
     return start == len(h)
 
 
@@ -58,6 +58,6 @@ def bumpy_patch():
 
 def spring_system(V: np.ndarray, F: np.ndarray, **kw):
     """The relax solver's spring system of a mesh (``V`` (n, 3), ``F`` (m, 3))."""
-    from potflat.relax.solver import _Springs
+    from potflat.relax.energy import SpringSystem
 
-    return _Springs(np.ascontiguousarray(V, float), np.ascontiguousarray(F, np.int64), len(V), **kw)
+    return SpringSystem(np.ascontiguousarray(V, float), np.ascontiguousarray(F, np.int64), len(V), **kw)

@@ -10,7 +10,7 @@ from _bench_meshes import meshes, signed_areas
 from potflat.errors import FoldedResultError
 from potflat.mesh.embedding import boundary_loops, repair_folds, tutte_embedding
 from potflat.relax import relax
-from potflat.relax import solver
+from potflat.relax import multilevel
 
 
 def _interior_vertex(faces, n):
@@ -61,7 +61,7 @@ def test_relax_starts_fold_free_whatever_the_start(monkeypatch):
     v = _interior_vertex(F, len(uv))
     nbr = np.unique(F[(F == v).any(axis=1)])
     uv[v] += 5.0 * (uv[nbr].max(axis=0) - uv[nbr].min(axis=0))
-    monkeypatch.setattr(solver, "_untangle", lambda sp, x, rounds=200: (x, int((sp.signed_areas(x) <= 0).sum())))
+    monkeypatch.setattr(multilevel, "untangle", lambda sp, x, rounds=200: (x, int((sp.signed_areas(x) <= 0).sum())))
     local = relax(flat.replace(uv=uv))
     assert any("re-embedded" in note for note in local.notes)
     # a fold reaching the border: no local repair, Tutte's disc
@@ -81,7 +81,7 @@ def test_relax_starts_fold_free_whatever_the_start(monkeypatch):
 
 def test_a_mesh_that_no_layout_unfolds_is_refused_with_the_fix(monkeypatch):
     flat = meshes.vessel_rollout(1500, seed=2)
-    monkeypatch.setattr(solver, "_untangle", lambda sp, x, rounds=200: (x, 1))
+    monkeypatch.setattr(multilevel, "untangle", lambda sp, x, rounds=200: (x, 1))
     with pytest.raises(FoldedResultError, match="mirrored.*--side inner"):
         relax(flat.replace(uv=flat.uv * np.array([-1.0, 1.0])))  # every face flipped: seen from the wrong side
     monkeypatch.setattr("potflat.mesh.embedding.tutte_embedding", lambda faces, n, scale=1.0: None)
@@ -104,7 +104,7 @@ def test_a_result_relaxed_from_the_disc_keeps_the_rollouts_orientation(monkeypat
     a, b = np.percentile(u, [40, 55])
     strip = (u > a) & (u < b)
     uv[strip, 0] = a + b - u[strip] + 0.3 * (u[strip] - a)
-    monkeypatch.setattr(solver, "_untangle", lambda sp, x, rounds=200: (x, int((sp.signed_areas(x) <= 0).sum())))
+    monkeypatch.setattr(multilevel, "untangle", lambda sp, x, rounds=200: (x, int((sp.signed_areas(x) <= 0).sum())))
     r = relax(flat.replace(uv=uv))
     assert any("Tutte" in note for note in r.notes)
     top = flat.mesh.vertices[:, 2] > np.percentile(flat.mesh.vertices[:, 2], 90)

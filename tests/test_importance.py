@@ -111,7 +111,7 @@ def test_shape_term_keeps_figures_rounder_and_never_folds():
     for r in (springs, shaped, rigid):
         assert r.flipped == 0 and r.boundary_overlap == 0
         assert np.all(signed_areas(r.flat.uv, flat.mesh.faces) > 0)
-        assert np.all(np.diff(r.energy_history[-r.levels[-1]["iterations"]:]) <= 0)
+        assert np.all(np.diff(r.energy_history[-r.levels[-1].iterations:]) <= 0)
     assert shaped.distortion.anisotropy_p95 < springs.distortion.anisotropy_p95 - 0.1
     assert rigid.distortion.anisotropy_p95 < springs.distortion.anisotropy_p95 - 0.1
     assert shaped.distortion.area_mean_abs_log > springs.distortion.area_mean_abs_log  # the trade
@@ -125,8 +125,8 @@ def test_area_term_gathers_area_distortion_within_the_anisotropy_of_a_solve_with
     F = flat.mesh.faces
     without = relax(flat, area=0.0)
     r = relax(flat)  # the default: the area term, its limit found by a first solve without it
-    assert [lv["level"] for lv in without.levels] == ["fine"]
-    assert [lv["level"] for lv in r.levels] == ["fine, shape first", "fine"]
+    assert [lv.level for lv in without.levels] == ["fine"]
+    assert [lv.level for lv in r.levels] == ["fine, shape first", "fine"]
     assert without.anisotropy_limit is None
     # that first solve is the solve without the area term: the limit is its 80th percentile
     fd = face_distortion(flat.mesh.vertices, without.flat.uv, F)
@@ -146,14 +146,14 @@ def test_a_given_anisotropy_limit_holds_and_inf_means_none():
     F = flat.mesh.faces
     free = relax(flat, area=0.0)
     limited = relax(flat, max_anisotropy=1.2)
-    assert limited.anisotropy_limit == 1.2 and [lv["level"] for lv in limited.levels] == ["fine"]
+    assert limited.anisotropy_limit == 1.2 and [lv.level for lv in limited.levels] == ["fine"]
     aniso = {name: face_distortion(flat.mesh.vertices, res.flat.uv, F) for name, res in
              (("free", free), ("limited", limited))}
     p90 = {name: weighted_percentile(fd.anisotropy, fd.area_3d, 90.0) for name, fd in aniso.items()}
     assert p90["free"] > 1.4 and p90["limited"] < 1.25  # a steep price above the limit (soft: the area term pulls)
     assert limited.flipped == 0 and np.all(signed_areas(limited.flat.uv, F) > 0)
     unlimited = relax(flat, max_anisotropy=float("inf"))  # the area term alone
-    assert unlimited.anisotropy_limit is None and [lv["level"] for lv in unlimited.levels] == ["fine"]
+    assert unlimited.anisotropy_limit is None and [lv.level for lv in unlimited.levels] == ["fine"]
     assert unlimited.distortion.area_mean_abs_log < 0.7 * free.distortion.area_mean_abs_log
 
 
@@ -162,7 +162,7 @@ def test_a_painted_zone_takes_no_area_term():
     zone = (flat.uv[:, 1] > np.percentile(flat.uv[:, 1], 40)) & (flat.uv[:, 1] < np.percentile(flat.uv[:, 1], 60))
     painted = flat.replace(importance=zone.astype(np.float64))
     r = relax(painted)
-    assert r.anisotropy_limit is None and not any("shape first" in lv["level"] for lv in r.levels)
+    assert r.anisotropy_limit is None and not any("shape first" in lv.level for lv in r.levels)
     np.testing.assert_array_equal(r.flat.uv, relax(painted, area=0.0).flat.uv)
     # painted all over, or a mask that is all black (uniform importance): no zone, the area term applies
     for uniform in (np.ones(len(flat.uv)), np.zeros(len(flat.uv))):
@@ -222,7 +222,7 @@ def test_a_high_contrast_is_reached_from_a_softer_solve_to_the_same_layout(monke
     or with every vertex wholly important, there is one solve."""
     from dataclasses import replace
 
-    import potflat.relax.solver as solver
+    import potflat.relax.multilevel as solver
     from potflat.relax.parameters import SOLVER
 
     flat = meshes.vessel_rollout(1500, seed=3)
@@ -231,7 +231,7 @@ def test_a_high_contrast_is_reached_from_a_softer_solve_to_the_same_layout(monke
     flat = flat.replace(importance=importance)
     kw = {"preset": "archival", "importance_contrast": 1000.0, "true_scale": False}
     two = relax(flat, **kw)
-    softer = [lv for lv in two.levels if lv.get("importance_contrast") == SOLVER.contrast_start]
+    softer = [lv for lv in two.levels if lv.importance_contrast == SOLVER.contrast_start]
     assert softer and any("softer than the painting" in note for note in two.notes)
     assert two.flipped == 0 and two.boundary_overlap == 0
     monkeypatch.setattr(solver, "SOLVER", replace(SOLVER, contrast_start=1000.0))
@@ -254,7 +254,7 @@ def test_with_a_coarse_copy_only_the_copy_takes_the_softer_first_solve(monkeypat
     ends where the full mesh relaxed at both contrasts in turn (no copy) does, fold-free."""
     from dataclasses import replace
 
-    import potflat.relax.solver as solver
+    import potflat.relax.multilevel as solver
     from potflat.relax.parameters import COARSE, SOLVER
 
     flat = meshes.vessel_rollout(3000, seed=3)
@@ -264,15 +264,15 @@ def test_with_a_coarse_copy_only_the_copy_takes_the_softer_first_solve(monkeypat
     kw = {"preset": "archival", "importance_contrast": 1000.0, "true_scale": False}
     monkeypatch.setattr(solver, "COARSE", replace(COARSE, min_vertices=1000))
     staged = relax(flat, **kw)
-    first = [lv for lv in staged.levels if lv.get("importance_contrast") == SOLVER.contrast_start]
-    assert first and all(lv["vertices"] < len(flat.uv) for lv in first)  # the lower contrast on the copy only
-    assert [lv["level"] for lv in staged.levels].count("fine") == 1
-    assert staged.levels[-1]["vertices"] == len(flat.uv) and "importance_contrast" not in staged.levels[-1]
+    first = [lv for lv in staged.levels if lv.importance_contrast == SOLVER.contrast_start]
+    assert first and all(lv.vertices < len(flat.uv) for lv in first)  # the lower contrast on the copy only
+    assert [lv.level for lv in staged.levels].count("fine") == 1
+    assert staged.levels[-1].vertices == len(flat.uv) and staged.levels[-1].importance_contrast is None
     assert any(note.startswith("coarse copy: relaxed first with plain surface") for note in staged.notes)
     assert staged.flipped == 0 and staged.boundary_overlap == 0 and staged.converged
     monkeypatch.setattr(solver, "COARSE", replace(COARSE, min_vertices=10**9))  # no copy
     direct = relax(flat, **kw)
-    assert [lv["vertices"] for lv in direct.levels if lv.get("importance_contrast")] == [len(flat.uv)]
+    assert [lv.vertices for lv in direct.levels if lv.importance_contrast] == [len(flat.uv)]
     F, V = flat.mesh.faces, flat.mesh.vertices
     zone = important_faces(F, importance)
     a, b = face_distortion(V, staged.flat.uv, F), face_distortion(V, direct.flat.uv, F)
@@ -286,7 +286,7 @@ def test_without_a_relaxed_copy_the_full_mesh_takes_the_softer_first_solve(monke
     to the full mesh (a note for each), and the result is fold-free."""
     from dataclasses import replace
 
-    import potflat.relax.solver as solver
+    import potflat.relax.multilevel as solver
     from potflat.errors import FoldedResultError
     from potflat.relax.parameters import COARSE, SOLVER
 
@@ -303,8 +303,8 @@ def test_without_a_relaxed_copy_the_full_mesh_takes_the_softer_first_solve(monke
 
     monkeypatch.setattr(solver, "_relax", copies_fold)
     r = relax(flat, importance_contrast=1000.0, true_scale=False)
-    first = [lv for lv in r.levels if lv.get("importance_contrast") == SOLVER.contrast_start]
-    assert [lv["vertices"] for lv in first] == [len(flat.uv)]
+    first = [lv for lv in r.levels if lv.importance_contrast == SOLVER.contrast_start]
+    assert [lv.vertices for lv in first] == [len(flat.uv)]
     assert any("could not be relaxed fold-free" in note for note in r.notes)
     assert any(note.startswith("relaxed first with plain surface") for note in r.notes)
     assert r.flipped == 0 and r.boundary_overlap == 0

@@ -199,7 +199,7 @@ def test_run_scan_computes_each_flattenings_figures_once(tmp_path, monkeypatch):
     flattening's (whole surface and painted zone, and their 3D side) from the relax stage,
     instead of computing them again; they are what the stage commands compute from the files."""
     import potflat.mesh.distortion as distortion
-    import potflat.relax.solver as solver
+    import potflat.relax.multilevel as solver
     from potflat.stages.bake_stage import run_bake_stage
     from potflat_synthetic.vessels import make_vessel, write_obj
 

@@ -15,7 +15,8 @@ from _bench_meshes import SPRINGS_ONLY, bumpy_patch, energy_never_increases, mes
 
 from potflat.mesh.distortion import summarize
 from potflat.errors import FoldedResultError, InvalidOptionError
-from potflat.relax import RelaxOptions, relax, run_relax_stage
+from potflat.relax import RelaxOptions, relax
+from potflat.stages.relax_stage import run_relax_stage
 from potflat.types import FlatMesh, Mesh
 
 
@@ -175,7 +176,7 @@ def test_energy_never_increases_under_the_default(vessel):
     r = relax(vessel, preset="standard")
     h = r.energy_history
     assert len(h) == r.iterations > 10
-    assert [lv["level"] for lv in r.levels] == ["fine, shape first", "fine"]
+    assert [lv.level for lv in r.levels] == ["fine, shape first", "fine"]
     assert energy_never_increases(r)
 
 
@@ -260,13 +261,13 @@ def test_slivers_stay_unflipped():
 def test_smoothing_the_direction_at_limiting_faces_keeps_every_guarantee(vessel, monkeypatch):
     import dataclasses
 
-    import potflat.relax.solver as rx
+    import potflat.relax.lbfgs as rx
 
     smooth = relax(vessel, preset="standard", **SPRINGS_ONLY)
     monkeypatch.setattr(rx, "SOLVER", dataclasses.replace(rx.SOLVER, smooth_max_fraction=0.0))
     plain = relax(vessel, preset="standard", **SPRINGS_ONLY)
-    assert sum(lv["smoothed_directions"] for lv in smooth.levels) > 0
-    assert sum(lv["smoothed_directions"] for lv in plain.levels) == 0
+    assert sum(lv.smoothed_directions for lv in smooth.levels) > 0
+    assert sum(lv.smoothed_directions for lv in plain.levels) == 0
     for r in (smooth, plain):
         assert r.flipped == 0 and r.boundary_overlap == 0 and r.converged
         assert np.all(np.diff(r.energy_history) <= 0)
@@ -352,9 +353,9 @@ def test_time_budget_and_callback_stop_early(vessel):
 
 def test_paper_preset_reports_flips_honestly(vessel):
     r = relax(vessel, preset="paper", max_iter=3000)
-    assert r.settings["stretch"] == 2.0 and r.settings["stiffness"] == 0.5
+    assert r.settings.stretch == 2.0 and r.settings.stiffness == 0.5
     assert r.flipped == int(np.sum(signed_areas(r.flat.uv, vessel.mesh.faces) <= 0))
-    assert r.levels[0]["dt"] > 0 and np.all(np.isfinite(r.flat.uv))
+    assert r.levels[0].dt > 0 and np.all(np.isfinite(r.flat.uv))
     assert r.energy_history[-1] < r.energy_history[0]
 
 
@@ -449,16 +450,16 @@ def test_contact_barrier_matches_reference(weighted):
 def test_line_search_never_accepts_an_overlapping_boundary(vessel, monkeypatch):
     """A trial point the overlap test rejects is never accepted: here a virtual wall stops
     the vertex that moves most to the left halfway."""
-    from potflat.relax import solver as relax_module
+    from potflat.relax import energy as relax_module
 
-    real = relax_module._Springs.overlap
+    real = relax_module.SpringSystem.overlap
     seen = []
 
     def record(self, x):
         seen.append(x.copy())
         return real(self, x)
 
-    monkeypatch.setattr(relax_module._Springs, "overlap", record)
+    monkeypatch.setattr(relax_module.SpringSystem, "overlap", record)
     free = relax(vessel, preset="standard")
     start, end = seen[0], seen[-1]
     v = int(np.argmin(end[:, 0] - start[:, 0]))
@@ -470,16 +471,16 @@ def test_line_search_never_accepts_an_overlapping_boundary(vessel, monkeypatch):
         return 5 if x[v, 0] < wall else real(self, x)
 
     seen.clear()
-    monkeypatch.setattr(relax_module._Springs, "overlap", walled)
+    monkeypatch.setattr(relax_module.SpringSystem, "overlap", walled)
     r = relax(vessel, preset="standard")
     assert seen[-1][v, 0] >= wall  # the returned state
-    assert r.levels[-1]["boundary_contact"] and any("touched" in n for n in r.notes)
+    assert r.levels[-1].boundary_contact and any("touched" in n for n in r.notes)
     assert energy_never_increases(r) and r.flipped == 0
-    assert r.levels[-1]["energy"] > free.levels[-1]["energy"]
+    assert r.levels[-1].energy > free.levels[-1].energy
 
 
 def test_untangle_fixes_flipped_interior_vertices():
-    from potflat.relax.solver import _untangle
+    from potflat.relax.start import untangle
 
     flat, _ = meshes.cylinder_patch(12, 10, seed=4)
     F = flat.mesh.faces
@@ -492,7 +493,7 @@ def test_untangle_fixes_flipped_interior_vertices():
         uv[i] = 2.0 * uv[nb].mean(0) - uv[i] + 1.6 * (uv[nb[0]] - uv[i])  # pushed over its neighbour
     n0 = int((signed_areas(uv, F) <= 0).sum())
     assert n0 >= 3
-    x, n_bad = _untangle(sp, uv, rounds=10)
+    x, n_bad = untangle(sp, uv, rounds=10)
     assert n_bad == n0 and int((signed_areas(x, F) <= 0).sum()) == 0
     moved = np.nonzero((x != uv).any(1))[0]
     assert 0 < len(moved) < len(uv) // 4  # only the tangled region moved
@@ -601,7 +602,7 @@ def test_following_a_coarse_copy_uncrosses_a_wrapped_boundary(monkeypatch):
     start; with no repair rounds the copy is given up (None, and a note says so)."""
     from dataclasses import replace
 
-    from potflat.relax import solver as relax_module
+    from potflat.relax import start as relax_module
 
     fan = _saddle_fan(flat_gap=-0.6)
     F = fan.mesh.faces
@@ -609,25 +610,25 @@ def test_following_a_coarse_copy_uncrosses_a_wrapped_boundary(monkeypatch):
     x = np.ascontiguousarray(fan.uv)
     assert sp.overlap(x) > 0 and (signed_areas(x, F) > 0).all()
     notes: list[str] = []
-    y = relax_module._follow(sp, x, notes)
+    y = relax_module.follow(sp, x, notes)
     assert y is not None and sp.overlap(y) == 0 and (signed_areas(y, F) > 0).all()
     assert _angle_sum(y, F) < 2 * np.pi and "cross itself" in notes[0]
     monkeypatch.setattr(relax_module, "COARSE", replace(relax_module.COARSE, follow_repair_rounds=0))
     notes.clear()
-    assert relax_module._follow(sp, x, notes) is None and "from the rollout" in notes[-1]
+    assert relax_module.follow(sp, x, notes) is None and "from the rollout" in notes[-1]
 
 
 def test_boundary_vertex_with_a_large_angle_sum_does_not_wrap(monkeypatch):
-    from potflat.relax import solver as relax_module
+    from potflat.relax import energy as relax_module
 
     fan = _saddle_fan()
     r = relax(fan, preset="standard")
     assert r.boundary_overlap == 0 and r.flipped == 0 and not r.notes
-    assert r.levels[-1]["level"] == "fine" and r.levels[-1]["iterations"] > 0
+    assert r.levels[-1].level == "fine" and r.levels[-1].iterations > 0
     assert 5.5 < _angle_sum(r.flat.uv, fan.mesh.faces) < 2 * np.pi
     # without the guard (and the contact barrier it switches on) the springs drive the fan
     # to wrap: only the line search's overlap test stops them
-    monkeypatch.setattr(relax_module._Springs, "guard_boundary", lambda self, x: 0)
+    monkeypatch.setattr(relax_module.SpringSystem, "guard_boundary", lambda self, x: 0)
     r = relax(fan, preset="standard")
     assert any("touched" in n for n in r.notes) and r.boundary_overlap == 0
 

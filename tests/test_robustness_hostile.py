@@ -339,7 +339,8 @@ def test_a_texture_symlink_loop_is_one_line(tmp_path):
 def test_a_sidecar_of_the_wrong_type_does_not_break_the_next_stage(tmp_path, sidecar):
     from potflat.bake import BakeOptions, run_bake_stage
     from potflat.io.flat_ply import write_flat_ply
-    from potflat.relax import RelaxOptions, run_relax_stage
+    from potflat.relax import RelaxOptions
+    from potflat.stages.relax_stage import run_relax_stage
     from potflat.types import FlatMesh, Mesh
 
     x, y = np.meshgrid(np.linspace(0, 40, 6), np.linspace(0, 30, 5))
@@ -366,7 +367,7 @@ def test_overflowing_coordinates_are_named(tmp_path):
 
 
 def test_paper_dynamics_that_diverge_stop_with_one_line_and_write_nothing(tmp_path, monkeypatch):
-    from potflat.relax import solver as relax_mod
+    from potflat.relax import energy as relax_mod, options as relax_options, parameters as relax_parameters
     from potflat.io.flat_ply import write_flat_ply
     from potflat.stages.relax_stage import run_relax_stage
     from potflat.types import FlatMesh, Mesh
@@ -376,19 +377,19 @@ def test_paper_dynamics_that_diverge_stop_with_one_line_and_write_nothing(tmp_pa
     F = np.array([[r * 8 + c, r * 8 + c + 1, r * 8 + c + 9] for r in range(6) for c in range(7)]
                  + [[r * 8 + c, r * 8 + c + 9, r * 8 + c + 8] for r in range(6) for c in range(7)])
     write_flat_ply(tmp_path / "pot.rollout.ply", FlatMesh(Mesh(V, F), V[:, :2].copy()))
-    monkeypatch.setattr(relax_mod._Springs, "laplacian_bound", lambda self: 1e-4)  # a step 100x too long
+    monkeypatch.setattr(relax_mod.SpringSystem, "laplacian_bound", lambda self: 1e-4)  # a step 100x too long
     with pytest.raises(FoldedResultError, match="diverged.*--preset standard"):
-        run_relax_stage(tmp_path / "pot.rollout.ply", tmp_path / "out", relax_mod.RelaxOptions(preset="paper"))
+        run_relax_stage(tmp_path / "pot.rollout.ply", tmp_path / "out", relax_options.RelaxOptions(preset="paper"))
     assert not (tmp_path / "out").exists()
     # the advice works
-    out = run_relax_stage(tmp_path / "pot.rollout.ply", tmp_path / "out", relax_mod.RelaxOptions(preset="standard"))
+    out = run_relax_stage(tmp_path / "pot.rollout.ply", tmp_path / "out", relax_options.RelaxOptions(preset="standard"))
     assert out.summary["fold_free"]
 
 
 def test_the_paper_step_bounds_the_largest_eigenvalue():
     """dt = 1.9 / sqrt(bound) is stable when bound >= the spring Laplacian's largest
     eigenvalue; the earlier power-iteration estimate came from below (diverged on real scans)."""
-    from potflat.relax import solver as relax_mod
+    from potflat.relax import energy as relax_mod, options as relax_options, parameters as relax_parameters
     from potflat.types import FlatMesh, Mesh
 
     rng = np.random.default_rng(1)
@@ -398,13 +399,13 @@ def test_the_paper_step_bounds_the_largest_eigenvalue():
                  + [[r * 7 + c, r * 7 + c + 8, r * 7 + c + 7] for r in range(5) for c in range(6)])
     flat = FlatMesh(Mesh(V, F), V[:, :2].copy())
     for weighting in ("uniform", "relative"):
-        sp = relax_mod._Springs(flat.mesh.vertices, F, len(V), k=0.5, relative=weighting == "relative")
+        sp = relax_mod.SpringSystem(flat.mesh.vertices, F, len(V), k=0.5, relative=weighting == "relative")
         n = sp.n
         L = np.zeros((n, n))
         for i in range(n):
             for p in range(sp.ptr[i], sp.ptr[i + 1]):
                 j = sp.nbr[p]
-                c = sp.k / max(sp.rst[p], relax_mod.ENERGY.length_floor) ** 2 if sp.relative else sp.k
+                c = sp.k / max(sp.rst[p], relax_parameters.ENERGY.length_floor) ** 2 if sp.relative else sp.k
                 L[i, i] += c
                 L[i, j] -= c
         assert sp.laplacian_bound() >= np.linalg.eigvalsh(L).max() * (1 - 1e-12)

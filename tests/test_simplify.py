@@ -11,7 +11,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from _bench_meshes import SPRINGS_ONLY, meshes, signed_areas
 
-import potflat.relax.solver as relax_module
+import potflat.relax.multilevel as relax_module
 from potflat.relax import relax
 from potflat.relax.simplify import cell_side, grid_simplification, interpolate
 from potflat.types import FlatMesh, Mesh
@@ -102,28 +102,28 @@ def test_standard_starts_from_a_coarse_copy(vessel, monkeypatch):
     monkeypatch.setattr(relax_module, "COARSE", dataclasses.replace(relax_module.COARSE, min_vertices=10**9))
     plain = relax(vessel, preset="standard")
     # the area term joins after a first solve without it, on the coarsest mesh solved
-    assert [lv["level"] for lv in nested.levels] == ["coarse, shape first", "coarse", "fine"]
-    assert [lv["level"] for lv in plain.levels] == ["fine, shape first", "fine"]
-    assert nested.levels[0]["vertices"] < len(vessel.uv) / 8
+    assert [lv.level for lv in nested.levels] == ["coarse, shape first", "coarse", "fine"]
+    assert [lv.level for lv in plain.levels] == ["fine, shape first", "fine"]
+    assert nested.levels[0].vertices < len(vessel.uv) / 8
     for r in (nested, plain):
         assert r.converged and r.flipped == 0 and r.boundary_overlap == 0
     assert nested.distortion.edge_rms <= plain.distortion.edge_rms + 2e-3
-    assert nested.levels[-1]["iterations"] < plain.levels[-1]["iterations"]
+    assert nested.levels[-1].iterations < plain.levels[-1].iterations
 
 
 def test_preview_follows_a_coarse_copy_and_scales_with_units(vessel):
     r = relax(vessel, preset="preview", simplify_mm=6.0)
     assert relax(vessel, preset="preview", simplify_mm=6.0, **SPRINGS_ONLY).distortion.edge_rms < (
         0.6 * r.distortion_before.edge_rms)
-    assert [lv["level"] for lv in r.levels] == ["coarse, shape first", "coarse", "follow"]
-    assert r.levels[0]["vertices"] <= 0.7 * len(vessel.uv)
+    assert [lv.level for lv in r.levels] == ["coarse, shape first", "coarse", "follow"]
+    assert r.levels[0].vertices <= 0.7 * len(vessel.uv)
     assert r.flipped == 0 and r.boundary_overlap == 0 and np.all(signed_areas(r.flat.uv, vessel.mesh.faces) > 0)
     assert any("follows it" in note for note in r.notes)
     again = relax(vessel, preset="preview", simplify_mm=6.0, threads=1)
     np.testing.assert_array_equal(again.flat.uv, r.flat.uv)
     metres = FlatMesh(Mesh(vessel.mesh.vertices / 1000.0, vessel.mesh.faces, units="m"), vessel.uv / 1000.0)
     rm = relax(metres, preset="preview", simplify_mm=6.0)
-    assert [lv["vertices"] for lv in rm.levels] == [lv["vertices"] for lv in r.levels]
+    assert [lv.vertices for lv in rm.levels] == [lv.vertices for lv in r.levels]
     np.testing.assert_allclose(rm.flat.uv * 1000.0, r.flat.uv, rtol=0, atol=1e-7 * np.ptp(r.flat.uv))
 
 
@@ -132,4 +132,4 @@ def test_a_copy_too_coarse_or_too_fine_is_not_followed(vessel, simplify_mm):
     # 500 mm: one cell, nothing to relax; 1 mm: cells smaller than the edges (about 2.6 mm),
     # most fine vertices outside the copy. Both relax the full mesh (from a 16-per-cell copy).
     r = relax(vessel, preset="preview", simplify_mm=simplify_mm)
-    assert [lv["level"] for lv in r.levels] == ["coarse, shape first", "coarse", "fine"] and r.flipped == 0
+    assert [lv.level for lv in r.levels] == ["coarse, shape first", "coarse", "fine"] and r.flipped == 0

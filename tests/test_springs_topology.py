@@ -106,7 +106,7 @@ def test_spring_csr_equals_the_numpy_assembly(name):
 
 
 def test_mean_edge_length_equals_numpy_and_ignores_blocks_and_threads(monkeypatch):
-    from potflat.relax.solver import _mean_edge_length
+    from potflat.relax.energy import mean_edge_length
 
     flat = meshes.vessel_rollout(1500, seed=2)
     V, F = flat.mesh.vertices, flat.mesh.faces
@@ -116,7 +116,7 @@ def test_mean_edge_length_equals_numpy_and_ignores_blocks_and_threads(monkeypatc
                    for s in distortion.row_blocks(len(F))) / (3 * len(F))
         for threads in (1, 2):
             with numba_threads(threads):
-                assert _mean_edge_length(V, F) == want
+                assert mean_edge_length(V, F) == want
 
 
 @pytest.mark.parametrize("name", ["no faces", "degenerate faces", "isolated vertices", "vessel", "random soup 5"])

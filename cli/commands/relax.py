@@ -67,7 +67,7 @@ def relax_command(
     json: Json = False,
 ) -> None:
     from potflat.mesh.distortion import distortion_words
-    from potflat.relax import run_relax_stage
+    from potflat.stages.relax_stage import run_relax_stage
     from potflat_cli._options import options_from_cli
     from potflat_cli._stage import run_stage, with_compile_note
 

@@ -360,7 +360,7 @@ class Renderer:
     summary : DistortionSummary, optional
         ``flat``'s whole-surface figures when the caller has them (``potflat run``: the relax
         stage's, of the same flattening); computed when not given.
-    zone : dict, optional
+    zone : ZoneSummary, optional
         ``flat``'s painted-zone figures (:func:`potflat.mesh.distortion.zone_summary`) when the
         caller has them (the relax stage's); computed when not given.
     reference : SurfaceReference, optional
@@ -371,7 +371,8 @@ class Renderer:
 
     def __init__(self, flat: FlatMesh, px_per_mm: float, *, supersample: int = 0, max_megapixels: float = 1000.0,
                  distortion_maps: bool = True, summary: distortion.DistortionSummary | None = None,
-                 zone: dict | None = None, reference: distortion.SurfaceReference | None = None):
+                 zone: distortion.ZoneSummary | None = None,
+                 reference: distortion.SurfaceReference | None = None):
         from potflat.bake import _kernels as raster
 
         self.flat = flat
@@ -663,7 +664,7 @@ def image_figures(r: Renderer, covered_px: float) -> dict:
         "area": {**_stats(np.abs(fv["area"][valid]), w), "unit": "|ln(flat area / 3D area)|"},
         "anisotropy": {**_stats(fv["anisotropy"][valid], w), "unit": "sigma_max / sigma_min"},
         "distortion": summary,
-        **r.zone,
+        **r.zone.as_dict(),
         "covered_area_mm2": covered_px / g.px_per_mm ** 2,
         "flattened_area_mm2": float(np.abs(r.area_2d).sum()) * mpu ** 2,
         "surface_area_mm2": float(r.area_3d.sum()) * mpu ** 2,

@@ -610,10 +610,35 @@ def true_scale_factor(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, i
     return 1.0 / median if np.isfinite(median) and median > 0 else 1.0
 
 
+@dataclass(frozen=True)
+class ZoneSummary:
+    """How true a flattening is inside the important (painted) zone and outside it.
+
+    Attributes
+    ----------
+    important : ZoneFigures
+        The important zone (the whole surface without an importance).
+    rest : ZoneFigures
+        The rest of the surface (empty without an importance).
+    lengths : str
+        One sentence on how far lengths read off the image are off where the painting is.
+    """
+
+    important: ZoneFigures
+    rest: ZoneFigures
+    lengths: str
+
+    def as_dict(self) -> dict:
+        """JSON-ready dict: ``important_zone`` (:data:`PAINTED_ZONE_KEY`), ``rest`` (NaN as
+        null) and ``lengths``."""
+        return {PAINTED_ZONE_KEY: _json_safe(self.important.as_dict()), "rest": _json_safe(self.rest.as_dict()),
+                "lengths": self.lengths}
+
+
 def zone_summary(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, importance: np.ndarray | None, *,
                  reference: SurfaceReference | None = None, fd: FaceDistortion | None = None,
-                 edge_error: np.ndarray | None = None) -> dict:
-    """How true the flattening is inside the important zone and outside it, for the JSON.
+                 edge_error: np.ndarray | None = None) -> ZoneSummary:
+    """How true the flattening is inside the important zone and outside it.
 
     Parameters
     ----------
@@ -625,13 +650,6 @@ def zone_summary(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, import
         The 3D side of ``vertices`` and ``faces`` when the caller has it already.
     fd, edge_error : optional
         As for :func:`zone_figures`.
-
-    Returns
-    -------
-    dict
-        ``important_zone`` and ``rest`` (:class:`potflat.mesh.distortion.ZoneFigures` as dicts,
-        NaN as null) and ``lengths``: one sentence on how far lengths read off the image
-        are off where the painting is.
     """
     zones = zone_figures(vertices, uv, faces, importance, reference=reference, fd=fd, edge_error=edge_error)
     imp = zones["important"]
@@ -639,8 +657,7 @@ def zone_summary(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, import
     words = (f"lengths measured on the image {where} are off by {imp.length_error_median_pct:.1f}% "
              f"(median) and by at most {imp.length_error_p95_pct:.1f}% over 95% of it; "
              f"median scale {imp.scale_median:.3f}")
-    return {"important_zone": _json_safe(imp.as_dict()), "rest": _json_safe(zones["rest"].as_dict()),
-            "lengths": words}
+    return ZoneSummary(important=imp, rest=zones["rest"], lengths=words)
 
 
 def _json_safe(node):

@@ -8,7 +8,7 @@ presets from here). Every value changes the outputs; the comments say how each w
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -28,8 +28,9 @@ class RelaxPreset:
     max_iter : int
     coarse_start : bool
         Start large meshes from a relaxed coarse copy (:data:`COARSE`).
-    cell_vertices : float or None
-        Vertices per cell of the multilevel preconditioner's coarsest grid (L-BFGS only).
+    cell_vertices : float
+        Vertices per cell of the coarsest grid of the multilevel preconditioner (L-BFGS),
+        whose vertex order every solver uses.
     simplify_mm : float
         Relax only a copy with cells of this side (mm); 0: the full mesh.
     friction_inside, friction_boundary : float or None
@@ -49,7 +50,7 @@ class RelaxPreset:
     tol: float
     max_iter: int
     coarse_start: bool
-    cell_vertices: float | None = None
+    cell_vertices: float = 8.0
     simplify_mm: float = 0.0
     friction_inside: float | None = None
     friction_boundary: float | None = None
@@ -59,11 +60,6 @@ class RelaxPreset:
     max_anisotropy: float | str = "auto"
     importance_contrast: float = 1000.0
     true_scale: bool = True
-
-    def settings(self) -> dict:
-        """The fields the preset sets, by name (the ``settings`` recorded in ``NAME.relaxed.json``)."""
-        return {k: v for k, v in asdict(self).items() if v is not None}
-
 
 #: Spring weightings: ``uniform`` (the paper: absolute length errors) or ``relative``.
 WEIGHTINGS = ("uniform", "relative")

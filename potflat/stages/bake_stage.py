@@ -35,7 +35,7 @@ from potflat.types import FlatMesh, StageOutput, StepClock
 
 if TYPE_CHECKING:
     from potflat.bake.render import _Grid
-    from potflat.mesh.distortion import DistortionSummary, SurfaceReference
+    from potflat.mesh.distortion import DistortionSummary, SurfaceReference, ZoneSummary
 
 
 def _rollout_sidecar(flat_ply: Path, rollout_summary: dict | None = None) -> tuple[dict, Path | None]:
@@ -128,7 +128,7 @@ def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: li
 def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, options: BakeOptions | None = None, *,
                    name: str | None = None, flat: FlatMesh | None = None,
                    rollout_summary: dict | None = None, distortion: DistortionSummary | None = None,
-                   zone: dict | None = None, reference: SurfaceReference | None = None) -> StageOutput:
+                   zone: ZoneSummary | None = None, reference: SurfaceReference | None = None) -> StageOutput:
     """Bake ``NAME.relaxed.ply`` (or a rollout) into images and ``NAME.bake.json``.
 
     Files (in ``out_dir``): ``NAME.png`` (painting, RGBA, resolution in the file),
@@ -159,7 +159,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     distortion : DistortionSummary, optional
         The whole-surface figures of ``flat`` when the caller has them (:func:`potflat.run_scan`:
         the relax stage's); computed when not given.
-    zone : dict, optional
+    zone : ZoneSummary, optional
         :func:`potflat.mesh.distortion.zone_summary` of ``flat`` when the caller has it (the
         relax stage's ``important_zone``, ``rest`` and ``lengths``); computed when not given.
     reference : SurfaceReference, optional

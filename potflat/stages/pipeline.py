@@ -70,7 +70,7 @@ def stage_api(stage: str) -> tuple[type, Callable[..., StageOutput]]:
         ``run_<stage>_stage(input_path, out_dir, options, *, name=None) -> StageOutput``.
     """
     cls = options_class(stage)
-    return cls, getattr(importlib.import_module(f"potflat.{stage}"), f"run_{stage}_stage")
+    return cls, getattr(importlib.import_module(f"potflat.stages.{stage}_stage"), f"run_{stage}_stage")
 
 
 def options_dict(options: Any) -> dict[str, Any]:
@@ -289,7 +289,7 @@ def _preview_at_image_resolution(options: dict) -> dict:
     relax, bake = options["relax"], options["bake"]
     if relax.simplify_mm is not None:  # given
         return options
-    if relax.resolved()["simplify_mm"]:
+    if relax.resolved().simplify_mm:
         options = {**options, "relax": dataclasses.replace(relax, simplify_mm=2.0 / bake.resolution)}
     return options
 

@@ -9,7 +9,9 @@ from pathlib import Path
 import numpy as np
 
 from potflat.mesh.distortion import DistortionSummary
-from potflat.relax.solver import RelaxOptions, relax
+from potflat.relax.multilevel import relax
+from potflat.relax.options import RelaxOptions
+from potflat.relax.result import LevelRecord, RelaxResult
 from potflat.stages.names import relax_name
 from potflat.types import FlatMesh, StageOutput, StepClock
 
@@ -20,6 +22,17 @@ def _history_for_json(h: np.ndarray, limit: int = 1000) -> list[float]:
         return [float(e) for e in h]
     idx = np.unique(np.linspace(0, len(h) - 1, limit).round().astype(np.int64))
     return [float(h[i]) for i in idx]
+
+
+def _settings_for_json(result: RelaxResult, options: RelaxOptions) -> dict:
+    """The resolved settings as ``NAME.relaxed.json`` records them (the preset's fields it
+    sets, the options applied, and the time budget)."""
+    return {**{k: v for k, v in asdict(result.settings).items() if v is not None}, "time_budget": options.time_budget}
+
+
+def _level_for_json(level: LevelRecord) -> dict:
+    """One level of the relaxation as ``NAME.relaxed.json`` records it (the fields it has)."""
+    return {k: v for k, v in asdict(level).items() if v is not None}
 
 
 def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: RelaxOptions | None = None, *,
@@ -74,11 +87,10 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     clock.lap("relax")
     ply_path = out_dir / f"{name}.relaxed.ply"
     json_path = out_dir / f"{name}.relaxed.json"
-    zone = result.zone
     summary = {
         "preset": result.preset,
         "options": asdict(options),
-        "settings": result.settings,
+        "settings": _settings_for_json(result, options),
         "iterations": result.iterations,
         "converged": result.converged,
         "flipped": result.flipped,
@@ -87,16 +99,16 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         "fold_free_verified_by": "signed area of every face > 0 and no crossing boundary segments, checked after solving",
         "energy_history": _history_for_json(result.energy_history),
         "energy_units": "lengths divided by the mean 3D edge length; springs + barrier (fold-free presets) or springs only (paper)",
-        "spring_energy": result.levels[-1]["energy"] if result.levels else None,
+        "spring_energy": result.levels[-1].energy if result.levels else None,
         "stress": "paper Eq. 3 over mesh edges in sqrt(mm) (potflat.mesh.distortion.vertex_stress)",
-        "levels": list(result.levels),
+        "levels": [_level_for_json(level) for level in result.levels],
         "notes": list(result.notes),
         "distortion_before": result.distortion_before.as_dict(),
         "distortion": result.distortion.as_dict(),
         "importance": ("none: the whole surface counts alike" if result.flat.importance is None else
                        f"per vertex in {ply_path.name}; springs, barrier and shape term of plain surface weighted "
-                       f"1/{result.settings['importance_contrast']:g}"),
-        **zone,
+                       f"1/{result.settings.importance_contrast:g}"),
+        **result.zone.as_dict(),
         "true_scale_factor": result.scale_factor,
         "anisotropy_limit": result.anisotropy_limit,
         "units": flat.mesh.units,
@@ -126,8 +138,8 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
     # the solver's own steps, then the stage's (its total: reading to writing)
     steps = clock.total()
     del steps["relax"]
-    summary["timings"] = {**{k: v for k, v in result.timings.items() if k != "total"}, **steps}
+    summary["timings"] = {**{k: v for k, v in asdict(result.timings).items() if k != "total"}, **steps}
     write_json_atomic(json_path, summary)
     return StageOutput(paths={"ply": ply_path, "json": json_path}, summary=summary,
                        flat=as_stored(result.flat, ply_path, comments=comments), distortion=result.distortion,
-                       zone=zone, reference=result.reference)
+                       zone=result.zone, reference=result.reference)

@@ -510,7 +510,8 @@ def face_areas(x, faces, out):
 
 
 @parallel
-def face_terms(x, faces, a_ref, eps, shape, terms, areas, below, coef, e_face):
+def face_terms(x, faces, a_ref, eps, shape, w_shape, w_rigidity, w_area, w_limit, limit_u, area_eps, areas, below,
+               coef, e_face):
     """One pass over the faces: signed areas, per block of :data:`BLOCK` faces how many are
     not above ``eps`` of their reference area (the faces :func:`face_barrier` acts on; NaN
     areas count), and the per-face terms' energy and the coefficients with which
@@ -530,10 +531,13 @@ def face_terms(x, faces, a_ref, eps, shape, terms, areas, below, coef, e_face):
     eps : float
     shape : (m, 5) or (0, 5) float64
         :func:`shape_coefficients`; empty: no per-face terms (``coef`` and ``e_face`` untouched).
-    terms : (6,) float64
-        The per-face terms' weights per unit rest area: shape ``s``, rigidity ``r``, area
-        ``a``, anisotropy limit ``b``; then the limit ``u_lim`` and the area term's
-        smoothing ``eps``.
+    w_shape, w_rigidity, w_area, w_limit : float
+        The per-face terms' weights per unit rest area: shape, rigidity, area and anisotropy
+        limit (:class:`potflat.relax.energy.FaceTermWeights`).
+    limit_u : float
+        The anisotropy limit as ``u(limit) = sqrt(limit) - 1 / sqrt(limit)`` (inf: none).
+    area_eps : float
+        The area term's smoothing at zero log area ratio.
     areas : (m,) float64
         Output: signed areas.
     below : (ceil(m / BLOCK),) int64
@@ -546,12 +550,12 @@ def face_terms(x, faces, a_ref, eps, shape, terms, areas, below, coef, e_face):
     """
     m = faces.shape[0]
     shaped = shape.shape[0] > 0
-    s_shape = 2.0 * terms[0]
-    s_rigid = terms[1]
-    s_area = terms[2]
-    s_limit = terms[3]
-    u_lim = terms[4]
-    a_eps = terms[5]
+    s_shape = 2.0 * w_shape
+    s_rigid = w_rigidity
+    s_area = w_area
+    s_limit = w_limit
+    u_lim = limit_u
+    a_eps = area_eps
     for b in prange(below.shape[0]):
         count = 0
         eb = 0.0

@@ -1,0 +1,134 @@
+"""The solve's start: untangled, fold-free, with a boundary that does not cross itself,
+whether it comes from the rollout or from a relaxed coarse copy the full mesh follows."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from potflat.errors import FoldedResultError
+from potflat.mesh.boundary import crossing_pairs
+from potflat.mesh.embedding import repair_folds, tutte_embedding
+from potflat.relax.energy import SpringSystem
+from potflat.relax.parameters import COARSE
+
+
+def untangle(sp: SpringSystem, x: np.ndarray, rounds: int = 200) -> tuple[np.ndarray, int]:
+    """Move the vertices of non-positive faces to their edge neighbours' mean until none is left.
+
+    Averages over mesh edges only: the cross springs reach across the winged pair, and
+    averaging over them too left 81 of 83 flips of a sea-vase rollout in place (edges only:
+    all fixed in 6 rounds).
+    Returns the positions and the number of faces that were flipped at the start.
+    """
+    bad = sp.signed_areas(x) <= 0
+    n_bad = int(bad.sum())
+    if n_bad == 0:
+        return x, 0
+    x = x.copy()
+    region = np.zeros(sp.n, bool)
+    for r in range(rounds):
+        bad = sp.signed_areas(x) <= 0
+        if not bad.any():
+            break
+        region[sp.faces[bad].ravel()] = True
+        if r % 20 == 19:  # widen the region around persistent tangles
+            region[sp.faces[region[sp.faces].any(axis=1)].ravel()] = True
+        verts = np.nonzero(region)[0]
+        mean = np.empty((len(verts), 2))
+        sp.ks.neighbour_means(x, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
+        x[verts] = mean
+    return x, n_bad
+
+
+def fold_free_start(sp: SpringSystem, x: np.ndarray, n_bad: int, notes: list[str]) -> tuple[np.ndarray, bool]:
+    """A fold-free start from a layout ``x`` that untangling left folded: each folded cluster
+    re-embedded inside its fixed surroundings (:func:`potflat.mesh.embedding.repair_folds`),
+    else Tutte's embedding of the whole mesh (:func:`potflat.mesh.embedding.tutte_embedding`).
+    Returns the start and whether it is Tutte's disc (whose orientation is arbitrary).
+
+    Raises
+    ------
+    FoldedResultError
+        When neither gives a fold-free layout (the mesh is not disk-like), with the fix.
+    """
+    areas = sp.signed_areas(x)
+    if np.abs(areas[areas < 0]).sum() > np.abs(areas[areas > 0]).sum():
+        raise FoldedResultError(
+            "the rollout is mirrored (most of its area faces the other way): it shows the surface from the wrong "
+            "side; nothing written: make it again with potflat rollout (--side inner for a vessel's inside)")
+    faces = sp.faces.astype(np.int64)
+    y, repaired, left = repair_folds(faces, x)
+    if not left:
+        notes.append(f"the rollout had {n_bad} flipped or degenerate triangles; untangling left "
+                     f"{repaired}, re-embedded inside their surroundings (a harmonic map of each folded cluster)")
+        return np.ascontiguousarray(y), False
+    disc = tutte_embedding(faces, sp.n)
+    if disc is None or (sp.signed_areas(disc) <= 0).any():
+        raise FoldedResultError(
+            f"the rollout has {left} folded triangles that no fold-free layout of this mesh removes: it is not a "
+            "disk (a handle kept with the wall, a closed part, or faces joined at a single edge by three or more); "
+            "nothing written: run the rollout without --keep-attachments, or with --band LO HI leaving that part "
+            "out (folded.regions[].band in the rollout's JSON: where the folds are, as --band fractions)")
+    notes.append(f"the rollout had {n_bad} flipped or degenerate triangles and {left} stayed folded after a local "
+                 "repair; relaxed from Tutte's embedding of the whole mesh into a disc, then turned to the rollout's "
+                 "orientation")
+    return np.ascontiguousarray(disc), True
+
+
+def turned_like(x: np.ndarray, reference: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """``x`` (n, 2) rotated and moved (no mirroring) to fit ``reference`` (n, 2) best, each
+    vertex counting with ``weight`` (n,): the relaxed layout keeps the rollout's orientation
+    (axis vertical, mouth up) however the solver turned it on the way (the energy does not
+    care; a weak plain surface lets it drift)."""
+    w = weight / weight.sum()
+    ca, cb = w @ x, w @ reference
+    h = ((x - ca) * w[:, None]).T @ (reference - cb)
+    angle = math.atan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1])
+    rot = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+    return np.ascontiguousarray((x - ca) @ rot.T + cb)
+
+
+def follow(sp: SpringSystem, x: np.ndarray, notes: list[str]) -> np.ndarray | None:
+    """The full mesh's layout ``x`` following a relaxed coarse copy, untangled and with its
+    boundary uncrossed (:func:`uncross_boundary`); None (with a note) when it cannot be made
+    fold-free."""
+    x, n_bad = untangle(sp, x)
+    if n_bad:
+        notes.append(f"untangled {n_bad} triangles flipped by following the coarse copy")
+    folded = bool((sp.signed_areas(x) <= 0).any())
+    pairs = np.zeros((0, 2), np.int64) if folded else crossing_pairs(x, sp.boundary_segments)
+    if len(pairs):
+        x = uncross_boundary(sp, x, pairs)
+        notes.append(f"moved the boundary back where following the coarse copy made it cross itself "
+                     f"({len(pairs)} crossing pairs of boundary segments)")
+        folded = bool((sp.signed_areas(x) <= 0).any()) or sp.overlap(x) > 0
+    if folded:
+        notes.append("following the coarse copy folded the full mesh; relaxed the full mesh from the rollout")
+        return None
+    return x
+
+
+def uncross_boundary(sp: SpringSystem, x: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Move the vertices of crossing boundary segments (``pairs`` (k, 2) of
+    ``sp.boundary_segments``, crossing at ``x``) to their edge neighbours' mean, which pulls a
+    kinked boundary vertex inside, untangling after each round, until the boundary no longer
+    crosses itself or ``COARSE.follow_repair_rounds`` have passed; the moved region widens by
+    a ring every ``COARSE.follow_repair_widen`` rounds. Returns the positions (the caller
+    checks them)."""
+    seg = sp.boundary_segments
+    x = x.copy()
+    region = np.zeros(sp.n, bool)
+    for r in range(COARSE.follow_repair_rounds):
+        if not len(pairs):
+            break
+        region[seg[pairs.ravel()].ravel()] = True
+        if r % COARSE.follow_repair_widen == COARSE.follow_repair_widen - 1:
+            region[sp.faces[region[sp.faces].any(axis=1)].ravel()] = True
+        verts = np.nonzero(region)[0]
+        mean = np.empty((len(verts), 2))
+        sp.ks.neighbour_means(x, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
+        x[verts] = mean
+        x, _ = untangle(sp, x)
+        pairs = crossing_pairs(x, seg)
+    return x
