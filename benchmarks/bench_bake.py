@@ -73,18 +73,19 @@ def make_frieze(n_vertices: float, out: Path, *, seed: int = 0) -> Path:
 
 
 def _child(ply: str, out: str, options: str) -> None:
-    from potflat.bake import BakeOptions, run_bake_stage
+    from potflat.bake import BakeOptions
+    from potflat.files.bake_stage import run_bake_stage
 
     t = time.perf_counter()
     res = run_bake_stage(ply, out, BakeOptions(**json.loads(options)))
     seconds = time.perf_counter() - t
     usage = resource.getrusage(resource.RUSAGE_SELF)
-    s = res.summary
+    s = res.record
     print(json.dumps({"seconds": seconds, "cpu_seconds": usage.ru_utime + usage.ru_stime,
                       "peak_mb": usage.ru_maxrss / 1024, "image_px": s["image_px"],
                       "supersample": s["supersample"], "mip_levels": s["mip_levels"],
                       "files_mb": sum(p.stat().st_size for p in res.paths.values()) / 1e6,
-                      "files": sorted(res.summary["files"].values())}))
+                      "files": sorted(res.record["files"].values())}))
 
 
 def main() -> None:

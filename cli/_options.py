@@ -1,35 +1,43 @@
-"""Typer options shared by several commands, and the stage options derived from the stages.
+"""The command line's options: the ones every command shares, and each stage's options
+generated from its options dataclass (``RolloutOptions``, ``RelaxOptions``, ``BakeOptions``).
 
-The stage options of ``potflat run`` are generated from the options dataclasses
-(``RolloutOptions``, ``RelaxOptions``, ``BakeOptions``): one ``--field-name`` option per
-field, typed like the field, defaulting to the stage's own default, with the help text of
-the same option of ``potflat rollout/relax/bake`` (or the dataclass docstring). So the
-names, types and defaults can never drift from the stages and the batch file schema.
+A stage option is ``--field-name``, typed like its field, with the field's description in
+the dataclass docstring as its help, its allowed values (a field's ``choices`` metadata) and
+its default (the dataclass's, or each relax preset's). So the names, types, help and defaults
+can never drift from the stages and the batch file schema: a new option is one field.
 """
 from __future__ import annotations
 
 import dataclasses
+import functools
 import inspect
 import re
 import types
 import typing
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any, Optional
 
 import typer
+
+from potflat.files.options import STAGE_OPTIONS, coerce_option, option_types
+from potflat.relax.options import PRESET_FIELDS
+from potflat.relax.parameters import PRESETS
 
 OutputDir = Annotated[Optional[Path], typer.Option(
     "--output", "-o", help="Output folder, created if needed \\[default: ./NAME/ in the current folder; "
                            "never the scan's folder unless given].",
     file_okay=False)]
 StageOutputDir = Annotated[Optional[Path], typer.Option(
-    "--output", "-o", help="Output folder, created if needed \\[default: the folder of the stage file].",
+    "--output", "-o", help="Output folder, created if needed \\[default: the folder of the input file].",
     file_okay=False)]
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing but errors.")]
 Json = Annotated[bool, typer.Option("--json", help="Print a JSON summary to stdout (nothing else).")]
 Name = Annotated[Optional[str], typer.Option("--name", help="Output file name stem \\[default: the scan's stem].")]
 
 _PANELS = {"rollout": "Rollout options", "relax": "Relax options", "bake": "Bake options"}
+#: Longest list of allowed values shown as the metavar (``[a|b|c]``); a longer one shows ``NAME``.
+MAX_METAVAR = 15
 
 
 def _cli_type(tp: Any) -> Any:
@@ -45,78 +53,95 @@ def _cli_type(tp: Any) -> Any:
     return Optional[str]
 
 
-def _docstring_help(cls: type) -> dict[str, str]:
-    """Field descriptions from a numpydoc ``Attributes``/``Parameters`` section."""
+def _plain(text: str) -> str:
+    """Docstring markup as plain text: ``x`` as 'x', :role:`~a.b` as b, :role:`t <a.b>` as t."""
+    text = re.sub(r":\w+:`~?([^`<]*?)\s*<[^>]*>`", r"\1", text)
+    text = re.sub(r":\w+:`~([^`]*)`", lambda m: m.group(1).rsplit(".", 1)[-1], text)
+    text = re.sub(r":\w+:`([^`]*)`", r"\1", text)
+    return text.replace("``", "'").replace("[", "\\[")
+
+
+def field_help(cls: type) -> dict[str, str]:
+    """Each field's description in the numpydoc ``Attributes`` section of ``cls``'s docstring,
+    as plain text (a line ``a, b : type`` describes both)."""
     doc = inspect.getdoc(cls) or ""
     out: dict[str, str] = {}
-    current = None
+    current: list[str] = []
     for line in doc.splitlines():
-        match = re.match(r"^(\w+)\s*:", line)
-        if match:
-            current = match.group(1)
-            out[current] = ""
+        match = re.match(r"^(\w+(?:\s*,\s*\w+)*)\s*:", line)
+        if match and not line.startswith((" ", "\t")):
+            current = [n.strip() for n in match.group(1).split(",")]
+            for name in current:
+                out[name] = ""
         elif current and line.startswith((" ", "\t")) and line.strip():
-            out[current] = (out[current] + " " + line.strip()).strip()
-        elif not line.strip():
-            continue
-        else:
-            current = None
-    return out
+            for name in current:
+                out[name] = (out[name] + " " + line.strip()).strip()
+        elif line.strip():
+            current = []
+    return {name: _plain(text) for name, text in out.items()}
 
 
-def _command_help(stage: str) -> dict[str, str]:
-    """Help texts of the options of ``potflat <stage>`` by parameter name."""
-    import importlib
+def _shown(value: Any) -> str:
+    if isinstance(value, (tuple, list)):
+        return ",".join(map(str, value)) if value else "none"
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    return f"{value:g}" if isinstance(value, float) else str(getattr(value, "value", value))
 
-    func = getattr(importlib.import_module(f"potflat_cli.commands.{stage}"), f"{stage}_command")
-    hints = typing.get_type_hints(func, include_extras=True)
-    out = {}
-    for name, param in inspect.signature(func).parameters.items():
-        infos = [param.default] + list(getattr(hints.get(name), "__metadata__", ()))
-        for info in infos:
-            if isinstance(info, typer.models.OptionInfo) and info.help:
-                out[name] = info.help
-    return out
+
+def _preset_default(name: str) -> str:
+    """A relax option's default by preset: the default preset's value, then the others'
+    (``0.25 (paper: 0)``)."""
+    from potflat.relax.options import RelaxOptions
+
+    default = _shown(getattr(PRESETS[RelaxOptions().preset], name))
+    others: dict[str, list[str]] = {}
+    for preset, settings in PRESETS.items():
+        value = _shown(getattr(settings, name))
+        if value != default:
+            others.setdefault(value, []).append(preset)
+    return default + (" (" + "; ".join(f"{', '.join(p)}: {v}" for v, p in others.items()) + ")" if others else "")
+
+
+def _choices(field: dataclasses.Field) -> tuple[str, ...]:
+    return tuple(str(c) for c in field.metadata.get("choices", ()))
 
 
 def stage_parameters(stage: str) -> list[inspect.Parameter]:
     """Keyword parameters (Typer options) for every option field of ``stage``.
 
     Each is ``--field-name`` (``_`` becomes ``-``), defaults to ``None`` meaning the
-    stage's default (shown in the help), booleans are ``--flag/--no-flag``, fixed-length
-    tuples take that many values (``--band 0.2 0.6``), variable-length ones a
-    comma-separated list.
+    stage's default (shown in the help), booleans are ``--flag`` (off by default) or
+    ``--flag/--no-flag``, fixed-length tuples take that many values (``--band 0.2 0.6``),
+    variable-length ones a comma-separated list.
     """
-    from potflat.stages.pipeline import option_types, options_class
-
-    cls = options_class(stage)
-    helps = {**_docstring_help(cls), **_command_help(stage)}
-    defaults = {f.name: f.default for f in dataclasses.fields(cls)}
+    cls = STAGE_OPTIONS[stage]
+    helps = field_help(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
     params = []
     for name, tp in option_types(cls).items():
+        field = fields[name]
         flag = "--" + name.replace("_", "-")
         cli_type = _cli_type(tp)
-        default = defaults.get(name)
-        # a flag that is off by default is just --flag, as in the stage commands
-        on_off = cli_type == Optional[bool] and default is not False
+        default = field.default
+        on_off = cli_type == Optional[bool] and default is not False  # a flag off by default is just --flag
         decls = (f"{flag}/--no-{flag[2:]}",) if on_off else (flag,)
-        text = (helps.get(name) or f"{stage} option {name}.").replace("``", "'")
-        if "[default" not in text and default is not dataclasses.MISSING and default is not False:
-            text += f" \\[default: {_shown_default(default)}]"
-        info = typer.Option(*decls, help=text, rich_help_panel=_PANELS[stage], show_default=False)
+        text = helps.get(name) or f"{stage} option {name}."
+        choices = _choices(field)
+        if choices:
+            text += f" One of: {', '.join(choices)}."
+        if stage == "relax" and name in PRESET_FIELDS:
+            text += f" \\[default: {_preset_default(name)}]"
+        elif default is not dataclasses.MISSING and default is not None and default is not False:
+            text += f" \\[default: {_shown(default)}]"
+        metavar = field.metadata.get("metavar")
+        if metavar is None and choices:
+            metavar = "[" + "|".join(choices) + "]"
+            metavar = metavar if len(metavar) <= MAX_METAVAR else "NAME"
+        info = typer.Option(*decls, help=text, rich_help_panel=_PANELS[stage], show_default=False, metavar=metavar)
         params.append(inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY,
                                         annotation=Annotated[cli_type, info], default=None))
     return params
-
-
-def _shown_default(value: Any) -> str:
-    if value is None:
-        return "auto"
-    if isinstance(value, (tuple, list)):
-        return ",".join(map(str, value)) if value else "none"
-    if isinstance(value, bool):
-        return "on" if value else "off"
-    return str(getattr(value, "value", value))
 
 
 def options_from_cli(stage: str, values: dict[str, Any]):
@@ -128,9 +153,8 @@ def options_from_cli(stage: str, values: dict[str, Any]):
         Naming the option (``--px-per-mm ...``) and what is wrong.
     """
     from potflat.errors import InvalidOptionError
-    from potflat.stages.pipeline import coerce_option, option_types, options_class
 
-    cls = options_class(stage)
+    cls = STAGE_OPTIONS[stage]
     kwargs = {}
     for name, tp in option_types(cls).items():
         value = values.get(name)
@@ -141,3 +165,30 @@ def options_from_cli(stage: str, values: dict[str, Any]):
         except InvalidOptionError as exc:
             raise InvalidOptionError(f"--{name.replace('_', '-')} {exc}") from None
     return cls(**kwargs)
+
+
+def with_stage_options(*stages: str) -> Callable[[Callable], Callable]:
+    """Give a command the options of ``stages``, generated from their options dataclasses.
+
+    The decorated function takes its own parameters and ``options``: a dict of stage name to
+    its options dataclass, built from the command line (an option shared by two stages is
+    given once)."""
+    def decorate(func: Callable) -> Callable:
+        own = [p for p in inspect.signature(func, eval_str=True).parameters.values() if p.name != "options"]
+        seen, extra = {p.name for p in own}, []
+        for stage in stages:
+            for p in stage_parameters(stage):
+                if p.name not in seen:
+                    seen.add(p.name)
+                    extra.append(p)
+
+        @functools.wraps(func)
+        def command(**values: Any) -> Any:
+            options = {stage: options_from_cli(stage, values) for stage in stages}
+            return func(**{p.name: values[p.name] for p in own}, options=options)
+
+        command.__signature__ = inspect.Signature(own + extra)
+        command.__annotations__ = {p.name: p.annotation for p in own + extra}
+        del command.__wrapped__  # Typer reads the signature given here, not the function's
+        return command
+    return decorate

@@ -32,7 +32,7 @@ def run_stage(status: str | None, call: Callable, *, quiet: bool, as_json: bool)
 
     Returns
     -------
-    StageOutput or None
+    the stage's files (with their record) or None
         The result when a human-readable summary should follow, else ``None``.
     """
     from rich.console import Console
@@ -45,6 +45,6 @@ def run_stage(status: str | None, call: Callable, *, quiet: bool, as_json: bool)
         with console.status(with_compile_note(status)):
             result = call()
     if as_json:
-        print(json.dumps({k: v for k, v in result.summary.items() if k != "provenance"}, indent=2))
+        print(json.dumps({k: v for k, v in result.record.items() if k != "provenance"}, indent=2))
         return None
     return None if quiet else result

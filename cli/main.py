@@ -100,10 +100,6 @@ class _Group(TyperGroup):
 
     def resolve_command(self, ctx, args):
         name, command, rest = super().resolve_command(ctx, args)
-        if name == "run":
-            mini = typer.Typer(pretty_exceptions_show_locals=False, add_completion=False)
-            mini.command("run")(run.full_command())
-            command = typer.main.get_command(mini)
         if command is not None:
             pairs = {opt for p in command.params if p.nargs == 2 for opt in p.opts}
             rest = split_pairs(rest, pairs)  # --band 0.2,0.8 as --band 0.2 0.8
@@ -112,41 +108,13 @@ class _Group(TyperGroup):
         return name, command, rest
 
 
-#: Options that take a name, and where their allowed values are defined (module, constant).
-CHOICES = {"proxy": ("potflat.rollout.proxy", "KINDS"), "units": ("potflat.types", "UNITS_MM"),
-           "preset": ("potflat.relax.parameters", "PRESETS"), "weighting": ("potflat.relax.parameters", "WEIGHTINGS"),
-           "side": ("potflat.rollout.options", "SIDES"), "importance": ("potflat.importance", "METHODS"),
-           "maps": ("potflat.bake.render", "MAP_NAMES")}
-
-
-#: Longest list of allowed values shown as the metavar (longer ones go into the help text).
-MAX_METAVAR = 15
-
-
 def _show_choices(command) -> None:
-    """In ``--help``: the allowed values of the options that take a name (``[auto|cylinder|...]``)
-    instead of ``<str>``, and nothing after on/off flags (instead of ``<bool>``)."""
-    import importlib
-
+    """In ``--help``: nothing after on/off flags (instead of ``<bool>``), and ``A B|A,B`` for
+    the options that take two values."""
     for param in getattr(command, "params", ()):
-        if param.name in CHOICES:
-            module, constant = CHOICES[param.name]
-            try:
-                values = tuple(getattr(importlib.import_module(module), constant))
-            except (ImportError, AttributeError):  # a stage replaced (tests' fake stages)
-                continue
-            if param.name == "proxy":
-                values = ("auto", *values)
-            shown = "[" + "|".join(values) + "]"
-            if len(shown) <= MAX_METAVAR:
-                param.metavar = shown
-            else:  # a long list would squeeze the help's columns: name it, and list it in the help text
-                param.metavar = "NAME"
-                if not all(v in (param.help or "") for v in values):
-                    param.help = f"{param.help or ''} One of: {', '.join(values)}.".strip()
-        elif getattr(param, "is_flag", False):
+        if getattr(param, "is_flag", False):
             param.metavar = ""
-        elif param.nargs == 2:  # --band 0.2 0.8 or --band 0.2,0.8 (split_pairs)
+        elif param.nargs == 2 and param.metavar is None:  # --band 0.2 0.8 or --band 0.2,0.8 (split_pairs)
             param.metavar = "A B|A,B"
 
 

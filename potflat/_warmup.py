@@ -124,13 +124,14 @@ def warm(folder: Path, stage: str) -> None:
     rollout_ply = write_flat_ply(folder / "warmup.rollout.ply", flat)
     if stage == "relax":
         from potflat.relax import RelaxOptions
-        from potflat.stages.relax_stage import run_relax_stage
+        from potflat.files.relax_stage import run_relax_stage
 
         run_relax_stage(rollout_ply, folder, RelaxOptions())
     else:
-        from potflat.bake import BakeOptions, run_bake_stage
+        from potflat.bake import BakeOptions
+        from potflat.files.bake_stage import run_bake_stage
 
-        run_bake_stage(rollout_ply, folder, BakeOptions(), flat=flat)
+        run_bake_stage(rollout_ply, folder, BakeOptions())
 
 
 def bake_here() -> None:

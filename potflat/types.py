@@ -17,8 +17,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
-
 import numpy as np
 
 from potflat.errors import InvalidInputError
@@ -231,36 +229,53 @@ class FlatMesh:
         return replace(self, **changes)
 
 
-@dataclass(frozen=True)
-class StageOutput:
-    """What a stage wrote: its files and the content of its JSON sidecar, and what the next
-    stage takes in memory.
+@dataclass(frozen=True, eq=False)
+class RolloutMarks:
+    """Places of a rollout that the bake marks on its images (faces index the rollout's faces,
+    which the relaxation keeps).
 
     Attributes
     ----------
-    paths : dict of str to Path
-        Role (``"ply"``, ``"json"``, ``"png"``, ...) to the file written.
-    summary : dict
-        The JSON sidecar's content.
-    flat : FlatMesh or None
-        The flattening exactly as the stage's PLY holds it (rollout, relax), which
-        :func:`potflat.run_scan` hands to the next stage instead of reading the file.
-    distortion : DistortionSummary or None
-        Distortion figures of that flattening (:class:`potflat.mesh.distortion.DistortionSummary`).
-    zone : dict or None
-        Its painted zone's figures (:func:`potflat.mesh.distortion.zone_summary`; relax),
-        which the bake stage takes instead of computing them again.
-    reference : SurfaceReference or None
-        The 3D side of those figures (:class:`potflat.mesh.distortion.SurfaceReference` of the
-        flattening's vertices and faces; relax), which the bake stage takes too.
+    attachment_roots : (k,) int64
+        Faces where an attachment left out of the rollout (a handle, a spout) met the wall;
+        empty when none was left out.
+    repeated_from : int or None
+        The first face that repeats the start of the rollout past 360 degrees (``overlap``);
+        the faces from it on are the repeat. None: no repeat.
+    overlap_deg : float
+        Degrees repeated past 360 (0 without a repeat).
+    folded_faces : (j,) int64
+        Faces where the scan folds over itself in 3D (creases, flaps, duplicated sheets).
+    folded_area_mm2, folded_percent : float
+        Their 3D area, and its share of the unrolled surface in percent.
+    folded_regions : int
+        Connected places they make up.
     """
 
-    paths: dict
-    summary: dict
-    flat: FlatMesh | None = None
-    distortion: Any = None
-    zone: dict | None = None
-    reference: Any = None
+    attachment_roots: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    repeated_from: int | None = None
+    overlap_deg: float = 0.0
+    folded_faces: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    folded_area_mm2: float = 0.0
+    folded_percent: float = 0.0
+    folded_regions: int = 0
+
+    def face_indicator(self, which: str, n_faces: int) -> np.ndarray:
+        """A per-face indicator (n_faces,) float64 of ``"attachments"``, ``"repeated"`` or
+        ``"folded"``; empty when there is nothing to mark or an index is out of range (the
+        marks belong to another mesh)."""
+        if which == "repeated":
+            if self.repeated_from is None or not 0 < self.repeated_from < n_faces:
+                return np.zeros(0)
+            out = np.zeros(n_faces)
+            out[self.repeated_from:] = 1.0
+            return out
+        faces = {"attachments": self.attachment_roots, "folded": self.folded_faces}[which]
+        if not len(faces) or faces.min() < 0 or faces.max() >= n_faces:
+            return np.zeros(0)
+        out = np.zeros(n_faces)
+        out[faces] = 1.0
+        return out
 
 
 class StepClock:

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from potflat.bake import BakeOptions, bake, run_bake_stage
+from potflat.bake import BakeOptions, bake
+
+from potflat.files.bake_stage import run_bake_stage
 from potflat.errors import InvalidOptionError
 from potflat.io.flat_ply import write_flat_ply
 from potflat.types import FlatMesh, Mesh
@@ -458,7 +460,7 @@ def _flat(stage_dir):
 
 def test_scalebar_is_a_round_length_at_true_scale(stage_dir, tmp_path):
     out = run_bake_stage(stage_dir / "vase.relaxed.ply", tmp_path, BakeOptions(px_per_mm=5, maps=()))
-    bar_mm = out.summary["scale_bar_mm"]
+    bar_mm = out.record["scale_bar_mm"]
     assert bar_mm in (1, 2, 5, 10, 20, 50, 100, 200, 500)
     bar = np.asarray(Image.open(tmp_path / "vase.scalebar.png"))
     dark = (bar[..., :3].sum(-1) < 100)
@@ -562,4 +564,4 @@ def test_collapsed_flat_triangle_keeps_the_json_valid(tmp_path):
     out = run_bake_stage(tmp_path / "c.relaxed.ply", tmp_path, BakeOptions(px_per_mm=2))
     summary = json.loads((tmp_path / "c.bake.json").read_text())
     assert summary["distortion"]["anisotropy_max"] is None  # infinite
-    assert out.summary["anisotropy"]["max"] >= 1e6
+    assert out.record["anisotropy"]["max"] >= 1e6

@@ -4,7 +4,9 @@ import json
 import numpy as np
 from PIL import Image
 
-from potflat.bake import BakeOptions, run_bake_stage
+from potflat.bake import BakeOptions
+
+from potflat.files.bake_stage import run_bake_stage
 from potflat.io.flat_ply import write_flat_ply
 from potflat.types import FlatMesh, Mesh
 
@@ -34,7 +36,7 @@ def test_attachment_roots_are_masked(tmp_path):
     # v up: the bottom of the plane is the last rows; u right: the left columns
     assert rows.min() >= h - 12 and cols.max() <= 12
     assert abs(marked.sum() - 10 * 10) <= 12
-    assert out.summary["files"]["attachments"] == "x.attachments.png"
+    assert out.record["files"]["attachments"] == "x.attachments.png"
 
 
 def test_no_mask_when_attachments_kept_or_absent(tmp_path):

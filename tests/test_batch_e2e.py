@@ -16,7 +16,11 @@ import pytest
 from PIL import Image
 from typer.testing import CliRunner
 
-from potflat.stages.batch import MANIFEST, load_batch, read_manifest, run_batch
+from potflat.files.batch.config import load_batch
+
+from potflat.files.batch.execution import run_batch
+
+from potflat.files.batch.manifest import MANIFEST, read_manifest
 from potflat_cli.main import app
 
 KINDS = ("amphora", "lekythos")

@@ -1,10 +1,10 @@
-"""Fake stage modules (``potflat.rollout/relax/bake``) for pipeline and batch tests.
+"""Fake stages for pipeline and batch tests.
 
-They follow the stage contract (frozen kw_only options dataclasses validating themselves,
-``run_<stage>_stage(input, out_dir, options, *, name=None) -> StageOutput`` writing
-``NAME.rollout.ply``, ``NAME.relaxed.ply``, ``NAME.png``... with a provenance block) and
-are fast and deterministic, so the batch machinery is tested apart from the numerics.
-``install(monkeypatch)`` puts them in ``sys.modules``; the tests of this file check them.
+They follow the stages' contract (frozen kw_only options dataclasses validating themselves,
+file stages writing ``NAME.rollout.ply``, ``NAME.relaxed.ply``, ``NAME.png``... with a
+provenance block and returning the file layer's typed results) and are fast and
+deterministic, so the batch machinery is tested apart from the numerics.
+``install(monkeypatch)`` puts them in place of the real ones; the tests of this file check them.
 """
 from __future__ import annotations
 
@@ -20,9 +20,15 @@ from typing import Literal
 import pytest
 
 from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.files import options as file_options
+from potflat.files import pipeline
+from potflat.files.bake_stage import BakeFiles
+from potflat.files.provenance import provenance
+from potflat.files.relax_stage import RelaxFiles
+from potflat.files.rollout_stage import RolloutFiles
 from potflat.io.atomic import write_bytes_atomic, write_json_atomic
-from potflat.stages.provenance import provenance
-from potflat.types import StageOutput
+from potflat.mesh.distortion import ZoneFigures, ZoneSummary
+from potflat.types import RolloutMarks
 
 MAPS = ("stress", "area", "anisotropy")
 
@@ -128,10 +134,17 @@ def run_rollout_stage(scan_path, out_dir, options, *, name=None, check=None):
     summary = {"distortion": {"edge_rms": 0.2, "flipped": 0}, "cleaning": {"warnings": []},
                "provenance": provenance(stage="rollout", inputs=inputs, options=asdict(options))}
     js = write_json_atomic(out / f"{name}.rollout.json", summary)
-    return StageOutput(paths={"ply": ply, "json": js}, summary=summary)
+    return RolloutFiles(paths={"ply": ply, "json": js}, record=summary, flat=None,
+                        distortion=types.SimpleNamespace(**summary["distortion"]), marks=RolloutMarks())
 
 
-def run_relax_stage(rollout_ply, out_dir, options, *, name=None):
+def _zone(figures: dict) -> ZoneFigures:
+    return ZoneFigures(area_fraction=figures["area_fraction"], faces=0, scale_median=1.0,
+                       length_error_median_pct=figures["length_error_median_pct"],
+                       length_error_p95_pct=figures["length_error_p95_pct"], distortion=None)
+
+
+def run_relax_stage(rollout_ply, out_dir, options, *, name=None, rolled=None):
     src, out = Path(rollout_ply), Path(out_dir)
     name = name or src.name.split(".")[0]
     _sabotage(name, "relax")
@@ -144,11 +157,12 @@ def run_relax_stage(rollout_ply, out_dir, options, *, name=None):
                "rest": {"area_fraction": 0.75, "length_error_median_pct": 30.0, "length_error_p95_pct": 55.0},
                "provenance": provenance(stage="relax", inputs=[src], options=asdict(options))}
     js = write_json_atomic(out / f"{name}.relaxed.json", summary)
-    return StageOutput(paths={"ply": ply, "json": js}, summary=summary,
-                       distortion=types.SimpleNamespace(**summary["distortion"]))
+    zone = ZoneSummary(important_zone=_zone(summary["important_zone"]), rest=_zone(summary["rest"]), lengths="")
+    return RelaxFiles(paths={"ply": ply, "json": js}, record=summary, flat=None,
+                      distortion=types.SimpleNamespace(**summary["distortion"]), zone=zone, reference=None)
 
 
-def run_bake_stage(relaxed_ply, out_dir, options, *, name=None):
+def run_bake_stage(relaxed_ply, out_dir, options, *, name=None, relaxed=None, marks=None):
     src, out = Path(relaxed_ply), Path(out_dir)
     name = name or src.name.split(".")[0]
     _sabotage(name, "bake")
@@ -158,20 +172,17 @@ def run_bake_stage(relaxed_ply, out_dir, options, *, name=None):
         paths[m] = write_bytes_atomic(out / f"{name}.{m}.png", _digest(data, m.encode()))
     summary = {"provenance": provenance(stage="bake", inputs=[src], options=asdict(options))}
     paths["json"] = write_json_atomic(out / f"{name}.bake.json", summary)
-    return StageOutput(paths=paths, summary=summary)
+    return BakeFiles(paths=paths, record=summary)
 
 
 def install(monkeypatch) -> None:
-    """Make ``potflat.rollout``, ``potflat.relax`` and ``potflat.bake`` these fakes."""
+    """Run these fakes instead of the stages (their options and file stages)."""
     this = sys.modules[__name__]
     for stage, cls, run in (("rollout", RolloutOptions, run_rollout_stage),
                             ("relax", RelaxOptions, run_relax_stage),
                             ("bake", BakeOptions, run_bake_stage)):
-        module = types.ModuleType(f"potflat.{stage}")
-        setattr(module, cls.__name__, cls)
-        setattr(module, run.__name__, run)
-        module.__file__ = this.__file__
-        monkeypatch.setitem(sys.modules, f"potflat.{stage}", module)
+        monkeypatch.setitem(file_options.STAGE_OPTIONS, stage, cls)
+        monkeypatch.setattr(pipeline, run.__name__, run)
     monkeypatch.setattr(this, "SABOTAGE", {})
 
 

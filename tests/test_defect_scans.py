@@ -30,7 +30,7 @@ from scipy.spatial import cKDTree
 
 from potflat.errors import InvalidOptionError
 from potflat.mesh.distortion import summarize
-from potflat.stages.pipeline import run_scan
+from potflat.files.pipeline import run_scan
 from potflat_synthetic.defects import DEFECTS, add_defects
 from potflat_synthetic.vessels import PART_OUTER, make_vessel, write_ply_colored
 
@@ -59,7 +59,7 @@ def clean(cup, tmp_path_factory):
 
 def _away_rms(result, points: np.ndarray) -> tuple[float, int]:
     """Edge RMS of the relaxed faces all of whose vertices lie more than AWAY_MM from ``points``."""
-    flat = result.stages["relax"].flat
+    flat = result.relax.flat
     V, F = flat.mesh.vertices, flat.mesh.faces
     far = (cKDTree(points).query(V)[0][F] > AWAY_MM).all(axis=1)
     return summarize(V, flat.uv, F[far]).edge_rms, int(far.sum())
@@ -71,9 +71,9 @@ def test_a_defective_scan_gives_a_fold_free_image_close_to_the_clean_ones(cup, c
     scan = add_defects(cup, defects, walls=("outer", "inner"))
     ply = write_ply_colored(scan.vessel, tmp_path / "cup.ply")
     result = _run(ply, tmp_path / "out", side)
-    relaxed, base = result.stages["relax"].summary, clean[side].stages["relax"].summary
+    relaxed, base = result.relax.record, clean[side].relax.record
     assert relaxed["flipped"] == 0 and relaxed["boundary_overlap"] == 0
-    assert result.paths["bake.png"].is_file() and result.stages["bake"].summary["image_px"][0] > 100
+    assert result.paths["bake.png"].is_file() and result.bake.record["image_px"][0] > 100
     near = scan.vessel.mesh.vertices[np.unique(scan.vessel.mesh.faces[scan.defect_faces])]
     rms, kept = _away_rms(result, near)
     rms_clean, kept_clean = _away_rms(clean[side], near)
@@ -89,16 +89,16 @@ def test_a_crease_is_reported_where_it_is_and_hatched_on_the_maps(cup, clean, tm
     scan = add_defects(cup, "crease", walls=(side,))
     ply = write_ply_colored(scan.vessel, tmp_path / "cup.ply")
     result = _run(ply, tmp_path / "out", side)
-    folded = result.stages["rollout"].summary["folded"]
+    folded = result.rollout.record["folded"]
     assert folded["faces"] > 0 and folded["facing_in"] > 0 and 0 < folded["percent_of_surface"] < 5
     crease = scan.vessel.to_canonical(scan.vessel.mesh.vertices[np.unique(scan.vessel.mesh.faces[scan.defect_faces])])
     big = folded["regions"][0]
     assert big["height_mm"][0] <= np.median(crease[:, 2]) <= big["height_mm"][1]
     centroid = scan.vessel.to_canonical(np.asarray(big["centroid"]))[0]
     assert np.linalg.norm(crease - centroid, axis=1).min() < 10.0  # on the crease, in scan coordinates
-    assert result.stages["relax"].summary["folded"]["area_mm2"] == pytest.approx(folded["area_mm2"])
-    assert "face_indices" not in result.stages["relax"].summary["folded"]
-    bake = result.stages["bake"].summary
+    assert result.relax.record["folded"]["area_mm2"] == pytest.approx(folded["area_mm2"])
+    assert "face_indices" not in result.relax.record["folded"]
+    bake = result.bake.record
     assert bake["folded"]["faces"] == folded["faces"] and "hatched" in bake["folded"]["mark"]
     # the hatch's colour is on the stress map of the creased cup and not on the clean one's
     from PIL import Image
@@ -107,7 +107,7 @@ def test_a_crease_is_reported_where_it_is_and_hatched_on_the_maps(cup, clean, tm
     for run, expected in ((result, True), (clean[side], False)):
         img = np.asarray(Image.open(run.paths["bake.stress"]).convert("RGBA"))
         assert (img == magenta).all(axis=2).any() == expected
-    assert clean[side].stages["rollout"].summary["folded"]["faces"] == 0
+    assert clean[side].rollout.record["folded"]["faces"] == 0
     assert json.loads(result.paths["rollout.json"].read_text())["folded"]["face_indices"]
 
 
@@ -115,8 +115,8 @@ def test_noise_alone_is_not_reported_as_folded(cup, tmp_path):
     scan = add_defects(cup, "noise", walls=("outer", "inner"))
     ply = write_ply_colored(scan.vessel, tmp_path / "cup.ply")
     result = _run(ply, tmp_path / "out", "outer")
-    assert result.stages["rollout"].summary["folded"]["faces"] == 0
-    assert result.stages["bake"].summary["folded"] is None
+    assert result.rollout.record["folded"]["faces"] == 0
+    assert result.bake.record["folded"] is None
 
 
 def test_the_generator_makes_what_it_says(cup):
@@ -152,8 +152,8 @@ def test_real_scans_give_fold_free_images_from_both_sides(tmp_path, scan, side):
     """Measured: 0 flipped triangles everywhere; folded in 3D: plastic vase 11 faces outside,
     1 inside; sea vase 87 (312 mm2, 0.09 %) outside, 3 inside; goblet (designed) none."""
     result = run_scan(REAL / scan, tmp_path, rollout={"side": side, "units": "mm"}, bake={"px_per_mm": 1.0})
-    relaxed = result.stages["relax"].summary
+    relaxed = result.relax.record
     assert relaxed["flipped"] == 0 and relaxed["fold_free"] and result.paths["bake.png"].is_file()
-    folded = result.stages["rollout"].summary["folded"]
+    folded = result.rollout.record["folded"]
     assert folded["percent_of_surface"] < 0.5
     assert (folded["faces"] == 0) == scan.startswith("goblet")

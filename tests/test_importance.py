@@ -501,7 +501,9 @@ def test_image_mask_round_trip_is_exact_on_a_developable_vessel(tmp_path):
     it, and the important faces are those the painted rectangle covers."""
     import cv2
 
-    from potflat.bake import BakeOptions, run_bake_stage
+    from potflat.bake import BakeOptions
+
+    from potflat.files.bake_stage import run_bake_stage
     from potflat.io.flat_ply import write_flat_ply
     from potflat.rollout import rollout
     from potflat_synthetic.vessels import make_vessel

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from potflat.stages.pipeline import run_scan
+from potflat.files.pipeline import run_scan
 from potflat_synthetic.vessels import make_vessel, write_obj
 
 PX_PER_MM = 2.0
@@ -60,8 +60,8 @@ def _random_motion(seed: int):
 def _bake(scan: Path, out: Path, units: str = "mm", **rollout) -> tuple[np.ndarray, dict]:
     result = run_scan(scan, out, rollout={"units": units, **rollout}, relax={"preset": "archival"},
                       bake={"px_per_mm": PX_PER_MM, "maps": ()})
-    with Image.open(result.stages["bake"].paths["png"]) as im:
-        return np.asarray(im.convert("RGBA")), result.stages["bake"].summary
+    with Image.open(result.bake.paths["png"]) as im:
+        return np.asarray(im.convert("RGBA")), result.bake.record
 
 
 def _compare(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:

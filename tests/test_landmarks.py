@@ -8,7 +8,8 @@ import scipy.sparse.csgraph
 
 from _vessel_meshes import cylinder_with_handle
 from potflat.errors import InvalidOptionError
-from potflat.rollout.unroll import RolloutOptions, rollout, rollout_summary
+from potflat.files.rollout_stage import rollout_record as rollout_summary
+from potflat.rollout.unroll import RolloutOptions, rollout
 from potflat.types import Mesh
 
 #: Azimuth (degrees, about +z from +x) of the painted sector of the test vessel.
@@ -122,8 +123,9 @@ def test_overlap_repeats_the_start_past_360(vessel):
 def test_overlap_is_marked_in_the_baked_image(vessel, tmp_path):
     from PIL import Image
 
-    from potflat.bake.render import REPEAT_COLOUR, BakeOptions
-    from potflat.stages.bake_stage import run_bake_stage
+    from potflat.bake.options import BakeOptions
+    from potflat.bake.render import REPEAT_COLOUR
+    from potflat.files.bake_stage import run_bake_stage
     from potflat.io.atomic import write_json_atomic
     from potflat.io.flat_ply import write_flat_ply
 
@@ -131,7 +133,7 @@ def test_overlap_is_marked_in_the_baked_image(vessel, tmp_path):
     write_flat_ply(tmp_path / "v.rollout.ply", res.flat)
     write_json_atomic(tmp_path / "v.rollout.json", rollout_summary(res))
     out = run_bake_stage(tmp_path / "v.rollout.ply", tmp_path, BakeOptions(px_per_mm=2, maps=()))
-    assert out.summary["overlap"]["repeated_faces"] == len(res.flat.mesh.faces) - res.region.repeated_from
+    assert out.record["overlap"]["repeated_faces"] == len(res.flat.mesh.faces) - res.region.repeated_from
     img = np.asarray(Image.open(out.paths["png"]))
     marked = np.all(img == REPEAT_COLOUR, axis=2)
     rows, cols = np.nonzero(marked)

@@ -12,7 +12,7 @@ from potflat.io.obj import write_textured_obj
 
 @pytest.fixture(scope="module")
 def baked(tmp_path_factory):
-    from potflat.stages.pipeline import run_scan
+    from potflat.files.pipeline import run_scan
     from potflat_synthetic.vessels import make_vessel, write_obj
 
     root = tmp_path_factory.mktemp("obj")
@@ -36,7 +36,7 @@ def test_flat_obj_loads_with_its_texture(baked):
     from potflat.io.flat_ply import read_flat_ply
 
     out = baked.out_dir
-    paths = baked.stages["bake"].paths
+    paths = baked.bake.paths
     assert paths["obj"] == out / "pot.flat.obj" and paths["mtl"] == out / "pot.flat.mtl"
     flat = read_flat_ply(out / "pot.relaxed.ply")
     mesh = trimesh.load(paths["obj"], process=False)

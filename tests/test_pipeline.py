@@ -1,4 +1,4 @@
-"""potflat.stages.pipeline: run_scan over the three stages, option coercion and resolution."""
+"""potflat.files.pipeline: run_scan over the three stages, option coercion and resolution."""
 from __future__ import annotations
 
 import typing
@@ -10,8 +10,8 @@ from PIL import Image
 
 import test_batch_fakes as fakes
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.stages.pipeline import (FIGURES, coerce_option, describe_type, option_types,
-                              resolve_options, run_scan, stage_api)
+from potflat.files.options import coerce_option, describe_type, option_types, resolve_options
+from potflat.files.pipeline import FIGURES, run_scan
 
 
 @pytest.fixture
@@ -33,14 +33,14 @@ def test_run_scan_runs_three_stages_in_order(tmp_path, fake_stages):
                                  "bake.png", "bake.stress", "bake.json"}
     assert all(p.is_file() for p in result.paths.values())
     assert result.figures["flipped"] == 0 and result.figures["edge_rms"] > 0
-    assert set(result.seconds) == {"rollout", "relax", "bake", "total"}
+    assert set(vars(result.seconds)) == {"rollout", "relax", "bake", "total"}
 
 
 def test_run_scan_name_and_options_objects(tmp_path, fake_stages):
     scan = fakes.write_scan(tmp_path / "a.obj")
     result = run_scan(scan, tmp_path / "o", name="other", relax=fakes.RelaxOptions(preset="preview"))
     assert result.name == "other" and (tmp_path / "o" / "other.png").is_file()
-    assert result.stages["relax"].summary["provenance"]["options"]["preset"] == "preview"
+    assert result.relax.record["provenance"]["options"]["preset"] == "preview"
 
 
 def test_run_scan_failure_keeps_finished_stages(tmp_path, fake_stages):
@@ -61,16 +61,11 @@ def test_run_scan_corrupt_scan_is_a_user_error(tmp_path, fake_stages):
 
 def test_resolve_options_checks_types(fake_stages):
     opts = resolve_options(rollout={"proxy": "cone"})
-    assert opts["rollout"].proxy == "cone" and opts["relax"] == fakes.RelaxOptions()
+    assert opts.rollout.proxy == "cone" and opts.relax == fakes.RelaxOptions()
     with pytest.raises(InvalidOptionError, match="RelaxOptions"):
         resolve_options(relax=fakes.BakeOptions())
     with pytest.raises(InvalidOptionError, match="px_per_mm"):
         resolve_options(bake={"px_per_mm": -1.0})
-
-
-def test_stage_api_unknown_stage():
-    with pytest.raises(ValueError, match="unknown stage"):
-        stage_api("paint")
 
 
 def test_option_types_from_dataclass(fake_stages):
@@ -127,7 +122,7 @@ def test_run_refuses_early_when_the_painting_would_replace_the_scan_texture(tmp_
     import pytest
 
     from potflat.errors import InvalidOptionError
-    from potflat.stages.pipeline import run_scan
+    from potflat.files.pipeline import run_scan
 
     scan = tmp_path / "pot.obj"
     scan.write_text("v 0 0 0\n")
@@ -146,10 +141,10 @@ def test_run_refuses_early_when_the_painting_would_replace_the_scan_texture(tmp_
     ({"preset": "standard"}, {"px_per_mm": 8.0}, None),
 ])
 def test_preview_relaxes_at_two_pixels_of_the_image(relax, bake, want):
-    from potflat.stages.pipeline import _preview_at_image_resolution
+    from potflat.files.pipeline import _preview_at_image_resolution
 
     options = _preview_at_image_resolution(resolve_options(relax=relax, bake=bake))
-    assert options["relax"].simplify_mm == pytest.approx(want) if want is not None else options["relax"].simplify_mm is None
+    assert options.relax.simplify_mm == pytest.approx(want) if want is not None else options.relax.simplify_mm is None
 
 
 def test_run_scan_hands_the_flattening_on_in_memory(tmp_path, monkeypatch):
@@ -166,8 +161,8 @@ def test_run_scan_hands_the_flattening_on_in_memory(tmp_path, monkeypatch):
     monkeypatch.setattr(potflat.io.flat_ply, "read_flat_ply", no_reading)
     result = run_scan(scan, tmp_path / "out", relax={"preset": "preview"}, bake={"px_per_mm": 1.0, "maps": ()})
     monkeypatch.undo()
-    relaxed = result.stages["relax"]
-    assert result.figures == {k: relaxed.summary["distortion"][k] for k in FIGURES}
+    relaxed = result.relax
+    assert result.figures == {k: relaxed.record["distortion"][k] for k in FIGURES}
     back = potflat.io.flat_ply.read_flat_ply(result.paths["relax.ply"])
     assert back.uv.tobytes() == relaxed.flat.uv.tobytes()
     assert back.mesh.texcoords.tobytes() == relaxed.flat.mesh.texcoords.tobytes()
@@ -178,16 +173,16 @@ def test_every_stage_json_records_its_timings_by_step(tmp_path):
     """rollout.json, relaxed.json and bake.json each say how long their steps took."""
     from pathlib import Path
 
-    from potflat.stages.pipeline import run_scan
+    from potflat.files.pipeline import run_scan
 
     sample = Path(__file__).parents[1] / "samples" / "data" / "cone.obj"
     result = run_scan(sample, tmp_path, bake={"px_per_mm": 1.0, "maps": ()})
-    rollout = result.stages["rollout"].summary["timings"]
+    rollout = result.rollout.record["timings"]
     assert {"load", "rollout", "write", "total"} <= set(rollout)
     assert {"axis", "walls", "profile", "unroll", "untangle", "importance", "total"} <= set(rollout["rollout_steps"])
-    relax = result.stages["relax"].summary["timings"]
+    relax = result.relax.record["timings"]
     assert {"setup", "solve", "check", "figures", "write", "total"} <= set(relax)
-    bake = result.stages["bake"].summary["timings"]
+    bake = result.bake.record["timings"]
     assert {"prepare", "render", "figures", "total"} <= set(bake)
     for timings in (rollout, rollout["rollout_steps"], relax, bake):
         steps = [v for k, v in timings.items() if k != "total" and isinstance(v, float)]
@@ -200,7 +195,7 @@ def test_run_scan_computes_each_flattenings_figures_once(tmp_path, monkeypatch):
     instead of computing them again; they are what the stage commands compute from the files."""
     import potflat.mesh.distortion as distortion
     import potflat.relax.multilevel as solver
-    from potflat.stages.bake_stage import run_bake_stage
+    from potflat.files.bake_stage import run_bake_stage
     from potflat_synthetic.vessels import make_vessel, write_obj
 
     scan = write_obj(make_vessel("amphora", n_vertices=3000, seed=2, texture_size=64), tmp_path / "in" / "a.obj")
@@ -233,23 +228,23 @@ def test_run_scan_computes_each_flattenings_figures_once(tmp_path, monkeypatch):
     result = run_scan(scan, tmp_path / "out", relax={"preset": "preview"}, bake=bake, progress=stage.append)
     assert ("relax", "zone") in computed and ("relax", "summarize") in computed
     assert not [c for c in computed if c[0] == "bake"]
-    assert result.stages["relax"].reference is None  # handed to the bake, not kept by the result
-    rollout_uv = result.stages["rollout"].flat.uv
+    assert result.relax.reference is None  # handed to the bake, not kept by the result
+    rollout_uv = result.rollout.flat.uv
     assert layouts and not any(uv.shape == rollout_uv.shape and np.array_equal(uv, rollout_uv) for uv in layouts)
-    assert result.stages["relax"].summary["distortion_before"] == result.stages["rollout"].summary["distortion"]
+    assert result.relax.record["distortion_before"] == result.rollout.record["distortion"]
     stage.append("bake again")
-    again = run_bake_stage(result.paths["relax.ply"], tmp_path / "again", resolve_options(bake=bake)["bake"])
+    again = run_bake_stage(result.paths["relax.ply"], tmp_path / "again", resolve_options(bake=bake).bake)
     assert {("bake again", "zone"), ("bake again", "summarize"), ("bake again", "reference")} <= set(computed)
     for png in ("png", "stress"):  # the maps from the handed 3D side as from the file's
-        ran, baked = (np.asarray(Image.open(out.paths[png])) for out in (result.stages["bake"], again))
+        ran, baked = (np.asarray(Image.open(out.paths[png])) for out in (result.bake, again))
         np.testing.assert_array_equal(ran, baked)
     for key in ("distortion", "important_zone", "rest", "lengths"):
-        assert result.stages["bake"].summary[key] == again.summary[key]
-    assert result.stages["bake"].summary["important_zone"] == result.stages["relax"].summary["important_zone"]
-    zone = result.stages["relax"].summary["important_zone"]
+        assert result.bake.record[key] == again.record[key]
+    assert result.bake.record["important_zone"] == result.relax.record["important_zone"]
+    zone = result.relax.record["important_zone"]
     assert result.zone_figures["painted_length_error_median_pct"] == zone["length_error_median_pct"] > 0
     assert result.zone_figures["painted_area_fraction"] == zone["area_fraction"] < 1  # the sample's frieze
-    assert result.zone_figures["plain_length_error_p95_pct"] == result.stages["relax"].summary["rest"][
+    assert result.zone_figures["plain_length_error_p95_pct"] == result.relax.record["rest"][
         "length_error_p95_pct"]
 
 
@@ -264,8 +259,8 @@ def test_the_painted_zone_outline_stands_out_on_every_map(tmp_path):
     scan = write_obj(make_vessel("amphora", n_vertices=3000, seed=2, texture_size=64), tmp_path / "in" / "a.obj")
     result = run_scan(scan, tmp_path / "out", relax={"preset": "preview"},
                       bake={"px_per_mm": 2.0, "maps": ("stress", "area", "anisotropy")})
-    assert result.stages["relax"].summary["important_zone"]["area_fraction"] < 1  # a painted zone was found
-    labels = result.stages["bake"].summary["maps"]
+    assert result.relax.record["important_zone"]["area_fraction"] < 1  # a painted zone was found
+    labels = result.bake.record["maps"]
     for name, colour in (("stress", (255, 255, 255, 255)), ("anisotropy", (255, 255, 255, 255)),
                          ("area", (0, 0, 0, 255))):
         image = np.asarray(Image.open(result.paths[f"bake.{name}"]).convert("RGBA"))

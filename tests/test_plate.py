@@ -1,4 +1,4 @@
-"""The archaeological plate (potflat.bake.plate), the scale bar on the image and the profile step."""
+"""The archaeological plate (potflat.files.plate), the scale bar on the image and the profile step."""
 from __future__ import annotations
 
 import json
@@ -12,7 +12,8 @@ from typer.testing import CliRunner
 
 from potflat import __version__
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.bake.plate import PREVIEW_DPI, make_plate, parse_scale, scale_label
+from potflat.bake.options import parse_scale
+from potflat.files.plate import PREVIEW_DPI, make_plate, scale_label
 from potflat.mesh.distortion import PAINTED_ZONE_KEY, distortion_words, painted_zone_distortion
 from potflat_cli.main import app
 
@@ -22,7 +23,7 @@ PT_PER_MM = 72 / 25.4
 @pytest.fixture(scope="module")
 def cup_run(tmp_path_factory):
     """A small two-walled cup run through every stage, with the plate at 1:2 and the bar on the image."""
-    from potflat.stages.pipeline import run_scan
+    from potflat.files.pipeline import run_scan
     from potflat_synthetic.vessels import make_vessel, write_obj
 
     root = tmp_path_factory.mktemp("plate")
@@ -39,7 +40,7 @@ def _svg_size_mm(path):
 
 
 def test_plate_pages_are_at_print_size(cup_run):
-    out, bake = cup_run.out_dir, cup_run.stages["bake"].summary
+    out, bake = cup_run.out_dir, cup_run.bake.record
     page = bake["plate"]["page_mm"]
     assert _svg_size_mm(out / "cup.plate.svg") == pytest.approx(page, abs=0.01)
     media = re.search(rb"/MediaBox \[ 0 0 ([\d.]+) ([\d.]+) \]", (out / "cup.plate.pdf").read_bytes())
@@ -50,7 +51,7 @@ def test_plate_pages_are_at_print_size(cup_run):
 
 def test_plate_rollout_is_at_the_stated_scale(cup_run):
     """The embedded rollout is NAME.png, unresampled, drawn at half its true size (1:2)."""
-    out, bake = cup_run.out_dir, cup_run.stages["bake"].summary
+    out, bake = cup_run.out_dir, cup_run.bake.record
     w_px, h_px = Image.open(out / "cup.png").size
     ns = {"svg": "http://www.w3.org/2000/svg"}
     images = ET.parse(out / "cup.plate.svg").getroot().findall(".//svg:image", ns)
@@ -70,7 +71,7 @@ def test_plate_svg_text_caption_and_vector_profile(cup_run):
         assert words in texts, words
     assert "data:image/png;base64," in svg
     assert len(re.findall(r"<path ", svg)) >= 6  # section, outer lines, axis, scale bar blocks
-    summary = cup_run.stages["bake"].summary
+    summary = cup_run.bake.record
     assert summary["files"]["plate_svg"] == "cup.plate.svg"
     assert summary["plate"]["scale_label"] == "1:2"
 
@@ -87,9 +88,9 @@ def test_plate_is_reproducible_with_source_date_epoch(cup_run, tmp_path, monkeyp
 
 def test_plate_auto_scale_fits_a4(cup_run):
     plate = make_plate(cup_run.out_dir / "cup.relaxed.ply", cup_run.out_dir, name="cup")
-    w, h = plate.summary["page_mm"]
-    assert plate.summary["scale"] in (1.0, 0.5, 1 / 3, 0.25, 0.2, 0.1, 0.05, 0.02)
-    assert w <= 210 and plate.summary["scale"] <= 0.5  # the cup's rollout is wider than 180 mm at 1:1
+    w, h = plate.record["page_mm"]
+    assert plate.record["scale"] in (1.0, 0.5, 1 / 3, 0.25, 0.2, 0.1, 0.05, 0.02)
+    assert w <= 210 and plate.record["scale"] <= 0.5  # the cup's rollout is wider than 180 mm at 1:1
 
 
 def test_plate_cli_and_its_errors(cup_run, tmp_path):
@@ -138,7 +139,8 @@ def test_painted_zone_figures_are_preferred():
 
 def test_scale_on_image_covers_no_painting(cup_run, tmp_path):
     """NAME.png with the bar differs from the plain bake only where the painting is transparent."""
-    from potflat.bake import BakeOptions, run_bake_stage
+    from potflat.bake import BakeOptions
+    from potflat.files.bake_stage import run_bake_stage
 
     run_bake_stage(cup_run.out_dir / "cup.relaxed.ply", tmp_path, BakeOptions(px_per_mm=2, maps=()))
     plain = np.asarray(Image.open(tmp_path / "cup.png"))
@@ -147,12 +149,13 @@ def test_scale_on_image_covers_no_painting(cup_run, tmp_path):
     changed = np.any(barred != plain, axis=2)
     assert changed.sum() > 500  # the bar and its labels are there
     assert (plain[changed, 3] == 0).all()
-    info = cup_run.stages["bake"].summary["scale_on_image"]
+    info = cup_run.bake.record["scale_on_image"]
     assert info["band_below_px"] == 0
 
 
 def test_scale_on_image_adds_a_band_when_the_painting_fills_the_image(tmp_path):
-    from potflat.bake import BakeOptions, run_bake_stage
+    from potflat.bake import BakeOptions
+    from potflat.files.bake_stage import run_bake_stage
     from potflat.io.flat_ply import write_flat_ply
     from potflat.types import FlatMesh, Mesh
 
@@ -164,8 +167,8 @@ def test_scale_on_image_adds_a_band_when_the_painting_fills_the_image(tmp_path):
     write_flat_ply(tmp_path / "flat.relaxed.ply", FlatMesh(Mesh(V, F, vertex_colors=colours), V[:, :2]))
     out = run_bake_stage(tmp_path / "flat.relaxed.ply", tmp_path / "o", BakeOptions(px_per_mm=4, maps=(),
                                                                                     scale_on_image=True))
-    band = out.summary["scale_on_image"]["band_below_px"]
-    w, h = out.summary["image_px"]
+    band = out.record["scale_on_image"]["band_below_px"]
+    w, h = out.record["image_px"]
     img = np.asarray(Image.open(out.paths["png"]))
     assert band > 0 and img.shape[:2] == (h + band, w)
     assert (img[h:, :, 3] > 0).any()  # the bar is in the band
@@ -175,16 +178,17 @@ def test_scale_on_image_adds_a_band_when_the_painting_fills_the_image(tmp_path):
 
 def test_profile_step_follows_the_edges_or_the_option(cup_run, tmp_path):
     from potflat.rollout.profile import read_profile_csv
-    from potflat.rollout import RolloutOptions, run_rollout_stage
+    from potflat.rollout import RolloutOptions
+    from potflat.files.rollout_stage import run_rollout_stage
 
-    summary = cup_run.stages["rollout"].summary["profile"]
+    summary = cup_run.rollout.record["profile"]
     csv = cup_run.out_dir / "cup.profile.csv"
     prof = read_profile_csv(csv, summary)
     assert np.median(np.diff(prof.heights)) == pytest.approx(summary["bin_mm"], rel=1e-3)
     assert prof.two_walled and np.isfinite(prof.floor_height)
     fine = run_rollout_stage(cup_run.scan, tmp_path, RolloutOptions(profile_mm=1.0))
-    assert fine.summary["profile"]["bin_mm"] == pytest.approx(1.0, rel=0.05)
-    assert fine.summary["profile"]["bins"] > 3 * summary["bins"]
+    assert fine.record["profile"]["bin_mm"] == pytest.approx(1.0, rel=0.05)
+    assert fine.record["profile"]["bins"] > 3 * summary["bins"]
     with pytest.raises(InvalidOptionError):
         RolloutOptions(profile_mm=0)
     (tmp_path / "bad.csv").write_text("a,b\n")

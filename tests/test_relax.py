@@ -16,7 +16,7 @@ from _bench_meshes import SPRINGS_ONLY, bumpy_patch, energy_never_increases, mes
 from potflat.mesh.distortion import summarize
 from potflat.errors import FoldedResultError, InvalidOptionError
 from potflat.relax import RelaxOptions, relax
-from potflat.stages.relax_stage import run_relax_stage
+from potflat.files.relax_stage import run_relax_stage
 from potflat.types import FlatMesh, Mesh
 
 

@@ -1,4 +1,4 @@
-"""The batch report index.html (potflat.stages.report): cards, links, thumbnails, sorting, in a real browser."""
+"""The batch report index.html (potflat.files.batch.report): cards, links, thumbnails, sorting, in a real browser."""
 from __future__ import annotations
 
 import base64
@@ -16,9 +16,11 @@ from urllib.parse import unquote
 import pytest
 from PIL import Image
 
-from potflat.stages.batch import load_batch, run_batch
+from potflat.files.batch.config import load_batch
+
+from potflat.files.batch.execution import run_batch
 from potflat.mesh.distortion import painted_zone_distortion
-from potflat.stages.report import REPORT_NAME
+from potflat.files.batch.report import REPORT_NAME
 
 #: Browsers tried, in order (Debian's package is chromium; .ci/run installs it when missing).
 BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable", "chrome")
@@ -87,7 +89,7 @@ def test_report_links_resolve_and_thumbnails_decode(batch_out):
 def test_report_shows_no_thumbnail_of_a_planted_link(batch_out, tmp_path):
     from types import SimpleNamespace
 
-    from potflat.stages.report import _card
+    from potflat.files.batch.report import _card
 
     folder = tmp_path / "cup"
     shutil.copytree(batch_out / "cup", folder)

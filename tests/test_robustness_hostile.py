@@ -24,7 +24,9 @@ import pytest
 from typer.testing import CliRunner
 
 import test_batch_fakes as fakes
-from potflat.stages.batch import MANIFEST, BatchFileError, is_complete, job_key, load_batch, read_manifest, run_batch
+from potflat.files.batch.config import BatchFileError, load_batch
+from potflat.files.batch.execution import run_batch
+from potflat.files.batch.manifest import MANIFEST, is_complete, job_key, read_manifest
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
 from potflat_cli.main import app
 
@@ -337,10 +339,11 @@ def test_a_texture_symlink_loop_is_one_line(tmp_path):
 
 @pytest.mark.parametrize("sidecar", ["null", "[1, 2]", '{"attachments": null}', '{"attachments": {"root_faces": "x"}}'])
 def test_a_sidecar_of_the_wrong_type_does_not_break_the_next_stage(tmp_path, sidecar):
-    from potflat.bake import BakeOptions, run_bake_stage
+    from potflat.bake import BakeOptions
+    from potflat.files.bake_stage import run_bake_stage
     from potflat.io.flat_ply import write_flat_ply
     from potflat.relax import RelaxOptions
-    from potflat.stages.relax_stage import run_relax_stage
+    from potflat.files.relax_stage import run_relax_stage
     from potflat.types import FlatMesh, Mesh
 
     x, y = np.meshgrid(np.linspace(0, 40, 6), np.linspace(0, 30, 5))
@@ -369,7 +372,7 @@ def test_overflowing_coordinates_are_named(tmp_path):
 def test_paper_dynamics_that_diverge_stop_with_one_line_and_write_nothing(tmp_path, monkeypatch):
     from potflat.relax import energy as relax_mod, options as relax_options, parameters as relax_parameters
     from potflat.io.flat_ply import write_flat_ply
-    from potflat.stages.relax_stage import run_relax_stage
+    from potflat.files.relax_stage import run_relax_stage
     from potflat.types import FlatMesh, Mesh
 
     x, y = np.meshgrid(np.linspace(0, 40, 8), np.linspace(0, 30, 7))
@@ -383,7 +386,7 @@ def test_paper_dynamics_that_diverge_stop_with_one_line_and_write_nothing(tmp_pa
     assert not (tmp_path / "out").exists()
     # the advice works
     out = run_relax_stage(tmp_path / "pot.rollout.ply", tmp_path / "out", relax_options.RelaxOptions(preset="standard"))
-    assert out.summary["fold_free"]
+    assert out.record["fold_free"]
 
 
 def test_the_paper_step_bounds_the_largest_eigenvalue():
@@ -428,7 +431,7 @@ def test_obj_faces_naming_missing_texture_coordinates_are_refused(tmp_path):
 
 
 def test_an_interrupted_batch_records_cancelled_and_interrupted_scans(tmp_path, fake_stages):
-    from potflat.stages.batch import _unfinished
+    from potflat.files.batch.execution import _unfinished
 
     batch = load_batch(_batch(tmp_path, "  - path: scans/*.obj\n"))
     started = time.time()
@@ -444,7 +447,7 @@ def test_stopping_the_pool_ends_its_workers_and_cancels_the_queue():
     from concurrent.futures import ProcessPoolExecutor
     from multiprocessing.connection import wait
 
-    from potflat.stages.batch import START_METHOD, _stop_workers, _worker_start
+    from potflat.files.batch.execution import START_METHOD, _stop_workers, _worker_start
 
     pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context(START_METHOD),
                                initializer=_worker_start, initargs=(os.getpid(),))
@@ -466,7 +469,7 @@ def test_stopping_the_pool_ends_its_workers_and_cancels_the_queue():
 
 def test_potflats_own_partial_painting_does_not_block_the_rerun(tmp_path, fake_stages):
     """Killed between NAME.png and NAME.bake.json: the marker says the PNG is potflat's."""
-    from potflat.stages.pipeline import run_scan
+    from potflat.files.pipeline import run_scan
 
     scan = fakes.write_scan(tmp_path / "pot.obj")
     out = tmp_path / "out"
@@ -577,10 +580,10 @@ def test_python_m_ends_an_interrupt_that_left_an_exec_with_130(tmp_path):
     with the exit code 130. The rollout is replaced (``sitecustomize``) by one that is
     interrupted inside an ``exec``."""
     (tmp_path / "sitecustomize.py").write_text(
-        "import potflat.rollout\n"
+        "import potflat.files.rollout_stage\n"
         "def _interrupted(*args, **kwargs):\n"
         "    exec('import os, signal\\nos.kill(os.getpid(), signal.SIGTERM)\\nfor _ in range(10 ** 7): pass')\n"
-        "potflat.rollout.run_rollout_stage = _interrupted\n")
+        "potflat.files.rollout_stage.run_rollout_stage = _interrupted\n")
     scan = _tube_obj(tmp_path / "vase.obj")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")])}
     r = subprocess.run([sys.executable, "-m", "potflat_cli", "rollout", str(scan), "-o", str(tmp_path / "out")],
@@ -648,7 +651,7 @@ def test_one_log_base_and_figures_in_words():
 def test_large_trims_and_poor_axis_fits_are_warned_with_the_option():
     from types import SimpleNamespace
 
-    from potflat.rollout.unroll import _notes
+    from potflat.rollout.notes import rollout_notes as _notes
     from potflat.types import FlatMesh, Mesh
 
     V = np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0]], float)
@@ -670,7 +673,7 @@ def test_a_foot_unrolled_into_a_flange_is_warned_with_the_option():
     from potflat.rollout import rollout
     from potflat_synthetic.vessels import make_vessel
 
-    from potflat.rollout.unroll import _notes
+    from potflat.rollout.notes import rollout_notes as _notes
 
     kylix = rollout(make_vessel("kylix", n_vertices=4000, seed=1).mesh, importance="none")
     assert any("faces along the axis" in note and "--band" in note for note in _notes(kylix))

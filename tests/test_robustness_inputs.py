@@ -407,7 +407,7 @@ def test_relax_and_bake_never_write_over_their_input(tmp_path, scan):
 
 def test_missing_texture_at_relax_time_is_one_clear_line_before_relaxing(tmp_path, scan, monkeypatch):
     """A rollout file copied without its texture: refused on reading, not after the solve."""
-    import potflat.stages.relax_stage as relax_stage
+    import potflat.files.relax_stage as relax_stage
 
     out = tmp_path / "out"
     assert _invoke(["rollout", scan, "-o", out, "-q"]).exit_code == 0

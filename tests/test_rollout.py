@@ -13,7 +13,7 @@ from potflat.mesh.distortion import face_distortion
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.flat_ply import read_flat_ply
 from potflat.rollout.unroll import RolloutOptions, cut_open, rollout
-from potflat.stages.rollout_stage import run_rollout_stage
+from potflat.files.rollout_stage import run_rollout_stage
 
 #: The shared real scans (CI has ../shared beside the repository).
 REAL = Path(__file__).resolve().parents[2] / "shared/data/real"
@@ -396,7 +396,7 @@ def test_run_rollout_stage_writes_ply_and_json(tmp_path):
     ply, js = out.paths["ply"], out.paths["json"]
     assert ply == tmp_path / "out" / "pot.rollout.ply" and js.name == "pot.rollout.json"
     data = json.loads(js.read_text())
-    assert data == json.loads(json.dumps(out.summary))
+    assert data == json.loads(json.dumps(out.record))
     for key in ("axis", "proxy", "seam", "region", "units", "counts", "cleaning", "distortion", "provenance"):
         assert key in data
     assert np.isclose(np.linalg.norm(data["axis"]["direction"]), 1.0)
@@ -426,7 +426,7 @@ def test_run_rollout_stage_refuses_to_overwrite_its_input(tmp_path):
 @pytest.mark.skipif(not (REAL / "goblet.stl").exists(), reason="shared real scans absent")
 def test_real_goblet_band_rolls_out(tmp_path):
     out = run_rollout_stage(REAL / "goblet.stl", tmp_path)
-    s = out.summary
+    s = out.record
     # the goblet is a closed shell: its outer wall is unrolled, less the folded base underside
     assert s["walls"]["two_walled"] and s["walls"]["faces_inner"] > 0
     assert s["counts"]["faces"] + s["trimmed"]["faces"] == s["walls"]["faces_selected"]
@@ -476,9 +476,9 @@ def test_units_declared_by_the_file_are_kept_unless_given(tmp_path):
     lines += [" ".join(map(repr, v)) for v in mesh.vertices.tolist()]
     lines += ["3 " + " ".join(map(str, f)) for f in mesh.faces.tolist()]
     scan.write_text("\n".join(lines) + "\n")
-    assert run_rollout_stage(scan, tmp_path / "a").summary["units"] == "cm"
+    assert run_rollout_stage(scan, tmp_path / "a").record["units"] == "cm"
     out = run_rollout_stage(scan, tmp_path / "b", RolloutOptions(units="mm"))
-    assert out.summary["units"] == "mm" and out.summary["mm_per_unit"] == 1.0
+    assert out.record["units"] == "mm" and out.record["mm_per_unit"] == 1.0
     assert read_flat_ply(out.paths["ply"]).mesh.units == "mm"
 
 

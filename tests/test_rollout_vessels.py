@@ -18,7 +18,7 @@ from potflat.rollout.unroll import (
     signed_areas,
     untangle,
 )
-from potflat.stages.rollout_stage import run_rollout_stage
+from potflat.files.rollout_stage import run_rollout_stage
 from potflat_synthetic.vessels import (
     PART_BASE,
     PART_HANDLE,
@@ -277,4 +277,4 @@ def test_a_separate_inner_wall_is_kept_but_a_second_vessel_is_left_out():
     x = res2.flat.mesh.vertices[:, 0]
     assert x.max() < 300.0 or x.min() > 300.0
     assert abs(res2.axis.direction[2]) > np.cos(np.radians(1.0))
-    assert any("separate objects" in n for n in __import__("potflat.rollout.unroll").rollout.unroll._notes(res2))
+    assert any("separate objects" in n for n in __import__("potflat.rollout.notes").rollout.notes.rollout_notes(res2))

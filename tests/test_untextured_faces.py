@@ -148,12 +148,14 @@ def test_auto_importance_ignores_untextured_faces(tmp_path):
 def test_the_flag_survives_the_stage_files_from_rollout_to_bake(tmp_path, small_vessel):
     from PIL import Image
 
-    from potflat.bake import BakeOptions, run_bake_stage
+    from potflat.bake import BakeOptions
+
+    from potflat.files.bake_stage import run_bake_stage
     from potflat.io.flat_ply import read_flat_ply
     from potflat.relax import RelaxOptions
     from potflat.rollout import RolloutOptions
-    from potflat.stages.relax_stage import run_relax_stage
-    from potflat.stages.rollout_stage import run_rollout_stage
+    from potflat.files.relax_stage import run_relax_stage
+    from potflat.files.rollout_stage import run_rollout_stage
 
     untextured = _patches(small_vessel)
     (tmp_path / "scan").mkdir()

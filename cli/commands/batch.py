@@ -42,7 +42,9 @@ def batch_command(batch_file: BatchFile, workers: Workers = None, scheduler: Sch
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from potflat.stages.batch import BatchFileError, load_batch, run_batch
+    from potflat.files.batch.config import BatchFileError, load_batch
+
+    from potflat.files.batch.execution import run_batch
     from potflat_cli._stage import with_compile_note
 
     try:

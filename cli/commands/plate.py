@@ -34,13 +34,13 @@ def plate_command(
     from potflat_cli._stage import run_stage
     from rich.console import Console
 
-    from potflat.bake.plate import make_plate
+    from potflat.files.plate import make_plate
 
     result = run_stage(f"composing the plate of {relaxed_ply.name}",
                        lambda: make_plate(relaxed_ply, output, scale=scale, name=name), quiet=quiet, as_json=json)
     if result is None:
         return
-    s = result.summary
+    s = result.record
     out = Console(highlight=False)
     out.print(f"[bold]{result.paths['svg']}[/]: {s['page_mm'][0]:.1f} x {s['page_mm'][1]:.1f} mm at "
               f"{s['scale_label']}, distortion in the {s['distortion_where']}; also "

@@ -1,14 +1,13 @@
 """`potflat run`: rollout, relax and bake one scan in one go."""
 from __future__ import annotations
 
-import inspect
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import typer
 
 from potflat_cli._errors import check_stop, user_errors
-from potflat_cli._options import Json, Name, OutputDir, Quiet
+from potflat_cli._options import Json, Name, OutputDir, Quiet, with_stage_options
 
 HELP = """Run rollout, relax and bake on one scan: NAME.rollout.ply/.json, NAME.relaxed.ply/.json, NAME.png, NAME.bake.json and the distortion maps, all in OUTDIR.
 
@@ -20,51 +19,30 @@ Example:  potflat run samples/data/amphora.obj -o out/ --proxy cone --preset pre
 Scan = Annotated[Path, typer.Argument(help="Textured scan (OBJ, PLY, STL, OFF, GLB/glTF).")]
 
 
-def run_command(scan: Scan, output: OutputDir = None, name: Name = None,
-                quiet: Quiet = False, json: Json = False) -> None:
-    """Run rollout, relax and bake on one scan (stage options: see 'potflat run --help')."""
-    # Only listed in 'potflat --help': invoking 'run' resolves to full_command(), which
-    # adds every stage option (built on demand so other commands stay fast to start).
-    full_command()(scan=scan, output=output, name=name, quiet=quiet, json=json)
+@user_errors
+@with_stage_options("rollout", "relax", "bake")
+def run_command(scan: Scan, output: OutputDir = None, name: Name = None, quiet: Quiet = False,
+                json: Json = False, *, options: dict) -> None:
+    """Run rollout, relax and bake on one scan."""
+    _run(scan, output, name, quiet, json, options)
 
 
-def full_command():
-    """``run`` with one option per stage option field (see potflat_cli._options)."""
-    from potflat.stages.pipeline import STAGES
-    from potflat_cli._options import stage_parameters
-
-    base = list(inspect.signature(run_command, eval_str=True).parameters.values())
-    params, seen = [], {p.name for p in base}
-    for stage in STAGES:
-        for p in stage_parameters(stage):
-            if p.name not in seen:  # an option used by two stages is given once
-                seen.add(p.name)
-                params.append(p)
-
-    @user_errors
-    def run(**values: Any) -> None:
-        _run(values)
-
-    run.__signature__ = inspect.Signature(base + params)
-    run.__annotations__ = {p.name: p.annotation for p in base + params}
-    run.__doc__ = HELP
-    return run
+run_command.__doc__ = HELP
 
 
-def _run(values: dict[str, Any]) -> None:
+def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json: bool, options: dict) -> None:
     import json as json_module
+    from dataclasses import asdict
 
     from rich.console import Console
 
     import potflat._warmup as potflat_warmup
+    from potflat.files.pipeline import run_scan
     from potflat.mesh.distortion import distortion_words
-    from potflat.stages.pipeline import STAGES, run_scan
-    from potflat_cli._options import options_from_cli
     from potflat_cli._stage import say_compiling, with_compile_note
 
-    options = {stage: options_from_cli(stage, values) for stage in STAGES}
-    scan = Path(values["scan"])
-    err = Console(stderr=True, quiet=values["quiet"] or values["json"])
+    scan = Path(scan)
+    err = Console(stderr=True, quiet=quiet or as_json)
     started, warmup = [], None
     with err.status(f"{scan.name}: starting") as status:
         def progress(stage: str) -> None:
@@ -80,33 +58,33 @@ def _run(values: dict[str, Any]) -> None:
                 # the scan rolled out (bad input is refused before this): the bake kernels
                 # compile here while the child finishes the relax kernels
                 potflat_warmup.bake_here()
-        out_dir = values["output"] or Path(values["name"] or scan.stem)  # ./NAME/, never the scan's folder
+        out_dir = output or Path(name or scan.stem)  # ./NAME/, never the scan's folder
         try:
-            result = run_scan(scan, out_dir, name=values["name"], progress=progress, **options)
+            result = run_scan(scan, out_dir, name=name, progress=progress, **options)
         finally:
             if warmup is not None:
                 warmup.stop()
     figures = result.figures
-    if values["json"]:
+    if as_json:
         print(json_module.dumps({
             "name": result.name, "scan": str(result.scan), "output": str(result.out_dir),
-            "seconds": {k: round(v, 3) for k, v in result.seconds.items()},
+            "seconds": {k: round(v, 3) for k, v in asdict(result.seconds).items()},
             "figures": figures, "paths": {k: str(v) for k, v in result.paths.items()}}, indent=2))
         return
-    if values["quiet"]:
+    if quiet:
         return
     out = Console()
-    out.print(f"[bold]{result.name}[/]: done in {result.seconds['total']:.1f} s, "
+    out.print(f"[bold]{result.name}[/]: done in {result.seconds.total:.1f} s, "
               f"outputs in {result.out_dir}")
     shown = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
                       for k, v in figures.items() if v is not None)
     if shown:
         out.print(f"  whole-surface distortion: {distortion_words(figures)} ({shown}; area figures are natural logs)")
-    relaxed = result.stages["relax"].summary
+    relaxed = result.relax.record
     if relaxed.get("lengths"):
         out.print(f"  {relaxed['lengths']}")
     for key, path in result.paths.items():
         out.print(f"  {key:<16} {path}", highlight=False)
-    rolled = result.stages["rollout"].summary
+    rolled = result.rollout.record
     for note in rolled.get("notes", []) + rolled["cleaning"]["warnings"]:  # and what loading the scan found
         out.print(f"[yellow]warning:[/] {note}", highlight=False)

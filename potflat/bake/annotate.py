@@ -8,7 +8,6 @@ from __future__ import annotations
 import io
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -372,27 +371,26 @@ def _zone_line(flat: FlatMesh) -> str:
     return "\n".join(parts)
 
 
-def comparison_sheet(path: str | Path, panels, *, title: str = "") -> Path:
+def comparison_sheet(panels, *, title: str = "") -> bytes:
     """Side-by-side sheet: proxy rollout vs relaxed, painting and stress map with figures.
 
-    Both stress maps use one colour scale. Written atomically as PNG. The panels are baked
-    by the caller (:func:`potflat.bake.render.comparison_sheet`), so this module draws only.
+    Both stress maps use one colour scale. The panels are baked by the caller, so this
+    module draws only.
 
     Parameters
     ----------
-    path : path-like
     panels : sequence of (str, FlatMesh, BakeResult)
         Label, flattening and its bake (with the ``stress`` map) of each column.
     title : str
 
     Returns
     -------
-    Path
+    bytes
+        The sheet as a PNG file's content.
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from potflat.io.atomic import write_bytes_atomic
     from potflat.mesh import distortion
 
     panels = [(label, res, distortion.vertex_length_error(flat.mesh.vertices, flat.uv, flat.mesh.faces),
@@ -434,7 +432,7 @@ def comparison_sheet(path: str | Path, panels, *, title: str = "") -> Path:
     canvas.draw()
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=100)
-    return write_bytes_atomic(path, buf.getvalue())
+    return buf.getvalue()
 
 
 

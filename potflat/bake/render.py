@@ -17,16 +17,14 @@ mouth up), column 0 at the smallest ``u`` (not mirrored); :attr:`BakeResult.orig
 is the ``uv`` of the top-left pixel corner. Images are rendered in horizontal strips,
 so large outputs (hundreds of megapixels) are streamed to disk with a bounded memory
 footprint: :class:`Renderer` gives every layer of a strip of rows, which the file stage
-(:func:`potflat.stages.bake_stage.run_bake_stage`) writes as it goes.
+(:func:`potflat.files.bake_stage.run_bake_stage`) writes as it goes.
 """
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
-from pathlib import Path
 
 import numpy as np
 
@@ -36,10 +34,6 @@ from potflat.io.images import read_ahead, read_texture
 from potflat.types import FlatMesh
 from potflat.mesh.tolerances import DEGENERATE, ROUNDING
 
-#: Distortion maps :func:`bake` can make.
-MAP_NAMES = ("stress", "area", "anisotropy")
-#: px/mm used when neither ``px_per_mm`` nor ``dpi`` is given.
-DEFAULT_PX_PER_MM = 4.0
 #: Transparent border around the mesh, in pixels.
 PAD_PX = 1
 #: Fewest pixels along the painting's longer side: smaller images show nothing (and leave no
@@ -57,126 +51,6 @@ AUTO_SUPERSAMPLE_BUDGET = 64e6
 RELIEF_RADIUS_MM = 5.0
 #: Relief exaggeration of the shaded relief (the normals' deviation from the smoothed surface is scaled by it).
 RELIEF_EXAGGERATION = 2.0
-
-
-@dataclass(frozen=True, kw_only=True)
-class BakeOptions:
-    """Options of the bake stage (field names are the CLI option names).
-
-    Attributes
-    ----------
-    px_per_mm : float or None
-        Output resolution in pixels per millimetre (give this or ``dpi``; default 4).
-    dpi : float or None
-        Output resolution in dots per inch (``px_per_mm = dpi / 25.4``).
-    maps : tuple of str
-        Distortion maps to write, from :data:`MAP_NAMES` (``"none"``: no maps); ``stress``
-        also writes the overlay.
-    sheet : bool
-        Write the rollout-vs-relaxed comparison sheet (needs ``NAME.rollout.ply`` beside the input).
-    position_map : bool
-        Write a float32 TIFF of the 3D point under each pixel (NaN outside).
-    grid : bool
-        Draw a labelled 10 mm grid in the scale layer.
-    tiff : bool
-        Also write the painting as a 16-bit RGBA TIFF.
-    supersample : int
-        Sub-samples per pixel side (1-8); 0 chooses from the texture density (2-4).
-    max_megapixels : float
-        Refuse images larger than this (protects laptops from a mistyped resolution).
-    scale_on_image : bool
-        Draw the scale bar (and the grid, with ``grid``) into ``NAME.png`` itself, where it
-        covers no painting (in a band added below the image when no such place is free).
-    plate : bool
-        Also write the archaeological plate ``NAME.plate.svg/.pdf/.png``
-        (:mod:`potflat.bake.plate`; needs the rollout's and relaxation's files beside the input).
-    plate_scale : str, float or None
-        Print scale of the plate, e.g. ``1:2`` or 0.5; None: the largest of 1:1, 1:2, 1:3, 1:4, 1:5,
-        1:10, 1:20, 1:50 at which it fits an A4 page.
-    obj : bool
-        Also write ``NAME.flat.obj`` + ``NAME.flat.mtl``: the scan's surface (3D, scan units)
-        with the flat coordinates as texture coordinates into ``NAME.png`` (the painting
-        re-baked in the flat layout), for MeshLab and Blender.
-    """
-
-    px_per_mm: float | None = None
-    dpi: float | None = None
-    maps: tuple[str, ...] = MAP_NAMES
-    sheet: bool = False
-    position_map: bool = False
-    grid: bool = False
-    tiff: bool = False
-    supersample: int = 0
-    max_megapixels: float = 1000.0
-    scale_on_image: bool = False
-    plate: bool = False
-    plate_scale: str | float | None = None
-    obj: bool = False
-
-    def __post_init__(self) -> None:
-        from potflat.bake.plate import parse_scale
-
-        for name in ("scale_on_image", "plate", "obj"):
-            if not isinstance(getattr(self, name), bool):
-                raise InvalidOptionError(f"{name} must be true or false, got {getattr(self, name)!r}")
-        if self.plate_scale is not None:
-            parse_scale(self.plate_scale)
-        if self.px_per_mm is not None and self.dpi is not None:
-            raise InvalidOptionError("give either px_per_mm (--px-per-mm) or dpi (--dpi), not both")
-        for name in ("px_per_mm", "dpi", "max_megapixels"):
-            value = getattr(self, name)
-            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))
-                                      or not math.isfinite(value) or value <= 0):
-                raise InvalidOptionError(f"{name} must be a positive number, got {value!r}")
-        maps = (self.maps,) if isinstance(self.maps, str) else tuple(self.maps)
-        if maps == ("none",):
-            maps = ()
-        unknown = [m for m in maps if m not in MAP_NAMES]
-        if unknown:
-            raise InvalidOptionError(f"unknown map {unknown[0]!r}; choose from {', '.join(MAP_NAMES)}")
-        object.__setattr__(self, "maps", tuple(dict.fromkeys(maps)))
-        if isinstance(self.supersample, bool) or not isinstance(self.supersample, int) or not 0 <= self.supersample <= 8:
-            raise InvalidOptionError(f"supersample must be an integer from 0 (automatic) to 8, got {self.supersample!r}")
-
-    @property
-    def resolution(self) -> float:
-        """The effective pixels per millimetre."""
-        if self.dpi is not None:
-            return self.dpi / 25.4
-        return float(self.px_per_mm) if self.px_per_mm is not None else DEFAULT_PX_PER_MM
-
-
-@dataclass(frozen=True, eq=False)
-class BakeResult:
-    """The baked images of one flattening (in memory).
-
-    Attributes
-    ----------
-    image : (h, w, 4) uint8
-        The painting, RGBA; alpha is the covered fraction of each pixel (0 outside and in holes).
-    maps : dict of str to (h, w) float32
-        Distortion values per pixel (NaN outside): ``stress`` as the % length error around
-        each vertex (:func:`potflat.mesh.distortion.vertex_length_error`, interpolated; the
-        paper's Eq. 3 stress is in the figures and the PLY), ``area`` as ln(flat area / 3D area) per face (the natural log, as every area figure),
-        ``anisotropy`` as sigma_max / sigma_min per face.
-    position : (h, w, 3) float32 or None
-        3D point (scan units) under each pixel, NaN outside.
-    px_per_mm : float
-        Resolution.
-    origin : (2,) float64
-        ``(u, v)`` of the top-left corner of pixel (0, 0), scan units; pixel ``(r, c)``
-        covers ``u`` from ``origin[0] + c / s`` and ``v`` down from ``origin[1] - r / s``
-        with ``s = px_per_mm * mm_per_unit`` pixels per unit.
-    figures : dict
-        Resolution, size, distortion figures, covered area (see :func:`potflat.stages.bake_stage.run_bake_stage`).
-    """
-
-    image: np.ndarray
-    maps: dict
-    position: np.ndarray | None
-    px_per_mm: float
-    origin: np.ndarray
-    figures: dict = field(default_factory=dict)
 
 
 # --------------------------------------------------------------------------------------
@@ -288,7 +162,7 @@ def _pull_fill(levels: list, valids: list) -> None:
 
 
 @dataclass(frozen=True)
-class _Grid:
+class Grid:
     """Pixel grid of a flattening."""
 
     px_per_mm: float
@@ -298,7 +172,7 @@ class _Grid:
     height: int
 
 
-def _make_grid(flat: FlatMesh, px_per_mm: float, max_megapixels: float) -> _Grid:
+def make_grid(flat: FlatMesh, px_per_mm: float, max_megapixels: float) -> Grid:
     used = np.zeros(len(flat.uv), bool)
     used[flat.mesh.faces.ravel()] = True
     if not used.any():
@@ -310,7 +184,7 @@ def _make_grid(flat: FlatMesh, px_per_mm: float, max_megapixels: float) -> _Grid
     scale = px_per_mm * flat.mesh.mm_per_unit
     width, height = image_size((hi - lo) * flat.mesh.mm_per_unit, px_per_mm, max_megapixels)
     origin = np.array([lo[0] - PAD_PX / scale, hi[1] + PAD_PX / scale])
-    return _Grid(px_per_mm, scale, origin, width, height)
+    return Grid(px_per_mm, scale, origin, width, height)
 
 
 def image_size(extent_mm, px_per_mm: float, max_megapixels: float) -> tuple[int, int]:
@@ -378,7 +252,7 @@ class Renderer:
         self.flat = flat
         mesh = flat.mesh
         self.faces = mesh.faces
-        self.grid = _make_grid(flat, px_per_mm, max_megapixels)
+        self.grid = make_grid(flat, px_per_mm, max_megapixels)
         g = self.grid
         untextured = mesh.untextured_faces
         textured = mesh.texcoords is not None and mesh.texture_path is not None and (untextured is None
@@ -708,67 +582,6 @@ def paint(flat: FlatMesh, px_per_mm: float, *, supersample: int = 2,
             coverage *= 1.0 - np.nan_to_num(r.untextured_share(r0, r1), nan=0.0)
         image[r0:r1] = rgba8(r.painting(r0, r1, relief_on_untextured=not leave_out), coverage)
     return image, g.origin.copy()
-
-
-def bake(flat: FlatMesh, *, options: BakeOptions | None = None, **option_fields) -> BakeResult:
-    """Bake a flattening into a true-scale RGBA image and distortion maps, in memory.
-
-    Parameters
-    ----------
-    flat : FlatMesh
-        The flattening (``uv`` in scan units, u right, v up).
-    options : BakeOptions, optional
-        The stage's options; or give its fields as keywords (not both). Used here:
-        ``px_per_mm`` or ``dpi`` (default 4 px/mm), ``maps`` (from :data:`MAP_NAMES`),
-        ``position_map`` (also return the 3D point under each pixel), ``supersample``
-        (sub-samples per pixel side, 0: automatic), ``max_megapixels`` (refuse larger
-        images); the other fields concern the files :func:`run_bake_stage` writes.
-
-    Returns
-    -------
-    BakeResult
-
-    Raises
-    ------
-    InvalidOptionError
-        When an option is invalid, or both ``options`` and option keywords are given.
-
-    Notes
-    -----
-    Everything is held in memory; for very large images use :func:`run_bake_stage`,
-    which streams the same strips to disk.
-    """
-    if options is None:
-        options = BakeOptions(**option_fields)
-    elif option_fields:
-        raise InvalidOptionError("give either options= or option keywords to bake(), not both")
-    opts = options
-    r = Renderer(flat, opts.resolution, supersample=opts.supersample, max_megapixels=opts.max_megapixels)
-    g = r.grid
-    image = np.zeros((g.height, g.width, 4), np.uint8)
-    values = {name: np.empty((g.height, g.width), np.float32) for name in opts.maps}
-    position = np.empty((g.height, g.width, 3), np.float32) if opts.position_map else None
-    covered = 0.0
-    for r0, r1 in r.strips():
-        cov = r.coverage(r0, r1)
-        covered += float(cov.sum(dtype=np.float64))
-        image[r0:r1] = rgba8(r.painting(r0, r1), cov)
-        for name in opts.maps:
-            values[name][r0:r1] = r.scalar(name, r0, r1)
-        if position is not None:
-            position[r0:r1] = r.position(r0, r1)
-    return BakeResult(image=image, maps=values, position=position, px_per_mm=g.px_per_mm,
-                      origin=g.origin.copy(), figures=image_figures(r, covered))
-
-
-def comparison_sheet(path: str | os.PathLike, rollout: FlatMesh, relaxed: FlatMesh, *, title: str = "") -> Path:
-    """Bake the proxy rollout and the relaxed flattening and draw them side by side
-    (:func:`potflat.bake.annotate.comparison_sheet`); written atomically as PNG."""
-    from potflat.bake import annotate
-
-    panels = [(label, flat, bake(flat, px_per_mm=annotate.sheet_px_per_mm(flat), maps=("stress",)))
-              for label, flat in (("proxy rollout", rollout), ("relaxed", relaxed))]
-    return annotate.comparison_sheet(path, panels, title=title)
 
 
 def attachment_rows(share: np.ndarray) -> np.ndarray:

@@ -616,7 +616,7 @@ class ZoneSummary:
 
     Attributes
     ----------
-    important : ZoneFigures
+    important_zone : ZoneFigures
         The important zone (the whole surface without an importance).
     rest : ZoneFigures
         The rest of the surface (empty without an importance).
@@ -624,14 +624,14 @@ class ZoneSummary:
         One sentence on how far lengths read off the image are off where the painting is.
     """
 
-    important: ZoneFigures
+    important_zone: ZoneFigures
     rest: ZoneFigures
     lengths: str
 
     def as_dict(self) -> dict:
         """JSON-ready dict: ``important_zone`` (:data:`PAINTED_ZONE_KEY`), ``rest`` (NaN as
         null) and ``lengths``."""
-        return {PAINTED_ZONE_KEY: _json_safe(self.important.as_dict()), "rest": _json_safe(self.rest.as_dict()),
+        return {PAINTED_ZONE_KEY: _json_safe(self.important_zone.as_dict()), "rest": _json_safe(self.rest.as_dict()),
                 "lengths": self.lengths}
 
 
@@ -657,7 +657,7 @@ def zone_summary(vertices: np.ndarray, uv: np.ndarray, faces: np.ndarray, import
     words = (f"lengths measured on the image {where} are off by {imp.length_error_median_pct:.1f}% "
              f"(median) and by at most {imp.length_error_p95_pct:.1f}% over 95% of it; "
              f"median scale {imp.scale_median:.3f}")
-    return ZoneSummary(important=imp, rest=zones["rest"], lengths=words)
+    return ZoneSummary(important_zone=imp, rest=zones["rest"], lengths=words)
 
 
 def _json_safe(node):

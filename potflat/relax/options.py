@@ -3,7 +3,7 @@ from :class:`RelaxOptions` without importing the solver)."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -87,19 +87,19 @@ class RelaxOptions:
         scale bar are right where the painting is. None: the preset's (off for ``paper``).
     """
 
-    preset: str = "standard"
+    preset: str = field(default="standard", metadata={"choices": tuple(PRESETS)})
     tol: float | None = None
     max_iter: int | None = None
-    time_budget: float | None = None
+    time_budget: float | None = field(default=None, metadata={"metavar": "SECONDS"})
     threads: int | None = None
     stretch: float | None = None
     stiffness: float | None = None
-    weighting: str | None = None
-    simplify_mm: float | None = None
+    weighting: str | None = field(default=None, metadata={"choices": WEIGHTINGS})
+    simplify_mm: float | None = field(default=None, metadata={"metavar": "MM"})
     shape: float | None = None
     rigidity: float | None = None
     area: float | None = None
-    max_anisotropy: float | Literal["auto"] | None = None
+    max_anisotropy: float | Literal["auto"] | None = field(default=None, metadata={"metavar": "NUMBER|auto|inf"})
     importance_contrast: float | None = None
     true_scale: bool | None = None
 

@@ -3,12 +3,10 @@
 ``from potflat.rollout import rollout, RolloutOptions``. Modules: :mod:`.options` (the
 stage's options, light to import), :mod:`.axis` (axis fit), :mod:`.walls` (outer/inner
 wall), :mod:`.attachments` (handles, spouts), :mod:`.proxy` (cylinder/cone/sphere fits and
-developments), :mod:`.profile` (the vessel profile), :mod:`.unroll` (the rollout algorithm);
-the file stage ``run_rollout_stage`` lives in :mod:`potflat.stages.rollout_stage`. Names are
-imported on first use, so the options come without scipy.
+developments), :mod:`.profile` (the vessel profile), :mod:`.unroll` (the rollout algorithm).
+Names are imported on first use, so the options come without scipy.
 """
 from potflat._lazy import lazy_exports
 
-__getattr__ = lazy_exports(__name__, {"RolloutOptions": ".options", "RolloutResult": ".unroll",
-                                      "rollout": ".unroll", "run_rollout_stage": "potflat.stages.rollout_stage"})
-__all__ = ["RolloutOptions", "RolloutResult", "rollout", "run_rollout_stage"]
+__getattr__ = lazy_exports(__name__, {"RolloutOptions": ".options", "RolloutResult": ".unroll", "rollout": ".unroll"})
+__all__ = ["RolloutOptions", "RolloutResult", "rollout"]

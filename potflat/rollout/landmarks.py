@@ -19,7 +19,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from potflat.errors import InvalidOptionError
-from potflat.rollout.options import LANDMARKS
 from potflat.mesh.tolerances import DEGENERATE
 
 #: The painting's contrast has a centre when its weighted circular mean has at least this

@@ -3,7 +3,7 @@ builds its options and ``--help`` without importing the algorithm."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 
 from potflat import importance as _importance
 from potflat.errors import InvalidOptionError
@@ -86,26 +86,26 @@ class RolloutOptions:
         For ``band``: angle range in degrees from the seam.
     """
 
-    units: str | None = None
+    units: str | None = field(default=None, metadata={"choices": tuple(UNITS_MM)})
     texture: bool = True
-    proxy: str = "auto"
-    axis: tuple[float, ...] | None = None
+    proxy: str = field(default="auto", metadata={"choices": ("auto", *PROXY_KINDS)})
+    axis: tuple[float, ...] | None = field(default=None, metadata={"metavar": "px,py,pz,dx,dy,dz"})
     flip: bool = False
-    seam: float | None = None
-    band: tuple[float, float] | None = None
-    angles: tuple[float, float] | None = None
-    view: tuple[float, ...] | None = None
-    side: str = "outer"
+    seam: float | None = field(default=None, metadata={"metavar": "DEG"})
+    band: tuple[float, float] | None = field(default=None, metadata={"metavar": "LO HI"})
+    angles: tuple[float, float] | None = field(default=None, metadata={"metavar": "A0 A1"})
+    view: tuple[float, ...] | None = field(default=None, metadata={"metavar": "x,y,z"})
+    side: str = field(default="outer", metadata={"choices": SIDES})
     keep_attachments: bool = False
-    seam_at: tuple[float, float, float] | None = None
-    landmark: str | None = None
-    overlap: float = 0.0
-    profile_mm: float | None = None
-    importance: str = "auto"
-    importance_mask: str | None = None
-    importance_image: str | None = None
-    importance_band: tuple[float, float] | None = None
-    importance_arc: tuple[float, float] | None = None
+    seam_at: tuple[float, float, float] | None = field(default=None, metadata={"metavar": "X Y Z"})
+    landmark: str | None = field(default=None, metadata={"choices": LANDMARKS})
+    overlap: float = field(default=0.0, metadata={"metavar": "DEG"})
+    profile_mm: float | None = field(default=None, metadata={"metavar": "MM"})
+    importance: str = field(default="auto", metadata={"choices": _importance.METHODS})
+    importance_mask: str | None = field(default=None, metadata={"metavar": "PNG"})
+    importance_image: str | None = field(default=None, metadata={"metavar": "NAME.bake.json"})
+    importance_band: tuple[float, float] | None = field(default=None, metadata={"metavar": "LO HI"})
+    importance_arc: tuple[float, float] | None = field(default=None, metadata={"metavar": "A0 A1"})
 
     def __post_init__(self) -> None:
         _importance.check_method(self.importance)

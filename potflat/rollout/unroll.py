@@ -9,7 +9,7 @@ over (the rim top, a base's underside, break faces: :func:`border_folds`); folds
 region, from the scan itself, are unfolded (:func:`untangle`), so the result has no flipped
 face and no overlapping border, and everything left out is reported. The file stage
 (reading a scan, writing ``NAME.rollout.ply`` and its sidecars) is
-:func:`potflat.stages.rollout_stage.run_rollout_stage`.
+:func:`potflat.files.rollout_stage.run_rollout_stage`.
 
 Angles: the reference direction of the axis (:attr:`AxisFit.reference`) is 0 degrees; the
 seam angle is measured from it counter-clockwise about the axis (axis pointing up). Angles
@@ -28,7 +28,7 @@ import scipy.sparse
 
 from potflat import importance as _importance
 from potflat.rollout import proxy as _proxy
-from potflat.mesh._kernels import face_geometry, union_find
+from potflat.mesh._kernels import union_find
 from potflat.mesh.boundary import crossing_pairs, edges_and_boundary
 from potflat.io.images import read_ahead
 from potflat.mesh.embedding import signed_areas
@@ -37,7 +37,7 @@ from potflat.rollout.folds import ScanFolds, fold_masks, scan_folds
 from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
 from potflat.mesh.distortion import DistortionSummary, face_areas, summarize
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.types import FlatMesh, Mesh, StepClock
+from potflat.types import FlatMesh, Mesh, RolloutMarks, StepClock
 from potflat.rollout.options import RolloutOptions
 from potflat.rollout.profile import Profile, vessel_profile
 from potflat.rollout.walls import FaceGraph, WallSelection, check_axis, face_frame, select_wall
@@ -209,6 +209,19 @@ class RolloutResult:
     def side(self) -> str:
         """The painted side unrolled, ``outer`` or ``inner``."""
         return self.walls.side
+
+    @property
+    def marks(self) -> RolloutMarks:
+        """What the bake marks on the images of this rollout and of its relaxation."""
+        folds = self.folds
+        return RolloutMarks(
+            attachment_roots=np.zeros(0, np.int64) if self.attachments_kept else np.asarray(self.attachment_roots,
+                                                                                            np.int64),
+            repeated_from=self.region.repeated_from, overlap_deg=self.region.overlap_deg,
+            folded_faces=np.zeros(0, np.int64) if folds is None else np.asarray(folds.faces, np.int64),
+            folded_area_mm2=0.0 if folds is None else folds.area_mm2,
+            folded_percent=0.0 if folds is None else folds.percent,
+            folded_regions=0 if folds is None else len(folds.regions))
 
 
 def _luminance_variation(mesh: Mesh, faces: np.ndarray) -> tuple[np.ndarray | None, str]:
@@ -999,104 +1012,6 @@ def _find_importance(flat: FlatMesh, options: RolloutOptions, axis: AxisFit, the
                                        options.importance_band, options.importance_arc)
 
 
-def rollout_summary(result: RolloutResult) -> dict:
-    """The JSON-ready figures of a rollout (the sidecar without file and provenance fields)."""
-    mesh = result.flat.mesh
-    return {
-        "units": mesh.units,
-        "mm_per_unit": mesh.mm_per_unit,
-        "axis": result.axis.as_dict(),
-        "proxy": result.proxy.as_dict(),
-        "seam": {"angle_deg": result.seam_angle, "method": result.seam_method, "cut": result.region.cut,
-                 "landmark": result.landmark.as_dict() if result.landmark is not None else None,
-                 "theta_origin_deg": result.theta_origin},
-        "region": result.region.as_dict(),
-        "counts": {
-            "vertices": len(mesh.vertices), "faces": len(mesh.faces),
-            "input_faces": result.region.faces_total,
-            "input_vertices_used": int(len(result.vertex_index) - result.seam_vertices - result.split_vertices),
-            "seam_vertices_duplicated": result.seam_vertices,
-            "nonmanifold_vertices_split": result.split_vertices,
-        },
-        "distortion": result.distortion.as_dict(),
-        "importance": result.importance.as_dict() if result.importance is not None else None,
-        "boundary_overlap": result.boundary_overlap,
-        "walls": result.walls.summary(),
-        "attachments": _attachments_summary(result),
-        "trimmed": _trimmed_summary(result, mesh.mm_per_unit),
-        "notes": _notes(result),
-        "folded": result.folds.as_dict() if result.folds is not None else None,
-        "untangled": {"faces": result.untangled_faces, "vertices_moved": result.untangled_vertices,
-                      "reason": "faces folded inside the development by the scan's own creases and "
-                                "slivers, unfolded by moving their vertices to their neighbours' mean"},
-    }
-
-
-#: Warn when more than this share of the surface is trimmed away as folded border.
-WARN_TRIMMED_FRACTION = 0.05
-#: Warn when the axis' RMS normal-to-meridian angle (degrees) is above this.
-WARN_AXIS_RMS_DEG = 5.0
-#: Warn when more than this share of the unrolled area faces along the axis (normal within
-#: :data:`FLANGE_ANGLE_DEG` of it: a foot's top, a base, a flat shoulder): a cylinder, cone or
-#: sphere develops such a ring into a wide, lobed flange.
-WARN_FLANGE_FRACTION, FLANGE_ANGLE_DEG = 0.08, 30.0
-
-
-def _notes(result: RolloutResult) -> list[str]:
-    """Warnings for the sidecar: what the user should know before relaxing."""
-    notes = list(result.landmark_notes)
-    if result.region.repeated_from is not None:
-        notes.append(f"{len(result.flat.mesh.faces) - result.region.repeated_from} faces repeat the first "
-                     f"{result.region.overlap_deg:g} degrees after the seam past 360 degrees (their distortion is "
-                     "counted twice in the figures)")
-    if result.distortion.flipped:
-        why = (" (kept attachments: a handle cannot be unrolled without folds; leave them out)"
-               if result.attachments_kept and result.attachments.n_faces else "")
-        if result.distortion.flipped > 0.05 * len(result.flat.mesh.faces):
-            why = (" (they face the other way: the two sides of the wall were not told apart"
-                   + (", the scan's faces were read as pointing inwards" if result.walls.normals_inverted else "")
-                   + "; check the axis (--axis) or try --side inner)")
-        notes.append(f"{result.distortion.flipped} faces stay flipped{why}; the relax stage starts from a fold-free "
-                     "layout (it refuses only a mesh that is not a disk)")
-    folded = result.folds.note() if result.folds is not None else None
-    if folded:
-        notes.append(folded)
-    if result.boundary_overlap:
-        notes.append(f"the border overlaps itself at {result.boundary_overlap} places; the relax stage unfolds it "
-                     "(and refuses a result that still overlaps)")
-    if result.other_objects_faces:
-        notes.append(f"{result.other_objects_faces} faces of separate objects that do not share the vessel's axis "
-                     "(another vessel or fragment in the same file) were left out; split the file or give --axis")
-    if result.trimmed_area:
-        kept = float(face_areas(result.flat.mesh.vertices, result.flat.mesh.faces).sum())
-        share = result.trimmed_area / (result.trimmed_area + kept)
-        if share > WARN_TRIMMED_FRACTION:
-            notes.append(f"{100 * share:.0f} % of the surface was trimmed away as folded border (rim top, base "
-                         "underside, breaks, a foot turned under); if painting is lost there, unroll the painted "
-                         "height only (--band LO HI) or try another --proxy")
-    share = _facing_axis_share(result)
-    if share > WARN_FLANGE_FRACTION and result.proxy.kind != "ortho":
-        notes.append(f"{100 * share:.0f} % of the unrolled surface faces along the axis (a foot, a base or a flat "
-                     "shoulder): the proxy unrolls it as a wide, lobed flange; if the painting is elsewhere, unroll "
-                     "the painted height only (--band LO HI)")
-    if result.axis.rms_angle_deg > WARN_AXIS_RMS_DEG:
-        notes.append(f"the axis fits the surface poorly ({result.axis.rms_angle_deg:.0f} deg RMS between the normals "
-                     "and the meridian planes): the vessel is not very round, or a foot, handle or break misleads the "
-                     "fit, so the rollout is distorted; give the axis (--axis px,py,pz,dx,dy,dz) or unroll the "
-                     "painted height only (--band LO HI)")
-    return notes
-
-
-def _facing_axis_share(result: RolloutResult) -> float:
-    """Share of the unrolled 3D area whose normal lies within :data:`FLANGE_ANGLE_DEG` of the axis."""
-    mesh = result.flat.mesh
-    normal, twice, _, _ = face_geometry(np.ascontiguousarray(mesh.vertices, dtype=np.float64),
-                                        np.ascontiguousarray(mesh.faces, dtype=np.int64))  # |normal| = twice
-    along = np.abs(normal @ result.axis.direction) > math.cos(math.radians(FLANGE_ANGLE_DEG)) * twice
-    total = float(twice.sum())
-    return float(twice[along].sum()) / total if total > 0 else 0.0
-
-
 def _submesh(mesh: Mesh, face_mask: np.ndarray) -> Mesh:
     """The faces of ``mesh`` selected by ``face_mask`` with only the vertices they use."""
     F = np.take(mesh.faces, np.flatnonzero(face_mask), axis=0)
@@ -1153,19 +1068,3 @@ def _main_object(mesh: Mesh) -> np.ndarray | None:
     return None if keep.all() else keep
 
 
-def _attachments_summary(result: RolloutResult) -> dict:
-    att = result.attachments
-    summary = att.summary()
-    return {**summary, "kept": result.attachments_kept,
-            "faces_left_out": 0 if result.attachments_kept else att.n_faces,
-            "area_left_out_mm2": 0.0 if result.attachments_kept else summary["area_mm2"],
-            "root_faces": result.attachment_roots.tolist(),
-            "root_faces_note": "rollout faces (indices into the PLY's faces) where a left-out "
-                               "attachment met the wall, to mask in the bake"}
-
-
-def _trimmed_summary(result: RolloutResult, mm_per_unit: float) -> dict:
-    """Counts and area of the folded border faces left out (see :func:`border_folds`)."""
-    return {"faces": len(result.trimmed), "area_mm2": result.trimmed_area * mm_per_unit ** 2,
-            "reason": "border faces that fold the development over: strips edge-on to the proxy "
-                      "(rim top, base underside, break faces) and overlapping border faces"}

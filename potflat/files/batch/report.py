@@ -98,7 +98,7 @@ def _relax_summary(folder: Path, name: str) -> dict:
 
 
 def _card(report, base: Path) -> str:
-    from potflat.stages.batch import MANIFEST
+    from potflat.files.batch.manifest import MANIFEST
 
     folder = Path(report.output)
     name = report.name
@@ -148,7 +148,7 @@ def write_report(summary) -> Path:
     Parameters
     ----------
     summary : BatchSummary
-        The batch's outcome (:func:`potflat.stages.batch.run_batch`).
+        The batch's outcome (:func:`potflat.files.batch.run_batch`).
 
     Returns
     -------

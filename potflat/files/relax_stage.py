@@ -3,17 +3,50 @@
 from __future__ import annotations
 
 import json
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
-from potflat.mesh.distortion import DistortionSummary
+from potflat.files.names import relax_name
+from potflat.files.provenance import provenance
+from potflat.files.rollout_stage import RolloutFiles
+from potflat.io.atomic import write_json_atomic
+from potflat.io.flat_ply import as_stored, read_flat_ply, write_flat_ply
+from potflat.io.images import check_texture_file
+from potflat.mesh.distortion import DistortionSummary, SurfaceReference, ZoneSummary
 from potflat.relax.multilevel import relax
 from potflat.relax.options import RelaxOptions
 from potflat.relax.result import LevelRecord, RelaxResult
-from potflat.stages.names import relax_name
-from potflat.types import FlatMesh, StageOutput, StepClock
+from potflat.types import FlatMesh, StepClock
+
+
+@dataclass(frozen=True, eq=False)
+class RelaxFiles:
+    """What the relax stage's file stage wrote, and what the bake takes in memory.
+
+    Attributes
+    ----------
+    paths : dict of str to Path
+        ``"ply"`` and ``"json"`` to the file written.
+    record : dict
+        The content of ``NAME.relaxed.json``, as written.
+    flat : FlatMesh
+        The relaxed flattening exactly as ``NAME.relaxed.ply`` holds it.
+    distortion : DistortionSummary
+        Its distortion figures.
+    zone : ZoneSummary
+        Its painted zone's figures.
+    reference : SurfaceReference or None
+        The 3D side of those figures, for the bake of the same mesh (None once handed on).
+    """
+
+    paths: dict[str, Path]
+    record: dict
+    flat: FlatMesh
+    distortion: DistortionSummary
+    zone: ZoneSummary
+    reference: SurfaceReference | None
 
 
 def _history_for_json(h: np.ndarray, limit: int = 1000) -> list[float]:
@@ -36,8 +69,8 @@ def _level_for_json(level: LevelRecord) -> dict:
 
 
 def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: RelaxOptions | None = None, *,
-                    name: str | None = None, progress: bool = False, flat: FlatMesh | None = None,
-                    rollout_summary: dict | None = None, distortion: DistortionSummary | None = None) -> StageOutput:
+                    name: str | None = None, progress: bool = False,
+                    rolled: RolloutFiles | None = None) -> RelaxFiles:
     """Relax ``NAME.rollout.ply`` and write ``NAME.relaxed.ply`` and ``NAME.relaxed.json``.
 
     Parameters
@@ -51,43 +84,33 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         Output stem (default: the input's name without ``.rollout.ply``).
     progress : bool
         Show a progress bar.
-    flat : FlatMesh, optional
-        The content of ``rollout_ply`` already in memory (:func:`potflat.run_scan`); read
-        from the file when not given.
-    rollout_summary : dict, optional
-        The rollout stage's summary in memory (its axis, proxy and units go into the JSON);
-        read from ``NAME.rollout.json`` beside the input when not given.
-    distortion : DistortionSummary, optional
-        The figures of ``flat`` when the caller has them (:func:`potflat.run_scan`: the rollout
-        stage's); computed when not given.
+    rolled : RolloutFiles, optional
+        What the rollout's file stage wrote in this run (:func:`potflat.run_scan`): its
+        flattening, figures and record are taken from there instead of ``rollout_ply`` and
+        ``NAME.rollout.json`` beside it.
 
     Returns
     -------
-    StageOutput
-        ``paths`` with ``ply`` and ``json``; ``summary`` the JSON content; the relaxed
-        ``flat`` as written, its ``distortion`` and its painted ``zone``'s figures.
+    RelaxFiles
     """
-    from potflat.io.atomic import write_json_atomic
-    from potflat.io.flat_ply import as_stored, read_flat_ply, write_flat_ply
-    from potflat.io.images import check_texture_file
-    from potflat.stages.provenance import provenance
-
     options = options or RelaxOptions()
     rollout_ply = Path(rollout_ply)
     out_dir = Path(out_dir)
     stem = relax_name(rollout_ply)
     name = name or stem
     clock = StepClock()
-    if flat is None:
-        flat = read_flat_ply(rollout_ply)
+    if rolled is None:
+        flat, distortion = read_flat_ply(rollout_ply), None
         clock.lap("read")
+    else:
+        flat, distortion = rolled.flat, rolled.distortion
     if flat.mesh.texture_path is not None:  # copied beside the output: missing, say so before relaxing
         check_texture_file(flat.mesh.texture_path)
     result = relax(flat, options=options, progress=progress, distortion_before=distortion)
     clock.lap("relax")
     ply_path = out_dir / f"{name}.relaxed.ply"
     json_path = out_dir / f"{name}.relaxed.json"
-    summary = {
+    record = {
         "preset": result.preset,
         "options": asdict(options),
         "settings": _settings_for_json(result, options),
@@ -116,30 +139,29 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         "faces": len(flat.mesh.faces),
     }
     rollout_json = rollout_ply.with_name(f"{stem}.rollout.json")
-    if rollout_summary is not None or rollout_json.exists():
+    if rolled is not None or rollout_json.exists():
         try:
-            rj = rollout_summary if rollout_summary is not None else json.loads(
-                rollout_json.read_text(encoding="utf-8"))
+            rj = rolled.record if rolled is not None else json.loads(rollout_json.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             rj = {}
         if not isinstance(rj, dict):  # a sidecar holding null, a list...: nothing to copy from it
             rj = {}
         for key in ("axis", "proxy", "units"):
             if key in rj:
-                summary[key] = rj[key]
+                record[key] = rj[key]
         folded = rj.get("folded")
         if isinstance(folded, dict):  # where the scan folds in 3D: the figures, the faces stay in the rollout's JSON
-            summary["folded"] = {k: v for k, v in folded.items() if k != "face_indices"}
+            record["folded"] = {k: v for k, v in folded.items() if k != "face_indices"}
     inputs = [rollout_ply] + ([rollout_json] if rollout_json.exists() else [])
-    summary["provenance"] = provenance(stage="relax", inputs=inputs, options=asdict(options))
+    record["provenance"] = provenance(stage="relax", inputs=inputs, options=asdict(options))
     comments = (f"potflat relax preset {result.preset}",)
     write_flat_ply(ply_path, result.flat, comments=comments)
     clock.lap("write")
     # the solver's own steps, then the stage's (its total: reading to writing)
     steps = clock.total()
     del steps["relax"]
-    summary["timings"] = {**{k: v for k, v in asdict(result.timings).items() if k != "total"}, **steps}
-    write_json_atomic(json_path, summary)
-    return StageOutput(paths={"ply": ply_path, "json": json_path}, summary=summary,
-                       flat=as_stored(result.flat, ply_path, comments=comments), distortion=result.distortion,
-                       zone=result.zone, reference=result.reference)
+    record["timings"] = {**{k: v for k, v in asdict(result.timings).items() if k != "total"}, **steps}
+    write_json_atomic(json_path, record)
+    return RelaxFiles(paths={"ply": ply_path, "json": json_path}, record=record,
+                      flat=as_stored(result.flat, ply_path, comments=comments), distortion=result.distortion,
+                      zone=result.zone, reference=result.reference)

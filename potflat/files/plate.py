@@ -27,12 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.bake.options import parse_scale
+from potflat.errors import InvalidInputError
 from potflat.mesh.distortion import distortion_words, painted_zone_distortion
-from potflat.types import StageOutput
 
-#: Largest print scale accepted (drawing mm per vessel mm): 10:1, for small sherds.
-MAX_SCALE = 10.0
 #: Scales tried when none is given, largest first (drawing mm per vessel mm).
 PLATE_SCALES = (1.0, 1 / 2, 1 / 3, 1 / 4, 1 / 5, 1 / 10, 1 / 20, 1 / 50)
 #: The automatic scale keeps drawing and rollout within this area (A4 portrait minus margins), mm.
@@ -45,41 +43,20 @@ CHAR_EM = 0.56
 PREVIEW_DPI, VIEW_DPI = 150.0, 300.0
 
 
-def parse_scale(value) -> float | None:
-    """A print scale as drawing mm per vessel mm.
+@dataclass(frozen=True)
+class PlateFiles:
+    """What :func:`make_plate` wrote.
 
-    Parameters
+    Attributes
     ----------
-    value : str, float or None
-        ``"1:5"``, ``"1/5"``, ``0.2``, ``"auto"`` or None (automatic).
-
-    Returns
-    -------
-    float or None
-        None for automatic.
-
-    Raises
-    ------
-    InvalidOptionError
-        Not a positive ratio.
+    paths : dict of str to Path
+        ``"svg"``, ``"pdf"``, ``"png"`` to the file written.
+    record : dict
+        Scale, page size, figures and the files, as ``NAME.bake.json`` records them.
     """
-    if value is None or (isinstance(value, str) and value.strip().lower() in ("", "auto")):
-        return None
-    try:
-        if isinstance(value, str) and (":" in value or "/" in value):
-            a, b = value.replace("/", ":").split(":")
-            scale = float(a) / float(b)
-        else:
-            scale = float(value)
-    except (TypeError, ValueError, ZeroDivisionError):
-        raise InvalidOptionError(f"plate scale {value!r} is not a scale; give e.g. 1:1, 1:2, 1:5 or auto") from None
-    if not math.isfinite(scale) or scale <= 0:
-        raise InvalidOptionError(f"plate scale {value!r} must be positive, e.g. 1:2")
-    if scale > MAX_SCALE:
-        raise InvalidOptionError(
-            f"plate scale {value!r} would draw the vessel {scale:g} times its size; give e.g. 1:2 (in a YAML file "
-            "in quotes, '1:5': unquoted, YAML reads 1:5 as the number 65)")
-    return scale
+
+    paths: dict[str, Path]
+    record: dict
 
 
 def scale_label(scale: float) -> str:
@@ -128,7 +105,7 @@ def _read_rgba(path: Path) -> np.ndarray:
 def _sources(relaxed_ply: Path, name: str | None, bake_dir: Path) -> _Sources:
     from potflat.io.flat_ply import read_flat_ply
     from potflat.rollout.profile import read_profile_csv
-    from potflat.stages.names import stage_name
+    from potflat.files.names import stage_name
 
     if not relaxed_ply.name.endswith(".relaxed.ply"):
         raise InvalidInputError(f"{relaxed_ply.name}: the plate is made from NAME.relaxed.ply (with the rollout, "
@@ -350,7 +327,7 @@ def compose_plate(src: _Sources, scale: float | None):
 
 
 def make_plate(relaxed_ply: str | os.PathLike, out_dir: str | os.PathLike | None = None, *,
-               scale: float | str | None = None, name: str | None = None) -> StageOutput:
+               scale: float | str | None = None, name: str | None = None) -> PlateFiles:
     """Write ``NAME.plate.svg``, ``NAME.plate.pdf`` and ``NAME.plate.png`` for a flattened scan.
 
     Parameters
@@ -369,8 +346,8 @@ def make_plate(relaxed_ply: str | os.PathLike, out_dir: str | os.PathLike | None
 
     Returns
     -------
-    StageOutput
-        ``paths`` (``svg``, ``pdf``, ``png``) and ``summary`` (scale, page size in mm,
+    PlateFiles
+        ``paths`` (``svg``, ``pdf``, ``png``) and ``record`` (scale, page size in mm,
         figures quoted).
     """
     import matplotlib
@@ -389,5 +366,5 @@ def make_plate(relaxed_ply: str | os.PathLike, out_dir: str | os.PathLike | None
             kwargs = {"dpi": PREVIEW_DPI} if fmt == "png" else {"metadata": {**meta, "Title": f"{src.name}: plate"}}
             fig.savefig(buf, format=fmt, facecolor="white", **kwargs)
             paths[fmt] = write_bytes_atomic(out / f"{src.name}.plate.{fmt}", buf.getvalue())
-    return StageOutput(paths=paths, summary={**facts, "files": {k: p.name for k, p in paths.items()},
+    return PlateFiles(paths=paths, record={**facts, "files": {k: p.name for k, p in paths.items()},
                                               "inputs": [str(p) for p in src.inputs]})

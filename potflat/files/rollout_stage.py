@@ -1,0 +1,168 @@
+"""The rollout's file stage: read a scan, roll it out, write ``NAME.rollout.ply``,
+``NAME.rollout.json`` (see ``docs/formats.md``) and the profile ``NAME.profile.csv`` /
+``NAME.profile.svg`` (see ``docs/profile.md``). The algorithm is :mod:`potflat.rollout`."""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from potflat import __version__
+from potflat._heap import reuse_freed_memory
+from potflat.errors import InvalidOptionError
+from potflat.files.provenance import provenance
+from potflat.io.atomic import check_output_name, write_json_atomic
+from potflat.io.flat_ply import as_stored, write_flat_ply
+from potflat.io.scan import check_plausible_size, load_scan
+from potflat.mesh.distortion import DistortionSummary
+from potflat.rollout.notes import rollout_notes
+from potflat.rollout.options import RolloutOptions
+from potflat.rollout.profile import write_profile_csv, write_profile_svg
+from potflat.rollout.unroll import RolloutResult, rollout
+from potflat.types import FlatMesh, RolloutMarks, StepClock
+
+
+@dataclass(frozen=True, eq=False)
+class RolloutFiles:
+    """What the rollout's file stage wrote, and what the next stage takes in memory.
+
+    Attributes
+    ----------
+    paths : dict of str to Path
+        ``"ply"``, ``"json"``, ``"profile_csv"``, ``"profile_svg"`` to the file written.
+    record : dict
+        The content of ``NAME.rollout.json``, as written.
+    flat : FlatMesh
+        The flattening exactly as ``NAME.rollout.ply`` holds it (what ``potflat relax``
+        reads from the file).
+    distortion : DistortionSummary
+        Its distortion figures.
+    marks : RolloutMarks
+        What the bake marks on the images (attachment roots, the repeat, folded faces).
+    """
+
+    paths: dict[str, Path]
+    record: dict
+    flat: FlatMesh
+    distortion: DistortionSummary
+    marks: RolloutMarks
+
+
+@reuse_freed_memory()  # (its many large temporaries; its peak is under the relax stage's)
+def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None, *,
+                      name: str | None = None, check: Callable[[FlatMesh], None] | None = None) -> RolloutFiles:
+    """Read a scan, roll it out, write ``NAME.rollout.ply``, ``NAME.rollout.json`` and its profile.
+
+    The rollout's profile (:attr:`RolloutResult.profile`: both walls around its axis,
+    attachments left out) is written as ``NAME.profile.csv`` and ``NAME.profile.svg`` (a
+    section drawing, see ``docs/profile.md``).
+
+    Parameters
+    ----------
+    scan_path : path-like
+        The scan (any format :func:`potflat.io.scan.load_scan` reads).
+    out_dir : path-like
+        Output folder (created if needed).
+    options : RolloutOptions, optional
+    name : str, optional
+        Output stem; default: the scan's file stem.
+    check : callable, optional
+        Called with the flattening before anything is written; it may raise to stop the run
+        (``potflat run`` checks the size of the image to come).
+
+    Returns
+    -------
+    RolloutFiles
+
+    Raises
+    ------
+    InvalidOptionError
+        When an output would overwrite the input, or the name is not a plain file stem.
+    """
+    options = options or RolloutOptions()
+    scan_path, out_dir = Path(scan_path), Path(out_dir)
+    name = check_output_name(name or scan_path.stem, what="name" if name else f"the name of {scan_path}")
+    paths = {"ply": out_dir / f"{name}.rollout.ply", "json": out_dir / f"{name}.rollout.json",
+             "profile_csv": out_dir / f"{name}.profile.csv", "profile_svg": out_dir / f"{name}.profile.svg"}
+    for out in paths.values():
+        if out.resolve() == scan_path.resolve():
+            raise InvalidOptionError(
+                f"output {out} would overwrite the input scan; choose another output folder or --name")
+    clock = StepClock()
+    loaded = load_scan(scan_path, units=options.units, texture="use" if options.texture else "ignore")
+    check_plausible_size(loaded, scan_path)
+    mesh, cleaning = loaded.mesh, loaded.report.as_dict()
+    del loaded
+    clock.lap("load")
+    result = rollout(mesh, options=options)
+    clock.lap("rollout")
+    if check is not None:
+        check(result.flat)
+    del mesh
+    profile = result.profile
+    record = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_record(result),
+              "profile": profile.summary(),
+              "cleaning": cleaning,
+              "files": {role: path.name for role, path in paths.items()}}
+    record["provenance"] = provenance(stage="rollout", inputs=[scan_path], options=options.as_dict())
+    comments = (f"potflat {__version__} rollout of {scan_path.name}",)
+    write_flat_ply(paths["ply"], result.flat, comments=comments)
+    write_profile_csv(profile, paths["profile_csv"])
+    write_profile_svg(profile, paths["profile_svg"], title=f"{name}: profile ({profile.units})")
+    clock.lap("write")
+    record["timings"] = {**clock.total(), "rollout_steps": result.timings}
+    write_json_atomic(paths["json"], record)
+    return RolloutFiles(paths=paths, record=record, flat=as_stored(result.flat, paths["ply"], comments=comments),
+                        distortion=result.distortion, marks=result.marks)
+
+
+def rollout_record(result: RolloutResult) -> dict:
+    """The figures of a rollout as ``NAME.rollout.json`` records them (without the file and
+    provenance fields)."""
+    mesh = result.flat.mesh
+    return {
+        "units": mesh.units,
+        "mm_per_unit": mesh.mm_per_unit,
+        "axis": result.axis.as_dict(),
+        "proxy": result.proxy.as_dict(),
+        "seam": {"angle_deg": result.seam_angle, "method": result.seam_method, "cut": result.region.cut,
+                 "landmark": result.landmark.as_dict() if result.landmark is not None else None,
+                 "theta_origin_deg": result.theta_origin},
+        "region": result.region.as_dict(),
+        "counts": {
+            "vertices": len(mesh.vertices), "faces": len(mesh.faces),
+            "input_faces": result.region.faces_total,
+            "input_vertices_used": int(len(result.vertex_index) - result.seam_vertices - result.split_vertices),
+            "seam_vertices_duplicated": result.seam_vertices,
+            "nonmanifold_vertices_split": result.split_vertices,
+        },
+        "distortion": result.distortion.as_dict(),
+        "importance": result.importance.as_dict() if result.importance is not None else None,
+        "boundary_overlap": result.boundary_overlap,
+        "walls": result.walls.summary(),
+        "attachments": _attachments_summary(result),
+        "trimmed": _trimmed_summary(result, mesh.mm_per_unit),
+        "notes": rollout_notes(result),
+        "folded": result.folds.as_dict() if result.folds is not None else None,
+        "untangled": {"faces": result.untangled_faces, "vertices_moved": result.untangled_vertices,
+                      "reason": "faces folded inside the development by the scan's own creases and "
+                                "slivers, unfolded by moving their vertices to their neighbours' mean"},
+    }
+
+
+def _attachments_summary(result: RolloutResult) -> dict:
+    att = result.attachments
+    summary = att.summary()
+    return {**summary, "kept": result.attachments_kept,
+            "faces_left_out": 0 if result.attachments_kept else att.n_faces,
+            "area_left_out_mm2": 0.0 if result.attachments_kept else summary["area_mm2"],
+            "root_faces": result.attachment_roots.tolist(),
+            "root_faces_note": "rollout faces (indices into the PLY's faces) where a left-out "
+                               "attachment met the wall, to mask in the bake"}
+
+
+def _trimmed_summary(result: RolloutResult, mm_per_unit: float) -> dict:
+    """Counts and area of the folded border faces left out (see :func:`potflat.rollout.unroll.border_folds`)."""
+    return {"faces": len(result.trimmed), "area_mm2": result.trimmed_area * mm_per_unit ** 2,
+            "reason": "border faces that fold the development over: strips edge-on to the proxy "
+                      "(rim top, base underside, break faces) and overlapping border faces"}

@@ -1,0 +1,79 @@
+"""What a user should know of a rollout before relaxing it: its warnings, in words."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from potflat.mesh._kernels import face_geometry
+from potflat.mesh.distortion import face_areas
+
+
+#: Warn when more than this share of the surface is trimmed away as folded border.
+WARN_TRIMMED_FRACTION = 0.05
+
+
+#: Warn when the axis' RMS normal-to-meridian angle (degrees) is above this.
+WARN_AXIS_RMS_DEG = 5.0
+
+
+#: Warn when more than this share of the unrolled area faces along the axis (normal within
+#: :data:`FLANGE_ANGLE_DEG` of it: a foot's top, a base, a flat shoulder): a cylinder, cone or
+#: sphere develops such a ring into a wide, lobed flange.
+WARN_FLANGE_FRACTION, FLANGE_ANGLE_DEG = 0.08, 30.0
+
+
+def rollout_notes(result) -> list[str]:
+    """Warnings for the rollout's JSON and summary (``result`` a
+    :class:`~potflat.rollout.unroll.RolloutResult`): what the user should know before relaxing."""
+    notes = list(result.landmark_notes)
+    if result.region.repeated_from is not None:
+        notes.append(f"{len(result.flat.mesh.faces) - result.region.repeated_from} faces repeat the first "
+                     f"{result.region.overlap_deg:g} degrees after the seam past 360 degrees (their distortion is "
+                     "counted twice in the figures)")
+    if result.distortion.flipped:
+        why = (" (kept attachments: a handle cannot be unrolled without folds; leave them out)"
+               if result.attachments_kept and result.attachments.n_faces else "")
+        if result.distortion.flipped > 0.05 * len(result.flat.mesh.faces):
+            why = (" (they face the other way: the two sides of the wall were not told apart"
+                   + (", the scan's faces were read as pointing inwards" if result.walls.normals_inverted else "")
+                   + "; check the axis (--axis) or try --side inner)")
+        notes.append(f"{result.distortion.flipped} faces stay flipped{why}; the relax stage starts from a fold-free "
+                     "layout (it refuses only a mesh that is not a disk)")
+    folded = result.folds.note() if result.folds is not None else None
+    if folded:
+        notes.append(folded)
+    if result.boundary_overlap:
+        notes.append(f"the border overlaps itself at {result.boundary_overlap} places; the relax stage unfolds it "
+                     "(and refuses a result that still overlaps)")
+    if result.other_objects_faces:
+        notes.append(f"{result.other_objects_faces} faces of separate objects that do not share the vessel's axis "
+                     "(another vessel or fragment in the same file) were left out; split the file or give --axis")
+    if result.trimmed_area:
+        kept = float(face_areas(result.flat.mesh.vertices, result.flat.mesh.faces).sum())
+        share = result.trimmed_area / (result.trimmed_area + kept)
+        if share > WARN_TRIMMED_FRACTION:
+            notes.append(f"{100 * share:.0f} % of the surface was trimmed away as folded border (rim top, base "
+                         "underside, breaks, a foot turned under); if painting is lost there, unroll the painted "
+                         "height only (--band LO HI) or try another --proxy")
+    share = _facing_axis_share(result)
+    if share > WARN_FLANGE_FRACTION and result.proxy.kind != "ortho":
+        notes.append(f"{100 * share:.0f} % of the unrolled surface faces along the axis (a foot, a base or a flat "
+                     "shoulder): the proxy unrolls it as a wide, lobed flange; if the painting is elsewhere, unroll "
+                     "the painted height only (--band LO HI)")
+    if result.axis.rms_angle_deg > WARN_AXIS_RMS_DEG:
+        notes.append(f"the axis fits the surface poorly ({result.axis.rms_angle_deg:.0f} deg RMS between the normals "
+                     "and the meridian planes): the vessel is not very round, or a foot, handle or break misleads the "
+                     "fit, so the rollout is distorted; give the axis (--axis px,py,pz,dx,dy,dz) or unroll the "
+                     "painted height only (--band LO HI)")
+    return notes
+
+
+def _facing_axis_share(result) -> float:
+    """Share of the unrolled 3D area whose normal lies within :data:`FLANGE_ANGLE_DEG` of the axis."""
+    mesh = result.flat.mesh
+    normal, twice, _, _ = face_geometry(np.ascontiguousarray(mesh.vertices, dtype=np.float64),
+                                        np.ascontiguousarray(mesh.faces, dtype=np.int64))  # |normal| = twice
+    along = np.abs(normal @ result.axis.direction) > math.cos(math.radians(FLANGE_ANGLE_DEG)) * twice
+    total = float(twice.sum())
+    return float(twice[along].sum()) / total if total > 0 else 0.0
