@@ -38,11 +38,14 @@ from pathlib import Path
 
 import numpy as np
 
+from potflat._jit import worker_threads
 from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.io.flat_ply import read_flat_ply
+from potflat.io.images import read_mask
+from potflat.mesh.distortion import face_areas, important_faces
+from potflat.raster.render import paint
 from potflat.types import FlatMesh
 
-#: Ways to obtain the importance (:attr:`potflat.rollout.RolloutOptions.importance`).
-METHODS = ("auto", "none", "mask", "texture-mask", "band")
 #: Resolution of the auto detection's rendering (px/mm of the start layout).
 DETECT_PX_PER_MM = 2.0
 #: Radius (Gaussian sigma, mm) of the colour statistics that measure detail.
@@ -81,7 +84,7 @@ class Importance:
     values : (n,) float64 or None
         0 (plain) to 1 (painting) per vertex; None: the whole surface counts alike.
     method : str
-        One of :data:`METHODS`.
+        One of :data:`potflat.rollout.options.IMPORTANCE_METHODS`.
     zone_fraction : float
         Share of the surface's area in the important zone (1 when ``values`` is None).
     reason : str
@@ -100,8 +103,6 @@ class Importance:
 
 
 def _zone_fraction(flat: FlatMesh, values: np.ndarray) -> float:
-    from potflat.mesh.distortion import face_areas, important_faces
-
     area = face_areas(flat.mesh.vertices, flat.mesh.faces)
     total = float(area.sum())
     return float(area[important_faces(flat.mesh.faces, values)].sum()) / total if total > 0 else 0.0
@@ -337,7 +338,6 @@ def auto_importance(flat: FlatMesh) -> Importance:
     mesh = flat.mesh
     if (mesh.texcoords is None or mesh.texture_path is None) and mesh.vertex_colors is None:
         return Importance(None, "auto", 1.0, "no texture or vertex colours: the whole surface counts alike")
-    from potflat.bake.render import paint
 
     px_per_mm = DETECT_PX_PER_MM
     image, origin = paint(flat, px_per_mm, leave_out_untextured=True)  # no colour evidence there
@@ -433,9 +433,6 @@ def image_mask_importance(flat: FlatMesh, mask_path: str | Path, reference: str 
     """
     from scipy.spatial import cKDTree
 
-    from potflat.io.flat_ply import read_flat_ply
-    from potflat.io.images import read_mask
-
     mask_path = Path(mask_path)
     mask = read_mask(mask_path)
     ref_json = _reference_for(mask_path, mask.shape, None if reference is None else Path(reference))
@@ -459,7 +456,6 @@ def image_mask_importance(flat: FlatMesh, mask_path: str | Path, reference: str 
     centroids = RV[RF].mean(axis=1)
     points = flat.mesh.vertices
     k = min(8, len(RF))
-    from potflat._jit import worker_threads
 
     _, cand = cKDTree(centroids).query(points, k=k, workers=worker_threads())
     cand = np.asarray(cand, np.int64).reshape(len(points), k)
@@ -481,7 +477,6 @@ def texture_mask_importance(flat: FlatMesh, mask_path: str | Path) -> Importance
     if mesh.texcoords is None:
         raise InvalidInputError(f"{mesh.source or 'the scan'} has no texture coordinates, so a texture-space mask "
                                 "cannot be placed; paint the mask over a potflat image instead (--importance PNG)")
-    from potflat.io.images import read_mask
 
     mask = read_mask(mask_path)
     h, w = mask.shape
@@ -525,9 +520,3 @@ def band_importance(flat: FlatMesh, height_fraction: np.ndarray, angle_deg: np.n
     if not inside.any():
         raise InvalidOptionError(f"the importance band ({what}) holds no part of the rollout; widen it")
     return _result(flat, inside.astype(np.float64), "band", f"band {what}")
-
-
-def check_method(method: str) -> None:
-    """Refuse an unknown importance method with one line."""
-    if method not in METHODS:
-        raise InvalidOptionError(f"unknown importance {method!r}; use one of {', '.join(METHODS)}")

@@ -155,7 +155,7 @@ def _slow_coverage(ih, ir, tv, nh, nr, max_bins):
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_angle_coverage_kernel_matches_sets(seed):
-    from potflat.mesh._kernels import angle_coverage
+    from potflat.mesh._kernels.grids import angle_coverage
 
     rng = np.random.default_rng(seed)
     ih = rng.integers(0, 6, 400)
@@ -177,7 +177,7 @@ def test_angle_coverage_kernel_matches_sets(seed):
 
 
 def test_lower_medians_kernel():
-    from potflat.mesh._kernels import lower_medians
+    from potflat.mesh._kernels.quantiles import lower_medians
 
     rng = np.random.default_rng(2)
     values = rng.normal(size=60)
@@ -194,7 +194,7 @@ def test_segment_distances_match_numpy_reference():
     """The distance to the segment between the two nearest representatives (where it is at
     most ``join`` long) equals NumPy's vector formulas, bit for bit, a zero-length segment and
     points beyond the ends included."""
-    from potflat.mesh._kernels import segment_distances
+    from potflat.mesh._kernels.grids import segment_distances
 
     rng = np.random.default_rng(12)
     reps = rng.normal(size=(30, 2))

@@ -10,9 +10,8 @@ import pytest
 from PIL import Image
 
 from potflat.bake import BakeOptions, bake
-
-from potflat.files.bake_stage import run_bake_stage
 from potflat.errors import InvalidOptionError
+from potflat.files.bake_stage import run_bake_stage
 from potflat.io.flat_ply import write_flat_ply
 from potflat.types import FlatMesh, Mesh
 
@@ -321,7 +320,7 @@ def test_face_values_columns_match_reference():
 def test_strips_threads_and_reruns_give_identical_images(painted_plane, monkeypatch):
     import numba
 
-    import potflat.bake.render as bake_mod
+    import potflat.raster.render as bake_mod
 
     whole = bake(painted_plane, px_per_mm=4, maps=("stress",))
     monkeypatch.setattr(bake_mod, "STRIP_SAMPLES", 4096)  # many small strips
@@ -364,9 +363,9 @@ def test_options_object_or_keywords_bake_the_same(painted_plane):
 
 def test_refuses_a_surface_reference_of_another_mesh(painted_plane):
     """The 3D side handed to the renderer must be its mesh's (equal arrays count too)."""
-    from potflat.bake.render import Renderer
     from potflat.errors import InvalidInputError
     from potflat.mesh.distortion import SurfaceReference
+    from potflat.raster.render import Renderer
 
     V, F = painted_plane.mesh.vertices, painted_plane.mesh.faces
     with pytest.raises(InvalidInputError, match="not of the flattening's mesh"):
@@ -518,7 +517,7 @@ def test_cli(stage_dir, tmp_path):
 
 
 def test_masked_halving_matches_reference():
-    from potflat.bake.render import _halve_masked
+    from potflat.raster.render import _halve_masked
 
     rng = np.random.default_rng(5)
     img = rng.integers(0, 256, (7, 9, 3), dtype=np.uint8)
@@ -539,7 +538,7 @@ def test_pull_fill_matches_reference():
     coarsest level's the mean of its charts; the texels in the charts keep their values."""
     import cv2
 
-    from potflat.bake.render import _pull_fill
+    from potflat.raster.render import _pull_fill
 
     rng = np.random.default_rng(6)
     for dtype in (np.uint8, np.uint16):

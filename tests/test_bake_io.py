@@ -30,7 +30,7 @@ def _paeth_reference(raw, prev, bpp):
 
 
 def test_paeth_kernel_matches_reference():
-    from potflat.io._kernels import paeth_filter
+    from potflat.io._kernels.ply_png import paeth_filter
 
     rng = np.random.default_rng(0)
     raw = rng.integers(0, 256, (5, 24), dtype=np.uint8)

@@ -9,13 +9,15 @@ import numpy as np
 import pytest
 import scipy.sparse
 import scipy.sparse.csgraph
+from potflat_synthetic.vessels import make_vessel
 
+from potflat.io.flat_ply import read_flat_ply, write_flat_ply
 from potflat.mesh import distortion
 from potflat.mesh.cleaning import clean_mesh
-from potflat.io.flat_ply import read_flat_ply, write_flat_ply
+from potflat.mesh.embedding import signed_areas
 from potflat.rollout.profile import vessel_profile
-from potflat.rollout.unroll import cut_open, rollout, signed_areas
-from potflat_synthetic.vessels import make_vessel
+from potflat.rollout.seam import cut_open
+from potflat.rollout.unroll import rollout
 
 
 def _same(a, b):

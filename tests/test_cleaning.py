@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from potflat.mesh._kernels import edge_table, fan_joins, first_equal_rows, union_find
+from potflat.mesh._kernels.topology import edge_table, fan_joins, first_equal_rows, union_find
 from potflat.mesh.cleaning import CleaningReport, clean_mesh, weld_vertices
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh

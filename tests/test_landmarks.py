@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 import scipy.sparse
 import scipy.sparse.csgraph
-
 from _vessel_meshes import cylinder_with_handle
+
 from potflat.errors import InvalidOptionError
 from potflat.files.rollout_stage import rollout_record as rollout_summary
 from potflat.rollout.unroll import RolloutOptions, rollout
@@ -123,8 +123,8 @@ def test_overlap_repeats_the_start_past_360(vessel):
 def test_overlap_is_marked_in_the_baked_image(vessel, tmp_path):
     from PIL import Image
 
+    from potflat.bake.marks import REPEAT_COLOUR
     from potflat.bake.options import BakeOptions
-    from potflat.bake.render import REPEAT_COLOUR
     from potflat.files.bake_stage import run_bake_stage
     from potflat.io.atomic import write_json_atomic
     from potflat.io.flat_ply import write_flat_ply

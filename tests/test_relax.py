@@ -11,12 +11,25 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 import reference as ref
-from _bench_meshes import SPRINGS_ONLY, bumpy_patch, energy_never_increases, meshes, signed_areas, spring_system
+from _bench_meshes import (
+    SPRINGS_ONLY,
+    bumpy_patch,
+    energy_never_increases,
+    meshes,
+    signed_areas,
+    spring_system,
+)
 
-from potflat.mesh.distortion import summarize
 from potflat.errors import FoldedResultError, InvalidOptionError
-from potflat.relax import RelaxOptions, relax
 from potflat.files.relax_stage import run_relax_stage
+from potflat.mesh._kernels.topology import (
+    flagged_face_vertices,
+    incident_faces,
+    vertex_faces,
+)
+from potflat.mesh.distortion import summarize
+from potflat.relax import RelaxOptions, relax
+from potflat.relax._kernels.steps import max_step_of
 from potflat.types import FlatMesh, Mesh
 
 
@@ -42,10 +55,11 @@ def vessel():
 # --- kernels against the references ---------------------------------------------------------
 
 def test_springs_and_cross_rest_lengths_match_reference(bumpy):
-    from potflat.relax._kernels.springs import cross_rest_lengths, halfedge_springs, vertex_faces
+    from potflat.relax._kernels.springs import cross_rest_lengths
+    from potflat.relax.energy import mesh_springs
 
     V, F = bumpy.mesh.vertices, bumpy.mesh.faces
-    edges, cross, boundary = halfedge_springs(F, *vertex_faces(len(V), F), True)
+    edges, cross, boundary = mesh_springs(F, len(V))
     r_cross = cross_rest_lengths(V, cross)
     want_pairs, want_rest = ref.springs(V, F)
     got = np.concatenate([edges, np.sort(cross[:, :2], axis=1)])
@@ -110,11 +124,11 @@ def test_limiting_faces_are_those_whose_own_bound_is_below_the_cap(bumpy):
     d = 0.5 * np.random.default_rng(1).normal(size=x.shape)
     flags = np.empty(sp.m, bool)
     t = sp.max_step(x, d, cap=1.0, limiting=flags)
-    own = np.array([sp.ks.max_step_of(x, d, sp.faces, np.array([f]), 1.0, 1.0) for f in range(sp.m)])
+    own = np.array([max_step_of(x, d, sp.faces, np.array([f]), 1.0, 1.0) for f in range(sp.m)])
     assert 0 < flags.sum() < sp.m  # a real mix
     assert np.array_equal(flags, own < 1.0)
     assert t == own.min()
-    assert sp.ks.max_step_of(x, d, sp.faces, np.arange(sp.m), 1.0, 1.0) == t
+    assert max_step_of(x, d, sp.faces, np.arange(sp.m), 1.0, 1.0) == t
 
 
 def test_max_step_near_equals_the_full_bound_after_a_local_change(bumpy):
@@ -125,24 +139,22 @@ def test_max_step_near_equals_the_full_bound_after_a_local_change(bumpy):
         d = 0.5 * rng.normal(size=x.shape)
         flags = np.empty(sp.m, bool)
         sp.max_step(x, d, cap=1.0, limiting=flags)
-        verts = sp.ks.flagged_face_vertices(flags, sp.faces, np.zeros(sp.n, bool))
+        verts = flagged_face_vertices(flags, sp.faces, np.zeros(sp.n, bool))
         d[verts] = 0.5 * rng.normal(size=(len(verts), 2))  # changed at the limiting faces' vertices only
         assert sp.max_step_near(x, d, verts, 1.0, 1.0) == sp.max_step(x, d, cap=1.0)
 
 
 def test_flagged_face_vertices_and_incident_faces_match_numpy():
-    from potflat.relax._kernels import springs as ks
-
     rng = np.random.default_rng(3)
     F = np.array([rng.choice(40, 3, replace=False) for _ in range(200)], np.int32)
     flags = rng.random(200) < 0.1
     seen = np.zeros(40, bool)
-    verts = ks.flagged_face_vertices(flags, F, seen)
+    verts = flagged_face_vertices(flags, F, seen)
     assert np.array_equal(np.sort(verts), np.unique(F[flags]))
     assert not seen.any()  # the work space is left clean for the next call
-    assert len(ks.flagged_face_vertices(np.zeros(200, bool), F, seen)) == 0
-    vf_ptr, vf_tri = ks.vertex_faces(40, F)
-    got = ks.incident_faces(verts, vf_ptr, vf_tri)
+    assert len(flagged_face_vertices(np.zeros(200, bool), F, seen)) == 0
+    vf_ptr, vf_tri = vertex_faces(40, F)
+    got = incident_faces(verts, vf_ptr, vf_tri)
     want = np.concatenate([np.nonzero((F == v).any(axis=1))[0] for v in verts])
     assert np.array_equal(np.sort(got), np.sort(want))
 
@@ -638,9 +650,10 @@ def test_a_boundary_left_touching_itself_is_not_a_crossing_after_the_final_turn(
     (touching, which the line search allows); the final rigid turn to the rollout's orientation
     then made that pair test as crossing, and relax refused its own fold-free result. Seen on
     the painted-figures benchmark's aryballos panel with ``max_anisotropy`` 1.3."""
+    from potflat_synthetic.vessels import make_vessel, write_obj
+
     from potflat.io.scan import load_scan
     from potflat.rollout import rollout
-    from potflat_synthetic.vessels import make_vessel, write_obj
 
     vessel = make_vessel("aryballos", n_vertices=40000, seed=0, painting="panel", texture_size=2048)
     rolled = rollout(load_scan(write_obj(vessel, tmp_path / "aryballos.obj")).mesh)

@@ -124,7 +124,8 @@ def test_fused_passes_match_numpy_and_do_not_depend_on_threads():
 
 
 def test_neighbour_means_count_each_edge_neighbour_once():
-    from potflat.relax._kernels.springs import neighbour_means, vertex_faces
+    from potflat.mesh._kernels.topology import vertex_faces
+    from potflat.relax._kernels.springs import neighbour_means
 
     faces = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1], [1, 4, 5]])
     x = np.random.default_rng(5).normal(size=(6, 2))
@@ -138,7 +139,7 @@ def test_neighbour_means_count_each_edge_neighbour_once():
 
 
 def test_faces_in_vertex_order_renumber_and_sort_stably_by_the_smallest_corner():
-    from potflat.relax._kernels.springs import faces_in_vertex_order
+    from potflat.mesh._kernels.topology import faces_in_vertex_order
 
     rng = np.random.default_rng(7)
     faces = rng.integers(0, 40, size=(300, 3)).astype(np.int64)  # many ties, unused vertices
@@ -150,6 +151,7 @@ def test_faces_in_vertex_order_renumber_and_sort_stably_by_the_smallest_corner()
 
 
 def test_face_barrier_visits_only_blocks_with_squeezed_faces_and_matches_the_full_scan():
+    from potflat.mesh._kernels.geometry import signed_areas_2d
     from potflat.relax._kernels import springs as ks
 
     rng = np.random.default_rng(3)
@@ -158,16 +160,17 @@ def test_face_barrier_visits_only_blocks_with_squeezed_faces_and_matches_the_ful
     faces = rng.integers(0, n, size=(2 * m, 3)).astype(np.int32)
     faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])][:m]
     areas = np.empty(m)
-    ks.face_areas(x, faces, areas)
+    signed_areas_2d(x, faces, areas)
     faces[areas < 0] = faces[areas < 0][:, ::-1]  # positively oriented
     faces[m - 1] = faces[m - 1, ::-1]  # but the last face: flipped (infinite barrier)
     a_ref = np.full(m, 0.02)
     a_ref[: 2 * ks.BLOCK] = 1e-30  # the first two blocks: every face far above the barrier
     a_ref[100] = 1e3  # ... but one
     below = np.empty(-(-m // ks.BLOCK), np.int64)
-    ks.face_terms(x, faces, a_ref, 0.5, np.empty((0, 5)), np.zeros(6), areas, below, np.empty((0, 4)), np.empty(0))
+    ks.face_terms(x, faces, a_ref, 0.5, np.empty((0, 5)), 0.0, 0.0, 0.0, 0.0, np.inf, 0.05, areas, below,
+                  np.empty((0, 4)), np.empty(0))
     want = np.empty(m)
-    ks.face_areas(x, faces, want)
+    signed_areas_2d(x, faces, want)
     np.testing.assert_array_equal(areas, want)
     squeezed = ~(areas >= 0.5 * a_ref)
     np.testing.assert_array_equal(below, np.add.reduceat(squeezed.astype(np.int64), np.arange(0, m, ks.BLOCK)))

@@ -21,14 +21,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import test_batch_fakes as fakes
+from potflat_cli.main import app
 from typer.testing import CliRunner
 
-import test_batch_fakes as fakes
+from potflat.errors import FoldedResultError, InvalidInputError
 from potflat.files.batch.config import BatchFileError, load_batch
 from potflat.files.batch.execution import run_batch
 from potflat.files.batch.manifest import MANIFEST, is_complete, job_key, read_manifest
-from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
-from potflat_cli.main import app
 
 runner = CliRunner()
 
@@ -269,8 +269,8 @@ def test_a_texture_over_the_memory_budget_is_refused_with_its_size(tmp_path):
 def test_utf8_and_latin1_names_in_obj_mtl_and_stage_files(tmp_path):
     from PIL import Image
 
-    from potflat.io.scan import load_scan
     from potflat.io.flat_ply import read_flat_ply, write_flat_ply
+    from potflat.io.scan import load_scan
     from potflat.types import FlatMesh
 
     folder = tmp_path / "Fund ü"
@@ -341,9 +341,9 @@ def test_a_texture_symlink_loop_is_one_line(tmp_path):
 def test_a_sidecar_of_the_wrong_type_does_not_break_the_next_stage(tmp_path, sidecar):
     from potflat.bake import BakeOptions
     from potflat.files.bake_stage import run_bake_stage
+    from potflat.files.relax_stage import run_relax_stage
     from potflat.io.flat_ply import write_flat_ply
     from potflat.relax import RelaxOptions
-    from potflat.files.relax_stage import run_relax_stage
     from potflat.types import FlatMesh, Mesh
 
     x, y = np.meshgrid(np.linspace(0, 40, 6), np.linspace(0, 30, 5))
@@ -370,9 +370,10 @@ def test_overflowing_coordinates_are_named(tmp_path):
 
 
 def test_paper_dynamics_that_diverge_stop_with_one_line_and_write_nothing(tmp_path, monkeypatch):
-    from potflat.relax import energy as relax_mod, options as relax_options, parameters as relax_parameters
-    from potflat.io.flat_ply import write_flat_ply
     from potflat.files.relax_stage import run_relax_stage
+    from potflat.io.flat_ply import write_flat_ply
+    from potflat.relax import energy as relax_mod
+    from potflat.relax import options as relax_options
     from potflat.types import FlatMesh, Mesh
 
     x, y = np.meshgrid(np.linspace(0, 40, 8), np.linspace(0, 30, 7))
@@ -392,7 +393,8 @@ def test_paper_dynamics_that_diverge_stop_with_one_line_and_write_nothing(tmp_pa
 def test_the_paper_step_bounds_the_largest_eigenvalue():
     """dt = 1.9 / sqrt(bound) is stable when bound >= the spring Laplacian's largest
     eigenvalue; the earlier power-iteration estimate came from below (diverged on real scans)."""
-    from potflat.relax import energy as relax_mod, options as relax_options, parameters as relax_parameters
+    from potflat.relax import energy as relax_mod
+    from potflat.relax import parameters as relax_parameters
     from potflat.types import FlatMesh, Mesh
 
     rng = np.random.default_rng(1)
@@ -501,7 +503,6 @@ def _exit_code_of_stopped(command) -> int:
     """Run ``command`` (a :func:`user_errors` command that records a stop signal) and return
     the exit code it ends with; the recorded signals are cleared afterwards."""
     import typer
-
     from potflat_cli._errors import STOP
 
     try:
@@ -670,9 +671,9 @@ def test_large_trims_and_poor_axis_fits_are_warned_with_the_option():
 
 
 def test_a_foot_unrolled_into_a_flange_is_warned_with_the_option():
-    from potflat.rollout import rollout
     from potflat_synthetic.vessels import make_vessel
 
+    from potflat.rollout import rollout
     from potflat.rollout.notes import rollout_notes as _notes
 
     kylix = rollout(make_vessel("kylix", n_vertices=4000, seed=1).mesh, importance="none")
@@ -686,9 +687,9 @@ def test_compile_note_on_a_first_run(tmp_path, monkeypatch):
     import pickle
 
     import numba
+    from potflat_cli._stage import with_compile_note
 
     import potflat.relax._kernels.springs
-    from potflat_cli._stage import with_compile_note
 
     monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "empty"))
     assert "first run: compiling" in with_compile_note("rolling out")
@@ -711,9 +712,8 @@ def test_compile_note_is_a_plain_line_when_stderr_is_not_a_terminal(tmp_path, mo
     import io
 
     import numba
-    from rich.console import Console
-
     from potflat_cli._stage import say_compiling
+    from rich.console import Console
 
     monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "empty"))
     log = io.StringIO()

@@ -6,14 +6,15 @@ import pytest
 import scipy.sparse
 import scipy.sparse.csgraph
 import trimesh
-
 from _revolve import cone, cylinder, vase
-from potflat.rollout.axis import _boundary_loops
-from potflat.mesh.distortion import face_distortion
+
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.io.flat_ply import read_flat_ply
-from potflat.rollout.unroll import RolloutOptions, cut_open, rollout
 from potflat.files.rollout_stage import run_rollout_stage
+from potflat.io.flat_ply import read_flat_ply
+from potflat.mesh.distortion import face_distortion
+from potflat.rollout.axis import _boundary_loops
+from potflat.rollout.seam import cut_open
+from potflat.rollout.unroll import RolloutOptions, rollout
 
 #: The shared real scans (CI has ../shared beside the repository).
 REAL = Path(__file__).resolve().parents[2] / "shared/data/real"
@@ -335,7 +336,7 @@ def test_cut_open_matches_the_sorting_reference(seed):
 def test_texel_spread_matches_numpy(shape):
     """The seam's brightness spread per face: the same bits as NumPy's std of the four
     texels (corners and their mean, coordinates wrapped), also outside [0, 1]."""
-    from potflat.mesh._kernels import texel_spread
+    from potflat.mesh._kernels.geometry import texel_spread
 
     rng = np.random.default_rng(len(shape) + shape[0])
     img = rng.integers(0, 256, size=shape, dtype=np.uint8)
@@ -485,7 +486,7 @@ def test_units_declared_by_the_file_are_kept_unless_given(tmp_path):
 def test_corner_angles_match_numpy_reference():
     """Each corner's angle unwrapped to within pi of its face's, as the NumPy formula gives it
     (Python's float modulo), at the wrap points too."""
-    from potflat.rollout.unroll import _corner_angles
+    from potflat.rollout.seam import _corner_angles
 
     rng = np.random.default_rng(4)
     theta_v = rng.random(60) * 2 * np.pi

@@ -5,20 +5,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _vessel_meshes import revolve
-from typer.testing import CliRunner
-
-from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.io.flat_ply import read_flat_ply
-from potflat.mesh.boundary import edges_and_boundary
-from potflat.rollout.unroll import (
-    RolloutOptions,
-    border_folds,
-    crossing_segments,
-    rollout,
-    signed_areas,
-    untangle,
-)
-from potflat.files.rollout_stage import run_rollout_stage
 from potflat_synthetic.vessels import (
     PART_BASE,
     PART_HANDLE,
@@ -27,8 +13,17 @@ from potflat_synthetic.vessels import (
     make_vessel,
     write_ply_colored,
 )
-from potflat.types import Mesh
+from typer.testing import CliRunner
+
+from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.files.rollout_stage import run_rollout_stage
+from potflat.io.flat_ply import read_flat_ply
+from potflat.mesh.boundary import edges_and_boundary
+from potflat.mesh.embedding import signed_areas
+from potflat.rollout.border import border_folds, crossing_segments, untangle
+from potflat.rollout.unroll import RolloutOptions, rollout
 from potflat.rollout.walls import OUTER
+from potflat.types import Mesh
 
 #: The shared real scans (CI has ../shared beside the repository).
 REAL = Path(__file__).resolve().parents[2] / "shared/data/real"
@@ -258,8 +253,9 @@ def test_thick_sherd_unrolls_its_painted_face_only():
 def test_a_separate_inner_wall_is_kept_but_a_second_vessel_is_left_out():
     """Pieces sharing the vessel's axis stay (an inner wall scanned apart); a second vessel
     beside it is left out, with a note."""
-    from potflat.rollout import rollout
     from potflat_synthetic.vessels import make_vessel
+
+    from potflat.rollout import rollout
     from potflat.types import Mesh
 
     a = make_vessel("amphora", n_vertices=3000, seed=1, texture_size=64, pose=False)

@@ -21,7 +21,7 @@ def _private_tempdir(tmp_path, monkeypatch):
     folder: make a new one per test, in tmp_path."""
     import tempfile
 
-    from potflat.io import scan as scan_io
+    from potflat.io import raw as scan_io
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     monkeypatch.setattr(scan_io, "_PRIVATE_CACHE", [])
@@ -278,7 +278,7 @@ def test_obj_same_texture_in_two_materials_is_one_atlas(tmp_path):
 
 
 def test_obj_float_parser_matches_python(tmp_path):
-    from potflat.io.scan import parse_obj
+    from potflat.io.obj import parse_obj
 
     rng = np.random.default_rng(3)
     vals = np.concatenate([rng.normal(0, 1e3, 60), rng.normal(0, 1e-4, 30), [0.0, -0.0, 1e-300, 123456789.0]])
@@ -321,7 +321,7 @@ def _obj_of_every_kind(rng) -> bytes:
 
 
 def test_obj_ranges_parse_like_one_range():
-    from potflat.io.scan import parse_obj
+    from potflat.io.obj import parse_obj
 
     rng = np.random.default_rng(11)
     for text in (_obj_of_every_kind(rng), _obj_of_every_kind(rng)[:-1], b"v 0 0 0", b""):

@@ -80,7 +80,7 @@ def test_as_stored_shares_texture_coordinates_already_at_the_files_precision(tmp
 
 
 def test_float32_exactness_matches_numpy():
-    from potflat.io._kernels import float32_exact
+    from potflat.io._kernels.ply_png import float32_exact
 
     rng = np.random.default_rng(2)
     stored = rng.random(50).astype(np.float32).astype(np.float64)

@@ -103,7 +103,7 @@ def test_a_scan_with_every_face_textured_has_no_flag(tmp_path, small_vessel):
 def test_untextured_faces_are_baked_as_relief_never_the_corner_texel(tmp_path, small_vessel):
     from potflat import load_scan
     from potflat.bake import bake
-    from potflat.bake.render import Renderer
+    from potflat.raster.render import Renderer
     from potflat.rollout import rollout
 
     untextured = _patches(small_vessel)
@@ -127,9 +127,10 @@ def test_auto_importance_ignores_untextured_faces(tmp_path):
     """A cone painted in a belt, a quarter of its surface in scattered untextured blocks whose
     (0, 0) texel is loud: the painted zone found is about the one found without them (before:
     their borders were detail, 63% of the surface important instead of 13%)."""
+    from potflat_synthetic.vessels import make_vessel
+
     from potflat import load_scan
     from potflat.rollout import rollout
-    from potflat_synthetic.vessels import make_vessel
 
     vessel = make_vessel("cone", n_vertices=8000, seed=3, painting="belt", shading=True)
     none = np.zeros(len(vessel.mesh.faces), bool)
@@ -149,13 +150,12 @@ def test_the_flag_survives_the_stage_files_from_rollout_to_bake(tmp_path, small_
     from PIL import Image
 
     from potflat.bake import BakeOptions
-
     from potflat.files.bake_stage import run_bake_stage
+    from potflat.files.relax_stage import run_relax_stage
+    from potflat.files.rollout_stage import run_rollout_stage
     from potflat.io.flat_ply import read_flat_ply
     from potflat.relax import RelaxOptions
     from potflat.rollout import RolloutOptions
-    from potflat.files.relax_stage import run_relax_stage
-    from potflat.files.rollout_stage import run_rollout_stage
 
     untextured = _patches(small_vessel)
     (tmp_path / "scan").mkdir()
@@ -190,9 +190,8 @@ def test_a_flattening_without_untextured_faces_writes_no_flag(tmp_path, small_ve
 @pytest.mark.parametrize("command", ["rollout", "run"])
 def test_the_command_line_says_which_faces_have_no_texture(tmp_path, small_vessel, command):
     """The loader's warnings reach the user on the terminal, not only the JSON."""
-    from typer.testing import CliRunner
-
     from potflat_cli.main import app
+    from typer.testing import CliRunner
 
     untextured = _patches(small_vessel)
     scan = _obj_with_untextured(small_vessel, tmp_path / "pot.obj", untextured, "no vt")
@@ -207,7 +206,7 @@ def test_the_seam_choice_reads_no_colour_on_untextured_faces(tmp_path):
     whatever their (meaningless) texture coordinates point at."""
     import cv2
 
-    from potflat.rollout.unroll import _luminance_variation
+    from potflat.rollout.seam import _luminance_variation
 
     halves = np.zeros((64, 64, 3), np.uint8)
     halves[:, 32:] = 255  # black left, white right: a face reading both halves has spread

@@ -11,10 +11,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from potflat.bake._kernels import heat_rgba
+from potflat.mesh import distortion
 from potflat.mesh.distortion import bounds, percent_from_log
-
-from potflat.types import FlatMesh
 from potflat.mesh.tolerances import ROUNDING
+from potflat.types import FlatMesh
 
 #: Longest side in pixels of each baked panel of the comparison sheet.
 SHEET_PANEL_PX = 900
@@ -96,7 +97,6 @@ def map_scale(name: str, values: np.ndarray, *, hi: float | None = None) -> MapS
 
 def colorize(values: np.ndarray, scale: MapScale, coverage: np.ndarray) -> np.ndarray:
     """Heat map rows: (k, w) values and coverage -> (k, w, 4) uint8 (transparent outside)."""
-    from potflat.bake._kernels import heat_rgba
 
     values = np.ascontiguousarray(values, dtype=np.float32)
     out = np.empty(values.shape + (4,), np.uint8)
@@ -107,7 +107,6 @@ def colorize(values: np.ndarray, scale: MapScale, coverage: np.ndarray) -> np.nd
 
 def overlay(rgb: np.ndarray, values: np.ndarray, scale: MapScale, coverage: np.ndarray) -> np.ndarray:
     """Heat map over the greyscale painting: (k, w, 3) rgb in [0, 1], (k, w) values -> (k, w, 4) uint8."""
-    from potflat.bake._kernels import heat_rgba
 
     grey = np.ascontiguousarray(rgb @ np.array([0.299, 0.587, 0.114], np.float32), dtype=np.float32)
     out = np.empty(values.shape + (4,), np.uint8)
@@ -358,7 +357,6 @@ def free_spot(covered: np.ndarray, box: tuple[int, int], margin: int) -> tuple[i
 
 def _zone_line(flat: FlatMesh) -> str:
     """The distortion inside the important zone and outside it, in one line for a sheet."""
-    from potflat.mesh import distortion
 
     zones = distortion.zone_figures(flat.mesh.vertices, flat.uv, flat.mesh.faces, flat.importance)
     parts = []
@@ -390,8 +388,6 @@ def comparison_sheet(panels, *, title: str = "") -> bytes:
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-
-    from potflat.mesh import distortion
 
     panels = [(label, res, distortion.vertex_length_error(flat.mesh.vertices, flat.uv, flat.mesh.faces),
                distortion.summarize(flat.mesh.vertices, flat.uv, flat.mesh.faces),

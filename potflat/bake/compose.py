@@ -10,19 +10,18 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from potflat.bake import annotate
-from potflat.bake.options import BakeOptions
-from potflat.bake.render import (
+from potflat.bake.marks import (
     FOLDED_COLOUR,
     REPEAT_COLOUR,
-    Renderer,
     attachment_rows,
     folded_hatch,
     image_figures,
     repeat_line,
-    rgba8,
     scale_layer_on_image,
 )
+from potflat.bake.options import BakeOptions
 from potflat.errors import InvalidOptionError
+from potflat.raster.render import Renderer, rgba8
 from potflat.types import FlatMesh, RolloutMarks
 
 

@@ -17,8 +17,8 @@ from potflat import __version__
 from potflat._heap import reuse_freed_memory
 from potflat.bake import annotate
 from potflat.bake.compose import Composition, bake
+from potflat.bake.marks import FOLDED_COLOUR, REPEAT_COLOUR, image_figures, rgba16
 from potflat.bake.options import BakeOptions
-from potflat.bake.render import FOLDED_COLOUR, REPEAT_COLOUR, Grid, Renderer, image_figures, rgba16
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.files.names import rollout_json_beside, stage_name
 from potflat.files.plate import make_plate
@@ -28,6 +28,7 @@ from potflat.io.atomic import write_bytes_atomic, write_json_atomic
 from potflat.io.flat_ply import read_flat_ply
 from potflat.io.images import PngWriter, write_png, write_tiff_rows
 from potflat.io.obj import write_textured_obj
+from potflat.raster.render import Grid, Renderer
 from potflat.types import FlatMesh, RolloutMarks, StepClock
 
 

@@ -12,15 +12,20 @@ from typing import Any
 import numpy as np
 
 from potflat.bake.options import BakeOptions
-from potflat.bake.render import image_size
 from potflat.errors import InvalidOptionError
 from potflat.files.bake_stage import BakeFiles, run_bake_stage
 from potflat.files.options import RunOptions, resolve_options
 from potflat.files.relax_stage import RelaxFiles, run_relax_stage
 from potflat.files.rollout_stage import RolloutFiles, run_rollout_stage
-from potflat.io.atomic import check_output_name, output_lock, remove_stale_parts, write_json_atomic
+from potflat.io.atomic import (
+    check_output_name,
+    output_lock,
+    remove_stale_parts,
+    write_json_atomic,
+)
 from potflat.io.scan import check_scan_file
 from potflat.mesh.distortion import bounds
+from potflat.raster.render import image_size
 from potflat.types import FlatMesh
 
 #: The distortion figures a batch summary reports (keys of DistortionSummary).

@@ -27,9 +27,17 @@ from pathlib import Path
 
 import numpy as np
 
+from potflat import __version__
+from potflat.bake import bake
+from potflat.bake.annotate import nice_length
 from potflat.bake.options import parse_scale
 from potflat.errors import InvalidInputError
+from potflat.files.names import stage_name
+from potflat.io.atomic import write_bytes_atomic
+from potflat.io.flat_ply import read_flat_ply
 from potflat.mesh.distortion import distortion_words, painted_zone_distortion
+from potflat.rollout.profile import _runs, read_profile_csv, section_polygon
+from potflat.types import FlatMesh
 
 #: Scales tried when none is given, largest first (drawing mm per vessel mm).
 PLATE_SCALES = (1.0, 1 / 2, 1 / 3, 1 / 4, 1 / 5, 1 / 10, 1 / 20, 1 / 50)
@@ -103,10 +111,6 @@ def _read_rgba(path: Path) -> np.ndarray:
 
 
 def _sources(relaxed_ply: Path, name: str | None, bake_dir: Path) -> _Sources:
-    from potflat.io.flat_ply import read_flat_ply
-    from potflat.rollout.profile import read_profile_csv
-    from potflat.files.names import stage_name
-
     if not relaxed_ply.name.endswith(".relaxed.ply"):
         raise InvalidInputError(f"{relaxed_ply.name}: the plate is made from NAME.relaxed.ply (with the rollout, "
                                 "relax and bake files beside it); give that file")
@@ -170,8 +174,6 @@ def outside_view(flat, rollout_summary: dict, px_per_mm: float):
     BakeResult
         ``uv`` frame: scan units, ``x`` from the axis, ``y`` from the profile's origin.
     """
-    from potflat.bake import bake
-    from potflat.types import FlatMesh
 
     mesh = flat.mesh
     a = np.asarray(rollout_summary["axis"]["direction"], np.float64)
@@ -210,8 +212,6 @@ def _scale_bar(ax, x0: float, y0: float, scale: float, max_paper_mm: float) -> f
     """Draw a bar of alternating blocks at paper ``(x0, y0)`` (mm, bottom left); returns its paper length."""
     from matplotlib.patches import Rectangle
 
-    from potflat.bake.annotate import nice_length
-
     length = nice_length(max_paper_mm / scale)  # vessel mm
     lead = round(length / 10 ** math.floor(math.log10(length)))
     blocks = 4 if lead == 2 else 5
@@ -228,9 +228,6 @@ def _scale_bar(ax, x0: float, y0: float, scale: float, max_paper_mm: float) -> f
 def compose_plate(src: _Sources, scale: float | None):
     """The plate as a matplotlib figure sized in millimetres; returns ``(figure, facts)``."""
     from matplotlib.figure import Figure
-
-    from potflat import __version__
-    from potflat.rollout.profile import _runs, section_polygon
 
     prof = src.profile
     ro = prof.outer_radius
@@ -351,8 +348,6 @@ def make_plate(relaxed_ply: str | os.PathLike, out_dir: str | os.PathLike | None
         figures quoted).
     """
     import matplotlib
-
-    from potflat.io.atomic import write_bytes_atomic
 
     relaxed_ply = Path(relaxed_ply)
     out = Path(out_dir) if out_dir is not None else relaxed_ply.parent

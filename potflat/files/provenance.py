@@ -9,6 +9,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import potflat
+
 
 def file_sha256(path: str | os.PathLike, *, chunk: int = 1 << 20) -> str:
     """SHA-256 hex digest of a file's bytes."""
@@ -28,8 +30,6 @@ def options_hash(options: dict[str, Any]) -> str:
 def versions() -> dict[str, str]:
     """Versions of potflat, Python and the numerical libraries that shape the result."""
     import numpy
-
-    import potflat
 
     out = {"potflat": potflat.__version__, "python": sys.version.split()[0],
            "numpy": numpy.__version__, "platform": platform.platform()}

@@ -162,7 +162,7 @@ def _attachments_summary(result: RolloutResult) -> dict:
 
 
 def _trimmed_summary(result: RolloutResult, mm_per_unit: float) -> dict:
-    """Counts and area of the folded border faces left out (see :func:`potflat.rollout.unroll.border_folds`)."""
+    """Counts and area of the folded border faces left out (see :func:`potflat.rollout.border.border_folds`)."""
     return {"faces": len(result.trimmed), "area_mm2": result.trimmed_area * mm_per_unit ** 2,
             "reason": "border faces that fold the development over: strips edge-on to the proxy "
                       "(rim top, base underside, break faces) and overlapping border faces"}

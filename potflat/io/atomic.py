@@ -9,7 +9,7 @@ import tempfile
 from pathlib import Path
 from typing import Any, Iterator
 
-from potflat.errors import InvalidInputError
+from potflat.errors import InvalidInputError, InvalidOptionError
 
 
 @contextlib.contextmanager
@@ -117,7 +117,6 @@ def check_output_name(name: str, *, what: str = "name") -> str:
     (``..``, hidden files) or a reserved name (:data:`RESERVED_NAMES`, :data:`DEVICE_NAMES`; without case),
     at most :data:`MAX_NAME_BYTES` bytes in UTF-8.
     """
-    from potflat.errors import InvalidOptionError
 
     shown = repr(name)
     if not isinstance(name, str) or not name.strip():
@@ -146,8 +145,6 @@ def output_lock(folder: str | os.PathLike, *, what: str = "potflat") -> Iterator
     folder too if this call created it and nothing was written).
     """
     import fcntl
-
-    from potflat.errors import InvalidOptionError
 
     folder = Path(folder)
     lock = folder / LOCK_NAME

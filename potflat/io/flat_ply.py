@@ -18,10 +18,13 @@ from pathlib import Path
 
 import numpy as np
 
-from potflat.mesh.distortion import row_blocks
 from potflat.errors import InvalidInputError
+from potflat.io._kernels.ply_png import float32_exact
 from potflat.io.atomic import atomic_path
+from potflat.io.ply import _ply_header
+from potflat.mesh.distortion import row_blocks
 from potflat.types import UNITS_MM, FlatMesh, Mesh
+
 
 def _texture_target(texture: Path, ply_path: Path) -> Path:
     """Where :func:`_place_texture` makes ``texture`` available beside ``ply_path``."""
@@ -170,8 +173,6 @@ def as_stored(flat: FlatMesh, path: str | os.PathLike, *, comments: tuple[str, .
     mesh = flat.mesh
     texcoords, texture_path, untextured = None, None, None
     if mesh.texture_path is not None and mesh.texcoords is not None:
-        from potflat.io._kernels import float32_exact
-
         texcoords = mesh.texcoords
         if not float32_exact(np.ascontiguousarray(texcoords, dtype=np.float64).reshape(-1)):
             texcoords = texcoords.astype(np.float32).astype(np.float64)
@@ -202,7 +203,6 @@ def read_flat_ply(path: str | os.PathLike) -> FlatMesh:
     InvalidInputError
         When the file is missing, truncated, or not a triangle stage PLY.
     """
-    from potflat.io.scan import _ply_header
 
     path = Path(path)
     try:

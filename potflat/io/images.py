@@ -24,6 +24,7 @@ import numpy as np
 from zlib_ng import zlib_ng
 
 from potflat.errors import InvalidInputError
+from potflat.io._kernels.ply_png import paeth_filter
 from potflat.io.atomic import atomic_path
 
 #: Deflate level of the PNG encoder (6 is libpng's default; 9 is much slower for ~2% less).
@@ -196,7 +197,6 @@ class PngWriter:
         raw = rows.reshape(len(rows), -1)
         if self.bits == 16:
             raw = raw.astype(">u2").view(np.uint8).reshape(len(rows), -1)
-        from potflat.io._kernels import paeth_filter
 
         raw = np.require(raw, requirements=["C", "W"])  # one kernel signature (read-only rows: copied)
         filtered = np.empty((raw.shape[0], raw.shape[1] + 1), np.uint8)

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from potflat.mesh import _segments
+from potflat.mesh._kernels.topology import edge_table
 from potflat.mesh.tolerances import DEGENERATE
 
 #: Finest grid of the search: the cell is at least the layout's extent over this.
@@ -48,7 +50,6 @@ def crossing_pairs(uv: np.ndarray, seg: np.ndarray, *, max_pairs: int | None = N
     (k, 2) int64
         Indices into ``seg`` of each crossing pair.
     """
-    from potflat.mesh import _segments  # Numba: imported on first use
 
     uv, seg = _coerced(uv, seg)
     if len(seg) < 2:
@@ -75,7 +76,6 @@ def edges_and_boundary(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarra
     owner : (b,) int64
         The face of each segment.
     """
-    from potflat.mesh._kernels import edge_table  # Numba: imported on first use
 
     F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
     _, edges, count, halves = edge_table(F, int(n))

@@ -25,14 +25,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from potflat.mesh._kernels import (
-    edge_table,
-    face_geometry,
-    fan_joins,
-    first_equal_rows,
-    propagate_orientation,
-    union_find,
-)
+from potflat.mesh._kernels.geometry import face_geometry
+
+from potflat.mesh._kernels.topology import edge_table, fan_joins, first_equal_rows, propagate_orientation, union_find
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
 from potflat.mesh.distortion import bounds

@@ -23,8 +23,14 @@ from functools import cached_property
 
 import numpy as np
 
-from potflat.types import FlatMesh
+from potflat.mesh._kernels.geometry import edge_lengths, face_frames, faces_reaching, flat_face_maps, triangle_areas, valid_face_figures
+
+from potflat.mesh._kernels.quantiles import select_weighted_quantiles
+
+from potflat.mesh._kernels.topology import mark_face_edges
 from potflat.mesh.tolerances import ROUNDING
+from potflat.mesh._kernels.topology import edge_table
+from potflat.types import FlatMesh
 
 #: Relative 3D area below which a face counts as degenerate (fraction of the mean face area).
 DEGENERATE_AREA_FRACTION = 1e-12
@@ -168,24 +174,18 @@ class SurfaceReference:
     @cached_property
     def edge_length_3d(self) -> np.ndarray:
         """3D length of each of :attr:`edges`. Shape (e,) float64."""
-        from potflat.mesh._kernels import edge_lengths
 
         return edge_lengths(self.vertices, self.edges)
 
     @cached_property
     def _frames(self) -> np.ndarray:
-        from potflat.mesh._kernels import face_frames
-
         return face_frames(self.vertices, self.faces, self.area_3d, self.valid)
 
     def _flat_lengths(self, uv: np.ndarray) -> np.ndarray:
-        from potflat.mesh._kernels import edge_lengths
-
         return edge_lengths(np.ascontiguousarray(uv, dtype=np.float64), self.edges)
 
     def face_distortion(self, uv: np.ndarray) -> FaceDistortion:
         """Per-face distortion of the map to ``uv`` ((n, 2) float64)."""
-        from potflat.mesh._kernels import flat_face_maps
 
         area_2d, sigma_max, sigma_min = flat_face_maps(np.ascontiguousarray(uv, dtype=np.float64),
                                                        self.faces, self._frames)
@@ -238,7 +238,6 @@ class SurfaceReference:
         fd, edge_error : optional
             :meth:`face_distortion` and :meth:`edge_length_error` of ``uv`` when the caller has them.
         """
-        from potflat.mesh._kernels import mark_face_edges
 
         part = np.asarray(part, bool)
         area = self.area_3d[part]
@@ -262,7 +261,6 @@ def _nondegenerate(area_3d: np.ndarray) -> np.ndarray:
 
 def _summary(fd: FaceDistortion, err: np.ndarray) -> DistortionSummary:
     """:class:`DistortionSummary` of per-face figures ``fd`` and relative edge-length errors ``err`` ((e,))."""
-    from potflat.mesh._kernels import valid_face_figures
 
     m = len(fd.area_3d)
     w, area_2d, ratio, an = (np.empty(m) for _ in range(4))
@@ -291,7 +289,6 @@ def _summary(fd: FaceDistortion, err: np.ndarray) -> DistortionSummary:
 
 def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """3D area of each face (a parallel kernel, no temporaries). Shape (m,) float64."""
-    from potflat.mesh._kernels import triangle_areas
 
     return triangle_areas(np.ascontiguousarray(vertices, dtype=np.float64),
                           np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3))
@@ -338,7 +335,6 @@ def median_edge_length(vertices: np.ndarray, faces: np.ndarray) -> float:
     -------
     float
     """
-    from potflat.mesh._kernels import edge_lengths
 
     V = np.ascontiguousarray(vertices, dtype=np.float64)
     F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
@@ -356,21 +352,15 @@ def _edge_vectors(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np
 
 
 def unique_edges(faces: np.ndarray) -> np.ndarray:
-    """Undirected edges of ``faces``, each once (``i <= j``), sorted. Shape (e, 2) int64.
-
-    Parallel, without a global sort: each vertex groups the edges to its higher neighbours
-    (:func:`potflat.relax._kernels.springs.halfedge_springs`).
-    """
-    from potflat.relax._kernels.springs import halfedge_springs, vertex_faces
-
+    """Undirected edges of ``faces``, each once (``i <= j``), sorted. Shape (e, 2) int64
+    (the edge table's, :func:`potflat.mesh._kernels.topology.edge_table`)."""
     faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
     n = int(faces.max()) + 1 if len(faces) else 0
-    return halfedge_springs(faces, *vertex_faces(n, faces), False)[0]
+    return edge_table(faces, n)[1]
 
 
 def edge_length_error(vertices: np.ndarray, uv: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """Relative edge-length error ``(l_2d - l_3d) / l_3d`` per edge (0 for zero-length edges). Shape (e,)."""
-    from potflat.mesh._kernels import edge_lengths
 
     edges = np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2)
     return _relative_error(edge_lengths(np.ascontiguousarray(uv, dtype=np.float64), edges),
@@ -465,7 +455,6 @@ def important_faces(faces: np.ndarray, importance: np.ndarray | None) -> np.ndar
     -------
     (m,) bool
     """
-    from potflat.mesh._kernels import faces_reaching
 
     if importance is None:
         return np.ones(len(faces), bool)
@@ -486,7 +475,6 @@ def weighted_percentiles(values: np.ndarray, weights: np.ndarray, qs) -> list[fl
     (:func:`potflat.mesh._kernels.select_weighted_quantiles`; 6M values: 0.07 s a percentile,
     0.073 s two, against 0.7 s for a sort). Ties and NaN as a sort orders them (NaN last);
     the total weight is summed in index order."""
-    from potflat.mesh._kernels import select_weighted_quantiles
 
     values = np.ascontiguousarray(values, dtype=np.float64).ravel()
     weights = np.ascontiguousarray(weights, dtype=np.float64).ravel()

@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from potflat.mesh.distortion import bounds
-
+from potflat.mesh._kernels.geometry import signed_areas_2d as face_areas
 
 #: Rings by which a folded cluster is grown at most before giving up on local repair.
 REPAIR_MAX_RINGS = 12
@@ -38,7 +38,6 @@ def signed_areas(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
         ``((b - a) x (c - a)) / 2`` of the corners ``a, b, c``: the relax solver's parallel
         kernel (:func:`potflat.relax._kernels.springs.face_areas`), with its face type (int32).
     """
-    from potflat.relax._kernels.springs import face_areas
 
     out = np.empty(len(faces))
     face_areas(np.ascontiguousarray(uv, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int32), out)

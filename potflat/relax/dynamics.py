@@ -7,6 +7,7 @@ import time
 import numpy as np
 
 from potflat.errors import FoldedResultError
+from potflat.relax._kernels.dynamics import dynamics_step
 from potflat.relax.control import RunControl, relative_change
 from potflat.relax.energy import SpringSystem
 from potflat.relax.parameters import ENERGY, SOLVER, RelaxPreset
@@ -39,7 +40,7 @@ def paper_dynamics(sp: SpringSystem, x: np.ndarray, settings: RelaxPreset,
     converged = False
     it = 0
     while True:
-        sp.ks.dynamics_step(x, v, sp.ptr, sp.nbr, sp.rst, sp.k, sp.relative, ENERGY.length_floor, friction, dt, xo, vo, es)
+        dynamics_step(x, v, sp.ptr, sp.nbr, sp.rst, sp.k, sp.relative, ENERGY.length_floor, friction, dt, xo, vo, es)
         x, xo, v, vo = xo, x, vo, v
         it += 1
         e = float(np.sum(es))  # energy before this step

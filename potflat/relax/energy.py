@@ -10,10 +10,29 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from potflat.mesh._kernels.geometry import signed_areas_2d
+from potflat.mesh._kernels.topology import edge_table, incident_faces, vertex_faces
 from potflat.mesh.boundary import crossing_pairs
-from potflat.mesh.distortion import face_areas, face_distortion, row_blocks, weighted_percentile
-from potflat.relax._kernels import overlap as kernels_overlap
+from potflat.mesh.distortion import (
+    face_areas,
+    face_distortion,
+    row_blocks,
+    weighted_percentile,
+)
 from potflat.relax._kernels import springs as kernels_springs
+from potflat.relax._kernels.overlap import contact_barrier, contact_max_step
+from potflat.relax._kernels.springs import (
+    BLOCK,
+    boundary_angle_sums,
+    build_csr,
+    cross_rest_lengths,
+    edge_springs,
+    energy_gradient,
+    face_barrier,
+    face_terms,
+    shape_coefficients,
+)
+from potflat.relax._kernels.steps import boundary_max_step, max_step, max_step_of
 from potflat.relax.parameters import ENERGY, SOLVER
 
 
@@ -46,6 +65,31 @@ class FaceTermWeights:
     area_eps: float = ENERGY.area_eps
 
 
+def mesh_springs(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The springs of a triangle mesh: every edge once and a cross spring over every winged
+    triangle pair, and its boundary edges.
+
+    Parameters
+    ----------
+    faces : (m, 3) int32 or int64
+    n : int
+        Number of vertices.
+
+    Returns
+    -------
+    edges : (e, 2) int64
+        Each undirected edge once, ``i <= j``, sorted.
+    cross : (c, 4) int64
+        ``(p, q, a, b)``: the cross spring ``p-q`` over the edge ``a -> b``
+        (:func:`potflat.relax._kernels.springs.edge_springs`).
+    boundary : (b, 2) int64
+        The edges of one face only, oriented as in their face.
+    """
+    _, edges, count, halves = edge_table(np.ascontiguousarray(faces, dtype=np.int64), n)
+    cross, boundary = edge_springs(faces, count, halves)
+    return edges, cross, boundary
+
+
 _NO_FLAGS = np.empty(0, bool)
 
 
@@ -65,11 +109,9 @@ class SpringSystem:
         (n,) the vertices' importance weights (None: all 1), ``shape``, ``rigidity`` and
         ``area`` the per-face terms' weights (0: none); no anisotropy limit until
         :meth:`set_area_and_limit` sets one."""
-        ks = kernels_springs
-        self.ks, self.ko = ks, kernels_overlap
-        self.vf_ptr, self.vf_tri = ks.vertex_faces(n, faces)
-        edges, cross, self.boundary_segments = ks.halfedge_springs(faces, self.vf_ptr, self.vf_tri, True)
-        self.ptr, self.nbr, self.rst = ks.build_csr(V, edges, cross, ks.cross_rest_lengths(V, cross))
+        self.vf_ptr, self.vf_tri = vertex_faces(n, faces)
+        edges, cross, self.boundary_segments = mesh_springs(faces, n)
+        self.ptr, self.nbr, self.rst = build_csr(V, edges, cross, cross_rest_lengths(V, cross))
         del edges, cross  # peak memory: the spring lists are only needed for the CSR
         areas = face_areas(V, faces)
         self.a_ref = np.maximum(areas, ENERGY.area_floor)
@@ -79,7 +121,7 @@ class SpringSystem:
         self.weights = FaceTermWeights(shape=shape, rigidity=rigidity)
         if (shape > 0 or rigidity > 0 or area > 0) and len(faces):
             self.rest_shape = np.empty((len(faces), 5))
-            ks.shape_coefficients(V, self.faces, self.weight, 1.0 / float(np.mean(areas)), ENERGY.area_floor,
+            shape_coefficients(V, self.faces, self.weight, 1.0 / float(np.mean(areas)), ENERGY.area_floor,
                                   self.rest_shape)
         self.set_area_and_limit(area, None)
         del areas
@@ -103,7 +145,7 @@ class SpringSystem:
         self._eb = np.empty(n)
         self._areas = np.empty(self.m)
         self.diag = np.empty(n)
-        self._blocks = np.empty(max(1, -(-self.m // ks.BLOCK)))
+        self._blocks = np.empty(max(1, -(-self.m // BLOCK)))
         self._below = np.zeros(len(self._blocks), np.int64)  # faces near the barrier per block
         self._coef = np.empty((len(self.rest_shape), 4))  # the per-face terms' gradient coefficients
         self._e_face = np.zeros(len(self._blocks))  # and their energy per block
@@ -131,12 +173,12 @@ class SpringSystem:
         cand = np.nonzero((self.bprev >= 0) & (self.bnext >= 0) & (self.bprev != self.bnext))[0]
         theta = np.zeros(self.n)
         if len(cand):
-            self.ks.boundary_angle_sums(x, cand, self.vf_ptr, self.vf_tri, self.faces, theta)
+            boundary_angle_sums(x, cand, self.vf_ptr, self.vf_tri, self.faces, theta)
         ok = theta[cand] < 2.0 * math.pi - SOLVER.boundary_angle_slack
         self.bverts = np.ascontiguousarray(cand[ok])
         self.bguard = np.zeros(self.n, bool)
         self.bguard[self.bverts] = True
-        self._bblocks = np.empty(max(1, -(-len(self.bverts) // self.ks.BLOCK)))
+        self._bblocks = np.empty(max(1, -(-len(self.bverts) // BLOCK)))
         self.contact = len(self.boundary_segments) >= 3 and self.overlap(x) == 0
         return int((~ok).sum())
 
@@ -147,12 +189,12 @@ class SpringSystem:
         the Hessian diagonal bound at ``x``."""
         g = np.empty((self.n, 2)) if out is None else out
         w = self.weights
-        self.ks.face_terms(x, self.faces, self.a_ref, ENERGY.barrier_eps, self.rest_shape, w.shape, w.rigidity, w.area,
+        face_terms(x, self.faces, self.a_ref, ENERGY.barrier_eps, self.rest_shape, w.shape, w.rigidity, w.area,
                            w.limit, w.limit_u, w.area_eps, self._areas,
                            self._below, self._coef, self._e_face)
         if barrier and len(self.bverts):
-            self.ks.boundary_angle_sums(x, self.bverts, self.vf_ptr, self.vf_tri, self.faces, self.theta)
-        self.ks.energy_gradient(x, self.ptr, self.nbr, self.rst, self.k, self.relative, ENERGY.length_floor,
+            boundary_angle_sums(x, self.bverts, self.vf_ptr, self.vf_tri, self.faces, self.theta)
+        energy_gradient(x, self.ptr, self.nbr, self.rst, self.k, self.relative, ENERGY.length_floor,
                                 self.weight, self.vf_ptr, self.vf_tri, self.faces,
                                 self.rest_shape, self._coef, self.bprev, self.bnext, self.bguard, self.theta, ENERGY.boundary_mu if barrier else 0.0,
                                 ENERGY.boundary_gap, g, self._es, self._eb, self.diag)
@@ -160,11 +202,11 @@ class SpringSystem:
         if not barrier:
             return es, es, g
         eb = float(np.sum(self._eb))
-        ef = self.ks.face_barrier(x, self.faces, self._areas, self.a_ref, ENERGY.barrier_mu, self.k, ENERGY.barrier_eps,
+        ef = face_barrier(x, self.faces, self._areas, self.a_ref, ENERGY.barrier_mu, self.k, ENERGY.barrier_eps,
                                   self.relative, self.weight, g, self.diag, self._below)
         ec = 0.0
         if self.contact:
-            ec = self.ko.contact_barrier(x, self.boundary_segments, self.bprev, self.bnext, ENERGY.contact_gap,
+            ec = contact_barrier(x, self.boundary_segments, self.bprev, self.bnext, ENERGY.contact_gap,
                                          ENERGY.contact_mu * self.k, self._contact_cell, self.weight, g, self.diag)
         return es + eb + ef + ec, es, g
 
@@ -182,7 +224,7 @@ class SpringSystem:
         also flag the faces whose own bound is below ``cap``."""
         if self.m == 0:
             return cap
-        self.ks.max_step(x, d, self.faces, float(cap), float(shrink), self._blocks,
+        max_step(x, d, self.faces, float(cap), float(shrink), self._blocks,
                          _NO_FLAGS if limiting is None else limiting)
         return self._boundary_step(x, d, float(self._blocks.min()), float(shrink))
 
@@ -190,8 +232,8 @@ class SpringSystem:
         """:meth:`max_step` for a direction ``d`` changed at ``verts`` only, from one for which
         no face away from them was limiting (its bound was at least ``cap``): only the faces
         around ``verts``, the guarded boundary and the contact pairs are tested."""
-        faces = self.ks.incident_faces(verts, self.vf_ptr, self.vf_tri)
-        return self._boundary_step(x, d, self.ks.max_step_of(x, d, self.faces, faces, float(cap), float(shrink)),
+        faces = incident_faces(verts, self.vf_ptr, self.vf_tri)
+        return self._boundary_step(x, d, max_step_of(x, d, self.faces, faces, float(cap), float(shrink)),
                                    float(shrink))
 
     def _boundary_step(self, x: np.ndarray, d: np.ndarray, t: float, shrink: float) -> float:
@@ -199,17 +241,17 @@ class SpringSystem:
         the contact barrier is on, by the boundary pairs it acts on (each may lose at most
         ``shrink`` of its distance, as a face of its area)."""
         if len(self.bverts):
-            self.ks.boundary_max_step(x, d, self.bverts, self.bprev, self.bnext, self._bblocks)
+            boundary_max_step(x, d, self.bverts, self.bprev, self.bnext, self._bblocks)
             t = min(t, float(self._bblocks.min()))
         if self.contact:
-            t = self.ko.contact_max_step(x, d, self.boundary_segments, self.bprev, self.bnext, ENERGY.contact_gap,
+            t = contact_max_step(x, d, self.boundary_segments, self.bprev, self.bnext, ENERGY.contact_gap,
                                          self._contact_cell, t, shrink)
         return t
 
     def signed_areas(self, x: np.ndarray) -> np.ndarray:
         """Signed area of every face at ``x``, shape (m,)."""
         out = np.empty(self.m)
-        self.ks.face_areas(np.ascontiguousarray(x, dtype=np.float64), self.faces, out)
+        signed_areas_2d(np.ascontiguousarray(x, dtype=np.float64), self.faces, out)
         return out
 
     def overlap(self, x: np.ndarray) -> int:
@@ -235,7 +277,8 @@ def boundary_neighbours(segments: np.ndarray, n: int) -> tuple[np.ndarray, np.nd
     Parameters
     ----------
     segments : (b, 2) int64
-        Boundary half-edges ``a -> b`` oriented as in their faces (:func:`halfedge_springs`).
+        Boundary half-edges ``a -> b`` oriented as in their faces
+        (:func:`potflat.relax._kernels.springs.edge_springs`).
 
     Returns
     -------

@@ -15,6 +15,7 @@ import numpy as np
 
 from potflat.mesh.distortion import bounds
 from potflat.relax._kernels import grid as relax_grid
+from potflat.relax._kernels.lbfgs import add_jacobi
 
 
 @dataclass(frozen=True)
@@ -174,7 +175,6 @@ class MultilevelPreconditioner:
     def apply(self, r: np.ndarray, out: np.ndarray, *, restricted: np.ndarray | None = None) -> None:
         """``out = H0 r`` for per-vertex vectors ``r``, ``out`` (n, 2) (distinct arrays);
         ``restricted``: :meth:`restrict` of ``r`` when the caller has it."""
-        from potflat.relax._kernels.lbfgs import add_jacobi
 
         parts = self._down(self.restrict(r) if restricted is None else restricted)
         z = parts[0] * self.inv_mean[0]

@@ -6,14 +6,14 @@ import time
 
 import numpy as np
 
+from potflat.mesh._kernels.topology import flagged_face_vertices
 from potflat.relax._kernels import lbfgs as kernels_lbfgs
+from potflat.relax._kernels.springs import neighbour_means
 from potflat.relax.control import RunControl, relative_change
 from potflat.relax.energy import SpringSystem
 from potflat.relax.hierarchy import GridHierarchy, MultilevelPreconditioner
 from potflat.relax.parameters import SOLVER
 from potflat.relax.result import LevelRecord
-
-
 
 _NO_VECTOR = np.empty(0)
 
@@ -132,14 +132,14 @@ class LBFGS:
         the step bound ``t``); kept only when it still descends and allows a longer step.
         Returns the step and ``g . q``."""
         sp = self.sp
-        verts = sp.ks.flagged_face_vertices(self._limiting, sp.faces, self._seen)
+        verts = flagged_face_vertices(self._limiting, sp.faces, self._seen)
         if not 0 < len(verts) <= SOLVER.smooth_max_fraction * sp.n:  # none: the boundary limits the step
             return t, gd
         dx = self.q.reshape(-1, 2)
         before = dx[verts]
         mean = np.empty_like(before)
         for _ in range(SOLVER.smooth_rounds):
-            sp.ks.neighbour_means(dx, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
+            neighbour_means(dx, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
             dx[verts] = mean
         # g . q changed at verts only (no pass over the whole mesh)
         g = self.g.reshape(-1, 2)[verts]

@@ -41,7 +41,7 @@ from potflat._heap import release_free_memory
 from potflat._jit import numba_threads
 from potflat.errors import FoldedResultError, InvalidInputError, InvalidOptionError
 from potflat.mesh.distortion import DistortionSummary, SurfaceReference, bounds, true_scale_factor, zone_summary
-from potflat.relax._kernels.springs import faces_in_vertex_order
+from potflat.mesh._kernels.topology import faces_in_vertex_order
 from potflat.relax.control import RunControl, progress_bar
 from potflat.relax.dynamics import paper_dynamics
 from potflat.relax.energy import SpringSystem, importance_weights, mean_edge_length

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from potflat.mesh.distortion import bounds
+from potflat.relax._kernels.simplify import interpolate as kernel
+from potflat.mesh._kernels.topology import vertex_faces
 
 #: A grid of at most this many cells per fine vertex is indexed directly (counting, no sort:
 #: at 3M vertices 0.33 against 1.1 s; the default side gives about 1/8), a finer one (a tiny
@@ -142,8 +144,6 @@ def interpolate(s: Simplification, uv: np.ndarray, uv_coarse: np.ndarray) -> tup
     inside : (n,) bool
         Which fine vertices lie inside the copy.
     """
-    from potflat.relax._kernels.simplify import interpolate as kernel
-    from potflat.relax._kernels.springs import vertex_faces
 
     vf_ptr, vf_tri = vertex_faces(len(s.uv), s.faces)
     out = np.empty((len(uv), 2))

@@ -9,6 +9,7 @@ import numpy as np
 from potflat.errors import FoldedResultError
 from potflat.mesh.boundary import crossing_pairs
 from potflat.mesh.embedding import repair_folds, tutte_embedding
+from potflat.relax._kernels.springs import neighbour_means
 from potflat.relax.energy import SpringSystem
 from potflat.relax.parameters import COARSE
 
@@ -36,7 +37,7 @@ def untangle(sp: SpringSystem, x: np.ndarray, rounds: int = 200) -> tuple[np.nda
             region[sp.faces[region[sp.faces].any(axis=1)].ravel()] = True
         verts = np.nonzero(region)[0]
         mean = np.empty((len(verts), 2))
-        sp.ks.neighbour_means(x, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
+        neighbour_means(x, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
         x[verts] = mean
     return x, n_bad
 
@@ -127,7 +128,7 @@ def uncross_boundary(sp: SpringSystem, x: np.ndarray, pairs: np.ndarray) -> np.n
             region[sp.faces[region[sp.faces].any(axis=1)].ravel()] = True
         verts = np.nonzero(region)[0]
         mean = np.empty((len(verts), 2))
-        sp.ks.neighbour_means(x, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
+        neighbour_means(x, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
         x[verts] = mean
         x, _ = untangle(sp, x)
         pairs = crossing_pairs(x, seg)

@@ -29,9 +29,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from potflat._jit import worker_threads
 from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.mesh._kernels.grids import angle_coverage, segment_distances
+from potflat.mesh._kernels.quantiles import lower_medians
 from potflat.mesh.distortion import median_edge_length
-from potflat.types import Mesh
 from potflat.rollout.walls import (
     FaceGraph,
     check_axis,
@@ -40,6 +42,7 @@ from potflat.rollout.walls import (
     cylindrical,
     unique_ints,
 )
+from potflat.types import Mesh
 
 #: Automatic cell size: at least this many median edge lengths ...
 _CELL_EDGES = 2.0
@@ -312,7 +315,6 @@ def _coverage_pass(hv: np.ndarray, rv: np.ndarray, tv: np.ndarray, cell: float,
     offset : (s,) float64
         Distance from the revolution surface in the meridian plane (NaN when none found).
     """
-    from potflat.mesh._kernels import angle_coverage, lower_medians  # Numba: imported on first use
 
     ih = np.floor(hv / cell).astype(np.int64)
     ir = np.floor(rv / cell).astype(np.int64)
@@ -380,8 +382,6 @@ def _distance_to_curve(reps: np.ndarray, pts: np.ndarray, join: float) -> np.nda
     segment to its two nearest representatives when they are closer than ``join``."""
     if len(reps) == 0:
         return np.full(len(pts), np.nan)
-    from potflat._jit import worker_threads
-    from potflat.mesh._kernels import segment_distances  # Numba: imported on first use
 
     tree = cKDTree(reps)
     if len(reps) == 1:

@@ -52,9 +52,10 @@ import scipy.sparse
 import scipy.sparse.csgraph
 
 from potflat.errors import AxisNotFoundError, InvalidInputError, InvalidOptionError
-from potflat.types import Mesh
+from potflat.mesh._kernels.geometry import vertex_normal_sums
 from potflat.mesh.distortion import weighted_percentile
 from potflat.mesh.tolerances import DEGENERATE
+from potflat.types import Mesh
 
 #: Largest relative profile deviation (median |r - slice median r| / median r) of a vessel.
 MAX_PROFILE_DEVIATION = 0.05
@@ -219,7 +220,6 @@ def normal_lines(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     revolution sampled exactly, these lines meet the axis far more closely than face normals
     through face centroids (which are tilted by the faceting).
     """
-    from potflat.mesh._kernels import vertex_normal_sums  # Numba: imported on first use
 
     V = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
     acc, area = vertex_normal_sums(V, np.ascontiguousarray(mesh.faces, dtype=np.int64).reshape(-1, 3))

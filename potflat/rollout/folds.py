@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from potflat.mesh._kernels.grids import centre_grid, centres_inside
 from potflat.mesh.distortion import bounds, face_areas
 from potflat.mesh.embedding import signed_areas
 
@@ -107,7 +108,6 @@ def overlapping_faces(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
     -------
     (m,) bool
     """
-    from potflat.mesh._kernels import centre_grid, centres_inside
 
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     uv = np.ascontiguousarray(uv, dtype=np.float64)

@@ -5,9 +5,8 @@ import math
 
 import numpy as np
 
-from potflat.mesh._kernels import face_geometry
+from potflat.mesh._kernels.geometry import face_geometry
 from potflat.mesh.distortion import face_areas
-
 
 #: Warn when more than this share of the surface is trimmed away as folded border.
 WARN_TRIMMED_FRACTION = 0.05

@@ -5,10 +5,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 
-from potflat import importance as _importance
 from potflat.errors import InvalidOptionError
-from potflat.rollout.proxy import KINDS as PROXY_KINDS
 from potflat.types import UNITS_MM, canonical_units
+
+#: Proxy kinds that are developments around the axis, simplest first (``auto`` chooses among
+#: them, :mod:`potflat.rollout.proxy`).
+DEVELOPABLE = ("cylinder", "cone", "sphere")
+#: All proxy kinds.
+KINDS = (*DEVELOPABLE, "ortho")
+#: Ways to find where the painting is (:mod:`potflat.importance`).
+IMPORTANCE_METHODS = ("auto", "none", "mask", "texture-mask", "band")
 
 #: Sides accepted by :func:`potflat.rollout.walls.select_wall`.
 SIDES = ("outer", "inner")
@@ -88,7 +94,7 @@ class RolloutOptions:
 
     units: str | None = field(default=None, metadata={"choices": tuple(UNITS_MM)})
     texture: bool = True
-    proxy: str = field(default="auto", metadata={"choices": ("auto", *PROXY_KINDS)})
+    proxy: str = field(default="auto", metadata={"choices": ("auto", *KINDS)})
     axis: tuple[float, ...] | None = field(default=None, metadata={"metavar": "px,py,pz,dx,dy,dz"})
     flip: bool = False
     seam: float | None = field(default=None, metadata={"metavar": "DEG"})
@@ -101,14 +107,15 @@ class RolloutOptions:
     landmark: str | None = field(default=None, metadata={"choices": LANDMARKS})
     overlap: float = field(default=0.0, metadata={"metavar": "DEG"})
     profile_mm: float | None = field(default=None, metadata={"metavar": "MM"})
-    importance: str = field(default="auto", metadata={"choices": _importance.METHODS})
+    importance: str = field(default="auto", metadata={"choices": IMPORTANCE_METHODS})
     importance_mask: str | None = field(default=None, metadata={"metavar": "PNG"})
     importance_image: str | None = field(default=None, metadata={"metavar": "NAME.bake.json"})
     importance_band: tuple[float, float] | None = field(default=None, metadata={"metavar": "LO HI"})
     importance_arc: tuple[float, float] | None = field(default=None, metadata={"metavar": "A0 A1"})
 
     def __post_init__(self) -> None:
-        _importance.check_method(self.importance)
+        if self.importance not in IMPORTANCE_METHODS:
+            raise InvalidOptionError(f"unknown importance {self.importance!r}; use one of {', '.join(IMPORTANCE_METHODS)}")
         if (self.importance in ("mask", "texture-mask")) != (self.importance_mask is not None):
             raise InvalidOptionError("give importance_mask (--importance-mask PNG) with importance mask or "
                                      "texture-mask, and only then")
@@ -148,9 +155,9 @@ class RolloutOptions:
             object.__setattr__(self, "units", canonical_units(self.units))
         if not isinstance(self.texture, bool):
             raise InvalidOptionError(f"texture must be true or false, got {self.texture!r}")
-        if self.proxy not in ("auto", *PROXY_KINDS):
+        if self.proxy not in ("auto", *KINDS):
             raise InvalidOptionError(
-                f"proxy {self.proxy!r} is unknown; use auto, {', '.join(PROXY_KINDS)}")
+                f"proxy {self.proxy!r} is unknown; use auto, {', '.join(KINDS)}")
         if self.axis is not None:
             ax = _floats("axis", self.axis, 6, "px,py,pz,dx,dy,dz")
             if not any(ax[3:]):

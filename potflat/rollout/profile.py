@@ -22,21 +22,21 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from potflat.mesh.distortion import median_edge_length, weighted_percentile
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.atomic import write_bytes_atomic
-from potflat.types import Mesh
+from potflat.mesh.distortion import median_edge_length, weighted_percentile
 from potflat.rollout.walls import (
     INNER,
     OUTER,
+    FaceFrame,
     binned_median,
     check_axis,
     check_mesh,
-    FaceFrame,
     cylindrical,
     face_frame,
     wall_labels,
 )
+from potflat.types import Mesh
 
 #: Bins whose weight is below this fraction of the side's median bin weight get no radius.
 _MIN_BIN_WEIGHT_FRACTION = 0.01

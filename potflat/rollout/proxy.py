@@ -36,11 +36,8 @@ import numpy as np
 
 from potflat.mesh.distortion import DistortionSummary, SurfaceReference
 from potflat.mesh.tolerances import DEGENERATE
+from potflat.rollout.options import DEVELOPABLE
 
-#: Proxy kinds that are developments around the axis, simplest first (``auto`` chooses among them).
-DEVELOPABLE = ("cylinder", "cone", "sphere")
-#: All proxy kinds.
-KINDS = (*DEVELOPABLE, "ortho")
 #: ``auto`` keeps the simplest candidate whose edge-length RMS is within this factor of the best.
 AUTO_TOLERANCE = 1.01
 

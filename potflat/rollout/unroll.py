@@ -24,46 +24,43 @@ import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-import scipy.sparse
 
 from potflat import importance as _importance
-from potflat.rollout import proxy as _proxy
-from potflat.mesh._kernels import union_find
-from potflat.mesh.boundary import crossing_pairs, edges_and_boundary
-from potflat.io.images import read_ahead
-from potflat.mesh.embedding import signed_areas
-from potflat.rollout.attachments import AttachmentSelection, detect_attachments
-from potflat.rollout.folds import ScanFolds, fold_masks, scan_folds
-from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
-from potflat.mesh.distortion import DistortionSummary, face_areas, summarize
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.types import FlatMesh, Mesh, RolloutMarks, StepClock
+from potflat.io.images import read_ahead
+from potflat.mesh.boundary import edges_and_boundary
+from potflat.mesh.distortion import DistortionSummary, face_areas, summarize
+from potflat.rollout import proxy as _proxy
+from potflat.rollout.attachments import AttachmentSelection, detect_attachments
+from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
+from potflat.rollout.border import (
+    TRIM_ROUNDS,
+    border_folds,
+    crossing_segments,
+    untangle,
+)
+from potflat.rollout.folds import ScanFolds, fold_masks, scan_folds
+from potflat.rollout.landmarks import find_landmark, zone_centre
+from potflat.rollout.objects import _main_object, _submesh
 from potflat.rollout.options import RolloutOptions
 from potflat.rollout.profile import Profile, vessel_profile
-from potflat.rollout.walls import FaceGraph, WallSelection, check_axis, face_frame, select_wall
-from potflat.mesh.tolerances import ROUNDING
+from potflat.rollout.seam import (
+    _auto_seam,
+    _corner_angles,
+    _covered,
+    _gap_middle,
+    cut_open,
+)
+from potflat.rollout.walls import (
+    FaceGraph,
+    WallSelection,
+    check_axis,
+    face_frame,
+    select_wall,
+)
+from potflat.types import FlatMesh, Mesh, RolloutMarks, StepClock
 
 TWO_PI = 2.0 * np.pi
-#: A connected piece with at least this fraction of the largest piece's area is an object of
-#: its own: it must share the largest piece's axis (an inner wall does) or it is left out.
-SEPARATE_OBJECT_FRACTION = 0.1
-#: Two pieces share an axis when their axes differ by less than this angle (degrees) ...
-SHARED_AXIS_DEG = 5.0
-#: ... and pass within this fraction of the largest piece's height of each other.
-SHARED_AXIS_OFFSET = 0.05
-#: Angular bins (per turn) used to choose the seam and to find gaps in a region.
-SEAM_BINS = 360
-#: Width (bins) of the circular moving average applied to the seam cost.
-SEAM_SMOOTH = 5
-#: A face is edge-on to the proxy when its flat area is below this fraction of its 3D area.
-EDGE_ON_RATIO = 0.05
-#: Rounds of trimming folded border faces: all but the last unroll again without them (the
-#: proxy is refitted), the last removes them from the development as it is.
-TRIM_ROUNDS = 3
-#: Passes of :func:`border_folds` over one development (each peels what the last exposed).
-BORDER_PASSES = 50
-#: Rounds of :func:`untangle`; its region widens by one ring every ``UNTANGLE_WIDEN`` rounds.
-UNTANGLE_ROUNDS, UNTANGLE_WIDEN = 200, 20
 
 
 @dataclass(frozen=True)
@@ -222,168 +219,6 @@ class RolloutResult:
             folded_area_mm2=0.0 if folds is None else folds.area_mm2,
             folded_percent=0.0 if folds is None else folds.percent,
             folded_regions=0 if folds is None else len(folds.regions))
-
-
-def _luminance_variation(mesh: Mesh, faces: np.ndarray) -> tuple[np.ndarray | None, str]:
-    """Per-face spread of brightness (std of samples at its corners), and its source."""
-    if mesh.texcoords is not None and mesh.texture_path is not None:
-        from potflat.io.images import read_texture_grey_quarter
-
-        from potflat.mesh._kernels import texel_spread  # Numba: imported on first use
-
-        img = read_texture_grey_quarter(mesh.texture_path)
-        if img is not None and img.size:
-            spread = texel_spread(np.ascontiguousarray(mesh.texcoords, dtype=np.float64),
-                                  np.ascontiguousarray(faces, dtype=np.int64), np.ascontiguousarray(img))
-            if mesh.untextured_faces is not None:  # no colour, no painting to keep whole
-                spread[mesh.untextured_faces[faces]] = 0.0
-            return spread, "texture"
-    if mesh.vertex_colors is not None:
-        rgb = mesh.vertex_colors[:, :3].astype(np.float64)
-        lum = rgb @ np.array([0.299, 0.587, 0.114])
-        return lum[mesh.faces[faces]].std(axis=1), "colours"
-    return None, "geometry"
-
-
-def _longest_min_run(cost: np.ndarray) -> int:
-    """Index of the middle of the longest circular run of (near-)minimal bins."""
-    low = cost <= cost.min() + ROUNDING * max(cost.max(), 1e-300)
-    if low.all():
-        return 0
-    k = len(cost)
-    start = int(np.argmin(low))  # a non-minimal bin: runs do not wrap past it
-    rolled = np.roll(low, -start)
-    best_len, best_mid, run = 0, 0, 0
-    for i in range(k + 1):
-        if i < k and rolled[i]:
-            run += 1
-            continue
-        if run > best_len:
-            best_len, best_mid = run, (i - run + (run - 1) / 2.0)
-        run = 0
-    return round(start + best_mid) % k
-
-
-def choose_seam(mesh: Mesh, faces: np.ndarray, theta_c: np.ndarray, area: np.ndarray,
-                covered: np.ndarray | None = None) -> tuple[float, str]:
-    """Seam angle (radians from the reference) where the region is least painted.
-
-    Each face costs its area times (the spread of brightness at its corners + 10 % of the
-    mean spread) when a texture or vertex colours exist, its area otherwise; the costs are
-    summed per degree of angle, smoothed over :data:`SEAM_SMOOTH` degrees, and the seam goes
-    to the middle of the longest run of minimal cost. When the region has an empty sector
-    (no face spans it: a sherd, a scan with a gap from foot to rim) the seam goes to the
-    middle of the widest one, and nothing needs to be cut.
-
-    Parameters
-    ----------
-    mesh : Mesh
-    faces : (k,) int64
-        Indices of the region's faces.
-    theta_c : (k,) float64
-        Angles of their centroids, radians in ``[0, 2 pi)`` from the reference.
-    area : (k,) float64
-        Their areas.
-    covered : (SEAM_BINS,) bool, optional
-        Angle bins (from the reference) covered by the faces' angular spans.
-
-    Returns
-    -------
-    angle : float
-        Radians in ``[0, 2 pi)``.
-    method : str
-        ``texture``, ``colours``, ``geometry``, or ``gap`` when the region has an empty sector.
-    """
-    if covered is not None and (gap := _gap_middle(covered)) is not None:
-        return gap, "gap"
-    var, method = _luminance_variation(mesh, faces)
-    weight = area if var is None else area * (var + 0.1 * max(float(np.average(var, weights=area)), 1e-12))
-    bins = np.minimum((theta_c / TWO_PI * SEAM_BINS).astype(np.int64), SEAM_BINS - 1)
-    cost = np.bincount(bins, weight, SEAM_BINS)
-    kernel = np.ones(SEAM_SMOOTH) / SEAM_SMOOTH
-    pad = SEAM_SMOOTH // 2
-    smooth = np.convolve(np.concatenate([cost[-pad:], cost, cost[:pad]]), kernel, mode="valid")
-    k = _longest_min_run(smooth)
-    return _snap_to_gap(theta_c, (k + 0.5) / SEAM_BINS * TWO_PI, TWO_PI / SEAM_BINS), method
-
-
-def _snap_to_gap(theta_c: np.ndarray, angle: float, half_width: float) -> float:
-    """Move ``angle`` to the middle of the widest gap between face-centroid angles within
-    ``half_width`` of it, so the cut lies at a place of the surface, not of the bin grid
-    (whose origin, the reference direction, depends on the scan's pose)."""
-    offset = (theta_c - angle + np.pi) % TWO_PI - np.pi
-    near = np.sort(offset[np.abs(offset) <= half_width])
-    if len(near) < 2:
-        return angle
-    gaps = np.diff(near)
-    i = int(np.argmax(gaps))
-    return float((angle + 0.5 * (near[i] + near[i + 1])) % TWO_PI)
-
-
-def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
-    """Cut a mesh where the unwrapped angles of a vertex's corners disagree.
-
-    Corners of the same vertex stay one vertex when they are joined through shared edges
-    whose faces agree on the vertex's angle (differ by less than pi); otherwise they
-    become separate copies. So vertices on the seam get one copy per side, no face is
-    changed, and a vertex whose faces form separate fans (a non-manifold input) becomes one
-    vertex per fan.
-
-    Parameters
-    ----------
-    faces : (m, 3) int64
-        Faces (indices into the original vertices).
-    corner_theta : (m, 3) float64
-        Unwrapped angle of each face corner.
-
-    Returns
-    -------
-    new_faces : (m, 3) int64
-        Faces indexing the new vertices.
-    vertex_index : (n_out,) int64
-        Original vertex of each new vertex (sorted, so the input order is kept).
-    theta : (n_out,) float64
-        Angle of each new vertex.
-    seam_vertices : int
-        Copies made because of the angle (the cut).
-    split_vertices : int
-        Further copies made for separate fans.
-    """
-    from potflat.mesh._kernels import corner_joins, half_edge_keys  # Numba: imported on first use
-
-    m = len(faces)
-    F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
-    corner_v = F.ravel()
-    th = np.ascontiguousarray(corner_theta, dtype=np.float64).ravel()
-    # half-edges on the same edge are neighbours when sorted by (lower vertex, higher vertex,
-    # turn of the angle at the lower vertex) (stable: by id on ties). The turn puts the faces of
-    # an edge listed twice (a rollout repeated past 360 degrees) next to those they join: 0+,
-    # 2 pi-, 2 pi+. Their corners at each end are joined where the faces agree on the angle.
-    # (NumPy's sort of the keys, nearly sorted in a scan's face order, is faster than a
-    # counting sort by edge, whose scattered writes miss the cache.)
-    key = half_edge_keys(F, th, int(corner_v.max()) + 1 if m else 1)
-    a, b = corner_joins(F, th, key, np.argsort(key, kind="stable"))
-    del key
-    labels, n_comp = union_find(3 * m, a, b)
-    del a, b
-    # components are numbered in order of their lowest corner: where the running maximum grows
-    run = np.maximum.accumulate(labels)
-    first = np.flatnonzero(np.concatenate([[m > 0], run[1:] != run[:-1]]))  # lowest corner of each
-    del run
-    vertex_of = corner_v[first]
-    perm = np.lexsort((first, vertex_of))
-    rank = np.empty(n_comp, np.int64)
-    rank[perm] = np.arange(n_comp)
-    new_faces = rank[labels].reshape(m, 3)
-    vertex_index = vertex_of[perm]
-    theta = th[first][perm]
-    base = np.count_nonzero(np.bincount(corner_v))
-    # copies of one vertex made by the cut differ in angle by whole turns
-    turns = np.floor(theta / TWO_PI + 0.5).astype(np.int64)
-    o = np.lexsort((turns, vertex_index))
-    distinct = 1 + np.count_nonzero((np.diff(vertex_index[o]) != 0) | (np.diff(turns[o]) != 0))
-    seam = distinct - base
-    return new_faces, vertex_index, theta, int(seam), int(n_comp - base - seam)
 
 
 def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.ndarray | None = None,
@@ -654,186 +489,6 @@ def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
                      un.origin, table)
 
 
-def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *, table: tuple | None = None) -> np.ndarray:
-    """Faces at the border of a development that fold it over: to trim before relaxing.
-
-    Two kinds, peeled in up to :data:`BORDER_PASSES` passes (each pass looks at the border
-    the previous one exposed):
-
-    * **edge-on strips**: a face is edge-on when its flat signed area is below
-      :data:`EDGE_ON_RATIO` times its 3D area (it faces along the proxy surface, not out
-      of it: a rim top, a flat base's underside, the break faces of a thick sherd, the wall
-      of a hole through a thick wall). A connected strip of edge-on faces that contains a
-      flipped face (signed area <= 0) and reaches the boundary (the outline, the seam, a
-      hole) is not part of the painted surface and cannot be unrolled without a fold.
-    * **overlapping border**: faces owning boundary segments that cross or touch another
-      boundary segment (a ragged rim or hole edge whose thin border faces overlap their
-      neighbours).
-    * **pinched vertices**: where a vertex's faces form separate fans (they meet at the
-      vertex only, e.g. after trimming), all but the fan of largest area are left out, so
-      the development does not touch itself.
-
-    Folds enclosed by well-unrolled faces (scan noise, slivers) are left to :func:`untangle`.
-
-    Parameters
-    ----------
-    faces : (m, 3) int64
-        Faces of the cut mesh.
-    uv : (n, 2) float64
-        Its development.
-    area_3d : (m,) float64
-        3D area of each face.
-    table : tuple, optional
-        ``edges_and_boundary(faces, len(uv))`` when the caller has it (used by the first pass).
-
-    Returns
-    -------
-    (m,) bool
-    """
-    faces = np.asarray(faces, np.int64)
-    keep = np.ones(len(faces), bool)
-    for _ in range(BORDER_PASSES):
-        idx = np.flatnonzero(keep)
-        if len(idx) == 0:
-            break
-        sub = faces[idx]
-        full = len(idx) == len(faces)  # sub is faces itself
-        edges, seg, owner = table if table is not None and full else edges_and_boundary(sub, len(uv))
-        drop = _edge_on_strips(sub, uv, area_3d[idx], seg) | _minor_fans(sub, area_3d[idx], edges, len(uv))
-        if not drop.any():  # overlaps are judged on a border without folded strips
-            a, b = crossing_segments(uv, seg)
-            drop[owner[a]] = True
-            drop[owner[b]] = True
-        if not drop.any():
-            break
-        keep[idx[drop]] = False
-    return ~keep
-
-
-def crossing_segments(uv: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pairs of segments that cross or touch (:func:`potflat.mesh.boundary.crossing_pairs`),
-    but for pairs of two zero-length segments.
-
-    Parameters
-    ----------
-    uv : (n, 2) float64
-    seg : (b, 2) int64
-
-    Returns
-    -------
-    a, b : (k,) int64
-        Indices into ``seg`` of each crossing pair.
-    """
-    pairs = crossing_pairs(uv, seg)
-    a, b = pairs[:, 0], pairs[:, 1]
-    length = np.linalg.norm(uv[seg[:, 1]] - uv[seg[:, 0]], axis=1) if len(seg) else np.zeros(0)
-    real = length[a] + length[b] > 0
-    return a[real], b[real]
-
-
-def _minor_fans(faces: np.ndarray, area_3d: np.ndarray, edges: np.ndarray, n: int) -> np.ndarray:
-    """Faces of the smaller fans at vertices whose faces form several fans (see :func:`border_folds`).
-
-    A vertex with ``k`` faces in open fans has ``k`` plus one edge per fan, so a vertex
-    with at least two more edges than faces is pinched; only the faces around those are cut
-    apart (:func:`cut_open`) to find the fans.
-    """
-    pinched = np.bincount(edges.ravel(), minlength=n) - np.bincount(faces.ravel(), minlength=n) >= 2
-    out = np.zeros(len(faces), bool)
-    if not pinched.any():
-        return out
-    local = np.flatnonzero(pinched[faces].any(axis=1))
-    new_faces, vertex_index, _, _, _ = cut_open(faces[local], np.zeros((len(local), 3)))
-    fan_area = np.bincount(new_faces.ravel(), np.repeat(area_3d[local], 3), len(vertex_index))
-    # keep the largest fan of each pinched vertex
-    order = np.lexsort((-fan_area, vertex_index))
-    first = np.ones(len(order), bool)
-    first[1:] = vertex_index[order][1:] != vertex_index[order][:-1]
-    minor = np.zeros(len(vertex_index), bool)
-    minor[order[~first]] = True
-    minor &= pinched[vertex_index]
-    out[local] = minor[new_faces].any(axis=1)
-    return out
-
-
-def _edge_on_strips(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, seg: np.ndarray) -> np.ndarray:
-    """Edge-on strips that contain a flipped face and touch the boundary (see :func:`border_folds`)."""
-    flat = signed_areas(faces, uv)
-    out = np.zeros(len(faces), bool)
-    if not (flat <= 0).any():
-        return out
-    sel = np.flatnonzero(flat < EDGE_ON_RATIO * area_3d)
-    sub = faces[sel]
-    comp = FaceGraph(sub).components()
-    on_border = np.zeros(len(uv), bool)
-    on_border[seg.ravel()] = True
-    k = int(comp.max()) + 1
-    has_flip = np.bincount(comp[flat[sel] <= 0], minlength=k) > 0
-    touches = np.bincount(comp[on_border[sub].any(axis=1)], minlength=k) > 0
-    out[sel] = (has_flip & touches)[comp]
-    return out
-
-
-def untangle(faces: np.ndarray, uv: np.ndarray, *, table: tuple | None = None) -> tuple[np.ndarray, int, int]:
-    """Unfold folds inside a development by moving their vertices to their neighbours' mean.
-
-    The vertices of flipped faces (signed area <= 0) move to the mean of their edge
-    neighbours (Jacobi steps), the region widening by one ring every
-    :data:`UNTANGLE_WIDEN` rounds, for up to :data:`UNTANGLE_ROUNDS` rounds; boundary
-    vertices stay. Such folds come from the scan (a crease, a sliver, a spike), not from
-    the development; the relax stage then restores the lengths around them.
-
-    Parameters
-    ----------
-    faces : (m, 3) int64
-    uv : (n, 2) float64
-    table : tuple, optional
-        ``edges_and_boundary(faces, len(uv))`` when the caller has it.
-
-    Returns
-    -------
-    uv : (n, 2) float64
-        A new array (``uv`` itself when nothing was flipped).
-    flipped : int
-        Faces flipped before.
-    moved : int
-        Vertices moved.
-    """
-    bad = signed_areas(faces, uv) <= 0
-    n_bad = int(bad.sum())
-    if n_bad == 0:
-        return uv, 0, 0
-    n = len(uv)
-    edges, seg, _ = table if table is not None else edges_and_boundary(faces, n)
-    A = scipy.sparse.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]],
-                                                            np.r_[edges[:, 1], edges[:, 0]])), shape=(n, n)).tocsr()
-    deg = np.maximum(np.diff(A.indptr), 1).astype(np.float64)
-    movable = np.ones(n, bool)
-    movable[seg.ravel()] = False
-    # faces of each vertex (CSR), to re-check only the faces around the moved vertices
-    corner_order = np.argsort(faces.ravel(), kind="stable")
-    vf_ptr = np.concatenate([[0], np.cumsum(np.bincount(faces.ravel(), minlength=n))])
-    x = uv.copy()
-    region = np.zeros(n, bool)
-    region[faces[bad].ravel()] = True
-    for r in range(UNTANGLE_ROUNDS):
-        if r % UNTANGLE_WIDEN == UNTANGLE_WIDEN - 1:  # widen the region around persistent tangles
-            region |= (A @ region.astype(np.float64)) > 0
-        region &= movable
-        idx = np.flatnonzero(region)
-        if len(idx) == 0:
-            break
-        x[idx] = (A[idx] @ x) / deg[idx, None]
-        count = vf_ptr[idx + 1] - vf_ptr[idx]
-        offset = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-        near = np.unique(corner_order[np.repeat(vf_ptr[idx], count) + offset] // 3)
-        still = near[signed_areas(faces[near], x) <= 0]
-        if len(still) == 0:
-            break
-        region[faces[still].ravel()] = True
-    return x, n_bad, int(np.count_nonzero(np.any(x != uv, axis=1)))
-
-
 #: Seam methods of a seam placed by the user (an angle, a point, a landmark), not chosen here.
 _PLACED_SEAMS = ("user", "point", "handle", "opposite painted zone")
 
@@ -842,7 +497,6 @@ def _find_landmark(mesh: Mesh, axis: AxisFit, options: RolloutOptions, attachmen
                    theta_c, theta_v, area):
     """The landmark the options name (:func:`potflat.rollout.landmarks.find_landmark`), or None when
     seam and angles are measured as before (from the reference direction, angles from the seam)."""
-    from potflat.rollout.landmarks import find_landmark
 
     if options.seam_at is None and options.landmark is None and (options.angles is None or options.seam is not None):
         return None, []
@@ -859,7 +513,6 @@ def _painted_zone_centre(mesh: Mesh, axis: AxisFit, options: RolloutOptions, fac
                          theta_v, area) -> tuple[float | None, str]:
     """Centre angle of the importance zone (:func:`_find_importance` on an all-round unrolling
     with the automatic seam), or None and why."""
-    from potflat.rollout.landmarks import zone_centre
 
     plain = dataclasses.replace(options, seam=None, angles=None, seam_at=None, landmark=None, overlap=0.0)
     un = _unroll(mesh, axis, plain, face_mask, band, h_c, theta_c, theta_v, area)
@@ -879,11 +532,6 @@ def _painted_zone_centre(mesh: Mesh, axis: AxisFit, options: RolloutOptions, fac
 def _in_band(axis: AxisFit, band, h_c) -> np.ndarray:
     frac = h_c / axis.height if axis.height > 0 else np.zeros(len(h_c))
     return (frac >= band[0]) & (frac <= band[1])
-
-
-def _auto_seam(mesh: Mesh, sel: np.ndarray, theta_c, theta_v, area) -> tuple[float, str]:
-    corners = _corner_angles(theta_v, mesh.faces, sel, theta_c[sel])
-    return choose_seam(mesh, sel, theta_c[sel], area[sel], _covered(theta_c[sel], corners))
 
 
 def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c, theta_v, area,
@@ -939,60 +587,12 @@ def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band,
     return face_index, seam, seam_method, corner_theta, origin
 
 
-def _corner_angles(theta_v: np.ndarray, F: np.ndarray, idx: np.ndarray, centre: np.ndarray,
-                   shift: float = 0.0) -> np.ndarray:
-    """Corner angles of the faces ``F[idx]``, ``theta_v - shift`` unwrapped to within pi of
-    ``centre`` ((k,) angle of each face). Shape (k, 3)."""
-    from potflat.mesh._kernels import corner_angles
-
-    out = np.empty((len(idx), 3))
-    corner_angles(np.ascontiguousarray(theta_v, dtype=np.float64), np.ascontiguousarray(F, dtype=np.int64),
-                  np.ascontiguousarray(idx, dtype=np.int64), np.ascontiguousarray(centre, dtype=np.float64),
-                  float(shift), out)
-    return out
-
-
 def _default_view(axis: AxisFit, theta_c: np.ndarray, area: np.ndarray, seam: float) -> np.ndarray:
     """From the axis towards the region's (area-weighted) centre angle; opposite the seam if all round."""
     s, c = area @ np.sin(theta_c), area @ np.cos(theta_c)
     angle = math.atan2(s, c) if np.hypot(s, c) >= 1e-6 * area.sum() else seam + math.pi
     other = np.cross(axis.direction, axis.reference)
     return math.cos(angle) * axis.reference + math.sin(angle) * other
-
-
-def _covered(theta_c: np.ndarray, corner_theta: np.ndarray) -> np.ndarray:
-    """Which of the :data:`SEAM_BINS` angle bins the faces' angular spans cover.
-
-    Parameters
-    ----------
-    theta_c : (k,) float64
-        Face centroid angles (radians, any origin).
-    corner_theta : (k, 3) float64
-        Corner angles unwrapped around ``theta_c`` (same origin).
-
-    Returns
-    -------
-    (SEAM_BINS,) bool
-        Bin ``i`` covers ``[i, i + 1)`` turns / SEAM_BINS from the origin. Faces spanning
-        half a turn or more (around the axis itself) are ignored.
-    """
-    # (column by column: NumPy's reduction along a row of three is 2.5x slower)
-    lo = np.minimum(np.minimum(corner_theta[:, 0], corner_theta[:, 1]), corner_theta[:, 2])
-    hi = np.maximum(np.maximum(corner_theta[:, 0], corner_theta[:, 1]), corner_theta[:, 2])
-    narrow = hi - lo < np.pi
-    b0 = np.floor(lo[narrow] / TWO_PI * SEAM_BINS).astype(np.int64)
-    b1 = np.floor(hi[narrow] / TWO_PI * SEAM_BINS).astype(np.int64) + 1
-    s0, s1 = b0 % SEAM_BINS, b1 % SEAM_BINS
-    delta = np.bincount(s0, minlength=SEAM_BINS) - np.bincount(s1, minlength=SEAM_BINS)
-    delta[0] += np.count_nonzero(s1 <= s0)
-    return np.cumsum(delta)[:SEAM_BINS] > 0
-
-
-def _gap_middle(covered: np.ndarray) -> float | None:
-    """Middle (radians from the bins' origin) of the longest uncovered sector, None if all covered."""
-    if covered.all():
-        return None
-    return (_longest_min_run(covered.astype(np.float64)) + 0.5) / SEAM_BINS * TWO_PI
 
 
 def _find_importance(flat: FlatMesh, options: RolloutOptions, axis: AxisFit, theta_deg: np.ndarray
@@ -1010,61 +610,5 @@ def _find_importance(flat: FlatMesh, options: RolloutOptions, axis: AxisFit, the
     h = axis.cylindrical(flat.mesh.vertices)[0]
     return _importance.band_importance(flat, h / max(axis.height, np.finfo(float).tiny), theta_deg,
                                        options.importance_band, options.importance_arc)
-
-
-def _submesh(mesh: Mesh, face_mask: np.ndarray) -> Mesh:
-    """The faces of ``mesh`` selected by ``face_mask`` with only the vertices they use."""
-    F = np.take(mesh.faces, np.flatnonzero(face_mask), axis=0)
-    used = np.zeros(len(mesh.vertices), bool)
-    used[F] = True
-    remap = np.cumsum(used) - 1  # np.unique is slow on millions of indices in numpy 2.4
-    return Mesh(mesh.vertices[used], remap[F], units=mesh.units, source=mesh.source)
-
-
-def _main_object(mesh: Mesh) -> np.ndarray | None:
-    """Faces of the vessel when the scan holds separate objects, else ``None``.
-
-    Pieces (connected components) with at least :data:`SEPARATE_OBJECT_FRACTION` of the
-    largest piece's area are objects; each is kept when its own axis agrees with the
-    largest piece's (a separately scanned inner wall or foot does), and left out when it
-    does not (a second vessel, a fragment lying beside it). Returns ``None`` when nothing
-    would be left out, so a single-object scan is fitted as a whole.
-    """
-    from potflat.errors import AxisNotFoundError
-
-    V, F = mesh.vertices, mesh.faces
-    # pieces joined through the faces' edges (two per face reach all three vertices); union-find
-    # numbers them as scipy's connected_components did (0.16 against 0.61 s at 6M faces)
-    labels, n_pieces = union_find(len(V), np.concatenate([F[:, 0], F[:, 1]]).astype(np.int64, copy=False),
-                                  np.concatenate([F[:, 1], F[:, 2]]).astype(np.int64, copy=False))
-    if n_pieces < 2:
-        return None
-    face_label = labels[F[:, 0]]
-    area = face_areas(V, F)
-    piece_area = np.bincount(face_label, area, n_pieces)
-    order = np.argsort(-piece_area, kind="stable")
-    objects = [k for k in order if piece_area[k] >= SEPARATE_OBJECT_FRACTION * piece_area[order[0]]]
-    if len(objects) < 2:
-        return None
-    main = face_label == objects[0]
-    try:
-        ref = estimate_axis(_submesh(mesh, main))
-    except AxisNotFoundError:
-        return None  # the whole scan decides (and refuses honestly if it must)
-    keep = main.copy()
-    for k in objects[1:]:
-        piece = face_label == k
-        try:
-            own = estimate_axis(_submesh(mesh, piece))
-        except AxisNotFoundError:
-            continue
-        cos = abs(float(own.direction @ ref.direction))
-        offset = own.point - ref.point
-        distance = np.linalg.norm(offset - (offset @ ref.direction) * ref.direction)
-        if cos >= math.cos(math.radians(SHARED_AXIS_DEG)) and distance <= SHARED_AXIS_OFFSET * ref.height:
-            keep |= piece
-    small = ~np.isin(face_label, objects)
-    keep |= small  # small pieces are judged by the wall and attachment analysis
-    return None if keep.all() else keep
 
 

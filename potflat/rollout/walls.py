@@ -34,11 +34,12 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
-from potflat.mesh._kernels import edge_lengths, face_geometry
 from potflat.errors import InvalidInputError, InvalidOptionError
+from potflat.mesh._kernels.geometry import edge_lengths, face_geometry, radial_parts
+from potflat.mesh._kernels.topology import edge_table, face_pairs, pair_csr, union_find
+from potflat.mesh.tolerances import DEGENERATE, ROUNDING
 from potflat.rollout.options import SIDES  # the sides select_wall accepts
 from potflat.types import Mesh
-from potflat.mesh.tolerances import DEGENERATE, ROUNDING
 
 #: Label values in :attr:`WallSelection.labels`.
 OUTER, INNER = 1, -1
@@ -175,7 +176,6 @@ class FaceGraph:
     def _csr(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(indptr, indices, pair of each entry)``, rows sorted (:func:`potflat.mesh._kernels.pair_csr`);
         built on first use (only :meth:`matrix` needs it)."""
-        from potflat.mesh._kernels import pair_csr  # Numba: imported on first use
 
         indptr, indices, pair_of = pair_csr(np.ascontiguousarray(self.pairs, dtype=np.int64).reshape(-1, 2), self.m)
         dtype = np.int32 if self.m < 2**31 else np.int64
@@ -192,7 +192,6 @@ class FaceGraph:
     def components(self, pair_mask: np.ndarray | None = None) -> np.ndarray:
         """Connected-component label (m,) int64 of every face, over the pairs in ``pair_mask``
         (numbered in order of each component's lowest face, as scipy's connected_components)."""
-        from potflat.mesh._kernels import union_find  # Numba: imported on first use
 
         a, b = self.pairs[:, 0], self.pairs[:, 1]
         if pair_mask is not None:  # (each column gathered alone: a row gather of the (p, 2) pairs is 5x slower)
@@ -238,7 +237,6 @@ def face_adjacency(faces: np.ndarray, return_edges: bool = False):
     edges : (p, 2) int64
         Only with ``return_edges``: endpoints of the shared edge, smaller first.
     """
-    from potflat.mesh._kernels import edge_table, face_pairs  # Numba: imported on first use
 
     F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
     n = int(F.max()) + 1 if len(F) else 0
@@ -264,7 +262,6 @@ def cylindrical(points: np.ndarray, axis_point: np.ndarray, axis_direction: np.n
     radial : (n, 3) float64
         Unit vectors pointing away from the axis (zero on the axis).
     """
-    from potflat.mesh._kernels import radial_parts  # Numba: imported on first use
 
     direction = np.ascontiguousarray(axis_direction, dtype=np.float64)
     d = np.ascontiguousarray(np.asarray(points, dtype=np.float64) - axis_point).reshape(-1, 3)

@@ -28,8 +28,15 @@ from typing import Any
 import yaml
 
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.files.options import STAGE_OPTIONS, RunOptions, coerce_option, option_types, options_dict
+from potflat.files.options import (
+    STAGE_OPTIONS,
+    RunOptions,
+    coerce_option,
+    option_types,
+    options_dict,
+)
 from potflat.io.atomic import check_output_name
+from potflat.io.scan import SCAN_EXTENSIONS
 
 #: Top-level keys of a batch file.
 TOP_KEYS = ("output", "defaults", "scans")
@@ -445,8 +452,6 @@ class _Validator:
         return jobs
 
     def scan_files(self, entry: _LineDict, output: Path) -> list[Path]:
-        from potflat.io.scan import SCAN_EXTENSIONS
-
         if "path" not in entry:
             self.problem(entry.line, "scan entry without 'path:'; add 'path: FILE-OR-PATTERN'")
             return []

@@ -16,12 +16,21 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-
+from potflat import __version__
 from potflat._jit import numba_threads
 from potflat.errors import InvalidOptionError, PotflatError
 from potflat.files.batch.config import Batch, ScanJob
-from potflat.files.batch.manifest import MANIFEST, external_inputs, is_complete, job_key, output_inside, read_manifest
-from potflat.files.pipeline import FIGURES, ZONE_FIGURES
+from potflat.files.batch.manifest import (
+    MANIFEST,
+    external_inputs,
+    is_complete,
+    job_key,
+    output_inside,
+    read_manifest,
+)
+from potflat.files.batch.report import write_report
+from potflat.files.pipeline import FIGURES, ZONE_FIGURES, run_scan
+from potflat.io.atomic import output_lock, write_bytes_atomic, write_json_atomic
 
 #: Statuses of a scan in a batch summary.
 STATUSES = ("done", "skipped", "failed", "interrupted", "cancelled")
@@ -98,9 +107,6 @@ def run_job(job: ScanJob, key: str, *, threads: int | None = None) -> ScanReport
     run wrote and this one did not (e.g. a map no longer asked for) are removed.
     ``error.log`` in the scan folder keeps the traceback of a failure.
     """
-    from potflat import __version__
-    from potflat.io.atomic import write_bytes_atomic, write_json_atomic
-    from potflat.files.pipeline import run_scan
 
     start = time.perf_counter()
     old = read_manifest(job.out_dir) or {}
@@ -192,7 +198,6 @@ class BatchSummary:
 
     def to_dict(self) -> dict[str, Any]:
         """The summary as JSON-ready data (the content of ``summary.json``)."""
-        from potflat import __version__
 
         return {"batch": str(self.batch), "output": str(self.output), "potflat": __version__,
                 "seconds": round(self.seconds, 3), "counts": self.counts,
@@ -200,7 +205,6 @@ class BatchSummary:
 
     def write(self) -> tuple[Path, Path]:
         """Write ``summary.json`` and ``summary.csv`` into the output folder, atomically."""
-        from potflat.io.atomic import write_bytes_atomic, write_json_atomic
 
         json_path = write_json_atomic(self.output / "summary.json", self.to_dict())
         buffer = io.StringIO()
@@ -243,7 +247,6 @@ def run_batch(batch: Batch, *, workers: int | None = None, scheduler: str | None
         (:mod:`potflat.files.report`) in ``batch.output``, even when interrupted (unfinished scans are
         then ``interrupted``).
     """
-    from potflat.io.atomic import output_lock
 
     start = time.perf_counter()
     wall_start = time.time()
@@ -293,7 +296,6 @@ def run_batch(batch: Batch, *, workers: int | None = None, scheduler: str | None
                                    seconds=time.perf_counter() - start)
             with contextlib.suppress(PotflatError, OSError):
                 summary.write()
-                from potflat.files.batch.report import write_report
 
                 write_report(summary)
     return summary

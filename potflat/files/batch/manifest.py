@@ -8,9 +8,10 @@ import stat
 from pathlib import Path
 from typing import Any
 
-
+from potflat import __version__
 from potflat.files.batch.config import ScanJob
 from potflat.files.pipeline import ScanResult
+from potflat.files.provenance import file_sha256, options_hash
 
 #: File written last into each finished scan folder.
 MANIFEST = "manifest.json"
@@ -20,9 +21,6 @@ MANIFEST = "manifest.json"
 def job_key(job: ScanJob) -> str:
     """Hash of what determines a scan's outputs: scan bytes, options, potflat version."""
     import hashlib
-
-    from potflat import __version__
-    from potflat.files.provenance import file_sha256, options_hash
 
     text = json.dumps({"scan_sha256": file_sha256(job.scan), "options": options_hash(job.options_json()),
                        "potflat": __version__}, sort_keys=True)
@@ -45,7 +43,6 @@ def is_complete(job: ScanJob, key: str) -> dict | None:
     the recorded size, and every other input the stages read (e.g. the texture) still has
     the recorded SHA-256.
     """
-    from potflat.files.provenance import file_sha256
 
     manifest = read_manifest(job.out_dir)
     if manifest is None or manifest.get("key") != key or manifest.get("complete") is not True:

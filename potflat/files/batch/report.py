@@ -18,6 +18,9 @@ from datetime import datetime, timezone
 from pathlib import Path
 from urllib.parse import quote
 
+from potflat import __version__
+from potflat.files.batch.manifest import MANIFEST
+from potflat.io.atomic import write_bytes_atomic
 from potflat.mesh.distortion import distortion_words, painted_zone_distortion
 
 #: File name of the report in the batch output folder.
@@ -98,8 +101,6 @@ def _relax_summary(folder: Path, name: str) -> dict:
 
 
 def _card(report, base: Path) -> str:
-    from potflat.files.batch.manifest import MANIFEST
-
     folder = Path(report.output)
     name = report.name
     relax = _relax_summary(folder, name)
@@ -154,8 +155,6 @@ def write_report(summary) -> Path:
     -------
     Path
     """
-    from potflat import __version__
-    from potflat.io.atomic import write_bytes_atomic
 
     base = Path(summary.output)
     counts = ", ".join(f"{n} {status}" for status, n in summary.counts.items() if n)

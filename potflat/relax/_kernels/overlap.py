@@ -12,7 +12,7 @@ import numpy as np
 
 from potflat._jit import leaf
 from potflat.mesh._segments import bin_segments
-from potflat.relax._kernels.springs import _first_root, _no_root_up_to, triangle_area_polynomial
+from potflat.relax._kernels.steps import _first_root, _no_root_up_to, triangle_area_polynomial
 
 
 @leaf

@@ -37,206 +37,65 @@ from potflat._jit import leaf, parallel, prange
 BLOCK = 4096
 
 
-#: A vertex's half-edges are sorted by insertion up to this many, by heap sort above (a fan
-#: of thousands of faces stays ``O(d log d)``).
-INSERTION_MAX = 32
-
-
-@parallel
-def halfedge_springs(faces, vf_ptr, vf_tri, springs):
-    """Unique edges and cross springs of a triangle mesh.
-
-    Count-then-fill over the vertices (no global sort): each vertex ``i`` groups the
-    half-edges of its faces whose smaller endpoint is ``i`` by the other endpoint. Equal to
-    a stable sort of all half-edges by edge, so the two half-edges of an edge come in the
-    order of their flat index ``3 f + c``.
+@leaf
+def edge_springs(faces, count, halves):
+    """Cross springs and boundary edges of a triangle mesh, from its edge table
+    (:func:`potflat.mesh._kernels.topology.edge_table`), in the table's edge order.
 
     Parameters
     ----------
     faces : (m, 3) int32 or int64
-    vf_ptr, vf_tri : CSR from :func:`vertex_faces` (its length gives the number of vertices)
-    springs : bool
-        False: only the edges (``cross`` and ``boundary`` come back empty).
+    count : (e,) int64
+        Half-edges (faces) on each edge.
+    halves : (e, 2) int64
+        The first two half-edges of each edge (lowest ids); half-edge ``3 f + c`` runs from
+        ``faces[f, c]`` to ``faces[f, (c + 1) % 3]``.
 
     Returns
     -------
-    edges : (e, 2) int64
-        Each undirected edge once (``i < j``; ``i == j`` for a face with a repeated vertex),
-        ordered by ``(i, j)``.
     cross : (c, 4) int64
-        One row ``(p, q, a, b)`` per edge shared by exactly two faces, in ``edges``' order:
-        the shared edge ``a -> b`` as it runs in the face with the smaller half-edge index,
-        ``p`` its vertex opposite the edge and ``q`` the other face's; rows with ``p == q``
-        (e.g. a duplicate face) are left out.
+        One row ``(p, q, a, b)`` per edge shared by exactly two faces: the shared edge
+        ``a -> b`` as it runs in the face with the smaller half-edge index, ``p`` its vertex
+        opposite the edge and ``q`` the other face's; rows with ``p == q`` (e.g. a duplicate
+        face) are left out.
     boundary : (b, 2) int64
-        The edges used by one face only, in ``edges``' order, each oriented as in its face
-        (``a -> b`` counter-clockwise). Edges of three or more faces are in neither.
+        The edges used by one face only, each oriented as in its face (``a -> b``
+        counter-clockwise). Edges of three or more faces are in neither.
     """
-    n = vf_ptr.shape[0] - 1
-    most = 0
-    for i in range(n):
-        most = max(most, vf_ptr[i + 1] - vf_ptr[i])
-    nblk = (n + BLOCK - 1) // BLOCK
-    # offsets of each vertex's edges, cross springs and boundary edges (counted, then summed);
-    # the counting pass writes nothing, so it gets empty outputs
-    start = np.zeros((n + 1, 3), np.int64)
-    edges = np.empty((0, 2), np.int64)
-    cross = np.empty((0, 4), np.int64)
-    boundary = np.empty((0, 2), np.int64)
-    for blk in prange(nblk):
-        hj = np.empty(3 * most, np.int64)
-        hh = np.empty(3 * most, np.int64)
-        for i in range(blk * BLOCK, min(n, (blk + 1) * BLOCK)):
-            k = _lower_halfedges(i, vf_ptr, vf_tri, faces, hj, hh)
-            ne, nc, nb = _vertex_edges(i, faces, hj, hh, k, springs, edges, cross, boundary, 0, 0, 0, False)
-            start[i + 1, 0] = ne
-            start[i + 1, 1] = nc
-            start[i + 1, 2] = nb
-    for i in range(n):
-        for t in range(3):
-            start[i + 1, t] += start[i, t]
-    edges = np.empty((start[n, 0], 2), np.int64)
-    cross = np.empty((start[n, 1], 4), np.int64)
-    boundary = np.empty((start[n, 2], 2), np.int64)
-    for blk in prange(nblk):
-        hj = np.empty(3 * most, np.int64)
-        hh = np.empty(3 * most, np.int64)
-        for i in range(blk * BLOCK, min(n, (blk + 1) * BLOCK)):
-            k = _lower_halfedges(i, vf_ptr, vf_tri, faces, hj, hh)
-            _vertex_edges(i, faces, hj, hh, k, springs, edges, cross, boundary,
-                          start[i, 0], start[i, 1], start[i, 2], True)
-    return edges, cross, boundary
-
-
-@leaf
-def _swap(hj, hh, a, b):
-    hj[a], hj[b] = hj[b], hj[a]
-    hh[a], hh[b] = hh[b], hh[a]
-
-
-@leaf
-def _before(hj, hh, a, b):
-    """Whether slot ``a`` sorts before slot ``b`` by ``(hj, hh)``."""
-    return hj[a] < hj[b] or (hj[a] == hj[b] and hh[a] < hh[b])
-
-
-@leaf
-def _sift_down(hj, hh, root, end):
-    """Restore the max-heap by ``(hj, hh)`` of slots ``[0, end)`` below ``root``.
-
-    (A hand-written heap sort: NumPy's argsort and slice assignments inside a kernel took
-    seconds to compile on a first run, for a branch only big fans take.)"""
-    while True:
-        child = 2 * root + 1
-        if child >= end:
-            return
-        if child + 1 < end and _before(hj, hh, child, child + 1):
-            child += 1
-        if _before(hj, hh, child, root):
-            return
-        _swap(hj, hh, root, child)
-        root = child
-
-
-@leaf
-def _lower_halfedges(i, vf_ptr, vf_tri, faces, hj, hh):
-    """The half-edges whose smaller endpoint is vertex ``i``, sorted by ``(j, h)``.
-
-    Parameters
-    ----------
-    i : int
-    vf_ptr, vf_tri : CSR from :func:`vertex_faces`
-    faces : (m, 3) int32 or int64
-    hj, hh : (cap,) int64
-        Output in the first ``k`` slots: the other endpoint ``j >= i`` and the half-edge
-        index ``h = 3 f + c`` (from ``faces[f, c]`` to ``faces[f, (c + 1) % 3]``). ``cap``
-        must be at least three times the vertex's number of faces.
-
-    Returns
-    -------
-    k : int
-    """
-    k = 0
-    prev = -1
-    for p in range(vf_ptr[i], vf_ptr[i + 1]):
-        f = vf_tri[p]
-        if f == prev:  # a face with a repeated vertex is listed once per corner
-            continue
-        prev = f
-        for c in range(3):
-            a = faces[f, c]
-            b = faces[f, (c + 1) % 3]
-            if min(a, b) == i:
-                hj[k] = max(a, b)
-                hh[k] = 3 * f + c
-                k += 1
-    # the faces come in increasing order, so h does: a stable sort by j sorts by (j, h)
-    if k > INSERTION_MAX:  # a big fan: heap sort by (j, h), h unique
-        for root in range(k // 2 - 1, -1, -1):
-            _sift_down(hj, hh, root, k)
-        for end in range(k - 1, 0, -1):
-            _swap(hj, hh, 0, end)
-            _sift_down(hj, hh, 0, end)
-        return k
-    for s in range(1, k):
-        j = hj[s]
-        h = hh[s]
-        t = s - 1
-        while t >= 0 and hj[t] > j:
-            hj[t + 1] = hj[t]
-            hh[t + 1] = hh[t]
-            t -= 1
-        hj[t + 1] = j
-        hh[t + 1] = h
-    return k
-
-
-@leaf
-def _vertex_edges(i, faces, hj, hh, k, springs, edges, cross, boundary, oe, oc, ob, write):
-    """Count vertex ``i``'s edges, cross springs and boundary edges; with ``write``, also
-    store them from rows ``oe``, ``oc``, ``ob`` of ``edges``, ``cross``, ``boundary``.
-
-    ``hj[:k]``, ``hh[:k]`` are the vertex's half-edges from :func:`_lower_halfedges`; the
-    rows are those of :func:`halfedge_springs` (cross and boundary only with ``springs``).
-
-    Returns
-    -------
-    ne, nc, nb : int
-    """
-    ne = 0
+    ne = count.shape[0]
     nc = 0
     nb = 0
-    s = 0
-    while s < k:
-        g = s + 1
-        while g < k and hj[g] == hj[s]:
-            g += 1
-        if write:
-            edges[oe + ne, 0] = i
-            edges[oe + ne, 1] = hj[s]
-        ne += 1
-        if springs and g - s <= 2:
-            f0 = hh[s] // 3
-            c0 = hh[s] % 3
-            a = faces[f0, c0]
-            b = faces[f0, (c0 + 1) % 3]
-            if g - s == 1:  # oriented as in its face
-                if write:
-                    boundary[ob + nb, 0] = a
-                    boundary[ob + nb, 1] = b
-                nb += 1
-            else:
-                p = faces[f0, (c0 + 2) % 3]
-                q = faces[hh[s + 1] // 3, (hh[s + 1] % 3 + 2) % 3]
-                if p != q:
-                    if write:
-                        cross[oc + nc, 0] = p
-                        cross[oc + nc, 1] = q
-                        cross[oc + nc, 2] = a
-                        cross[oc + nc, 3] = b
-                    nc += 1
-        s = g
-    return ne, nc, nb
+    for e in range(ne):
+        if count[e] == 1:
+            nb += 1
+        elif count[e] == 2:
+            h0 = halves[e, 0]
+            h1 = halves[e, 1]
+            if faces[h0 // 3, (h0 % 3 + 2) % 3] != faces[h1 // 3, (h1 % 3 + 2) % 3]:
+                nc += 1
+    cross = np.empty((nc, 4), np.int64)
+    boundary = np.empty((nb, 2), np.int64)
+    nc = 0
+    nb = 0
+    for e in range(ne):
+        h0 = halves[e, 0]
+        f0 = h0 // 3
+        c0 = h0 % 3
+        if count[e] == 1:
+            boundary[nb, 0] = faces[f0, c0]
+            boundary[nb, 1] = faces[f0, (c0 + 1) % 3]
+            nb += 1
+        elif count[e] == 2:
+            h1 = halves[e, 1]
+            p = faces[f0, (c0 + 2) % 3]
+            q = faces[h1 // 3, (h1 % 3 + 2) % 3]
+            if p != q:
+                cross[nc, 0] = p
+                cross[nc, 1] = q
+                cross[nc, 2] = faces[f0, c0]
+                cross[nc, 3] = faces[f0, (c0 + 1) % 3]
+                nc += 1
+    return cross, boundary
 
 
 @parallel
@@ -371,72 +230,6 @@ def _put_spring(fill, nbr, rst, i, j, r):
     fill[j] += 1
 
 
-@leaf
-def vertex_faces(n, faces):
-    """Incident faces of each vertex (CSR, faces in increasing order).
-
-    Returns
-    -------
-    ptr : (n + 1,) int64
-    tri : (3 m,) int32
-    """
-    m = faces.shape[0]
-    deg = np.zeros(n + 1, np.int64)
-    for f in range(m):
-        for c in range(3):
-            deg[np.uint64(faces[f, c] + 1)] += 1
-    ptr = np.cumsum(deg)
-    fill = ptr[:-1].copy()
-    tri = np.empty(3 * m, np.int32)
-    for f in range(m):
-        for c in range(3):
-            v = np.uint64(faces[f, c])
-            tri[np.uint64(fill[v])] = f
-            fill[v] += 1
-    return ptr, tri
-
-
-@leaf
-def faces_in_vertex_order(faces, new_index):
-    """The faces with their corners renumbered by ``new_index``, ordered by their smallest
-    new corner index (stable: ties keep their order).
-
-    With the vertices renumbered in a locality-preserving order, the faces in this order are
-    local too: the per-face passes and the per-vertex gathers over incident faces then read
-    nearby memory. One counting sort, ``O(n + m)`` (equal to ``G[np.argsort(G.min(axis=1),
-    kind="stable")]`` for ``G = new_index[faces]``, without its temporaries).
-
-    Parameters
-    ----------
-    faces : (m, 3) int64
-    new_index : (n,) int64
-        The new index of every vertex (a permutation of ``range(n)``).
-
-    Returns
-    -------
-    (m, 3) int64
-    """
-    n = new_index.shape[0]
-    m = faces.shape[0]
-    start = np.zeros(n + 1, np.int64)
-    for f in range(m):
-        start[min(new_index[faces[f, 0]], new_index[faces[f, 1]], new_index[faces[f, 2]]) + 1] += 1
-    for i in range(n):
-        start[i + 1] += start[i]
-    out = np.empty((m, 3), np.int64)
-    for f in range(m):
-        a = new_index[faces[f, 0]]
-        b = new_index[faces[f, 1]]
-        c = new_index[faces[f, 2]]
-        v = min(a, b, c)
-        row = start[v]
-        out[row, 0] = a
-        out[row, 1] = b
-        out[row, 2] = c
-        start[v] += 1
-    return out
-
-
 @parallel
 def neighbour_means(x, verts, vf_ptr, vf_tri, faces, out):
     """Mean of ``x`` (positions, or a search direction) over each listed vertex's edge
@@ -489,24 +282,6 @@ def _phi(a):
     if a <= 0.0:
         return np.inf
     return a - 1.0 - math.log(a)
-
-
-@parallel
-def face_areas(x, faces, out):
-    """Signed area of every face.
-
-    Parameters
-    ----------
-    x : (n, 2) float64
-    faces : (m, 3) int32 or int64
-    out : (m,) float64
-    """
-    for t in prange(faces.shape[0]):
-        a0 = np.uint32(faces[t, 0])
-        a1 = np.uint32(faces[t, 1])
-        a2 = np.uint32(faces[t, 2])
-        out[t] = 0.5 * ((x[a1, 0] - x[a0, 0]) * (x[a2, 1] - x[a0, 1])
-                        - (x[a1, 1] - x[a0, 1]) * (x[a2, 0] - x[a0, 0]))
 
 
 @parallel
@@ -941,184 +716,6 @@ def face_barrier(x, faces, areas, a_ref, mu, k, eps, relative, weight, grad, dia
     return total
 
 
-@leaf
-def _area_polynomial(x, d, faces, f, shrink):
-    """Coefficients ``(c0, c1, c2)`` of face ``f``'s signed area (doubled) along ``x + t d``
-    minus ``1 - shrink`` of its area at ``x``: ``c0 + c1 t + c2 t^2``."""
-    # (uint32 corners: one compiled type for the faces' int32 and the contact bound's int64,
-    # and no negative-index wraparound at each read)
-    return triangle_area_polynomial(x, d, np.uint32(faces[f, 0]), np.uint32(faces[f, 1]), np.uint32(faces[f, 2]),
-                                    shrink)
-
-
-@leaf
-def triangle_area_polynomial(x, d, a0, a1, a2, shrink):
-    """:func:`_area_polynomial` of the triangle of vertices ``a0, a1, a2`` (any three; the
-    contact step bound's vertex and segment too)."""
-    e1x = x[a1, 0] - x[a0, 0]
-    e1y = x[a1, 1] - x[a0, 1]
-    e2x = x[a2, 0] - x[a0, 0]
-    e2y = x[a2, 1] - x[a0, 1]
-    f1x = d[a1, 0] - d[a0, 0]
-    f1y = d[a1, 1] - d[a0, 1]
-    f2x = d[a2, 0] - d[a0, 0]
-    f2y = d[a2, 1] - d[a0, 1]
-    c0 = (e1x * e2y - e1y * e2x) * shrink
-    c1 = e1x * f2y - e1y * f2x + f1x * e2y - f1y * e2x
-    c2 = f1x * f2y - f1y * f2x
-    return c0, c1, c2
-
-
-@leaf
-def _no_root_up_to(c0, c1, c2, t):
-    """True when ``c0 + c1 s + c2 s^2`` stays positive for every ``s`` in ``[0, t]``: positive
-    at both ends and no convex dip below zero in between (branch-free, without a division
-    or a square root)."""
-    return (c0 > 0.0) & (c0 + t * (c1 + t * c2) > 0.0) & (
-        (c2 <= 0.0) | (c1 >= 0.0) | (-c1 >= 2.0 * c2 * t) | (4.0 * c0 * c2 > c1 * c1))
-
-
-@parallel
-def max_step(x, d, faces, cap, shrink, out, limiting):
-    """Per block of faces, the largest ``t <= cap`` for which ``x + t d`` keeps every face's
-    signed area above ``1 - shrink`` times its area at ``x`` (``shrink = 1``: positive;
-    the smallest positive root of a quadratic in ``t``).
-
-    A face whose area polynomial has no root in ``[0, best]`` is skipped (most faces); only
-    the others solve their quadratic.
-
-    Parameters
-    ----------
-    x, d : (n, 2) float64
-    faces : (m, 3) int32 or int64
-    cap : float
-        Upper bound of interest (``inf``: none).
-    shrink : float
-        Largest fraction of its area a face may lose, in (0, 1].
-    out : (ceil(m / BLOCK),) float64
-        Output: minimum over each block (``cap`` when no face shrinks that far before it).
-    limiting : (m,) or (0,) bool
-        Output unless empty: the faces whose own bound is below ``cap``.
-    """
-    m = faces.shape[0]
-    nb = out.shape[0]
-    flag = limiting.shape[0] > 0
-    for b in prange(nb):
-        best = cap
-        for f in range(np.uint64(b * BLOCK), np.uint64(min(m, (b + 1) * BLOCK))):
-            c0, c1, c2 = _area_polynomial(x, d, faces, f, shrink)
-            if flag:
-                limiting[f] = not _no_root_up_to(c0, c1, c2, cap)
-            if not _no_root_up_to(c0, c1, c2, best):
-                best = min(best, _first_root(c0, c1, c2))
-        out[b] = best
-
-
-@leaf
-def max_step_of(x, d, faces, face_list, cap, shrink):
-    """:func:`max_step` over the listed faces only (repeats allowed): the largest ``t <= cap``.
-
-    Parameters
-    ----------
-    x, d : (n, 2) float64
-    faces : (m, 3) int32 or int64
-    face_list : (k,) int64
-    cap, shrink : float
-    """
-    best = cap
-    for p in range(face_list.shape[0]):
-        c0, c1, c2 = _area_polynomial(x, d, faces, np.uint64(face_list[p]), shrink)
-        if not _no_root_up_to(c0, c1, c2, best):
-            best = min(best, _first_root(c0, c1, c2))
-    return best
-
-
-@leaf
-def flagged_face_vertices(flags, faces, seen):
-    """The vertices of the flagged faces, each once, in order of first appearance.
-
-    Parameters
-    ----------
-    flags : (m,) bool
-    faces : (m, 3) int32 or int64
-    seen : (n,) bool
-        Work space, all False on entry and on return.
-
-    Returns
-    -------
-    (k,) int64
-    """
-    count = 0
-    for f in range(flags.shape[0]):
-        if flags[f]:
-            count += 3
-    out = np.empty(count, np.int64)
-    k = 0
-    for f in range(flags.shape[0]):
-        if flags[f]:
-            for c in range(3):
-                v = faces[f, c]
-                if not seen[v]:
-                    seen[v] = True
-                    out[k] = v
-                    k += 1
-    for p in range(k):
-        seen[out[p]] = False
-    return out[:k]
-
-
-@leaf
-def incident_faces(verts, vf_ptr, vf_tri):
-    """The faces incident to the listed vertices, concatenated per vertex (a face shared by
-    several listed vertices appears once per vertex).
-
-    Parameters
-    ----------
-    verts : (k,) int64
-    vf_ptr, vf_tri : CSR from :func:`vertex_faces`
-
-    Returns
-    -------
-    (sum of the valences,) int64
-    """
-    total = 0
-    for v in verts:
-        total += vf_ptr[v + 1] - vf_ptr[v]
-    out = np.empty(total, np.int64)
-    k = 0
-    for v in verts:
-        for p in range(vf_ptr[v], vf_ptr[v + 1]):
-            out[k] = vf_tri[p]
-            k += 1
-    return out
-
-
-@leaf
-def _first_root(c0, c1, c2):
-    """Smallest positive root of ``c0 + c1 t + c2 t^2`` (inf if none); 0 if ``c0 <= 0``."""
-    if c0 <= 0.0:
-        return 0.0
-    scale = abs(c0) + abs(c1) + abs(c2)
-    if abs(c2) <= 1e-14 * scale:
-        if c1 < 0.0:
-            return -c0 / c1
-        return np.inf
-    disc = c1 * c1 - 4.0 * c2 * c0
-    if disc < 0.0:
-        return np.inf
-    sq = math.sqrt(disc)
-    q = -0.5 * (c1 + sq) if c1 >= 0.0 else -0.5 * (c1 - sq)
-    best = np.inf
-    if q != 0.0:
-        r1 = q / c2
-        r2 = c0 / q
-        if r1 > 0.0:
-            best = r1
-        if 0.0 < r2 < best:
-            best = r2
-    return best
-
-
 @parallel
 def boundary_angle_sums(x, verts, vf_ptr, vf_tri, faces, out):
     """Flat interior angle sum of each listed boundary vertex (sum of its faces' angles).
@@ -1158,130 +755,4 @@ def boundary_angle_sums(x, verts, vf_ptr, vf_tri, faces, out):
             acc += math.atan2(ux * wy - uy * wx, ux * wx + uy * wy)
         out[i] = acc
 
-
-@parallel
-def boundary_max_step(x, d, verts, bprev, bnext, out):
-    """Per block of guarded boundary vertices, the largest ``t`` before the vertex's angle
-    sum at ``x + t d`` reaches ``2 pi`` (its two boundary edges align, pointing the same way).
-
-    With ``u = x_nxt - x_b`` and ``w = x_prv - x_b`` the angle sum is a multiple of ``2 pi``
-    exactly where ``cross(u, w) = 0`` (a quadratic in ``t``) and ``dot(u, w) > 0``; starting
-    below ``2 pi`` with no face flipping, the first such ``t`` is where it reaches ``2 pi``.
-
-    Parameters
-    ----------
-    x, d : (n, 2) float64
-    verts : (b,) int64
-        Guarded boundary vertices (angle sum below ``2 pi`` at ``x``).
-    bprev, bnext : (n,) int32
-    out : (ceil(b / BLOCK),) float64
-        Output: minimum over each block (inf when no angle sum reaches ``2 pi``).
-    """
-    nv = verts.shape[0]
-    for blk in prange(out.shape[0]):
-        best = np.inf
-        for s in range(blk * BLOCK, min(nv, (blk + 1) * BLOCK)):
-            b = verts[s]
-            nx = bnext[b]
-            pv = bprev[b]
-            ux = x[nx, 0] - x[b, 0]
-            uy = x[nx, 1] - x[b, 1]
-            wx = x[pv, 0] - x[b, 0]
-            wy = x[pv, 1] - x[b, 1]
-            dux = d[nx, 0] - d[b, 0]
-            duy = d[nx, 1] - d[b, 1]
-            dwx = d[pv, 0] - d[b, 0]
-            dwy = d[pv, 1] - d[b, 1]
-            c0 = ux * wy - uy * wx
-            c1 = ux * dwy - uy * dwx + dux * wy - duy * wx
-            c2 = dux * dwy - duy * dwx
-            e0 = ux * wx + uy * wy
-            e1 = ux * dwx + uy * dwy + dux * wx + duy * wy
-            e2 = dux * dwx + duy * dwy
-            r1, r2 = _positive_roots(c0, c1, c2)
-            if r1 < best and e0 + r1 * (e1 + r1 * e2) > 0.0:
-                best = r1
-            elif r2 < best and e0 + r2 * (e1 + r2 * e2) > 0.0:
-                best = r2
-        out[blk] = best
-
-
-@leaf
-def _positive_roots(c0, c1, c2):
-    """The non-negative roots of ``c0 + c1 t + c2 t^2`` in increasing order (inf for missing ones)."""
-    scale = abs(c0) + abs(c1) + abs(c2)
-    if scale == 0.0:
-        return np.inf, np.inf
-    if abs(c2) <= 1e-14 * scale:
-        if c1 != 0.0 and -c0 / c1 >= 0.0:
-            return -c0 / c1, np.inf
-        return np.inf, np.inf
-    disc = c1 * c1 - 4.0 * c2 * c0
-    if disc < 0.0:
-        return np.inf, np.inf
-    sq = math.sqrt(disc)
-    q = -0.5 * (c1 + sq) if c1 >= 0.0 else -0.5 * (c1 - sq)
-    r1 = q / c2
-    r2 = c0 / q if q != 0.0 else r1
-    lo = min(r1, r2)
-    hi = max(r1, r2)
-    if lo < 0.0:
-        lo = np.inf
-    if hi < 0.0:
-        hi = np.inf
-    if lo > hi:
-        lo, hi = hi, lo
-    return lo, hi
-
-
-@parallel
-def dynamics_step(x, v, ptr, nbr, rst, k, relative, r_floor, friction, dt, x_out, v_out, e_spring):
-    """One semi-implicit Euler step of the paper's damped spring system (mass 1).
-
-    ``v <- (1 - c_i) v + dt F``, ``x <- x + dt v`` with friction ``c_i`` applied per step.
-
-    Parameters
-    ----------
-    x, v : (n, 2) float64
-        Positions and velocities now.
-    ptr, nbr, rst, k, relative, r_floor
-        Springs as in :func:`energy_gradient`.
-    friction : (n,) float64
-    dt : float
-    x_out, v_out : (n, 2) float64
-        Output: the state after the step.
-    e_spring : (n,) float64
-        Output: each vertex's share of the spring energy at ``x`` (before the step).
-    """
-    n = x.shape[0]
-    for i in prange(n):
-        fx = 0.0
-        fy = 0.0
-        es = 0.0
-        xi = x[i, 0]
-        yi = x[i, 1]
-        for p in range(np.uint64(ptr[i]), np.uint64(ptr[i + 1])):
-            j = np.uint32(nbr[p])  # (unsigned: no negative-index wraparound at each read)
-            dx = xi - x[j, 0]
-            dy = yi - x[j, 1]
-            ln = math.sqrt(dx * dx + dy * dy)
-            r = rst[p]
-            c = k
-            if relative:
-                rr = max(r, r_floor)
-                c = k / (rr * rr)
-            dl = ln - r
-            es += 0.25 * c * dl * dl
-            if ln > 0.0:
-                f = c * dl / ln
-                fx -= f * dx
-                fy -= f * dy
-        keep = 1.0 - friction[i]
-        vx = keep * v[i, 0] + dt * fx
-        vy = keep * v[i, 1] + dt * fy
-        v_out[i, 0] = vx
-        v_out[i, 1] = vy
-        x_out[i, 0] = xi + dt * vx
-        x_out[i, 1] = yi + dt * vy
-        e_spring[i] = es
 

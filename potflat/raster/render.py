@@ -1,7 +1,7 @@
-"""Bake stage: true-scale images of the painting and of the flattening's distortion.
+"""A flattening drawn in a true-scale pixel grid: its painting and per-pixel fields.
 
 For every output pixel the flat triangle under it is found (a binned, parallel
-rasteriser, :mod:`potflat.bake._kernels`), the per-corner texture coordinates are
+rasteriser, :mod:`potflat.raster._kernels`), the per-corner texture coordinates are
 interpolated barycentrically and the texture is sampled bilinearly. Anti-aliasing:
 each pixel averages ``n x n`` sub-samples (``supersample``; also anti-aliases the
 outline, alpha = covered fraction) and, where the texture is still finer than a
@@ -13,11 +13,11 @@ shaded relief, and so do the faces of a textured scan that have no texture coord
 texture's mip levels are made from the other faces' charts only.
 
 The pixel grid: ``px_per_mm`` pixels per millimetre, row 0 at the largest ``v`` (the
-mouth up), column 0 at the smallest ``u`` (not mirrored); :attr:`BakeResult.origin`
-is the ``uv`` of the top-left pixel corner. Images are rendered in horizontal strips,
+mouth up), column 0 at the smallest ``u`` (not mirrored); :attr:`Grid.origin` is
+the ``uv`` of the top-left pixel corner. Images are rendered in horizontal strips,
 so large outputs (hundreds of megapixels) are streamed to disk with a bounded memory
-footprint: :class:`Renderer` gives every layer of a strip of rows, which the file stage
-(:func:`potflat.files.bake_stage.run_bake_stage`) writes as it goes.
+footprint: :class:`Renderer` gives every layer of a strip of rows, which the bake composes
+(:mod:`potflat.bake.compose`) and its file stage writes as it goes.
 """
 from __future__ import annotations
 
@@ -26,13 +26,16 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cached_property
 
+import cv2
 import numpy as np
 
-from potflat.mesh import distortion
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.images import read_ahead, read_texture
-from potflat.types import FlatMesh
+from potflat.mesh import distortion
 from potflat.mesh.tolerances import DEGENERATE, ROUNDING
+from potflat.raster import _kernels as raster
+from potflat.raster._kernels import copy_where, halve_masked
+from potflat.types import FlatMesh
 
 #: Transparent border around the mesh, in pixels.
 PAD_PX = 1
@@ -121,9 +124,6 @@ def _chart_mask(texcoords: np.ndarray, height: int, width: int) -> np.ndarray:
     height, width : int
         Texture size.
     """
-    import cv2
-
-    from potflat.bake import _kernels as raster
 
     mask = np.zeros((height, width), np.uint8)
     raster.cover_texcoords(np.ascontiguousarray(texcoords, dtype=np.float64).reshape(-1, 3, 2), ROUNDING, mask)
@@ -136,7 +136,6 @@ def _halve_masked(img: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.nd
     img : (H, W, C) uint8/uint16, valid : (H, W) bool -> ((H+1)//2, (W+1)//2, C) same dtype, and its
     validity (any valid texel in the block).
     """
-    from potflat.bake._kernels import halve_masked
 
     h, w = (img.shape[0] + 1) // 2, (img.shape[1] + 1) // 2
     out = np.empty((h, w, img.shape[2]), img.dtype)
@@ -147,9 +146,6 @@ def _halve_masked(img: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.nd
 
 def _pull_fill(levels: list, valids: list) -> None:
     """Fill each level's texels outside the charts from the next coarser level (in place)."""
-    import cv2
-
-    from potflat.bake._kernels import copy_where
 
     last, ok = levels[-1], valids[-1]
     if ok.any() and not ok.all():
@@ -247,8 +243,6 @@ class Renderer:
                  distortion_maps: bool = True, summary: distortion.DistortionSummary | None = None,
                  zone: distortion.ZoneSummary | None = None,
                  reference: distortion.SurfaceReference | None = None):
-        from potflat.bake import _kernels as raster
-
         self.flat = flat
         mesh = flat.mesh
         self.faces = mesh.faces
@@ -319,7 +313,6 @@ class Renderer:
     # -- setup ---------------------------------------------------------------------
     def _texel_ratio(self, pix: np.ndarray) -> np.ndarray:
         """Texels per output pixel (largest singular value of the pixel-to-texel map) per face."""
-        from potflat.bake import _kernels as raster
 
         H0, W0 = self.texture.shape[:2]
         out = np.empty(len(self.faces))
@@ -488,7 +481,7 @@ class Renderer:
         :data:`potflat.mesh.distortion.ZONE_THRESHOLD`), shape (k, w) bool; None without importance."""
         if self.flat.importance is None:
             return None
-        return _outline(self._vertex_fields(r0, r1)[1], distortion.ZONE_THRESHOLD)
+        return outline_pixels(self._vertex_fields(r0, r1)[1], distortion.ZONE_THRESHOLD)
 
     def position(self, r0: int, r1: int) -> np.ndarray:
         """3D point under each pixel, scan units (NaN outside). Shape (k, w, 3) float32."""
@@ -497,53 +490,6 @@ class Renderer:
 
 # --------------------------------------------------------------------------------------
 # figures
-
-
-def _stats(values: np.ndarray, weights: np.ndarray | None = None) -> dict:
-    values = np.asarray(values, float)
-    if not len(values):
-        return {"mean": 0.0, "p95": 0.0, "max": 0.0}
-    mean = float(np.average(values, weights=weights)) if weights is not None and weights.sum() > 0 else float(values.mean())
-    return {"mean": mean, "p95": float(np.percentile(values, 95)), "max": float(values.max())}
-
-
-def image_figures(r: Renderer, covered_px: float) -> dict:
-    """The figures of ``NAME.bake.json``: the image's grid and texture, the distortion maps'
-    statistics, the whole surface's figures (``r.summary``) and the painted zone's
-    (``r.zone``); ``covered_px``: the painting's covered pixels, summed."""
-    g, flat = r.grid, r.flat
-    mpu = flat.mesh.mm_per_unit
-    fv = r.face_values
-    valid = r.valid
-    w = r.area_3d[valid]
-    # JSON has no infinity: a collapsed flat triangle (anisotropy inf) is reported as null
-    summary = {k: (v if not isinstance(v, float) or math.isfinite(v) else None) for k, v in r.summary.as_dict().items()}
-    figures = {
-        "px_per_mm": g.px_per_mm,
-        "dpi": g.px_per_mm * 25.4,
-        "units": flat.mesh.units,
-        "mm_per_unit": mpu,
-        "px_per_unit": g.scale,
-        "image_px": [g.width, g.height],
-        "image_mm": [g.width / g.px_per_mm, g.height / g.px_per_mm],
-        "origin_uv": [float(g.origin[0]), float(g.origin[1])],
-        "supersample": r.n,
-        "mip_levels": r.mip_levels,
-        "texture": str(flat.mesh.texture_path) if r.texture is not None else None,
-        "texture_px": list(r.texture.shape[1::-1]) if r.texture is not None else None,
-        "texels_per_pixel_median": r.texels_per_pixel_median,
-        "painting": "texture" if r.texture is not None else "vertex colours" if flat.mesh.vertex_colors is not None
-        else "shaded relief",
-        "stress": {**_stats(r.vertex_stress), "unit": "sqrt(mm)"},
-        "area": {**_stats(np.abs(fv["area"][valid]), w), "unit": "|ln(flat area / 3D area)|"},
-        "anisotropy": {**_stats(fv["anisotropy"][valid], w), "unit": "sigma_max / sigma_min"},
-        "distortion": summary,
-        **r.zone.as_dict(),
-        "covered_area_mm2": covered_px / g.px_per_mm ** 2,
-        "flattened_area_mm2": float(np.abs(r.area_2d).sum()) * mpu ** 2,
-        "surface_area_mm2": float(r.area_3d.sum()) * mpu ** 2,
-    }
-    return figures
 
 
 # --------------------------------------------------------------------------------------
@@ -584,15 +530,6 @@ def paint(flat: FlatMesh, px_per_mm: float, *, supersample: int = 2,
     return image, g.origin.copy()
 
 
-def attachment_rows(share: np.ndarray) -> np.ndarray:
-    """RGBA rows of the attachment mask from the covered share of marked faces per pixel."""
-    alpha = np.nan_to_num(share, nan=0.0)
-    out = np.zeros(share.shape + (4,), np.uint8)
-    out[..., :3] = ATTACHMENT_COLOUR[:3]
-    out[..., 3] = np.round(alpha * ATTACHMENT_COLOUR[3]).astype(np.uint8)
-    return out
-
-
 def rgba8(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
     """(k, w, 3) float in [0, 1] (NaN outside) and coverage -> (k, w, 4) uint8."""
     out = np.empty(rgb.shape[:2] + (4,), np.uint8)
@@ -601,105 +538,14 @@ def rgba8(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
     return out
 
 
-def rgba16(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
-    out = np.empty(rgb.shape[:2] + (4,), np.uint16)
-    out[..., :3] = np.rint(np.clip(np.nan_to_num(rgb, nan=0.0), 0.0, 1.0) * 65535.0)
-    out[..., 3] = np.rint(coverage * 65535.0)
-    return out
-
-
 # --------------------------------------------------------------------------------------
 # marks and the scale bar drawn into the painting (used strip by strip by the file stage)
 
 
-#: Colour (RGBA) of the faces where a left-out attachment (handle, spout, knob) met the wall.
-ATTACHMENT_COLOUR = (230, 0, 160, 220)
-
-
-#: Colour (RGBA) of the outline and hatching of the places where the scan folds over itself in 3D.
-FOLDED_COLOUR = (255, 0, 255, 255)
-#: Spacing (pixels) of the hatching's diagonal lines.
-FOLDED_HATCH_PX = 6
-
-
-def _outline(field: np.ndarray, threshold: float) -> np.ndarray:
+def outline_pixels(field: np.ndarray, threshold: float) -> np.ndarray:
     """Pixels (k, w) bool on the outline of where ``field`` (k, w, NaN outside) is at least ``threshold``."""
-    import cv2
-
     inside = (np.nan_to_num(field, nan=0.0) >= threshold).astype(np.uint8)
     ring = np.ones((3, 3), np.uint8)
     edge = cv2.dilate(inside, ring, borderType=cv2.BORDER_REPLICATE) & ~cv2.erode(
         inside, ring, borderType=cv2.BORDER_REPLICATE)
     return edge.astype(bool) & np.isfinite(field)
-
-
-def folded_hatch(share: np.ndarray, r0: int) -> np.ndarray:
-    """Pixels (k, w) bool marking where the scan folds in 3D: the outline of the faces'
-    footprint (their share crossing one half) and diagonal hatching inside it."""
-    rows, cols = np.indices(share.shape)
-    hatch = (np.nan_to_num(share, nan=0.0) >= 0.5) & ((rows + r0 + cols) % FOLDED_HATCH_PX == 0)
-    return _outline(share, 0.5) | hatch
-
-
-#: Colour (RGBA) of the dashed line where a rollout's repeat past 360 degrees (``overlap``) starts.
-REPEAT_COLOUR = (255, 0, 200, 255)
-#: Dash length of that line, pixels.
-REPEAT_DASH_PX = 6
-
-
-def repeat_line(share: np.ndarray, r0: int) -> np.ndarray:
-    """Pixels (k, w) bool of a dashed line where the repeated part starts: where the share of
-    repeated faces crosses one half from left to right (the line runs from foot to mouth)."""
-    rep = np.nan_to_num(share, nan=-1.0)
-    inside = rep >= 0.5
-    edge = np.zeros_like(inside)
-    edge[:, 1:] = inside[:, 1:] & (rep[:, :-1] >= 0) & ~inside[:, :-1]
-    edge[:, :-1] |= edge[:, 1:].copy()  # two pixels wide
-    rows = (np.arange(r0, r0 + len(rep)) // REPEAT_DASH_PX) % 2 == 0
-    return edge & rows[:, None]
-
-
-#: Shortest scale bar drawn into ``NAME.png``, as a fraction of the default (a quarter of the width).
-MIN_BAR_FRACTION = 0.1
-
-
-def scale_layer_on_image(r: Renderer, grid: bool):
-    """The scale layer to draw into ``NAME.png``, placed where it covers no painting.
-
-    The painting's footprint is rasterised on a grid of at most
-    :data:`potflat.bake.annotate.FREE_SPOT_MASK_PX` pixels a side and the free place nearest the
-    bottom-left corner is taken, for the longest round bar (from a quarter of the image width
-    down to :data:`MIN_BAR_FRACTION` of that) that has one; when none has, a band is added
-    below the image with the default bar.
-
-    Returns
-    -------
-    layer : ScaleLayer
-    band : int
-        Rows added below the image (0 when the bar fits beside the painting).
-    """
-    from potflat.bake import annotate
-
-    g = r.grid
-    f = max(1, math.ceil(max(g.width, g.height) / annotate.FREE_SPOT_MASK_PX))
-    wc, hc = math.ceil(g.width / f), math.ceil(g.height / f)
-    uv = r.flat.uv[r.faces]  # (m, 3, 2)
-    tex = np.empty_like(uv)
-    tex[..., 0] = (uv[..., 0] - g.origin[0]) * g.scale / f / wc
-    tex[..., 1] = 1.0 - (g.origin[1] - uv[..., 1]) * g.scale / f / hc
-    covered = _chart_mask(tex, hc, wc)
-    default = annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid)
-    bar = default.bar_mm
-    while bar >= MIN_BAR_FRACTION * default.bar_mm * (1 - ROUNDING):
-        probe = annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid, bar_mm=bar)
-        bw, bh = probe.box_size
-        spot = annotate.free_spot(covered, (math.ceil(bw / f) + 1, math.ceil(bh / f) + 1), math.ceil(probe.margin / f))
-        if spot is not None:
-            return annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid, bar_mm=bar,
-                                       at=(spot[0] * f, spot[1] * f)), 0
-        bar = annotate.nice_length(bar * 0.99)
-    bw, bh = default.box_size
-    band = bh + 2 * default.margin
-    return annotate.ScaleLayer(g.width, g.height + band, g.px_per_mm, grid=grid, bar_mm=default.bar_mm,
-                               at=(default.margin, g.height + default.margin)), band
-

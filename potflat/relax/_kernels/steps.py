@@ -1,0 +1,207 @@
+"""Step bounds of the fold-free solver: the longest step along a direction that keeps every
+face above a share of its area, and every guarded boundary vertex's angle sum below 2 pi.
+
+Arrays in, arrays out, no I/O; deterministic for any thread count.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from potflat._jit import leaf, parallel, prange
+
+from potflat.relax._kernels.springs import BLOCK
+
+
+@leaf
+def _area_polynomial(x, d, faces, f, shrink):
+    """Coefficients ``(c0, c1, c2)`` of face ``f``'s signed area (doubled) along ``x + t d``
+    minus ``1 - shrink`` of its area at ``x``: ``c0 + c1 t + c2 t^2``."""
+    # (uint32 corners: one compiled type for the faces' int32 and the contact bound's int64,
+    # and no negative-index wraparound at each read)
+    return triangle_area_polynomial(x, d, np.uint32(faces[f, 0]), np.uint32(faces[f, 1]), np.uint32(faces[f, 2]),
+                                    shrink)
+
+
+@leaf
+def triangle_area_polynomial(x, d, a0, a1, a2, shrink):
+    """:func:`_area_polynomial` of the triangle of vertices ``a0, a1, a2`` (any three; the
+    contact step bound's vertex and segment too)."""
+    e1x = x[a1, 0] - x[a0, 0]
+    e1y = x[a1, 1] - x[a0, 1]
+    e2x = x[a2, 0] - x[a0, 0]
+    e2y = x[a2, 1] - x[a0, 1]
+    f1x = d[a1, 0] - d[a0, 0]
+    f1y = d[a1, 1] - d[a0, 1]
+    f2x = d[a2, 0] - d[a0, 0]
+    f2y = d[a2, 1] - d[a0, 1]
+    c0 = (e1x * e2y - e1y * e2x) * shrink
+    c1 = e1x * f2y - e1y * f2x + f1x * e2y - f1y * e2x
+    c2 = f1x * f2y - f1y * f2x
+    return c0, c1, c2
+
+
+@leaf
+def _no_root_up_to(c0, c1, c2, t):
+    """True when ``c0 + c1 s + c2 s^2`` stays positive for every ``s`` in ``[0, t]``: positive
+    at both ends and no convex dip below zero in between (branch-free, without a division
+    or a square root)."""
+    return (c0 > 0.0) & (c0 + t * (c1 + t * c2) > 0.0) & (
+        (c2 <= 0.0) | (c1 >= 0.0) | (-c1 >= 2.0 * c2 * t) | (4.0 * c0 * c2 > c1 * c1))
+
+
+@parallel
+def max_step(x, d, faces, cap, shrink, out, limiting):
+    """Per block of faces, the largest ``t <= cap`` for which ``x + t d`` keeps every face's
+    signed area above ``1 - shrink`` times its area at ``x`` (``shrink = 1``: positive;
+    the smallest positive root of a quadratic in ``t``).
+
+    A face whose area polynomial has no root in ``[0, best]`` is skipped (most faces); only
+    the others solve their quadratic.
+
+    Parameters
+    ----------
+    x, d : (n, 2) float64
+    faces : (m, 3) int32 or int64
+    cap : float
+        Upper bound of interest (``inf``: none).
+    shrink : float
+        Largest fraction of its area a face may lose, in (0, 1].
+    out : (ceil(m / BLOCK),) float64
+        Output: minimum over each block (``cap`` when no face shrinks that far before it).
+    limiting : (m,) or (0,) bool
+        Output unless empty: the faces whose own bound is below ``cap``.
+    """
+    m = faces.shape[0]
+    nb = out.shape[0]
+    flag = limiting.shape[0] > 0
+    for b in prange(nb):
+        best = cap
+        for f in range(np.uint64(b * BLOCK), np.uint64(min(m, (b + 1) * BLOCK))):
+            c0, c1, c2 = _area_polynomial(x, d, faces, f, shrink)
+            if flag:
+                limiting[f] = not _no_root_up_to(c0, c1, c2, cap)
+            if not _no_root_up_to(c0, c1, c2, best):
+                best = min(best, _first_root(c0, c1, c2))
+        out[b] = best
+
+
+@leaf
+def max_step_of(x, d, faces, face_list, cap, shrink):
+    """:func:`max_step` over the listed faces only (repeats allowed): the largest ``t <= cap``.
+
+    Parameters
+    ----------
+    x, d : (n, 2) float64
+    faces : (m, 3) int32 or int64
+    face_list : (k,) int64
+    cap, shrink : float
+    """
+    best = cap
+    for p in range(face_list.shape[0]):
+        c0, c1, c2 = _area_polynomial(x, d, faces, np.uint64(face_list[p]), shrink)
+        if not _no_root_up_to(c0, c1, c2, best):
+            best = min(best, _first_root(c0, c1, c2))
+    return best
+
+
+@leaf
+def _first_root(c0, c1, c2):
+    """Smallest positive root of ``c0 + c1 t + c2 t^2`` (inf if none); 0 if ``c0 <= 0``."""
+    if c0 <= 0.0:
+        return 0.0
+    scale = abs(c0) + abs(c1) + abs(c2)
+    if abs(c2) <= 1e-14 * scale:
+        if c1 < 0.0:
+            return -c0 / c1
+        return np.inf
+    disc = c1 * c1 - 4.0 * c2 * c0
+    if disc < 0.0:
+        return np.inf
+    sq = math.sqrt(disc)
+    q = -0.5 * (c1 + sq) if c1 >= 0.0 else -0.5 * (c1 - sq)
+    best = np.inf
+    if q != 0.0:
+        r1 = q / c2
+        r2 = c0 / q
+        if r1 > 0.0:
+            best = r1
+        if 0.0 < r2 < best:
+            best = r2
+    return best
+
+
+@parallel
+def boundary_max_step(x, d, verts, bprev, bnext, out):
+    """Per block of guarded boundary vertices, the largest ``t`` before the vertex's angle
+    sum at ``x + t d`` reaches ``2 pi`` (its two boundary edges align, pointing the same way).
+
+    With ``u = x_nxt - x_b`` and ``w = x_prv - x_b`` the angle sum is a multiple of ``2 pi``
+    exactly where ``cross(u, w) = 0`` (a quadratic in ``t``) and ``dot(u, w) > 0``; starting
+    below ``2 pi`` with no face flipping, the first such ``t`` is where it reaches ``2 pi``.
+
+    Parameters
+    ----------
+    x, d : (n, 2) float64
+    verts : (b,) int64
+        Guarded boundary vertices (angle sum below ``2 pi`` at ``x``).
+    bprev, bnext : (n,) int32
+    out : (ceil(b / BLOCK),) float64
+        Output: minimum over each block (inf when no angle sum reaches ``2 pi``).
+    """
+    nv = verts.shape[0]
+    for blk in prange(out.shape[0]):
+        best = np.inf
+        for s in range(blk * BLOCK, min(nv, (blk + 1) * BLOCK)):
+            b = verts[s]
+            nx = bnext[b]
+            pv = bprev[b]
+            ux = x[nx, 0] - x[b, 0]
+            uy = x[nx, 1] - x[b, 1]
+            wx = x[pv, 0] - x[b, 0]
+            wy = x[pv, 1] - x[b, 1]
+            dux = d[nx, 0] - d[b, 0]
+            duy = d[nx, 1] - d[b, 1]
+            dwx = d[pv, 0] - d[b, 0]
+            dwy = d[pv, 1] - d[b, 1]
+            c0 = ux * wy - uy * wx
+            c1 = ux * dwy - uy * dwx + dux * wy - duy * wx
+            c2 = dux * dwy - duy * dwx
+            e0 = ux * wx + uy * wy
+            e1 = ux * dwx + uy * dwy + dux * wx + duy * wy
+            e2 = dux * dwx + duy * dwy
+            r1, r2 = _positive_roots(c0, c1, c2)
+            if r1 < best and e0 + r1 * (e1 + r1 * e2) > 0.0:
+                best = r1
+            elif r2 < best and e0 + r2 * (e1 + r2 * e2) > 0.0:
+                best = r2
+        out[blk] = best
+
+
+@leaf
+def _positive_roots(c0, c1, c2):
+    """The non-negative roots of ``c0 + c1 t + c2 t^2`` in increasing order (inf for missing ones)."""
+    scale = abs(c0) + abs(c1) + abs(c2)
+    if scale == 0.0:
+        return np.inf, np.inf
+    if abs(c2) <= 1e-14 * scale:
+        if c1 != 0.0 and -c0 / c1 >= 0.0:
+            return -c0 / c1, np.inf
+        return np.inf, np.inf
+    disc = c1 * c1 - 4.0 * c2 * c0
+    if disc < 0.0:
+        return np.inf, np.inf
+    sq = math.sqrt(disc)
+    q = -0.5 * (c1 + sq) if c1 >= 0.0 else -0.5 * (c1 - sq)
+    r1 = q / c2
+    r2 = c0 / q if q != 0.0 else r1
+    lo = min(r1, r2)
+    hi = max(r1, r2)
+    if lo < 0.0:
+        lo = np.inf
+    if hi < 0.0:
+        hi = np.inf
+    if lo > hi:
+        lo, hi = hi, lo
+    return lo, hi

@@ -1,0 +1,79 @@
+"""Separate objects in one scan file: which pieces belong to the vessel."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from potflat.errors import AxisNotFoundError
+from potflat.mesh._kernels.topology import union_find
+from potflat.mesh.distortion import face_areas
+from potflat.rollout.axis import estimate_axis
+from potflat.types import Mesh
+
+#: A connected piece with at least this fraction of the largest piece's area is an object of
+#: its own: it must share the largest piece's axis (an inner wall does) or it is left out.
+SEPARATE_OBJECT_FRACTION = 0.1
+
+
+#: Two pieces share an axis when their axes differ by less than this angle (degrees) ...
+SHARED_AXIS_DEG = 5.0
+
+
+#: ... and pass within this fraction of the largest piece's height of each other.
+SHARED_AXIS_OFFSET = 0.05
+
+
+def _submesh(mesh: Mesh, face_mask: np.ndarray) -> Mesh:
+    """The faces of ``mesh`` selected by ``face_mask`` with only the vertices they use."""
+    F = np.take(mesh.faces, np.flatnonzero(face_mask), axis=0)
+    used = np.zeros(len(mesh.vertices), bool)
+    used[F] = True
+    remap = np.cumsum(used) - 1  # np.unique is slow on millions of indices in numpy 2.4
+    return Mesh(mesh.vertices[used], remap[F], units=mesh.units, source=mesh.source)
+
+
+def _main_object(mesh: Mesh) -> np.ndarray | None:
+    """Faces of the vessel when the scan holds separate objects, else ``None``.
+
+    Pieces (connected components) with at least :data:`SEPARATE_OBJECT_FRACTION` of the
+    largest piece's area are objects; each is kept when its own axis agrees with the
+    largest piece's (a separately scanned inner wall or foot does), and left out when it
+    does not (a second vessel, a fragment lying beside it). Returns ``None`` when nothing
+    would be left out, so a single-object scan is fitted as a whole.
+    """
+
+    V, F = mesh.vertices, mesh.faces
+    # pieces joined through the faces' edges (two per face reach all three vertices); union-find
+    # numbers them as scipy's connected_components did (0.16 against 0.61 s at 6M faces)
+    labels, n_pieces = union_find(len(V), np.concatenate([F[:, 0], F[:, 1]]).astype(np.int64, copy=False),
+                                  np.concatenate([F[:, 1], F[:, 2]]).astype(np.int64, copy=False))
+    if n_pieces < 2:
+        return None
+    face_label = labels[F[:, 0]]
+    area = face_areas(V, F)
+    piece_area = np.bincount(face_label, area, n_pieces)
+    order = np.argsort(-piece_area, kind="stable")
+    objects = [k for k in order if piece_area[k] >= SEPARATE_OBJECT_FRACTION * piece_area[order[0]]]
+    if len(objects) < 2:
+        return None
+    main = face_label == objects[0]
+    try:
+        ref = estimate_axis(_submesh(mesh, main))
+    except AxisNotFoundError:
+        return None  # the whole scan decides (and refuses honestly if it must)
+    keep = main.copy()
+    for k in objects[1:]:
+        piece = face_label == k
+        try:
+            own = estimate_axis(_submesh(mesh, piece))
+        except AxisNotFoundError:
+            continue
+        cos = abs(float(own.direction @ ref.direction))
+        offset = own.point - ref.point
+        distance = np.linalg.norm(offset - (offset @ ref.direction) * ref.direction)
+        if cos >= math.cos(math.radians(SHARED_AXIS_DEG)) and distance <= SHARED_AXIS_OFFSET * ref.height:
+            keep |= piece
+    small = ~np.isin(face_label, objects)
+    keep |= small  # small pieces are judged by the wall and attachment analysis
+    return None if keep.all() else keep
