@@ -31,6 +31,7 @@ run_command.__doc__ = HELP
 
 
 def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json: bool, options: dict) -> None:
+    # imported here, not at the top: 'potflat --help' stays free of Numba and SciPy
     import json as json_module
     from dataclasses import asdict
 
