@@ -3,8 +3,8 @@
 glibc serves every allocation above its mmap threshold (at most 32 MB) with a mapping of its
 own and unmaps it on free, so each large NumPy or Numba temporary is a fresh mapping whose
 pages the kernel zeroes on first touch. The rollout of a 3M-vertex scan makes thousands of
-them (each pass over 6M faces is 50-150 MB): 16-18 s of its 48-55 s went to the kernel as
-system time (page faults), measured in ``docs/performance.md``.
+them (each pass over 6M faces is 50-150 MB): without this, 16-18 s of its 48-55 s go to the
+kernel as system time (page faults).
 :func:`reuse_freed_memory` has glibc serve the block's allocations from its heap instead and
 keep what is freed there for the next one, then hands the unused memory back to the system
 (``malloc_trim``) and restores glibc's settings. Elsewhere (macOS, Windows, musl) it does

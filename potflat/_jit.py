@@ -22,8 +22,8 @@ import contextlib
 import os
 
 # Before any parallel kernel starts its OpenMP thread pool: the solvers run many short
-# parallel regions per iteration, and OpenMP's default busy-waiting between them made the
-# relax solver up to 20x slower on a machine shared with other jobs (docs/performance.md).
+# parallel regions per iteration, and OpenMP's default busy-waiting between them makes the
+# relax solver up to 20x slower on a machine shared with other jobs.
 # An explicit setting by the user wins.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 

@@ -37,7 +37,7 @@ class RelaxPreset:
         The dynamics' friction inside and on the boundary (``dynamics`` only).
     shape, rigidity, area, max_anisotropy, importance_contrast, true_scale
         The painted figures' defaults (measured in ``docs/performance.md``, "Painted
-        figures"): the shape, rigidity and area terms' weights, the anisotropy limit
+        figures" and "Relax options"): the shape, rigidity and area terms' weights, the anisotropy limit
         (``"auto"``: found by a first solve without the area term), how much stiffer the
         important zone is than plain surface, and the final scaling to true scale in the
         important zone.
@@ -162,7 +162,7 @@ class SolverParameters:
         coarse copy leaves both relaxations to the copy (which nests: the smallest copy
         takes the first) and is solved once, at the full contrast, from the copy's layout:
         2.5M textured amphora 16.5 s and 36 full-mesh iterations against 22.3 s and 10 + 34,
-        with lower edge-length RMS (docs/performance.md, fifteenth session).
+        with lower edge-length RMS.
     contrast_start_iterations : int
         Iterations the first of those relaxations spends on its mesh when it started from a
         relaxed coarse copy (the copies converge): it only has to smooth the layout the
