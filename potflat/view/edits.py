@@ -249,12 +249,13 @@ def save_mask(folder: Path, name: str, png: bytes, size: tuple[int, int]) -> Pat
         with Image.open(io.BytesIO(png)) as img:
             if img.format != "PNG":
                 raise ValueError
-            if img.size != tuple(size):
-                raise InvalidInputError(f"the mask is {img.size[0]} x {img.size[1]} px but {name}.png is "
-                                        f"{size[0]} x {size[1]}; paint it over that image")
-            mask = np.asarray(img.convert("L"))
+            got = img.size
+            mask = np.asarray(img.convert("L")) if got == tuple(size) else None
     except (OSError, ValueError, Image.DecompressionBombError):
         raise InvalidInputError("the mask is not a PNG image; paint it again") from None
+    if mask is None:
+        raise InvalidInputError(f"the mask is {got[0]} x {got[1]} px but {name}.png is {size[0]} x {size[1]}; "
+                                "paint it over that image")
     mask_png, reference = mask_paths(folder, name)
     relaxed_copy = folder / f"{name}.mask.relaxed.ply"
     with atomic_path(relaxed_copy) as part:

@@ -106,7 +106,9 @@ class Runs:
 def layer_files(scene) -> dict[str, Path]:
     """The images of a run by layer name: ``painting`` and each distortion map that is there."""
     out = {"painting": scene.folder / f"{scene.name}.png"}
-    for m in scene.bake.get("maps") or {}:
+    made = scene.bake.get("maps") or {}
+    asked = (scene.bake.get("provenance") or {}).get("options", {}).get("maps") or []
+    for m in [m for m in asked if m in made] + [m for m in made if m not in asked]:  # in the order asked
         path = scene.folder / f"{scene.name}.{m}.png"
         if path.is_file():
             out[m] = path
