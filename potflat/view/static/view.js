@@ -559,6 +559,19 @@ Object.assign(state, {
     const p = new THREE.Vector3(...point), d = new THREE.Vector3(...direction).normalize();
     controls.target.copy(p); camera.position.copy(p).add(d.multiplyScalar(distance)); controls.update(); render();
   },
+  frameTimes(n) {  // median milliseconds of a frame while the vessel turns by n steps
+    const times = [], gl = renderer.getContext(), pixel = new Uint8Array(4);
+    for (let i = 0; i < n; i++) {
+      camera.position.sub(controls.target).applyAxisAngle(camera.up, 2 * Math.PI / n).add(controls.target);
+      camera.lookAt(controls.target);
+      const t = performance.now();
+      render();
+      gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, pixel);  // wait for the frame
+      times.push(performance.now() - t);
+    }
+    times.sort((a, b) => a - b);
+    return times[Math.floor(n / 2)];
+  },
   zoomImage(p, zoom) { viewer.viewport.zoomTo(zoom, null, true); viewer.viewport.panTo(viewer.viewport.imageToViewportCoordinates(new OpenSeadragon.Point(...p)), true); },
 });
 
