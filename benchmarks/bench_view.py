@@ -62,7 +62,7 @@ def open_once(browser, out: Path) -> tuple[float, float, object, subprocess.Pope
     start, and the page's own share) and the open page with its server process."""
     t = time.perf_counter()
     proc = subprocess.Popen([sys.executable, "-m", "potflat_cli", "view", str(out), "--no-browser"],
-                            stdout=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     url = proc.stdout.readline().split()[2]
     page = browser.new_page(viewport={"width": 1400, "height": 800})
     page.goto(url)
@@ -86,7 +86,7 @@ def accuracy(page, out: Path, picks: int, distance_mm: float, seed: int = 0) -> 
     from potflat.view.scene import Scene
 
     scene = Scene(out, "amphora")
-    position = tifffile.memmap(out / "amphora.position.tif", mode="r")
+    position = tifffile.imread(out / "amphora.position.tif")
     rng = np.random.default_rng(seed)
     mm = scene.grid.mm_per_unit
     to_3d, to_flat = [], []
@@ -155,9 +155,11 @@ def main(argv: list[str] | None = None) -> None:
                     stop(page, proc)
             acc = accuracy(page, out, args.picks, args.distance)
             frame_ms = page.evaluate("potflat.frameTimes(24)")
+            phases = page.evaluate("potflat.timings")  # ms from the page's start: module, scene, mesh, ...
             stop(page, proc)
             rows.append({"kind": kind, "run_s": run_s, "open_s": statistics.median(o[0] for o in opens),
-                         "page_s": statistics.median(o[1] for o in opens), "frame_ms": frame_ms, **acc})
+                         "page_s": statistics.median(o[1] for o in opens), "frame_ms": frame_ms, "page_phases_ms": phases,
+                         **acc})
             print(json.dumps(rows[-1]), flush=True)
         browser.close()
     if args.keep is None:

@@ -187,6 +187,37 @@ def test_measure_gives_the_image_and_the_vessel_distance(page, served):
     page.click("[data-tool=look]")
 
 
+def test_window_and_overlap_dragged_on_the_image_become_options(page, served):
+    scene = served.scene
+    row = 0.55 * scene.grid.height
+    page.click("[data-tool=window]")
+    ends = [page.evaluate(f"potflat.imageToClient({[x, row]})") for x in (0.3 * scene.grid.width, 0.7 * scene.grid.width)]
+    page.mouse.move(ends[0]["x"], ends[0]["y"])
+    page.mouse.down()
+    for t in np.linspace(0, 1, 6):
+        page.mouse.move(ends[0]["x"] + t * (ends[1]["x"] - ends[0]["x"]), ends[0]["y"])
+    page.mouse.up()
+    page.wait_for_function("document.getElementById('command').textContent.includes('--angles')")
+    window = page.evaluate("potflat.edits.window")
+    expected = [scene.pixel_to_surface(x, row)["angle_deg"] for x in (0.3 * scene.grid.width, 0.7 * scene.grid.width)]
+    assert np.allclose(window, expected, atol=0.5)
+    assert "--seam " in page.text_content("#command")
+    page.click("[data-tool=overlap]")
+    x0 = 0.8 * scene.grid.width
+    ends = [page.evaluate(f"potflat.imageToClient({[x, row]})") for x in (x0, x0 + 40 * PX_PER_MM)]
+    page.mouse.move(ends[0]["x"], ends[0]["y"])
+    page.mouse.down()
+    page.mouse.move(ends[1]["x"], ends[1]["y"], steps=4)
+    page.mouse.up()
+    page.wait_for_function("document.getElementById('command').textContent.includes('--overlap')")
+    hit = scene.pixel_to_surface(x0, row)
+    degrees = 40.0 / (scene.radius(hit["point"]) * scene.grid.mm_per_unit) * 180 / np.pi
+    assert page.evaluate("potflat.edits.overlap") == pytest.approx(degrees, abs=0.5)
+    assert "--angles" not in page.text_content("#command")
+    page.evaluate("potflat.edits = {}; potflat.window = null; potflat.overlap = null")
+    page.click("[data-tool=look]")
+
+
 def test_seam_click_and_painted_mask_rerun_as_the_command_line_does(browser, run_dir, tmp_path):
     """The page's edits and Rerun give the outputs of the command line it shows."""
     from PIL import Image
@@ -373,7 +404,33 @@ def test_the_batch_report_links_each_scan_to_its_view(run_dir, tmp_path):
                              figures={})
     summary = SimpleNamespace(output=str(tmp_path), counts={"done": 1}, reports=[report], batch="b.yaml", seconds=1.0)
     page = write_report(summary).read_text()
-    assert 'data-href="_potflat/view/amphora"' in page and "potflat view" in page
+    assert 'data-view="_potflat/view/amphora"' in page and "potflat view" in page
+
+
+def test_the_batch_report_opens_each_view_when_served(browser, run_dir, tmp_path):
+    """Through 'potflat view' on a batch's folder, the report's link opens the scan's view."""
+    from potflat.stages.report import write_report
+    from potflat.view.server import serve
+
+    shutil.copytree(run_dir, tmp_path / "amphora")
+    report = SimpleNamespace(output=str(tmp_path / "amphora"), name="amphora", status="done", seconds=1.0,
+                             error=None, figures={})
+    write_report(SimpleNamespace(output=str(tmp_path), counts={"done": 1}, reports=[report], batch="b.yaml",
+                                 seconds=1.0))
+    server = serve(tmp_path)
+    threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.1}, daemon=True).start()
+    try:
+        page = browser.new_page()
+        page.goto(server.url())
+        link = page.locator("a.view")
+        link.wait_for(state="visible")
+        link.click()
+        page.wait_for_function("window.potflat && (window.potflat.ready || window.potflat.error)", timeout=60_000)
+        assert page.evaluate("potflat.error") is None and page.evaluate("potflat.scene.name") == "amphora"
+        page.close()
+    finally:
+        server.shutdown()
+        server.server_close()
 
 
 def test_view_command_prints_the_address_and_stops_on_ctrl_c(run_dir):

@@ -62,9 +62,9 @@ function sortCards(key){
   cards.forEach(c=>box.appendChild(c));
 }
 document.getElementById('sort').addEventListener('change',e=>sortCards(e.target.value));
-// served by 'potflat view' (which answers at data-href): each card links to its scan's view
-if(location.protocol.startsWith('http')){document.querySelectorAll('a.view[data-href]').forEach(a=>
-  fetch(a.dataset.href,{method:'HEAD'}).then(r=>{if(r.ok){a.href=a.dataset.href;a.hidden=false;}}).catch(()=>{}));}
+// served by 'potflat view' (which answers at data-view): each card links to its scan's view
+if(location.protocol!=='file:'){document.querySelectorAll('a.view[data-view]').forEach(a=>
+  fetch(a.dataset.view,{method:'HEAD'}).then(r=>{if(r.ok){a.href=a.dataset.view;a.hidden=false;}}).catch(()=>{}));}
 """
 
 _STATUS_RANK = {"failed": "0", "interrupted": "1", "cancelled": "2", "done": "3", "skipped": "4"}
@@ -131,7 +131,7 @@ def _card(report, base: Path) -> str:
             ("time", f"{seconds:.1f} s{when}" if seconds else "-"),
             ("folded triangles", "-" if flipped is None else str(flipped))]
     if (folder / f"{name}.bake.json").is_file():  # the view: a link when served by 'potflat view', else its command
-        rows.append(("view", f'<a class="view" hidden data-href="_potflat/view/{quote(name)}">open the view</a> '
+        rows.append(("view", f'<a class="view" hidden data-view="_potflat/view/{quote(name)}">open the view</a> '
                              f'<code>potflat view {html.escape(shlex.quote(str(base)))} {html.escape(shlex.quote(name))}</code>'))
     plate = folder / f"{name}.plate.pdf"
     if plate.is_file():

@@ -113,9 +113,14 @@ class Scene:
         self._lock = threading.Lock()
 
     # ---------------------------------------------------------------- lazily built parts
-    @cached_property
+    @property
     def display(self):
-        """The :class:`potflat.view.display.DisplayMesh` the page draws."""
+        """The :class:`potflat.view.display.DisplayMesh` the page draws (made once)."""
+        with self._lock:
+            return self._display
+
+    @cached_property
+    def _display(self):
         from potflat.view.display import display_mesh
 
         return display_mesh(self.flat, self.pixels)
@@ -173,7 +178,7 @@ class Scene:
 
     def warm(self) -> None:
         """Build the lookups a first click needs (in a background thread after the page opened)."""
-        for part in ("_flat_tree", "_surface_tree", "position", "geodesics"):
+        for part in ("_display", "_flat_tree", "_surface_tree", "position", "geodesics"):
             with self._lock:
                 getattr(self, part)
 

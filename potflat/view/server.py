@@ -184,6 +184,7 @@ class ViewServer(ThreadingHTTPServer):
         def work():
             for name in names:
                 try:
+                    self.runs.layer(name, "painting").texture()  # the page's first requests
                     self.runs.scene(name).warm()
                 except Exception:  # reported when the page asks for it
                     pass

@@ -36,6 +36,7 @@ class Layer:
         self.top = max(0, math.ceil(math.log2(max(self.width, self.height, 1))))
         self._levels: dict[int, object] = {}
         self._legend = None
+        self._texture: bytes | None = None
         self._lock = threading.Lock()
 
     def _full(self):
@@ -87,16 +88,19 @@ class Layer:
 
     def texture(self) -> bytes:
         """The image at most :data:`TEXTURE_PX` on its longest side, as JPEG on white (the 3D
-        view's texture)."""
+        view's texture; made once)."""
         from PIL import Image
 
+        if self._texture is not None:
+            return self._texture
         level = self.top - max(0, math.ceil(math.log2(max(self.width, self.height) / TEXTURE_PX)))
         img = self.level(level)
         flat = Image.new("RGB", img.size, (255, 255, 255))
         flat.paste(img, mask=img.getchannel("A"))
         buf = io.BytesIO()
         flat.save(buf, format="JPEG", quality=90)
-        return buf.getvalue()
+        self._texture = buf.getvalue()
+        return self._texture
 
 
 def _png(img) -> bytes:

@@ -90,6 +90,7 @@ function markerSphere(color, radius) {
 
 async function loadVessel(s) {
   const buf = await (await api('mesh.bin')).arrayBuffer();
+  mark('mesh');
   const n = s.mesh.vertices, m = s.mesh.faces, k = s.mesh.seam;
   let off = 0;
   const take = (T, count) => { const a = new T(buf, off, count); off += count * 4; return a; };
@@ -124,6 +125,7 @@ async function loadVessel(s) {
     markers[key] = markerSphere(color, r * 0.012);
   }
   await setTexture(state.layer);
+  mark('texture');
   $('meshinfo').textContent = `${s.mesh.faces.toLocaleString()} faces drawn` +
     (s.mesh.decimated ? ` (of ${s.mesh.full_faces.toLocaleString()}; picking on the full mesh)` : '');
 }
@@ -512,8 +514,13 @@ function showLegend(layer) {
   legend.style.display = 'block';
 }
 
+const mark = what => { state.timings[what] = Math.round(performance.now() - started); };
+
 async function start(again = false) {
+  state.timings = state.timings || {};
+  mark('module');
   const s = await (await api('scene.json')).json();
+  mark('scene');
   state.scene = s;
   document.title = `potflat view: ${s.name}`;
   $('title').textContent = s.name;
@@ -527,7 +534,8 @@ async function start(again = false) {
   select.value = state.layer;
   $('command').textContent = s.command;
   if (s.lengths) $('measure').textContent = s.lengths.charAt(0).toUpperCase() + s.lengths.slice(1) + '.';
-  await Promise.all([loadVessel(s).then(() => { if (!again) frameVessel(s); resize3d(); }), openFlat(s, state.layer, again)]);
+  await Promise.all([loadVessel(s).then(() => { if (!again) frameVessel(s); resize3d(); mark('vessel'); }),
+                     openFlat(s, state.layer, again).then(() => mark('image'))]);
   showLegend(state.layer);
   state.zoneLoaded = false;
   if (state.marker3d) place('link', state.marker3d);
