@@ -343,7 +343,7 @@ def test_picking_on_the_full_mesh_from_a_decimated_display_mesh(served):
 
     scene = served.scene
     small = display_mesh(scene.flat, scene.pixels, faces=4000)
-    assert small.decimated and 2000 < len(small.faces) < 6000 and len(small.seam) > 0
+    assert small.decimated and 2000 < len(small.faces) < 6000 and len(scene.seam) > 0
     assert (small.pixels >= -1).all() and (small.pixels[:, 0] <= scene.grid.width + 1).all()
     rng = np.random.default_rng(1)
     V = scene.flat.mesh.vertices

@@ -7,7 +7,8 @@ flat position). Clustering in the flat layout never joins the two sides of the s
 copy's triangles are near-regular. Each display vertex carries its flat position in the
 image's pixels (the second texture-coordinate set: the page textures the vessel with the
 baked image through it) and its importance (the painted zone's outline). Picking and measuring
-go back to the full mesh (:mod:`potflat.view.scene`).
+go back to the full mesh (:mod:`potflat.view.scene`). The seam is drawn from the full mesh's
+cut edges (:func:`seam_segments`).
 """
 from __future__ import annotations
 
@@ -35,9 +36,6 @@ class DisplayMesh:
         0 plain surface .. 1 painting (all 1 when the run has no painted zone).
     faces : (m, 3) uint32
         Counter-clockwise seen from outside.
-    seam : (s, 2, 3) float32
-        The seam's segments on the surface (scan coordinates): boundary edges of the cut
-        flattening whose two ends are on both sides of the cut.
     decimated : bool
         Whether this is a coarse copy (False: the full mesh).
     """
@@ -46,19 +44,18 @@ class DisplayMesh:
     pixels: np.ndarray
     importance: np.ndarray
     faces: np.ndarray
-    seam: np.ndarray
     decimated: bool
 
     def as_bytes(self) -> bytes:
         """The arrays the page reads, little-endian, one after the other: vertices (float32),
-        pixels (float32), importance (float32), faces (uint32), seam (float32)."""
+        pixels (float32), importance (float32), faces (uint32)."""
         parts = (self.vertices.astype("<f4"), self.pixels.astype("<f4"), self.importance.astype("<f4"),
-                 self.faces.astype("<u4"), self.seam.astype("<f4"))
+                 self.faces.astype("<u4"))
         return b"".join(np.ascontiguousarray(p).tobytes() for p in parts)
 
     def counts(self) -> dict:
         """Lengths of the arrays in :meth:`as_bytes`."""
-        return {"vertices": len(self.vertices), "faces": len(self.faces), "seam": len(self.seam)}
+        return {"vertices": len(self.vertices), "faces": len(self.faces)}
 
 
 def display_mesh(flat: FlatMesh, pixels: np.ndarray, *, faces: int = DISPLAY_FACES) -> DisplayMesh:
@@ -78,18 +75,15 @@ def display_mesh(flat: FlatMesh, pixels: np.ndarray, *, faces: int = DISPLAY_FAC
     V, F = flat.mesh.vertices, flat.mesh.faces
     n = len(V)
     importance = np.ones(n) if flat.importance is None else np.asarray(flat.importance, np.float64)
-    seam = seam_segments(V, F)
     if len(F) <= faces:
         return DisplayMesh(vertices=V.astype(np.float32), pixels=np.asarray(pixels, np.float32),
-                           importance=importance.astype(np.float32), faces=F.astype(np.uint32), seam=seam,
-                           decimated=False)
+                           importance=importance.astype(np.float32), faces=F.astype(np.uint32), decimated=False)
     side = cell_side(pixels, 2.0 * n / faces)  # a cell gives two triangles
     s = grid_simplification(V, pixels, side)
     count = np.bincount(s.cluster, minlength=len(s.vertices)).astype(np.float64)
     mean_importance = np.bincount(s.cluster, importance, minlength=len(s.vertices)) / np.maximum(count, 1.0)
     return DisplayMesh(vertices=s.vertices.astype(np.float32), pixels=s.uv.astype(np.float32),
-                       importance=mean_importance.astype(np.float32), faces=s.faces.astype(np.uint32), seam=seam,
-                       decimated=True)
+                       importance=mean_importance.astype(np.float32), faces=s.faces.astype(np.uint32), decimated=True)
 
 
 def seam_segments(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

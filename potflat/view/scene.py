@@ -27,6 +27,9 @@ from potflat.types import FlatMesh
 PICK_CANDIDATES = 256
 #: Candidate faces tested to locate a point of the image.
 LOCATE_CANDIDATES = 16
+#: How the face lookups are built: unbalanced, not compacted (at 6M faces three times faster
+#: to build than the default, as fast to query).
+TREE = {"balanced_tree": False, "compact_nodes": False}
 
 
 @dataclass(frozen=True)
@@ -90,7 +93,6 @@ class Scene:
 
     def __init__(self, folder: Path, name: str):
         from potflat.io.flat_ply import read_flat_ply
-        from potflat.mesh.distortion import face_distortion, length_error
 
         self.folder, self.name = Path(folder), name
         self.bake = _read_json(self.folder / f"{name}.bake.json")
@@ -107,9 +109,6 @@ class Scene:
             raise InvalidInputError(f"{self.folder / f'{name}.bake.json'} lacks the image grid; bake the run again "
                                     "with potflat") from None
         self.pixels = self.grid.pixels(self.flat.uv)
-        fd = face_distortion(self.flat.mesh.vertices, self.flat.uv, self.flat.mesh.faces)
-        self.face_length_error = length_error(fd)
-        self.face_anisotropy = fd.anisotropy
         self._lock = threading.Lock()
 
     # ---------------------------------------------------------------- lazily built parts
@@ -124,6 +123,21 @@ class Scene:
         from potflat.view.display import display_mesh
 
         return display_mesh(self.flat, self.pixels)
+
+    @cached_property
+    def seam(self) -> np.ndarray:
+        """The seam's segments on the surface, (s, 2, 3) float32 (:func:`potflat.view.display.seam_segments`)."""
+        from potflat.view.display import seam_segments
+
+        return seam_segments(self.flat.mesh.vertices, self.flat.mesh.faces)
+
+    @cached_property
+    def _face_figures(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each face's largest length error (:func:`potflat.mesh.distortion.length_error`) and anisotropy."""
+        from potflat.mesh.distortion import face_distortion, length_error
+
+        fd = face_distortion(self.flat.mesh.vertices, self.flat.uv, self.flat.mesh.faces)
+        return length_error(fd), fd.anisotropy
 
     @cached_property
     def position(self) -> np.ndarray:
@@ -160,14 +174,14 @@ class Scene:
         from scipy.spatial import cKDTree
 
         F = self.flat.mesh.faces
-        return cKDTree(self.pixels[F].mean(axis=1))
+        return cKDTree(self.pixels[F].mean(axis=1), **TREE)
 
     @cached_property
     def _surface_tree(self):
         from scipy.spatial import cKDTree
 
         V, F = self.flat.mesh.vertices, self.flat.mesh.faces
-        return cKDTree(V[F].mean(axis=1))
+        return cKDTree(V[F].mean(axis=1), **TREE)
 
     @cached_property
     def geodesics(self):
@@ -178,7 +192,7 @@ class Scene:
 
     def warm(self) -> None:
         """Build the lookups a first click needs (in a background thread after the page opened)."""
-        for part in ("_display", "_flat_tree", "_surface_tree", "position", "geodesics"):
+        for part in ("_display", "seam", "position", "_flat_tree", "_surface_tree", "_face_figures", "geodesics"):
             with self._lock:
                 getattr(self, part)
 
@@ -281,8 +295,10 @@ class Scene:
                "point": [float(c) for c in point], "point_mm": [float(c) * mm for c in point], "face": face,
                "length_error_pct": None, "anisotropy": None, "painted": None, "angle_deg": self.angle_deg(point)}
         if face >= 0:
-            out["length_error_pct"] = 100.0 * float(self.face_length_error[face])
-            out["anisotropy"] = float(self.face_anisotropy[face])
+            with self._lock:
+                error, anisotropy = self._face_figures
+            out["length_error_pct"] = 100.0 * float(error[face])
+            out["anisotropy"] = float(anisotropy[face])
             if self.flat.importance is not None:
                 out["painted"] = bool(self.flat.importance[self.flat.mesh.faces[face]].mean() >= 0.5)
         return out
@@ -290,27 +306,25 @@ class Scene:
     def angle_deg(self, point: np.ndarray) -> float | None:
         """Angle of ``point`` about the rollout's axis from its reference direction, degrees in
         ``[0, 360)`` (None without ``NAME.rollout.json``)."""
-        from potflat.rollout.axis import cylindrical
-
-        axis = self.rollout.get("axis") or {}
-        try:
-            _, _, theta = cylindrical(np.asarray(point, np.float64).reshape(1, 3), np.asarray(axis["point"]),
-                                      np.asarray(axis["direction"]), np.asarray(axis["reference_direction"]))
-        except (KeyError, TypeError, ValueError):
-            return None
-        return float(np.degrees(theta[0]))
+        about = self._about_axis(point)
+        return None if about is None else float(np.degrees(about[1]))
 
     def radius(self, point: np.ndarray) -> float | None:
         """Distance of ``point`` from the rollout's axis, scan units (None without the axis)."""
+        about = self._about_axis(point)
+        return None if about is None else about[0]
+
+    def _about_axis(self, point: np.ndarray) -> tuple[float, float] | None:
+        """Radius and angle (radians) of ``point`` about the rollout's axis."""
         from potflat.rollout.axis import cylindrical
 
         axis = self.rollout.get("axis") or {}
         try:
-            _, r, _ = cylindrical(np.asarray(point, np.float64).reshape(1, 3), np.asarray(axis["point"]),
-                                  np.asarray(axis["direction"]), np.asarray(axis["reference_direction"]))
+            _, r, theta = cylindrical(np.asarray(point, np.float64).reshape(1, 3), np.asarray(axis["point"]),
+                                      np.asarray(axis["direction"]), np.asarray(axis["reference_direction"]))
         except (KeyError, TypeError, ValueError):
             return None
-        return float(r[0])
+        return float(r[0]), float(theta[0])
 
     def measure(self, a: tuple[float, float], b: tuple[float, float]) -> dict | None:
         """Two points of the image: their distance on the image and on the vessel, mm.

@@ -27,6 +27,8 @@ from potflat.errors import InvalidInputError, PotflatError
 
 #: Where the server's own routes live (a scan cannot be named so: names have no slash).
 PREFIX = "/_potflat"
+#: The lookups for clicks are built once a page has its display mesh, or after this many seconds.
+WARM_AFTER_S = 15.0
 #: Largest JSON body accepted.
 MAX_JSON_BYTES = 1 << 20
 #: Content types of the page's assets and the run's files.
@@ -63,6 +65,9 @@ class Runs:
         self._reruns: dict[str, Any] = {}
         self._layers: dict[tuple[str, str], Any] = {}
         self._lock = threading.Lock()
+        #: Set when a page has its display mesh: the lookups for clicks are built after it
+        #: (building them holds the interpreter, which would slow the page's first render).
+        self.opened = threading.Event()
 
     def scene(self, name: str):
         """The :class:`potflat.view.scene.Scene` of run ``name`` (loaded once)."""
@@ -185,6 +190,8 @@ class ViewServer(ThreadingHTTPServer):
             for name in names:
                 try:
                     self.runs.layer(name, "painting").texture()  # the page's first requests
+                    self.runs.scene(name).display
+                    self.runs.opened.wait(timeout=WARM_AFTER_S)
                     self.runs.scene(name).warm()
                 except Exception:  # reported when the page asks for it
                     pass
@@ -337,6 +344,12 @@ class Handler(BaseHTTPRequestHandler):
             self._json(scene_json(runs, name))
         elif what == "mesh.bin":
             self._send(200, runs.scene(name).display.as_bytes(), "application/octet-stream")
+            runs.opened.set()
+        elif what == "seam.bin":
+            scene = runs.scene(name)
+            with scene._lock:
+                seam = scene.seam
+            self._send(200, seam.astype("<f4").tobytes(), "application/octet-stream")
         elif what == "dzi" and len(rest) == 1 and rest[0].endswith(".dzi"):
             self._send(200, runs.layer(name, rest[0][:-4]).dzi().encode(), "application/xml")
         elif what == "dzi" and len(rest) == 3 and rest[0].endswith("_files"):

@@ -15,9 +15,9 @@ from pathlib import Path
 
 #: Side of a tile, pixels.
 TILE = 512
-#: Longest side of the image the 3D view wraps around the vessel (WebGL's texture limit is at
-#: least 4096 on every browser).
-TEXTURE_PX = 4096
+#: Longest side of the image the 3D view wraps around the vessel: an overview (the flat view
+#: has every pixel); a smaller texture is decoded and uploaded sooner on a software renderer.
+TEXTURE_PX = 2048
 
 
 class Layer:

@@ -91,11 +91,11 @@ function markerSphere(color, radius) {
 async function loadVessel(s) {
   const buf = await (await api('mesh.bin')).arrayBuffer();
   mark('mesh');
-  const n = s.mesh.vertices, m = s.mesh.faces, k = s.mesh.seam;
+  const n = s.mesh.vertices, m = s.mesh.faces;
   let off = 0;
   const take = (T, count) => { const a = new T(buf, off, count); off += count * 4; return a; };
   const pos = take(Float32Array, 3 * n), pix = take(Float32Array, 2 * n), imp = take(Float32Array, n);
-  const faces = take(Uint32Array, 3 * m), seam = take(Float32Array, 6 * k);
+  const faces = take(Uint32Array, 3 * m);
   const uv = new Float32Array(2 * n);
   for (let i = 0; i < n; i++) { uv[2 * i] = pix[2 * i] / s.width; uv[2 * i + 1] = 1 - pix[2 * i + 1] / s.height; }
   const g = new THREE.BufferGeometry();
@@ -113,11 +113,6 @@ async function loadVessel(s) {
   if (mesh) { scene3.remove(mesh); mesh.geometry.dispose(); }
   mesh = new THREE.Mesh(g, material);
   scene3.add(mesh);
-  if (seamLines) scene3.remove(seamLines);
-  const sg = new THREE.BufferGeometry();
-  sg.setAttribute('position', new THREE.BufferAttribute(seam, 3));
-  seamLines = new THREE.LineSegments(sg, new THREE.LineBasicMaterial({ color: 0xff00ff }));
-  scene3.add(seamLines);
   g.computeBoundingSphere();
   const r = g.boundingSphere.radius;
   for (const [key, color] of [['link', 0xffdd00], ['seam', 0xff00ff], ['a', 0x00e5ff], ['b', 0x00e5ff]]) {
@@ -128,6 +123,16 @@ async function loadVessel(s) {
   mark('texture');
   $('meshinfo').textContent = `${s.mesh.faces.toLocaleString()} faces drawn` +
     (s.mesh.decimated ? ` (of ${s.mesh.full_faces.toLocaleString()}; picking on the full mesh)` : '');
+}
+
+async function loadSeam() {  // after the first render: the full mesh's cut edges
+  const seam = new Float32Array(await (await api('seam.bin')).arrayBuffer());
+  if (seamLines) { scene3.remove(seamLines); seamLines.geometry.dispose(); }
+  const sg = new THREE.BufferGeometry();
+  sg.setAttribute('position', new THREE.BufferAttribute(seam, 3));
+  seamLines = new THREE.LineSegments(sg, new THREE.LineBasicMaterial({ color: 0xff00ff }));
+  scene3.add(seamLines);
+  render();
 }
 
 function frameVessel(s) {
@@ -543,6 +548,7 @@ async function start(again = false) {
   render(); drawOverlay();
   if (!again) state.firstRenderMs = performance.now() - started;
   state.ready = true;
+  loadSeam().catch(err => status(err.message, true));
   if (!again) status(`opened in ${(state.firstRenderMs / 1000).toFixed(2)} s`);
 }
 
