@@ -135,7 +135,7 @@ def scene_json(runs: Runs, name: str) -> dict:
     try:
         options = recorded_options(scene.folder, name)
         command = command_line(scan_of(scene.folder, name), scene.folder, name, options)
-        rollout = {k: v for k, v in _plain(options["rollout"]).items()}
+        rollout = _plain(options["rollout"])
     except InvalidInputError as exc:
         command, rollout = f"(cannot rerun: {exc})", {}
     maps = scene.bake.get("maps") or {}
@@ -233,7 +233,10 @@ class Handler(BaseHTTPRequestHandler):
             self.wfile.write(body)
 
     def _json(self, obj: Any, status: int = 200) -> None:
-        self._send(status, json.dumps(obj, allow_nan=False, default=_nan_free).encode(), "application/json")
+        from potflat.io.atomic import _finite  # strict JSON: a collapsed face's infinite anisotropy as null
+
+        self._send(status, json.dumps(_finite(obj), allow_nan=False, default=_numpy_scalar).encode(),
+                   "application/json")
 
     def _error(self, status: int, message: str) -> None:
         self._json({"error": message}, status)
@@ -438,7 +441,7 @@ def _numbers(value: Any, n: int) -> tuple[float, ...]:
     return out
 
 
-def _nan_free(obj: Any) -> Any:
+def _numpy_scalar(obj: Any) -> Any:
     import numpy as np
 
     if isinstance(obj, np.generic):

@@ -234,7 +234,7 @@ function drawOverlay() {
   ctx.clearRect(0, 0, overlay.width, overlay.height);
   const toLocal = p => { const c = imageToClient(p); return [c.x - rect.left, c.y - rect.top]; };
   const [x0, y0] = toLocal([0, 0]), [x1, y1] = toLocal([s.width, s.height]);
-  if (mask && (state.maskShown || state.tool === 'paint' || state.tool === 'erase')) {
+  if (mask && (state.tool === 'paint' || state.tool === 'erase')) {
     ctx.globalAlpha = 0.45; ctx.drawImage(mask, x0, y0, x1 - x0, y1 - y0); ctx.globalAlpha = 1;
   }
   for (const [band, color] of [[state.window, 'rgba(255,221,0,0.25)'], [state.overlap, 'rgba(255,0,255,0.25)']]) {
@@ -333,12 +333,11 @@ async function addMeasurePoint(p) {
 function removePath() { if (pathLine) { scene3.remove(pathLine); pathLine.geometry.dispose(); pathLine = null; } }
 
 function showReadout(h) {
-  const s = state.scene;
   $('readout').textContent = `Image: ${fmt(h.image_mm[0])}, ${fmt(h.image_mm[1])} mm from the top left ` +
     `(pixel ${fmt(h.pixel[0], 0)}, ${fmt(h.pixel[1], 0)}) | vessel: ${h.point_mm.map(v => fmt(v)).join(', ')} mm ` +
     `(scan coordinates) | local length error ${fmt(h.length_error_pct, 2)} %, anisotropy ${fmt(h.anisotropy, 3)}` +
     (h.painted === null ? '' : h.painted ? ' | painted zone' : ' | plain surface') +
-    (h.angle_deg === null ? '' : ` | ${fmt(h.angle_deg)}° about the axis`) + (s.lengths ? '' : '');
+    (h.angle_deg === null ? '' : ` | ${fmt(h.angle_deg)}° about the axis`);
 }
 
 // ------------------------------------------------------------------ the vessel's pointer
@@ -424,7 +423,7 @@ function brushDone(changed = true) {
   c.clearRect(0, 0, maskSmall.width, maskSmall.height);
   c.drawImage(mask, 0, 0, maskSmall.width, maskSmall.height);
   maskTexture.needsUpdate = true;
-  mesh.material.uniforms.maskOn.value = (state.maskShown || ['paint', 'erase'].includes(state.tool)) ? 1 : 0;
+  mesh.material.uniforms.maskOn.value = ['paint', 'erase'].includes(state.tool) ? 1 : 0;
   render(); drawOverlay();
   if (changed) preview();
 }
@@ -508,7 +507,7 @@ function setTool(tool) {
   const painting = tool === 'paint' || tool === 'erase';
   controls.mouseButtons = { LEFT: painting ? null : THREE.MOUSE.ROTATE, MIDDLE: THREE.MOUSE.DOLLY, RIGHT: painting ? THREE.MOUSE.ROTATE : THREE.MOUSE.PAN };
   if (painting) { ensureMask(); if (!state.zoneLoaded) { state.zoneLoaded = true; loadZone(); } }
-  if (mesh) mesh.material.uniforms.maskOn.value = (painting || state.maskShown) ? 1 : 0;
+  if (mesh) mesh.material.uniforms.maskOn.value = painting ? 1 : 0;
   render(); drawOverlay();
 }
 
@@ -565,10 +564,6 @@ window.addEventListener('resize', () => { resize3d(); drawOverlay(); });
 // for the tests and for scripts: where a 3D point or an image point is on the screen, and the actions
 Object.assign(state, {
   project, imageToClient, setTool, vesselClick, flatClick, rerun,
-  lookAt(point, distance) {
-    const p = new THREE.Vector3(...point), dir = camera.position.clone().sub(controls.target).normalize();
-    controls.target.copy(p); camera.position.copy(p).add(dir.multiplyScalar(distance)); controls.update(); render();
-  },
   lookFrom(point, direction, distance) {
     const p = new THREE.Vector3(...point), d = new THREE.Vector3(...direction).normalize();
     controls.target.copy(p); camera.position.copy(p).add(d.multiplyScalar(distance)); controls.update(); render();
@@ -586,7 +581,6 @@ Object.assign(state, {
     times.sort((a, b) => a - b);
     return times[Math.floor(n / 2)];
   },
-  zoomImage(p, zoom) { viewer.viewport.zoomTo(zoom, null, true); viewer.viewport.panTo(viewer.viewport.imageToViewportCoordinates(new OpenSeadragon.Point(...p)), true); },
 });
 
 start().catch(err => { status(`cannot open: ${err.message}`, true); state.error = err.message; });
