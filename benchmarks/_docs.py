@@ -27,6 +27,7 @@ BLOCKS = {
     "bench_figures": PERFORMANCE_MD,
     "bench_figures_knobs": PERFORMANCE_MD,
     "bench_starts": ROBUSTNESS_MD,
+    "bench_view": PERFORMANCE_MD,
 }
 
 
