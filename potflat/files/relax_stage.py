@@ -13,7 +13,7 @@ from potflat.files.provenance import provenance
 from potflat.files.rollout_stage import RolloutFiles
 from potflat.io.atomic import write_json_atomic
 from potflat.io.flat_ply import as_stored, read_flat_ply, write_flat_ply
-from potflat.io.images import check_texture_file
+from potflat.io.images import check_texture_image
 from potflat.mesh.distortion import DistortionSummary, SurfaceReference, ZoneSummary
 from potflat.relax.multilevel import relax
 from potflat.relax.options import RelaxOptions
@@ -104,8 +104,8 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         clock.lap("read")
     else:
         flat, distortion = rolled.flat, rolled.distortion
-    if flat.mesh.texture_path is not None:  # copied beside the output: missing, say so before relaxing
-        check_texture_file(flat.mesh.texture_path)
+    if flat.mesh.texture_path is not None:  # copied beside the output: missing or no image, say so before relaxing
+        check_texture_image(flat.mesh.texture_path)
     result = relax(flat, options=options, progress=progress, distortion_before=distortion)
     clock.lap("relax")
     ply_path = out_dir / f"{name}.relaxed.ply"

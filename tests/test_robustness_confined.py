@@ -1,0 +1,107 @@
+"""Nothing leaves or enters where it should not (catalogue in docs/robustness.md).
+
+A stage file, a bake JSON or a manifest never chooses what potflat reads or copies; a folder
+under the output folder is potflat's own or refused; embedded and declared data are bounded
+before anything is decoded. One small negative test per check, each case in ``tmp_path``.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from potflat_cli.main import app
+from typer.testing import CliRunner
+
+from potflat.errors import InvalidInputError
+from potflat.io.flat_ply import read_flat_ply, write_flat_ply
+from potflat.types import FlatMesh, Mesh
+
+runner = CliRunner()
+
+
+def _png(path: Path, size: int = 8) -> Path:
+    from PIL import Image
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.new("RGB", (size, size), (200, 120, 40)).save(path)
+    return path
+
+
+def _stage_file(path: Path, texture: Path | None = None) -> Path:
+    """A small textured stage PLY (a fan of three triangles) with its texture beside it."""
+    rng = np.random.default_rng(0)
+    F = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4]])
+    texture = texture or _png(path.parent / "src" / "atlas.png")
+    mesh = Mesh(rng.normal(size=(5, 3)), F, texcoords=rng.uniform(size=(3, 3, 2)), texture_path=texture)
+    return write_flat_ply(path, FlatMesh(mesh, rng.normal(size=(5, 2))))
+
+
+def _name_texture(ply: Path, name: str) -> None:
+    """Rewrite the stage file's ``comment TextureFile`` line to ``name``."""
+    data = ply.read_bytes()
+    head, body = data.split(b"end_header\n", 1)
+    lines = [b"comment TextureFile " + name.encode() if line.startswith(b"comment TextureFile") else line
+             for line in head.split(b"\n")]
+    ply.write_bytes(b"\n".join(lines) + b"end_header\n" + body)
+
+
+# ---------------------------------------------------------------------------------------
+# files named by files
+
+
+@pytest.mark.parametrize("where", ["relative", "absolute", "link"])
+def test_a_stage_file_never_names_a_texture_outside_its_folder(tmp_path, where):
+    """``comment TextureFile ../../secret/photo.png``, an absolute path or a link beside the
+    stage file leading out: refused on reading, so relax and bake never read or copy it."""
+    secret = _png(tmp_path / "secret" / "photo.png")
+    ply = _stage_file(tmp_path / "in" / "cone.rollout.ply")
+    name = {"relative": "../secret/photo.png", "absolute": str(secret), "link": "photo.png"}[where]
+    if where == "link":
+        (ply.parent / "photo.png").symlink_to(secret)
+    _name_texture(ply, name)
+    with pytest.raises(InvalidInputError, match="not a file beside it"):
+        read_flat_ply(ply)
+
+
+def test_relax_never_copies_a_file_that_is_not_an_image(tmp_path):
+    """A stage file whose texture beside it is a text file: relax refuses before relaxing and
+    copies nothing into its output folder."""
+    ply = _stage_file(tmp_path / "in" / "cone.rollout.ply")
+    (ply.parent / "notes.txt").write_text("not an image\n")
+    _name_texture(ply, "notes.txt")
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["relax", str(ply), "-o", str(out)])
+    assert result.exit_code == 2, result.output
+    assert "is not an image" in result.stderr and "notes.txt" in result.stderr
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_a_texture_that_does_not_decode_is_never_copied(tmp_path):
+    """A PNG whose header is sound and whose pixels are not: the copy beside a stage file is
+    refused (only an image that decodes is copied)."""
+    good = _png(tmp_path / "src" / "atlas.png", size=64)
+    data = good.read_bytes()
+    cut = data.index(b"IDAT") + 12
+    bad = tmp_path / "src" / "broken.png"
+    bad.write_bytes(data[:cut] + b"\0" * 40 + data[-12:])
+    with pytest.raises(InvalidInputError, match="does not decode"):
+        _stage_file(tmp_path / "out" / "pot.rollout.ply", texture=bad)
+    assert not (tmp_path / "out" / "pot.texture.png").exists()
+
+
+def test_a_bake_json_never_directs_the_mask_importance_elsewhere(tmp_path):
+    """A bake JSON beside the mask whose provenance names a flattening in another folder: the
+    flattening is looked for beside the JSON only."""
+    from potflat.importance import image_mask_importance
+
+    elsewhere = _stage_file(tmp_path / "elsewhere" / "v.relaxed.ply")
+    folder = tmp_path / "masks"
+    _png(folder / "v.mask.png", size=8)
+    (folder / "v.bake.json").write_text(json.dumps({
+        "image_px": [8, 8], "origin_uv": [0.0, 0.0], "px_per_unit": 1.0,
+        "provenance": {"inputs": [{"path": str(elsewhere)}]}}))
+    flat = read_flat_ply(elsewhere)
+    with pytest.raises(InvalidInputError, match="not beside it"):
+        image_mask_importance(flat, folder / "v.mask.png", folder / "v.bake.json")
