@@ -118,8 +118,11 @@ def test_force_redoes_all(three):
 
 
 def test_incomplete_outputs_or_changed_texture_rerun(three):
-    texture = three.parent / "scans" / "amphora-2.png"  # read by the fake rollout, in its provenance
+    texture = three.parent / "scans" / "amphora-2.png"  # read by the fake rollout, named by the scan's MTL
     texture.write_bytes(b"texture v1")
+    (three.parent / "scans" / "amphora-2.mtl").write_text("newmtl painted\nmap_Kd amphora-2.png\n")
+    with open(three.parent / "scans" / "amphora-2.obj", "a") as fh:
+        fh.write("mtllib amphora-2.mtl\n")
     run_batch(load_batch(three), workers=1)
     res = three.parent / "results"
     (res / "amphora-1" / "amphora-1.area.png").unlink()

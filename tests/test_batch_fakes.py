@@ -64,6 +64,9 @@ class RolloutOptions:
         if self.band is not None and not 0 <= self.band[0] < self.band[1] <= 1:
             raise InvalidOptionError(f"band must be two fractions 0 <= low < high <= 1, got {self.band}")
 
+    def input_files(self) -> tuple[str, ...]:
+        return ()
+
 
 @dataclass(frozen=True, kw_only=True)
 class RelaxOptions:

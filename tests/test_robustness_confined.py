@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from potflat_cli.main import app
+from test_robustness_hostile import one_line_error
 from typer.testing import CliRunner
 
 from potflat.errors import InvalidInputError
@@ -72,9 +73,7 @@ def test_relax_never_copies_a_file_that_is_not_an_image(tmp_path):
     (ply.parent / "notes.txt").write_text("not an image\n")
     _name_texture(ply, "notes.txt")
     out = tmp_path / "out"
-    result = runner.invoke(app, ["relax", str(ply), "-o", str(out)])
-    assert result.exit_code == 2, result.output
-    assert "is not an image" in result.stderr and "notes.txt" in result.stderr
+    one_line_error(runner.invoke(app, ["relax", str(ply), "-o", str(out)]), "is not an image", "notes.txt")
     assert not out.exists() or not any(out.iterdir())
 
 
@@ -105,3 +104,59 @@ def test_a_bake_json_never_directs_the_mask_importance_elsewhere(tmp_path):
     flat = read_flat_ply(elsewhere)
     with pytest.raises(InvalidInputError, match="not beside it"):
         image_mask_importance(flat, folder / "v.mask.png", folder / "v.bake.json")
+
+
+# ---------------------------------------------------------------------------------------
+# the output folder: written where potflat made it, never read from
+
+
+@pytest.fixture
+def fake_stages(monkeypatch):
+    import test_batch_fakes as fakes
+
+    fakes.install(monkeypatch)
+    return fakes
+
+
+def _one_scan_batch(tmp_path: Path, fakes) -> Path:
+    fakes.write_scan(tmp_path / "scans" / "cone.obj")
+    batch = tmp_path / "batch.yaml"
+    batch.write_text("output: OUT/\nscans:\n  - path: scans/cone.obj\n")
+    return batch
+
+
+def test_a_batch_never_writes_through_a_link_under_its_output(tmp_path, fake_stages):
+    """``OUT/cone`` a symbolic link to a folder elsewhere: the batch is refused with one line
+    before any work; the folder elsewhere (and its manifest) is untouched."""
+    batch = _one_scan_batch(tmp_path, fake_stages)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "manifest.json").write_text('{"mine": true}')
+    (tmp_path / "OUT").mkdir()
+    (tmp_path / "OUT" / "cone").symlink_to(elsewhere)
+    one_line_error(runner.invoke(app, ["batch", str(batch), "--workers", "1"]), "OUT/cone", "symbolic link")
+    assert sorted(p.name for p in elsewhere.iterdir()) == ["manifest.json"]
+    assert (elsewhere / "manifest.json").read_text() == '{"mine": true}'
+
+
+def test_a_manifest_never_chooses_what_the_batch_reads(tmp_path, fake_stages, monkeypatch):
+    """A planted complete manifest listing a file outside the folder as an input: the file is
+    never opened (the key comes from the batch file's scan and the files it names)."""
+    from potflat.files.batch import manifest as manifest_mod
+    from potflat.files.batch.config import load_batch
+    from potflat.files.batch.execution import run_batch
+
+    batch = _one_scan_batch(tmp_path, fake_stages)
+    assert run_batch(load_batch(batch), workers=1).exit_code == 0
+    big = tmp_path / "big.bin"
+    big.write_bytes(b"\0" * 1000)
+    folder = tmp_path / "OUT" / "cone"
+    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest["inputs"] = [{"path": str(big), "sha256": "0" * 64}]
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    hashed = []
+    real = manifest_mod.file_sha256
+    monkeypatch.setattr(manifest_mod, "file_sha256", lambda p: hashed.append(Path(p)) or real(p))
+    again = run_batch(load_batch(batch), workers=1)
+    assert [r.status for r in again.reports] == ["skipped"]
+    assert big not in hashed and hashed == [(tmp_path / "scans" / "cone.obj").resolve()]

@@ -111,19 +111,6 @@ def test_a_manifest_never_directs_a_batch_outside_its_folder(tmp_path, fake_stag
     assert (tmp_path / "results" / "pot-1" / "pot-1.png").is_file()
 
 
-def test_a_manifest_input_that_is_a_device_is_never_read(tmp_path, fake_stages):
-    """inputs: [/dev/zero] would hash forever; a non-regular file makes the scan incomplete."""
-    batch = _batch(tmp_path, "  - path: scans/pot-0.obj\n", n=1)
-    run_batch(load_batch(batch), workers=1)
-    job = load_batch(batch).jobs[0]
-    manifest = read_manifest(job.out_dir)
-    manifest["inputs"] = [{"path": "/dev/zero", "sha256": "0" * 64}]
-    (job.out_dir / MANIFEST).write_text(json.dumps(manifest))
-    start = time.monotonic()
-    assert is_complete(job, job_key(job)) is None
-    assert time.monotonic() - start < 5
-
-
 def test_the_texture_cache_is_private_and_never_trusted(tmp_path):
     """An embedded GLB texture is extracted into a new 0700 folder of this process, never into
     a shared folder where a planted file (or symlink) could replace the painting."""

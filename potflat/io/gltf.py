@@ -64,6 +64,26 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
     return raw
 
 
+def _gltf_inputs(path: Path) -> list[Path]:
+    """The files loading the glTF/GLB at ``path`` reads besides it: the buffers and images it
+    names by URI (those that exist; embedded data is part of the file). Of a GLB only the JSON
+    chunk is read."""
+    with open(path, "rb") as fh:
+        head = fh.read(20)
+        if head[:4] == b"glTF":
+            text = fh.read(struct.unpack_from("<I", head, 12)[0]) if len(head) == 20 else b""
+        else:
+            text = head + fh.read()
+    try:
+        doc = json.loads(text)
+    except ValueError:  # the load says what is wrong
+        return []
+    uris = [item.get("uri") for key in ("buffers", "images") if isinstance(doc, dict)
+            for item in (doc.get(key) or []) if isinstance(item, dict)]
+    found = (_find_file(uri, path.parent) for uri in uris if isinstance(uri, str) and not uri.startswith("data:"))
+    return [p for p in found if p.is_file()]
+
+
 def _gltf_images(path: Path) -> list[Path]:
     """Base-colour texture images of a glTF/GLB as files: external ones as they are, embedded ones
     extracted (content-addressed, atomically) into the private :func:`_texture_cache`."""

@@ -173,6 +173,11 @@ class RolloutOptions:
                 raise InvalidOptionError("view applies only to proxy ortho; add --proxy ortho or drop --view")
             object.__setattr__(self, "view", view)
 
+    def input_files(self) -> tuple[str, ...]:
+        """The files these options name, which the rollout reads: the importance mask and the
+        bake JSON it was painted over."""
+        return tuple(p for p in (self.importance_mask, self.importance_image) if p is not None)
+
     def as_dict(self) -> dict:
         """The options as a JSON-ready dict."""
         return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v)
