@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import functools
 import sys
+from pathlib import Path
 
 import typer
 
@@ -45,6 +46,12 @@ def user_errors(func):
             return result
         except KeyboardInterrupt:
             raise fail(INTERRUPTED, 130) from None
+        except MemoryError:
+            from potflat.errors import out_of_memory
+
+            # the command's input: its first path argument (the scan, stage file or batch file)
+            given = next((v for v in (*args, *kwargs.values()) if isinstance(v, Path)), "the input")
+            raise fail(str(out_of_memory(given))) from None
         except Exception as exc:
             if STOP:  # whatever the interrupt broke: e.g. a Numba call it landed in raises SystemError
                 raise fail(INTERRUPTED, 130) from None

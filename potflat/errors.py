@@ -25,3 +25,17 @@ class AxisNotFoundError(PotflatError):
 
 class FoldedResultError(PotflatError):
     """A flattening result would contain flipped triangles or boundary overlap."""
+
+
+def out_of_memory(path) -> InvalidInputError:
+    """The one-line error for running out of memory on the input ``path`` (a
+    :class:`MemoryError` anywhere while it is read or flattened)."""
+    import os
+
+    try:
+        size = os.stat(path).st_size
+        shown = f" ({size / 1024**3:.1f} GiB)" if size >= 1024**3 else f" ({size / 1024**2:.0f} MiB)"
+    except (OSError, TypeError, ValueError):
+        shown = ""
+    return InvalidInputError(f"{path}{shown}: out of memory reading or flattening it; give a smaller file (decimate "
+                             "the scan) or run where more memory is available")

@@ -160,3 +160,54 @@ def test_a_manifest_never_chooses_what_the_batch_reads(tmp_path, fake_stages, mo
     again = run_batch(load_batch(batch), workers=1)
     assert [r.status for r in again.reports] == ["skipped"]
     assert big not in hashed and hashed == [(tmp_path / "scans" / "cone.obj").resolve()]
+
+
+# ---------------------------------------------------------------------------------------
+# files too large for memory
+
+
+def _sparse(path: Path, size: int, head: bytes = b"") -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "wb") as fh:
+        fh.write(head)
+        fh.truncate(size)
+    return path
+
+
+def test_a_scan_larger_than_the_memory_is_refused_before_reading(tmp_path, monkeypatch):
+    """A sparse scan file larger than the memory the process may use (a 20 GB file under an
+    8 GB limit, here 64 MiB under 32 MiB): one line with both sizes, nothing read."""
+    from potflat.io import raw
+    from potflat.io.scan import load_scan
+
+    scan = _sparse(tmp_path / "big.obj", 64 << 20, b"v 0 0 0\n")
+    monkeypatch.setattr(raw, "memory_limit", lambda: 32 << 20)
+    monkeypatch.setattr(Path, "read_bytes", lambda self: pytest.fail(f"{self} was read"))
+    with pytest.raises(InvalidInputError, match=r"big.obj is 64 MiB, more than the 32 MiB of memory"):
+        load_scan(scan)
+
+
+def test_a_huge_material_library_is_refused_by_its_size(tmp_path):
+    """``mtllib`` naming a 32 MiB sparse file: refused by its size, never read whole."""
+    from potflat.io.scan import load_scan
+
+    scan = tmp_path / "pot.obj"
+    scan.write_text("mtllib pot.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nvt 0 0\n"
+                    "f 1/1 2/1 3/1\nf 1/1 2/1 4/1\nf 1/1 3/1 4/1\nf 2/1 3/1 4/1\n")
+    _sparse(tmp_path / "pot.mtl", 32 << 20, b"newmtl a\nmap_Kd pot.png\n")
+    with pytest.raises(InvalidInputError, match="pot.mtl is 32 MiB, too large for a material library"):
+        load_scan(scan)
+
+
+def test_running_out_of_memory_anywhere_is_one_line_naming_the_input(tmp_path, monkeypatch):
+    """A MemoryError raised anywhere in a command: one line naming the scan, exit 2."""
+    from potflat.files import pipeline
+
+    scan = tmp_path / "pot.obj"
+    scan.write_text("v 0 0 0\n")
+
+    def exhausted(*args, **kwargs):
+        raise MemoryError
+
+    monkeypatch.setattr(pipeline, "run_scan", exhausted)
+    one_line_error(runner.invoke(app, ["run", str(scan), "-o", str(tmp_path / "out")]), "pot.obj", "out of memory")

@@ -23,6 +23,7 @@ from potflat.io._kernels.ply_png import float32_exact
 from potflat.io.atomic import atomic_path
 from potflat.io.images import check_texture_image
 from potflat.io.ply import _ply_header
+from potflat.io.raw import _read_bytes
 from potflat.mesh.distortion import row_blocks
 from potflat.types import UNITS_MM, FlatMesh, Mesh
 
@@ -230,7 +231,7 @@ def read_flat_ply(path: str | os.PathLike) -> FlatMesh:
         if not stat.S_ISREG(path.stat().st_mode):
             raise InvalidInputError(f"{path} is not a regular file (a folder, device or pipe); give a stage file "
                                     "written by potflat")
-        data = path.read_bytes()
+        data = _read_bytes(path, "a stage file")
     except (OSError, RuntimeError) as exc:
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else "a symbolic link loop"
         raise InvalidInputError(f"cannot read {path}: {reason}; give a stage file written by potflat") from None

@@ -36,6 +36,8 @@ from potflat.io.raw import (
 
 #: Bytes of an OBJ file per thread at least: smaller files are parsed in one range.
 OBJ_RANGE_BYTES = 4 << 20
+#: Largest material library (MTL) read: text of a few lines per material.
+MTL_MAX_BYTES = 16 << 20
 
 
 def parse_obj(buf: np.ndarray, ranges: int | None = None) -> tuple:
@@ -266,7 +268,7 @@ def _obj_material_textures(obj: Path, libs: list[str]) -> dict[str, Path]:
     out: dict[str, Path] = {}
     for mtl in _material_libraries(obj, libs):
         current = None
-        for line in _text(_read_bytes(mtl)).splitlines():
+        for line in _text(_read_bytes(mtl, "a material library", MTL_MAX_BYTES)).splitlines():
             parts = line.strip().split(None, 1)
             if not parts:
                 continue
