@@ -211,3 +211,50 @@ def test_running_out_of_memory_anywhere_is_one_line_naming_the_input(tmp_path, m
 
     monkeypatch.setattr(pipeline, "run_scan", exhausted)
     one_line_error(runner.invoke(app, ["run", str(scan), "-o", str(tmp_path / "out")]), "pot.obj", "out of memory")
+
+
+# ---------------------------------------------------------------------------------------
+# embedded and declared data, bounded before decoding
+
+
+def _gltf(path: Path, payload: int, declared: int | None = None) -> Path:
+    """A .gltf holding one triangle in a buffer of ``payload`` bytes embedded as base64,
+    declaring ``declared`` bytes."""
+    import base64
+    import struct
+
+    tri = struct.pack("<9f", 0, 0, 0, 100, 0, 0, 0, 100, 0) + struct.pack("<3I", 0, 1, 2)
+    data = tri + b"\0" * (payload - len(tri))
+    doc = {"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+           "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+           "buffers": [{"byteLength": declared or len(data),
+                        "uri": "data:application/octet-stream;base64," + base64.b64encode(data).decode()}],
+           "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36},
+                           {"buffer": 0, "byteOffset": 36, "byteLength": 12}],
+           "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                          "min": [0, 0, 0], "max": [100, 100, 0]},
+                         {"bufferView": 1, "componentType": 5125, "count": 3, "type": "SCALAR"}]}
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_embedded_gltf_data_over_the_limit_is_refused_before_decoding(tmp_path, monkeypatch):
+    """A buffer embedded as base64 over the limit (1 GiB, 5.3 GB to decode; here 2 MiB over
+    1 MiB): refused from the JSON, nothing decoded."""
+    from potflat.io import gltf
+    from potflat.io.scan import load_scan
+
+    monkeypatch.setattr(gltf, "MAX_EMBEDDED_BYTES", 1 << 20)
+    monkeypatch.setattr(gltf, "_trimesh_load", lambda *a, **k: pytest.fail("decoded"))
+    with pytest.raises(InvalidInputError, match=r"embeds 2 MiB as base64 text .* over the 1 MiB limit"):
+        load_scan(_gltf(tmp_path / "pot.gltf", 2 << 20))
+
+
+def test_a_gltf_buffer_declaring_more_than_its_data_is_refused(tmp_path, monkeypatch):
+    """``byteLength`` 1 TiB over a buffer of 1 kB: refused before decoding."""
+    from potflat.io import gltf
+    from potflat.io.scan import load_scan
+
+    monkeypatch.setattr(gltf, "_trimesh_load", lambda *a, **k: pytest.fail("decoded"))
+    with pytest.raises(InvalidInputError, match="buffer 0 declares 1099511627776 bytes but its base64 text holds"):
+        load_scan(_gltf(tmp_path / "pot.gltf", 1000, declared=1 << 40))
