@@ -13,7 +13,8 @@ EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 #: at the end, since the KeyboardInterrupt the handler raises is lost when it lands in a finaliser.
 STOP: list[int] = []
 #: What an interrupted command says.
-INTERRUPTED = "interrupted; outputs already finished are kept, none is half-written"
+INTERRUPTED = ("interrupted; no output is half-written or mixed with an earlier run's (an earlier run's outputs "
+               "are restored; without one, the stages finished are kept)")
 
 
 def check_stop() -> None:

@@ -258,3 +258,78 @@ def test_a_gltf_buffer_declaring_more_than_its_data_is_refused(tmp_path, monkeyp
     monkeypatch.setattr(gltf, "_trimesh_load", lambda *a, **k: pytest.fail("decoded"))
     with pytest.raises(InvalidInputError, match="buffer 0 declares 1099511627776 bytes but its base64 text holds"):
         load_scan(_gltf(tmp_path / "pot.gltf", 1000, declared=1 << 40))
+
+
+# ---------------------------------------------------------------------------------------
+# a rerun never mixes old and new
+
+
+def test_an_interrupted_rerun_leaves_the_earlier_outputs_as_they_were(tmp_path, fake_stages):
+    """A run, then a rerun with another band interrupted in its bake: the folder holds the
+    first run's outputs, byte for byte, and nothing else (no new stage file beside old images)."""
+    from potflat.files.pipeline import run_scan
+
+    scan = fake_stages.write_scan(tmp_path / "pot.obj")
+    out = tmp_path / "out"
+    run_scan(scan, out)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    fake_stages.SABOTAGE["pot"] = ("interrupt", "bake")
+    with pytest.raises(KeyboardInterrupt):
+        run_scan(scan, out, rollout=fake_stages.RolloutOptions(band=(0.3, 0.7)))
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_a_new_stage_run_supersedes_the_outputs_made_from_the_old_one(tmp_path):
+    """A new relaxation makes the old images stale: they are removed with the old relaxation
+    when it completes; files of other names and the view's masks stay."""
+    from potflat.files.names import STAGES_FROM
+    from potflat.files.outputs import superseding
+
+    for name in ("pot.rollout.ply", "pot.relaxed.ply", "pot.png", "pot.stress.png", "pot.mask.png", "jug.png"):
+        (tmp_path / name).write_text("old")
+    with superseding(tmp_path, "pot", STAGES_FROM["relax"]):
+        assert not (tmp_path / "pot.png").exists()  # moved aside while the run writes
+        (tmp_path / "pot.relaxed.ply").write_text("new")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["jug.png", "pot.mask.png", "pot.relaxed.ply",
+                                                          "pot.rollout.ply"]
+    assert (tmp_path / "pot.relaxed.ply").read_text() == "new"
+
+
+def test_the_earlier_outputs_a_killed_run_moved_aside_come_back(tmp_path):
+    """A run killed outright leaves the earlier outputs in the hidden folder: the next run into
+    the folder moves them back first, and restores them when it fails in turn."""
+    from potflat.files.names import STAGES_FROM
+    from potflat.files.outputs import earlier_folder, superseding
+
+    aside = earlier_folder(tmp_path, "pot")
+    aside.mkdir()
+    (aside / "pot.png").write_text("old painting")
+    (tmp_path / "pot.rollout.ply").write_text("killed run's")
+    with pytest.raises(RuntimeError):
+        with superseding(tmp_path, "pot", STAGES_FROM["rollout"]):
+            raise RuntimeError("failed")
+    assert (tmp_path / "pot.png").read_text() == "old painting" and not aside.exists()
+
+
+
+# ---------------------------------------------------------------------------------------
+# the solver never produces a non-finite state
+
+
+def test_a_rollout_of_pages_on_one_edge_is_refused_before_relaxing():
+    """What a non-manifold "book" (pages joined on one edge) unrolls to: separate pages, every
+    face flipped. Refused before the relaxation (never a NaN layout, never a RuntimeWarning)."""
+    import warnings
+
+    from potflat.errors import FoldedResultError
+    from potflat.relax import relax
+
+    quad = np.array([[0, 0, 0], [60, 0, 0], [60, 0, 120], [0, 0, 120]], float)
+    V = np.concatenate([quad, quad + [0, 20, 0]])
+    F = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    uv = V[:, [0, 2]] * [-1.0, 1.0]  # mirrored: every face flipped
+    uv[4:, 0] -= 100.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        with pytest.raises(FoldedResultError, match="mirrored"):
+            relax(FlatMesh(Mesh(V, F), uv))

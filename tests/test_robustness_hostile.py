@@ -458,14 +458,15 @@ def test_stopping_the_pool_ends_its_workers_and_cancels_the_queue():
 
 def test_potflats_own_partial_painting_does_not_block_the_rerun(tmp_path, fake_stages):
     """Killed between NAME.png and NAME.bake.json: the marker says the PNG is potflat's."""
-    from potflat.files.pipeline import run_scan
+    from potflat.files.pipeline import partial_marker, run_scan
 
     scan = fakes.write_scan(tmp_path / "pot.obj")
     out = tmp_path / "out"
     fakes.SABOTAGE["pot"] = ("interrupt", "bake")
     with pytest.raises(KeyboardInterrupt):
         run_scan(scan, out)
-    (out / "pot.png").write_bytes(b"half")  # as if the kill came after the painting
+    (out / "pot.png").write_bytes(b"half")  # as a kill after the painting leaves it, with the marker
+    partial_marker(out, "pot").write_text("{}")
     (out / ".pot.png.abc123.part").write_bytes(b"debris")
     fakes.SABOTAGE.clear()
     run_scan(scan, out)
@@ -474,12 +475,15 @@ def test_potflats_own_partial_painting_does_not_block_the_rerun(tmp_path, fake_s
 
 
 def test_batch_force_redoes_a_scan_interrupted_in_its_bake(tmp_path, fake_stages):
+    from potflat.files.pipeline import partial_marker
+
     batch = _batch(tmp_path, "  - path: scans/pot-0.obj\n", n=1)
     fakes.SABOTAGE["pot-0"] = ("interrupt", "bake")
     with pytest.raises(KeyboardInterrupt):
         run_batch(load_batch(batch), workers=1)
     folder = tmp_path / "results" / "pot-0"
-    (folder / "pot-0.png").write_bytes(b"half")
+    (folder / "pot-0.png").write_bytes(b"half")  # as a kill during the bake leaves it, with the marker
+    partial_marker(folder, "pot-0").write_text("{}")
     fakes.SABOTAGE.clear()
     for force in (False, True):
         assert [r.status for r in run_batch(load_batch(batch), workers=1, force=force).reports] == ["done"]

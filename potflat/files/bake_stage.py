@@ -20,7 +20,8 @@ from potflat.bake.compose import Composition, bake
 from potflat.bake.marks import FOLDED_COLOUR, REPEAT_COLOUR, image_figures, rgba16
 from potflat.bake.options import BakeOptions
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.files.names import rollout_json_beside, stage_name
+from potflat.files.names import STAGE_OUTPUTS, STAGES_FROM, rollout_json_beside, stage_name
+from potflat.files.outputs import superseding
 from potflat.files.plate import make_plate
 from potflat.files.provenance import provenance
 from potflat.files.relax_stage import RelaxFiles
@@ -108,14 +109,11 @@ def _write_flat_obj(path: Path, flat: FlatMesh, g: Grid, band: int, texture_name
                               header=header)
 
 
-def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: list) -> None:
+def _check_not_inputs(out_dir: Path, name: str, inputs: list) -> None:
     """Refuse to bake when an output name is an input file (e.g. the scan's texture ``NAME.png``
     when baking into the scan's own folder): the input would be replaced."""
-    suffixes = (".png", ".tif", ".position.tif", ".sheet.png", ".bake.json", ".overlay.png", ".scale-layer.png",
-                ".attachments.png", ".flat.obj", ".flat.mtl", ".plate.svg", ".plate.pdf", ".plate.png",
-                ".scalebar.png", *(f".{m}.png" for m in options.maps))
     for src in (Path(p) for p in inputs if p is not None):
-        for out in (out_dir / f"{name}{s}" for s in suffixes):
+        for out in (out_dir / f"{name}{s}" for s in STAGE_OUTPUTS["bake"]):
             if src.exists() and out.exists() and os.path.samefile(out, src):
                 raise InvalidOptionError(f"the output {out} is the input {src} and would be overwritten; "
                                          "bake into another folder (-o) or give another --name")
@@ -172,95 +170,97 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
             raise InvalidInputError(f"--sheet needs {rollout_ply.name} beside {flat_ply}; copy it there or drop --sheet")
     if options.plate and not flat_ply.name.endswith(".relaxed.ply"):
         raise InvalidOptionError(f"the plate is made from NAME.relaxed.ply; bake the relaxed file, not {flat_ply.name}")
-    _check_not_inputs(out_dir, name, options, [flat_ply, flat.mesh.texture_path, rollout_ply])
+    _check_not_inputs(out_dir, name, [flat_ply, flat.mesh.texture_path, rollout_ply])
     rollout_json = rollout_json_beside(flat_ply)
     if marks is None:
         record, rollout_json = _rollout_record_beside(flat_ply)
         marks = marks_from_record(record, len(flat.mesh.faces))
     elif not rollout_json.is_file():
         rollout_json = None
-    ppm = options.resolution
-    r = Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels,
-                 summary=relaxed.distortion if relaxed is not None else None,
-                 zone=relaxed.zone if relaxed is not None else None,
-                 reference=relaxed.reference if relaxed is not None else None)
-    g = r.grid
-    clock.lap("prepare")
-    comp = Composition(r, maps=options.maps, marks=marks, grid=options.grid, scale_on_image=options.scale_on_image)
-    paths: dict[str, Path] = {"png": out_dir / f"{name}.png"}
-    with ExitStack() as stack:
-        png = stack.enter_context(PngWriter(paths["png"], g.width, g.height + comp.band, 4, px_per_mm=ppm))
-        writers = {}
-        for key, legend in comp.legends.items():
-            paths[key] = out_dir / f"{name}.{key}.png"
-            writers[key] = stack.enter_context(PngWriter(paths[key], g.width, g.height + len(legend), 4,
-                                                         px_per_mm=ppm))
-        paths["scale_layer"] = out_dir / f"{name}.scale-layer.png"
-        layer_png = stack.enter_context(PngWriter(paths["scale_layer"], g.width, g.height, 4, px_per_mm=ppm))
-        if len(comp.attachments):
-            paths["attachments"] = out_dir / f"{name}.attachments.png"
-            mask_png = stack.enter_context(PngWriter(paths["attachments"], g.width, g.height, 4, px_per_mm=ppm))
-        for strip in comp.strips():
-            png.write(strip.painting)
-            for key, writer in writers.items():
-                writer.write(strip.maps[key])
-            layer_png.write(strip.scale_layer)
-            if strip.attachments is not None:
-                mask_png.write(strip.attachments)
-        if comp.band:
-            png.write(comp.band_rows())
-        for key, legend in comp.legends.items():
-            writers[key].write(legend)
-    paths["scalebar"] = write_png(out_dir / f"{name}.scalebar.png", comp.layer.bar_image(), px_per_mm=ppm)
-    clock.lap("render")
-    if options.tiff:
-        paths["tiff"] = write_tiff_rows(out_dir / f"{name}.tif",
-                                        (rgba16(r.painting(a, b), r.coverage(a, b)) for a, b in r.strips()),
-                                        shape=(g.height, g.width, 4), dtype=np.uint16, px_per_mm=ppm, photometric="rgb")
-    if options.position_map:
-        paths["position"] = write_tiff_rows(out_dir / f"{name}.position.tif", (r.position(a, b) for a, b in r.strips()),
-                                            shape=(g.height, g.width, 3), dtype=np.float32, px_per_mm=ppm,
-                                            photometric="rgb")
-    clock.lap("tiff")
-    figures = image_figures(r, comp.covered_px)
-    clock.lap("figures")
-    if options.obj:
-        paths["obj"] = _write_flat_obj(out_dir / f"{name}.flat.obj", flat, g, comp.band, paths["png"].name)
-        paths["mtl"] = paths["obj"].with_suffix(".mtl")
-    if rollout_ply is not None:
-        paths["sheet"] = _write_comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat,
-                                                 title=name)
-    clock.lap("obj_sheet")
-    inputs = ([flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else [])
-              + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else []))
-    scales = comp.scales
-    record = {
-        **figures,
-        "overlap": None if not len(comp.repeated) else {
-            "deg": marks.overlap_deg, "repeated_faces": int(comp.repeated.sum()),
-            "mark": f"dashed line {REPEAT_COLOUR[:3]} where the repeat past 360 degrees starts"},
-        "folded": None if not len(comp.folded) else {
-            "faces": int(len(marks.folded_faces)), "area_mm2": marks.folded_area_mm2,
-            "percent_of_surface": marks.folded_percent, "regions_total": marks.folded_regions,
-            "mark": f"outlined and hatched {FOLDED_COLOUR[:3]} on the distortion maps and the overlay: where the scan "
-                    "folds over itself in 3D (see NAME.rollout.json, folded)"},
-        "scale_bar_mm": comp.layer.bar_mm,
-        "scale_on_image": None if comp.on_image is None else {
-            "bar_mm": comp.on_image.bar_mm, "at_px": list(comp.on_image.at), "box_px": list(comp.on_image.box_size),
-            "band_below_px": comp.band, "grid": options.grid},
-        "maps": {m: {"range": [scales[m].lo, scales[m].hi], "label": scales[m].label} for m in options.maps},
-        "files": {k: p.name for k, p in paths.items()},
-        "provenance": provenance(stage="bake", inputs=inputs,
-                                 options={**asdict(options), "px_per_mm_effective": ppm, "name": name}),
-    }
-    paths["json"] = out_dir / f"{name}.bake.json"
-    record["files"]["json"] = paths["json"].name
-    record["timings"] = clock.total()  # the plate (made from these files) comes after
-    write_json_atomic(paths["json"], record)
-    if options.plate:
-        plate = make_plate(flat_ply, out_dir, scale=options.plate_scale, name=name)
-        paths.update({f"plate_{k}": p for k, p in plate.paths.items()})
-        record["files"].update({f"plate_{k}": p.name for k, p in plate.paths.items()})
-        record["plate"] = {k: v for k, v in plate.record.items() if k not in ("files", "inputs")}
+    with superseding(out_dir, name, STAGES_FROM["bake"],
+                     keep=lambda: (p for p in (flat_ply, flat.mesh.texture_path, rollout_ply, rollout_json) if p)):
+        ppm = options.resolution
+        r = Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels,
+                     summary=relaxed.distortion if relaxed is not None else None,
+                     zone=relaxed.zone if relaxed is not None else None,
+                     reference=relaxed.reference if relaxed is not None else None)
+        g = r.grid
+        clock.lap("prepare")
+        comp = Composition(r, maps=options.maps, marks=marks, grid=options.grid, scale_on_image=options.scale_on_image)
+        paths: dict[str, Path] = {"png": out_dir / f"{name}.png"}
+        with ExitStack() as stack:
+            png = stack.enter_context(PngWriter(paths["png"], g.width, g.height + comp.band, 4, px_per_mm=ppm))
+            writers = {}
+            for key, legend in comp.legends.items():
+                paths[key] = out_dir / f"{name}.{key}.png"
+                writers[key] = stack.enter_context(PngWriter(paths[key], g.width, g.height + len(legend), 4,
+                                                             px_per_mm=ppm))
+            paths["scale_layer"] = out_dir / f"{name}.scale-layer.png"
+            layer_png = stack.enter_context(PngWriter(paths["scale_layer"], g.width, g.height, 4, px_per_mm=ppm))
+            if len(comp.attachments):
+                paths["attachments"] = out_dir / f"{name}.attachments.png"
+                mask_png = stack.enter_context(PngWriter(paths["attachments"], g.width, g.height, 4, px_per_mm=ppm))
+            for strip in comp.strips():
+                png.write(strip.painting)
+                for key, writer in writers.items():
+                    writer.write(strip.maps[key])
+                layer_png.write(strip.scale_layer)
+                if strip.attachments is not None:
+                    mask_png.write(strip.attachments)
+            if comp.band:
+                png.write(comp.band_rows())
+            for key, legend in comp.legends.items():
+                writers[key].write(legend)
+        paths["scalebar"] = write_png(out_dir / f"{name}.scalebar.png", comp.layer.bar_image(), px_per_mm=ppm)
+        clock.lap("render")
+        if options.tiff:
+            paths["tiff"] = write_tiff_rows(out_dir / f"{name}.tif",
+                                            (rgba16(r.painting(a, b), r.coverage(a, b)) for a, b in r.strips()),
+                                            shape=(g.height, g.width, 4), dtype=np.uint16, px_per_mm=ppm, photometric="rgb")
+        if options.position_map:
+            paths["position"] = write_tiff_rows(out_dir / f"{name}.position.tif", (r.position(a, b) for a, b in r.strips()),
+                                                shape=(g.height, g.width, 3), dtype=np.float32, px_per_mm=ppm,
+                                                photometric="rgb")
+        clock.lap("tiff")
+        figures = image_figures(r, comp.covered_px)
+        clock.lap("figures")
+        if options.obj:
+            paths["obj"] = _write_flat_obj(out_dir / f"{name}.flat.obj", flat, g, comp.band, paths["png"].name)
+            paths["mtl"] = paths["obj"].with_suffix(".mtl")
+        if rollout_ply is not None:
+            paths["sheet"] = _write_comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat,
+                                                     title=name)
+        clock.lap("obj_sheet")
+        inputs = ([flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else [])
+                  + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else []))
+        scales = comp.scales
+        record = {
+            **figures,
+            "overlap": None if not len(comp.repeated) else {
+                "deg": marks.overlap_deg, "repeated_faces": int(comp.repeated.sum()),
+                "mark": f"dashed line {REPEAT_COLOUR[:3]} where the repeat past 360 degrees starts"},
+            "folded": None if not len(comp.folded) else {
+                "faces": int(len(marks.folded_faces)), "area_mm2": marks.folded_area_mm2,
+                "percent_of_surface": marks.folded_percent, "regions_total": marks.folded_regions,
+                "mark": f"outlined and hatched {FOLDED_COLOUR[:3]} on the distortion maps and the overlay: where the scan "
+                        "folds over itself in 3D (see NAME.rollout.json, folded)"},
+            "scale_bar_mm": comp.layer.bar_mm,
+            "scale_on_image": None if comp.on_image is None else {
+                "bar_mm": comp.on_image.bar_mm, "at_px": list(comp.on_image.at), "box_px": list(comp.on_image.box_size),
+                "band_below_px": comp.band, "grid": options.grid},
+            "maps": {m: {"range": [scales[m].lo, scales[m].hi], "label": scales[m].label} for m in options.maps},
+            "files": {k: p.name for k, p in paths.items()},
+            "provenance": provenance(stage="bake", inputs=inputs,
+                                     options={**asdict(options), "px_per_mm_effective": ppm, "name": name}),
+        }
+        paths["json"] = out_dir / f"{name}.bake.json"
+        record["files"]["json"] = paths["json"].name
+        record["timings"] = clock.total()  # the plate (made from these files) comes after
         write_json_atomic(paths["json"], record)
+        if options.plate:
+            plate = make_plate(flat_ply, out_dir, scale=options.plate_scale, name=name)
+            paths.update({f"plate_{k}": p for k, p in plate.paths.items()})
+            record["files"].update({f"plate_{k}": p.name for k, p in plate.paths.items()})
+            record["plate"] = {k: v for k, v in plate.record.items() if k not in ("files", "inputs")}
+            write_json_atomic(paths["json"], record)
     return BakeFiles(paths=paths, record=record)

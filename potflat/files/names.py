@@ -2,10 +2,39 @@
 from a stage file (light: no numpy)."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
+
+from potflat.bake.options import MAP_NAMES
 
 #: The stage file each stage after the first reads: ``NAME`` and this suffix.
 STAGE_INPUT = {"relax": ".rollout.ply", "bake": ".relaxed.ply"}
+#: The files each stage writes: ``NAME`` and these suffixes (the rollout also ``NAME.texture.EXT``,
+#: its copy of the scan's texture: :data:`TEXTURE_COPY`).
+STAGE_OUTPUTS = {
+    "rollout": (".rollout.ply", ".rollout.json", ".profile.csv", ".profile.svg"),
+    "relax": (".relaxed.ply", ".relaxed.json"),
+    "bake": (".png", *(f".{m}.png" for m in (*MAP_NAMES, "overlay")), ".scale-layer.png", ".attachments.png",
+             ".scalebar.png", ".tif", ".position.tif", ".flat.obj", ".flat.mtl", ".sheet.png", ".bake.json",
+             ".plate.svg", ".plate.pdf", ".plate.png"),
+}
+#: ``NAME`` and this, then the image's extension: the rollout's copy of the scan's texture.
+TEXTURE_COPY = ".texture."
+#: Each stage and the stages made from its outputs: a new run of the stage supersedes theirs.
+STAGES_FROM = {"rollout": ("rollout", "relax", "bake"), "relax": ("relax", "bake"), "bake": ("bake",)}
+
+
+def stage_outputs(folder: Path, name: str, stages: tuple[str, ...]) -> list[Path]:
+    """The files in ``folder`` named as ``stages`` name their outputs for ``name`` (whoever
+    wrote them), sorted; symbolic links count as files (they are never followed)."""
+    names = {f"{name}{suffix}" for stage in stages for suffix in STAGE_OUTPUTS[stage]}
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return []
+    return sorted(Path(e.path) for e in entries
+                  if (e.name in names or ("rollout" in stages and e.name.startswith(f"{name}{TEXTURE_COPY}")))
+                  and (e.is_symlink() or e.is_file()))
 
 
 def stage_name(path: Path) -> str:

@@ -10,10 +10,12 @@ from pathlib import Path
 from potflat import __version__
 from potflat._heap import reuse_freed_memory
 from potflat.errors import InvalidOptionError
+from potflat.files.names import STAGES_FROM
+from potflat.files.outputs import superseding
 from potflat.files.provenance import provenance
 from potflat.io.atomic import check_output_name, write_json_atomic
 from potflat.io.flat_ply import as_stored, write_flat_ply
-from potflat.io.scan import check_plausible_size, load_scan
+from potflat.io.scan import check_plausible_size, check_scan_file, load_scan, scan_inputs
 from potflat.mesh.distortion import DistortionSummary
 from potflat.rollout.notes import rollout_notes
 from potflat.rollout.options import RolloutOptions
@@ -88,30 +90,33 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
         if out.resolve() == scan_path.resolve():
             raise InvalidOptionError(
                 f"output {out} would overwrite the input scan; choose another output folder or --name")
-    clock = StepClock()
-    loaded = load_scan(scan_path, units=options.units, texture="use" if options.texture else "ignore")
-    check_plausible_size(loaded, scan_path)
-    mesh, cleaning = loaded.mesh, loaded.report.as_dict()
-    del loaded
-    clock.lap("load")
-    result = rollout(mesh, options=options)
-    clock.lap("rollout")
-    if check is not None:
-        check(result.flat)
-    del mesh
-    profile = result.profile
-    record = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_record(result),
-              "profile": profile.summary(),
-              "cleaning": cleaning,
-              "files": {role: path.name for role, path in paths.items()}}
-    record["provenance"] = provenance(stage="rollout", inputs=[scan_path], options=options.as_dict())
-    comments = (f"potflat {__version__} rollout of {scan_path.name}",)
-    write_flat_ply(paths["ply"], result.flat, comments=comments)
-    write_profile_csv(profile, paths["profile_csv"])
-    write_profile_svg(profile, paths["profile_svg"], title=f"{name}: profile ({profile.units})")
-    clock.lap("write")
-    record["timings"] = {**clock.total(), "rollout_steps": result.timings}
-    write_json_atomic(paths["json"], record)
+    check_scan_file(scan_path)
+    with superseding(out_dir, name, STAGES_FROM["rollout"],
+                     keep=lambda: (scan_path, *scan_inputs(scan_path), *options.input_files())):
+        clock = StepClock()
+        loaded = load_scan(scan_path, units=options.units, texture="use" if options.texture else "ignore")
+        check_plausible_size(loaded, scan_path)
+        mesh, cleaning = loaded.mesh, loaded.report.as_dict()
+        del loaded
+        clock.lap("load")
+        result = rollout(mesh, options=options)
+        clock.lap("rollout")
+        if check is not None:
+            check(result.flat)
+        del mesh
+        profile = result.profile
+        record = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_record(result),
+                  "profile": profile.summary(),
+                  "cleaning": cleaning,
+                  "files": {role: path.name for role, path in paths.items()}}
+        record["provenance"] = provenance(stage="rollout", inputs=[scan_path], options=options.as_dict())
+        comments = (f"potflat {__version__} rollout of {scan_path.name}",)
+        write_flat_ply(paths["ply"], result.flat, comments=comments)
+        write_profile_csv(profile, paths["profile_csv"])
+        write_profile_svg(profile, paths["profile_svg"], title=f"{name}: profile ({profile.units})")
+        clock.lap("write")
+        record["timings"] = {**clock.total(), "rollout_steps": result.timings}
+        write_json_atomic(paths["json"], record)
     return RolloutFiles(paths=paths, record=record, flat=as_stored(result.flat, paths["ply"], comments=comments),
                         distortion=result.distortion, marks=result.marks)
 

@@ -25,7 +25,6 @@ from potflat.files.batch.manifest import (
     is_complete,
     job_inputs,
     job_key,
-    output_inside,
     read_manifest,
 )
 from potflat.files.batch.report import write_report
@@ -103,9 +102,9 @@ def run_job(job: ScanJob, key: str, *, threads: int | None = None) -> ScanReport
 
     The old manifest is first replaced by a partial one (``complete: false``, the marker of
     potflat's own unfinished outputs); the new one is written last, after every output, so an
-    interrupted or failed scan is never taken as complete. Outputs that an earlier
-    run wrote and this one did not (e.g. a map no longer asked for) are removed.
-    ``error.log`` in the scan folder keeps the traceback of a failure.
+    interrupted or failed scan is never taken as complete. The scan folder's outputs stay one
+    consistent set (:func:`potflat.run_scan`: an earlier run's are replaced whole, or restored
+    when this one fails). ``error.log`` in the scan folder keeps the traceback of a failure.
     """
 
     start = time.perf_counter()
@@ -127,11 +126,6 @@ def run_job(job: ScanJob, key: str, *, threads: int | None = None) -> ScanReport
             p = Path(p).resolve()
             rel = p.relative_to(job.out_dir.resolve()).as_posix()
             outputs[rel] = p.stat().st_size
-        for rel in old_outputs:
-            target = output_inside(job.out_dir, rel)
-            if rel not in outputs and target is not None and rel != MANIFEST:
-                with contextlib.suppress(OSError):
-                    target.unlink()
         with contextlib.suppress(FileNotFoundError):
             (job.out_dir / "error.log").unlink()
         seconds = time.perf_counter() - start
