@@ -56,9 +56,9 @@ def _run(values: dict[str, Any]) -> None:
 
     from rich.console import Console
 
-    import potflat._warmup as potflat_warmup
     from potflat.mesh.distortion import distortion_words
     from potflat.stages.pipeline import STAGES, run_scan
+    from potflat_cli import _warmup as potflat_warmup
     from potflat_cli._options import options_from_cli
     from potflat_cli._stage import say_compiling, with_compile_note
 
