@@ -301,12 +301,6 @@ def test_one_line_strips_newlines_and_colour_codes():
 
 
 def test_sample_batch_file_is_valid():
-    from potflat.stages.pipeline import STAGES, stage_api
-
-    try:
-        [stage_api(stage) for stage in STAGES]
-    except (ImportError, AttributeError):
-        pytest.skip("a stage module is not there yet")
     sample = Path(__file__).resolve().parents[1] / "samples" / "batch.yaml"
     batch = load_batch(sample)
     assert [job.name for job in batch.jobs] == ["amphora", "cone"]
