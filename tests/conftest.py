@@ -40,12 +40,14 @@ def sources_hash(root: Path = CHECKOUT) -> str:
 
 def kernel_cache(config) -> Path:
     """This run's Numba cache folder, made if needed and marked as just used; all but the
-    :data:`KEPT_CACHES` most recently used are removed. A temporary folder when pytest's cache
-    is off."""
+    :data:`KEPT_CACHES` most recently used are removed. When pytest's cache is off, a
+    temporary folder, removed at the end of the run."""
     name = f"numba-{sources_hash()}"
     cache = getattr(config, "cache", None)
     if cache is None:  # -p no:cacheprovider
-        return Path(tempfile.mkdtemp(prefix=f"potflat-{name}-"))
+        folder = Path(tempfile.mkdtemp(prefix=f"potflat-{name}-"))
+        config.add_cleanup(lambda: shutil.rmtree(folder, ignore_errors=True))
+        return folder
     folder = cache.mkdir(name)
     os.utime(folder)
     caches = sorted(folder.parent.glob("numba-*"), key=lambda p: p.stat().st_mtime, reverse=True)

@@ -48,3 +48,16 @@ def test_real_scans_are_found_beside_the_checkout_or_skipped_with_the_reason(tmp
         conftest.real_scans_folder(checkout)
     (tmp_path / "shared" / "data" / "real").mkdir(parents=True)
     assert conftest.real_scans_folder(checkout) == tmp_path / "shared" / "data" / "real"
+
+
+def test_without_pytests_cache_the_kernel_cache_is_removed_at_the_end():
+    cleanups = []
+
+    class Config:
+        cache = None
+        add_cleanup = cleanups.append
+
+    folder = conftest.kernel_cache(Config())
+    assert folder.is_dir() and len(cleanups) == 1
+    cleanups[0]()
+    assert not folder.exists()
