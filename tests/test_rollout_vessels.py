@@ -1,6 +1,5 @@
 """Rollout of real vessels: painted side, attachments, folded border, profile files, real scans."""
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,7 +25,6 @@ from potflat.rollout.walls import OUTER
 from potflat.types import Mesh
 
 #: The shared real scans (CI has ../shared beside the repository).
-REAL = Path(__file__).resolve().parents[2] / "shared/data/real"
 SCANS = ("goblet.stl", "plastic-vase.ply", "sea-vase.ply")
 
 
@@ -206,12 +204,11 @@ def test_stage_writes_profile_and_reports(tmp_path, cup):
     assert data["profile"]["two_walled"] and data["provenance"]["options"]["side"] == "outer"
 
 
-@pytest.mark.skipif(not REAL.is_dir(), reason="shared real scans absent")
 @pytest.mark.parametrize("scan", SCANS)
-def test_real_scans_roll_out_one_wall_cleanly(scan):
+def test_real_scans_roll_out_one_wall_cleanly(real_scans, scan):
     from potflat.io.scan import load_scan
 
-    mesh = load_scan(REAL / scan).mesh
+    mesh = load_scan(real_scans / scan).mesh
     res = rollout(mesh)
     assert res.walls.two_walled
     assert np.all(res.walls.labels[res.face_index] == OUTER)
@@ -220,12 +217,11 @@ def test_real_scans_roll_out_one_wall_cleanly(scan):
     assert len(res.trimmed) < 0.05 * res.walls.n_selected
 
 
-@pytest.mark.skipif(not REAL.is_dir(), reason="shared real scans absent")
-def test_potflat_run_on_a_real_scan_is_fold_free(tmp_path):
+def test_potflat_run_on_a_real_scan_is_fold_free(tmp_path, real_scans):
     from potflat_cli.main import app
 
     out = tmp_path / "out"
-    result = CliRunner().invoke(app, ["run", str(REAL / "sea-vase.ply"), "-o", str(out), "--preset", "preview",
+    result = CliRunner().invoke(app, ["run", str(real_scans / "sea-vase.ply"), "-o", str(out), "--preset", "preview",
                                       "--px-per-mm", "1", "--quiet"])
     assert result.exit_code == 0, result.output
     relaxed = json.loads((out / "sea-vase.relaxed.json").read_text())

@@ -12,7 +12,6 @@ import pytest
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.scan import LoadedScan, load_scan
 
-REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real"
 
 
 @pytest.fixture(autouse=True)
@@ -458,10 +457,8 @@ def test_glb_textured_via_trimesh(tmp_path):
 
 
 @pytest.mark.parametrize("name", ["plastic-vase.ply", "sea-vase.ply", "goblet.stl"])
-def test_real_scans_load_and_clean(name):
-    path = REAL / name
-    if not path.exists():
-        pytest.skip(f"{path} not present")
+def test_real_scans_load_and_clean(real_scans, name):
+    path = real_scans / name
     scan = load_scan(path)
     r = scan.report
     mesh = scan.mesh
@@ -483,10 +480,8 @@ def test_real_scans_load_and_clean(name):
         assert r.boundary_loops > 1 and r.components_removed > 0
 
 
-def test_real_scan_inverted_is_turned_outward(tmp_path):
-    path = REAL / "sea-vase.ply"
-    if not path.exists():
-        pytest.skip(f"{path} not present")
+def test_real_scan_inverted_is_turned_outward(tmp_path, real_scans):
+    path = real_scans / "sea-vase.ply"
     import trimesh
 
     tm = trimesh.load(path, process=False)
