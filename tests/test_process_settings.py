@@ -31,19 +31,19 @@ print(sorted(set(os.environ.items()) ^ set(before.items())))
 def _record_stage_settings(monkeypatch) -> list:
     """Fake stages that record the wait policy and the heap opt-in they run with (no warm-up)."""
     import potflat._jit
+    from potflat.files import pipeline
 
     fakes.install(monkeypatch)
     monkeypatch.setattr(potflat._jit, "kernels_cached", lambda: True)
     seen = []
     for stage in ("rollout", "relax", "bake"):
-        module = sys.modules[f"potflat.{stage}"]
-        run = getattr(module, f"run_{stage}_stage")
+        run = getattr(pipeline, f"run_{stage}_stage")
 
         def recording(*args, _run=run, **kwargs):
             seen.append((os.environ.get("OMP_WAIT_POLICY"), _heap.heap_tuning_allowed()))
             return _run(*args, **kwargs)
 
-        monkeypatch.setattr(module, f"run_{stage}_stage", recording)
+        monkeypatch.setattr(pipeline, f"run_{stage}_stage", recording)
     return seen
 
 
