@@ -131,4 +131,7 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from potflat_cli._process import command_settings
+
+    with command_settings():  # as the potflat command runs: OpenMP's passive wait, the heap tuning
+        main()

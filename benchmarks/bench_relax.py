@@ -239,4 +239,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from potflat_cli._process import command_settings
+
+    with command_settings():  # as the potflat command runs: OpenMP's passive wait, the heap tuning
+        main()

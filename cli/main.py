@@ -60,7 +60,8 @@ class _Group(TyperGroup):
 
     Usage errors (a missing argument, a value out of range, a directory given as a file)
     are one ``error:`` line and exit code 2, like every other bad input; SIGTERM is
-    handled like SIGINT.
+    handled like SIGINT. Commands run with the process settings of
+    :func:`potflat_cli._process.command_settings`.
     """
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
@@ -74,6 +75,7 @@ class _Group(TyperGroup):
             import click
 
         from potflat_cli._errors import EXIT_USAGE, INTERRUPTED, STOP, fail
+        from potflat_cli._process import command_settings
 
         STOP.clear()
         args = list(sys.argv[1:] if args is None else args)
@@ -82,9 +84,11 @@ class _Group(TyperGroup):
                 signal.signal(sig, _interrupt)
             sys.unraisablehook = _quiet_unraisable
         if not standalone_mode:
-            return super().main(args, prog_name, complete_var, standalone_mode, **extra)
+            with command_settings():
+                return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         try:
-            code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+            with command_settings():
+                code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except click.exceptions.NoArgsIsHelpError as exc:
             exc.show()
             code = EXIT_USAGE

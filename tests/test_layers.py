@@ -20,7 +20,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("potflat.rollout", "potflat.relax", "potflat.bake"),
     ("potflat.files",),
     ("potflat.view",),
-    ("potflat_cli", "potflat._warmup"),
+    ("potflat_cli",),
 )
 #: The stage packages: none imports another.
 STAGES = ("potflat.rollout", "potflat.relax", "potflat.bake")

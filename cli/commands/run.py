@@ -37,9 +37,9 @@ def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json
 
     from rich.console import Console
 
-    import potflat._warmup as potflat_warmup
     from potflat.files.pipeline import run_scan
     from potflat.mesh.distortion import distortion_words
+    from potflat_cli import _warmup as potflat_warmup
     from potflat_cli._stage import say_compiling, with_compile_note
 
     scan = Path(scan)

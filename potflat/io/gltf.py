@@ -25,7 +25,15 @@ from potflat.io.stl_off import _trimesh_load
 def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
     import trimesh
 
-    _check_gltf_sizes(path, *_gltf_document(path))
+    doc, bin_length = _gltf_json(path)
+    _check_gltf_sizes(path, doc, bin_length)
+    used = doc.get("extensionsUsed")
+    if isinstance(used, list) and "KHR_draco_mesh_compression" in used:
+        try:  # trimesh decodes Draco with DracoPy; without it, it returns all-zero positions
+            import DracoPy  # noqa: F401
+        except ImportError:
+            raise InvalidInputError(f"{path} is Draco-compressed (KHR_draco_mesh_compression) and its decoder is "
+                                    "missing: pip install DracoPy") from None
     scene = _trimesh_load(path, force="scene")
     try:  # trimesh decodes embedded images lazily, here
         geoms = [g for g in (scene.dump() if isinstance(scene, trimesh.Scene) else [scene])
@@ -77,7 +85,7 @@ _COMPONENT_BYTES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
 _TYPE_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 
 
-def _gltf_document(path: Path) -> tuple[dict, int]:
+def _gltf_json(path: Path) -> tuple[dict, int]:
     """The JSON of a glTF or GLB (read alone: of a GLB its JSON chunk, never its binary chunk)
     and the length of a GLB's binary chunk (0 for a .gltf).
 
@@ -187,7 +195,7 @@ def _gltf_inputs(path: Path) -> list[Path]:
     names by URI (those that exist; embedded data is part of the file). Of a GLB only the JSON
     chunk is read."""
     try:
-        doc = _gltf_document(path)[0]
+        doc = _gltf_json(path)[0]
     except InvalidInputError:  # the load says what is wrong
         return []
     uris = [item.get("uri") for key in ("buffers", "images")
@@ -206,7 +214,8 @@ def _gltf_images(path: Path) -> list[Path]:
                                 f"export the scan again {_IGNORE_HINT}") from None
 
 
-def _gltf_image_files(path: Path) -> list[Path]:
+def _gltf_document(path: Path) -> tuple[dict, bytes]:
+    """The JSON document of a glTF/GLB and a GLB's binary chunk (empty for a .gltf)."""
     data = _read_bytes(path)
     bin_chunk = b""
     if data[:4] == b"glTF":
@@ -227,6 +236,11 @@ def _gltf_image_files(path: Path) -> list[Path]:
             raise InvalidInputError(f"{path} is not valid glTF JSON; export the scan again") from None
         if not isinstance(doc, dict):
             raise InvalidInputError(f"{path} is not valid glTF JSON; export the scan again")
+    return doc, bin_chunk
+
+
+def _gltf_image_files(path: Path) -> list[Path]:
+    doc, bin_chunk = _gltf_document(path)
     images = doc.get("images", [])
     textures = doc.get("textures", [])
     base = set()  # images used as base colour (not normal or roughness maps)

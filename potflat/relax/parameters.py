@@ -103,6 +103,9 @@ class EnergyParameters:
         generated vessel's painted circles came out rounder than under libigl ARAP).
     area_eps : float
         Smoothing of the area term at zero log area ratio.
+    ear_lift : float
+        Untangling: a folded ear (a triangle whose tip is on no other face) is mirrored about
+        its base; a tip lying on the base is lifted off it by this fraction of the base.
     """
 
     barrier_mu: float = 1.0
@@ -116,6 +119,7 @@ class EnergyParameters:
     limit_mu: float = 100.0
     limit_percentile: float = 80.0
     area_eps: float = 0.05
+    ear_lift: float = 0.1
 
 
 @dataclass(frozen=True, kw_only=True)
