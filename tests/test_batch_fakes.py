@@ -147,7 +147,7 @@ def _zone(figures: dict) -> ZoneFigures:
                        length_error_p95_pct=figures["length_error_p95_pct"], distortion=None)
 
 
-def run_relax_stage(rollout_ply, out_dir, options, *, name=None, rolled=None):
+def run_relax_stage(rollout_ply, out_dir, options, *, name=None, rolled=None, check=None):
     src, out = Path(rollout_ply), Path(out_dir)
     name = name or src.name.split(".")[0]
     _sabotage(name, "relax")

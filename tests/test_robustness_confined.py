@@ -15,7 +15,7 @@ from potflat_cli.main import app
 from test_robustness_hostile import one_line_error
 from typer.testing import CliRunner
 
-from potflat.errors import InvalidInputError
+from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.flat_ply import read_flat_ply, write_flat_ply
 from potflat.types import FlatMesh, Mesh
 
@@ -37,6 +37,20 @@ def _stage_file(path: Path, texture: Path | None = None) -> Path:
     texture = texture or _png(path.parent / "src" / "atlas.png")
     mesh = Mesh(rng.normal(size=(5, 3)), F, texcoords=rng.uniform(size=(3, 3, 2)), texture_path=texture)
     return write_flat_ply(path, FlatMesh(mesh, rng.normal(size=(5, 2))))
+
+
+def _tube(path: Path, radius: float = 40.0, height: float = 120.0) -> Path:
+    """An open cylinder (a plain vessel wall) as an OBJ, in millimetres."""
+    t = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    z = np.linspace(0, height, 12)
+    lines = [f"v {radius * np.cos(a):.9g} {radius * np.sin(a):.9g} {h:.9g}" for h in z for a in t]
+    for i in range(len(z) - 1):
+        for j in range(32):
+            p, q = i * 32 + j, i * 32 + (j + 1) % 32
+            lines += [f"f {p + 1} {q + 1} {q + 33}", f"f {p + 1} {q + 33} {p + 33}"]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+    return path
 
 
 def _name_texture(ply: Path, name: str) -> None:
@@ -333,3 +347,41 @@ def test_a_rollout_of_pages_on_one_edge_is_refused_before_relaxing():
         warnings.simplefilter("error", RuntimeWarning)
         with pytest.raises(FoldedResultError, match="mirrored"):
             relax(FlatMesh(Mesh(V, F), uv))
+
+
+# ---------------------------------------------------------------------------------------
+# the image size, checked before anything is written
+
+
+def test_an_image_too_large_for_the_relaxed_layout_leaves_nothing(tmp_path, monkeypatch):
+    """A resolution the rollout's layout takes but the relaxed one (wider: up to 1.6 times the
+    rollout's area on real scans, here 9 times) does not: refused before the relax stage
+    writes, naming the scan, and the rollout's files go too."""
+    import dataclasses
+
+    from potflat.files import relax_stage
+    from potflat.files.pipeline import run_scan
+    from potflat_synthetic.vessels import make_vessel, write_obj
+
+    scan = write_obj(make_vessel("cylinder", n_vertices=600, seed=1, texture_size=64, pose=False),
+                     tmp_path / "pot.obj")
+    real = relax_stage.relax
+
+    def wider(flat, **kwargs):
+        result = real(flat, **kwargs)
+        return dataclasses.replace(result, flat=result.flat.replace(uv=result.flat.uv * 3.0))
+
+    monkeypatch.setattr(relax_stage, "relax", wider)
+    with pytest.raises(InvalidOptionError, match=r"pot.obj: 2 px/mm would make a .* over the 2 MP limit"):
+        run_scan(scan, tmp_path / "out", relax={"preset": "preview"}, bake={"px_per_mm": 2.0, "max_megapixels": 2.0})
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_scan_given_the_wrong_unit_is_blamed_on_the_unit(tmp_path):
+    """A millimetre scan given ``--units m``: the unit is named, not the resolution the user
+    never asked for."""
+    scan = _tube(tmp_path / "pot.obj")
+    line = one_line_error(runner.invoke(app, ["run", str(scan), "-o", str(tmp_path / "out"), "--units", "m"]),
+                          "pot.obj", "--units mm")
+    assert "px/mm" not in line and "px_per_mm" not in line
+    assert not (tmp_path / "out").exists()

@@ -180,10 +180,13 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     with superseding(out_dir, name, STAGES_FROM["bake"],
                      keep=lambda: (p for p in (flat_ply, flat.mesh.texture_path, rollout_ply, rollout_json) if p)):
         ppm = options.resolution
-        r = Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels,
-                     summary=relaxed.distortion if relaxed is not None else None,
-                     zone=relaxed.zone if relaxed is not None else None,
-                     reference=relaxed.reference if relaxed is not None else None)
+        try:
+            r = Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels,
+                         summary=relaxed.distortion if relaxed is not None else None,
+                         zone=relaxed.zone if relaxed is not None else None,
+                         reference=relaxed.reference if relaxed is not None else None)
+        except InvalidOptionError as exc:  # the image's size: name the file
+            raise InvalidOptionError(f"{flat_ply}: {exc}") from None
         g = r.grid
         clock.lap("prepare")
         comp = Composition(r, maps=options.maps, marks=marks, grid=options.grid, scale_on_image=options.scale_on_image)

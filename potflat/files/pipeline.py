@@ -130,16 +130,21 @@ def _preview_at_image_resolution(options: RunOptions) -> RunOptions:
     return options
 
 
-def _image_check(bake: BakeOptions) -> Callable[[FlatMesh], None]:
-    """A check of the rollout's flattening: would the baked image be of a sane size? Run before
-    the rollout writes anything, so an absurd resolution (or a scan in the wrong unit) stops the
-    run before any file exists rather than at the bake, after rollout and relax."""
+def _image_check(bake: BakeOptions, scan: Path) -> Callable[[FlatMesh], None]:
+    """A check of a flattening: would the baked image be of a sane size? Run on the rollout's
+    before the rollout writes anything, so an absurd resolution stops the run before any file
+    exists, and on the relaxed one (its extent is the image's, up to 1.6 times the rollout's
+    area) before the relax stage writes: :func:`run_scan` then removes the rollout's files too.
+    The message names the scan."""
     def check(flat: FlatMesh) -> None:
         used = np.zeros(len(flat.uv), bool)
         used[flat.mesh.faces.ravel()] = True
         if used.any():
             lo, hi = bounds(flat.uv[used])
-            image_size((hi - lo) * flat.mesh.mm_per_unit, bake.resolution, bake.max_megapixels)
+            try:
+                image_size((hi - lo) * flat.mesh.mm_per_unit, bake.resolution, bake.max_megapixels)
+            except InvalidOptionError as exc:
+                raise InvalidOptionError(f"{scan}: {exc}") from None
     return check
 
 
@@ -183,11 +188,17 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
     with superseding(out, name, STAGES_FROM["rollout"], keep=lambda: inputs) as run:
         say("rollout")
         t = time.perf_counter()
-        rolled = run_rollout_stage(scan, out, options.rollout, name=name, check=_image_check(options.bake))
+        image_check = _image_check(options.bake, scan)
+        rolled = run_rollout_stage(scan, out, options.rollout, name=name, check=image_check)
         run.done("rollout")
         t_rollout, t = time.perf_counter() - t, time.perf_counter()
         say("relax")
-        relaxed = run_relax_stage(rolled.paths["ply"], out, options.relax, name=name, rolled=rolled)
+        try:
+            relaxed = run_relax_stage(rolled.paths["ply"], out, options.relax, name=name, rolled=rolled,
+                                      check=image_check)
+        except InvalidOptionError:  # the image size: this run's options, not the scan, so nothing of it stays
+            run.finished.clear()
+            raise
         run.done("relax")
         t_relax, t = time.perf_counter() - t, time.perf_counter()
         say("bake")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -71,7 +72,8 @@ def _level_for_json(level: LevelRecord) -> dict:
 
 def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: RelaxOptions | None = None, *,
                     name: str | None = None, progress: bool = False,
-                    rolled: RolloutFiles | None = None) -> RelaxFiles:
+                    rolled: RolloutFiles | None = None,
+                    check: Callable[[FlatMesh], None] | None = None) -> RelaxFiles:
     """Relax ``NAME.rollout.ply`` and write ``NAME.relaxed.ply`` and ``NAME.relaxed.json``.
 
     Parameters
@@ -89,6 +91,9 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         What the rollout's file stage wrote in this run (:func:`potflat.run_scan`): its
         flattening, figures and record are taken from there instead of ``rollout_ply`` and
         ``NAME.rollout.json`` beside it.
+    check : callable, optional
+        Called with the relaxed flattening before anything is written; it may raise to stop the
+        run (``potflat run`` checks the size of the image to come).
 
     Returns
     -------
@@ -112,6 +117,8 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
                      keep=lambda: (p for p in (rollout_ply, rollout_json, flat.mesh.texture_path) if p is not None)):
         result = relax(flat, options=options, progress=progress, distortion_before=distortion)
         clock.lap("relax")
+        if check is not None:
+            check(result.flat)
         ply_path = out_dir / f"{name}.relaxed.ply"
         json_path = out_dir / f"{name}.relaxed.json"
         record = {

@@ -161,7 +161,8 @@ def _truncated(path: Path, element: str) -> InvalidInputError:
                              "the file is cut short: copy or export it again")
 
 
-_IGNORE_HINT = "or pass texture='ignore' (CLI --no-texture) to load it untextured"
+#: The way out of a texture problem, in the command line's words (the API's ``texture="ignore"``).
+_IGNORE_HINT = "or pass --no-texture to load it untextured"
 
 
 def _texture_cache() -> Path:
@@ -213,7 +214,7 @@ def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source
     W, H = cols * cw, rows * ch
     if W * H > max_pixels:
         raise InvalidInputError(f"{source}: its {len(paths)} texture images would make a {W} x {H} atlas, over "
-                                f"max_texture_pixels={max_pixels}; re-export with one texture {_IGNORE_HINT}")
+                                f"the limit of {max_pixels} pixels; re-export with one texture {_IGNORE_HINT}")
     key = json.dumps([[str(p), p.stat().st_size, p.stat().st_mtime_ns] for p in paths]).encode()
     target = _texture_cache() / (hashlib.sha256(key).hexdigest()[:32] + ".png")
     if not target.exists():
@@ -279,8 +280,8 @@ def _check_texture(tex: Path, source: Path, max_pixels: int) -> tuple[Path, tupl
                 if w <= 0 or h <= 0 or w * h > max_pixels:
                     raise InvalidInputError(
                         f"{source}: texture {tex.name} declares {w} x {h} pixels, over the limit of "
-                        f"{max_pixels} (a corrupt file or decompression bomb); restore a sane image, "
-                        f"raise max_texture_pixels if it is genuine, {_IGNORE_HINT}")
+                        f"{max_pixels} (a corrupt file or decompression bomb); restore a sane image "
+                        f"{_IGNORE_HINT}")
                 try:
                     check_texture_budget(tex, w, h, im.mode)
                 except InvalidInputError as exc:
