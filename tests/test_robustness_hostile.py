@@ -225,7 +225,7 @@ def test_a_scan_in_another_unit_is_refused_with_the_likely_unit(tmp_path, units,
 def test_image_size_is_checked_before_any_file_is_written(tmp_path, px_per_mm, words):
     scan = _tube_obj(tmp_path / "vase.obj")
     out = tmp_path / "out"
-    one_line_error(cli("run", scan, "-o", out, "--px-per-mm", px_per_mm), *words)
+    one_line_error(cli("run", scan, "-o", out, "--px-per-mm", px_per_mm), "vase.obj", "--px-per-mm", *words)
     assert not out.exists() or not any(out.iterdir())
 
 

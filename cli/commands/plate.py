@@ -6,7 +6,7 @@ from typing import Annotated, Optional
 
 import typer
 from potflat_cli._errors import user_errors
-from potflat_cli._options import Json, Name, OutputDir, Quiet
+from potflat_cli._options import Json, Quiet, StageName, StageOutputDir
 
 HELP = """Compose the archaeological plate of a flattened scan: the outside view and the profile section side by side (left and right of the axis), the rollout below at one stated scale, a scale bar and a caption (name, computed from a 3D scan, proxy, preset, distortion, scale, date, potflat version).
 
@@ -22,11 +22,11 @@ Input = Annotated[Path, typer.Argument(help="NAME.relaxed.ply written by potflat
 @user_errors
 def plate_command(
     relaxed_ply: Input,
-    output: OutputDir = None,
+    output: StageOutputDir = None,
     scale: Annotated[Optional[str], typer.Option(
         "--scale", metavar="1:N", help="Print scale, e.g. 1:1, 1:2, 1:5 \\[default: the largest of 1:1, 1:2, 1:3, "
                                        "1:4, 1:5, 1:10, 1:20, 1:50 that fits A4].")] = None,
-    name: Name = None,
+    name: StageName = None,
     quiet: Quiet = False,
     json: Json = False,
 ) -> None:

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from potflat_cli._errors import user_errors
-from potflat_cli._options import Json, Name, Quiet, StageOutputDir, with_stage_options
+from potflat_cli._options import Json, Quiet, StageName, StageOutputDir, with_stage_options
 
 HELP = """Relax a rollout into a fold-free flattening: writes NAME.relaxed.ply (with per-vertex stress) and NAME.relaxed.json (energy history, flips, boundary check, distortion before/after, timings, provenance).
 
@@ -23,7 +23,7 @@ Input = Annotated[Path, typer.Argument(help="NAME.rollout.ply written by 'potfla
 
 @user_errors
 @with_stage_options("relax")
-def relax_command(rollout_ply: Input, output: StageOutputDir = None, name: Name = None, quiet: Quiet = False,
+def relax_command(rollout_ply: Input, output: StageOutputDir = None, name: StageName = None, quiet: Quiet = False,
                   json: Json = False, *, options: dict) -> None:
     """Relax a rollout into a fold-free flattening."""
     # imported here, not at the top: 'potflat --help' stays free of Numba and SciPy

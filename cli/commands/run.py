@@ -77,10 +77,9 @@ def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json
     out = Console()
     out.print(f"[bold]{result.name}[/]: done in {result.seconds.total:.1f} s, "
               f"outputs in {result.out_dir}")
-    shown = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
-                      for k, v in figures.items() if v is not None)
-    if shown:
-        out.print(f"  whole-surface distortion: {distortion_words(figures)} ({shown}; area figures are natural logs)")
+    out.print(f"  whole-surface distortion: {distortion_words(figures)}"
+              + (f", shapes stretched at most {figures['anisotropy_p95']:.2f} times over 95 % of the surface"
+                 if figures.get("anisotropy_p95") is not None else ""))
     relaxed = result.relax.record
     if relaxed.get("lengths"):
         out.print(f"  {relaxed['lengths']}")

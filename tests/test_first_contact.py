@@ -1,0 +1,101 @@
+"""First contact: the help and the messages in the command line's words, naming the file
+and the fix (catalogue in docs/robustness.md). One small test per check."""
+from __future__ import annotations
+
+import re
+
+import pytest
+import test_batch_fakes as fakes
+from potflat_cli.main import app
+from typer.testing import CliRunner
+
+from potflat.files.batch.config import BatchFileError, load_batch
+
+runner = CliRunner()
+COMMANDS = ("rollout", "relax", "bake", "run", "batch", "plate", "view")
+
+
+def _help(command: str) -> str:
+    result = runner.invoke(app, [command, "--help"], env={"COLUMNS": "300"})
+    assert result.exit_code == 0, result.output
+    return result.stdout
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_help_is_in_the_command_lines_words(command):
+    """No Python in the help: no ``None``, field or constant names, module paths, quoted
+    Python literals, ``<bool>`` after a flag or ``{scan}`` in the usage line."""
+    text = _help(command)
+    usage = next(line for line in text.splitlines() if "Usage:" in line)
+    assert "{" not in usage and re.search(r"\[OPTIONS\]( \[?[A-Z_]+\]?)+\s*$", usage), usage
+    assert "<bool>" not in text
+    for python in ("None", "MAP_NAMES", "'seam_at'", "'importance_mask'", "texture='", "=\"", "'\"auto\"'",
+                   "False", "True"):
+        assert python not in text, (python, command)
+    assert not re.search(r"potflat\.[a-z]", text), command  # a module path
+
+
+def test_plate_help_gives_the_output_folder_it_uses():
+    """The plate writes beside its input (``potflat plate out/x.relaxed.ply``), not ./NAME/."""
+    text = _help("plate")
+    assert "./NAME/" not in text and "the folder of the input file" in text
+
+
+def test_every_option_with_a_default_shows_it_once():
+    """``--maps`` shows its default; ``--dpi`` (derived from --px-per-mm) shows none."""
+    text = " ".join(_help("run").split())
+    maps = text[text.index("--maps"):text.index("--sheet")]
+    assert "[default: stress,area,anisotropy]" in maps
+    dpi = text[text.index("--dpi"):text.index("--maps")]
+    assert "default: auto" not in dpi and "[default:" not in dpi
+
+
+def test_the_run_summary_speaks_words_not_field_names(tmp_path, monkeypatch):
+    fakes.install(monkeypatch)
+    scan = fakes.write_scan(tmp_path / "pot.obj")
+    result = runner.invoke(app, ["run", str(scan), "-o", str(tmp_path / "out")], env={"COLUMNS": "300"})
+    assert result.exit_code == 0, result.output
+    for key in ("edge_rms", "area_mean_abs_log", "anisotropy_p95", "natural log"):
+        assert key not in result.stdout, key
+    assert "length error" in result.stdout and "area error" in result.stdout
+
+
+def test_a_missing_texture_is_told_in_the_command_lines_words(tmp_path):
+    from potflat.errors import InvalidInputError
+    from potflat.io.scan import load_scan
+
+    scan = tmp_path / "pot.obj"
+    scan.write_text("mtllib pot.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nvt 0 0\n"
+                    "f 1/1 2/1 3/1\nf 1/1 2/1 4/1\nf 1/1 3/1 4/1\nf 2/1 3/1 4/1\n")
+    (tmp_path / "pot.mtl").write_text("newmtl m\nmap_Kd gone.png\n")
+    with pytest.raises(InvalidInputError) as error:
+        load_scan(scan)
+    assert "--no-texture" in str(error.value) and "texture=" not in str(error.value)
+
+
+def _batch_problems(tmp_path, text: str) -> list[str]:
+    (tmp_path / "pot.obj").write_text("v 0 0 0\n")
+    (tmp_path / "b.yaml").write_text(text)
+    with pytest.raises(BatchFileError) as error:
+        load_batch(tmp_path / "b.yaml")
+    return [p.split("b.yaml:", 1)[1] for p in error.value.problems]
+
+
+def test_a_batch_error_names_the_line_of_the_option_at_fault(tmp_path):
+    """A default on line 3 whose message calls it by its words ("importance band"), the scan
+    entry on line 5: line 3."""
+    problems = _batch_problems(tmp_path, "output: out\ndefaults:\n  importance_band: [0.6, 0.2]\nscans:\n"
+                                         "  - path: pot.obj\n")
+    assert len(problems) == 1 and problems[0].startswith("3:"), problems
+
+
+def test_batch_errors_are_listed_in_line_order(tmp_path):
+    problems = _batch_problems(tmp_path, "output: out\ndefaults:\n  px_per_mm: two\nscans:\n  - path: gone.obj\n"
+                                         "extra: 1\n")
+    assert [int(p.split(":")[0]) for p in problems] == [3, 5, 6], problems
+
+
+def test_a_scan_listed_many_times_is_one_line_without_a_pattern_hint(tmp_path):
+    """10,000 entries of one scan (no pattern): one line, not 9,999 saying "narrow the pattern"."""
+    problems = _batch_problems(tmp_path, "output: out\nscans:\n" + "  - path: pot.obj\n" * 10_000)
+    assert len(problems) == 1 and "narrow the pattern" not in problems[0] and "9994 more" in problems[0]
