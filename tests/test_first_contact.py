@@ -99,3 +99,47 @@ def test_a_scan_listed_many_times_is_one_line_without_a_pattern_hint(tmp_path):
     """10,000 entries of one scan (no pattern): one line, not 9,999 saying "narrow the pattern"."""
     problems = _batch_problems(tmp_path, "output: out\nscans:\n" + "  - path: pot.obj\n" * 10_000)
     assert len(problems) == 1 and "narrow the pattern" not in problems[0] and "9994 more" in problems[0]
+
+
+# ---------------------------------------------------------------------------------------
+# outputs: shapes that are no vessel are refused
+
+
+def test_a_tetrahedron_is_no_vessel(tmp_path):
+    """Four faces, one point at each height: no radius anywhere, so no axis to unroll about."""
+    from potflat.errors import AxisNotFoundError
+    from potflat.io.scan import load_scan
+    from potflat.rollout import rollout
+
+    scan = tmp_path / "tet.obj"
+    scan.write_text("v 0 0 0\nv 100 0 0\nv 0 100 0\nv 0 0 100\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    with pytest.raises(AxisNotFoundError, match="tet.obj is no vessel to unroll"):
+        rollout(load_scan(scan).mesh)
+
+
+@pytest.mark.parametrize("nodes,roots,words", [
+    ([{"mesh": 0, "children": [0]}], [0], "node 0 is its own child"),
+    ([{"children": [1]}, {"mesh": 0, "children": [0]}], [0], "among its own descendants"),
+    ([{"mesh": 0}, {"children": [0]}, {"children": [0]}], [1, 2], "two parents"),
+    ([{"children": [1]}, {"mesh": 0}], [0, 1], "drawn twice"),
+])
+def test_a_gltf_whose_nodes_are_no_tree_is_refused(tmp_path, nodes, roots, words):
+    import base64
+    import json
+    import struct
+
+    from potflat.errors import InvalidInputError
+    from potflat.io.scan import load_scan
+
+    data = struct.pack("<9f", 0, 0, 0, 0.1, 0, 0, 0, 0.1, 0) + struct.pack("<3I", 0, 1, 2)
+    doc = {"asset": {"version": "2.0"}, "scenes": [{"nodes": roots}], "nodes": nodes,
+           "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+           "buffers": [{"byteLength": len(data),
+                        "uri": "data:application/octet-stream;base64," + base64.b64encode(data).decode()}],
+           "bufferViews": [{"buffer": 0, "byteLength": 36}, {"buffer": 0, "byteOffset": 36, "byteLength": 12}],
+           "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                          "min": [0, 0, 0], "max": [0.1, 0.1, 0]},
+                         {"bufferView": 1, "componentType": 5125, "count": 3, "type": "SCALAR"}]}
+    (tmp_path / "pot.gltf").write_text(json.dumps(doc))
+    with pytest.raises(InvalidInputError, match=words):
+        load_scan(tmp_path / "pot.gltf")

@@ -27,6 +27,7 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
 
     doc, bin_length = _gltf_json(path)
     _check_gltf_sizes(path, doc, bin_length)
+    _check_gltf_nodes(path, doc)
     used = doc.get("extensionsUsed")
     if isinstance(used, list) and "KHR_draco_mesh_compression" in used:
         try:  # trimesh decodes Draco with DracoPy; without it, it returns all-zero positions
@@ -188,6 +189,42 @@ def _check_gltf_sizes(path: Path, doc: dict, bin_length: int) -> None:
         elif budget is not None and count * element > budget:  # zeros, or compressed (Draco): decoded here
             raise InvalidInputError(f"{path}: accessor {k} declares {count} items ({count * element / 2**30:.1f} "
                                     "GiB), more than the memory potflat may use here; give a smaller scan")
+
+
+def _check_gltf_nodes(path: Path, doc: dict) -> None:
+    """Refuse a glTF whose nodes are no hierarchy of objects (glTF 2.0: disjoint trees, each
+    node the child of one node at most, the scenes' nodes roots): a node among its own
+    descendants, a node with two parents or a scene listing a child would make a reader loop,
+    or draw the same part twice."""
+    nodes = doc.get("nodes") or []
+    if not isinstance(nodes, list):
+        nodes = []
+    parent: dict[int, int] = {}
+    for k, node in enumerate(nodes):
+        children = node.get("children") or [] if isinstance(node, dict) else []
+        for child in children if isinstance(children, list) else []:
+            if not isinstance(child, int) or isinstance(child, bool) or not 0 <= child < len(nodes):
+                raise InvalidInputError(f"{path}: node {k} names a child {child!r} that does not exist; the file is "
+                                        "corrupt: export the scan again")
+            if child in parent or child == k:
+                why = "is its own child" if child == k else f"has two parents (nodes {parent[child]} and {k})"
+                raise InvalidInputError(f"{path}: node {child} {why}: its nodes are no tree of objects; the file is "
+                                        "corrupt: export the scan again")
+            parent[child] = k
+    for k in parent:  # a cycle: following the parents from k comes back to k
+        seen, at = {k}, parent[k]
+        while at in parent:
+            if at in seen:
+                raise InvalidInputError(f"{path}: node {at} is among its own descendants (a cycle of nodes): its "
+                                        "nodes are no tree of objects; the file is corrupt: export the scan again")
+            seen.add(at)
+            at = parent[at]
+    for scene in doc.get("scenes") or []:
+        roots = scene.get("nodes") or [] if isinstance(scene, dict) else []
+        listed = [r for r in roots if isinstance(r, int) and r in parent] if isinstance(roots, list) else []
+        if listed:
+            raise InvalidInputError(f"{path}: a scene lists node {listed[0]}, a child of node {parent[listed[0]]}, "
+                                    "as a root: it would be drawn twice; the file is corrupt: export the scan again")
 
 
 def _gltf_inputs(path: Path) -> list[Path]:
