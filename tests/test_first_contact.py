@@ -143,3 +143,29 @@ def test_a_gltf_whose_nodes_are_no_tree_is_refused(tmp_path, nodes, roots, words
     (tmp_path / "pot.gltf").write_text(json.dumps(doc))
     with pytest.raises(InvalidInputError, match=words):
         load_scan(tmp_path / "pot.gltf")
+
+
+def test_a_side_the_scan_barely_shows_is_noted(tmp_path):
+    """A tube whose wall folds over its rim into a short inner band (as the sea vase's inside
+    is a piece of its neck): ``--side inner`` unrolls the band, with a note saying how little of
+    the scan it is and the other side's option."""
+    import numpy as np
+
+    from potflat.io.scan import load_scan
+    from potflat.rollout import rollout
+    from potflat.rollout.notes import rollout_notes
+
+    t = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    rings = [(40.0, z) for z in np.linspace(0, 120, 13)] + [(39.0, 120.0)] + [(38.0, z) for z in (118.0, 114.0, 110.0)]
+    V = np.array([[r * np.cos(a), r * np.sin(a), z] for r, z in rings for a in t])
+    lines = [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in V]
+    for i in range(len(rings) - 1):
+        for j in range(48):
+            p, q = i * 48 + j, i * 48 + (j + 1) % 48
+            lines += [f"f {p + 1} {q + 1} {q + 49}", f"f {p + 1} {q + 49} {p + 49}"]
+    scan = tmp_path / "tube.obj"
+    scan.write_text("\n".join(lines) + "\n")
+    mesh = load_scan(scan).mesh
+    notes = " ".join(rollout_notes(rollout(mesh, side="inner")))
+    assert "inner wall unrolled here is only" in notes and "--side outer" in notes, notes
+    assert "wall unrolled here" not in " ".join(rollout_notes(rollout(mesh, side="outer")))
