@@ -35,7 +35,7 @@ def plate_command(
     from potflat_cli._stage import run_stage
     from rich.console import Console
 
-    from potflat.files.plate import make_plate
+    from potflat.files.plate import make_plate, paper_words
 
     result = run_stage(f"composing the plate of {relaxed_ply.name}",
                        lambda: make_plate(relaxed_ply, output, scale=scale, name=name), quiet=quiet, as_json=json)
@@ -44,7 +44,7 @@ def plate_command(
     s = result.record
     out = Console(highlight=False)
     out.print(f"[bold]{result.paths['svg']}[/]: {s['page_mm'][0]:.1f} x {s['page_mm'][1]:.1f} mm at "
-              f"{s['scale_label']}, distortion in the {s['distortion_where']}; also "
+              f"{s['scale_label']} ({paper_words(s)}), distortion in the {s['distortion_where']}; also "
               f"{result.paths['pdf'].name}, {result.paths['png'].name}")
 
 
