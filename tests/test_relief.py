@@ -135,14 +135,14 @@ def test_relief_refuses_a_smoothing_that_is_not_a_length():
         R.surface_relief(V, F, uv, smoothing_mm=0.0)
 
 
-def test_relief_refuses_a_smoothing_too_fine_for_the_layout():
-    """Two fine pieces 100 m apart: cells of half the smoothing would not fit in memory."""
+def test_the_smoothing_is_raised_to_fit_a_huge_layout():
+    """Two fine pieces 100 m apart: cells of half the smoothing asked for would not fit in memory."""
     V, F, uv = _plane_mesh(400, 10.0, lambda x, y: np.zeros_like(x))
     far = np.array([1e5, 1e5])
-    V2 = np.vstack([V, V + [*far, 0.0]])
-    uv2 = np.vstack([uv, uv + far])
-    with pytest.raises(InvalidOptionError, match="too fine for a 100010 x 100010 mm layout; use"):
-        R.surface_relief(V2, np.vstack([F, F + len(V)]), uv2, smoothing_mm=1.0)
+    rel = R.surface_relief(np.vstack([V, V + [*far, 0.0]]), np.vstack([F, F + len(V)]), np.vstack([uv, uv + far]),
+                           smoothing_mm=1.0)
+    assert (1e5 / rel.smoothing_mm * R.FIT_CELLS_PER_SIGMA) ** 2 <= R.MAX_CELLS
+    assert rel.smoothing_mm < 1.05 * 1e5 * R.FIT_CELLS_PER_SIGMA / R.MAX_CELLS ** 0.5
 
 
 def test_relief_refuses_faces_out_of_range():

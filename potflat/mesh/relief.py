@@ -77,8 +77,9 @@ INVARIANT_SMALLEST_EDGES = 1.2
 #: Most vertices the largest ball holds on average (bounds the invariant's cost on a dense
 #: mesh: its radius shrinks to hold no more).
 INVARIANT_MOST_VERTICES = 200
-#: Most grid cells the fit may use (bounds its memory: about 300 bytes a cell).
-MAX_CELLS = 10_000_000
+#: Most grid cells the fit may use (bounds its memory: about 300 bytes a cell); on a layout
+#: too large for them at the scale asked for, the scale is raised to fit.
+MAX_CELLS = 4_000_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,7 +101,8 @@ class SurfaceRelief:
         Each vertex's share of the surface (a third of its faces' areas).
     smoothing_mm : float
         The smoothed surface's scale (Gaussian sigma of the fit): the one asked for, or
-        :data:`SMOOTHING_MIN_EDGES` edge lengths when that is larger.
+        :data:`SMOOTHING_MIN_EDGES` edge lengths when that is larger (or the smallest whose
+        grid fits :data:`MAX_CELLS` cells, on a huge layout).
     requested_mm : float
         The scale asked for.
     radii_mm : tuple of float
@@ -197,8 +199,7 @@ def surface_relief(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, *, s
     Raises
     ------
     InvalidOptionError
-        ``smoothing_mm`` not a positive number, or so small against the layout that the fit's
-        grid would exceed :data:`MAX_CELLS` cells (the message gives the smallest that works).
+        ``smoothing_mm`` not a positive number.
     ValueError
         Arrays of the wrong shape, non-finite coordinates or face indices out of range.
     """
@@ -224,15 +225,12 @@ def surface_relief(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, *, s
     sums, area = vertex_normal_sums(P, F)
     spacing = float(math.sqrt(4.0 * np.median(triangle_areas(P, F)) / math.sqrt(3.0))) if len(F) else 0.0
 
-    sigma = max(float(smoothing_mm), SMOOTHING_MIN_EDGES * spacing)
+    extent = np.ptp(xy[used], axis=0) + spacing
+    least = math.sqrt(float(extent[0] * extent[1]) / MAX_CELLS) * FIT_CELLS_PER_SIGMA * 1.01
+    sigma = max(float(smoothing_mm), SMOOTHING_MIN_EDGES * spacing, least)
     cell = sigma / FIT_CELLS_PER_SIGMA
     origin, nx, ny = _grid(xy, used, cell)
     mx, my = -(-nx // FIT_CELLS_PER_SIGMA), -(-ny // FIT_CELLS_PER_SIGMA)
-    if nx * ny > MAX_CELLS:
-        extent = np.ptp(xy[used], axis=0)
-        least = math.sqrt(float(extent[0] * extent[1]) / MAX_CELLS) * FIT_CELLS_PER_SIGMA * 1.01
-        raise InvalidOptionError(f"relief smoothing {sigma:g} mm is too fine for a {extent[0]:.0f} x {extent[1]:.0f} mm "
-                                 f"layout; use {least:.2g} mm or more")
     order, ptr = _sorted_by_cell(xy, used, origin, cell, nx, ny)
     # the nodes: at the centres of every FIT_CELLS_PER_SIGMA-th cell, sigma apart; a vertex
     # blends the four around it, so those of every node square holding a vertex are needed
