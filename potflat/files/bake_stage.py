@@ -192,10 +192,11 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
                  reference=relaxed.reference if relaxed is not None else None, relief_mm=options.relief_mm)
     g = r.grid
     clock.lap("prepare")
+    if options.relief or r.paints_relief:
+        r.relief  # noqa: B018 - the relief's fits, timed apart (made on first use)
+        clock.lap("relief")
     comp = Composition(r, options, marks=marks)
     relief = comp.relief
-    if relief is not None or r.paints_relief:
-        clock.lap("relief")  # the relief's fits (and its legends)
     paths: dict[str, Path] = {"png": out_dir / f"{name}.png"}
     with ExitStack() as stack:
         png = stack.enter_context(PngWriter(paths["png"], g.width, g.height + comp.band, 4, px_per_mm=ppm))
