@@ -108,6 +108,58 @@ def cell_moments(uv, P, weight, order, cell_ptr, ox, oy, cell, nx, sigma, M, N):
                 xp *= x
 
 
+@leaf
+def _shift_table(reach, h):
+    """The binomial shift of the moments about a cell's centre to a node ``(dx, dy)`` cells
+    away, with that cell's Gaussian weight, for every offset within ``reach``: ``sum_w (x +
+    dx h)^a (y + dy h)^b = sum over (p, q) of coef * M[idx(p, q)]``.
+
+    Returns
+    -------
+    target, source : (70,) int64
+        The shifted moment ``idx(a, b)`` each term adds to and the moment ``idx(p, q)`` it
+        reads (``p <= a``, ``q <= b``, ``a + b <= 4``); the first 15 terms have ``a + b <= 2``
+        (the quadric's own moments, which the values' sums need).
+    coef : ((2 reach + 1)^2, 70) float64
+        Per offset ``(dy + reach) (2 reach + 1) + dx + reach``: the terms' coefficients, 0 beyond
+        ``reach`` cells of the node.
+    """
+    binom = np.array([[1.0, 0.0, 0.0, 0.0, 0.0], [1.0, 1.0, 0.0, 0.0, 0.0], [1.0, 2.0, 1.0, 0.0, 0.0],
+                      [1.0, 3.0, 3.0, 1.0, 0.0], [1.0, 4.0, 6.0, 4.0, 1.0]])
+    target = np.empty(70, np.int64)
+    source = np.empty(70, np.int64)
+    exps = np.empty((70, 4), np.int64)  # a - p, b - q and the binomials' rows and columns
+    n = 0
+    for low in range(2):  # the quadric's moments first
+        for a in range(5):
+            for b in range(5 - a):
+                if (a + b <= 2) != (low == 0):
+                    continue
+                for p in range(a + 1):
+                    for q in range(b + 1):
+                        target[n] = _idx(a, b)
+                        source[n] = _idx(p, q)
+                        exps[n, 0] = a
+                        exps[n, 1] = p
+                        exps[n, 2] = b
+                        exps[n, 3] = q
+                        n += 1
+    side = 2 * reach + 1
+    coef = np.zeros((side * side, 70))
+    for oy in range(-reach, reach + 1):
+        for ox in range(-reach, reach + 1):
+            if ox * ox + oy * oy > reach * reach:
+                continue
+            dx = ox * h
+            dy = oy * h
+            g = np.exp(-0.5 * (dx * dx + dy * dy))
+            row = (oy + reach) * side + ox + reach
+            for t in range(70):
+                a, p, b, q = exps[t, 0], exps[t, 1], exps[t, 2], exps[t, 3]
+                coef[row, t] = g * binom[a, p] * binom[b, q] * dx ** (a - p) * dy ** (b - q)
+    return target, source, coef
+
+
 @parallel
 def fit_quadrics(M, N, nx, ny, cell, sigma, step, reach, need, ridge, coef, ok):
     """Weighted least-squares quadric ``P(x, y)`` (each column of ``P``) around every needed node.
@@ -118,9 +170,10 @@ def fit_quadrics(M, N, nx, ny, cell, sigma, step, reach, need, ridge, coef, ok):
     ``reach * cell`` of it, each vertex weighted by its weight times ``exp(-d^2 / 2)``, ``d``
     the distance of its cell's centre from the node (in ``sigma``). The sums over a cell's
     vertices come from its moments about its centre (:func:`cell_moments`), shifted to the
-    node by the binomial theorem: the monomials are exact, only the Gaussian is taken per
-    cell, so the fit reproduces any quadric exactly. The quadratic terms are held towards
-    zero by ``ridge`` times the total weight (a plane where the data cannot fix a quadric).
+    node by the binomial theorem (:func:`_shift_table`): the monomials are exact, only the
+    Gaussian is taken per cell, so the fit reproduces any quadric exactly. The quadratic terms
+    are held towards zero by ``ridge`` times the total weight (a plane where the data cannot
+    fix a quadric).
 
     Parameters
     ----------
@@ -138,73 +191,67 @@ def fit_quadrics(M, N, nx, ny, cell, sigma, step, reach, need, ridge, coef, ok):
         Output: whether the node has a fit.
     """
     mx = (nx + step - 1) // step
-    h = cell / sigma
     d = N.shape[2]
-    cut2 = float(reach * reach)
-    binom = np.array([[1.0, 0.0, 0.0, 0.0, 0.0], [1.0, 1.0, 0.0, 0.0, 0.0], [1.0, 2.0, 1.0, 0.0, 0.0],
-                      [1.0, 3.0, 3.0, 1.0, 0.0], [1.0, 4.0, 6.0, 4.0, 1.0]])
+    side = 2 * reach + 1
+    target, source, shift = _shift_table(reach, cell / sigma)
     for j in prange(need.shape[0]):
         ok[j] = False
         if not need[j]:
             continue
         cx = (j % mx) * step
         cy = (j // mx) * step
-        A = np.zeros((TERMS, TERMS))
-        B = np.zeros((TERMS, d))
-        S = np.empty(MOMENTS)
-        T = np.empty((TERMS, d))
-        dxp = np.empty(5)
-        dyp = np.empty(5)
+        S = np.zeros(MOMENTS)  # sum over the cells of the weighted moments about the node
+        T = np.zeros((TERMS, d))
         for ky in range(max(cy - reach, 0), min(cy + reach + 1, ny)):
             for kx in range(max(cx - reach, 0), min(cx + reach + 1, nx)):
                 k = np.uint64(ky * nx + kx)
-                if M[k, 0] == 0.0 or (kx - cx) ** 2 + (ky - cy) ** 2 > cut2:
+                if M[k, 0] == 0.0:
                     continue
-                dx = (kx - cx) * h
-                dy = (ky - cy) * h
-                g = np.exp(-0.5 * (dx * dx + dy * dy))
-                dxp[0] = 1.0
-                dyp[0] = 1.0
-                for e in range(1, 5):
-                    dxp[e] = dxp[e - 1] * dx
-                    dyp[e] = dyp[e - 1] * dy
-                # the moments about the node: sum w (x + dx)^a (y + dy)^b
-                for a in range(5):
-                    for b in range(5 - a):
-                        t = _idx(a, b)
-                        acc = 0.0
-                        for p in range(a + 1):
-                            for q in range(b + 1):
-                                acc += binom[a, p] * binom[b, q] * dxp[a - p] * dyp[b - q] * M[k, _idx(p, q)]
-                        S[t] = g * acc
-                        if t < TERMS:
-                            for c in range(d):
-                                acc = 0.0
-                                for p in range(a + 1):
-                                    for q in range(b + 1):
-                                        acc += binom[a, p] * binom[b, q] * dxp[a - p] * dyp[b - q] * N[k, _idx(p, q), c]
-                                T[t, c] = g * acc
-                for t1 in range(TERMS):
-                    d1 = 0 if t1 == 0 else (1 if t1 < 3 else 2)
-                    q1 = t1 - d1 * (d1 + 1) // 2
-                    for t2 in range(t1 + 1):
-                        d2 = 0 if t2 == 0 else (1 if t2 < 3 else 2)
-                        q2 = t2 - d2 * (d2 + 1) // 2
-                        A[t1, t2] += S[_idx(d1 - q1 + d2 - q2, q1 + q2)]
-                    for c in range(d):
-                        B[t1, c] += T[t1, c]
-        if not A[0, 0] > 0.0:
+                row = np.uint64((ky - cy + reach) * side + kx - cx + reach)
+                if shift[row, 0] == 0.0:  # beyond reach
+                    continue
+                for t in range(70):
+                    w = shift[row, t]
+                    S[target[t]] += w * M[k, source[t]]
+                    if t < 15:
+                        for c in range(d):
+                            T[target[t], c] += w * N[k, source[t], c]
+        if not S[0] > 0.0:
             continue
-        for a in range(TERMS):
-            for b in range(a):
-                A[b, a] = A[a, b]
+        A = np.empty((TERMS, TERMS))
+        for t1 in range(TERMS):
+            d1 = 0 if t1 == 0 else (1 if t1 < 3 else 2)
+            q1 = t1 - d1 * (d1 + 1) // 2
+            for t2 in range(TERMS):
+                d2 = 0 if t2 == 0 else (1 if t2 < 3 else 2)
+                q2 = t2 - d2 * (d2 + 1) // 2
+                A[t1, t2] = S[_idx(d1 - q1 + d2 - q2, q1 + q2)]
         for a in range(1, TERMS):
             A[a, a] += (ridge if a >= 3 else ridge * 1e-3) * A[0, 0]
-        if _solve_spd(A, B):
+        if _solve_spd(A, T):
             for a in range(TERMS):
                 for c in range(d):
-                    coef[j, a, c] = B[a, c]
+                    coef[j, a, c] = T[a, c]
             ok[j] = True
+
+
+@leaf
+def _corner(u, v, ox, oy, spacing, nx, ny, sigma, ok, k):
+    """Corner ``k`` (0-3) of the node square around the point ``(u, v)``: the node's index
+    (-1 when it is off the grid, has no fit or weighs nothing), its bilinear weight and the
+    point's offset from it in units of ``sigma``."""
+    fx = (u - ox) / spacing
+    fy = (v - oy) / spacing
+    dx = k & 1
+    dy = k >> 1
+    jx = int(np.floor(fx)) + dx
+    jy = int(np.floor(fy)) + dy
+    tx = fx - np.floor(fx)
+    ty = fy - np.floor(fy)
+    beta = (tx if dx else 1.0 - tx) * (ty if dy else 1.0 - ty)
+    if jx < 0 or jy < 0 or jx >= nx or jy >= ny or beta <= 0.0 or not ok[np.uint64(jy * nx + jx)]:
+        return -1, 0.0, 0.0, 0.0
+    return jy * nx + jx, beta, (u - (ox + jx * spacing)) / sigma, (v - (oy + jy * spacing)) / sigma
 
 
 @parallel
@@ -234,48 +281,33 @@ def blend_quadrics(uv, P, normal, ox, oy, spacing, nx, ny, sigma, coef, ok, heig
     """
     n = uv.shape[0]
     for i in prange(n):
-        fx = (uv[i, 0] - ox) / spacing
-        fy = (uv[i, 1] - oy) / spacing
-        x0 = int(np.floor(fx))
-        y0 = int(np.floor(fy))
-        tx = fx - x0
-        ty = fy - y0
         s0 = s1 = s2 = 0.0
         u0 = u1 = u2 = 0.0
         v0 = v1 = v2 = 0.0
         total = 0.0
-        for dy in range(2):
-            for dx in range(2):
-                jx = x0 + dx
-                jy = y0 + dy
-                if jx < 0 or jy < 0 or jx >= nx or jy >= ny:
-                    continue
-                j = np.uint64(jy * nx + jx)
-                if not ok[j]:
-                    continue
-                beta = (tx if dx else 1.0 - tx) * (ty if dy else 1.0 - ty)
-                if beta <= 0.0:
-                    continue
-                x = (uv[i, 0] - (ox + jx * spacing)) / sigma
-                y = (uv[i, 1] - (oy + jy * spacing)) / sigma
-                total += beta
-                for c in range(3):
-                    val = (coef[j, 0, c] + coef[j, 1, c] * x + coef[j, 2, c] * y + coef[j, 3, c] * x * x
-                           + coef[j, 4, c] * x * y + coef[j, 5, c] * y * y)
-                    du = (coef[j, 1, c] + 2.0 * coef[j, 3, c] * x + coef[j, 4, c] * y) / sigma
-                    dv = (coef[j, 2, c] + coef[j, 4, c] * x + 2.0 * coef[j, 5, c] * y) / sigma
-                    if c == 0:
-                        s0 += beta * val
-                        u0 += beta * du
-                        v0 += beta * dv
-                    elif c == 1:
-                        s1 += beta * val
-                        u1 += beta * du
-                        v1 += beta * dv
-                    else:
-                        s2 += beta * val
-                        u2 += beta * du
-                        v2 += beta * dv
+        for k in range(4):
+            j, beta, x, y = _corner(uv[i, 0], uv[i, 1], ox, oy, spacing, nx, ny, sigma, ok, k)
+            if j < 0:
+                continue
+            j = np.uint64(j)
+            total += beta
+            for c in range(3):
+                val = (coef[j, 0, c] + coef[j, 1, c] * x + coef[j, 2, c] * y + coef[j, 3, c] * x * x
+                       + coef[j, 4, c] * x * y + coef[j, 5, c] * y * y)
+                du = (coef[j, 1, c] + 2.0 * coef[j, 3, c] * x + coef[j, 4, c] * y) / sigma
+                dv = (coef[j, 2, c] + coef[j, 4, c] * x + 2.0 * coef[j, 5, c] * y) / sigma
+                if c == 0:
+                    s0 += beta * val
+                    u0 += beta * du
+                    v0 += beta * dv
+                elif c == 1:
+                    s1 += beta * val
+                    u1 += beta * du
+                    v1 += beta * dv
+                else:
+                    s2 += beta * val
+                    u2 += beta * du
+                    v2 += beta * dv
         frame[i, 0] = 0.0
         frame[i, 1] = 0.0
         frame[i, 2] = 1.0
@@ -323,29 +355,16 @@ def blend_scalar(uv, ox, oy, spacing, nx, ny, sigma, coef, ok, out):
     the vertex has a fit."""
     n = uv.shape[0]
     for i in prange(n):
-        fx = (uv[i, 0] - ox) / spacing
-        fy = (uv[i, 1] - oy) / spacing
-        x0 = int(np.floor(fx))
-        y0 = int(np.floor(fy))
-        tx = fx - x0
-        ty = fy - y0
         acc = 0.0
         total = 0.0
-        for dy in range(2):
-            for dx in range(2):
-                jx = x0 + dx
-                jy = y0 + dy
-                if jx < 0 or jy < 0 or jx >= nx or jy >= ny:
-                    continue
-                j = np.uint64(jy * nx + jx)
-                beta = (tx if dx else 1.0 - tx) * (ty if dy else 1.0 - ty)
-                if not ok[j] or beta <= 0.0:
-                    continue
-                x = (uv[i, 0] - (ox + jx * spacing)) / sigma
-                y = (uv[i, 1] - (oy + jy * spacing)) / sigma
-                acc += beta * (coef[j, 0, 0] + coef[j, 1, 0] * x + coef[j, 2, 0] * y + coef[j, 3, 0] * x * x
-                               + coef[j, 4, 0] * x * y + coef[j, 5, 0] * y * y)
-                total += beta
+        for k in range(4):
+            j, beta, x, y = _corner(uv[i, 0], uv[i, 1], ox, oy, spacing, nx, ny, sigma, ok, k)
+            if j < 0:
+                continue
+            j = np.uint64(j)
+            acc += beta * (coef[j, 0, 0] + coef[j, 1, 0] * x + coef[j, 2, 0] * y + coef[j, 3, 0] * x * x
+                           + coef[j, 4, 0] * x * y + coef[j, 5, 0] * y * y)
+            total += beta
         out[i] = acc / total if total > 0.0 else np.nan
 
 
