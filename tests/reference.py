@@ -359,3 +359,22 @@ def volume_invariant(uv: np.ndarray, height: np.ndarray, weight: np.ndarray, rad
                 values.append((weight[inside] * np.clip(height[inside] - height[p], -a, a)).sum() / (2 * den))
         out[p] = np.mean(values) if values else 0.0
     return out
+
+
+def relief_rows(fields, coverage, lights, gain, curve_hi, curve_span, rgb, grey_lo, grey_scale, blend,
+                mm_per_level, zero_level):
+    """The relief's images of a strip in numpy: raking light per light (grey, alpha), the
+    concavity's grey, the overlay of painting and relief grey, the TIFF's levels."""
+    alpha = np.rint(coverage * 255.0).astype(np.uint8)
+    inside = np.isfinite(fields[..., 0])
+    to8 = lambda x: np.rint(np.clip(np.nan_to_num(x, nan=0.0), 0.0, 1.0) * 255.0).astype(np.uint8)
+    normal = fields[..., 1:4].astype(np.float64)
+    length = np.linalg.norm(normal, axis=-1)
+    raking = np.stack([np.stack([to8(np.where(length > 0, normal @ light / np.where(length > 0, length, 1) * gain, 0)),
+                                 alpha], axis=-1) for light in lights])
+    curvature = np.stack([to8(np.where(inside, (curve_hi - fields[..., 4]) / curve_span, 0)), alpha], axis=-1)
+    grey = np.where(inside, np.clip((fields[..., 0] - grey_lo) * grey_scale, 0, 1), 0.0)[..., None]
+    overlay = np.concatenate([to8((1 - blend) * np.clip(np.nan_to_num(rgb, nan=0.0), 0, 1) + blend * grey),
+                              alpha[..., None]], axis=-1)
+    level = np.where(inside, np.rint(fields[..., 0] / mm_per_level) + zero_level, 0)
+    return raking, curvature, overlay, np.clip(level, 0, 65535).astype(np.uint16)

@@ -11,6 +11,7 @@ import pytest
 import tifffile
 from PIL import Image
 
+import reference
 from potflat.bake import bake
 from potflat.bake.options import BakeOptions
 from potflat.errors import InvalidOptionError
@@ -159,6 +160,26 @@ def _bump_scan(colours=False):
     V, F, uv = _plane_mesh(20000, 30.0, lambda x, y: 0.4 * np.exp(-((x - 15) ** 2 + (y - 15) ** 2) / 2.0))
     mesh = Mesh(V, F, vertex_colors=np.tile([200, 60, 20, 255], (len(V), 1)).astype(np.uint8) if colours else None)
     return FlatMesh(mesh, uv)
+
+
+def test_relief_rows_kernel_matches_reference():
+    from potflat.bake._kernels import relief_rows
+
+    rng = np.random.default_rng(4)
+    k, w = 7, 9
+    fields = rng.normal(0, 0.3, (k, w, 5)).astype(np.float32)
+    fields[..., 3] += 1.0
+    fields[0, :3] = np.nan
+    coverage = np.where(np.isnan(fields[..., 0]), 0, rng.uniform(0.2, 1, (k, w))).astype(np.float32)
+    rgb = rng.uniform(0, 1, (k, w, 3)).astype(np.float32)
+    rgb[0, :3] = np.nan
+    lights = np.array([[-0.66, 0.66, 0.34], [0.0, -0.94, 0.34]])
+    args = (fields, coverage, lights, 1.46, 0.2, 0.4, rgb, -0.4, 1.25, 0.3, 0.001, 32768)
+    raking, curvature = np.empty((2, k, w, 2), np.uint8), np.empty((k, w, 2), np.uint8)
+    overlay, levels = np.empty((k, w, 4), np.uint8), np.empty((k, w), np.uint16)
+    relief_rows(*args[:10], True, *args[10:], raking, curvature, overlay, levels)
+    for got, want in zip((raking, curvature, overlay, levels), reference.relief_rows(*args)):
+        np.testing.assert_array_equal(got, want)
 
 
 def test_raking_light_comes_from_the_azimuth_given():

@@ -52,8 +52,8 @@ class StripLayers:
     attachments : (k, w, 4) uint8 or None
         Where left-out attachments met the wall (None: none were left out).
     relief : dict of str to (k, w, c) uint8
-        Each relief image's rows (:attr:`potflat.bake.relief.ReliefImages.keys`; empty
-        without ``relief``).
+        Each relief image's rows (:attr:`potflat.bake.relief.ReliefImages.keys`) and
+        ``"levels"``, the relief TIFF's (k, w) uint16; empty without ``relief``.
     """
 
     r0: int

@@ -11,7 +11,8 @@ import math
 import numpy as np
 
 from potflat.bake import annotate
-from potflat.raster.render import RELIEF_GREY_PERCENTILES, RELIEF_MIN_RANGE_MM, Renderer, rgba8
+from potflat.bake._kernels import relief_rows
+from potflat.raster.render import RELIEF_GREY_PERCENTILES, RELIEF_MIN_RANGE_MM, Renderer
 
 #: Elevation of the raking light above the smoothed surface, degrees.
 RAKING_ELEVATION_DEG = 20.0
@@ -34,14 +35,6 @@ def grey_alpha(rgba: np.ndarray) -> np.ndarray:
     out = np.empty(rgba.shape[:2] + (2,), np.uint8)
     out[..., 0] = np.rint(rgba[..., :3] @ np.array([0.299, 0.587, 0.114], np.float32))
     out[..., 1] = rgba[..., 3]
-    return out
-
-
-def _grey_rows(grey: np.ndarray, coverage: np.ndarray) -> np.ndarray:
-    """Grey (k, w) in [0, 1] (NaN outside) and coverage as (k, w, 2) uint8 grey and alpha."""
-    out = np.empty(grey.shape + (2,), np.uint8)
-    out[..., 0] = np.rint(np.nan_to_num(grey, nan=0.0) * 255.0)
-    out[..., 1] = np.rint(coverage * 255.0)
     return out
 
 
@@ -93,39 +86,35 @@ class ReliefImages:
             ("relief-overlay",) if self.painted else ())
         self.channels = {k: 2 if k == "curvature" or k.startswith("raking-") else 4 for k in self.keys}
         el = math.radians(RAKING_ELEVATION_DEG)
-        self._light_vectors = [np.array([math.sin(math.radians(a)) * math.cos(el),
-                                         math.cos(math.radians(a)) * math.cos(el), math.sin(el)], np.float32)
-                               for a in self.lights]
+        self._lights = np.array([[math.sin(math.radians(a)) * math.cos(el), math.cos(math.radians(a)) * math.cos(el),
+                                  math.sin(el)] for a in self.lights])
         used = np.zeros(len(rel.height_mm), bool)
         used[r.faces.ravel()] = True
         self.max_abs_mm = max(float(np.abs(rel.height_mm[used]).max()), 1e-9)
         self.mm_per_level = self.max_abs_mm / (TIFF_ZERO_LEVEL - 1)
 
     def rows(self, r0: int, r1: int, rgb: np.ndarray, coverage: np.ndarray) -> dict[str, np.ndarray]:
-        """Rows ``r0:r1`` of every image of :attr:`keys`; ``rgb`` (k, w, 3) and ``coverage``
-        (k, w) are the strip's painting and covered fraction."""
+        """Rows ``r0:r1`` of every image of :attr:`keys` and, as ``"levels"``, of
+        ``NAME.relief.tif`` (the height as 16-bit levels, 0 where no surface is); ``rgb`` (k,
+        w, 3) and ``coverage`` (k, w) are the strip's painting and covered fraction."""
         r = self.renderer
         fields = r.relief_fields(r0, r1)
-        out = {"relief": annotate.colorize(fields[..., 0], self.height_scale, coverage)}
-        normal = fields[..., 1:4]
-        length = np.linalg.norm(normal, axis=-1)
-        gain = np.float32(0.5 / math.sin(math.radians(RAKING_ELEVATION_DEG)))
-        for azimuth, light in zip(self.lights, self._light_vectors):
-            shade = (normal @ light) / np.maximum(length, np.float32(1e-30)) * gain  # flat surface: 1/2
-            out[raking_key(azimuth)] = _grey_rows(np.clip(shade, 0.0, 1.0), coverage)
+        k, w = coverage.shape
+        raking = np.empty((len(self.lights), k, w, 2), np.uint8)
+        curvature = np.empty((k, w, 2), np.uint8)
+        overlay = np.empty((k, w, 4) if self.painted else (0, 0, 4), np.uint8)
+        levels = np.empty((k, w), np.uint16)
+        lo, hi = r.relief_grey_range
         sc = self.concavity_scale
-        out["curvature"] = _grey_rows(np.clip((sc.hi - fields[..., 4]) / (sc.hi - sc.lo), 0.0, 1.0), coverage)
+        relief_rows(fields, np.ascontiguousarray(coverage, np.float32), self._lights,
+                    0.5 / math.sin(math.radians(RAKING_ELEVATION_DEG)), sc.hi, sc.hi - sc.lo,
+                    np.ascontiguousarray(rgb, np.float32), lo, 1.0 / (hi - lo), self.blend, self.painted,
+                    self.mm_per_level, TIFF_ZERO_LEVEL, raking, curvature, overlay, levels)
+        out = {"relief": annotate.colorize(fields[..., 0], self.height_scale, coverage), "curvature": curvature,
+               "levels": levels, **{raking_key(a): raking[j] for j, a in enumerate(self.lights)}}
         if self.painted:
-            grey = r.relief_grey(r0, r1)[..., None]
-            out["relief-overlay"] = rgba8((1.0 - self.blend) * rgb + self.blend * grey, coverage)
+            out["relief-overlay"] = overlay
         return out
-
-    def levels(self, r0: int, r1: int) -> np.ndarray:
-        """Rows ``r0:r1`` of ``NAME.relief.tif``: the height as 16-bit levels, 0 where no
-        surface is. Shape (k, w) uint16."""
-        height = self.renderer.relief_fields(r0, r1)[..., 0]
-        level = np.rint(height / self.mm_per_level) + TIFF_ZERO_LEVEL
-        return np.clip(np.nan_to_num(level, nan=0.0), 0, 65535).astype(np.uint16)
 
     def tiff_description(self) -> str:
         """What ``NAME.relief.tif`` holds and its scale, as JSON text for its description tag."""

@@ -231,7 +231,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
             for key, writer in relief_writers.items():
                 writer.write(strip.relief[key])
             if relief is not None:
-                relief_tif.write(relief.levels(strip.r0, strip.r1))
+                relief_tif.write(strip.relief["levels"])
         if comp.band:
             png.write(comp.band_rows())
         for key, legend in comp.legends.items():
