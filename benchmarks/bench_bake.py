@@ -6,10 +6,13 @@ threads) is the steadier figure. The frieze is a band of a vessel (radius 160 mm
 an 8192 x 8192 atlas holding the band in eight charts (13.6 texels/mm). The bake runs in a fresh child
 process so its peak resident memory (``ru_maxrss``) is measured alone.
 
-Reproduce (the table in docs/performance.md, section "Bake")::
+Two sets of outputs, each baked in its own child process from the same frieze: ``maps`` (the
+painting, the three distortion maps, the overlay and the scale layer: what ``potflat run``
+writes) and ``archive`` (the painting, a 16-bit TIFF and the position map, no maps).
 
-    python benchmarks/bench_bake.py --vertices 2.5e6 --px-per-mm 20
-    python benchmarks/bench_bake.py --vertices 2.5e6 --px-per-mm 20 --maps none --position-map --tiff
+Reproduce (block ``bench_bake`` of docs/performance.md)::
+
+    python benchmarks/bench_bake.py --write
 """
 from __future__ import annotations
 
@@ -25,7 +28,15 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _docs import command_line, machine, publish  # noqa: E402
+
 RADIUS_MM, HEIGHT_MM, ATLAS = 160.0, 300.0, 8192
+#: The sets of outputs: name -> ``BakeOptions`` keywords besides the resolution.
+OUTPUTS = {
+    "maps": {"maps": ["stress", "area", "anisotropy"]},
+    "archive": {"maps": [], "position_map": True, "tiff": True},
+}
 
 
 def make_frieze(n_vertices: float, out: Path, *, seed: int = 0) -> Path:
@@ -88,43 +99,53 @@ def _child(ply: str, out: str, options: str) -> None:
                       "files": sorted(res.record["files"].values())}))
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--vertices", type=float, default=2.5e6)
     ap.add_argument("--px-per-mm", type=float, default=20.0)
-    ap.add_argument("--maps", default="stress,area,anisotropy")
-    ap.add_argument("--position-map", action="store_true")
-    ap.add_argument("--tiff", action="store_true")
+    ap.add_argument("--outputs", default=",".join(OUTPUTS), help=f"comma-separated, of {', '.join(OUTPUTS)}")
     ap.add_argument("--workdir", type=Path, default=None, help="keep the frieze and outputs here")
+    ap.add_argument("--write", action="store_true", help="rewrite block bench_bake of docs/performance.md")
     ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if args.child:
         _child(*args.child)
         return
+    unknown = sorted(set(args.outputs.split(",")) - set(OUTPUTS))
+    if unknown:
+        raise SystemExit(f"--outputs: unknown {', '.join(unknown)}; choose from {', '.join(OUTPUTS)}")
     work = args.workdir or Path(tempfile.mkdtemp(prefix="potflat-bench-bake-"))
     ply = work / "frieze.relaxed.ply"
     t = time.perf_counter()
     if not ply.exists():
         make_frieze(args.vertices, work)
     build = time.perf_counter() - t
-    maps = [] if args.maps == "none" else args.maps.split(",")
-    options = {"px_per_mm": args.px_per_mm, "maps": maps, "position_map": args.position_map, "tiff": args.tiff}
-    proc = subprocess.run([sys.executable, __file__, "--child", str(ply), str(work / "out"), json.dumps(options)],
-                          check=True, capture_output=True, text=True, env={**os.environ})
-    r = json.loads(proc.stdout.strip().splitlines()[-1])
     from potflat.io.flat_ply import read_flat_ply
 
     flat = read_flat_ply(ply)
-    w, h = r["image_px"]
     print(f"frieze {len(flat.mesh.vertices) / 1e6:.2f}M vertices, {len(flat.mesh.faces) / 1e6:.2f}M faces "
-          f"(built in {build:.0f} s), atlas {ATLAS}^2")
-    print("| vertices | px/mm | image | outputs | supersample | wall time | CPU time | peak memory | files |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    outs = ", ".join(f.split(".", 1)[1] for f in r["files"])
-    print(f"| {len(flat.mesh.vertices) / 1e6:.2f}M | {args.px_per_mm:g} | {w} x {h} ({w * h / 1e6:.0f} MP) | {outs} | "
-          f"{r['supersample']} | {r['seconds']:.0f} s | {r['cpu_seconds']:.0f} s | {r['peak_mb'] / 1024:.2f} GB | "
-          f"{r['files_mb']:.0f} MB |")
+          f"(built in {build:.0f} s), atlas {ATLAS}^2", flush=True)
+    lines = [f"`{command_line('bench_bake.py', argv if argv is not None else sys.argv[1:])}` ({machine()}): "
+             f"{len(flat.mesh.vertices) / 1e6:.2f}M vertices, {len(flat.mesh.faces) / 1e6:.2f}M faces, "
+             f"{ATLAS} x {ATLAS} atlas.", "",
+             "| outputs | files | px/mm | image | supersample | wall time | CPU time | peak memory | written |",
+             "|---|---|---:|---|---:|---:|---:|---:|---:|"]
+    for name in args.outputs.split(","):
+        options = {"px_per_mm": args.px_per_mm, **OUTPUTS[name]}
+        proc = subprocess.run([sys.executable, __file__, "--child", str(ply), str(work / name), json.dumps(options)],
+                              check=True, capture_output=True, text=True, env={**os.environ})
+        r = json.loads(proc.stdout.strip().splitlines()[-1])
+        w, h = r["image_px"]
+        files = ", ".join(f.split(".", 1)[1] for f in r["files"])
+        lines.append(f"| {name} | {files} | {args.px_per_mm:g} | {w} x {h} ({w * h / 1e6:.0f} MP) | {r['supersample']} | "
+                     f"{r['seconds']:.0f} s | {r['cpu_seconds']:.0f} s | {r['peak_mb'] / 1024:.2f} GB | "
+                     f"{r['files_mb']:.0f} MB |")
+        print(lines[-1], flush=True)
+    publish("bench_bake", "\n".join(lines) + "\n", args.write)
 
 
 if __name__ == "__main__":
-    main()
+    from potflat_cli._process import command_settings
+
+    with command_settings():  # as the potflat command runs: OpenMP's passive wait, the heap tuning
+        main()

@@ -6,14 +6,14 @@ atlas) goes through ``potflat run`` with the default options and with each knob 
 accuracy for time (``--supersample 2``: fewer sub-samples per pixel than the automatic choice;
 ``--maps none``: no distortion maps; ``--preset preview``: the relaxation of a coarse copy
 only; all three together). The runs go in turn, round after round (``--rounds``), each round
-beside a trimesh load of the same OBJ (the yardstick of issue 15: the whole run at most 2x it
-at 1M); the table gives medians. Accuracy is read from each run's ``NAME.bake.json``: the
+beside a trimesh load of the same OBJ (the yardstick of ``bench_scale.py``); the table gives
+medians. Accuracy is read from each run's ``NAME.bake.json``: the
 painted zone's length error (median and 95th percentile, %, the figures the archaeologist
 reads), the whole surface's edge-length RMS, and, for the knobs that leave the layout as it
 is, how far the painting ``NAME.png`` is from the default's (8-bit levels over the pixels
 both cover).
 
-Reproduce (the section "Speed knobs" of docs/performance.md)::
+Reproduce (block ``bench_knobs`` of docs/performance.md)::
 
     python benchmarks/bench_knobs.py --write
 
@@ -25,21 +25,18 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _docs import command_line, publish  # noqa: E402
+from _docs import command_line, machine, publish  # noqa: E402
 from bench_scale import add_scan_options, child_load, make_scan, run_benchmark, warm_kernels  # noqa: E402
 
-SECTION = "## Speed knobs"
+BLOCK = "bench_knobs"
 #: (name, relax preset, other ``potflat run`` options), the default first (the reference of the
 #: image differences).
 KNOBS = (
@@ -92,17 +89,11 @@ def measure(scan: Path, root: Path, *, rounds: int, px_per_mm: float) -> tuple[l
 
 
 def table(loads: list[float], knobs: dict[str, dict], *, command: str, info: dict, px_per_mm: float) -> str:
+    """The block of docs/performance.md: the command, the scan, the table."""
     load = statistics.median(loads)
-    setup = (f"`{command}` ({time.strftime('%Y-%m-%d %H:%M')}, {os.cpu_count()} cores, {platform.machine()}, "
-             f"Python {platform.python_version()}): the synthetic painted amphora of `bench_scale.py` "
-             f"({info['vertices']:,} vertices, {info['faces']:,} faces, {info['obj_mb']:.0f} MB OBJ, "
-             f"{info['texture']} atlas) through `potflat run --px-per-mm {px_per_mm:g}` with each knob, the "
-             f"runs in turn over {len(loads)} rounds, each round beside a `trimesh.load(path, process=False)` "
-             f"of the OBJ (median {load:.1f} s); medians of the rounds (whole process, start-up included). "
-             "Zone: the painted zone's length error (median / 95th percentile, %); painting vs default: "
-             "|difference| of `NAME.png` in 8-bit levels over the pixels both cover (mean / 99th "
-             "percentile), for the knobs that keep the default's layout.")
-    lines = [SECTION, "", setup, "",
+    lines = [f"`{command}` ({machine()}): {info['vertices']:,} vertices, {info['faces']:,} faces, "
+             f"{info['obj_mb']:.0f} MB OBJ, {info['texture']} atlas, {px_per_mm:g} px/mm; medians of "
+             f"{len(loads)} rounds; trimesh load {load:.1f} s.", "",
              "| options | whole run s | rollout s | relax s | bake s | run / trimesh | supersample "
              "| zone length error % | edge RMS | painting vs default |",
              "|---|---:|---:|---:|---:|---:|---:|---|---:|---|"]
@@ -136,8 +127,11 @@ def main(argv: list[str] | None = None) -> None:
         loads, knobs = measure(scan, root / "knobs", rounds=args.rounds, px_per_mm=args.px_per_mm)
         command = command_line("bench_knobs.py", argv if argv is not None else sys.argv[1:])
         section = table(loads, knobs, command=command, info=info, px_per_mm=args.px_per_mm)
-    publish(section, args.write)
+    publish(BLOCK, section, args.write)
 
 
 if __name__ == "__main__":
-    main()
+    from potflat_cli._process import command_settings
+
+    with command_settings():  # as the potflat command runs: OpenMP's passive wait, the heap tuning
+        main()

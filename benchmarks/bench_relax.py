@@ -5,7 +5,7 @@ caches beyond Numba's compiled kernels); repeated runs are summarised by their m
 
     python benchmarks/bench_relax.py                       # 0.1M 0.5M 1M 2.5M, all presets + ARAP
     python benchmarks/bench_relax.py --sizes 0.1 --repeat 3
-    python benchmarks/bench_relax.py --write               # also rewrite docs/performance.md (## Relax)
+    python benchmarks/bench_relax.py --write               # also rewrite block bench_relax of docs/performance.md
 
 Meshes: ``benchmarks/_meshes.py`` bulgy amphora-like vessels (foot to lip), irregular
 triangles, cut open along a meridian and rolled out on a cylinder proxy.
@@ -22,6 +22,9 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _docs import command_line, machine, write_block  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CACHE = Path(tempfile.gettempdir()) / "potflat-bench-meshes"
@@ -84,7 +87,7 @@ def _worker(size_m: float, method: str, budget: float, target: float | None) -> 
             trace.append((time.perf_counter() - t0, info["energy"]))
 
         kw = {"preset": preset, "time_budget": budget}
-        if weighting == "springs":  # the springs alone: no per-face terms, no final scaling (before issue 13)
+        if weighting == "springs":  # the springs alone: no per-face terms, no final scaling
             kw.update(shape=0.0, rigidity=0.0, area=0.0, true_scale=False)
         elif weighting:
             kw["weighting"] = weighting
@@ -182,7 +185,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--budget", type=float, default=600.0, help="time budget (s) of each relax run")
     ap.add_argument("--paper-max-size", type=float, default=0.5, help="largest size for the paper dynamics")
-    ap.add_argument("--write", action="store_true", help="rewrite the ## Relax section of docs/performance.md")
+    ap.add_argument("--write", action="store_true", help="rewrite block bench_relax of docs/performance.md")
     ap.add_argument("--json", type=Path, help="also dump all rows here")
     ap.add_argument("--note", default="", help="with --from-json: how the rows were measured")
     ap.add_argument("--from-json", type=Path, nargs="+", help="no runs: tabulate rows dumped by earlier --json runs")
@@ -216,7 +219,6 @@ def main() -> None:
     if args.write:
         png = ROOT / "docs" / "relax_performance.png"
         _plot(rows, png)
-        cpu = os.cpu_count()
         extra = []
         for r in rows:
             if r.get("method") == "paper" and "error" not in r:
@@ -228,23 +230,16 @@ def main() -> None:
                                  + (f"reached it after {t:.1f} s ({t / ref['seconds']:.0f}x slower)." if t else
                                     f"did not reach it within {r['seconds']:.0f} s (ended at {r.get('paper_energy_end', float('nan')):.3e}; "
                                     f"more than {r['seconds'] / ref['seconds']:.0f}x slower)."))
-        how = (f"`python benchmarks/bench_relax.py --sizes {args.sizes} --methods {args.methods} "
-               f"--repeat {args.repeat} --write`") if not args.from_json else args.note
-        text = ("## Relax\n\n"
-                f"Measured with {how} on {cpu} cores ({args.threads} threads), "
-                f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}. Time = setup + solve of `relax()` "
-                "(springs, hierarchy, solver; not file I/O or the distortion summaries), ARAP = libigl "
-                "`arap_precomputation` + 10 `arap_solve` iterations from the same rollout. Energy = paper Eq. 1 with "
-                "k = 1 over edge and cross springs, lengths in mean-edge units, per spring (the same yardstick for "
-                "every method). The machine was shared with other jobs: compare rows of the same run, not absolute "
-                "times.\n\n" + table + "\n![time vs energy and edge RMS](relax_performance.png)\n\n"
-                + ("Paper dynamics against the default solver on the same energy:\n\n" + "\n".join(extra) + "\n\n"
+        how = (f"`{command_line('bench_relax.py', sys.argv[1:])}`" if not args.from_json else args.note)
+        text = (f"{how} ({machine()}, {args.threads} threads):\n\n" + table
+                + "\n![time vs energy and edge RMS](relax_performance.png)\n"
+                + ("\nPaper dynamics against the default solver on the same energy:\n\n" + "\n".join(extra) + "\n"
                    if extra else ""))
-        sys.path.insert(0, str(ROOT))
-        from benchmarks._docs import write_section
-
-        write_section(text)
+        write_block("bench_relax", text)
 
 
 if __name__ == "__main__":
-    main()
+    from potflat_cli._process import command_settings
+
+    with command_settings():  # as the potflat command runs: OpenMP's passive wait, the heap tuning
+        main()

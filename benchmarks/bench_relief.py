@@ -8,7 +8,7 @@ bake stage's own time (``NAME.bake.json``, ``timings.total``: start-up not count
 steps, and the ratio of the medians. A first bake of each kind (not counted) compiles and caches
 the kernels. Goal: the relief adds at most 50% to the bake.
 
-Reproduce (the table in docs/performance.md)::
+Reproduce (the table in docs/performance.md, block ``bench_relief``)::
 
     python benchmarks/bench_relief.py --write
 
@@ -33,8 +33,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _docs import command_line, publish  # noqa: E402
 from bench_scale import make_scan  # noqa: E402
 
-#: The heading of the benchmark's section of docs/performance.md.
-SECTION = "## Relief: what it adds to a bake"
 #: The goal: the relief adds at most this share to a bake.
 GOAL_ADDED = 0.5
 #: The bake's steps shown (``NAME.bake.json`` timings).
@@ -120,8 +118,7 @@ def main(argv: list[str] | None = None) -> None:
         m = measure(root, vertices=args.vertices, repeat=args.repeat, px_per_mm=args.px_per_mm,
                     texture_size=args.texture_size)
     command = command_line("bench_relief.py", argv if argv is not None else sys.argv[1:])
-    publish(SECTION + "\n\n" + table(m, command=command, px_per_mm=args.px_per_mm, repeat=args.repeat) + "\n",
-            args.write)
+    publish("bench_relief", table(m, command=command, px_per_mm=args.px_per_mm, repeat=args.repeat), args.write)
 
 
 if __name__ == "__main__":

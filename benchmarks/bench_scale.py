@@ -12,16 +12,13 @@ stages by the appearance of each stage's JSON sidecar (``NAME.rollout.json``,
 ``NAME.relaxed.json``, ``NAME.bake.json``): per stage the wall time (as the run reports it)
 and the peak memory; for the whole run the wall time (start-up included), the CPU time of the
 child (user + system, all threads) and its peak (``VmHWM``).
-The rollout's own steps (load, axis, walls, unroll, ...) come from its JSON's timings.
 Before the first size, ``potflat run`` on the bundled amphora compiles and caches every kernel
 the runs use (:func:`warm_kernels`): the rows measure runs with warm kernels; a first run's
-compile time is measured apart (docs/performance.md, "Loaders, first run and the rollout's
-steps").
+compile time is measured by ``bench_first_run.py``.
 
-Goals (issue 15): at 1M vertices the whole run at most 2x the trimesh load; at 3M at most
-60 s and 3 GB.
+Targets: at 1M vertices the whole run at most 2x the trimesh load; at 3M at most 60 s and 3 GB.
 
-Reproduce (the table in docs/performance.md, section "End to end at scale")::
+Reproduce (block ``bench_scale`` of docs/performance.md)::
 
     python benchmarks/bench_scale.py --write
 
@@ -33,8 +30,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import re
 import resource
 import shutil
@@ -46,15 +41,15 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _docs import command_line, publish  # noqa: E402
+from _docs import command_line, machine, publish  # noqa: E402
 
-#: Issue 15's goals: the whole run at 1M vertices within this multiple of the trimesh load ...
+#: Targets: the whole run at 1M vertices within this multiple of the trimesh load ...
 GOAL_RATIO_1M = 2.0
 #: ... and at 3M vertices within these seconds and GB.
 GOAL_S_3M, GOAL_GB_3M = 60.0, 3.0
 STAGES = ("rollout", "relax", "bake")
 SIDE = {"rollout": ".rollout.json", "relax": ".relaxed.json", "bake": ".bake.json"}
-SECTION = "## End to end at scale"
+BLOCK = "bench_scale"
 
 
 def make_scan(n_vertices: int, folder: Path, *, texture_size: int, seed: int = 0) -> tuple[Path, dict]:
@@ -174,14 +169,6 @@ def _image(out: Path, name: str) -> str:
     return f"{w} x {h} px"
 
 
-def _rollout_steps(out: Path, name: str) -> dict[str, float]:
-    """The rollout stage's own timings: load, profile, then the rollout's steps."""
-    t = json.loads((out / f"{name}.rollout.json").read_text()).get("timings", {})
-    steps = {k: v for k, v in t.items() if isinstance(v, (int, float)) and k not in ("rollout", "total")}
-    steps.update({k: v for k, v in t.get("rollout_steps", {}).items() if k != "total"})
-    return steps
-
-
 def measure(n_vertices: float, root: Path, *, preset: str, px_per_mm: float, texture_size: int) -> dict:
     """Generate one scan, load it with trimesh, run potflat on it; every figure of one row."""
     print(f"generating {n_vertices:.3g}-vertex amphora in {root} ...", flush=True)
@@ -194,8 +181,7 @@ def measure(n_vertices: float, root: Path, *, preset: str, px_per_mm: float, tex
           flush=True)
     result = run_benchmark(scan, root / "out", preset=preset, px_per_mm=px_per_mm)
     print(f"  potflat run {result['total_wall_s']:.1f} s, peak {result['peak_gb']:.2f} GB", flush=True)
-    return {"info": info, "trimesh": yardstick, "loader": loader, "result": result, "image": _image(root / "out", scan.stem),
-            "steps": _rollout_steps(root / "out", scan.stem)}
+    return {"info": info, "trimesh": yardstick, "loader": loader, "result": result, "image": _image(root / "out", scan.stem)}
 
 
 def _verdicts(rows: list[dict]) -> list[str]:
@@ -205,27 +191,18 @@ def _verdicts(rows: list[dict]) -> list[str]:
         ratio = res["total_wall_s"] / tm["load_s"]
         if 0.5e6 < v < 2e6:
             out.append(f"{v / 1e6:.1f}M vertices: the whole run takes {ratio:.1f}x the trimesh load "
-                       f"(goal at most {GOAL_RATIO_1M:g}x): {'met' if ratio <= GOAL_RATIO_1M else 'NOT met'}.")
+                       f"(target at most {GOAL_RATIO_1M:g}x): {'met' if ratio <= GOAL_RATIO_1M else 'not met'}.")
         if v >= 2e6:
             fast, small = res["total_wall_s"] <= GOAL_S_3M, res["peak_gb"] <= GOAL_GB_3M
-            out.append(f"{v / 1e6:.1f}M vertices: {res['total_wall_s']:.0f} s (goal at most {GOAL_S_3M:g} s: "
-                       f"{'met' if fast else 'NOT met'}) and {res['peak_gb']:.2f} GB (goal at most "
-                       f"{GOAL_GB_3M:g} GB: {'met' if small else 'NOT met'}).")
+            out.append(f"{v / 1e6:.1f}M vertices: {res['total_wall_s']:.0f} s (target at most {GOAL_S_3M:g} s: "
+                       f"{'met' if fast else 'not met'}) and {res['peak_gb']:.2f} GB (target at most "
+                       f"{GOAL_GB_3M:g} GB: {'met' if small else 'not met'}).")
     return out
 
 
-def table(rows: list[dict], *, command: str, preset: str, px_per_mm: float, texture: str) -> str:
-    """The Markdown section (heading, setup line, tables, verdicts)."""
-    setup = (f"`{command}` ({time.strftime('%Y-%m-%d')}, {os.cpu_count()} cores, {platform.machine()}, "
-             f"Python {platform.python_version()}): synthetic painted amphorae with a {texture} texture "
-             f"atlas (OBJ + MTL + PNG; generating them is not counted), each loaded by "
-             f"`trimesh.load(path, process=False)` and by potflat's `load_scan(path, clean=False)` (the load "
-             f"call, each in its own process), and run through "
-             f"`potflat run --preset {preset} --px-per-mm {px_per_mm:g}` (one process, start-up included), "
-             "one after the other in one benchmark run. Stage times are the run's own; memory is the "
-             "resident set sampled every 0.1 s (stage peaks) and the process's high-water mark (whole "
-             "run), GB = 2^30 bytes. The machine is shared: treat times as +-30%.")
-    lines = [SECTION, "", setup, "",
+def table(rows: list[dict], *, command: str) -> str:
+    """The block of docs/performance.md: the command, the table, the targets."""
+    lines = [f"`{command}` ({machine()}):", "",
              "| vertices | faces | OBJ MB | trimesh load s (GB) | potflat load s (GB) | rollout s (GB) | relax s (GB) | bake s (GB) "
              "| whole run s (CPU s) | peak GB | run / trimesh | image |",
              "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
@@ -239,16 +216,10 @@ def table(rows: list[dict], *, command: str, preset: str, px_per_mm: float, text
         cells += [f"**{res['total_wall_s']:.1f}** ({res['cpu_s']:.0f})", f"**{res['peak_gb']:.2f}**",
                   f"{res['total_wall_s'] / tm['load_s']:.1f}", row["image"]]
         lines.append("| " + " | ".join(cells) + " |")
-    names = sorted({k for row in rows for k in row["steps"]}, key=lambda k: -max(r["steps"].get(k, 0) for r in rows))
-    lines += ["", "The rollout stage's steps (s, from `NAME.rollout.json`):", "",
-              "| vertices | " + " | ".join(names) + " |", "|---:|" + "---:|" * len(names)]
-    for row in rows:
-        lines.append(f"| {row['info']['vertices']:,} | "
-                     + " | ".join(f"{row['steps'].get(k, float('nan')):.1f}" for k in names) + " |")
     f = rows[-1]["result"]["figures"]
     lines += ["", *_verdicts(rows), (f"Relaxed (largest): edge-length RMS {f.get('edge_rms', float('nan')):.4f}, "
-                                     f"{f.get('flipped')} flipped triangles."), ""]
-    return "\n".join(lines)
+                                     f"{f.get('flipped')} flipped triangles.")]
+    return "\n".join(lines) + "\n"
 
 
 def warm_kernels() -> None:
@@ -269,11 +240,11 @@ def warm_kernels() -> None:
 
 def add_scan_options(ap: argparse.ArgumentParser) -> None:
     """The options of a benchmark on generated scans: resolution, texture size, where to keep
-    the files, whether to write its section of docs/performance.md."""
+    the files, whether to write its block of docs/performance.md."""
     ap.add_argument("--px-per-mm", type=float, default=4.0)
     ap.add_argument("--texture-size", type=int, default=8192)
     ap.add_argument("--keep", type=Path, help="folder for the scans and outputs (kept)")
-    ap.add_argument("--write", action="store_true", help="update the section in docs/performance.md")
+    ap.add_argument("--write", action="store_true", help="update the benchmark's block in docs/performance.md")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -292,9 +263,11 @@ def main(argv: list[str] | None = None) -> None:
             rows.append(measure(n, root, preset=args.preset, px_per_mm=args.px_per_mm,
                                 texture_size=args.texture_size))
     command = command_line("bench_scale.py", argv if argv is not None else sys.argv[1:])
-    publish(table(rows, command=command, preset=args.preset, px_per_mm=args.px_per_mm,
-                  texture=f"{args.texture_size} x {args.texture_size}"), args.write)
+    publish(BLOCK, table(rows, command=command), args.write)
 
 
 if __name__ == "__main__":
-    main()
+    from potflat_cli._process import command_settings
+
+    with command_settings():  # as the potflat command runs: OpenMP's passive wait, the heap tuning
+        main()

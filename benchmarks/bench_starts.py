@@ -12,7 +12,8 @@ relaxed (default options) from three starts:
   Tutte's embedding of the whole mesh (:func:`potflat.mesh.embedding.tutte_embedding`).
 
 It prints the edge RMS, the area distortion and the painted circles' figures of each
-(``benchmarks/_figures.py``) and writes the table into ``docs/robustness.md``.
+(``benchmarks/_figures.py``) and writes the table into block ``bench_starts`` of
+``docs/robustness.md``.
 
 Usage::
 
@@ -31,7 +32,6 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 SAMPLES = ("amphora", "cone")
-ROBUSTNESS_MD = ROOT / "docs" / "robustness.md"
 
 
 def _starts(flat):
@@ -60,7 +60,7 @@ def _starts(flat):
 def run(log=print) -> list[dict]:
     from benchmarks._figures import measure_figures, truth_circles
     from potflat.io.scan import load_scan
-    from potflat.relax import relax, solver
+    from potflat.relax import multilevel, relax
     from potflat.rollout import rollout
 
     rows = []
@@ -70,8 +70,8 @@ def run(log=print) -> list[dict]:
         flat = rollout(load_scan(scan).mesh).flat
         base = None
         for start, (uv, off) in _starts(flat).items():
-            patch = (mock.patch.object(solver, "_untangle", lambda sp, x, rounds=200: (x, int((sp.signed_areas(x) <= 0).sum())))
-                     if off else mock.patch.object(solver, "_untangle", solver._untangle))
+            patch = (mock.patch.object(multilevel, "untangle", lambda sp, x, rounds=200: (x, int((sp.signed_areas(x) <= 0).sum())))
+                     if off else mock.patch.object(multilevel, "untangle", multilevel.untangle))
             t = time.perf_counter()
             with patch:
                 result = relax(flat.replace(uv=uv))
@@ -109,15 +109,13 @@ def main(argv: list[str] | None = None) -> None:
     text = table(rows)
     print(text)
     if not args.no_write:
-        from benchmarks._docs import write_section
+        from benchmarks._docs import write_block
 
-        write_section("## The relaxed result does not depend on the start (issue 17)\n\n"
-                      "Written by `python benchmarks/bench_starts.py`: each bundled sample relaxed (default options) "
-                      "from its rollout, from a start whose folded cluster was re-embedded locally, and from Tutte's "
-                      "embedding of the whole mesh (untangling switched off, folds planted: see the script). "
-                      "`change` is the edge RMS against the rollout start's; the circles are the painted circles "
-                      "of the sample's truth file (`benchmarks/_figures.py`).\n\n" + text, ROBUSTNESS_MD)
+        write_block("bench_starts", f"`python benchmarks/bench_starts.py`:\n\n{text}")
 
 
 if __name__ == "__main__":
-    main()
+    from potflat_cli._process import command_settings
+
+    with command_settings():  # as the potflat command runs: OpenMP's passive wait, the heap tuning
+        main()

@@ -1,4 +1,4 @@
-"""The hostile-input corpus of issue 18, generated here and run through the real command line.
+"""The hostile-input corpus, generated here and run through the real command line.
 
 Every case is made in a temporary folder (nothing is taken from the tests), run as a real
 ``python -m potflat_cli`` process in its own session under a memory cap (``RLIMIT_AS``,
@@ -208,7 +208,7 @@ def corpus(real: Path | None) -> list[Case]:
         if not tex.is_file():
             return "no texture beside the rollout"
         return "" if np.asarray(Image.open(tex).convert("RGB"))[0, 0].tolist() == [200, 30, 40] else "planted image used"
-    add(Case("GLB texture with planted files in the old shared cache", glb_cache, 0, painting_kept))
+    add(Case("GLB texture with planted files in a shared cache", glb_cache, 0, painting_kept))
 
     def laughs(d: Path) -> list:
         levels = ["  a0: &a0 [lol, lol, lol, lol, lol, lol, lol, lol, lol]"]

@@ -21,7 +21,8 @@ from typing import Annotated, Any, Optional
 import typer
 
 from potflat.files.options import STAGE_OPTIONS, coerce_option, option_types
-from potflat.relax.options import PRESET_FIELDS
+from potflat.errors import InvalidOptionError
+from potflat.relax.options import PRESET_FIELDS, RelaxOptions
 from potflat.relax.parameters import PRESETS
 
 OutputDir = Annotated[Optional[Path], typer.Option(
@@ -92,8 +93,6 @@ def _shown(value: Any) -> str:
 def _preset_default(name: str) -> str:
     """A relax option's default by preset: the default preset's value, then the others'
     (``0.25 (paper: 0)``)."""
-    from potflat.relax.options import RelaxOptions
-
     default = _shown(getattr(PRESETS[RelaxOptions().preset], name))
     others: dict[str, list[str]] = {}
     for preset, settings in PRESETS.items():
@@ -152,8 +151,6 @@ def options_from_cli(stage: str, values: dict[str, Any]):
     InvalidOptionError
         Naming the option (``--px-per-mm ...``) and what is wrong.
     """
-    from potflat.errors import InvalidOptionError
-
     cls = STAGE_OPTIONS[stage]
     kwargs = {}
     for name, tp in option_types(cls).items():

@@ -4,11 +4,11 @@ from __future__ import annotations
 import typer
 from typer.core import TyperGroup
 
-from potflat_cli.commands import bake, batch, plate, relax, rollout, run
+from potflat_cli.commands import bake, batch, plate, relax, rollout, run, view
 
 HELP = """Flatten textured 3D scans of painted pottery into true-scale images.
 
-Stages: rollout (axis, proxy, seam, unroll) -> relax (fold-free elastic relaxation) -> bake (true-scale PNG and distortion maps). 'run' does all three on one scan, 'batch' on many scans from a YAML file; 'plate' composes the publication plate.
+Stages: rollout (axis, proxy, seam, unroll) -> relax (fold-free elastic relaxation) -> bake (true-scale PNG and distortion maps). 'run' does all three on one scan, 'batch' on many scans from a YAML file; 'plate' composes the publication plate; 'view' opens a finished run in the browser.
 
 Exit codes: 0 success, 1 some scans of a batch failed, 2 bad input or options (message on stderr), 130 interrupted.
 
@@ -60,7 +60,8 @@ class _Group(TyperGroup):
 
     Usage errors (a missing argument, a value out of range, a directory given as a file)
     are one ``error:`` line and exit code 2, like every other bad input; SIGTERM is
-    handled like SIGINT.
+    handled like SIGINT. Commands run with the process settings of
+    :func:`potflat_cli._process.command_settings`.
     """
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
@@ -74,6 +75,7 @@ class _Group(TyperGroup):
             import click
 
         from potflat_cli._errors import EXIT_USAGE, INTERRUPTED, STOP, fail
+        from potflat_cli._process import command_settings
 
         STOP.clear()
         args = list(sys.argv[1:] if args is None else args)
@@ -82,9 +84,11 @@ class _Group(TyperGroup):
                 signal.signal(sig, _interrupt)
             sys.unraisablehook = _quiet_unraisable
         if not standalone_mode:
-            return super().main(args, prog_name, complete_var, standalone_mode, **extra)
+            with command_settings():
+                return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         try:
-            code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+            with command_settings():
+                code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except click.exceptions.NoArgsIsHelpError as exc:
             exc.show()
             code = EXIT_USAGE
@@ -150,3 +154,4 @@ app.command("bake")(bake.bake_command)
 app.command("run")(run.run_command)
 app.command("batch")(batch.batch_command)
 app.command("plate")(plate.plate_command)
+app.command("view")(view.view_command)

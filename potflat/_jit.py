@@ -15,17 +15,17 @@ which costs a compare and a select per read and keeps LLVM from vectorising a lo
 contiguous entries (relax at 2.5M vertices: the energy and gradient 0.74-0.85x, the fused
 L-BFGS passes 0.6-0.8x, results bit-identical). Only for indexing: NumPy's rules make an
 unsigned and a signed integer combine into a float.
+
+Importing potflat sets nothing process-wide. Numba's thread pool here is OpenMP's, which
+busy-waits between parallel regions unless ``OMP_WAIT_POLICY=PASSIVE`` is in the environment
+before the first parallel kernel runs: the solvers run many short parallel regions per
+iteration, and busy-waiting made the relax solver up to 20x slower on a machine shared with
+other jobs (docs/performance.md). The ``potflat`` command sets it for its own process
+(:mod:`potflat_cli._process`); an application calling the library sets it itself.
 """
 from __future__ import annotations
 
 import contextlib
-import os
-
-# Before any parallel kernel starts its OpenMP thread pool: the solvers run many short
-# parallel regions per iteration, and OpenMP's default busy-waiting between them made the
-# relax solver up to 20x slower on a machine shared with other jobs (docs/performance.md).
-# An explicit setting by the user wins.
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numba
 

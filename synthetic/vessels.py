@@ -6,7 +6,7 @@ triangles (jittered rings of samples joined by strips, planar Delaunay caps at c
 poles; no seam duplication: one connected manifold like a real scan), poses it
 arbitrarily in space, paints it with measurable features and bakes the painting into a
 multi-chart texture atlas as photogrammetry software does (UV seams lie inside the
-surface). Issue 7 kinds: two-walled cups, handles (intersecting or welded), holes and
+surface). Real-vessel kinds too: two-walled cups, handles (intersecting or welded), holes and
 sherds.
 
 :func:`write_obj` writes OBJ + MTL + PNG (one ``v`` per 3D point, several ``vt`` where

@@ -10,9 +10,6 @@ from potflat.rollout.axis import (AxisFit, axis_residuals, cylindrical, estimate
 from potflat.errors import AxisNotFoundError, InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
 
-REAL = Path("/work/shared/data/real")
-
-
 def _angle_deg(a, b):
     return np.degrees(np.arccos(np.clip(abs(a @ b) / np.linalg.norm(a) / np.linalg.norm(b), -1, 1)))
 
@@ -150,22 +147,20 @@ def test_deterministic():
     assert np.array_equal(a.point, b.point) and np.array_equal(a.direction, b.direction)
 
 
-@pytest.mark.skipif(not (REAL / "goblet.stl").exists(), reason="shared real scans absent")
-def test_real_goblet_axis():
+def test_real_goblet_axis(real_scans):
     from potflat.io.scan import load_scan
 
-    mesh = load_scan(REAL / "goblet.stl").mesh  # designed exact surface of revolution, upright in +z
+    mesh = load_scan(real_scans / "goblet.stl").mesh  # designed exact surface of revolution, upright in +z
     fit = estimate_axis(mesh)
     assert fit.direction[2] > np.cos(np.radians(0.5))  # mouth (cup, inner wall) up
     assert fit.median_angle_deg < 1.0 and fit.profile_deviation < 0.03
 
 
-@pytest.mark.skipif(not (REAL / "sea-vase.ply").exists(), reason="shared real scans absent")
 @pytest.mark.parametrize("name", ["plastic-vase.ply", "sea-vase.ply"])
-def test_real_scanned_vases_axis(name):
+def test_real_scanned_vases_axis(real_scans, name):
     from potflat.io.scan import load_scan
 
-    mesh = load_scan(REAL / name).mesh  # both stand roughly upright along +z in their files
+    mesh = load_scan(real_scans / name).mesh  # both stand roughly upright along +z in their files
     fit = estimate_axis(mesh)
     assert abs(fit.direction[2]) > np.cos(np.radians(3.0))
     assert fit.median_angle_deg < 10 and fit.profile_deviation < 0.05

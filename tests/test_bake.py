@@ -248,7 +248,7 @@ def test_untextured_scan_is_baked_as_its_relief_with_a_legend():
 def test_rasterizer_matches_reference():
     from scipy.spatial import Delaunay
 
-    from potflat.bake import _kernels as raster
+    from potflat.raster import _kernels as raster
 
     rng = np.random.default_rng(3)
     pts = rng.uniform(0.3, 29.7, (40, 2))
@@ -279,7 +279,7 @@ def test_chart_coverage_matches_reference():
     """The atlas' chart coverage marks exactly the texels whose centres lie in some triangle,
     with v up, on a texture that is not square, triangles overlapping, reaching past the
     texture's edges, and one of zero area."""
-    from potflat.bake import _kernels as raster
+    from potflat.raster import _kernels as raster
 
     rng = np.random.default_rng(11)
     h, w = 23, 31
@@ -302,7 +302,7 @@ def test_chart_coverage_matches_reference():
 def test_face_values_columns_match_reference():
     """Every column of the per-face fields averaged over each pixel's covered sub-samples as a
     slow loop does it, and as the column alone (the maps' fields share one pass)."""
-    from potflat.bake import _kernels as raster
+    from potflat.raster import _kernels as raster
 
     rng = np.random.default_rng(5)
     n, k, w, m = 3, 4, 5, 7

@@ -22,7 +22,6 @@ The figures over the whole surface include the defect's own faces (a spike's edg
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -141,17 +140,13 @@ def test_the_generator_makes_what_it_says(cup):
         add_defects(make_vessel("cylinder", n_vertices=800), "crease", walls=("inner",))
 
 
-REAL = Path(__file__).resolve().parents[2] / "shared/data/real"
-
-
 @pytest.mark.slow
-@pytest.mark.skipif(not REAL.is_dir(), reason="shared real scans absent")
 @pytest.mark.parametrize("side", SIDES)
 @pytest.mark.parametrize("scan", ["plastic-vase.ply", "sea-vase.ply", "goblet.stl"])
-def test_real_scans_give_fold_free_images_from_both_sides(tmp_path, scan, side):
+def test_real_scans_give_fold_free_images_from_both_sides(tmp_path, real_scans, scan, side):
     """Measured: 0 flipped triangles everywhere; folded in 3D: plastic vase 11 faces outside,
     1 inside; sea vase 87 (312 mm2, 0.09 %) outside, 3 inside; goblet (designed) none."""
-    result = run_scan(REAL / scan, tmp_path, rollout={"side": side, "units": "mm"}, bake={"px_per_mm": 1.0})
+    result = run_scan(real_scans / scan, tmp_path, rollout={"side": side, "units": "mm"}, bake={"px_per_mm": 1.0})
     relaxed = result.relax.record
     assert relaxed["flipped"] == 0 and relaxed["fold_free"] and result.paths["bake.png"].is_file()
     folded = result.rollout.record["folded"]

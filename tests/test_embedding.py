@@ -84,7 +84,7 @@ def test_a_mesh_that_no_layout_unfolds_is_refused_with_the_fix(monkeypatch):
     monkeypatch.setattr(multilevel, "untangle", lambda sp, x, rounds=200: (x, 1))
     with pytest.raises(FoldedResultError, match="mirrored.*--side inner"):
         relax(flat.replace(uv=flat.uv * np.array([-1.0, 1.0])))  # every face flipped: seen from the wrong side
-    monkeypatch.setattr("potflat.mesh.embedding.tutte_embedding", lambda faces, n, scale=1.0: None)
+    monkeypatch.setattr("potflat.relax.start.tutte_embedding", lambda faces, n, scale=1.0: None)
     uv = flat.uv.copy()
     u = uv[:, 0]
     a, b = np.percentile(u, [40, 55])

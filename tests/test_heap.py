@@ -1,6 +1,8 @@
-"""potflat._heap: large allocations from glibc's heap inside the block, mappings again after it."""
+"""potflat._heap: large allocations from glibc's heap inside the block when the application opted
+in, mappings again after the last block."""
 import ctypes
 import os
+import threading
 
 import numpy as np
 import pytest
@@ -35,14 +37,59 @@ def _mapped_by_allocation() -> int:
 
 def test_large_allocations_come_from_the_heap_inside_the_block_only():
     assert _mapped_by_allocation() >= LARGE  # glibc's default: a mapping of its own
-    with _heap.reuse_freed_memory():
+    with _heap.heap_tuning(), _heap.reuse_freed_memory():
         assert _mapped_by_allocation() == 0
     assert _mapped_by_allocation() >= LARGE  # restored
 
 
+def test_without_the_opt_in_the_library_changes_nothing():
+    assert not _heap.heap_tuning_allowed()
+    with _heap.reuse_freed_memory():
+        assert _mapped_by_allocation() >= LARGE
+    with _heap.heap_tuning():
+        pass
+    assert not _heap.heap_tuning_allowed()  # the opt-in ends with its block
+    with _heap.reuse_freed_memory():
+        assert _mapped_by_allocation() >= LARGE
+
+
+@pytest.mark.parametrize("name, value", [("MALLOC_MMAP_MAX_", "65536"),
+                                         ("GLIBC_TUNABLES", "glibc.malloc.trim_threshold=131072")])
+def test_the_users_own_malloc_settings_stand(monkeypatch, name, value):
+    monkeypatch.setenv(name, value)
+    assert _heap.user_settings()
+    with _heap.heap_tuning(), _heap.reuse_freed_memory():
+        assert _mapped_by_allocation() >= LARGE
+
+
+def test_the_tuning_lasts_until_the_last_of_nested_and_overlapping_blocks_ends():
+    _mapped_bytes()  # (skips without glibc)
+    inside, leave = threading.Event(), threading.Event()
+
+    def stage_in_another_thread():
+        with _heap.reuse_freed_memory():
+            inside.set()
+            leave.wait(60)
+
+    other = threading.Thread(target=stage_in_another_thread)
+    with _heap.heap_tuning():
+        with _heap.reuse_freed_memory():
+            with _heap.reuse_freed_memory():
+                pass
+            assert _mapped_by_allocation() == 0  # the inner block's end kept the outer's tuning
+            other.start()
+            assert inside.wait(60)
+        try:
+            assert _mapped_by_allocation() == 0  # this thread's block ended, the other's runs on
+        finally:
+            leave.set()
+            other.join()
+        assert _mapped_by_allocation() >= LARGE  # the last block put the settings back
+
+
 def test_settings_restored_when_the_block_raises():
     with pytest.raises(KeyError):
-        with _heap.reuse_freed_memory():
+        with _heap.heap_tuning(), _heap.reuse_freed_memory():
             raise KeyError("stop")
     assert _mapped_by_allocation() >= LARGE
 
@@ -54,7 +101,7 @@ def _resident_bytes() -> int:
 
 def test_release_hands_the_kept_memory_back():
     _mapped_bytes()  # (skips without glibc)
-    with _heap.reuse_freed_memory():
+    with _heap.heap_tuning(), _heap.reuse_freed_memory():
         block = np.ones(LARGE // 8)
         del block  # (kept in the heap: the block's trim threshold is above it)
         before = _resident_bytes()
@@ -65,6 +112,6 @@ def test_release_hands_the_kept_memory_back():
 def test_without_glibc_the_block_just_runs(monkeypatch):
     monkeypatch.setattr(_heap, "_glibc", lambda: None)
     ran = []
-    with _heap.reuse_freed_memory():
+    with _heap.heap_tuning(), _heap.reuse_freed_memory():
         ran.append(True)
     assert ran == [True]

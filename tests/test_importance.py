@@ -236,7 +236,7 @@ def test_a_high_contrast_is_reached_from_a_softer_solve_to_the_same_layout(monke
     assert two.flipped == 0 and two.boundary_overlap == 0
     monkeypatch.setattr(solver, "SOLVER", replace(SOLVER, contrast_start=1000.0))
     one = relax(flat, **kw)
-    assert not any("importance_contrast" in lv for lv in one.levels)
+    assert not any(lv.importance_contrast is not None for lv in one.levels)
     F, V = flat.mesh.faces, flat.mesh.vertices
     zone = important_faces(F, importance)
     a, b = face_distortion(V, two.flat.uv, F), face_distortion(V, one.flat.uv, F)
@@ -245,7 +245,7 @@ def test_a_high_contrast_is_reached_from_a_softer_solve_to_the_same_layout(monke
     monkeypatch.undo()
     for other in ({**kw, "importance_contrast": SOLVER.contrast_start}, kw):
         got = relax(flat.replace(importance=np.ones(len(importance))) if other is kw else flat, **other)
-        assert not any("importance_contrast" in lv for lv in got.levels)
+        assert not any(lv.importance_contrast is not None for lv in got.levels)
 
 
 def test_with_a_coarse_copy_only_the_copy_takes_the_softer_first_solve(monkeypatch):
@@ -382,7 +382,7 @@ def test_the_zone_ends_on_a_panels_edge():
     assert zone is not None, reason
     assert zone[panel].min() == 1.0  # the whole panel is wholly important
     outside_mm = ndimage.distance_transform_edt(~panel) / px_per_mm
-    assert outside_mm[zone >= 1.0].max() == 0.0  # it was 2.5 mm with a fixed pull-back and margin
+    assert outside_mm[zone >= 1.0].max() == 0.0
     assert zone[outside_mm > 4 * imp.SOFT_EDGE_MM].max() < 0.01
 
 
@@ -418,7 +418,7 @@ def test_the_ground_between_figures_at_the_zones_edge_stays_in_it():
     img[110:170, 220:228, :3] = (28, 22, 20)
     zone, reason = imp.painted_zone_image(img, px_per_mm)
     assert zone is not None, reason
-    assert zone[110:168, 208:220].min() == 1.0  # the ground between them, to their ends (was 0.4 there)
+    assert zone[110:168, 208:220].min() == 1.0  # the ground between them, to their ends
     assert zone[175:185, 200:228].max() < 0.1  # not the plain surface below them
     assert zone[90:96, 200:228].max() < 0.1  # nor above the band
 

@@ -1,5 +1,5 @@
 """The same vessel in metres, centimetres and millimetres and in other poses gives the same
-image at the same px/mm (issue 6; docs/robustness.md).
+image at the same px/mm (docs/robustness.md).
 
 One synthetic painted vessel is written as an OBJ in mm, rescaled copies (m, cm: the same
 texture, coordinates divided, ``--units`` given) and the same vessel in random poses.

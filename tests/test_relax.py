@@ -659,3 +659,44 @@ def test_a_boundary_left_touching_itself_is_not_a_crossing_after_the_final_turn(
     rolled = rollout(load_scan(write_obj(vessel, tmp_path / "aryballos.obj")).mesh)
     result = relax(rolled.flat, max_anisotropy=1.3)  # raised FoldedResultError: 1 boundary crossing
     assert result.flipped == 0 and result.boundary_overlap == 0
+
+
+def test_untangle_keeps_a_small_island_open():
+    """A piece of two triangles apart from the rest (as a rollout's trimming leaves them),
+    one of them folded: averaging each of its vertices over its neighbours pulls the piece
+    together into a line (no vertex of it is held), and the fold stays; mirroring each
+    folded ear (a triangle whose tip is on no other face) about its base unfolds it."""
+    from potflat.relax.start import untangle
+
+    flat, _ = meshes.cylinder_patch(6, 5, seed=2)
+    n = len(flat.uv)
+    quad = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    V = np.vstack([flat.mesh.vertices, np.c_[quad + [5.0, 0.0], np.zeros(4)]])
+    F = np.vstack([flat.mesh.faces, [[n, n + 1, n + 2], [n, n + 2, n + 3]]])
+    island = quad + [5.0, 0.0]
+    island[3] = [1.2, 0.6] + np.array([5.0, 0.0])  # the second triangle's tip across the diagonal
+    uv = np.vstack([flat.uv, island])
+    assert (signed_areas(uv, F) <= 0).tolist() == [False] * (len(F) - 1) + [True]
+    sp = spring_system(V, F, k=1.0, relative=True)
+    x, n_bad = untangle(sp, uv)
+    assert n_bad == 1 and (signed_areas(x, F) > 0).all()
+    assert np.array_equal(x[:n], uv[:n])
+
+
+def test_a_given_up_coarse_copy_leaves_its_anisotropy_limit_behind(vessel, monkeypatch):
+    """The anisotropy limit a relaxed coarse copy found fits the copy's relaxed layout; when
+    following the copy fails, the full mesh starts from the rollout and finds its own limit
+    (a first solve without the area term) instead of paying the copy's limit over nearly
+    every face of the unrelaxed rollout (1M dragon jar: steps held to 0.0017 of the natural
+    one, stopped after 118 iterations at a higher edge-length RMS than the rollout's)."""
+    from dataclasses import replace
+
+    from potflat.relax import multilevel
+
+    monkeypatch.setattr(multilevel, "COARSE", replace(multilevel.COARSE, min_vertices=1000))
+    kept = relax(vessel, preset="standard")
+    assert [lv.level for lv in kept.levels if lv.level.startswith("fine")] == ["fine"]  # the copy's limit
+    monkeypatch.setattr(multilevel, "follow", lambda sp, x, notes: notes.append("given up") or None)
+    given_up = relax(vessel, preset="standard")
+    assert "given up" in given_up.notes and given_up.flipped == 0
+    assert [lv.level for lv in given_up.levels] == ["fine, shape first", "fine"]

@@ -1,4 +1,4 @@
-"""Faults: a run killed with SIGKILL during relax, during bake and during a batch (issue 6).
+"""Faults: a run killed with SIGKILL during relax, during bake and during a batch.
 
 Each run is a real ``python -m potflat_cli`` process in its own session, killed (with any
 worker processes: the whole process group) when the files show that a stage is under way.

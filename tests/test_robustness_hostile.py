@@ -1,4 +1,4 @@
-"""Hostile inputs and first contact (issue 18; catalogue in docs/robustness.md).
+"""Hostile inputs and first contact (catalogue in docs/robustness.md).
 
 One small negative test per check, each case generated in ``tmp_path``: data safety (a batch
 confined to its output folder, a private texture cache, bounded YAML, confined globs, the
@@ -144,7 +144,7 @@ def test_the_texture_cache_is_private_and_never_trusted(tmp_path):
                            visual=trimesh.visual.TextureVisuals(uv=uv, image=painting))
     glb = tmp_path / "pot.glb"
     glb.write_bytes(mesh.export(file_type="glb"))
-    # plant files where the shared cache used to be
+    # plant files in a shared cache folder, where an attacker could
     shared = Path(tempfile.gettempdir()) / f"potflat-textures-{os.environ.get('USER', 'root')}"
     shared.mkdir(exist_ok=True)
     for name in [p.name for p in shared.glob("*.png")] + ["planted.png"]:
@@ -617,8 +617,8 @@ def test_sigterm_ends_a_run_like_ctrl_c(tmp_path):
 
 def test_help_shows_the_allowed_values():
     text = " ".join(runner.invoke(app, ["run", "--help"], env={"COLUMNS": "240"}).stdout.split())
-    for shown in ("[um|mm|cm|m|in]", "[outer|inner]", "--proxy NAME Proxy surface: auto", "cylinder, cone, sphere, ortho",
-                  "--preset NAME preview | standard | archival", "A B|A,B"):
+    for shown in ("[um|mm|cm|m|in]", "[outer|inner]", "--proxy NAME", "One of: auto, cylinder, cone, sphere, ortho",
+                  "--preset NAME", "One of: preview, standard, archival, paper", "--band LO HI"):
         assert shown in text, shown
     assert "<bool>" not in text.replace("--help <bool>", "") and "--proxy <str>" not in text
     batch_help = " ".join(cli("batch", "--help").stdout.split())
@@ -730,7 +730,7 @@ def test_compile_note_is_a_plain_line_when_stderr_is_not_a_terminal(tmp_path, mo
 def test_the_main_command_compiles_each_kernel_for_one_argument_type(tmp_path):
     """A second type specialisation of a kernel is a second compile on a first run: an
     omitted default argument in one call and not in another, or read-only rows for the PNG
-    filter, each cost seconds (issue 15). Specialisations to constants passed between
+    filter, each cost seconds. Specialisations to constants passed between
     kernels (Numba's literal types) are left aside."""
     sample = Path(__file__).resolve().parents[1] / "samples" / "data" / "amphora.obj"
     code = f"""

@@ -1,4 +1,4 @@
-"""Bad-input corpus through the CLI (issue 6; catalogue in docs/robustness.md).
+"""Bad-input corpus through the CLI (catalogue in docs/robustness.md).
 
 Every case is generated here in ``tmp_path``. A bad input must give exit code 2 and exactly
 one line on stderr, ``error: ...``, naming the file and saying what to do; no traceback,

@@ -1,5 +1,4 @@
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,7 +16,6 @@ from potflat.rollout.seam import cut_open
 from potflat.rollout.unroll import RolloutOptions, rollout
 
 #: The shared real scans (CI has ../shared beside the repository).
-REAL = Path(__file__).resolve().parents[2] / "shared/data/real"
 
 
 def _local(res, local, Rot):
@@ -424,9 +422,8 @@ def test_run_rollout_stage_refuses_to_overwrite_its_input(tmp_path):
         run_rollout_stage(scan, tmp_path, name="a/b")
 
 
-@pytest.mark.skipif(not (REAL / "goblet.stl").exists(), reason="shared real scans absent")
-def test_real_goblet_band_rolls_out(tmp_path):
-    out = run_rollout_stage(REAL / "goblet.stl", tmp_path)
+def test_real_goblet_band_rolls_out(tmp_path, real_scans):
+    out = run_rollout_stage(real_scans / "goblet.stl", tmp_path)
     s = out.record
     # the goblet is a closed shell: its outer wall is unrolled, less the folded base underside
     assert s["walls"]["two_walled"] and s["walls"]["faces_inner"] > 0

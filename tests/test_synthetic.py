@@ -280,7 +280,7 @@ def test_deterministic_bytes(tmp_path):
     assert a.read_bytes() != c.read_bytes()
 
 
-# --------------------------------------------------------------------------- issue 7 kinds
+# --------------------------------------------------------------------------- real-vessel kinds
 
 
 def test_cup_has_two_walls_a_thickness_and_a_tondo():

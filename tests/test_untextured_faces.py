@@ -125,12 +125,11 @@ def test_untextured_faces_are_baked_as_relief_never_the_corner_texel(tmp_path, s
 
 def test_auto_importance_ignores_untextured_faces(tmp_path):
     """A cone painted in a belt, a quarter of its surface in scattered untextured blocks whose
-    (0, 0) texel is loud: the painted zone found is about the one found without them (before:
-    their borders were detail, 63% of the surface important instead of 13%)."""
-    from potflat_synthetic.vessels import make_vessel
-
+    (0, 0) texel is loud: the painted zone found is about the one found without them (their
+    borders are not taken for detail)."""
     from potflat import load_scan
     from potflat.rollout import rollout
+    from potflat_synthetic.vessels import make_vessel
 
     vessel = make_vessel("cone", n_vertices=8000, seed=3, painting="belt", shading=True)
     none = np.zeros(len(vessel.mesh.faces), bool)

@@ -1,4 +1,4 @@
-"""potflat._warmup: the child process that compiles the relax kernels on a first run, and
+"""potflat_cli._warmup: the child process that compiles the relax kernels on a first run, and
 the bake kernels compiled in the run first."""
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import potflat._jit
-import potflat._warmup as warmup
 from potflat.mesh.embedding import signed_areas
 from potflat.relax.parameters import COARSE
+from potflat_cli import _warmup as warmup
 
 
 def test_the_vessel_is_a_fold_free_painted_start_with_coarse_copies(tmp_path):

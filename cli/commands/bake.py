@@ -31,6 +31,7 @@ bake_command.__doc__ = HELP
 
 
 def _bake(flat_ply: Path, output: Path | None, options, *, name: str | None, quiet: bool, as_json: bool) -> None:
+    # imported here, not at the top: 'potflat --help' stays free of Numba and SciPy
     from potflat_cli._stage import run_stage
     from rich.console import Console
 

@@ -37,6 +37,7 @@ def batch_command(batch_file: BatchFile, workers: Workers = None, scheduler: Sch
 
     Example:  potflat batch samples/batch.yaml --workers 2
     """
+    # imported here, not at the top: 'potflat --help' stays free of Numba and SciPy
     import json as json_module
 
     from rich.console import Console
@@ -93,12 +94,14 @@ def _figures(report) -> str:
     parts = []
     if report.seconds:
         parts.append(f"{report.seconds:.1f} s")
+    # imported here, not at the top: 'potflat --help' stays free of Numba and SciPy
     from potflat.mesh.distortion import distortion_words
 
     return ", ".join(parts + [distortion_words(f)])
 
 
 def _print_table(summary) -> None:
+    # imported here, not at the top: 'potflat --help' stays free of Numba and SciPy
     from rich.console import Console
     from rich.table import Table
 

@@ -35,6 +35,7 @@ def plate_command(
     json: Json = False,
 ) -> None:
     """Compose the archaeological plate of a flattened scan."""
+    # imported here, not at the top: 'potflat --help' stays free of Numba and SciPy
     from potflat_cli._stage import run_stage
     from rich.console import Console
 

@@ -26,6 +26,7 @@ Input = Annotated[Path, typer.Argument(help="NAME.rollout.ply written by 'potfla
 def relax_command(rollout_ply: Input, output: StageOutputDir = None, name: Name = None, quiet: Quiet = False,
                   json: Json = False, *, options: dict) -> None:
     """Relax a rollout into a fold-free flattening."""
+    # imported here, not at the top: 'potflat --help' stays free of Numba and SciPy
     from potflat.mesh.distortion import distortion_words
     from potflat.files.relax_stage import run_relax_stage
     from potflat_cli._stage import run_stage, with_compile_note

@@ -23,6 +23,7 @@ Scan = Annotated[Path, typer.Argument(help="The scan: OBJ (+MTL, texture), PLY, 
 def rollout_command(scan: Scan, output: OutputDir = None, name: Name = None, quiet: Quiet = False,
                     json: Json = False, *, options: dict) -> None:
     """Unroll a vessel scan onto a proxy surface."""
+    # imported here, not at the top: 'potflat --help' stays free of Numba and SciPy
     from potflat.errors import InvalidOptionError
 
     if output is not None and output.exists() and not output.is_dir():
@@ -34,6 +35,7 @@ rollout_command.__doc__ = HELP
 
 
 def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quiet: bool, as_json: bool) -> None:
+    # imported here, not at the top: 'potflat --help' stays free of Numba and SciPy
     from potflat_cli._stage import run_stage
     from rich.console import Console
 

@@ -31,14 +31,15 @@ run_command.__doc__ = HELP
 
 
 def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json: bool, options: dict) -> None:
+    # imported here, not at the top: 'potflat --help' stays free of Numba and SciPy
     import json as json_module
     from dataclasses import asdict
 
     from rich.console import Console
 
-    import potflat._warmup as potflat_warmup
     from potflat.files.pipeline import run_scan
     from potflat.mesh.distortion import distortion_words
+    from potflat_cli import _warmup as potflat_warmup
     from potflat_cli._stage import say_compiling, with_compile_note
 
     scan = Path(scan)

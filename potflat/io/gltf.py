@@ -25,6 +25,16 @@ from potflat.io.stl_off import _trimesh_load
 def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
     import trimesh
 
+    try:
+        used = _gltf_document(path)[0].get("extensionsUsed")
+    except InvalidInputError:
+        used = None  # (a broken file: trimesh's reading says what is wrong with it)
+    if isinstance(used, list) and "KHR_draco_mesh_compression" in used:
+        try:  # trimesh decodes Draco with DracoPy; without it, it returns all-zero positions
+            import DracoPy  # noqa: F401
+        except ImportError:
+            raise InvalidInputError(f"{path} is Draco-compressed (KHR_draco_mesh_compression) and its decoder is "
+                                    "missing: pip install DracoPy") from None
     scene = _trimesh_load(path, force="scene")
     try:  # trimesh decodes embedded images lazily, here
         geoms = [g for g in (scene.dump() if isinstance(scene, trimesh.Scene) else [scene])
@@ -74,7 +84,8 @@ def _gltf_images(path: Path) -> list[Path]:
                                 f"export the scan again {_IGNORE_HINT}") from None
 
 
-def _gltf_image_files(path: Path) -> list[Path]:
+def _gltf_document(path: Path) -> tuple[dict, bytes]:
+    """The JSON document of a glTF/GLB and a GLB's binary chunk (empty for a .gltf)."""
     data = _read_bytes(path)
     bin_chunk = b""
     if data[:4] == b"glTF":
@@ -95,6 +106,11 @@ def _gltf_image_files(path: Path) -> list[Path]:
             raise InvalidInputError(f"{path} is not valid glTF JSON; export the scan again") from None
         if not isinstance(doc, dict):
             raise InvalidInputError(f"{path} is not valid glTF JSON; export the scan again")
+    return doc, bin_chunk
+
+
+def _gltf_image_files(path: Path) -> list[Path]:
+    doc, bin_chunk = _gltf_document(path)
     images = doc.get("images", [])
     textures = doc.get("textures", [])
     base = set()  # images used as base colour (not normal or roughness maps)

@@ -76,23 +76,25 @@ class LoadedScan:
     units_from: str = "default"
 
 
-#: Size range (mm, the longest side of the bounding box) of a vessel or sherd scanned in
-#: millimetres; outside it, a scan with no declared unit is taken for a unit mistake.
+#: Size range (mm, the longest side of the bounding box) of a vessel or sherd; outside it, the
+#: unit the scan was read in is taken for a unit mistake.
 PLAUSIBLE_SIZE_MM = (10.0, 2000.0)
+#: The units tried, in this order, for a scan of implausible size.
+PLAUSIBLE_UNITS = ("mm", "m", "cm", "in", "um")
 
 
 def check_plausible_size(loaded: LoadedScan, path: str | os.PathLike) -> None:
-    """Refuse a scan whose size is implausible in the unit it was read in, unless that unit was
-    given or declared by the file: a 45 cm vase in metres would be read as 0.45 mm.
+    """Refuse a scan whose size is implausible in the unit it was read in: a 45 cm vase in
+    millimetres read as metres would be 450 m tall, in metres read as millimetres 0.45 mm.
+    A unit the file declares is checked too (glTF is metres by definition, but exporters
+    also write millimetres), and so is a given one (a millimetre OBJ given ``--units m``).
 
     Raises
     ------
     InvalidInputError
         Naming the size, the unit it most likely is and the option that says so
-        (``looks like metres: add --units m``).
+        (``looks like millimetres: add --units mm``).
     """
-    if loaded.units_from != "default":
-        return
     mesh = loaded.mesh
     side = 0.0
     if len(mesh.vertices):
@@ -103,13 +105,14 @@ def check_plausible_size(loaded: LoadedScan, path: str | os.PathLike) -> None:
     if lo <= size_mm <= hi:
         return
     names = {"m": "metres", "cm": "centimetres", "um": "micrometres", "in": "inches", "mm": "millimetres"}
-    candidates = ("m", "cm", "in") if size_mm < lo else ("um",)
-    likely = next((u for u in candidates if lo <= side * UNITS_MM[u] <= hi), None)
+    likely = next((u for u in PLAUSIBLE_UNITS if u != mesh.units and lo <= side * UNITS_MM[u] <= hi), None)
     what = "small" if size_mm < lo else "large"
     hint = (f"it looks like {names[likely]}: add --units {likely}" if likely
             else f"give its unit with --units ({', '.join(UNITS_MM)})")
-    raise InvalidInputError(f"{path} is {side:.4g} units across: in {names[mesh.units]} a vessel too {what} to be real "
-                            f"({lo:g} to {hi:g} mm); {hint}, or --units {mesh.units} if the size is right")
+    read = {"given": "as given", "file": "as the file declares", "default": "the default"}[loaded.units_from]
+    escape = f", or --units {mesh.units} if the size is right" if loaded.units_from == "default" else ""
+    raise InvalidInputError(f"{path} is {side:.4g} units across: in {names[mesh.units]} ({read}) a vessel too {what} "
+                            f"to be real ({lo:g} to {hi:g} mm); {hint}{escape}")
 
 
 def load_scan(path: str | os.PathLike, *, units: str | None = None, clean: bool = True,

@@ -27,7 +27,6 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cached_property
 
-import cv2
 import numpy as np
 
 from potflat.errors import InvalidInputError, InvalidOptionError
@@ -76,6 +75,8 @@ def _chart_mask(texcoords: np.ndarray, height: int, width: int) -> np.ndarray:
 
     mask = np.zeros((height, width), np.uint8)
     raster.cover_texcoords(np.ascontiguousarray(texcoords, dtype=np.float64).reshape(-1, 3, 2), ROUNDING, mask)
+    import cv2  # here, not at the top: importing cv2 sets LD_LIBRARY_PATH in the environment
+
     return cv2.dilate(mask, np.ones((3, 3), np.uint8)).view(bool)  # (0 and 1: valid as bool, no copy)
 
 
@@ -95,6 +96,8 @@ def _halve_masked(img: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.nd
 
 def _pull_fill(levels: list, valids: list) -> None:
     """Fill each level's texels outside the charts from the next coarser level (in place)."""
+
+    import cv2  # here, not at the top: importing cv2 sets LD_LIBRARY_PATH in the environment
 
     last, ok = levels[-1], valids[-1]
     if ok.any() and not ok.all():
@@ -520,6 +523,8 @@ def rgba8(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
 
 def outline_pixels(field: np.ndarray, threshold: float) -> np.ndarray:
     """Pixels (k, w) bool on the outline of where ``field`` (k, w, NaN outside) is at least ``threshold``."""
+    import cv2  # here, not at the top: importing cv2 sets LD_LIBRARY_PATH in the environment
+
     inside = (np.nan_to_num(field, nan=0.0) >= threshold).astype(np.uint8)
     ring = np.ones((3, 3), np.uint8)
     edge = cv2.dilate(inside, ring, borderType=cv2.BORDER_REPLICATE) & ~cv2.erode(

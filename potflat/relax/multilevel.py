@@ -236,6 +236,7 @@ class _Plan:
 
     area: float  # the area term's weight (0 with a painted zone)
     limit: float | str | None  # the anisotropy limit: a number, "auto" (found by a first solve) or None
+    limit_of_copy: bool  # the limit is the one the coarse copy's solve found
     coarse: CoarseStart | None  # a relaxed coarse copy (None: none, or it could not be relaxed)
     softer: SofterStart | None  # a first relaxation at a lower importance contrast
     notes: list[str]
@@ -277,13 +278,14 @@ def _plan(flat: FlatMesh, options: RelaxOptions, settings: RelaxPreset, progress
     if limit == "auto" and softer is not None and softer.result.anisotropy_limit is not None:
         limit = softer.result.anisotropy_limit  # the first solve found it: every later solve uses it
     found = None if coarse is None or coarse.result is None else coarse.result.anisotropy_limit
-    if limit == "auto" and found is not None:  # (None: the copy stopped early; this solve finds it)
+    limit_of_copy = limit == "auto" and found is not None
+    if limit_of_copy:  # (None: the copy stopped early; this solve finds it)
         limit = found
     notes = [] if softer is None else softer.note(settings.importance_contrast)
     notes += list(coarse.notes) if coarse is not None else []
     if coarse is not None and coarse.result is None:
         coarse = None
-    return _Plan(area=area, limit=limit, coarse=coarse, softer=softer, notes=notes)
+    return _Plan(area=area, limit=limit, limit_of_copy=limit_of_copy, coarse=coarse, softer=softer, notes=notes)
 
 
 def _spring_system(V: np.ndarray, F: np.ndarray, start_uv: np.ndarray, flat: FlatMesh, settings: RelaxPreset,
@@ -414,6 +416,9 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         if plan.softer is not None:  # its layout is in x now (peak memory)
             plan = replace(plan, softer=replace(plan.softer, uv=None))
         x, folded_start, coarse, t_follow = _start(sp, x, frame, plan, fold_free, notes)
+        if plan.coarse is not None and coarse is None and plan.limit_of_copy:
+            # the copy's limit fits the copy's layout, not the rollout this solve starts from
+            plan = replace(plan, limit="auto", limit_of_copy=False)
         plan = replace(plan, coarse=None)  # (``coarse`` is what is left of it)
         # the setup's freed temporaries back to the system before the solve (the stage's peak;
         # 140 MiB at 3M vertices after a rollout in the same process, whose arrays fill the heap)

@@ -37,7 +37,7 @@ class RelaxPreset:
         The dynamics' friction inside and on the boundary (``dynamics`` only).
     shape, rigidity, area, max_anisotropy, importance_contrast, true_scale
         The painted figures' defaults (measured in ``docs/performance.md``, "Painted
-        figures"): the shape, rigidity and area terms' weights, the anisotropy limit
+        figures" and "Relax options"): the shape, rigidity and area terms' weights, the anisotropy limit
         (``"auto"``: found by a first solve without the area term), how much stiffer the
         important zone is than plain surface, and the final scaling to true scale in the
         important zone.
@@ -103,6 +103,9 @@ class EnergyParameters:
         generated vessel's painted circles came out rounder than under libigl ARAP).
     area_eps : float
         Smoothing of the area term at zero log area ratio.
+    ear_lift : float
+        Untangling: a folded ear (a triangle whose tip is on no other face) is mirrored about
+        its base; a tip lying on the base is lifted off it by this fraction of the base.
     """
 
     barrier_mu: float = 1.0
@@ -116,6 +119,7 @@ class EnergyParameters:
     limit_mu: float = 100.0
     limit_percentile: float = 80.0
     area_eps: float = 0.05
+    ear_lift: float = 0.1
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -162,7 +166,7 @@ class SolverParameters:
         coarse copy leaves both relaxations to the copy (which nests: the smallest copy
         takes the first) and is solved once, at the full contrast, from the copy's layout:
         2.5M textured amphora 16.5 s and 36 full-mesh iterations against 22.3 s and 10 + 34,
-        with lower edge-length RMS (docs/performance.md, fifteenth session).
+        with lower edge-length RMS.
     contrast_start_iterations : int
         Iterations the first of those relaxations spends on its mesh when it started from a
         relaxed coarse copy (the copies converge): it only has to smooth the layout the

@@ -11,7 +11,7 @@ from potflat.mesh.boundary import crossing_pairs
 from potflat.mesh.embedding import repair_folds, tutte_embedding
 from potflat.relax._kernels.springs import neighbour_means
 from potflat.relax.energy import SpringSystem
-from potflat.relax.parameters import COARSE
+from potflat.relax.parameters import COARSE, ENERGY
 
 
 def untangle(sp: SpringSystem, x: np.ndarray, rounds: int = 200) -> tuple[np.ndarray, int]:
@@ -19,7 +19,11 @@ def untangle(sp: SpringSystem, x: np.ndarray, rounds: int = 200) -> tuple[np.nda
 
     Averages over mesh edges only: the cross springs reach across the winged pair, and
     averaging over them too left 81 of 83 flips of a sea-vase rollout in place (edges only:
-    all fixed in 6 rounds).
+    all fixed in 6 rounds). The tip of an ear (a boundary vertex of one face) is not
+    averaged: the mean of its two neighbours lies on the ear's base, which leaves the ear
+    with zero area for good, and a small piece apart from the rest (a rollout's trimming
+    leaves some) is pulled together into a line; a folded ear is mirrored about its base
+    instead (:func:`unfold_ears`).
     Returns the positions and the number of faces that were flipped at the start.
     """
     bad = sp.signed_areas(x) <= 0
@@ -28,6 +32,7 @@ def untangle(sp: SpringSystem, x: np.ndarray, rounds: int = 200) -> tuple[np.nda
         return x, 0
     x = x.copy()
     region = np.zeros(sp.n, bool)
+    ear_tip = np.diff(sp.vf_ptr) == 1
     for r in range(rounds):
         bad = sp.signed_areas(x) <= 0
         if not bad.any():
@@ -35,11 +40,34 @@ def untangle(sp: SpringSystem, x: np.ndarray, rounds: int = 200) -> tuple[np.nda
         region[sp.faces[bad].ravel()] = True
         if r % 20 == 19:  # widen the region around persistent tangles
             region[sp.faces[region[sp.faces].any(axis=1)].ravel()] = True
-        verts = np.nonzero(region)[0]
+        verts = np.nonzero(region & ~ear_tip)[0]
         mean = np.empty((len(verts), 2))
         neighbour_means(x, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
         x[verts] = mean
+        unfold_ears(sp, x, np.flatnonzero(region & ear_tip))
     return x, n_bad
+
+
+def unfold_ears(sp: SpringSystem, x: np.ndarray, tips: np.ndarray) -> None:
+    """Mirror every folded ear among ``tips`` (boundary vertices of one face) about its base,
+    the line through its other two corners (a tip on that line is moved off it by
+    ``ENERGY.ear_lift`` of the base's length); ``x`` (n, 2) is changed in place."""
+    if not len(tips):
+        return
+    face = sp.vf_tri[sp.vf_ptr[tips]]
+    corner = np.argmax(sp.faces[face] == tips[:, None], axis=1)
+    a = x[sp.faces[face, (corner + 1) % 3]]
+    base = x[sp.faces[face, (corner + 2) % 3]] - a
+    length = np.linalg.norm(base, axis=1)
+    p = x[tips] - a
+    fold = (base[:, 0] * p[:, 1] - base[:, 1] * p[:, 0] <= 0) & (length > 0)
+    if not fold.any():
+        return
+    unit = base[fold] / length[fold, None]
+    normal = np.stack([-unit[:, 1], unit[:, 0]], axis=1)  # towards the ear's inner side
+    along = (p[fold] * unit).sum(axis=1)
+    height = np.maximum(-(p[fold] * normal).sum(axis=1), ENERGY.ear_lift * length[fold])
+    x[tips[fold]] = a[fold] + along[:, None] * unit + height[:, None] * normal
 
 
 def fold_free_start(sp: SpringSystem, x: np.ndarray, n_bad: int, notes: list[str]) -> tuple[np.ndarray, bool]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse
 
+from potflat.mesh._kernels.topology import edge_table
 from potflat.mesh.boundary import crossing_pairs, edges_and_boundary
 from potflat.mesh.embedding import signed_areas
 from potflat.rollout.seam import cut_open
@@ -27,6 +28,9 @@ TRIM_ROUNDS = 3
 
 #: Passes of :func:`border_folds` over one development (each peels what the last exposed).
 BORDER_PASSES = 50
+#: A piece that trimming cuts off a connected part of the development is trimmed with it
+#: when its area is below this fraction of that part's (:func:`border_folds`).
+CUT_OFF_FRACTION = 0.1
 
 
 def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *, table: tuple | None = None) -> np.ndarray:
@@ -46,6 +50,10 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *, tabl
     * **pinched vertices**: where a vertex's faces form separate fans (they meet at the
       vertex only, e.g. after trimming), all but the fan of largest area are left out, so
       the development does not touch itself.
+    * **cut-off pieces**: a piece that trimming separated from a connected part of the
+      development, with less than :data:`CUT_OFF_FRACTION` of that part's area (the
+      outside of a foot beyond the edge-on band where the surface turns under): left as
+      it is, it lies over the wall and would be peeled a ring of faces per pass.
 
     Folds enclosed by well-unrolled faces (scan noise, slivers) are left to :func:`untangle`.
 
@@ -64,16 +72,26 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *, tabl
     -------
     (m,) bool
     """
-    faces = np.asarray(faces, np.int64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
     keep = np.ones(len(faces), bool)
+    # the edges and face adjacency once; each pass reads its border off them by counting
+    edge_of, all_edges, _, _ = edge_table(faces, len(uv))
+    graph = FaceGraph(faces)
+    part = graph.components()
+    part_area = np.bincount(part, area_3d)
     for _ in range(BORDER_PASSES):
         idx = np.flatnonzero(keep)
         if len(idx) == 0:
             break
         sub = faces[idx]
         full = len(idx) == len(faces)  # sub is faces itself
-        edges, seg, owner = table if table is not None and full else edges_and_boundary(sub, len(uv))
+        if table is not None and full:
+            edges, seg, owner = table
+        else:
+            edges, seg, owner = _kept_edges(faces, edge_of, all_edges, idx)
         drop = _edge_on_strips(sub, uv, area_3d[idx], seg) | _minor_fans(sub, area_3d[idx], edges, len(uv))
+        if not full:
+            drop |= _cut_off(graph, keep, area_3d, part, part_area)[idx]
         if not drop.any():  # overlaps are judged on a border without folded strips
             a, b = crossing_segments(uv, seg)
             drop[owner[a]] = True
@@ -82,6 +100,36 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *, tabl
             break
         keep[idx[drop]] = False
     return ~keep
+
+
+def _kept_edges(faces: np.ndarray, edge_of: np.ndarray, edges: np.ndarray, idx: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`potflat.mesh.boundary.edges_and_boundary` of the faces ``idx`` of ``faces``, read
+    off the whole mesh's edge table (``edge_of``, ``edges`` from
+    :func:`potflat.mesh._kernels.topology.edge_table`) by counting each edge's kept faces: the
+    edges of the kept faces, their boundary segments (in face order) and each segment's face
+    (an index into ``idx``)."""
+    halves = (3 * idx[:, None] + np.arange(3)).ravel()
+    edge = edge_of[halves]
+    count = np.bincount(edge, minlength=len(edges))
+    one = count[edge] == 1
+    face, k = halves[one] // 3, halves[one] % 3
+    seg = np.stack([faces[face, k], faces[face, (k + 1) % 3]], axis=1)
+    return edges[count > 0], seg, np.flatnonzero(one) // 3
+
+
+def _cut_off(graph: FaceGraph, keep: np.ndarray, area_3d: np.ndarray, part: np.ndarray,
+             part_area: np.ndarray) -> np.ndarray:
+    """Kept faces (``keep`` (m,) bool) of the pieces that trimming cut off a connected part of
+    the development, with less than :data:`CUT_OFF_FRACTION` of its area (see
+    :func:`border_folds`); ``graph`` is the whole development's face adjacency, ``part`` (m,)
+    each face's part before trimming, ``part_area`` the parts' areas."""
+    pairs = graph.pairs
+    piece = graph.components(keep[pairs[:, 0]] & keep[pairs[:, 1]])
+    area = np.bincount(piece, np.where(keep, area_3d, 0.0))
+    of = np.zeros(len(area), np.int64)
+    of[piece] = part
+    return (area < CUT_OFF_FRACTION * part_area[of])[piece] & keep
 
 
 def crossing_segments(uv: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

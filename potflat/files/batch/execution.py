@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from potflat import __version__
+from potflat import _heap
 from potflat._jit import numba_threads
 from potflat.errors import InvalidOptionError, PotflatError
 from potflat.files.batch.config import Batch, ScanJob
@@ -336,11 +337,13 @@ def _interrupt(signum, frame) -> None:
     raise KeyboardInterrupt
 
 
-def _run_job_in_worker(job: ScanJob, key: str, threads: int) -> ScanReport:
-    """:func:`run_job` in a pool worker; an interrupt (SIGTERM from the parent) ends the worker
-    once the scan's temporaries are removed, so it can never start a queued scan."""
+def _run_job_in_worker(job: ScanJob, key: str, threads: int, heap_tuning: bool) -> ScanReport:
+    """:func:`run_job` in a pool worker, with the heap tuning allowed when the batch's process
+    allowed it (:func:`potflat._heap.heap_tuning`); an interrupt (SIGTERM from the parent) ends
+    the worker once the scan's temporaries are removed, so it can never start a queued scan."""
     try:
-        return run_job(job, key, threads=threads)
+        with _heap.heap_tuning() if heap_tuning else contextlib.nullcontext():
+            return run_job(job, key, threads=threads)
     except KeyboardInterrupt:
         os._exit(130)
 
@@ -354,13 +357,13 @@ def _run_pool(todo: list, workers: int, record: Callable[[int, ScanReport], None
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from concurrent.futures.process import BrokenProcessPool
 
-    threads = max(1, _cores() // workers)
+    threads, heap_tuning = max(1, _cores() // workers), _heap.heap_tuning_allowed()
     context = multiprocessing.get_context(START_METHOD)
     crashed = []
     start = dict(mp_context=context, initializer=_worker_start, initargs=(os.getpid(),))
     with ProcessPoolExecutor(max_workers=workers, **start) as pool:
         try:
-            futures = {pool.submit(_run_job_in_worker, job, key, threads): (index, job, key)
+            futures = {pool.submit(_run_job_in_worker, job, key, threads, heap_tuning): (index, job, key)
                        for index, job, key in todo}
             for future in as_completed(futures):
                 index, job, key = futures[future]
@@ -377,7 +380,7 @@ def _run_pool(todo: list, workers: int, record: Callable[[int, ScanReport], None
     for index, job, key in sorted(crashed, key=lambda item: item[0]):
         with ProcessPoolExecutor(max_workers=1, **start) as pool:
             try:
-                report = pool.submit(_run_job_in_worker, job, key, threads).result()
+                report = pool.submit(_run_job_in_worker, job, key, threads, heap_tuning).result()
             except BrokenProcessPool:
                 report = _report(job, "failed", error=(
                     "the worker process died (killed, out of memory or crashed); run this scan "

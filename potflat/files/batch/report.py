@@ -14,6 +14,7 @@ import html
 import io
 import json
 import os
+import shlex
 from datetime import datetime, timezone
 from pathlib import Path
 from urllib.parse import quote
@@ -64,6 +65,9 @@ function sortCards(key){
   cards.forEach(c=>box.appendChild(c));
 }
 document.getElementById('sort').addEventListener('change',e=>sortCards(e.target.value));
+// served by 'potflat view' (which answers at data-view): each card links to its scan's view
+if(location.protocol!=='file:'){document.querySelectorAll('a.view[data-view]').forEach(a=>
+  fetch(a.dataset.view,{method:'HEAD'}).then(r=>{if(r.ok){a.href=a.dataset.view;a.hidden=false;}}).catch(()=>{}));}
 """
 
 _STATUS_RANK = {"failed": "0", "interrupted": "1", "cancelled": "2", "done": "3", "skipped": "4"}
@@ -127,6 +131,9 @@ def _card(report, base: Path) -> str:
             (f"distortion ({where})", html.escape(distortion_words(figures)) if figures else "-"),
             ("time", f"{seconds:.1f} s{when}" if seconds else "-"),
             ("folded triangles", "-" if flipped is None else str(flipped))]
+    if (folder / f"{name}.bake.json").is_file():  # the view: a link when served by 'potflat view', else its command
+        rows.append(("view", f'<a class="view" hidden data-view="_potflat/view/{quote(name)}">open the view</a> '
+                             f'<code>potflat view {html.escape(shlex.quote(str(base)))} {html.escape(shlex.quote(name))}</code>'))
     plate = folder / f"{name}.plate.pdf"
     if plate.is_file():
         rows.append(("plate", f'<a href="{_href(plate, base)}">PDF</a>, '

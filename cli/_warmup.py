@@ -72,7 +72,7 @@ def start() -> Warmup | None:
     except OSError:
         return None
     try:
-        process = subprocess.Popen([sys.executable, "-m", "potflat._warmup", str(folder)],
+        process = subprocess.Popen([sys.executable, "-m", "potflat_cli._warmup", str(folder)],
                                    stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     except OSError:
         shutil.rmtree(folder, ignore_errors=True)

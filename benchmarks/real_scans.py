@@ -1,0 +1,363 @@
+"""Real museum scans at full resolution: upsampled copies of the shared real scans through
+``potflat run`` with the defaults.
+
+Each scan of ``--data`` (default ``../shared/data/real`` beside the repository) is read as
+potflat reads it, without cleaning (exact welding only, so stray pieces, pinholes and
+non-manifold joins stay), and refined to each target vertex count by midpoint subdivision:
+every triangle into 4 (the new vertex of an edge at its 3D midpoint, each face corner's
+texture coordinates carried to the midpoint of its two corners, so texture seams stay
+seams) while that stays under the target, then the longest edges are split (their triangles
+into 2, 3 or 4, the shorter diagonal of a quadrilateral) up to the target exactly. Textured
+copies are written as OBJ + MTL + the scan's own texture image, untextured ones as binary
+PLY, both in millimetres. The copies are cached in ``--out`` (a later run reuses a copy
+made with the same settings); the native scan itself is the ``native`` size.
+
+Then, one after the other, each copy runs through ``python -m potflat_cli run COPY -o DIR
+--json`` in its own process (resident memory sampled every 0.1 s; a failure is a row, not
+an abort) and the row is read off the JSON sidecars: stage times (and the rollout's steps),
+relax iterations per level, flipped triangles and boundary crossings (of the rollout and
+of the result, or of the refusal), the painted zone's length error (median, p95), the
+share of the scan's surface in the image and the share trimmed away, and the outline's
+total turning (sum of absolute exterior angles over 2 pi, all boundary loops) of the
+rollout and the relaxed layout.
+
+Reproduce::
+
+    python benchmarks/real_scans.py --out /tmp/real --sizes native 0.1e6 0.3e6 1e6 3e6
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import resource
+import shutil
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _docs import command_line, publish  # noqa: E402
+from bench_scale import _status_kb, warm_kernels  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / "shared" / "data" / "real"
+SCANS = ("dragon-jar.glb", "colonoware-pot.glb", "plastic-vase.ply", "sea-vase.ply", "goblet.stl")
+SECTION = "## Real scans at full resolution"
+#: The copy's settings: a cached copy made with other settings is made again.
+COPY_VERSION = 1
+
+# local corner indices of a face being split: corners 0-2, then the midpoints of edges
+# 0-1, 1-2, 2-0 as 3-5 (after rotating the face so that its split edges come first)
+_ONE = np.array([[0, 3, 2], [3, 1, 2]])  # edge 0-1 split
+_TWO = {True: np.array([[3, 1, 4], [0, 3, 4], [0, 4, 2]]),  # edges 0-1, 1-2 split; diagonal 0-4
+        False: np.array([[3, 1, 4], [0, 3, 2], [3, 4, 2]])}  # diagonal 3-2
+_ALL = np.array([[0, 3, 5], [3, 1, 4], [5, 4, 2], [3, 4, 5]])
+
+
+def split_edges(vertices: np.ndarray, faces: np.ndarray, texcoords: np.ndarray | None,
+                n_split: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Split edges at their midpoints: all of them (``n_split`` None: each triangle into 4) or
+    the ``n_split`` longest (their triangles into 2, 3 or 4).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    faces : (m, 3) int64
+    texcoords : (m, 3, 2) float64 or None
+        Per face corner; a new corner gets the mean of its edge's two corners in that face.
+    n_split : int or None
+
+    Returns
+    -------
+    vertices : (n + s, 3) float64
+    faces : (m', 3) int64
+        Counter-clockwise as the input.
+    texcoords : (m', 3, 2) float64 or None
+    """
+    from potflat.mesh._kernels.topology import edge_table
+
+    F = np.ascontiguousarray(faces, np.int64)
+    edge_of, edges, _, _ = edge_table(F, len(vertices))
+    if n_split is None:
+        chosen = np.arange(len(edges))
+    else:
+        length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
+        chosen = np.sort(np.argsort(-length, kind="stable")[:n_split])
+    new_id = np.full(len(edges), -1, np.int64)
+    new_id[chosen] = len(vertices) + np.arange(len(chosen))
+    V = np.concatenate([vertices, 0.5 * (vertices[edges[chosen, 0]] + vertices[edges[chosen, 1]])])
+    mid = new_id[edge_of.reshape(-1, 3)]  # (m, 3): midpoint of edge k (corner k to k + 1)
+    split = mid >= 0
+    ns = split.sum(axis=1)
+    # rotate each face so that its split edges come first: one split edge -> edge 0; two ->
+    # edges 0 and 1 (the unsplit one last)
+    shift = np.zeros(len(F), np.int64)
+    shift[ns == 1] = np.argmax(split[ns == 1], axis=1)
+    shift[ns == 2] = (np.argmin(split[ns == 2], axis=1) + 1) % 3
+    order = (np.arange(3)[None, :] + shift[:, None]) % 3
+    rows = np.arange(len(F))[:, None]
+    ids = np.concatenate([F[rows, order], mid[rows, order]], axis=1)  # (m, 6)
+    tc = None
+    if texcoords is not None:
+        corners = texcoords[rows, order]  # (m, 3, 2)
+        tc = np.concatenate([corners, 0.5 * (corners + np.roll(corners, -1, axis=1))], axis=1)  # (m, 6, 2)
+    out_f, out_t = [], []
+
+    def emit(sel: np.ndarray, template: np.ndarray) -> None:
+        out_f.append(ids[sel][:, template].reshape(-1, 3))
+        if tc is not None:
+            out_t.append(tc[sel][:, template].reshape(-1, 3, 2))
+
+    emit(ns == 0, np.array([[0, 1, 2]]))
+    emit(ns == 1, _ONE)
+    two = np.flatnonzero(ns == 2)
+    d04 = np.linalg.norm(V[ids[two, 0]] - V[ids[two, 4]], axis=1)
+    d32 = np.linalg.norm(V[ids[two, 3]] - V[ids[two, 2]], axis=1)
+    emit(two[d04 <= d32], _TWO[True])
+    emit(two[d04 > d32], _TWO[False])
+    emit(ns == 3, _ALL)
+    return V, np.concatenate(out_f), (np.concatenate(out_t) if tc is not None else None)
+
+
+def upsample(vertices: np.ndarray, faces: np.ndarray, texcoords: np.ndarray | None, target: int):
+    """Midpoint subdivision to ``target`` vertices: whole 1-to-4 steps while they stay at or
+    under it, then the longest edges split up to it (see the module docstring)."""
+    from potflat.mesh._kernels.topology import edge_table
+
+    V, F, T = vertices, faces, texcoords
+    while True:
+        n_edges = len(edge_table(np.ascontiguousarray(F, np.int64), len(V))[1])
+        if len(V) + n_edges > target:
+            break
+        V, F, T = split_edges(V, F, T)
+    if target > len(V):
+        V, F, T = split_edges(V, F, T, target - len(V))
+    return V, F, T
+
+
+def _write_ply(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
+    from potflat.io.atomic import atomic_path
+
+    head = (f"ply\nformat binary_little_endian 1.0\ncomment units mm\nelement vertex {len(vertices)}\n"
+            "property double x\nproperty double y\nproperty double z\n"
+            f"element face {len(faces)}\nproperty list uchar int vertex_indices\nend_header\n").encode()
+    rec = np.empty(len(faces), dtype=[("k", "u1"), ("f", "<i4", 3)])
+    rec["k"], rec["f"] = 3, faces
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            fh.write(head)
+            fh.write(np.ascontiguousarray(vertices, "<f8").tobytes())
+            fh.write(rec.tobytes())
+
+
+def make_copy(scan: Path, target: int, folder: Path) -> tuple[Path, dict]:
+    """The copy of ``scan`` refined to ``target`` vertices, in ``folder`` (reused when a copy
+    with the same settings is there); its path and figures (vertices, faces, 3D area mm²)."""
+    from potflat.io.obj import write_textured_obj
+    from potflat.io.scan import load_scan
+    from potflat.types import mm_per_unit
+
+    settings = {"scan": scan.name, "size": scan.stat().st_size, "target": target, "version": COPY_VERSION}
+    record = folder / "copy.json"
+    if record.is_file():
+        kept = json.loads(record.read_text())
+        if kept.get("settings") == settings and (folder / kept["file"]).is_file():
+            return folder / kept["file"], kept["info"]
+    folder.mkdir(parents=True, exist_ok=True)
+    t = time.perf_counter()
+    mesh = load_scan(scan, clean=False).mesh
+    V, F, T = upsample(mesh.vertices * mm_per_unit(mesh.units), mesh.faces, mesh.texcoords, target)
+    if T is not None:
+        image = folder / f"{scan.stem}-texture{mesh.texture_path.suffix}"
+        shutil.copyfile(mesh.texture_path, image)
+        vt, corner = np.unique(T.reshape(-1, 2), axis=0, return_inverse=True)
+        path = write_textured_obj(folder / f"{scan.stem}.obj", V, F, vt, corner.reshape(-1, 3), image.name,
+                                  header=f"{scan.name} upsampled to {len(V)} vertices by midpoint subdivision, "
+                                         "units mm")
+    else:
+        path = folder / f"{scan.stem}.ply"
+        _write_ply(path, V, F)
+    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
+    info = {"vertices": len(V), "faces": len(F), "area_mm2": float(area), "make_s": time.perf_counter() - t}
+    record.write_text(json.dumps({"settings": settings, "file": path.name, "info": info}))
+    return path, info
+
+
+def native_info(scan: Path) -> dict:
+    """Vertices, faces and 3D area (mm²) of a scan as read (exact welding only)."""
+    from potflat.io.scan import load_scan
+    from potflat.types import mm_per_unit
+
+    mesh = load_scan(scan, clean=False).mesh
+    V, F = mesh.vertices * mm_per_unit(mesh.units), mesh.faces
+    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
+    return {"vertices": len(V), "faces": len(F), "area_mm2": float(area)}
+
+
+def run_potflat(scan: Path, out: Path, extra: tuple[str, ...] = (), interval: float = 0.1) -> dict:
+    """``potflat run`` on ``scan`` into ``out`` (emptied first) in a child process: exit code,
+    last error line, wall time, CPU time (user + system, all threads: the figure to compare
+    on a shared machine), peak resident memory (GB) and the run's JSON report."""
+    if out.exists():
+        shutil.rmtree(out)
+    cmd = [sys.executable, "-m", "potflat_cli", "run", str(scan), "-o", str(out), *extra, "--json"]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            stdin=subprocess.DEVNULL)
+    hwm = [0]
+
+    def sample() -> None:
+        while proc.poll() is None:
+            hwm[0] = max(hwm[0], _status_kb(proc.pid).get("VmHWM", 0))
+            time.sleep(interval)
+
+    thread = threading.Thread(target=sample, daemon=True)
+    thread.start()
+    stdout, stderr = proc.communicate()
+    wall = time.perf_counter() - start
+    thread.join()
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    errors = [ln for ln in stderr.splitlines() if ln.startswith("error")]
+    try:
+        report = json.loads(stdout) if proc.returncode == 0 else None
+    except ValueError:
+        report = None
+    return {"rc": proc.returncode, "error": " ".join(stderr.split("error:", 1)[1].split()) if errors else "",
+            "wall_s": wall, "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime),
+            "peak_gb": hwm[0] / 2**20, "report": report}
+
+
+def outline_turning(ply: Path) -> float:
+    """Total turning of a stage PLY's flat outline: the sum over all boundary loops of the
+    absolute exterior angles, over 2 pi (1 for a convex outline)."""
+    from potflat.io.flat_ply import read_flat_ply
+    from potflat.mesh.embedding import boundary_loops
+
+    flat = read_flat_ply(ply)
+    total = 0.0
+    for loop in boundary_loops(flat.mesh.faces, len(flat.uv)):
+        p = flat.uv[loop]
+        d = np.roll(p, -1, axis=0) - p
+        a = np.arctan2(d[:, 1], d[:, 0])
+        total += float(np.abs((np.roll(a, -1) - a + np.pi) % (2 * np.pi) - np.pi).sum())
+    return total / (2 * np.pi)
+
+
+def _load(path: Path) -> dict:
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def figures(out: Path, name: str, run: dict, area_mm2: float) -> dict:
+    """One row's figures from the sidecars in ``out`` (whatever stages were written)."""
+    ro, re_, ba = (_load(out / f"{name}.{s}.json") for s in ("rollout", "relaxed", "bake"))
+    row: dict = {"rc": run["rc"], "error": run["error"], "wall_s": run["wall_s"], "cpu_s": run["cpu_s"],
+                 "peak_gb": run["peak_gb"]}
+    t = ro.get("timings", {})
+    row["rollout_s"] = t.get("total")
+    row["steps"] = {k: v for k, v in t.get("rollout_steps", {}).items() if k != "total"}
+    row["relax_s"] = re_.get("timings", {}).get("total")
+    row["bake_s"] = ba.get("timings", {}).get("total")
+    row["rollout_overlap"] = ro.get("boundary_overlap")
+    row["levels"] = [(lv.get("level"), lv.get("iterations")) for lv in re_.get("levels", [])]
+    row["notes"] = re_.get("notes", [])
+    row["flipped"] = re_.get("flipped")
+    row["crossings"] = re_.get("boundary_overlap")
+    m = re.search(r"(\d+) flipped triangles and (\d+) boundary crossings", run["error"])
+    if m:
+        row["flipped"], row["crossings"] = int(m.group(1)), int(m.group(2))
+    zone = re_.get("important_zone") or {}
+    imp = ro.get("importance", {})
+    row["zone"] = "none" if imp.get("uniform") else f"{100 * imp.get('zone_fraction', float('nan')):.0f}%"
+    row["zone_err"] = (zone.get("length_error_median_pct"), zone.get("length_error_p95_pct"))
+    row["in_image_pct"] = 100 * ba["surface_area_mm2"] / area_mm2 if "surface_area_mm2" in ba else None
+    row["trimmed_pct"] = 100 * ro.get("trimmed", {}).get("area_mm2", float("nan")) / area_mm2 if ro else None
+    row["turning"] = tuple(outline_turning(p) if p.is_file() else None
+                           for p in (out / f"{name}.rollout.ply", out / f"{name}.relaxed.ply"))
+    return row
+
+
+def _f(x, fmt: str = ".1f") -> str:
+    return "-" if x is None else format(x, fmt)
+
+
+def table(rows: list[dict], command: str) -> str:
+    """The Markdown section: one row per scan and size."""
+    lines = [SECTION, "",
+             f"`{command}` ({time.strftime('%Y-%m-%d')}): the real scans (native and upsampled by midpoint "
+             "subdivision) through `potflat run` with the defaults, one after the other in one run. "
+             "Times in s (the stages' own, wall), the whole run's CPU time (user + system, all threads) "
+             "and CPU time per vertex in us; relax iterations per level, coarsest "
+             "first; crossings of the rollout's outline / of the result; zone: the painted zone's share "
+             "of the rollout (none: uniform weights) and its length error, median / p95 %; image / "
+             "trimmed: share of the scan's 3D area; turning of the outline over 2 pi, rollout / relaxed.",
+             "", "| scan | vertices | result | rollout s | unroll s | untangle s | folds s | relax s | bake s "
+             "| whole s (CPU s) | CPU us/vertex | peak GB | iterations | flips | crossings | zone | zone error % "
+             "| image % | trimmed % | turning |",
+             "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---|---|---:|---:|---|"]
+    for r in rows:
+        result = "image" if r["rc"] == 0 else ("refused: " + r["error"][:60] if r["error"] else f"exit {r['rc']}")
+        steps = r["steps"]
+        lines.append("| " + " | ".join([
+            r["scan"], f"{r['vertices']:,}", result, _f(r["rollout_s"]), _f(steps.get("unroll")),
+            _f(steps.get("untangle")), _f(steps.get("folds")), _f(r["relax_s"]), _f(r["bake_s"]),
+            f"{_f(r['wall_s'])} ({_f(r['cpu_s'], '.0f')})", _f(1e6 * r["cpu_s"] / r["vertices"], ".0f"),
+            _f(r["peak_gb"], ".2f"),
+            " ".join(str(it) for _, it in r["levels"]) or "-", _f(r["flipped"], "d"),
+            f"{_f(r['rollout_overlap'], 'd')} / {_f(r['crossings'], 'd')}", r["zone"],
+            f"{_f(r['zone_err'][0])} / {_f(r['zone_err'][1])}", _f(r["in_image_pct"]),
+            _f(r["trimmed_pct"]), f"{_f(r['turning'][0])} / {_f(r['turning'][1])}"]) + " |")
+    notes = [f"- {r['scan']} {r['vertices']:,}: {n}" for r in rows for n in r["notes"]]
+    return "\n".join(lines + ([""] + notes if notes else []) + [""])
+
+
+def _size(text: str) -> str | int:
+    if text == "native":
+        return text
+    try:
+        return int(float(text))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a size is 'native' or a vertex count, got {text!r}") from None
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, required=True, help="folder for the copies (kept, reused) and the runs")
+    ap.add_argument("--sizes", type=_size, nargs="+", default=["native", 100_000, 300_000, 1_000_000, 3_000_000],
+                    help="'native' and/or vertex counts (default: native 0.1e6 0.3e6 1e6 3e6)")
+    ap.add_argument("--scans", nargs="+", default=list(SCANS), help="file names in --data (default: all five)")
+    ap.add_argument("--data", type=Path, default=DATA, help="folder of the real scans")
+    ap.add_argument("--run-options", default="", help="more options for every `potflat run`, one string")
+    ap.add_argument("--no-warm", action="store_true", help="skip compiling the kernels first")
+    ap.add_argument("--write", action="store_true", help="update the section in docs/performance.md")
+    args = ap.parse_args(argv)
+
+    if not args.no_warm:
+        warm_kernels()
+    rows = []
+    for name in args.scans:
+        scan = args.data / name
+        for size in args.sizes:
+            folder = args.out / Path(name).stem / str(size)
+            if size == "native":
+                path, info = scan, native_info(scan)
+            else:
+                print(f"{name}: copy with {size:,} vertices ...", flush=True)
+                path, info = make_copy(scan, size, folder / "copy")
+            print(f"{name} ({info['vertices']:,} vertices): potflat run ...", flush=True)
+            run = run_potflat(path, folder / "run", tuple(args.run_options.split()))
+            row = {"scan": Path(name).stem, "vertices": info["vertices"],
+                   **figures(folder / "run", path.stem, run, info["area_mm2"])}
+            print(f"  {'image' if run['rc'] == 0 else 'FAILED: ' + run['error']} in {run['wall_s']:.1f} s", flush=True)
+            (folder / "row.json").write_text(json.dumps(row, indent=1, default=str))
+            rows.append(row)
+    publish("real_scans", table(rows, command_line("real_scans.py", argv if argv is not None else sys.argv[1:])), args.write)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,459 @@
+"""``potflat view``: the server's safety, the links between the views, the measure, the edits
+and the rerun, checked in a real headless Chromium (Debian's, driven by Playwright) on the
+amphora sample run once for the whole module."""
+from __future__ import annotations
+
+import http.client
+import json
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+SAMPLE = Path(__file__).resolve().parents[1] / "samples" / "data" / "amphora.obj"
+#: Chromium's flags: software WebGL, no network of its own.
+CHROMIUM_ARGS = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--disable-gpu-sandbox",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
+                 "--disable-dev-shm-usage"]
+PX_PER_MM = 4.0
+
+
+def _run_sample(out: Path) -> Path:
+    from potflat.files.pipeline import run_scan
+
+    run_scan(SAMPLE, out, relax={"preset": "preview"}, bake={"px_per_mm": PX_PER_MM, "position_map": True})
+    return out
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    return _run_sample(tmp_path_factory.mktemp("view") / "out")
+
+
+class _Served:
+    def __init__(self, folder: Path):
+        from potflat.view.server import serve
+
+        self.server = serve(folder)
+        self.thread = threading.Thread(target=self.server.serve_forever, kwargs={"poll_interval": 0.1}, daemon=True)
+        self.thread.start()
+        self.server.runs.scene("amphora").warm()
+
+    @property
+    def scene(self):
+        return self.server.runs.scene("amphora")
+
+    def close(self):
+        self.server.shutdown()
+        self.server.server_close()
+
+
+@pytest.fixture(scope="module")
+def served(run_dir):
+    s = _Served(run_dir)
+    yield s
+    s.close()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    playwright = pytest.importorskip("playwright.sync_api", reason="pip install playwright (in the test extra)")
+    exe = shutil.which("chromium") or shutil.which("chromium-browser")
+    if exe is None:
+        pytest.skip("no chromium on this machine (.ci/run installs Debian's chromium; apt-get install chromium)")
+    with playwright.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+def _open(browser, served, errors=None):
+    page = browser.new_page(viewport={"width": 1400, "height": 800})
+    if errors is not None:
+        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+        page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(served.server.url("amphora"))
+    page.wait_for_function("window.potflat && (window.potflat.ready || window.potflat.error)", timeout=60_000)
+    assert page.evaluate("potflat.error") is None
+    return page
+
+
+@pytest.fixture(scope="module")
+def page(browser, served):
+    p = _open(browser, served)
+    yield p
+    p.close()
+
+
+def _share_drawn(png: bytes) -> float:
+    """Share of a screenshot's pixels that differ from the page's background (59, 59, 59)."""
+    import io
+
+    from PIL import Image
+
+    a = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int)
+    return float((np.abs(a - 59).sum(axis=2) > 12).mean())
+
+
+def _outward(scene, point):
+    axis = scene.rollout["axis"]
+    d = np.asarray(point) - np.asarray(axis["point"])
+    a = np.asarray(axis["direction"])
+    d = d - (d @ a) * a
+    return d / np.linalg.norm(d)
+
+
+# ---------------------------------------------------------------------- in the browser
+def test_page_loads_without_console_errors_and_both_views_render(browser, served):
+    errors: list[str] = []
+    page = _open(browser, served, errors)
+    try:
+        page.wait_for_timeout(300)
+        assert errors == []
+        assert _share_drawn(page.locator("#vessel").screenshot()) > 0.15   # the vessel, textured
+        assert _share_drawn(page.locator("#flat").screenshot()) > 0.3     # the image's tiles
+        assert page.evaluate("potflat.firstRenderMs") > 0
+        layers = page.evaluate("[...document.querySelectorAll('#layer option')].map(o => o.value)")
+        assert layers == ["painting", "stress", "area", "anisotropy"]
+        page.select_option("#layer", "stress")
+        page.wait_for_function("document.getElementById('legend').complete && "
+                               "document.getElementById('legend').naturalWidth > 0")
+        assert errors == []
+    finally:
+        page.close()
+
+
+def test_click_on_the_image_marks_the_position_maps_point_on_the_vessel(page, served, run_dir):
+    import tifffile
+
+    scene = served.scene
+    position = tifffile.imread(run_dir / "amphora.position.tif")
+    page.click("[data-tool=look]")
+    for pixel in ([1500.5, 950.5], [2400.5, 700.5]):
+        assert np.isfinite(position[int(pixel[1]), int(pixel[0])]).all()
+        c = page.evaluate(f"potflat.imageToClient({pixel})")
+        page.evaluate("potflat.marker3d = null")
+        page.mouse.click(c["x"], c["y"])
+        page.wait_for_function("potflat.marker3d !== null")
+        marked = np.asarray(page.evaluate("potflat.marker3d"))
+        expected = position[int(pixel[1]), int(pixel[0])].astype(float)
+        assert np.linalg.norm(marked - expected) * scene.grid.mm_per_unit < 1.0
+        readout = page.evaluate("potflat.readout")
+        assert readout["length_error_pct"] is not None and readout["anisotropy"] >= 1.0
+        assert "local length error" in page.text_content("#readout")
+
+
+def test_click_on_the_vessel_marks_the_flat_position(page, served):
+    scene = served.scene
+    page.click("[data-tool=look]")
+    for target in ([1700, 900], [1200, 1100]):
+        i = int(np.argmin(np.abs(scene.pixels - target).sum(axis=1)))
+        point = scene.flat.mesh.vertices[i]
+        page.evaluate(f"potflat.lookFrom({point.tolist()}, {_outward(scene, point).tolist()}, 200)")
+        s = page.evaluate(f"potflat.project({point.tolist()})")
+        page.evaluate("potflat.markerFlat = null")
+        page.mouse.click(s["x"], s["y"])
+        page.wait_for_function("potflat.markerFlat !== null")
+        marked = np.asarray(page.evaluate("potflat.markerFlat"))
+        assert np.linalg.norm(marked - scene.pixels[i]) < 2.0
+
+
+def test_measure_gives_the_image_and_the_vessel_distance(page, served):
+    scene = served.scene
+    page.click("[data-tool=measure]")
+    a, b = [1000.5, 900.5], [1400.5, 950.5]
+    page.evaluate("potflat.measurePoints = []; potflat.measure = null")
+    for q in (a, b):
+        c = page.evaluate(f"potflat.imageToClient({q})")
+        page.mouse.click(c["x"], c["y"])
+    page.wait_for_function("potflat.measure !== null")
+    m = page.evaluate("potflat.measure")
+    got = np.asarray(page.evaluate("potflat.measurePoints"))
+    assert m["image_mm"] == pytest.approx(np.linalg.norm(got[1] - got[0]) / PX_PER_MM, rel=1e-9)
+    assert m["method"] == "geodesic"
+    # the surface path is at least the chord and, on this smooth belly, within 3 % of it
+    assert m["chord_mm"] <= m["surface_mm"] <= 1.03 * m["chord_mm"]
+    direct = scene.measure(tuple(got[0]), tuple(got[1]))
+    assert m["surface_mm"] == pytest.approx(direct["surface_mm"], rel=1e-9)
+    assert "on the vessel" in page.text_content("#measure")
+    page.click("[data-tool=look]")
+
+
+def test_window_and_overlap_dragged_on_the_image_become_options(page, served):
+    scene = served.scene
+    row = 0.55 * scene.grid.height
+    page.click("[data-tool=window]")
+    ends = [page.evaluate(f"potflat.imageToClient({[x, row]})") for x in (0.3 * scene.grid.width, 0.7 * scene.grid.width)]
+    page.mouse.move(ends[0]["x"], ends[0]["y"])
+    page.mouse.down()
+    for t in np.linspace(0, 1, 6):
+        page.mouse.move(ends[0]["x"] + t * (ends[1]["x"] - ends[0]["x"]), ends[0]["y"])
+    page.mouse.up()
+    page.wait_for_function("document.getElementById('command').textContent.includes('--angles')")
+    window = page.evaluate("potflat.edits.window")
+    expected = [scene.pixel_to_surface(x, row)["angle_deg"] for x in (0.3 * scene.grid.width, 0.7 * scene.grid.width)]
+    assert np.allclose(window, expected, atol=0.5)
+    assert "--seam " in page.text_content("#command")
+    page.click("[data-tool=overlap]")
+    x0 = 0.8 * scene.grid.width
+    ends = [page.evaluate(f"potflat.imageToClient({[x, row]})") for x in (x0, x0 + 40 * PX_PER_MM)]
+    page.mouse.move(ends[0]["x"], ends[0]["y"])
+    page.mouse.down()
+    page.mouse.move(ends[1]["x"], ends[1]["y"], steps=4)
+    page.mouse.up()
+    page.wait_for_function("document.getElementById('command').textContent.includes('--overlap')")
+    hit = scene.pixel_to_surface(x0, row)
+    degrees = 40.0 / (scene.radius(hit["point"]) * scene.grid.mm_per_unit) * 180 / np.pi
+    assert page.evaluate("potflat.edits.overlap") == pytest.approx(degrees, abs=0.5)
+    assert "--angles" not in page.text_content("#command")
+    page.evaluate("potflat.edits = {}; potflat.window = null; potflat.overlap = null")
+    page.click("[data-tool=look]")
+
+
+def test_seam_click_and_painted_mask_rerun_as_the_command_line_does(browser, run_dir, tmp_path):
+    """The page's edits and Rerun give the outputs of the command line it shows."""
+    from PIL import Image
+
+    from potflat.io.flat_ply import read_flat_ply
+
+    folder = tmp_path / "edited"
+    shutil.copytree(run_dir, folder)
+    served = _Served(folder)
+    try:
+        page = _open(browser, served)
+        scene = served.scene
+        # the seam through a point on the back of the vessel (a quarter of the image from the right)
+        i = int(np.argmin(np.abs(scene.pixels - [0.8 * scene.grid.width, 0.55 * scene.grid.height]).sum(axis=1)))
+        point = scene.flat.mesh.vertices[i]
+        page.click("[data-tool=seam]")
+        page.evaluate(f"potflat.lookFrom({point.tolist()}, {_outward(scene, point).tolist()}, 200)")
+        s = page.evaluate(f"potflat.project({point.tolist()})")
+        page.mouse.click(s["x"], s["y"])
+        page.wait_for_function("potflat.edits.seam_at !== undefined")
+        seam_at = np.asarray(page.evaluate("potflat.edits.seam_at"))
+        assert np.linalg.norm(seam_at - point) * scene.grid.mm_per_unit < 2.0
+        # paint a stroke across the image
+        page.click("[data-tool=paint]")
+        page.fill("#brush", "15")
+        page.wait_for_function("potflat.zoneLoaded")
+        ends = [page.evaluate(f"potflat.imageToClient({[x, 0.7 * scene.grid.height]})") for x in (900, 1500)]
+        page.mouse.move(ends[0]["x"], ends[0]["y"])
+        page.mouse.down()
+        for t in np.linspace(0, 1, 12):
+            page.mouse.move(ends[0]["x"] + t * (ends[1]["x"] - ends[0]["x"]), ends[0]["y"])
+        page.mouse.up()
+        assert page.evaluate("potflat.maskDirty")
+        page.wait_for_function("document.getElementById('command').textContent.includes('--importance mask')")
+        page.click("#rerun")
+        page.wait_for_function("potflat.rerun && ['done', 'failed'].includes(potflat.rerun.state) && potflat.ready",
+                               timeout=600_000)
+        rerun = page.evaluate("potflat.rerun")
+        assert rerun["state"] == "done", rerun["message"]
+        page.close()
+    finally:
+        served.close()
+    command = rerun["command"]
+    words = shlex.split(command)
+    assert words[:2] == ["potflat", "run"] and "--seam-at" in words and "--importance-mask" in words
+    recorded = json.loads((folder / "amphora.options.json").read_text())
+    assert recorded["command"] == command and recorded["rollout"]["importance"] == "mask"
+    assert np.allclose(recorded["rollout"]["seam_at"], seam_at)
+    mask = np.asarray(Image.open(folder / "amphora.mask.png"))
+    assert 0 < (mask == 255).mean() < 1
+    # the same command line into another folder gives the same outputs
+    other = tmp_path / "cli"
+    words[words.index("-o") + 1] = str(other)
+    run = subprocess.run([sys.executable, "-m", "potflat_cli", *words[1:]], capture_output=True, text=True,
+                         timeout=900)
+    assert run.returncode == 0, run.stderr
+    a, b = read_flat_ply(folder / "amphora.relaxed.ply"), read_flat_ply(other / "amphora.relaxed.ply")
+    assert np.array_equal(a.uv, b.uv) and np.array_equal(a.importance, b.importance)
+    assert np.array_equal(np.asarray(Image.open(folder / "amphora.png")), np.asarray(Image.open(other / "amphora.png")))
+    assert json.loads((folder / "amphora.rollout.json").read_text())["seam"]["method"] == "point"
+
+
+# ---------------------------------------------------------------------- the server's safety
+def _get(served, path, *, token=True, host=None, method="GET", body=None):
+    conn = http.client.HTTPConnection("127.0.0.1", served.server.port, timeout=30)
+    headers = {"Host": host or f"127.0.0.1:{served.server.port}"}
+    if token:
+        headers["X-Potflat-Token"] = served.server.token
+    conn.request(method, path, body=body, headers=headers)
+    r = conn.getresponse()
+    data = r.read()
+    conn.close()
+    return r.status, data
+
+
+def test_requests_without_the_token_are_refused(served):
+    assert _get(served, "/_potflat/api/amphora/scene.json")[0] == 200
+    assert _get(served, "/_potflat/api/amphora/scene.json", token=False)[0] == 403
+    assert _get(served, "/amphora.png", token=False)[0] == 403
+    assert _get(served, f"/amphora.png?token={served.server.token[:-2]}", token=False)[0] == 403
+    assert _get(served, f"/amphora.png?token={served.server.token}", token=False)[0] == 200
+
+
+def test_requests_for_another_host_are_refused(served):
+    """A page of another site whose name points at 127.0.0.1 (DNS rebinding) is refused."""
+    assert _get(served, "/amphora.png", host=f"evil.example:{served.server.port}")[0] == 403
+
+
+def test_paths_outside_the_folder_are_refused(served, run_dir, tmp_path):
+    secret = tmp_path / "secret.txt"
+    secret.write_text("not for the page")
+    (run_dir / "link-out.txt").symlink_to(secret)
+    try:
+        assert _get(served, "/amphora.bake.json")[0] == 200
+        for path in ("/../secret.txt", "/%2e%2e/%2e%2e/etc/passwd", "/..%2fsecret.txt", "/link-out.txt",
+                     "/.potflat.lock", f"/{'%2e%2e/' * 8}etc/passwd"):
+            status, body = _get(served, path)
+            assert status in (403, 404) and b"not for the page" not in body and b"root:" not in body, path
+        assert _get(served, "/link-out.txt")[0] == 403
+        assert _get(served, "/%2e%2e/secret.txt")[0] == 403
+        assert _get(served, "/_potflat/static/../../server.py")[0] in (403, 404)
+    finally:
+        (run_dir / "link-out.txt").unlink()
+
+
+def test_a_mask_of_the_wrong_size_is_refused(served, tmp_path):
+    import io
+
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.new("L", (10, 10)).save(buf, format="PNG")
+    status, body = _get(served, "/_potflat/api/amphora/mask", method="PUT", body=buf.getvalue())
+    assert status == 400 and b"paint it over that image" in body
+    assert not (served.scene.folder / "amphora.mask.png").exists()
+
+
+# ---------------------------------------------------------------------- pieces
+def test_picking_on_the_full_mesh_from_a_decimated_display_mesh(served):
+    """A ray aimed at a vertex finds that vertex's flat position (the display mesh only says
+    where to look), and the display mesh is decimated to about the face count asked."""
+    from potflat.view.display import display_mesh
+
+    scene = served.scene
+    small = display_mesh(scene.flat, scene.pixels, faces=4000)
+    assert small.decimated and 2000 < len(small.faces) < 6000 and len(scene.seam) > 0
+    assert (small.pixels >= -1).all() and (small.pixels[:, 0] <= scene.grid.width + 1).all()
+    rng = np.random.default_rng(1)
+    V = scene.flat.mesh.vertices
+    for i in rng.choice(len(V), 20, replace=False):
+        d = _outward(scene, V[i])
+        hit = scene.ray_to_surface(V[i] + 300 * d, -d, V[i] + rng.normal(scale=1.0, size=3), hint=scene.pixels[i])
+        if hit is None:  # hidden behind another part of the vessel from that side
+            continue
+        if np.linalg.norm(np.asarray(hit["point"]) - V[i]) < 1e-6:
+            assert np.linalg.norm(np.asarray(hit["pixel"]) - scene.pixels[i]) < 1e-6
+
+
+def test_geodesic_on_a_cylinder_is_the_unrolled_straight_line():
+    """On a finely meshed cylinder of radius 100 the distance is that of the development."""
+    from potflat.view.geodesic import SurfaceGraph
+
+    n_t, n_h, R, H = 400, 80, 100.0, 200.0
+    t = np.linspace(0, 2 * np.pi, n_t, endpoint=False)
+    h = np.linspace(0, H, n_h)
+    V = np.stack([np.repeat(R * np.cos(t)[None], n_h, 0), np.repeat(R * np.sin(t)[None], n_h, 0),
+                  np.repeat(h[:, None], n_t, 1)], axis=2).reshape(-1, 3)
+    idx = np.arange(n_h * n_t).reshape(n_h, n_t)
+    a, b = idx[:-1], np.roll(idx, -1, axis=1)[:-1]
+    c, d = idx[1:], np.roll(idx, -1, axis=1)[1:]
+    F = np.concatenate([np.stack([a, b, d], -1).reshape(-1, 3), np.stack([a, d, c], -1).reshape(-1, 3)])
+    graph = SurfaceGraph(V, F)
+    fa, fb = 1000, 1000 + 40 * 2 * (n_t - 1) + 123
+    pa, pb = V[F[fa]].mean(axis=0), V[F[fb]].mean(axis=0)
+    length, path, method = graph.distance(pa, fa, pb, fb, F)
+    ha, hb = pa[2], pb[2]
+    ta, tb = np.arctan2(pa[1], pa[0]), np.arctan2(pb[1], pb[0])
+    dt = abs((tb - ta + np.pi) % (2 * np.pi) - np.pi)
+    r = R * np.cos(np.pi / n_t)  # the face centres lie on the facets, slightly inside
+    assert method == "geodesic"
+    assert length == pytest.approx(np.hypot(r * dt, hb - ha), rel=3e-3)
+    assert np.allclose(path[0], pa) and np.allclose(path[-1], pb)
+
+
+def test_window_and_overlap_edits_become_rollout_options(run_dir):
+    from potflat.view.edits import Edits, command_line, edited_options, scan_of
+
+    seam = json.loads((run_dir / "amphora.rollout.json").read_text())["seam"]["angle_deg"]
+    options = edited_options(run_dir, "amphora", Edits(window=(seam + 30, seam + 200)), seam_deg=seam, landmark_deg=None)
+    r = options["rollout"]
+    assert r.seam == pytest.approx(seam % 360) and r.angles == pytest.approx((30.0, 200.0))
+    options = edited_options(run_dir, "amphora", Edits(overlap=25.0), seam_deg=seam, landmark_deg=None)
+    assert options["rollout"].overlap == 25.0 and options["rollout"].angles is None
+    line = command_line(scan_of(run_dir, "amphora"), run_dir, "amphora", options)
+    assert "--overlap 25.0" in line and "--preset preview" in line and "--position-map" in line
+    with pytest.raises(Exception, match="overlap"):
+        edited_options(run_dir, "amphora", Edits(overlap=500.0), seam_deg=seam, landmark_deg=None)
+
+
+def test_the_batch_report_links_each_scan_to_its_view(run_dir, tmp_path):
+    from potflat.files.batch.report import write_report
+
+    report = SimpleNamespace(output=str(run_dir), name="amphora", status="done", seconds=1.0, error=None,
+                             figures={})
+    summary = SimpleNamespace(output=str(tmp_path), counts={"done": 1}, reports=[report], batch="b.yaml", seconds=1.0)
+    page = write_report(summary).read_text()
+    assert 'data-view="_potflat/view/amphora"' in page and "potflat view" in page
+
+
+def test_the_batch_report_opens_each_view_when_served(browser, run_dir, tmp_path):
+    """Through 'potflat view' on a batch's folder, the report's link opens the scan's view."""
+    from potflat.files.batch.report import write_report
+    from potflat.view.server import serve
+
+    shutil.copytree(run_dir, tmp_path / "amphora")
+    report = SimpleNamespace(output=str(tmp_path / "amphora"), name="amphora", status="done", seconds=1.0,
+                             error=None, figures={})
+    write_report(SimpleNamespace(output=str(tmp_path), counts={"done": 1}, reports=[report], batch="b.yaml",
+                                 seconds=1.0))
+    server = serve(tmp_path)
+    threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.1}, daemon=True).start()
+    try:
+        page = browser.new_page()
+        page.goto(server.url())
+        link = page.locator("a.view")
+        link.wait_for(state="visible")
+        link.click()
+        page.wait_for_function("window.potflat && (window.potflat.ready || window.potflat.error)", timeout=60_000)
+        assert page.evaluate("potflat.error") is None and page.evaluate("potflat.scene.name") == "amphora"
+        page.close()
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def test_view_command_prints_the_address_and_stops_on_ctrl_c(run_dir):
+    proc = subprocess.Popen([sys.executable, "-m", "potflat_cli", "view", str(run_dir), "--no-browser"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        assert line.startswith("potflat view: http://127.0.0.1:") and "token=" in line
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130 and len(err.strip().splitlines()) == 1 and err.startswith("error: interrupted")
+
+
+def test_view_command_refuses_a_folder_without_a_run(tmp_path):
+    run = subprocess.run([sys.executable, "-m", "potflat_cli", "view", str(tmp_path), "--no-browser"],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and run.stderr.startswith("error:") and "holds no finished run" in run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1
+
+
+def test_view_command_refuses_an_unknown_name(run_dir):
+    run = subprocess.run([sys.executable, "-m", "potflat_cli", "view", str(run_dir), "nope", "--no-browser"],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and "has no run 'nope'" in run.stderr
