@@ -1,7 +1,7 @@
 """Textured scans with some faces that have no texture coordinates (faces without ``vt``, a
 second material without an image, MeshLab's hole filling, a glTF primitive without
 TEXCOORD_0): the faces are flagged (``Mesh.untextured_faces``) through loading, cleaning,
-rollout, the stage files, relax and bake; they are baked as shaded relief, never as the
+rollout, the stage files, relax and bake; they are baked as relief in grey, never as the
 texel at (0, 0), and carry no colour evidence into the painted-zone detection."""
 from __future__ import annotations
 
