@@ -9,17 +9,19 @@ from potflat.bake.options import MAP_NAMES
 
 #: The stage file each stage after the first reads: ``NAME`` and this suffix.
 STAGE_INPUT = {"relax": ".rollout.ply", "bake": ".relaxed.ply"}
-#: The files each stage writes: ``NAME`` and these suffixes (the rollout also ``NAME.texture.EXT``,
-#: its copy of the scan's texture: :data:`TEXTURE_COPY`).
+#: The files each stage writes: ``NAME`` and these suffixes, and those of :data:`STAGE_PATTERNS`.
 STAGE_OUTPUTS = {
     "rollout": (".rollout.ply", ".rollout.json", ".profile.csv", ".profile.svg"),
     "relax": (".relaxed.ply", ".relaxed.json"),
     "bake": (".png", *(f".{m}.png" for m in (*MAP_NAMES, "overlay")), ".scale-layer.png", ".attachments.png",
              ".scalebar.png", ".tif", ".position.tif", ".flat.obj", ".flat.mtl", ".sheet.png", ".bake.json",
-             ".plate.svg", ".plate.pdf", ".plate.png"),
+             ".plate.svg", ".plate.pdf", ".plate.png", ".relief.tif", ".relief.png", ".curvature.png",
+             ".relief-overlay.png"),
 }
-#: ``NAME`` and this, then the image's extension: the rollout's copy of the scan's texture.
-TEXTURE_COPY = ".texture."
+#: The files each stage writes with names it makes: ``NAME``, then one of these beginnings and
+#: endings: the rollout's copy of the scan's texture (``NAME.texture.EXT``), the raking lights
+#: (``NAME.raking-AZ.png``).
+STAGE_PATTERNS = {"rollout": ((".texture.", ""),), "relax": (), "bake": ((".raking-", ".png"),)}
 #: Each stage and the stages made from its outputs: a new run of the stage supersedes theirs.
 STAGES_FROM = {"rollout": ("rollout", "relax", "bake"), "relax": ("relax", "bake"), "bake": ("bake",)}
 
@@ -28,12 +30,13 @@ def stage_outputs(folder: Path, name: str, stages: tuple[str, ...]) -> list[Path
     """The files in ``folder`` named as ``stages`` name their outputs for ``name`` (whoever
     wrote them), sorted; symbolic links count as files (they are never followed)."""
     names = {f"{name}{suffix}" for stage in stages for suffix in STAGE_OUTPUTS[stage]}
+    patterns = [(f"{name}{begin}", end) for stage in stages for begin, end in STAGE_PATTERNS[stage]]
     try:
         entries = list(os.scandir(folder))
     except OSError:
         return []
     return sorted(Path(e.path) for e in entries
-                  if (e.name in names or ("rollout" in stages and e.name.startswith(f"{name}{TEXTURE_COPY}")))
+                  if (e.name in names or any(e.name.startswith(b) and e.name.endswith(x) for b, x in patterns))
                   and (e.is_symlink() or e.is_file()))
 
 
