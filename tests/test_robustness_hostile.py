@@ -651,6 +651,7 @@ def test_large_trims_and_poor_axis_fits_are_warned_with_the_option():
     result = SimpleNamespace(landmark_notes=(), region=SimpleNamespace(repeated_from=None),
                              distortion=SimpleNamespace(flipped=0), boundary_overlap=0, folds=None,
                              other_objects_faces=0,
+                             walls=SimpleNamespace(side="outer", outer_area=50.0, inner_area=0.0),
                              trimmed_area=20.0, flat=flat, proxy=SimpleNamespace(kind="cylinder"),
                              axis=SimpleNamespace(rms_angle_deg=14.0, direction=np.array([0.0, 1.0, 0.0])))
     notes = " ".join(_notes(result))
