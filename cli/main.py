@@ -74,10 +74,11 @@ class _Group(TyperGroup):
         except ImportError:
             import click
 
-        from potflat_cli._errors import EXIT_USAGE, INTERRUPTED, STOP, fail
+        from potflat_cli._errors import EXIT_USAGE, STOP, TOLD, fail, interrupted
         from potflat_cli._process import command_settings
 
         STOP.clear()
+        TOLD.clear()
         args = list(sys.argv[1:] if args is None else args)
         if threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
@@ -89,6 +90,8 @@ class _Group(TyperGroup):
         try:
             with command_settings():
                 code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+            if STOP:  # (Typer turns an interrupt outside a command into exit code 130, silently)
+                code = interrupted().exit_code
         except click.exceptions.NoArgsIsHelpError as exc:
             exc.show()
             code = EXIT_USAGE
@@ -97,9 +100,12 @@ class _Group(TyperGroup):
             message = " ".join(exc.format_message().split()).rstrip(".")
             fail(f"{message[:1].lower()}{message[1:]}; see '{command} --help'", exc.exit_code)
             code = exc.exit_code
-        except typer.Abort:
-            fail(INTERRUPTED, 130)
-            code = 130
+        except (typer.Abort, KeyboardInterrupt):
+            code = interrupted().exit_code
+        except Exception:
+            if not STOP:
+                raise
+            code = interrupted().exit_code  # whatever the interrupt broke while the command was being built
         sys.exit(code or 0)
 
     def resolve_command(self, ctx, args):

@@ -169,3 +169,42 @@ def test_a_side_the_scan_barely_shows_is_noted(tmp_path):
     notes = " ".join(rollout_notes(rollout(mesh, side="inner")))
     assert "inner wall unrolled here is only" in notes and "--side outer" in notes, notes
     assert "wall unrolled here" not in " ".join(rollout_notes(rollout(mesh, side="outer")))
+
+
+# ---------------------------------------------------------------------------------------
+# every run honest from the first second
+
+
+#: ``potflat run`` in a fresh process, sent the signal ``sys.argv[2]`` by a timer exactly
+#: ``sys.argv[1]`` seconds after the command's first instruction (an outside kill cannot land
+#: as precisely; before that instruction the Python interpreter is still starting).
+EARLY_INTERRUPT = """
+import os, signal, sys
+seconds, sig = float(sys.argv[1]), getattr(signal, sys.argv[2])
+sys.argv = ["potflat", "run", sys.argv[3], "-o", sys.argv[4], "--preset", "preview"]
+signal.signal(signal.SIGALRM, lambda *a: os.kill(os.getpid(), sig))
+signal.setitimer(signal.ITIMER_REAL, seconds)
+from potflat_cli.main import app
+app()
+"""
+
+
+@pytest.mark.parametrize("seconds, signal_name", [(0.002, "SIGINT"), (0.01, "SIGINT"), (0.02, "SIGINT"),
+                                                  (0.1, "SIGINT"), (0.3, "SIGINT"), (0.6, "SIGINT"),
+                                                  (1.0, "SIGINT"), (0.002, "SIGTERM"), (0.3, "SIGTERM")])
+def test_an_interrupt_in_the_first_moments_is_one_line_and_130(tmp_path, seconds, signal_name):
+    """Ctrl-C or SIGTERM from the command's first instruction to its first stage (while it
+    imports itself, builds its options, loads or compiles its first kernels): one line, exit
+    130, no output half-written."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    scan = Path(__file__).resolve().parents[1] / "samples" / "data" / "cone.obj"
+    out = tmp_path / "out"
+    result = subprocess.run([sys.executable, "-c", EARLY_INTERRUPT, str(seconds), signal_name, str(scan), str(out)],
+                            capture_output=True, text=True, timeout=120)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 130 and len(lines) == 1 and lines[0].startswith("error: interrupted"), result.stderr
+    left = sorted(p.name for p in out.rglob("*")) if out.exists() else []
+    assert not [name for name in left if name.endswith(".part") or name == ".potflat.lock"], left
