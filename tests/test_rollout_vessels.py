@@ -110,8 +110,12 @@ def test_handles_are_left_out_and_reported(amphora):
 
 def test_keep_attachments_keeps_them(amphora):
     res = rollout(amphora.mesh, keep_attachments=True)
-    handle = amphora.face_part == PART_HANDLE
-    assert np.all(np.isin(np.flatnonzero(handle), res.face_index))
+    handle = np.flatnonzero(amphora.face_part == PART_HANDLE)
+    # kept, cut through (a handle joined at both ends cannot be laid flat: test_disk_cut.py),
+    # and what then folds over the wall trimmed
+    assert res.disk_cut.handles == 2 and np.all(np.isin(res.disk_cut_faces, handle))
+    assert np.all(np.isin(handle, np.concatenate([res.face_index, res.disk_cut_faces, res.trimmed])))
+    assert np.isin(handle, res.face_index).any()
     assert len(res.attachment_roots) == 0 and res.attachments_kept
 
 

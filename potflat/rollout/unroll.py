@@ -46,6 +46,7 @@ from potflat.rollout.landmarks import find_landmark, zone_centre
 from potflat.rollout.objects import _main_object, _submesh
 from potflat.rollout.options import RolloutOptions
 from potflat.rollout.profile import Profile, vessel_profile
+from potflat.rollout.topology import DiskCut, disk_cut
 from potflat.rollout.seam import (
     _auto_seam,
     _corner_angles,
@@ -177,6 +178,13 @@ class RolloutResult:
         Where the faces at the foot that face along the axis went (:mod:`potflat.rollout.base`):
         left out of :attr:`flat` and shown as their own disc (``base.flat``), or kept; None
         for the ``ortho`` proxy (a view already).
+    disk_cut : DiskCut or None
+        What made the selected faces other than a disk (:mod:`potflat.rollout.topology`); its
+        ``faces`` are of the first development.
+    disk_cut_faces : (c,) int64
+        Input faces left out to make the selection a disk.
+    disk_cut_area : float
+        Their 3D area, scan units squared.
     """
 
     flat: FlatMesh
@@ -208,6 +216,9 @@ class RolloutResult:
     folds: ScanFolds | None = None
     profile: Profile | None = None
     base: BaseSplit | None = None
+    disk_cut: DiskCut | None = None
+    disk_cut_faces: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    disk_cut_area: float = 0.0
 
     @property
     def side(self) -> str:
@@ -336,6 +347,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
                                               theta_v, area)
     trimmed = np.zeros(len(F), bool)
     un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area, landmark=landmark)
+    clock.lap("unroll")
     base = None
     if options.proxy != "ortho":  # (a view along the axis shows the base as it is)
         region, first = np.unique(un.face_index, return_index=True)  # (a repeat past 360 degrees once)
@@ -349,6 +361,16 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
             un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area,
                          seam=(un.seam, un.seam_method), landmark=landmark)
     del n_axial, r_c, r_v
+    clock.lap("base")
+    # a piece that is not a disk (a handle joined at both ends, a closed part, an edge of three
+    # faces) cannot be laid flat without a fold: cut into one
+    disk = disk_cut(un.flat.mesh.faces, un.flat.mesh.vertices, attachments.vertex_offset[un.vertex_index])
+    cut_faces = np.unique(un.face_index[disk.faces])
+    if len(cut_faces):
+        allowed = allowed.copy()
+        allowed[cut_faces] = False
+        un = _without(un, ~disk.faces)
+    clock.lap("disk")
     for rnd in range(TRIM_ROUNDS):
         fold = border_folds(un.flat.mesh.faces, un.flat.uv, area[un.face_index], table=un.table)
         if not fold.any() or fold.all():
@@ -420,7 +442,8 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         untangled_faces=n_untangled, untangled_vertices=moved, boundary_overlap=overlap,
         other_objects_faces=int(other_objects.sum()), landmark=landmark,
         theta_origin=float(math.degrees(un.origin) % 360.0), landmark_notes=tuple(landmark_notes),
-        timings=clock.total(), folds=folds, profile=profile, base=base)
+        timings=clock.total(), folds=folds, profile=profile, base=base, disk_cut=disk,
+        disk_cut_faces=cut_faces.astype(np.int64), disk_cut_area=float(area[cut_faces].sum()))
 
 
 @dataclass(frozen=True, eq=False)
