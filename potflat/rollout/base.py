@@ -8,9 +8,11 @@ strip. Seen along the axis the same faces are nearly true: an orthographic view 
 lengths across a face by the cosine of its tilt, at most ``1 - cos 45 deg`` = 29% for the
 faces taken here and nothing on a flat base.
 
-:func:`split_base` finds the **candidates**: the region's faces whose normal
-(averaged over :data:`BASE_SMOOTH` rings of neighbours) is within :data:`BASE_ANGLE_DEG` of the axis, facing the viewer (down for the outer side, seen from
-below; up for the inner side, the floor seen from above), in connected pieces at the foot
+:func:`split_base` finds the **candidates**: the region's faces whose normal (averaged over
+:data:`BASE_SMOOTH` rings of neighbours, or its own where the development folds the face
+edge-on) is within :data:`BASE_ANGLE_DEG` of the axis, facing the viewer (down for the outer
+side, seen from below; up for the inner side, the floor seen from above), in connected pieces
+at the foot
 (reaching down to the region's lowest point, or in towards the axis in its lower quarter), one
 of them reaching the axis (an open foot's edge is no base). It then decides by
 measured distortion, not by the normal alone: in rings around the axis (:data:`BASE_RINGS`)
@@ -20,7 +22,9 @@ view's, area-weighted; the rings where the development is the less true one, out
 first where it is not, go to the disc, the rest stays in the rollout (a base that curves
 smoothly into the wall unrolls well near the wall). Pieces of the region that leaving the
 disc out cuts off from the rest (the inside of a foot ring between its underside and the
-base) go with it, the faces of them that face away from the viewer in neither image.
+base) go with it, the faces of them that face away from the viewer in neither image; when
+they are larger than half the disc, the wall goes on beyond it (a shoulder and a neck seen
+along an axis pointing the wrong way): no disc.
 :func:`base_disc` makes the disc's flattening.
 """
 from __future__ import annotations
@@ -38,7 +42,7 @@ from potflat.mesh.distortion import (
 )
 from potflat.rollout import proxy as _proxy
 from potflat.rollout.axis import AxisFit
-from potflat.rollout.border import _cut_off
+from potflat.rollout.border import EDGE_ON_RATIO, _cut_off
 from potflat.rollout.walls import FaceGraph, _smooth
 from potflat.types import FlatMesh, Mesh
 
@@ -60,6 +64,9 @@ NEAR_AXIS_FRACTION, BASE_HEIGHT_FRACTION = 0.25, 0.25
 MAX_UNROLLED_ERROR = 1.0
 #: A disc below this share of the region's area is not made (a few faces of noise at the foot).
 MIN_DISC_SHARE = 0.001
+#: Faces facing along the axis whose removal cuts off more than this fraction of their own area
+#: from the wall are no base (a shoulder between a body and a neck).
+MAX_CUT_OFF = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,8 +162,8 @@ def _errors(values: np.ndarray, weights: np.ndarray) -> tuple[float, float]:
 
 
 def split_base(mesh: Mesh, region: np.ndarray, unrolled_error: np.ndarray, *, n_axial: np.ndarray,
-               height: np.ndarray, radius: np.ndarray, vertex_radius: np.ndarray, area: np.ndarray,
-               vessel_height: float, side: str, keep: bool = False) -> BaseSplit:
+               height: np.ndarray, radius: np.ndarray, vertex_radius: np.ndarray, vertex_theta: np.ndarray,
+               area: np.ndarray, vessel_height: float, side: str, keep: bool = False) -> BaseSplit:
     """Decide which faces at the foot leave the rollout for the disc (see the module docs).
 
     Parameters
@@ -171,8 +178,8 @@ def split_base(mesh: Mesh, region: np.ndarray, unrolled_error: np.ndarray, *, n_
     n_axial, height, radius, area : (m,) float64
         Per scan face: the unit normal's component along the axis (towards the mouth), the
         centroid's height along the axis and distance from it, the 3D area.
-    vertex_radius : (n,) float64
-        Each scan vertex's distance from the axis.
+    vertex_radius, vertex_theta : (n,) float64
+        Each scan vertex's distance from the axis and angle about it (radians).
     vessel_height : float
         The scan's extent along the axis.
     side : str
@@ -191,34 +198,34 @@ def split_base(mesh: Mesh, region: np.ndarray, unrolled_error: np.ndarray, *, n_
     region_area = float(w.sum())
     empty = np.zeros(0, np.int64)
     graph = FaceGraph(np.take(mesh.faces, region, axis=0))
-    pairs = graph.pairs
     along = math.cos(math.radians(BASE_ANGLE_DEG))
     dev = np.minimum(unrolled_error, MAX_UNROLLED_ERROR)
-    # the normals averaged over a few rings: the split follows the surface, not the scan's noise
-    cand = (_smooth(facing, w, graph.matrix(), BASE_SMOOTH) > along) & (facing > 0.0)  # (a face turned away
-    if cand.any():                                                                      # would fold the view)
-        piece = graph.components(cand[pairs[:, 0]] & cand[pairs[:, 1]])
+    # the normals averaged over a few rings: the split follows the surface, not the scan's noise;
+    # and every face facing along the axis that the development folds edge-on (the averaging
+    # misses a flat base's last faces at a sharp corner, and the fan of a few large triangles);
+    # never a face turned away (it would fold the view)
+    cand = ((_smooth(facing, w, graph.matrix(), BASE_SMOOTH) > along)
+            | ((facing > along) & (dev > 1.0 - EDGE_ON_RATIO))) & (facing > 0.0)
+    if cand.any():
+        piece = graph.components(cand[graph.pairs[:, 0]] & cand[graph.pairs[:, 1]])
         lowest = np.full(piece.max() + 1, np.inf)
         closest = np.full(piece.max() + 1, np.inf)
         np.minimum.at(lowest, piece[cand], height[region[cand]])
-        corners = vertex_radius[np.take(mesh.faces, region[cand], axis=0)]
-        np.minimum.at(closest, piece[cand], np.minimum(np.minimum(corners[:, 0], corners[:, 1]), corners[:, 2]))
+        corners = np.take(mesh.faces, region[cand], axis=0)
+        reach = vertex_radius[corners].min(axis=1)
+        # a face spanning the axis (a flat bottom triangulated by chords between rim vertices):
+        # its corners' angles leave no gap of half a turn
+        angle = np.sort(vertex_theta[corners], axis=1)
+        gap = np.maximum(np.maximum(angle[:, 1] - angle[:, 0], angle[:, 2] - angle[:, 1]),
+                         2.0 * math.pi - (angle[:, 2] - angle[:, 0]))
+        reach[gap < math.pi] = 0.0
+        np.minimum.at(closest, piece[cand], reach)
         low = height[region].min()
         near_axis = ((closest <= NEAR_AXIS_FRACTION * radius[region].max())
                      & (lowest <= low + BASE_HEIGHT_FRACTION * vessel_height))
         at_foot = (lowest <= low + FOOT_FRACTION * vessel_height) | near_axis
         # a base reaches the axis: an open foot's ragged edge facing along it is no base
         cand &= (at_foot & near_axis.any())[piece]
-        # at a sharp corner the averaged normals miss the base's last faces, which the
-        # development folds edge-on: they go with it
-        for _ in range(BASE_SMOOTH):
-            edge = cand[pairs[:, 0]] != cand[pairs[:, 1]]
-            touching = np.zeros(len(region), bool)
-            touching[pairs[edge].ravel()] = True
-            grow = touching & ~cand & (facing > along) & (dev >= MAX_UNROLLED_ERROR)
-            if not grow.any():
-                break
-            cand |= grow
     n_cand = int(cand.sum())
     orth = 1.0 - np.clip(facing, 0.0, 1.0)
 
@@ -247,6 +254,9 @@ def split_base(mesh: Mesh, region: np.ndarray, unrolled_error: np.ndarray, *, n_
     # pieces of the region that the disc cuts off from the rest go with it
     part = graph.components()
     cut = _cut_off(graph, ~disc, w, part, np.bincount(part, w))
+    if w[cut].sum() > MAX_CUT_OFF * w[disc].sum():  # the wall goes on past them: a shoulder, a neck
+        return no_disc("the faces facing along the axis near it lie between two parts of the wall (a shoulder, not a "
+                       "base): kept in the rollout")
     hidden = cut & (facing <= 0.0)
     disc |= cut & ~hidden
     if w[disc].sum() < MIN_DISC_SHARE * region_area:

@@ -352,7 +352,8 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     if options.proxy != "ortho":  # (a view along the axis shows the base as it is)
         region, first = np.unique(un.face_index, return_index=True)  # (a repeat past 360 degrees once)
         base = split_base(mesh, region, unrolled_errors(un.flat, first), n_axial=n_axial, height=h_c, radius=r_c,
-                          vertex_radius=r_v, area=area, vessel_height=axis.height, side=options.side,
+                          vertex_radius=r_v, vertex_theta=theta_v, area=area, vessel_height=axis.height,
+                          side=options.side,
                           keep=options.keep_base)
         del region, first
         if base.left_out:  # unrolled again without it: the proxy is fitted to the wall alone
