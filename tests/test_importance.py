@@ -670,6 +670,34 @@ def test_shadows_and_highlights_are_no_painting_and_a_line_drawing_in_them_is_on
     assert zone[:50].max() < 0.5  # not the lit lip
 
 
+def test_highlights_on_black_glaze_are_no_painting_and_red_figures_on_it_are():
+    """Lustrous black glaze photographed with soft highlights (bright blobs 8-30 mm across):
+    no painting. Reserved clay figures with black lines inside them (red-figure): found, and
+    the zone covers them."""
+    import cv2
+
+    rng = np.random.default_rng(3)
+    h, w = 500, 1200
+    yy, xx = np.mgrid[0:h, 0:w]
+    rgb = np.full((h, w, 3), (30.0, 26.0, 24.0)) * (0.8 + 0.2 * np.cos(xx / w * np.pi))[..., None]
+    for _ in range(25):
+        cx, cy, r = rng.uniform(0, w), rng.uniform(0, h), rng.uniform(8, 30)
+        rgb += (np.clip(1 - np.hypot(xx - cx, yy - cy) / r, 0, 1) ** 2 * 120)[..., None]
+    rgb += rng.normal(0, 2, rgb.shape)
+    img = np.zeros((h, w, 4), np.uint8)
+    img[..., :3], img[..., 3] = np.clip(np.rint(rgb), 0, 255), 255
+    zone, reason = imp.painted_zone_image(img, 2.0)
+    assert zone is None and reason.startswith("no paint"), reason
+    figures = _figures((h, w), x0_mm=150.0, y0_mm=80.0)
+    figures = cv2.morphologyEx(figures.astype(np.uint8), cv2.MORPH_DILATE, np.ones((5, 5), np.uint8)) > 0
+    img[figures, :3] = (188, 94, 52)  # the figures reserved in the clay's colour ...
+    inner = (xx // 2 % 9 == 0) & figures & (yy > 200) & (yy < 260)
+    img[inner, :3] = (28, 22, 20)  # ... and lines drawn in them
+    zone, reason = imp.painted_zone_image(img, 2.0)
+    assert zone is not None, reason
+    assert zone[cv2.erode(figures.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0].min() == 1.0
+
+
 def _textured(vessel, folder: Path) -> Mesh:
     """The vessel's mesh with its texture written to ``folder``."""
     from potflat.io.images import write_png

@@ -2,7 +2,7 @@
 them (``potflat run`` with the defaults, a low resolution: the images are not what is tested),
 each wall of these two-walled scans in turn: an image with no flipped triangle and no boundary
 crossing, and the figures the run reports within what a flattening of such a vessel gives.
-Each scan and wall runs once for the module (the runs take about 20 s of CPU together)."""
+Each scan and wall runs once for the module, whichever test asks first."""
 from __future__ import annotations
 
 import json
