@@ -82,6 +82,9 @@ def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json
                       for k, v in figures.items() if v is not None)
     if shown:
         out.print(f"  whole-surface distortion: {distortion_words(figures)} ({shown}; area figures are natural logs)")
+    importance = result.rollout.record.get("importance")
+    if importance:  # where the painting was found, or that the whole surface counted alike
+        out.print(f"  importance ({importance['method']}): {importance['reason']}", highlight=False)
     relaxed = result.relax.record
     if relaxed.get("lengths"):
         out.print(f"  {relaxed['lengths']}")
