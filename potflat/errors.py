@@ -39,3 +39,8 @@ def out_of_memory(path) -> InvalidInputError:
         shown = ""
     return InvalidInputError(f"{path}{shown}: out of memory reading or flattening it; give a smaller file (decimate "
                              "the scan) or run where more memory is available")
+
+
+class NotADiskError(FoldedResultError):
+    """A rollout that no layout in the plane shows without a fold: it is not a disk (the relax
+    stage's file layer adds what to do, from the rollout's record)."""

@@ -9,19 +9,25 @@ from potflat.bake.options import MAP_NAMES
 
 #: The stage file each stage after the first reads: ``NAME`` and this suffix.
 STAGE_INPUT = {"relax": ".rollout.ply", "bake": ".relaxed.ply"}
+#: The files the bake writes for a painting ``NAME`` (and for its base's disc, ``NAME.base``).
+_BAKE_OUTPUTS = (".png", *(f".{m}.png" for m in (*MAP_NAMES, "overlay")), ".scale-layer.png", ".attachments.png",
+                 ".scalebar.png", ".tif", ".position.tif", ".flat.obj", ".flat.mtl", ".sheet.png", ".bake.json",
+                 ".plate.svg", ".plate.pdf", ".plate.png", ".relief.tif", ".relief.png", ".curvature.png",
+                 ".relief-overlay.png")
 #: The files each stage writes: ``NAME`` and these suffixes, and those of :data:`STAGE_PATTERNS`.
+#: The rollout's base left out (``NAME.base.ply``) is baked with the painting (``NAME.base.png``...).
 STAGE_OUTPUTS = {
-    "rollout": (".rollout.ply", ".rollout.json", ".profile.csv", ".profile.svg"),
+    "rollout": (".rollout.ply", ".rollout.json", ".profile.csv", ".profile.svg", ".base.ply"),
     "relax": (".relaxed.ply", ".relaxed.json"),
-    "bake": (".png", *(f".{m}.png" for m in (*MAP_NAMES, "overlay")), ".scale-layer.png", ".attachments.png",
-             ".scalebar.png", ".tif", ".position.tif", ".flat.obj", ".flat.mtl", ".sheet.png", ".bake.json",
-             ".plate.svg", ".plate.pdf", ".plate.png", ".relief.tif", ".relief.png", ".curvature.png",
-             ".relief-overlay.png"),
+    "bake": (*_BAKE_OUTPUTS, *(f".base{suffix}" for suffix in _BAKE_OUTPUTS)),
 }
 #: The files each stage writes with names it makes: ``NAME``, then one of these beginnings and
 #: endings: the rollout's copy of the scan's texture (``NAME.texture.EXT``), the raking lights
-#: (``NAME.raking-AZ.png``).
-STAGE_PATTERNS = {"rollout": ((".texture.", ""),), "relax": (), "bake": ((".raking-", ".png"),)}
+#: (``NAME.raking-AZ.png``, ``NAME.base.raking-AZ.png``).
+STAGE_PATTERNS = {"rollout": ((".texture.", ""),), "relax": (),
+                  "bake": ((".raking-", ".png"), (".base.raking-", ".png"))}
+#: The suffix of the base's disc's ``NAME`` (``NAME.base``): baked inside the bake of ``NAME``.
+BASE_NAME_SUFFIX = ".base"
 #: Each stage and the stages made from its outputs: a new run of the stage supersedes theirs.
 STAGES_FROM = {"rollout": ("rollout", "relax", "bake"), "relax": ("relax", "bake"), "bake": ("bake",)}
 
@@ -60,3 +66,10 @@ def rollout_json_beside(flat_ply: Path) -> Path:
     ``X.relaxed.ply``."""
     stem = flat_ply.name.removesuffix(".ply").removesuffix(".relaxed").removesuffix(".rollout")
     return flat_ply.with_name(f"{stem}.rollout.json")
+
+
+def base_ply_beside(flat_ply: Path) -> Path:
+    """The base's orthographic view ``X.base.ply`` beside a stage file ``X.rollout.ply`` or
+    ``X.relaxed.ply`` (written by the rollout when it leaves the base out)."""
+    stem = flat_ply.name.removesuffix(".ply").removesuffix(".relaxed").removesuffix(".rollout")
+    return flat_ply.with_name(f"{stem}{BASE_NAME_SUFFIX}.ply")

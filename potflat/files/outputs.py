@@ -19,7 +19,7 @@ import shutil
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
-from potflat.files.names import stage_outputs
+from potflat.files.names import BASE_NAME_SUFFIX, stage_outputs
 from potflat.io.atomic import output_lock, remove_stale_parts
 
 #: (folder, NAME) pairs whose outputs an enclosing :func:`superseding` block already handles
@@ -70,12 +70,14 @@ def superseding(folder: str | os.PathLike, name: str, stages: tuple[str, ...], *
     Notes
     -----
     Inside a block for the same folder and name (:func:`potflat.run_scan` around the stage
-    runners) the block does nothing: the outer one handles the outputs and holds the lock.
+    runners), or for the painting whose base's disc ``name`` is (``NAME.base``, baked inside
+    the bake of ``NAME``), the block does nothing: the outer one handles the outputs and
+    holds the lock.
     """
     folder = Path(folder)
     key = (os.path.abspath(folder), name)
     run = Superseding(stages)
-    if key in _HANDLED.get():
+    if key in _HANDLED.get() or (key[0], name.removesuffix(BASE_NAME_SUFFIX)) in _HANDLED.get():
         yield run
         return
     with output_lock(folder):

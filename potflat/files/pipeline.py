@@ -206,7 +206,7 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
         marker = write_json_atomic(partial_marker(out, name), {"potflat": "incomplete", "scan": str(scan)})
         try:
             baked = run_bake_stage(relaxed.paths["ply"], out, options.bake, name=name, relaxed=relaxed,
-                                   marks=rolled.marks)
+                                   marks=rolled.marks, base=rolled.base)
             run.done("bake")
         finally:  # (a failed or interrupted bake's images are removed with it)
             marker.unlink(missing_ok=True)
