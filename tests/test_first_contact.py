@@ -6,6 +6,7 @@ import re
 
 import pytest
 import test_batch_fakes as fakes
+from potflat_cli._stage import PROGRESS
 from potflat_cli.main import app
 from typer.testing import CliRunner
 
@@ -184,6 +185,7 @@ seconds, sig = float(sys.argv[1]), getattr(signal, sys.argv[2])
 sys.argv = ["potflat", "run", sys.argv[3], "-o", sys.argv[4], "--preset", "preview"]
 signal.signal(signal.SIGALRM, lambda *a: os.kill(os.getpid(), sig))
 signal.setitimer(signal.ITIMER_REAL, seconds)
+from potflat_cli._stage import PROGRESS
 from potflat_cli.main import app
 app()
 """
@@ -204,7 +206,72 @@ def test_an_interrupt_in_the_first_moments_is_one_line_and_130(tmp_path, seconds
     out = tmp_path / "out"
     result = subprocess.run([sys.executable, "-c", EARLY_INTERRUPT, str(seconds), signal_name, str(scan), str(out)],
                             capture_output=True, text=True, timeout=120)
-    lines = result.stderr.strip().splitlines()
+    lines = [line for line in result.stderr.strip().splitlines() if not line.startswith(PROGRESS)]
     assert result.returncode == 130 and len(lines) == 1 and lines[0].startswith("error: interrupted"), result.stderr
     left = sorted(p.name for p in out.rglob("*")) if out.exists() else []
     assert not [name for name in left if name.endswith(".part") or name == ".potflat.lock"], left
+
+
+def test_a_log_gets_a_line_when_each_stage_starts_and_ends(tmp_path, monkeypatch):
+    """stderr not a terminal (a log, a pipe; here the test's capture): a plain line per stage
+    start and end, with seconds, between the first-run note and the summary (nothing was
+    written there for minutes before); a failing stage gets no end line, the error follows."""
+    import io
+
+    from rich.console import Console
+
+    from potflat_cli._stage import StageLog
+
+    fakes.install(monkeypatch)
+    scan = fakes.write_scan(tmp_path / "pot.obj")
+    result = CliRunner().invoke(app, ["run", str(scan), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    progress = [line for line in result.stderr.splitlines() if line.startswith(PROGRESS) and "first run" not in line]
+    assert [re.sub(r"[0-9.]+ s$", "N s", line) for line in progress] == [
+        f"{PROGRESS}pot.obj: {stage}{end}" for stage in ("rollout", "relax", "bake") for end in (" ...", ": done in N s")]
+    fakes.SABOTAGE["pot"] = ("interrupt", "relax")
+    failed = CliRunner().invoke(app, ["run", str(scan), "-o", str(tmp_path / "again")])
+    lines = failed.stderr.strip().splitlines()
+    assert failed.exit_code == 130 and f"{PROGRESS}pot.obj: relax ..." in lines and lines[-1].startswith("error: ")
+    assert not any("relax: done" in line for line in lines), lines
+    terminal = io.StringIO()
+    log = StageLog(Console(file=terminal, force_terminal=True))
+    log.start("pot.obj: rollout")
+    log.end()
+    assert terminal.getvalue() == ""  # a terminal has the live status line instead
+
+
+#: Compiles, in a fresh process on an empty kernel cache, the kernels that share a helper
+#: between a serial and a parallel loop (``prange``'s index is unsigned) or call it with a
+#: constant, and prints the helpers compiled for more than one type.
+ONE_COMPILE_PER_HELPER = """
+import numpy as np
+from potflat.mesh._kernels import grids
+from potflat.relax._kernels import lbfgs, simplify
+
+q, none = np.ones(8), np.zeros(0)
+lbfgs.combine(q, 1.0, q.copy(), 0.5, q.copy(), none, 1.0, none, np.zeros(1))
+lbfgs.pair(q, 0.5, q.copy(), q * 0.0, none, np.zeros(8), np.zeros(8), np.zeros(1), np.zeros(1))
+faces, uv = np.array([[0, 1, 2]], np.int64), np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+start, items, centres, covered = grids.centre_grid(faces, uv, 0.0, 0.0, 1.0, 2, 2)
+grids.centres_inside(faces, uv, 0.0, 0.0, 1.0, 2, 2, start, items, centres, np.zeros(0, np.int64),
+                     np.zeros(1, np.int64), np.zeros(0, np.int64))
+simplify.interpolate(np.array([[0.2, 0.2]]), np.zeros(1, np.int64), uv, uv.copy(), faces,
+                     np.array([0, 1, 2, 3], np.int64), np.zeros(3, np.int32), np.zeros((1, 2)), np.zeros(1, bool))
+print("MORE THAN ONE TYPE:", [f"{m.__name__}.{k}: {d.signatures}" for m in (grids, lbfgs, simplify)
+                              for k, d in vars(m).items() if len(getattr(d, "signatures", ())) > 1])
+"""
+
+
+def test_a_helper_kernel_compiles_once_for_its_callers(tmp_path):
+    """A helper called from a serial loop (``range``: int64) and a ``prange`` loop (uint64), or
+    with the constant -1 as well as a variable (a literal type), compiled twice on a first run:
+    three of the relax stage's helpers and one of the grids'. The index is cast at the call."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "empty-cache")}
+    out = subprocess.run([sys.executable, "-c", ONE_COMPILE_PER_HELPER], capture_output=True, text=True, env=env,
+                         timeout=600)
+    assert "MORE THAN ONE TYPE: []" in out.stdout, out.stdout[-3000:] + out.stderr[-3000:]

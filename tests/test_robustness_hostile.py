@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import test_batch_fakes as fakes
+from potflat_cli._stage import PROGRESS
 from potflat_cli.main import app
 from typer.testing import CliRunner
 
@@ -44,8 +45,9 @@ def one_line_error(result, *words: str) -> str:
     """Exit 2, exactly one ``error:`` line on stderr with ``words``, no traceback, no box."""
     assert result.exit_code == 2, (result.exit_code, result.output)
     assert "Traceback" not in result.output and "╭" not in result.output, result.output
-    # a run whose kernels are not cached yet says so first (a test run alone on a fresh clone)
-    lines = [line for line in result.stderr.strip().splitlines() if not line.startswith(COMPILING)]
+    # lines of progress (a run whose kernels are not cached yet says so first; in a log each
+    # stage says when it starts and ends) come before it
+    lines = [line for line in result.stderr.strip().splitlines() if not line.startswith(PROGRESS)]
     assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
     for word in words:
         assert word.lower() in lines[0].lower(), (word, lines[0])
@@ -728,6 +730,7 @@ def test_the_main_command_compiles_each_kernel_for_one_argument_type(tmp_path):
     code = f"""
 import sys, numba
 from numba.core import types
+from potflat_cli._stage import PROGRESS
 from potflat_cli.main import app
 sys.argv = ["potflat", "run", {str(sample)!r}, "-o", {str(tmp_path / "out")!r}]
 try:

@@ -41,11 +41,11 @@ def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json
     from potflat.files.rollout_stage import base_line
     from potflat.mesh.distortion import distortion_words
     from potflat_cli import _warmup as potflat_warmup
-    from potflat_cli._stage import say_compiling, with_compile_note
+    from potflat_cli._stage import StageLog, say_compiling, with_compile_note
 
     scan = Path(scan)
     err = Console(stderr=True, quiet=quiet or as_json)
-    started, warmup = [], None
+    started, warmup, log = [], None, StageLog(err)
     with err.status(f"{scan.name}: starting") as status:
         def progress(stage: str) -> None:
             nonlocal warmup
@@ -56,6 +56,7 @@ def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json
                 # on a first run the relax kernels compile in a child process meanwhile
                 warmup = potflat_warmup.start()
             status.update(with_compile_note(f"{scan.name}: {stage}"))
+            log.start(f"{scan.name}: {stage}")
             if stage == "relax" and warmup is not None:
                 # the scan rolled out (bad input is refused before this): the bake kernels
                 # compile here while the child finishes the relax kernels
@@ -63,6 +64,7 @@ def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json
         out_dir = output or Path(name or scan.stem)  # ./NAME/, never the scan's folder
         try:
             result = run_scan(scan, out_dir, name=name, progress=progress, **options)
+            log.end()
         finally:
             if warmup is not None:
                 warmup.stop()
