@@ -8,14 +8,17 @@ from collections.abc import Callable
 #: How a line of progress begins on stderr (:class:`StageLog`, :func:`say_compiling`); an error
 #: line begins with ``error:``.
 PROGRESS = "potflat: "
+#: What a first run says: it compiles over a hundred kernels, for as long as the cores it gets
+#: take (benchmarks/bench_first_run.py measures it).
+FIRST_RUN = "first run: compiling potflat's kernels once, a few minutes (more on a busy machine)"
 
 
 def with_compile_note(status: str) -> str:
     """``status`` plus a note when this run compiles the kernels (the first run is silent for
-    about a minute otherwise)."""
+    a few minutes otherwise)."""
     from potflat._jit import kernels_cached
 
-    return status if kernels_cached() else f"{status} (first run: compiling potflat's kernels, about a minute, once)"
+    return status if kernels_cached() else f"{status} ({FIRST_RUN})"
 
 
 def say_compiling(console) -> None:
@@ -24,7 +27,7 @@ def say_compiling(console) -> None:
     from potflat._jit import kernels_cached
 
     if not console.is_terminal and not kernels_cached():
-        console.print(f"{PROGRESS}first run: compiling potflat's kernels, about a minute, once", highlight=False)
+        console.print(f"{PROGRESS}{FIRST_RUN}", highlight=False)
 
 
 class StageLog:

@@ -1,6 +1,6 @@
 """Compile the relax and bake stages' kernels early on a first run, on both cores.
 
-A first run (no kernels in Numba's disk cache yet) compiles some seventy kernels one after
+A first run (no kernels in Numba's disk cache yet) compiles over a hundred kernels one after
 the other, each on first use, on one core: the rollout's, then the relax stage's, then the
 bake stage's. :func:`start` runs this module in a child process that relaxes a small
 generated vessel (:func:`vessel`) in a temporary folder, so that the relax kernels are

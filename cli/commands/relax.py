@@ -29,11 +29,12 @@ def relax_command(rollout_ply: Input, output: StageOutputDir = None, name: Stage
     # imported here, not at the top: 'potflat --help' stays free of Numba and SciPy
     from potflat.mesh.distortion import distortion_words
     from potflat.files.relax_stage import run_relax_stage
-    from potflat_cli._stage import run_stage, with_compile_note
+    from potflat._jit import kernels_cached
+    from potflat_cli._stage import FIRST_RUN, run_stage
 
     show_progress = sys.stderr.isatty() and not (quiet or json)
-    if show_progress and with_compile_note("") != "":
-        print(f"note: {with_compile_note('').strip(' ()')}", file=sys.stderr)
+    if show_progress and not kernels_cached():
+        print(f"note: {FIRST_RUN}", file=sys.stderr)
     out = run_stage(None if show_progress else f"relaxing {rollout_ply.name}",
                     lambda: run_relax_stage(rollout_ply, output if output is not None else rollout_ply.parent,
                                             options["relax"], name=name, progress=show_progress),
