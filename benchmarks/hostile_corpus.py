@@ -8,7 +8,7 @@ no traceback and nothing written; a case potflat handles must succeed, and some 
 files afterwards (victims outside the output folder untouched, no ``.part`` left, the output
 texture not a link...). It prints a table (Markdown) and exits 1 if any case fails.
 
-    python benchmarks/hostile_corpus.py              # about 3-5 minutes on 2 cores
+    python benchmarks/hostile_corpus.py              # 68 cases, about 8 minutes on 2 shared cores
     python benchmarks/hostile_corpus.py --real ../shared/data/real   # + relax --preset paper on real scans
     python benchmarks/hostile_corpus.py -k yaml      # only the cases whose name contains 'yaml'
 
