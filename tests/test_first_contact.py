@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from potflat.files.batch.config import BatchFileError, load_batch
 
 runner = CliRunner()
-COMMANDS = ("rollout", "relax", "bake", "run", "batch", "plate", "view")
+COMMANDS = ("rollout", "relax", "bake", "run", "batch", "plate", "view", "warmup")
 
 
 def _help(command: str) -> str:
