@@ -1,9 +1,10 @@
 """``potflat view``: the server's safety, the links between the views, the measure, the edits
 and the rerun, checked in a real headless Chromium (Debian's, driven by Playwright) on the
-amphora sample run once for the whole module."""
+amphora sample run once (with ``--relief``) for the whole module."""
 from __future__ import annotations
 
 import http.client
+import io
 import json
 import shlex
 import shutil
@@ -23,12 +24,15 @@ CHROMIUM_ARGS = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swi
                  "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
                  "--disable-dev-shm-usage"]
 PX_PER_MM = 4.0
+#: The relief's images of a run with ``--relief`` (default lights), in the layer switch's order.
+RELIEF = ["relief", "raking-315", "raking-45", "curvature", "relief-overlay"]
 
 
 def _run_sample(out: Path) -> Path:
     from potflat.files.pipeline import run_scan
 
-    run_scan(SAMPLE, out, relax={"preset": "preview"}, bake={"px_per_mm": PX_PER_MM, "position_map": True})
+    run_scan(SAMPLE, out, relax={"preset": "preview"},
+             bake={"px_per_mm": PX_PER_MM, "position_map": True, "relief": True})
     return out
 
 
@@ -94,7 +98,6 @@ def page(browser, served):
 
 def _share_drawn(png: bytes) -> float:
     """Share of a screenshot's pixels that differ from the page's background (59, 59, 59)."""
-    import io
 
     from PIL import Image
 
@@ -121,13 +124,68 @@ def test_page_loads_without_console_errors_and_both_views_render(browser, served
         assert _share_drawn(page.locator("#flat").screenshot()) > 0.3     # the image's tiles
         assert page.evaluate("potflat.firstRenderMs") > 0
         layers = page.evaluate("[...document.querySelectorAll('#layer option')].map(o => o.value)")
-        assert layers == ["painting", "stress", "area", "anisotropy"]
+        assert layers == ["painting", "stress", "area", "anisotropy", *RELIEF]
         page.select_option("#layer", "stress")
         page.wait_for_function("document.getElementById('legend').complete && "
                                "document.getElementById('legend').naturalWidth > 0")
         assert errors == []
     finally:
         page.close()
+
+
+def test_the_layer_switch_shows_the_relief_images_with_their_legends(page):
+    """Each relief image of a --relief run is a layer: the image shows it, the relief and the
+    curvature with the legend band below their PNG, the raking light and the overlay with a
+    line saying what they are."""
+    from PIL import Image
+
+    def flat_view():
+        return np.asarray(Image.open(io.BytesIO(page.locator("#flat").screenshot())).convert("L"), float)
+
+    shown = {}
+    for layer in ["painting", *RELIEF]:
+        page.select_option("#layer", layer)
+        page.wait_for_function(f"potflat.layerShown === {json.dumps(layer)}")
+        page.wait_for_timeout(300)
+        shown[layer] = flat_view()
+        legend = page.evaluate("(() => { const l = document.getElementById('legend'); return l.style.display === 'block' "
+                               "? l.src : null; })()")
+        label = page.text_content("#layerlabel")
+        if layer in ("relief", "curvature"):
+            page.wait_for_function("document.getElementById('legend').complete && "
+                                   "document.getElementById('legend').naturalWidth > 0")
+            assert legend and legend.split("?")[0].endswith(f"/legend/{layer}.png") and label == ""
+        elif layer != "painting":
+            assert legend is None and label, layer
+    assert "raking light" in page.evaluate("potflat.scene.layers.find(l => l.name === 'raking-315').label")
+    rows = min(a.shape[0] for a in shown.values())  # (a legend below the image takes some of its height)
+
+    def differ(a, b):
+        return np.abs(shown[a][:rows] - shown[b][:rows]).mean()
+
+    for layer in RELIEF:  # each image differs from the painting and from the others
+        assert differ(layer, "painting") > 2.0, layer
+    assert differ("raking-315", "raking-45") > 1.0
+    page.select_option("#layer", "painting")
+    page.wait_for_function("potflat.layerShown === 'painting'")
+
+
+def test_a_relief_layers_tiles_and_legend_are_its_pngs(served, run_dir):
+    """The tiles of the relief layer are NAME.relief.png's pixels; its legend is the band below them."""
+    from PIL import Image
+
+    g = served.scene.grid
+    top = served.server.runs.layer("amphora", "relief").top
+    status, body = _get(served, f"/_potflat/api/amphora/dzi/relief_files/{top}/1_1.png")
+    assert status == 200
+    png = np.asarray(Image.open(run_dir / "amphora.relief.png").convert("RGBA"))
+    tile = np.asarray(Image.open(io.BytesIO(body)).convert("RGBA"))
+    assert np.array_equal(tile, png[512:1024, 512:1024])
+    status, body = _get(served, "/_potflat/api/amphora/legend/curvature.png")
+    legend = np.asarray(Image.open(io.BytesIO(body)).convert("RGBA"))
+    curvature = np.asarray(Image.open(run_dir / "amphora.curvature.png").convert("RGBA"))
+    assert status == 200 and np.array_equal(legend, curvature[g.height:])
+    assert _get(served, "/_potflat/api/amphora/legend/raking-45.png")[0] == 404
 
 
 def test_click_on_the_image_marks_the_position_maps_point_on_the_vessel(page, served, run_dir):
@@ -323,8 +381,6 @@ def test_paths_outside_the_folder_are_refused(served, run_dir, tmp_path):
 
 
 def test_a_mask_of_the_wrong_size_is_refused(served, tmp_path):
-    import io
-
     from PIL import Image
 
     buf = io.BytesIO()

@@ -117,16 +117,64 @@ class Runs:
             return self._layers[key]
 
 
+#: The relief's images in the order the page offers them (``raking-``: ``raking-AZ``, one per
+#: light azimuth, in the order the bake lists them).
+RELIEF_LAYERS = ("relief", "raking-", "curvature", "relief-overlay")
+
+
 def layer_files(scene) -> dict[str, Path]:
-    """The images of a run by layer name: ``painting`` and each distortion map that is there."""
+    """The images of a run by layer name: ``painting``, each distortion map and each of the
+    relief's images (``relief``, ``raking-AZ``, ``curvature``, ``relief-overlay``) that is there."""
     out = {"painting": scene.folder / f"{scene.name}.png"}
     made = scene.bake.get("maps") or {}
     asked = (scene.bake.get("provenance") or {}).get("options", {}).get("maps") or []
-    for m in [m for m in asked if m in made] + [m for m in made if m not in asked]:  # in the order asked
+    files = scene.bake.get("files") or {}
+    relief = [k for kind in RELIEF_LAYERS for k in files if k == kind or (kind == "raking-" and k.startswith(kind))]
+    for m in [m for m in asked if m in made] + [m for m in made if m not in asked] + relief:  # in the order asked
         path = scene.folder / f"{scene.name}.{m}.png"
         if path.is_file():
             out[m] = path
     return out
+
+
+def layer_entries(scene) -> list[dict]:
+    """The page's layer switch: each layer's ``name``, its ``title`` in the switch, its
+    ``label`` (what its colours or greys say) and whether a ``legend`` band is below it."""
+    from PIL import Image
+
+    maps = scene.bake.get("maps") or {}
+    relief = scene.bake.get("relief") or {}
+    entries = []
+    for key, path in layer_files(scene).items():
+        if key == "painting":
+            untextured = scene.bake.get("painting") == "relief"
+            title = "relief in grey (no texture)" if untextured else "painting"
+            label = (f"height above the surface smoothed at {relief.get('smoothing_mm', 0):.3g} mm, in grey"
+                     if untextured else "the scan's texture")
+        elif key in maps:
+            title, label = f"{key} map", maps[key].get("label", key)
+        elif key == "relief":
+            title = "relief: height"
+            label = f"height above the surface smoothed at {relief.get('smoothing_mm', 0):.3g} mm, mm"
+        elif key.startswith("raking-"):
+            azimuth = key[len("raking-"):]
+            title = f"relief: raking light from {azimuth}°"
+            label = (f"raking light at {relief.get('light_elevation_deg', 20):g}° from azimuth {azimuth}° "
+                     "(clockwise from the image's up)")
+        elif key == "curvature":
+            title, label = "relief: curvature", "concavity (MSII-like): dark grooves, light ridges"
+        else:
+            title = "painting + relief"
+            label = f"painting and relief blended (relief share {relief.get('overlay_blend') or 0:g})"
+        try:
+            with Image.open(path) as img:
+                legend = img.height > scene.grid.height
+        except OSError:
+            legend = False
+        entries.append({"name": key, "title": title, "label": label, "legend": legend,
+                        "range": maps.get(key, {}).get("range") or (relief.get("colour_range_mm") if key == "relief"
+                                                                   else None)})
+    return entries
 
 
 def scene_json(runs: Runs, name: str) -> dict:
@@ -145,12 +193,10 @@ def scene_json(runs: Runs, name: str) -> dict:
         rollout = _plain(options["rollout"])
     except InvalidInputError as exc:
         command, rollout = f"(cannot rerun: {exc})", {}
-    maps = scene.bake.get("maps") or {}
     return {
         "name": name, "folder": str(scene.folder), "width": g.width, "height": g.height, "px_per_mm": g.px_per_mm,
         "mm_per_unit": g.mm_per_unit, "units": scene.flat.mesh.units,
-        "layers": [{"name": k, "label": maps.get(k, {}).get("label", "painting") if k != "painting" else "painting",
-                    "range": maps.get(k, {}).get("range")} for k in layer_files(scene)],
+        "layers": layer_entries(scene),
         "mesh": {**display.counts(), "decimated": display.decimated, "full_vertices": len(scene.flat.uv),
                  "full_faces": len(scene.flat.mesh.faces)},
         "axis": scene.rollout.get("axis"), "seam": scene.rollout.get("seam"), "region": scene.rollout.get("region"),

@@ -15,7 +15,7 @@ const $ = id => document.getElementById(id);
 
 // what the page shows and the tests read
 const state = {
-  ready: false, firstRenderMs: null, scene: null, tool: 'look', layer: 'painting',
+  ready: false, firstRenderMs: null, scene: null, tool: 'look', layer: 'painting', layerShown: null,
   marker3d: null, markerFlat: null, readout: null, measure: null, measurePoints: [],
   edits: {}, maskDirty: false, rerun: null, window: null, overlap: null,
 };
@@ -511,9 +511,10 @@ function setTool(tool) {
   render(); drawOverlay();
 }
 
-function showLegend(layer) {
-  const legend = $('legend');
-  if (layer === 'painting') { legend.style.display = 'none'; return; }
+function showLegend(layer) {  // the legend band below the layer's image, else what its greys or colours are
+  const legend = $('legend'), entry = state.scene.layers.find(l => l.name === layer);
+  $('layerlabel').textContent = entry && !entry.legend && layer !== 'painting' ? entry.label : '';
+  if (!entry || !entry.legend) { legend.style.display = 'none'; legend.removeAttribute('src'); return; }
   legend.src = `${API}/legend/${encodeURIComponent(layer)}.png?token=${TOKEN}`;
   legend.style.display = 'block';
 }
@@ -532,7 +533,7 @@ async function start(again = false) {
   select.innerHTML = '';
   for (const l of s.layers) {
     const o = document.createElement('option'); o.value = l.name;
-    o.textContent = l.name === 'painting' ? 'painting' : `${l.name} map`; select.appendChild(o);
+    o.textContent = l.title; o.title = l.label; select.appendChild(o);
   }
   if (!s.layers.some(l => l.name === state.layer)) state.layer = 'painting';
   select.value = state.layer;
@@ -541,6 +542,7 @@ async function start(again = false) {
   await Promise.all([loadVessel(s).then(() => { if (!again) frameVessel(s); resize3d(); mark('vessel'); }),
                      openFlat(s, state.layer, again).then(() => mark('image'))]);
   showLegend(state.layer);
+  state.layerShown = state.layer;
   state.zoneLoaded = false;
   if (state.marker3d) place('link', state.marker3d);
   if (state.edits.seam_at) place('seam', state.edits.seam_at);
@@ -552,9 +554,10 @@ async function start(again = false) {
 }
 
 $('layer').addEventListener('change', async e => {
-  state.layer = e.target.value;
-  showLegend(state.layer);
-  await Promise.all([openFlat(state.scene, state.layer, true), setTexture(state.layer)]);
+  const layer = state.layer = e.target.value;
+  showLegend(layer);
+  await Promise.all([openFlat(state.scene, layer, true), setTexture(layer)]);
+  state.layerShown = layer;
 });
 for (const b of document.querySelectorAll('[data-tool]')) b.addEventListener('click', () => setTool(b.dataset.tool));
 $('outline').addEventListener('change', e => { if (mesh) { mesh.material.uniforms.outlineOn.value = e.target.checked && state.scene.painted_zone ? 1 : 0; render(); } });
