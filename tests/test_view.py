@@ -337,6 +337,138 @@ def test_seam_click_and_painted_mask_rerun_as_the_command_line_does(browser, run
     assert json.loads((folder / "amphora.rollout.json").read_text())["seam"]["method"] == "point"
 
 
+def _with_a_lug(run_dir: Path, folder: Path, scene) -> np.ndarray:
+    """A copy of the run in ``folder`` whose scan has a lug the rollout left out: a 30 mm
+    square (untextured) 25 mm out from the belly, apart from the body. Its centre."""
+    shutil.copytree(run_dir, folder)
+    scan = folder / "scan"
+    scan.mkdir()
+    for part in ("amphora.obj", "amphora.mtl", "amphora.png"):
+        shutil.copy(SAMPLE.with_name(part), scan / part)
+    i = int(np.argmin(np.abs(scene.pixels - [0.5 * scene.grid.width, 0.5 * scene.grid.height]).sum(axis=1)))
+    d = _outward(scene, scene.flat.mesh.vertices[i])
+    centre = scene.flat.mesh.vertices[i] + 25.0 * d
+    a = np.asarray(scene.rollout["axis"]["direction"])
+    u = np.cross(a, d)
+    corners = [centre + 15.0 * (su * u + sa * a) for su, sa in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+    n = sum(1 for line in (scan / "amphora.obj").read_text().splitlines() if line.startswith("v "))
+    with open(scan / "amphora.obj", "a") as f:
+        f.writelines("v " + " ".join(repr(float(x)) for x in c) + "\n" for c in corners)
+        f.write(f"f {n + 1} {n + 2} {n + 3}\nf {n + 1} {n + 3} {n + 4}\n")
+    sidecar = folder / "amphora.rollout.json"
+    record = json.loads(sidecar.read_text())
+    record["input"] = str(scan / "amphora.obj")
+    sidecar.write_text(json.dumps(record))
+    return centre
+
+
+def test_the_vessel_is_the_whole_scan_and_a_part_left_out_is_not_in_the_image(browser, served, run_dir, tmp_path):
+    """The vessel is drawn from the whole scan (a lug the rollout left out too); a click on the
+    lug says it is not in the image, a click on the belly still marks its flat position."""
+    centre = _with_a_lug(run_dir, tmp_path / "lug", served.scene)
+    lug = _Served(tmp_path / "lug")
+    try:
+        page = _open(browser, lug)
+        page.wait_for_function("potflat.timings.scan !== undefined || (potflat.scan && !potflat.scan.mesh)",
+                               timeout=120_000)
+        scan = page.evaluate("potflat.scan.mesh")
+        assert scan is not None, page.evaluate("potflat.scan.message")
+        assert scan["faces"] == len(served.scene.flat.mesh.faces) + 2 and not scan["decimated"]
+        scene = lug.scene
+        d = _outward(scene, centre)
+        page.evaluate(f"potflat.lookFrom({centre.tolist()}, {d.tolist()}, 200)")
+        s = page.evaluate(f"potflat.project({centre.tolist()})")
+        page.mouse.click(s["x"], s["y"])
+        page.wait_for_function("potflat.readout !== null")
+        readout = page.evaluate("potflat.readout")
+        assert readout["outside"] and np.linalg.norm(np.asarray(readout["point"]) - centre) < 1.0
+        assert page.evaluate("potflat.markerFlat") is None and "not in the image" in page.text_content("#readout")
+        # beside the lug, the belly: in the image, at its vertex's flat position
+        i = int(np.argmin(np.abs(scene.pixels - [0.3 * scene.grid.width, 0.5 * scene.grid.height]).sum(axis=1)))
+        point = scene.flat.mesh.vertices[i]
+        page.evaluate(f"potflat.lookFrom({point.tolist()}, {_outward(scene, point).tolist()}, 200)")
+        s = page.evaluate(f"potflat.project({point.tolist()})")
+        page.mouse.click(s["x"], s["y"])
+        page.wait_for_function("potflat.markerFlat !== null")
+        assert np.linalg.norm(np.asarray(page.evaluate("potflat.markerFlat")) - scene.pixels[i]) < 2.0
+        page.close()
+    finally:
+        lug.close()
+
+
+def test_a_pick_behind_the_surface_seen_is_not_in_the_image(served):
+    """The full flattening's hit counts only at the depth where the vessel is seen."""
+    scene = served.scene
+    i = int(np.argmin(np.abs(scene.pixels - [0.5 * scene.grid.width, 0.5 * scene.grid.height]).sum(axis=1)))
+    V = scene.flat.mesh.vertices
+    d = _outward(scene, V[i])
+    origin = V[i] + 300 * d
+    assert scene.ray_to_surface(origin, -d, V[i], depth=300.0) is not None
+    assert scene.ray_to_surface(origin, -d, V[i], depth=280.0) is None  # something 20 mm in front of it
+
+
+def test_the_whole_scan_drawn_whole_keeps_its_faces_and_texture_coordinates():
+    from potflat.io.scan import load_scan
+    from potflat.view.display import scan_display_mesh
+
+    mesh = load_scan(SAMPLE, clean=False).mesh
+    d = scan_display_mesh(mesh, np.ones(len(mesh.vertices), bool), faces=10**6)
+    assert not d.decimated and len(d.faces) == len(mesh.faces)
+    assert np.array_equal(d.vertices[d.faces], mesh.vertices[mesh.faces].astype(np.float32))
+    assert np.array_equal(d.texcoords[d.faces], mesh.texcoords.astype(np.float32))
+    assert (d.unrolled == 1).all() and np.allclose(np.linalg.norm(d.normals, axis=1), 1, atol=1e-6)
+
+
+def test_a_decimated_scan_keeps_its_texture_seam_apart_and_has_no_cracks():
+    """A cylinder textured by angle and height, its texture seam along one line: the decimated
+    copy's texture coordinates are those of its vertices' places, on each side of the seam."""
+    from potflat.types import Mesh
+    from potflat.view.display import scan_display_mesh
+
+    n_t, n_h, R, H = 360, 120, 100.0, 300.0
+    t = np.arange(n_t + 1) * 2 * np.pi / n_t  # the last column repeats the first, at u = 1
+    z = np.linspace(0, H, n_h)
+    V = np.stack([np.tile(R * np.cos(t[:-1]), n_h), np.tile(R * np.sin(t[:-1]), n_h), np.repeat(z, n_t)], axis=1)
+    idx = np.arange(n_h)[:, None] * n_t + np.arange(n_t + 1)[None] % n_t
+    uv_idx = np.stack(np.meshgrid(t / (2 * np.pi), z / H), axis=-1)
+    quads = [(idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:], idx[1:, :-1])]
+    a, b, c, e = (q.ravel() for q in quads[0])
+    F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, e], 1)])
+    ua, ub, uc, ue = (uv_idx[:-1, :-1].reshape(-1, 2), uv_idx[:-1, 1:].reshape(-1, 2), uv_idx[1:, 1:].reshape(-1, 2),
+                      uv_idx[1:, :-1].reshape(-1, 2))
+    T = np.concatenate([np.stack([ua, ub, uc], 1), np.stack([ua, uc, ue], 1)])
+    mesh = Mesh(vertices=V, faces=F, texcoords=T, texture_path=SAMPLE.with_name("amphora.png"))
+    d = scan_display_mesh(mesh, np.zeros(len(V), bool), faces=8000)
+    assert d.decimated and 4000 < len(d.faces) <= 10000 and (d.unrolled == 0).all()
+    P, uv = d.vertices.astype(float), d.texcoords.astype(float)
+    theta = np.arctan2(P[:, 1], P[:, 0]) % (2 * np.pi) / (2 * np.pi)
+    on_seam = np.minimum(theta, 1 - theta) < 0.02
+    # away from the seam, u is the angle; at it, 0 or 1 by the side the faces are on
+    assert np.abs(uv[~on_seam, 0] - theta[~on_seam]).max() < 0.01
+    assert np.abs(uv[:, 1] - P[:, 2] / H).max() < 0.02
+    assert np.ptp(uv[d.faces, 0], axis=1).max() < 0.05  # no face textured across the whole image
+    # no cracks: every display edge that is not the cylinder's top or bottom is shared by two faces
+    # once the seam's copies (same position) are one
+    _, pos = np.unique(d.vertices, axis=0, return_inverse=True)
+    E = np.sort(pos.ravel()[d.faces][:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, uses = np.unique(E, axis=0, return_counts=True)
+    assert (uses == 1).sum() < 0.05 * len(uses)
+
+
+def test_level_segments_follow_a_linear_field():
+    from potflat.view.display import level_segments
+
+    x, y = np.meshgrid(np.linspace(0, 1, 11), np.linspace(0, 1, 11))
+    V = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
+    idx = np.arange(121).reshape(11, 11)
+    a, b, c, e = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, e], 1)])
+    seg = level_segments(V, F, V[:, 0] + 0.5 * V[:, 1], 0.73)
+    assert len(seg) > 0 and np.allclose(seg[..., 0] + 0.5 * seg[..., 1], 0.73, atol=1e-6)
+    crossed = ((V[F, 0] + 0.5 * V[F, 1] >= 0.73).sum(axis=1) % 3) != 0
+    assert len(seg) == crossed.sum()
+
+
 # ---------------------------------------------------------------------- the server's safety
 def _get(served, path, *, token=True, host=None, method="GET", body=None):
     conn = http.client.HTTPConnection("127.0.0.1", served.server.port, timeout=30)
@@ -397,8 +529,8 @@ def test_picking_on_the_full_mesh_from_a_decimated_display_mesh(served):
     from potflat.view.display import display_mesh
 
     scene = served.scene
-    small = display_mesh(scene.flat, scene.pixels, faces=4000)
-    assert small.decimated and 2000 < len(small.faces) < 6000 and len(scene.seam) > 0
+    small = display_mesh(scene.flat, scene.pixels, px_per_unit=scene.grid.px_per_unit, faces=4000)
+    assert small.decimated and 2000 < len(small.faces) < 6000 and len(scene.lines["seam"]) > 0
     assert (small.pixels >= -1).all() and (small.pixels[:, 0] <= scene.grid.width + 1).all()
     rng = np.random.default_rng(1)
     V = scene.flat.mesh.vertices

@@ -199,6 +199,7 @@ def scene_json(runs: Runs, name: str) -> dict:
         "layers": layer_entries(scene),
         "mesh": {**display.counts(), "decimated": display.decimated, "full_vertices": len(scene.flat.uv),
                  "full_faces": len(scene.flat.mesh.faces)},
+        "scan": scene.rollout.get("input"),
         "axis": scene.rollout.get("axis"), "seam": scene.rollout.get("seam"), "region": scene.rollout.get("region"),
         "painted_zone": scene.flat.importance is not None, "lengths": relaxed.get("lengths"),
         "distortion_where": where, "figures": figures, "rollout": rollout, "command": command,
@@ -395,11 +396,25 @@ class Handler(BaseHTTPRequestHandler):
         elif what == "mesh.bin":
             self._send(200, runs.scene(name).display.as_bytes(), "application/octet-stream")
             runs.opened.set()
-        elif what == "seam.bin":
+        elif what == "lines" and len(rest) == 1 and rest[0] in ("seam.bin", "edge.bin", "outline.bin"):
             scene = runs.scene(name)
             with scene._lock:
-                seam = scene.seam
-            self._send(200, seam.astype("<f4").tobytes(), "application/octet-stream")
+                lines = scene.lines[rest[0][:-4]]
+            self._send(200, lines.astype("<f4").tobytes(), "application/octet-stream")
+        elif what == "scan.json":
+            whole = runs.scene(name).whole()
+            self._json({"scan": whole.scan, "message": whole.message,
+                        "mesh": None if whole.display is None else whole.display.counts()})
+        elif what == "scan.bin":
+            whole = runs.scene(name).whole()
+            if whole.display is None:
+                raise _Refused(HTTPStatus.NOT_FOUND, whole.message)
+            self._send(200, whole.display.as_bytes(), "application/octet-stream")
+        elif what == "scan-texture.jpg":
+            whole = runs.scene(name).whole()
+            if whole.texture is None:
+                raise _Refused(HTTPStatus.NOT_FOUND, "the scan has no texture")
+            self._send(200, whole.texture, "image/jpeg")
         elif what == "dzi" and len(rest) == 1 and rest[0].endswith(".dzi"):
             self._send(200, runs.layer(name, rest[0][:-4]).dzi().encode(), "application/xml")
         elif what == "dzi" and len(rest) == 3 and rest[0].endswith("_files"):
@@ -439,10 +454,16 @@ class Handler(BaseHTTPRequestHandler):
                 self._json({"hit": scene.pixel_to_surface(x, y)})
             else:
                 ray = data.get("ray") or {}
-                hint = ray.get("hint")
-                self._json({"hit": scene.ray_to_surface(_numbers(ray.get("origin"), 3), _numbers(ray.get("direction"), 3),
-                                                        _numbers(ray.get("near"), 3),
-                                                        None if hint is None else _numbers(hint, 2))})
+                hint, depth = ray.get("hint"), ray.get("depth")
+                near = _numbers(ray.get("near"), 3)
+                hit = scene.ray_to_surface(_numbers(ray.get("origin"), 3), _numbers(ray.get("direction"), 3), near,
+                                           None if hint is None else _numbers(hint, 2),
+                                           None if depth is None else _numbers([depth], 1)[0])
+                # a point seen on the vessel that is not in the flattening: where it is, and that it is not in the image
+                outside = None if hit is not None or depth is None else {
+                    "point": list(near), "point_mm": [c * scene.grid.mm_per_unit for c in near],
+                    "angle_deg": scene.angle_deg(near)}
+                self._json({"hit": hit, "outside": outside})
         elif what == "measure":
             self._json({"measure": scene.measure(_numbers(data.get("a"), 2), _numbers(data.get("b"), 2))})
         elif what in ("options", "rerun"):
