@@ -43,7 +43,6 @@ from _docs import command_line, publish  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "samples" / "data" / "amphora.obj"
-SECTION = "## Looking at a run"
 GOALS_S = {"sample": 3.0, "large": 10.0}
 CHROMIUM_ARGS = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--disable-gpu-sandbox",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
@@ -174,8 +173,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.keep is None:
         shutil.rmtree(work, ignore_errors=True)
     load = os.getloadavg()[0]
-    lines = [SECTION, "",
-             f"`potflat view` on a finished run: from the command's start to the page's first render of both views "
+    lines = [f"`potflat view` on a finished run: from the command's start to the page's first render of both views "
              f"(median of {args.repeat}; the page's own share from its navigation) and to the whole scan drawn with "
              "its own texture, on this machine's 2 cores with Debian's Chromium rendering WebGL in software (load "
              f"average {load:.1f} at the end: other jobs shared the cores); the links' accuracy over "

@@ -172,8 +172,7 @@ def layer_entries(scene) -> list[dict]:
         except OSError:
             legend = False
         entries.append({"name": key, "title": title, "label": label, "legend": legend,
-                        "range": maps.get(key, {}).get("range") or (relief.get("colour_range_mm") if key == "relief"
-                                                                   else None)})
+                        "range": maps.get(key, {}).get("range")})
     return entries
 
 
@@ -199,7 +198,6 @@ def scene_json(runs: Runs, name: str) -> dict:
         "layers": layer_entries(scene),
         "mesh": {**display.counts(), "decimated": display.decimated, "full_vertices": len(scene.flat.uv),
                  "full_faces": len(scene.flat.mesh.faces)},
-        "scan": scene.rollout.get("input"),
         "axis": scene.rollout.get("axis"), "seam": scene.rollout.get("seam"), "region": scene.rollout.get("region"),
         "painted_zone": scene.flat.importance is not None, "lengths": relaxed.get("lengths"),
         "distortion_where": where, "figures": figures, "rollout": rollout, "command": command,
