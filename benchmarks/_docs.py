@@ -29,6 +29,7 @@ BLOCKS = {
     "bench_starts": ROBUSTNESS_MD,
     "bench_view": PERFORMANCE_MD,
     "bench_relief": PERFORMANCE_MD,
+    "real_scans": PERFORMANCE_MD,
 }
 
 

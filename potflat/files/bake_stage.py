@@ -1,10 +1,12 @@
 """The bake's file stage: bake ``NAME.relaxed.ply`` (or a rollout) into ``NAME.png``, the
 distortion maps, the scale layers, optional TIFFs, OBJ, sheet and plate, and
-``NAME.bake.json``. The images are streamed strip by strip from
+``NAME.bake.json``; the base left out of the rollout (``NAME.base.ply``) into ``NAME.base.png``
+and its own maps and ``NAME.base.bake.json``. The images are streamed strip by strip from
 :class:`potflat.bake.compose.Composition`; what the rollout marks comes in memory
 (:class:`potflat.types.RolloutMarks`) or from ``NAME.rollout.json`` beside the input."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from contextlib import ExitStack
@@ -21,7 +23,7 @@ from potflat.bake.marks import FOLDED_COLOUR, REPEAT_COLOUR, rgba16
 from potflat.bake.options import BakeOptions
 from potflat.bake.relief import raking_key
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.files.names import rollout_json_beside, stage_name
+from potflat.files.names import base_ply_beside, rollout_json_beside, stage_name
 from potflat.files.plate import make_plate
 from potflat.files.provenance import provenance
 from potflat.files.relax_stage import RelaxFiles
@@ -124,10 +126,34 @@ def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: li
                                          "bake into another folder (-o) or give another --name")
 
 
+def _base_options(options: BakeOptions) -> BakeOptions:
+    """The options the base's disc is baked with: the painting's, with its scale bar drawn into
+    the image (a disc leaves a corner free), without the sheet, plate and OBJ (made of the
+    relaxed flattening)."""
+    return dataclasses.replace(options, sheet=False, plate=False, obj=False, scale_on_image=True)
+
+
+def _remove_stale_base(out_dir: Path, name: str) -> None:
+    """Remove the base images an earlier bake of ``name`` wrote into ``out_dir`` (the files its
+    ``NAME.base.bake.json`` lists) when this bake has no base: the folder's outputs stay one set."""
+    record_path = out_dir / f"{name}.base.bake.json"
+    try:
+        record = json.loads(record_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return
+    if not isinstance(record, dict) or not isinstance(record.get("files"), dict) \
+            or not isinstance(record.get("provenance"), dict) or record["provenance"].get("stage") != "bake":
+        return
+    for listed in record["files"].values():
+        if isinstance(listed, str) and listed.startswith(f"{name}.base.") and Path(listed).name == listed:
+            (out_dir / listed).unlink(missing_ok=True)
+
+
 @reuse_freed_memory()  # (its many large temporaries; its peak is under the relax stage's)
 def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, options: BakeOptions | None = None, *,
                    name: str | None = None, relaxed: RelaxFiles | None = None,
-                   marks: RolloutMarks | None = None) -> BakeFiles:
+                   marks: RolloutMarks | None = None, flat: FlatMesh | None = None,
+                   base: FlatMesh | None = None) -> BakeFiles:
     """Bake ``NAME.relaxed.ply`` (or a rollout) into images and ``NAME.bake.json``.
 
     Files (in ``out_dir``): ``NAME.png`` (painting, RGBA, resolution in the file),
@@ -141,7 +167,10 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     ``NAME.raking-AZ.png``, ``NAME.curvature.png`` and ``NAME.relief-overlay.png``
     (:mod:`potflat.bake.relief`); all images share the pixel grid of ``NAME.png`` (maps and
     some relief images add a legend band below it, and so does ``NAME.png`` when it is an
-    untextured scan's relief).
+    untextured scan's relief). Baking ``NAME.relaxed.ply`` also bakes the base the rollout
+    left out (``NAME.base.ply`` beside it) into ``NAME.base.png`` (its scale bar in the image),
+    its maps and ``NAME.base.bake.json``, listed under ``base_`` in :attr:`BakeFiles.paths`;
+    without a base, the base images of an earlier bake are removed.
 
     Parameters
     ----------
@@ -158,6 +187,10 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     marks : RolloutMarks, optional
         What the rollout of this run marks; read from ``NAME.rollout.json`` beside the input
         when not given.
+    flat : FlatMesh, optional
+        The flattening ``flat_ply`` holds, when the caller has it (read otherwise).
+    base : FlatMesh, optional
+        The base's disc ``NAME.base.ply`` holds, when the caller has it (read otherwise).
 
     Returns
     -------
@@ -168,7 +201,8 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     out_dir = Path(out_dir)
     name = name or stage_name(flat_ply)
     clock = StepClock()
-    flat = relaxed.flat if relaxed is not None else read_flat_ply(flat_ply)
+    if flat is None:
+        flat = relaxed.flat if relaxed is not None else read_flat_ply(flat_ply)
     rollout_ply = None
     if options.sheet:
         if not flat_ply.name.endswith(".relaxed.ply"):
@@ -251,6 +285,18 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     clock.lap("tiff")
     figures = comp.figures()
     clock.lap("figures")
+    base_files, base_ply = None, None
+    if flat_ply.name.endswith(".relaxed.ply"):
+        base_ply = base_ply_beside(flat_ply)
+        if base is None and base_ply.is_file():
+            base = read_flat_ply(base_ply)
+        if base is not None:
+            base_files = run_bake_stage(base_ply, out_dir, _base_options(options), name=f"{name}.base", flat=base,
+                                        marks=RolloutMarks())
+            paths.update({f"base_{k}": p for k, p in base_files.paths.items()})
+        else:
+            _remove_stale_base(out_dir, name)
+        clock.lap("base")
     if options.obj:
         paths["obj"] = _write_flat_obj(out_dir / f"{name}.flat.obj", flat, g, comp.band, paths["png"].name)
         paths["mtl"] = paths["obj"].with_suffix(".mtl")
@@ -259,7 +305,8 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
                                                  title=name)
     clock.lap("obj_sheet")
     inputs = ([flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else [])
-              + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else []))
+              + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else [])
+              + ([base_ply] if base_files is not None else []))
     scales = comp.scales
     record = {
         **figures,
@@ -271,6 +318,11 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
             "percent_of_surface": marks.folded_percent, "regions_total": marks.folded_regions,
             "mark": f"outlined and hatched {FOLDED_COLOUR[:3]} on the distortion maps and the overlay: where the scan "
                     "folds over itself in 3D (see NAME.rollout.json, folded)"},
+        "base": None if base_files is None else {
+            "what": "the base (the floor, inside) left out of the rollout, seen along the axis; its figures are in "
+                    f"{base_files.paths['json'].name}",
+            "files": base_files.record["files"], "image_mm": base_files.record["image_mm"],
+            "lengths": base_files.record.get("lengths")},
         "scale_bar_mm": comp.layer.bar_mm,
         "scale_on_image": None if comp.on_image is None else {
             "bar_mm": comp.on_image.bar_mm, "at_px": list(comp.on_image.at), "box_px": list(comp.on_image.box_size),

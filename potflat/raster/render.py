@@ -509,6 +509,33 @@ def paint(flat: FlatMesh, px_per_mm: float, *, supersample: int = 2,
     return image, g.origin.copy()
 
 
+def fill_faces(pixels: np.ndarray, faces: np.ndarray, height: int, width: int) -> np.ndarray:
+    """The pixels whose centre lies in one of ``faces``: a mask of whole faces, without
+    anti-aliasing (for a painting and its fields, :class:`Renderer`).
+
+    Parameters
+    ----------
+    pixels : (n, 2) float
+        Flat positions in pixels (column, row; ``(0, 0)`` the top-left corner of the image).
+    faces : (k, 3) int64
+        The faces to fill.
+    height, width : int
+        Image size.
+
+    Returns
+    -------
+    (height, width) bool
+    """
+    import cv2  # here, not at the top: importing cv2 sets LD_LIBRARY_PATH in the environment
+
+    mask = np.zeros((height, width), np.uint8)
+    if len(faces):
+        # pixel centres at integer positions for OpenCV, with 4 fractional bits
+        corners = np.round((np.asarray(pixels, np.float64)[faces] - 0.5) * 16).astype(np.int32)
+        cv2.fillPoly(mask, list(corners), 1, lineType=cv2.LINE_8, shift=4)
+    return mask.astype(bool)
+
+
 def rgba8(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:
     """(k, w, 3) float in [0, 1] (NaN outside) and coverage -> (k, w, 4) uint8."""
     out = np.empty(rgb.shape[:2] + (4,), np.uint8)
