@@ -419,6 +419,21 @@ def test_the_whole_scan_drawn_whole_keeps_its_faces_and_texture_coordinates():
     assert (d.unrolled == 1).all() and np.allclose(np.linalg.norm(d.normals, axis=1), 1, atol=1e-6)
 
 
+def test_texture_vertices_are_the_corners_with_one_vertex_and_one_texture_position():
+    """The quick grouping (each vertex's first corner, a hash table for the rest) numbers the
+    groups of (vertex, texture coordinates) in order of first corner, seams included."""
+    from potflat.io.scan import load_scan
+    from potflat.view.display import _texture_vertices
+
+    mesh = load_scan(SAMPLE, clean=False).mesh
+    fv, uv = mesh.faces.ravel(), mesh.texcoords.reshape(-1, 2) + 0.0
+    ids: dict = {}
+    expected = [ids.setdefault((int(v), float(a), float(b)), len(ids)) for v, (a, b) in zip(fv, uv)]
+    got = _texture_vertices(fv, uv, len(mesh.vertices))
+    assert np.array_equal(got, expected)
+    assert len(ids) > len(np.unique(fv))  # the sample's texture has seams
+
+
 def test_a_decimated_scan_keeps_its_texture_seam_apart_and_has_no_cracks():
     """A cylinder textured by angle and height, its texture seam along one line: the decimated
     copy's texture coordinates are those of its vertices' places, on each side of the seam."""

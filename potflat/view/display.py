@@ -218,23 +218,21 @@ def _clustered(mesh: Mesh, unrolled: np.ndarray, side: float) -> ScanDisplay:
                                          np.zeros(n, bool)))
     else:
         cell = np.arange(n, dtype=np.int64)
+    fv = F.ravel()
     if textured:  # corners at the same vertex with the same texture coordinates: one texture vertex
         uv = np.ascontiguousarray(mesh.texcoords, np.float64).reshape(-1, 2) + 0.0  # -0.0 as 0.0
         if mesh.untextured_faces is not None:
             uv[np.repeat(mesh.untextured_faces, 3)] = NO_TEXTURE
-        K = np.empty((3 * m, 3), np.int64)
-        K[:, 0] = F.ravel()
-        K[:, 1:] = uv.view(np.int64)
-        corner = _compact(first_equal_rows(K, False, np.zeros(3 * m, bool)))
+        corner = _texture_vertices(fv, uv, n)
     else:
-        corner = F.ravel().astype(np.int64)
-    # the faces' edges inside a cell join their ends (as vertices: pieces; as corners: display vertices)
-    i = np.tile(np.arange(3), m) + 3 * np.repeat(np.arange(m), 3)
-    j = np.tile(np.array([1, 2, 0]), m) + 3 * np.repeat(np.arange(m), 3)
-    fv = F.ravel()
-    inside = cell[fv[i]] == cell[fv[j]]
-    piece, pieces = union_find(n, fv[i[inside]], fv[j[inside]])
-    cluster, clusters = union_find(int(corner.max()) + 1, corner[i[inside]], corner[j[inside]])
+        corner = fv.astype(np.int64)
+    # the faces' edges (each corner to the next) inside a cell join their ends (as vertices:
+    # pieces; as corners: display vertices)
+    nxt = np.ascontiguousarray(F[:, [1, 2, 0]]).ravel()
+    inside = cell[fv] == cell[nxt]
+    piece, pieces = union_find(n, fv[inside], nxt[inside])
+    corner_next = np.ascontiguousarray(corner.reshape(m, 3)[:, [1, 2, 0]]).ravel()
+    cluster, clusters = union_find(int(corner.max()) + 1, corner[inside], corner_next[inside])
     cluster = cluster[corner]  # per corner
 
     count = np.bincount(piece, minlength=pieces).astype(np.float64)
@@ -248,10 +246,11 @@ def _clustered(mesh: Mesh, unrolled: np.ndarray, side: float) -> ScanDisplay:
     cluster_piece = np.empty(clusters, np.int64)
     cluster_piece[cluster] = corner_piece
     fp = corner_piece.reshape(m, 3)
-    keep = (fp[:, 0] != fp[:, 1]) & (fp[:, 1] != fp[:, 2]) & (fp[:, 0] != fp[:, 2])
-    turn = (np.argmin(fp, axis=1)[:, None] + np.arange(3)) % 3  # each face from its lowest piece: one per triple
-    rep = first_equal_rows(np.ascontiguousarray(np.take_along_axis(fp, turn, axis=1)), False, ~keep)
-    display_faces = cluster.reshape(m, 3)[keep & (rep == np.arange(m))]
+    kept = np.flatnonzero((fp[:, 0] != fp[:, 1]) & (fp[:, 1] != fp[:, 2]) & (fp[:, 0] != fp[:, 2]))
+    fk = fp[kept]
+    turn = (np.argmin(fk, axis=1)[:, None] + np.arange(3)) % 3  # each face from its lowest piece: one per triple
+    rep = first_equal_rows(np.ascontiguousarray(np.take_along_axis(fk, turn, axis=1)), False, np.zeros(len(kept), bool))
+    display_faces = cluster.reshape(m, 3)[kept[rep == np.arange(len(kept))]]
     used = np.zeros(clusters, bool)
     used[display_faces.ravel()] = True
     at = cluster_piece[used]
@@ -269,6 +268,23 @@ def _clustered(mesh: Mesh, unrolled: np.ndarray, side: float) -> ScanDisplay:
                        texcoords=texcoords, colors=colors, unrolled=share[at].astype(np.float32),
                        faces=((np.cumsum(used) - 1)[display_faces]).astype(np.uint32), decimated=side > 0.0,
                        spacing=float(side))
+
+
+def _texture_vertices(fv: np.ndarray, uv: np.ndarray, n: int) -> np.ndarray:
+    """Ids 0, 1, ... (in order of first corner) of the texture vertices: the corners (``fv``
+    (3m,) their vertices, ``uv`` (3m, 2) their texture coordinates, -0.0 as 0.0) at the same
+    vertex with the same texture coordinates. Each vertex's first corner stands for the
+    corners that match it; only the others (along texture seams) go through a hash table."""
+    first = np.empty(n, np.int64)
+    first[fv[::-1]] = np.arange(len(fv) - 1, -1, -1)  # the last write wins: each vertex's first corner
+    rep = first[fv]
+    odd = np.flatnonzero((uv != uv[rep]).any(axis=1))
+    if len(odd):
+        K = np.empty((len(odd), 3), np.int64)
+        K[:, 0] = fv[odd]
+        K[:, 1:] = uv[odd].view(np.int64)
+        rep[odd] = odd[first_equal_rows(K, False, np.zeros(len(odd), bool))]
+    return _compact(rep)
 
 
 def _compact(rep: np.ndarray) -> np.ndarray:

@@ -235,12 +235,14 @@ class ViewServer(ThreadingHTTPServer):
         return f"{base}{path}?token={self.token}"
 
     def warm(self, names) -> threading.Thread:
-        """Load runs and build their lookups in a background thread (the first clicks are then quick)."""
+        """Load runs in a background thread: what the page asks first, then the whole scan (its
+        display copy is ready soon after the first render), then the lookups for clicks."""
         def work():
             for name in names:
                 try:
                     self.runs.layer(name, "painting").texture()  # the page's first requests
                     self.runs.scene(name).display
+                    self.runs.scene(name).whole()
                     self.runs.opened.wait(timeout=WARM_AFTER_S)
                     self.runs.scene(name).warm()
                 except Exception:  # reported when the page asks for it
