@@ -280,6 +280,7 @@ def test_seam_click_and_painted_mask_rerun_as_the_command_line_does(browser, run
     from PIL import Image
 
     from potflat.io.flat_ply import read_flat_ply
+    from potflat.view.edits import recorded_options
 
     folder = tmp_path / "edited"
     shutil.copytree(run_dir, folder)
@@ -314,15 +315,18 @@ def test_seam_click_and_painted_mask_rerun_as_the_command_line_does(browser, run
                                timeout=600_000)
         rerun = page.evaluate("potflat.rerun")
         assert rerun["state"] == "done", rerun["message"]
+        page.wait_for_function("potflat.scene.rollout.importance === 'mask'")
+        shown = page.text_content("#command")
         page.close()
     finally:
         served.close()
     command = rerun["command"]
     words = shlex.split(command)
     assert words[:2] == ["potflat", "run"] and "--seam-at" in words and "--importance-mask" in words
-    recorded = json.loads((folder / "amphora.options.json").read_text())
-    assert recorded["command"] == command and recorded["rollout"]["importance"] == "mask"
-    assert np.allclose(recorded["rollout"]["seam_at"], seam_at)
+    # the options used are those the stages' sidecars record, and the page shows their command
+    assert shown == command
+    recorded = recorded_options(folder, "amphora")["rollout"]
+    assert recorded.importance == "mask" and np.allclose(recorded.seam_at, seam_at)
     mask = np.asarray(Image.open(folder / "amphora.mask.png"))
     assert 0 < (mask == 255).mean() < 1
     # the same command line into another folder gives the same outputs
@@ -335,6 +339,10 @@ def test_seam_click_and_painted_mask_rerun_as_the_command_line_does(browser, run
     assert np.array_equal(a.uv, b.uv) and np.array_equal(a.importance, b.importance)
     assert np.array_equal(np.asarray(Image.open(folder / "amphora.png")), np.asarray(Image.open(other / "amphora.png")))
     assert json.loads((folder / "amphora.rollout.json").read_text())["seam"]["method"] == "point"
+    # one consistent set: the files of that command, and the mask it reads
+    made = {p.name for p in other.iterdir()}
+    assert {p.name for p in folder.iterdir()} == made | {"amphora.mask.png", "amphora.mask.bake.json",
+                                                         "amphora.mask.relaxed.ply"}
 
 
 def _with_a_lug(run_dir: Path, folder: Path, scene) -> np.ndarray:
@@ -394,6 +402,88 @@ def test_the_vessel_is_the_whole_scan_and_a_part_left_out_is_not_in_the_image(br
         page.close()
     finally:
         lug.close()
+
+
+def _with_a_base(run_dir: Path, folder: Path, *, record: bool = True) -> np.ndarray:
+    """A copy of the run in ``folder`` with a base's disc as the bake writes it beside the
+    painting (``NAME.base.png``, listed under ``base`` in ``NAME.bake.json``; with ``record``,
+    ``NAME.base.bake.json`` giving its grid): a 300 x 200 px image, left half red, right half
+    blue, a 40 px grey legend band below. Its pixels (RGBA)."""
+    from PIL import Image
+
+    shutil.copytree(run_dir, folder)
+    disc = np.zeros((240, 300, 4), np.uint8)
+    disc[..., 3] = 255
+    disc[:200, :150, 0] = 220
+    disc[:200, 150:, 2] = 220
+    disc[200:, :, :3] = 128
+    Image.fromarray(disc).save(folder / "amphora.base.png")
+    if record:
+        (folder / "amphora.base.bake.json").write_text(json.dumps({"image_px": [300, 200], "px_per_mm": 4.0}))
+    bake = json.loads((folder / "amphora.bake.json").read_text())
+    bake["base"] = {"what": "the base left out of the rollout, seen along the axis",
+                    "files": {"png": "amphora.base.png", "json": "amphora.base.bake.json"}}
+    (folder / "amphora.bake.json").write_text(json.dumps(bake))
+    return disc
+
+
+def test_the_base_disc_is_a_layer_on_its_own_grid_not_linked(browser, run_dir, tmp_path):
+    """A run with a base's disc offers it in the layer switch: the image shows its pixels on
+    its own grid, its legend band below; a click on it marks nothing on the vessel and says
+    so; the vessel keeps the painting; back on the painting the views are linked again."""
+    from PIL import Image
+
+    disc = _with_a_base(run_dir, tmp_path / "base")
+    based = _Served(tmp_path / "base")
+    try:
+        entry = [e for e in json.loads(_get(based, "/_potflat/api/amphora/scene.json")[1])["layers"]
+                 if e["name"] == "base"]
+        assert entry and entry[0]["size"] == [300, 200] and not entry[0]["linked"] and entry[0]["legend"]
+        status, dzi = _get(based, "/_potflat/api/amphora/dzi/base.dzi")
+        assert status == 200 and b'Width="300" Height="200"' in dzi
+        top = based.server.runs.layer("amphora", "base").top
+        tile = np.asarray(Image.open(io.BytesIO(_get(based, f"/_potflat/api/amphora/dzi/base_files/{top}/0_0.png")[1])))
+        assert np.array_equal(tile, disc[:200])
+        legend = np.asarray(Image.open(io.BytesIO(_get(based, "/_potflat/api/amphora/legend/base.png")[1])))
+        assert np.array_equal(legend, disc[200:])
+
+        errors: list[str] = []
+        page = _open(browser, based, errors)
+        page.select_option("#layer", "base")
+        page.wait_for_function("potflat.layerShown === 'base'")
+        page.wait_for_timeout(300)
+        shot = np.asarray(Image.open(io.BytesIO(page.locator("#flat").screenshot())).convert("RGB")).astype(int)
+        assert ((shot[..., 0] > 180) & (shot[..., 2] < 60)).mean() > 0.05   # the red half
+        assert ((shot[..., 2] > 180) & (shot[..., 0] < 60)).mean() > 0.05   # the blue half
+        page.evaluate("potflat.marker3d = null")
+        c = page.evaluate("potflat.imageToClient([75, 100])")
+        page.mouse.click(c["x"], c["y"])
+        page.wait_for_function("document.getElementById('readout').textContent.includes('not linked')")
+        assert page.evaluate("potflat.marker3d") is None and page.evaluate("potflat.vesselShown") == "painting"
+        page.select_option("#layer", "painting")
+        page.wait_for_function("potflat.layerShown === 'painting'")
+        c = page.evaluate("potflat.imageToClient([1500.5, 950.5])")
+        page.mouse.click(c["x"], c["y"])
+        page.wait_for_function("potflat.marker3d !== null")
+        assert errors == []
+        page.close()
+    finally:
+        based.close()
+
+
+def test_a_base_listed_without_its_image_or_grid_is_tolerated(run_dir, tmp_path):
+    """Without NAME.base.png the run has no base layer; without NAME.base.bake.json the disc
+    takes its PNG's size (its band below then counts as image)."""
+    from potflat.view.server import layer_entries
+    from potflat.view.scene import Scene
+
+    _with_a_base(run_dir, tmp_path / "nogrid", record=False)
+    entry = [e for e in layer_entries(Scene(tmp_path / "nogrid", "amphora")) if e["name"] == "base"]
+    assert entry and entry[0]["size"] == [300, 240] and not entry[0]["legend"]
+    shutil.copytree(tmp_path / "nogrid", tmp_path / "gone")
+    (tmp_path / "gone" / "amphora.base.png").unlink()
+    names = [e["name"] for e in layer_entries(Scene(tmp_path / "gone", "amphora"))]
+    assert "base" not in names and names[0] == "painting"
 
 
 def test_a_pick_behind_the_surface_seen_is_not_in_the_image(served):

@@ -65,6 +65,27 @@ class WholeScan:
 
 
 @dataclass(frozen=True)
+class BaseImage:
+    """The base's disc the bake writes beside the painting when the rollout left the base out:
+    an orthographic view along the axis, on its own pixel grid (not linked to the vessel).
+
+    Attributes
+    ----------
+    path : Path
+        ``NAME.base.png``.
+    width, height : int
+        The disc image's size, pixels (rows below it: its legend band, if any).
+    px_per_mm : float or None
+        Its resolution (None when ``NAME.base.bake.json`` cannot be read).
+    """
+
+    path: Path
+    width: int
+    height: int
+    px_per_mm: float | None
+
+
+@dataclass(frozen=True)
 class Grid:
     """The bake's pixel grid.
 
@@ -142,6 +163,34 @@ class Scene:
         self._lock = threading.Lock()
         self._whole_lock = threading.Lock()
         self._whole: WholeScan | None = None
+
+    @cached_property
+    def base_image(self) -> BaseImage | None:
+        """The base's disc (``NAME.base.png``, written when the rollout left the base out), or
+        None when the run has none. Its size is its own grid's (``NAME.base.bake.json``), else
+        the PNG's."""
+        entry = self.bake.get("base")
+        listed = entry.get("files") if isinstance(entry, dict) else None
+        png = listed.get("png") if isinstance(listed, dict) else None
+        if not (isinstance(png, str) and png.startswith(f"{self.name}.base") and Path(png).name == png):
+            png = f"{self.name}.base.png"
+        path = self.folder / png
+        if not path.is_file():
+            return None
+        try:
+            record = json.loads((self.folder / f"{self.name}.base.bake.json").read_text(encoding="utf-8"))
+            width, height = (int(v) for v in record["image_px"])
+            px_per_mm = float(record["px_per_mm"])
+        except (OSError, ValueError, TypeError, KeyError):
+            from PIL import Image
+
+            try:
+                with Image.open(path) as img:
+                    width, height = img.size
+            except OSError:
+                return None
+            px_per_mm = None
+        return BaseImage(path=path, width=width, height=height, px_per_mm=px_per_mm)
 
     # ---------------------------------------------------------------- lazily built parts
     @property

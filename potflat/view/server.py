@@ -113,7 +113,7 @@ class Runs:
         with self._lock:
             key = (name, layer)
             if key not in self._layers:
-                self._layers[key] = Layer(files[layer], scene.grid.width, scene.grid.height)
+                self._layers[key] = Layer(files[layer], *layer_size(scene, layer))
             return self._layers[key]
 
 
@@ -122,9 +122,14 @@ class Runs:
 RELIEF_LAYERS = ("relief", "raking-", "curvature", "relief-overlay")
 
 
+#: The layer of the base's disc (:attr:`potflat.view.scene.Scene.base_image`).
+BASE_LAYER = "base"
+
+
 def layer_files(scene) -> dict[str, Path]:
-    """The images of a run by layer name: ``painting``, each distortion map and each of the
-    relief's images (``relief``, ``raking-AZ``, ``curvature``, ``relief-overlay``) that is there."""
+    """The images of a run by layer name: ``painting``, each distortion map, each of the
+    relief's images (``relief``, ``raking-AZ``, ``curvature``, ``relief-overlay``) and the
+    base's disc (``base``) that is there."""
     out = {"painting": scene.folder / f"{scene.name}.png"}
     made = scene.bake.get("maps") or {}
     asked = (scene.bake.get("provenance") or {}).get("options", {}).get("maps") or []
@@ -134,7 +139,16 @@ def layer_files(scene) -> dict[str, Path]:
         path = scene.folder / f"{scene.name}.{m}.png"
         if path.is_file():
             out[m] = path
+    if scene.base_image is not None:
+        out[BASE_LAYER] = scene.base_image.path
     return out
+
+
+def layer_size(scene, layer: str) -> tuple[int, int]:
+    """Width and height (pixels) of ``layer``'s image: the bake's grid, or the base disc's own."""
+    if layer == BASE_LAYER:
+        return scene.base_image.width, scene.base_image.height
+    return scene.grid.width, scene.grid.height
 
 
 def layer_entries(scene) -> list[dict]:
@@ -163,16 +177,23 @@ def layer_entries(scene) -> list[dict]:
                      "(clockwise from the image's up)")
         elif key == "curvature":
             title, label = "relief: curvature", "concavity (MSII-like): dark grooves, light ridges"
+        elif key == BASE_LAYER:
+            base = scene.base_image
+            title = "base, seen along the axis"
+            label = ("the base left out of the rollout, seen along the axis"
+                     + (f" at {base.px_per_mm:g} px/mm" if base.px_per_mm else "")
+                     + ": its own image, not linked to the vessel")
         else:
             title = "painting + relief"
             label = f"painting and relief blended (relief share {relief.get('overlay_blend') or 0:g})"
         try:
             with Image.open(path) as img:
-                legend = img.height > scene.grid.height
+                legend = img.height > layer_size(scene, key)[1]
         except OSError:
             legend = False
         entries.append({"name": key, "title": title, "label": label, "legend": legend,
-                        "range": maps.get(key, {}).get("range")})
+                        "range": maps.get(key, {}).get("range"), "linked": key != BASE_LAYER,
+                        "size": list(layer_size(scene, key))})
     return entries
 
 

@@ -34,6 +34,13 @@ async function api(path, options = {}) {
 const post = (path, body) => api(path, { method: 'POST', body: JSON.stringify(body),
                                          headers: { 'Content-Type': 'application/json' } }).then(r => r.json());
 function status(text, warn = false) { const s = $('status'); s.textContent = text; s.className = warn ? 'warn' : ''; }
+// a layer on the image's grid is linked to the vessel; the base's disc has its own grid
+const linked = (layer = state.layer) => {
+  const entry = state.scene && state.scene.layers.find(l => l.name === layer);
+  return !entry || entry.linked !== false;
+};
+// the layer drawn on the vessel: the image's, or the painting while an unlinked image is shown
+const vesselLayer = layer => (linked(layer) ? layer : 'painting');
 const fmt = (v, d = 1) => (v === null || v === undefined || !isFinite(v)) ? '-' : Number(v).toFixed(d);
 
 // ------------------------------------------------------------------ the vessel (three.js)
@@ -148,7 +155,7 @@ async function loadVessel(s) {
     if (markers[key]) scene3.remove(markers[key]);
     markers[key] = markerSphere(color, r * 0.012);
   }
-  await setTexture(state.layer);
+  await setTexture(vesselLayer(state.layer));
   mark('texture');
   meshInfo();
 }
@@ -242,6 +249,8 @@ function frameVessel(s) {
 }
 
 async function setTexture(layer) {
+  if (mesh.material.uniforms.map.value && state.vesselShown === layer) return;
+  state.vesselShown = layer;
   const tex = await textureLoader.loadAsync(`${API}/texture/${encodeURIComponent(layer)}.jpg?token=${TOKEN}`);
   tex.colorSpace = THREE.NoColorSpace;  // the shader writes the image's values as they are
   tex.anisotropy = renderer.capabilities.getMaxAnisotropy();
@@ -330,6 +339,7 @@ function drawOverlay() {
   overlay.width = rect.width; overlay.height = rect.height;
   const ctx = overlay.getContext('2d');
   ctx.clearRect(0, 0, overlay.width, overlay.height);
+  if (!linked(state.layerShown || state.layer)) return;  // marks are on the image's grid
   const toLocal = p => { const c = imageToClient(p); return [c.x - rect.left, c.y - rect.top]; };
   const [x0, y0] = toLocal([0, 0]), [x1, y1] = toLocal([s.width, s.height]);
   if (mask && (state.tool === 'paint' || state.tool === 'erase')) {
@@ -367,7 +377,7 @@ function hookFlat() {
   });
   let dragStart = null;
   viewer.addHandler('canvas-press', e => {
-    if (!['window', 'overlap', 'paint', 'erase'].includes(state.tool)) return;
+    if (!['window', 'overlap', 'paint', 'erase'].includes(state.tool) || !linked()) return;
     const rect = viewer.element.getBoundingClientRect();
     dragStart = clientToImage(rect.left + e.position.x, rect.top + e.position.y);
     if (state.tool === 'paint' || state.tool === 'erase') brush(dragStart);
@@ -397,6 +407,11 @@ function hookFlat() {
 }
 
 async function linkFromPixel(p, clicked) {
+  if (!linked()) {
+    if (clicked) $('readout').textContent = `${state.scene.layers.find(l => l.name === state.layer).label}: ` +
+      'switch to the painting or a map to link the image with the vessel.';
+    return null;
+  }
   const { hit } = await post('pick', { pixel: p });
   if (!hit) { if (clicked) status('not on the surface'); return null; }
   state.markerFlat = p; state.marker3d = hit.point; state.readout = hit;
@@ -405,6 +420,7 @@ async function linkFromPixel(p, clicked) {
 }
 
 async function flatClick(p) {
+  if (!linked()) return linkFromPixel(p, true);
   if (state.tool === 'measure') return addMeasurePoint(p);
   if (state.tool === 'look' || state.tool === 'seam') return linkFromPixel(p, true);
 }
@@ -482,7 +498,7 @@ async function vesselClick(x, y) {
   if (state.tool === 'seam') { state.edits.seam_at = hit.point; place('seam', hit.point); await preview(); }
   if (state.tool === 'measure') await addMeasurePoint(hit.pixel);
   const c = imageToClient(hit.pixel), rect = viewer.element.getBoundingClientRect();
-  if (c.x < rect.left || c.x > rect.right || c.y < rect.top || c.y > rect.bottom) {
+  if (linked() && (c.x < rect.left || c.x > rect.right || c.y < rect.top || c.y > rect.bottom)) {
     viewer.viewport.panTo(viewer.viewport.imageToViewportCoordinates(new OpenSeadragon.Point(...hit.pixel)));
   }
   render(); drawOverlay();
@@ -668,8 +684,10 @@ async function start(again = false) {
 $('layer').addEventListener('change', async e => {
   const layer = state.layer = e.target.value;
   showLegend(layer);
-  await Promise.all([openFlat(state.scene, layer, true), setTexture(layer)]);
+  await Promise.all([openFlat(state.scene, layer, linked(layer) && linked(state.layerShown)),
+                     setTexture(vesselLayer(layer))]);
   state.layerShown = layer;
+  drawOverlay();
 });
 for (const b of document.querySelectorAll('[data-tool]')) b.addEventListener('click', () => setTool(b.dataset.tool));
 $('outline').addEventListener('change', e => { if (lines.outline) { lines.outline.visible = e.target.checked; render(); } });
