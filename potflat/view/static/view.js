@@ -408,8 +408,8 @@ function hookFlat() {
 
 async function linkFromPixel(p, clicked) {
   if (!linked()) {
-    if (clicked) $('readout').textContent = `${state.scene.layers.find(l => l.name === state.layer).label}: ` +
-      'switch to the painting or a map to link the image with the vessel.';
+    if (clicked) $('readout').textContent = 'This image is not linked to the vessel: switch to the painting or a map ' +
+      'to link the image with the vessel.';
     return null;
   }
   const { hit } = await post('pick', { pixel: p });
