@@ -241,6 +241,21 @@ def test_measure_gives_the_image_and_the_vessel_distance(page, served):
     direct = scene.measure(tuple(got[0]), tuple(got[1]))
     assert m["surface_mm"] == pytest.approx(direct["surface_mm"], rel=1e-9)
     assert "on the vessel" in page.text_content("#measure")
+    # a short length on the smooth belly: the true distance is the chord between the position
+    # map's points (the surface bends by much less than 0.5 % over 10 mm there)
+    import tifffile
+
+    position = tifffile.imread(served.server.runs.folders["amphora"] / "amphora.position.tif")
+    page.evaluate("potflat.measurePoints = []; potflat.measure = null")
+    for q in ([1200.5, 900.5], [1240.5, 900.5]):
+        c = page.evaluate(f"potflat.imageToClient({q})")
+        page.mouse.click(c["x"], c["y"])
+    page.wait_for_function("potflat.measure !== null")
+    m = page.evaluate("potflat.measure")
+    got = np.asarray(page.evaluate("potflat.measurePoints"))
+    ends = [position[int(y), int(x)].astype(float) for x, y in got]
+    true_mm = np.linalg.norm(ends[1] - ends[0]) * scene.grid.mm_per_unit
+    assert 8.0 < true_mm < 12.0 and m["surface_mm"] == pytest.approx(true_mm, rel=5e-3)
     page.click("[data-tool=look]")
 
 
@@ -484,6 +499,18 @@ def test_a_base_listed_without_its_image_or_grid_is_tolerated(run_dir, tmp_path)
     (tmp_path / "gone" / "amphora.base.png").unlink()
     names = [e["name"] for e in layer_entries(Scene(tmp_path / "gone", "amphora"))]
     assert "base" not in names and names[0] == "painting"
+
+
+def test_a_scan_moved_away_leaves_the_unrolled_part_with_one_line(run_dir, tmp_path):
+    from potflat.view.scene import Scene
+
+    moved = tmp_path / "moved"
+    shutil.copytree(run_dir, moved)
+    record = json.loads((moved / "amphora.rollout.json").read_text())
+    record["input"] = str(tmp_path / "gone.obj")
+    (moved / "amphora.rollout.json").write_text(json.dumps(record))
+    whole = Scene(moved, "amphora").whole()
+    assert whole.display is None and "gone.obj" in whole.message and "\n" not in whole.message
 
 
 def test_a_pick_behind_the_surface_seen_is_not_in_the_image(served):
