@@ -752,6 +752,25 @@ def test_the_batch_report_opens_each_view_when_served(browser, run_dir, tmp_path
         server.server_close()
 
 
+def test_a_scan_of_a_batch_is_not_rerun_from_the_page(run_dir, tmp_path):
+    """In a batch's folder the edits still give the command line, but the rerun and the mask
+    are refused with one line (the batch's summary describes the scan's outputs)."""
+    folder = tmp_path / "batch"
+    shutil.copytree(run_dir, folder / "amphora")
+    (folder / "summary.json").write_text("{}")
+    batch = _Served(folder)
+    try:
+        status, body = _get(batch, "/_potflat/api/amphora/options", method="POST", body=b'{"overlap": 20}')
+        assert status == 200 and "--overlap 20.0" in json.loads(body)["command"]
+        for path, method, body in (("rerun", "POST", b'{"overlap": 20}'), ("mask", "PUT", b"png")):
+            status, answer = _get(batch, f"/_potflat/api/amphora/{path}", method=method, body=body)
+            assert status == 400 and "belongs to a batch" in json.loads(answer)["error"], path
+        assert not (folder / "amphora" / "amphora.mask.png").exists()
+        assert json.loads(_get(batch, "/_potflat/api/amphora/rerun")[1])["state"] == "idle"
+    finally:
+        batch.close()
+
+
 def test_view_command_prints_the_address_and_stops_on_ctrl_c(run_dir):
     proc = subprocess.Popen([sys.executable, "-m", "potflat_cli", "view", str(run_dir), "--no-browser"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

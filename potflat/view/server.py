@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs, unquote, urlsplit
 
-from potflat.errors import InvalidInputError, PotflatError
+from potflat.errors import InvalidInputError, InvalidOptionError, PotflatError
 from potflat.files.options import options_dict
 from potflat.io.atomic import _finite
 from potflat.mesh.distortion import painted_zone_distortion
@@ -46,6 +46,11 @@ PREFIX = "/_potflat"
 WARM_AFTER_S = 15.0
 #: Largest JSON body accepted.
 MAX_JSON_BYTES = 1 << 20
+#: Why a scan of a batch is not rerun from the page (the batch's summary, report and manifest
+#: describe its outputs).
+BATCH_RERUN = ("this scan belongs to a batch (summary.json in the folder given): rerunning it here would leave the "
+               "batch's summary and report describing other outputs; run the command shown into another folder, or "
+               "change the batch's YAML and run potflat batch again")
 #: Content types of the page's assets and the run's files.
 TYPES = {".js": "text/javascript; charset=utf-8", ".html": "text/html; charset=utf-8", ".css": "text/css",
          ".json": "application/json", ".png": "image/png", ".svg": "image/svg+xml", ".csv": "text/csv",
@@ -394,6 +399,8 @@ class Handler(BaseHTTPRequestHandler):
         elif method == "POST":
             self._post(name, what, self._body(MAX_JSON_BYTES))
         elif method == "PUT" and what == "mask":
+            if runs.batch:
+                raise InvalidOptionError(BATCH_RERUN)
             scene = runs.scene(name)
             saved = save_mask(scene.folder, name, self._body(MAX_MASK_BYTES), (scene.grid.width, scene.grid.height))
             self._json({"saved": saved.name})
@@ -499,6 +506,8 @@ class Handler(BaseHTTPRequestHandler):
             if what == "options":
                 self._json({"rollout": _plain(options["rollout"]),
                             "command": command_line(scan_of(scene.folder, name), scene.folder, name, options)})
+            elif runs.batch:
+                raise InvalidOptionError(BATCH_RERUN)
             else:
                 self._json(runs.rerun(name).start(scene.folder, name, options, lambda: runs.reload(name)))
         elif what == "angle":

@@ -624,7 +624,7 @@ async function rerun() {
       state.edits = {}; state.window = null; state.overlap = null; mask = null; maskSmall = null;
       await start(true);
     }
-  } catch (err) { status(err.message, true); } finally { button.disabled = false; }
+  } catch (err) { status(err.message, true); } finally { button.disabled = state.scene.batch; }
 }
 
 // ------------------------------------------------------------------ the page
@@ -665,6 +665,9 @@ async function start(again = false) {
   if (!s.layers.some(l => l.name === state.layer)) state.layer = 'painting';
   select.value = state.layer;
   $('command').textContent = s.command;
+  $('rerun').disabled = s.batch;  // a batch's summary and report describe its scans' outputs
+  $('rerun').title = s.batch ? 'a scan of a batch: run the command shown into another folder, or change the ' +
+    'batch\'s YAML and run potflat batch again' : '';
   if (s.lengths) $('measure').textContent = s.lengths.charAt(0).toUpperCase() + s.lengths.slice(1) + '.';
   await Promise.all([loadVessel(s).then(() => { if (!again) frameVessel(s); resize3d(); mark('vessel'); }),
                      openFlat(s, state.layer, again).then(() => mark('image'))]);
