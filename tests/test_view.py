@@ -250,6 +250,7 @@ def test_measure_gives_the_image_and_the_vessel_distance(page, served):
     for q in ([1200.5, 900.5], [1240.5, 900.5]):
         c = page.evaluate(f"potflat.imageToClient({q})")
         page.mouse.click(c["x"], c["y"])
+        page.wait_for_timeout(400)  # two quick clicks this close would be a double click: a zoom
     page.wait_for_function("potflat.measure !== null")
     m = page.evaluate("potflat.measure")
     got = np.asarray(page.evaluate("potflat.measurePoints"))
