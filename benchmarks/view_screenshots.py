@@ -29,7 +29,8 @@ ROOT = Path(__file__).resolve().parents[1]
 #: measure starts and ends and the point is clicked.
 SHOTS = [
     (ROOT / "samples" / "data" / "amphora.obj", "amphora", ((0.36, 0.49), (0.63, 0.49), (0.50, 0.49))),
-    (ROOT.parent / "shared" / "data" / "real" / "dragon-jar.glb", "dragon-jar", ((0.30, 0.46), (0.52, 0.46), (0.42, 0.50))),
+    (ROOT.parent / "shared" / "data" / "real" / "dragon-jar.glb", "dragon-jar",
+     ((0.30, 0.46), (0.52, 0.46), (0.42, 0.50))),
 ]
 
 
