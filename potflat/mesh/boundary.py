@@ -83,3 +83,38 @@ def edges_and_boundary(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarra
     owner, k = half // 3, half % 3
     return edges, np.stack([F[owner, k], F[owner, (k + 1) % 3]], axis=1), owner
 
+
+def outline_turning(faces: np.ndarray, uv: np.ndarray, *, segments: np.ndarray | None = None) -> float:
+    """Total turning of a flattening's outline: the sum of the absolute exterior angles at
+    every boundary vertex, over all boundary loops (the outline and the holes), over 2 pi.
+
+    A convex outline without holes turns once (1.0); every tooth of a saw-toothed edge adds
+    about twice its angle, so the figure measures how ragged the outline is.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+    uv : (n, 2) float64
+    segments : (b, 2) int64, optional
+        The boundary segments (``edges_and_boundary(faces, n)[1]``) when the caller has them.
+
+    Returns
+    -------
+    float
+    """
+    uv = np.ascontiguousarray(uv, dtype=np.float64)
+    if segments is None:
+        segments = edges_and_boundary(faces, len(uv))[1]
+    seg = np.ascontiguousarray(segments, dtype=np.int64).reshape(-1, 2)
+    if len(seg) == 0:
+        return 0.0
+    # each segment is followed by one that starts where it ends (the k-th arriving at a
+    # vertex by the k-th leaving it, where the boundary touches itself)
+    into = np.argsort(seg[:, 1], kind="stable")
+    out_of = np.argsort(seg[:, 0], kind="stable")
+    if not np.array_equal(seg[into, 1], seg[out_of, 0]):
+        raise ValueError("the boundary segments do not form closed loops")
+    d = uv[seg[:, 1]] - uv[seg[:, 0]]
+    d1, d2 = d[into], d[out_of]
+    angle = np.arctan2(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0], (d1 * d2).sum(axis=1))
+    return float(np.abs(angle).sum() / (2.0 * np.pi))
