@@ -18,6 +18,7 @@ from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.files.rollout_stage import run_rollout_stage
 from potflat.io.flat_ply import read_flat_ply
 from potflat.mesh.boundary import edges_and_boundary
+from potflat.mesh.distortion import edge_length_error
 from potflat.mesh.embedding import signed_areas
 from potflat.rollout.border import border_folds, crossing_segments, untangle
 from potflat.rollout.unroll import RolloutOptions, rollout
@@ -47,7 +48,7 @@ def _check_clean(res):
 
 def test_cup_outer_wall_only(cup):
     res = rollout(cup.mesh)
-    parts = cup.face_part[res.face_index]
+    parts = cup.face_part[np.unique(res.face_index)]  # (a face the seam cut is there once per piece)
     assert not np.any(parts == PART_INNER)
     assert np.count_nonzero(parts == PART_OUTER) == np.count_nonzero(cup.face_part == PART_OUTER)
     assert res.walls.two_walled and res.side == "outer"
@@ -127,7 +128,12 @@ def test_rim_top_is_trimmed_exactly():
     assert set(labels[res.trimmed]) == {"rim"}
     assert set(labels[res.face_index]) == {"wall"}
     assert len(res.trimmed) == np.count_nonzero(labels == "rim")
-    assert res.distortion.edge_rms < 1e-3  # chords of the 48-gon
+    # chords of the 48-gon, away from the seam (whose vertices may move onto its meridian)
+    u = res.flat.uv[:, 0]
+    F = res.flat.mesh.faces
+    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    e = e[~np.isin(u[e], (u.min(), u.max())).any(axis=1)]
+    assert np.sqrt(np.mean(edge_length_error(res.flat.mesh.vertices, res.flat.uv, e) ** 2)) < 1e-3
     _check_clean(res)
 
 
