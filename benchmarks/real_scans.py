@@ -233,22 +233,6 @@ def run_potflat(scan: Path, out: Path, extra: tuple[str, ...] = (), interval: fl
             "peak_gb": hwm[0] / 2**20, "report": report}
 
 
-def outline_turning(ply: Path) -> float:
-    """Total turning of a stage PLY's flat outline: the sum over all boundary loops of the
-    absolute exterior angles, over 2 pi (1 for a convex outline)."""
-    from potflat.io.flat_ply import read_flat_ply
-    from potflat.mesh.embedding import boundary_loops
-
-    flat = read_flat_ply(ply)
-    total = 0.0
-    for loop in boundary_loops(flat.mesh.faces, len(flat.uv)):
-        p = flat.uv[loop]
-        d = np.roll(p, -1, axis=0) - p
-        a = np.arctan2(d[:, 1], d[:, 0])
-        total += float(np.abs((np.roll(a, -1) - a + np.pi) % (2 * np.pi) - np.pi).sum())
-    return total / (2 * np.pi)
-
-
 def _load(path: Path) -> dict:
     return json.loads(path.read_text()) if path.is_file() else {}
 
@@ -277,8 +261,7 @@ def figures(out: Path, name: str, run: dict, area_mm2: float) -> dict:
     row["zone_err"] = (zone.get("length_error_median_pct"), zone.get("length_error_p95_pct"))
     row["in_image_pct"] = 100 * ba["surface_area_mm2"] / area_mm2 if "surface_area_mm2" in ba else None
     row["trimmed_pct"] = 100 * ro.get("trimmed", {}).get("area_mm2", float("nan")) / area_mm2 if ro else None
-    row["turning"] = tuple(outline_turning(p) if p.is_file() else None
-                           for p in (out / f"{name}.rollout.ply", out / f"{name}.relaxed.ply"))
+    row["turning"] = (ro.get("outline_turning"), re_.get("outline_turning", {}).get("relaxed"))
     return row
 
 

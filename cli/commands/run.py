@@ -38,6 +38,7 @@ def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json
     from rich.console import Console
 
     from potflat.files.pipeline import run_scan
+    from potflat.mesh.boundary import turning_words
     from potflat.mesh.distortion import distortion_words
     from potflat_cli import _warmup as potflat_warmup
     from potflat_cli._stage import say_compiling, with_compile_note
@@ -84,6 +85,8 @@ def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json
     relaxed = result.relax.record
     if relaxed.get("lengths"):
         out.print(f"  {relaxed['lengths']}")
+    if relaxed.get("outline_turning"):
+        out.print(f"  {turning_words(relaxed['outline_turning'])}", highlight=False)
     for key, path in result.paths.items():
         out.print(f"  {key:<16} {path}", highlight=False)
     rolled = result.rollout.record

@@ -14,6 +14,7 @@ from potflat.files.rollout_stage import RolloutFiles
 from potflat.io.atomic import write_json_atomic
 from potflat.io.flat_ply import as_stored, read_flat_ply, write_flat_ply
 from potflat.io.images import check_texture_file
+from potflat.mesh.boundary import edges_and_boundary, outline_turning
 from potflat.mesh.distortion import DistortionSummary, SurfaceReference, ZoneSummary
 from potflat.relax.multilevel import relax
 from potflat.relax.options import RelaxOptions
@@ -68,6 +69,15 @@ def _level_for_json(level: LevelRecord) -> dict:
     return {k: v for k, v in asdict(level).items() if v is not None}
 
 
+def _turning(start: FlatMesh, relaxed: FlatMesh) -> dict:
+    """The outline's total turning (:func:`potflat.mesh.boundary.outline_turning`) of the
+    rollout and of the relaxed layout (the same mesh)."""
+    segments = edges_and_boundary(start.mesh.faces, len(start.uv))[1]
+    before, after = (outline_turning(start.mesh.faces, f.uv, segments=segments) for f in (start, relaxed))
+    return {"rollout": before, "relaxed": after, "ratio": after / before if before > 0 else None,
+            "method": "sum of the absolute exterior angles of every boundary loop over 2 pi (1: convex outline)"}
+
+
 def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: RelaxOptions | None = None, *,
                     name: str | None = None, progress: bool = False,
                     rolled: RolloutFiles | None = None) -> RelaxFiles:
@@ -118,6 +128,7 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         "converged": result.converged,
         "flipped": result.flipped,
         "boundary_overlap": result.boundary_overlap,
+        "outline_turning": _turning(flat, result.flat),
         "fold_free": result.flipped == 0 and result.boundary_overlap == 0,
         "fold_free_verified_by": "signed area of every face > 0 and no crossing boundary segments, checked after solving",
         "energy_history": _history_for_json(result.energy_history),

@@ -118,3 +118,11 @@ def outline_turning(faces: np.ndarray, uv: np.ndarray, *, segments: np.ndarray |
     d1, d2 = d[into], d[out_of]
     angle = np.arctan2(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0], (d1 * d2).sum(axis=1))
     return float(np.abs(angle).sum() / (2.0 * np.pi))
+
+
+def turning_words(turning: dict) -> str:
+    """One line on how ragged the relaxed outline is beside the rollout's, from the relaxed
+    JSON's ``outline_turning`` (:func:`outline_turning` of each)."""
+    ratio = turning.get("ratio")
+    return (f"outline: turns {turning['relaxed']:.2f} times round (the rollout's {turning['rollout']:.2f}"
+            + (f", {ratio:.2f}x" if ratio is not None else "") + "; 1 is a convex outline without holes)")
