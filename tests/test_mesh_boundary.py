@@ -4,7 +4,7 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from potflat.mesh.boundary import crossing_pairs, edges_and_boundary, outline_turning
+from potflat.mesh.boundary import crossing_pairs, edges_and_boundary, outline_turning, surface_turning
 
 
 def test_edges_and_boundary_match_a_slow_reference():
@@ -69,3 +69,23 @@ def test_outline_turning_refuses_segments_that_do_not_close():
     seg = edges_and_boundary(F, len(uv))[1]
     with pytest.raises(ValueError, match="closed loops"):
         outline_turning(F, uv, segments=seg[1:])
+
+
+@pytest.mark.parametrize("leave_out, turns", [((), 1.0), (((1, 0),), 2.0), (((1, 1),), 2.0)])
+def test_surface_turning_of_a_flat_sheet_is_its_outline_turning(leave_out, turns):
+    F, uv = _squares(3, leave_out)
+    rot = np.linalg.qr(np.random.default_rng(1).normal(size=(3, 3)))[0]
+    V = np.c_[uv, np.zeros(len(uv))] @ rot.T
+    assert np.isclose(surface_turning(V, F), turns, rtol=1e-12)
+
+
+def test_surface_turning_of_a_sheet_bent_round_a_cylinder():
+    # its sides (generators) and ends (circles) are geodesics: four right-angled corners only
+    F, uv = _squares(8)
+    angle, z = uv[:, 0] * (np.pi / 8), uv[:, 1]
+    V = np.c_[np.cos(angle), np.sin(angle), z]
+    assert np.isclose(surface_turning(V, F), 1.0, rtol=1e-12)
+    # a tooth pulled out of an end (tip half an edge along the axis) adds its turns
+    tip = (uv[:, 1] == 0) & (uv[:, 0] == 4)
+    V[tip, 2] = -0.5
+    assert surface_turning(V, F) > 1.0 + 3 * np.arctan(0.5) / (2 * np.pi)

@@ -398,6 +398,7 @@ def test_run_relax_stage_writes_ply_and_json(tmp_path, vessel):
     turning = js["outline_turning"]  # the rollout's and the relaxed outline's, the same mesh
     assert turning["rollout"] >= 1.0 and turning["relaxed"] >= 1.0
     assert np.isclose(turning["ratio"], turning["relaxed"] / turning["rollout"])
+    assert turning["surface"] >= 1.0
 
 
 def test_cli_relax(tmp_path, vessel):
