@@ -22,7 +22,8 @@ a failure is a row, not an abort) and the row is read off the JSON sidecars: sta
 and boundary crossings (of the rollout and of the result, or of the refusal), the painted
 zone's length error (median, p95), the share of the scan's surface in the image, the
 outline's total turning (sum of absolute exterior angles over 2 pi, all boundary loops) of
-the rollout and the relaxed layout, and the peak memory. Below the table, each real scan's
+the rollout and the relaxed layout and of the scan's boundary on the surface (what a layout
+keeping every triangle's shape turns), and the peak memory. Below the table, each real scan's
 whole run at 1M vertices against the synthetic vessel's.
 
 Reproduce::
@@ -232,7 +233,8 @@ def figures(out: Path, name: str, run: dict, area_mm2: float) -> dict:
     row["zone"] = _zone(imp)
     row["zone_err"] = (zone.get("length_error_median_pct"), zone.get("length_error_p95_pct"))
     row["in_image_pct"] = 100 * ba["surface_area_mm2"] / area_mm2 if "surface_area_mm2" in ba else None
-    row["turning"] = (ro.get("outline_turning"), (re_.get("outline_turning") or {}).get("relaxed"))
+    turning = re_.get("outline_turning") or {}
+    row["turning"] = (ro.get("outline_turning"), turning.get("relaxed"), turning.get("surface"))
     return row
 
 
@@ -283,7 +285,7 @@ def table(rows: list[dict], command: str) -> str:
             " / ".join([_per_vertex(r["rollout_s"], v), _per_vertex(r["relax_s"], v), _per_vertex(r["cpu_s"], v)]),
             _f(r["peak_gb"], ".2f"), " ".join(str(it) for _, it in r["levels"]) or "-", _f(r["flipped"], "d"),
             f"{_f(r['rollout_overlap'], 'd')} / {_f(r['crossings'], 'd')}",
-            f"{_f(r['turning'][0])} / {_f(r['turning'][1])}", r["zone"],
+            f"{_f(r['turning'][0])} / {_f(r['turning'][1])} ({_f(r['turning'][2])})", r["zone"],
             f"{_f(r['zone_err'][0])} / {_f(r['zone_err'][1])}", _f(r["in_image_pct"])]) + " |")
     notes = [f"- {r['scan']} {r['vertices']:,}: {n}" for r in rows for n in r["notes"]]
     return "\n".join(lines + [""] + ratios(rows) + ([""] + notes if notes else []) + [""])
