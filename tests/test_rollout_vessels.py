@@ -328,3 +328,21 @@ def test_border_folds_reads_every_pass_off_one_edge_table(monkeypatch):
     drop = border_folds(faces, uv, np.full(len(faces), 0.5))
     assert drop.any() and np.all(signed_areas(faces[~drop], uv) > 0)
     assert len(calls) <= 3
+
+
+def _two_fans_at_one_place():
+    """A fan of four triangles around vertex 0 and one triangle around vertex 6, a copy of
+    vertex 0 (same place, as cleaning leaves a non-manifold vertex: one copy per fan)."""
+    a = np.radians([0, 45, 90, 135, 180])
+    uv = np.concatenate([[[0.0, 0.0]], np.c_[np.cos(a), np.sin(a)], [[0.0, 0.0], [-0.3, -0.5], [0.3, -0.5]]])
+    faces = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5], [6, 7, 8]])
+    return faces, uv, np.c_[uv, np.zeros(len(uv))], np.abs(signed_areas(faces, uv))
+
+
+def test_border_folds_keeps_the_largest_fan_of_a_vertex_split_into_copies():
+    faces, uv, points, area = _two_fans_at_one_place()
+    assert (signed_areas(faces, uv) > 0).all()
+    # the copies count as one pinched vertex: only the smaller fan goes
+    np.testing.assert_array_equal(border_folds(faces, uv, area, points=points), [0, 0, 0, 0, 1])
+    # taken as two vertices, the fans only touch: the faces at the touching point go from both
+    assert border_folds(faces, uv, area)[:4].any()
