@@ -21,6 +21,7 @@ from potflat.mesh.boundary import edges_and_boundary
 from potflat.mesh.distortion import edge_length_error
 from potflat.mesh.embedding import signed_areas
 from potflat.rollout.border import border_folds, crossing_segments, untangle
+from potflat.rollout.folds import overlapping_faces
 from potflat.rollout.unroll import RolloutOptions, rollout
 from potflat.rollout.walls import OUTER
 from potflat.types import Mesh
@@ -346,3 +347,21 @@ def test_border_folds_keeps_the_largest_fan_of_a_vertex_split_into_copies():
     np.testing.assert_array_equal(border_folds(faces, uv, area, points=points), [0, 0, 0, 0, 1])
     # taken as two vertices, the fans only touch: the faces at the touching point go from both
     assert border_folds(faces, uv, area)[:4].any()
+
+
+def test_border_folds_trims_a_flap_lying_over_the_wall_whole():
+    # a strip wound a turn and a bit (a spiral: its end lies over its start, no face flipped):
+    # the whole crossing region goes, both sheets, not only the faces owning crossing segments
+    k, turn = 60, 2 * np.pi + 1.0
+    a = np.linspace(0, turn, k + 1)
+    r = 1.0 + 0.1 * a / (2 * np.pi)
+    uv = np.concatenate([np.c_[r * np.cos(a), r * np.sin(a)], np.c_[(r + 0.3) * np.cos(a), (r + 0.3) * np.sin(a)]])
+    i = np.arange(k)
+    faces = np.concatenate([np.c_[i, k + 2 + i, i + 1], np.c_[i, k + 1 + i, k + 2 + i]])
+    area = signed_areas(faces, uv)
+    over = overlapping_faces(faces, uv)
+    assert (area > 0).all() and over.any()
+    drop = border_folds(faces, uv, area)
+    assert drop[over].all() and drop.sum() < 0.4 * len(faces)
+    assert not overlapping_faces(faces[~drop], uv).any()
+    assert len(crossing_segments(uv, edges_and_boundary(faces[~drop], len(uv))[1])[0]) == 0
