@@ -158,6 +158,7 @@ def run_relax_stage(rollout_ply, out_dir, options, *, name=None, rolled=None, ch
                "important_zone": {"area_fraction": 0.25, "length_error_median_pct": 1.0 + data[1] / 1e3,
                                   "length_error_p95_pct": 2.5},
                "rest": {"area_fraction": 0.75, "length_error_median_pct": 30.0, "length_error_p95_pct": 55.0},
+               "outline_turning": {"rollout": 1.5, "relaxed": 1.6, "ratio": 1.6 / 1.5},
                "provenance": provenance(stage="relax", inputs=[src], options=asdict(options))}
     js = write_json_atomic(out / f"{name}.relaxed.json", summary)
     zone = ZoneSummary(important_zone=_zone(summary["important_zone"]), rest=_zone(summary["rest"]), lengths="")

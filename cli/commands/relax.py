@@ -27,6 +27,7 @@ def relax_command(rollout_ply: Input, output: StageOutputDir = None, name: Stage
                   json: Json = False, *, options: dict) -> None:
     """Relax a rollout into a fold-free flattening."""
     # imported here, not at the top: 'potflat --help' stays free of Numba and SciPy
+    from potflat.mesh.boundary import turning_words
     from potflat.mesh.distortion import distortion_words
     from potflat.files.relax_stage import run_relax_stage
     from potflat._jit import kernels_cached
@@ -52,6 +53,7 @@ def relax_command(rollout_ply: Input, output: StageOutputDir = None, name: Stage
                f"mean |ln area ratio| {before['area_mean_abs_log']:.4f} -> {after['area_mean_abs_log']:.4f}, {fold}")
     typer.echo(f"  whole surface now: {distortion_words({**after, 'flipped': None})}")
     typer.echo(f"  {s['lengths']}")
+    typer.echo(f"  {turning_words(s['outline_turning'])}")
 
 
 relax_command.__doc__ = HELP

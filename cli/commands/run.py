@@ -39,6 +39,7 @@ def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json
 
     from potflat.files.pipeline import run_scan
     from potflat.files.rollout_stage import base_line
+    from potflat.mesh.boundary import turning_words
     from potflat.mesh.distortion import distortion_words
     from potflat_cli import _warmup as potflat_warmup
     from potflat_cli._stage import StageLog, say_compiling, with_compile_note
@@ -89,6 +90,8 @@ def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json
     relaxed = result.relax.record
     if relaxed.get("lengths"):
         out.print(f"  {relaxed['lengths']}")
+    if relaxed.get("outline_turning"):
+        out.print(f"  {turning_words(relaxed['outline_turning'])}", highlight=False)
     base = result.rollout.record.get("base")
     if base is not None and base["candidate_faces"]:
         out.print(f"  {base_line(base, result.paths.get('bake.base_png'))}", highlight=False)

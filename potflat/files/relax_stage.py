@@ -17,6 +17,7 @@ from potflat.files.rollout_stage import RolloutFiles
 from potflat.io.atomic import write_json_atomic
 from potflat.io.flat_ply import as_stored, read_flat_ply, write_flat_ply
 from potflat.io.images import check_texture_image
+from potflat.mesh.boundary import edges_and_boundary, outline_turning, surface_turning
 from potflat.mesh.distortion import DistortionSummary, SurfaceReference, ZoneSummary
 from potflat.relax.multilevel import relax
 from potflat.relax.options import RelaxOptions
@@ -69,6 +70,20 @@ def _settings_for_json(result: RelaxResult, options: RelaxOptions) -> dict:
 def _level_for_json(level: LevelRecord) -> dict:
     """One level of the relaxation as ``NAME.relaxed.json`` records it (the fields it has)."""
     return {k: v for k, v in asdict(level).items() if v is not None}
+
+
+def _turning(start: FlatMesh, relaxed: FlatMesh) -> dict:
+    """The outline's total turning (:func:`potflat.mesh.boundary.outline_turning`) of the
+    rollout and of the relaxed layout (the same mesh), and the scan boundary's own on the
+    surface (:func:`potflat.mesh.boundary.surface_turning`)."""
+    segments = edges_and_boundary(start.mesh.faces, len(start.uv))[1]
+    before, after = (outline_turning(start.mesh.faces, f.uv, segments=segments) for f in (start, relaxed))
+    surface = surface_turning(start.mesh.vertices, start.mesh.faces, segments=segments)
+    return {"rollout": before, "relaxed": after, "ratio": after / before if before > 0 else None,
+            "surface": surface,
+            "method": "sum of the absolute exterior angles of every boundary loop over 2 pi (1: convex outline); "
+                      "surface: the same on the scan (pi less the 3D corner angles at each boundary vertex), "
+                      "which a layout keeping every triangle's shape has"}
 
 
 def _not_a_disk_advice(rollout_record: dict, rollout_json: Path) -> str:
@@ -163,6 +178,7 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
             "converged": result.converged,
             "flipped": result.flipped,
             "boundary_overlap": result.boundary_overlap,
+            "outline_turning": _turning(flat, result.flat),
             "fold_free": result.flipped == 0 and result.boundary_overlap == 0,
             "fold_free_verified_by": "signed area of every face > 0 and no crossing boundary segments, checked after solving",
             "energy_history": _history_for_json(result.energy_history),

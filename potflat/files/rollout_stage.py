@@ -7,6 +7,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from potflat import __version__
 from potflat._heap import reuse_freed_memory
 from potflat.errors import InvalidOptionError
@@ -162,13 +164,18 @@ def rollout_record(result: RolloutResult) -> dict:
         "counts": {
             "vertices": len(mesh.vertices), "faces": len(mesh.faces),
             "input_faces": result.region.faces_total,
-            "input_vertices_used": int(len(result.vertex_index) - result.seam_vertices - result.split_vertices),
+            "input_faces_unrolled": int(np.count_nonzero(np.bincount(result.face_index))),
+            "input_vertices_used": int(len(result.vertex_index) - result.seam_vertices - result.split_vertices
+                                       - result.cut_vertices),
             "seam_vertices_duplicated": result.seam_vertices,
+            "vertices_added_by_cut": result.cut_vertices,
+            "faces_split_by_cut": result.cut_faces,
             "nonmanifold_vertices_split": result.split_vertices,
         },
         "distortion": result.distortion.as_dict(),
         "importance": result.importance.as_dict() if result.importance is not None else None,
         "boundary_overlap": result.boundary_overlap,
+        "outline_turning": result.outline_turning,
         "walls": result.walls.summary(),
         "attachments": _attachments_summary(result),
         "base": result.base.summary(mesh.mm_per_unit) if result.base is not None else None,
