@@ -37,9 +37,12 @@ def test_a_flat_base_is_left_out_and_shown_true_seen_from_below(cup):
     base = res.base
     assert base.left_out and base.view == "below" and base.flat is not None
     base_faces = np.flatnonzero(cup.face_part == PART_BASE)
-    assert np.isin(base_faces, base.disc_faces).mean() > 0.97
-    assert not np.intersect1d(base.disc_faces, res.face_index).size  # each face in one image
-    assert np.count_nonzero(cup.face_part[res.face_index] == PART_BASE) <= 0.01 * len(base_faces)
+    assert np.isin(base_faces, np.concatenate([base.disc_faces, base.cut.faces])).mean() > 0.97
+    assert not np.intersect1d(base.disc_faces, res.face_index).size  # each face in one image, or cut between
+    # (faces across the plane the base is cut off along are in both, in pieces: the rounded
+    # corner's upper part goes with the wall)
+    in_rollout = face_areas(res.flat.mesh.vertices, res.flat.mesh.faces)[cup.face_part[res.face_index] == PART_BASE]
+    assert in_rollout.sum() <= 0.05 * face_areas(cup.mesh.vertices, cup.mesh.faces[base_faces]).sum()
     # a flat base seen along the axis is true, and not mirrored: every face counter-clockwise
     assert base.orthographic_error_pct[0] < 0.5 and base.unrolled_error_pct[0] > 20
     assert np.all(signed_areas(base.flat.mesh.faces, base.flat.uv) > 0)

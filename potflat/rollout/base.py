@@ -75,7 +75,7 @@ MAX_CUT_OFF = 0.5
 #: along whole faces.
 MAX_CUT_MOVED = 0.5
 #: Percentiles of the heights where the disc of whole faces meets the wall at which a plane
-#: is tried; the one moving the least area between disc and wall is taken.
+#: is tried (:func:`cut_base` says which is taken).
 CUT_QUANTILES = (50.0, 75.0, 90.0, 100.0)
 #: Heights closer to the cut than this fraction of the vessel's height are on it.
 CUT_HEIGHT_TOLERANCE = 1e-9
@@ -126,9 +126,11 @@ def cut_base(points: np.ndarray, faces: np.ndarray, disc_faces: np.ndarray, wall
     where they meet (:data:`CUT_QUANTILES` of the heights of the vertices they share;
     :func:`potflat.mesh.split.split_faces`); each connected piece of the surface below or
     above it goes to the disc or the wall, whichever has the more of its area. Of the planes
-    tried, the one that moves the least area is taken, and none that moves more than
-    :data:`MAX_CUT_MOVED` of the disc or puts into it a piece facing away from its viewer. So the wall's lower edge and the disc's rim are one
-    curve at one height.
+    tried, the one that puts the least of the wall turned more than :data:`BASE_ANGLE_DEG`
+    from the view into the disc is taken (the disc stays as true as the faces chosen for
+    it), then the one moving the least area; none that moves more than :data:`MAX_CUT_MOVED`
+    of the disc or puts into it a face turned away from the view. So the wall's lower edge
+    and the disc's rim are one     curve at one height.
 
     Parameters
     ----------
@@ -173,15 +175,16 @@ def cut_base(points: np.ndarray, faces: np.ndarray, disc_faces: np.ndarray, wall
         tried = _try_cut(points, rows, d, vertex_height, height, tolerance, np.asarray(towards, np.float64))
         if isinstance(tried, str):
             notes.append(f"at the {q:g}th percentile {tried}")
-        elif best is None or tried[0] < best[0]:
+        elif best is None or tried[:2] < best[:2]:
             best = tried + (q,)
     if best is None:
         return None, disc_faces, "; ".join(notes) + ": cut along whole faces"
-    moved, cut, whole, q = best
+    steep, moved, cut, whole, q = best
     cut = BaseCut(cut.height, both[cut.faces], cut.on_cut)
     return cut, both[whole], (f"cut off along the plane across the axis at height {cut.height:.6g} (the {q:g}th "
                               f"percentile of where the faces facing along the axis met the wall): {len(cut.faces)} "
-                              f"faces split, {moved:.1%} of the disc's area moved between disc and wall")
+                              f"faces split, {moved:.1%} of the disc's area moved between disc and wall, {steep:.1%} of it "
+                              f"wall more than {BASE_ANGLE_DEG:g} degrees from the view put into the disc")
 
 
 def _try_cut(points, rows, d, vertex_height, height, tolerance, towards):
@@ -205,9 +208,13 @@ def _try_cut(points, rows, d, vertex_height, height, tolerance, towards):
     if moved > MAX_CUT_MOVED:
         return f"it would move {moved:.0%} of the disc's area"
     corner = pts[split.faces]
-    facing = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0]) @ towards
-    if np.any(to_disc & ~in_disc & (facing <= 0.0) & (piece_area > 0.0)):
+    facing = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0]) @ towards  # (2 area x cosine)
+    into_disc = to_disc & ~in_disc
+    if np.any(into_disc & (facing <= 0.0) & (piece_area > 0.0)):
         return "it puts faces turned away from the view into the disc"
+    # the wall's area the disc shows more than BASE_ANGLE_DEG from the view
+    steep = float(piece_area[into_disc & (facing <= 2.0 * piece_area * math.cos(math.radians(BASE_ANGLE_DEG)))].sum())
+    steep /= float(piece_area[in_disc].sum())
     n_disc = np.bincount(split.parent, to_disc, len(rows))
     n_pieces = np.bincount(split.parent, minlength=len(rows))
     mixed = (n_disc > 0) & (n_disc < n_pieces)
@@ -216,7 +223,7 @@ def _try_cut(points, rows, d, vertex_height, height, tolerance, towards):
     if np.any(mixed[split.parent] & ((to_disc & (split.side > 0)) | (~to_disc & (split.side < 0)))):
         return "the surface above it goes to the disc"
     cut = BaseCut(height, np.flatnonzero(mixed), np.union1d(cut.on_cut, ids[split.on_cut]))
-    return moved, cut, n_disc == n_pieces
+    return steep, moved, cut, n_disc == n_pieces
 
 
 @dataclass(frozen=True, eq=False)
