@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 from _revolve import cylinder, revolve
 from potflat.mesh.distortion import face_areas, summarize
 from potflat.mesh.embedding import signed_areas
+from potflat.mesh.split import CUT_SNAP
 from potflat.rollout import rollout
 from potflat.rollout.notes import _facing_axis_share
 from potflat.rollout.walls import FaceGraph
@@ -53,6 +54,43 @@ def test_a_flat_base_is_left_out_and_shown_true_seen_from_below(cup):
     assert at_seam.any() and np.all(uv[at_seam, 1] > 0) and np.all(np.abs(uv[at_seam, 0]) < uv[at_seam, 1])
     assert "base faces along the axis" in base.reason
     assert _facing_axis_share(res) < 0.02
+
+
+def test_the_base_is_cut_off_at_one_height_and_the_wall_s_lower_edge_is_level(cup):
+    res = rollout(cup.mesh, importance="none")
+    cut = res.base.cut
+    assert cut is not None and len(cut.faces) > 0 and "cut off along the plane" in res.base.cut_note
+    # the rollout's boundary in its lower half, away from the seam's sides
+    faces = res.flat.mesh.faces
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    key, count = np.unique(edges[:, 0] * len(res.flat.uv) + edges[:, 1], return_counts=True)
+    boundary = np.unique(np.concatenate([key[count == 1] // len(res.flat.uv), key[count == 1] % len(res.flat.uv)]))
+    h, _, theta = res.axis.cylindrical(res.flat.mesh.vertices[boundary])
+    off_seam = np.abs((theta - np.radians(res.seam_angle) + np.pi) % (2 * np.pi) - np.pi) > np.radians(3.0)
+    lower = h[off_seam & (h < 0.5 * res.axis.height)]
+    assert len(lower) > 32  # the whole way round
+    # on the plane: a vertex the splitter counts as on it is off by at most CUT_SNAP of an
+    # edge across it
+    face_h = res.axis.cylindrical(cup.mesh.vertices)[0][cup.mesh.faces]
+    across = (face_h.min(axis=1) < cut.height) & (face_h.max(axis=1) > cut.height)
+    snap = CUT_SNAP * np.ptp(face_h[across], axis=1).max()
+    assert np.abs(lower - cut.height).max() <= snap
+    assert np.mean(np.abs(lower - cut.height) < 1e-9 * res.axis.height) > 0.5
+    # the disc's rim is the same curve: no vertex of the disc above it
+    assert res.axis.cylindrical(res.base.flat.mesh.vertices)[0].max() <= cut.height + snap
+    # a face is whole in one image or split between both
+    assert not np.intersect1d(res.base.disc_faces, cut.faces).size
+    assert np.isin(cut.faces, res.face_index).all()
+
+
+def test_texture_coordinates_are_carried_exactly_into_the_pieces_of_both_images(cup):
+    # texture coordinates linear in the position: a piece's corner has the value of its point
+    A = np.array([[0.003, -0.001, 0.002], [0.001, 0.004, -0.002]])
+    mesh = cup.mesh.replace(texcoords=cup.mesh.vertices[cup.mesh.faces] @ A.T)
+    res = rollout(mesh, importance="none")
+    assert len(res.base.cut.faces)
+    for flat in (res.flat.mesh, res.base.flat.mesh):
+        assert np.abs(flat.texcoords - flat.vertices[flat.faces] @ A.T).max() < 1e-12
 
 
 def test_keep_base_keeps_it_in_the_rollout(cup):
