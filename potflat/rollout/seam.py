@@ -361,11 +361,12 @@ def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarr
     meridian : callable
         ``meridian(angle)``: a point of the axis and the unit normal of the meridian plane
         at unwrapped ``angle``, the normal pointing towards increasing angles.
-    floor : ((f,) bool, callable) or None
-        A base cut off (:class:`potflat.rollout.base.BaseCut`): the scan faces it splits, and
-        ``levels(ids)``, the signed height above its plane of the scan vertices ``ids``; those
+    floor : ((f,) bool, callable, callable) or None
+        A base cut off (:class:`potflat.rollout.base.BaseCut`): the scan faces it splits,
+        ``levels(ids)``, the signed height above its plane of the scan vertices ``ids``, and
+        ``angle(points)``, the angle of points (k, 3) in the region's angles (any turn); those
         faces are cut along it first (the same pieces as the base's disc) and their pieces
-        above it kept, their corners' angles interpolated within their face.
+        above it kept.
 
     Returns
     -------
@@ -444,13 +445,19 @@ def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarr
         return np.concatenate([V[ids[ids < n]], added_pts[ids[ids >= n] - n]])
 
     if floor is not None:  # the base cut off first: the pieces above the plane stay
-        cut_faces, levels = floor
+        cut_faces, levels, angle = floor
         rows = np.flatnonzero(cut_faces[rows_face])
         if len(rows):
             ids, local = np.unique(row_faces[rows], return_inverse=True)
             split = split_faces(V[ids], local.reshape(-1, 3), levels(ids))
-            splice(rows, ids, split, lambda piece, src: split.side[piece] > 0,
-                   lambda w, src: np.einsum("kij,kj->ki", w, T[src]))  # (within a face, angles are linear)
+
+            def floor_theta(w, src):
+                # each corner's angle at its point, unwrapped next to its face's corners'
+                near = np.einsum("kij,kj->ki", w, T[src])
+                at = angle((w @ V[row_faces[src]]).reshape(-1, 3)).reshape(near.shape)
+                return near + (at - near + np.pi) % TWO_PI - np.pi
+
+            splice(rows, ids, split, lambda piece, src: split.side[piece] > 0, floor_theta)
     for values in planes.values():
         r_lo, r_hi = T.min(axis=1), T.max(axis=1)
         across = np.zeros(len(T), bool)

@@ -380,7 +380,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
             if base_cut is not None and len(base_cut.faces):
                 cut_mask = np.zeros(len(F), bool)
                 cut_mask[base_cut.faces] = True
-                floor = (cut_mask, functools.partial(base_cut.levels, h_v))
+                floor = (cut_mask, functools.partial(base_cut.levels, h_v), lambda p: axis.cylindrical(p)[2])
             allowed = allowed.copy()
             allowed[base.disc_faces] = allowed[base.hidden_faces] = False
             un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area,
@@ -682,7 +682,8 @@ def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band,
         faces, corner_theta, origins = cut_region(
             mesh.vertices, F, face_index, centre, _corner_angles(theta_v, F, face_index, centre, origin),
             start=lo, end=end, repeat_from=TWO_PI if repeat else None,
-            meridian=lambda angle: (axis.point, _meridian_normal(axis, origin + angle)), floor=floor)
+            meridian=lambda angle: (axis.point, _meridian_normal(axis, origin + angle)),
+            floor=None if floor is None else (floor[0], floor[1], lambda p: floor[2](p) - origin))
         if len(faces) == 0:
             raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
         return faces, corner_theta, origins, seam, seam_method, origin
