@@ -245,13 +245,14 @@ class BaseSplit:
         Faces at the foot facing along the axis (before the decision).
     disc_area, hidden_area, kept_area, region_area : float
         3D areas (scan units squared); ``region_area``: the whole region the rollout was made
-        of before the split.
+        of before the split; ``disc_area``: of the disc as made (:func:`disc_figures`).
     radius : float
         Distance from the axis (scan units) out to which the disc reaches (0: no disc).
     unrolled_error_pct, orthographic_error_pct : (float, float)
         Area-weighted median and 95th percentile (%) of the largest length error through a
         face of the disc (or, without a disc, of the candidates): in the proxy's development
-        and in the orthographic view. NaN without candidates.
+        (of the faces chosen, before the cut) and in the orthographic view (of the disc as
+        made). NaN without candidates.
     reason : str
         Why, in words.
     flat : FlatMesh or None
@@ -496,6 +497,18 @@ def base_disc(mesh: Mesh, faces: np.ndarray, axis: AxisFit, *, view: str, up_ang
     what = "base seen from below" if view == "below" else "floor seen from above"
     prox = _proxy.Proxy(ortho.kind, ortho.params, reason=f"the {what}, orthographic, the seam upwards")
     return FlatMesh(disc, _proxy.project_ortho(prox, disc.vertices, axis.point)), prox
+
+
+def disc_figures(disc: FlatMesh, axis: AxisFit, view: str) -> tuple[float, tuple[float, float]]:
+    """The 3D area of the disc's faces and pieces (scan units squared) and the area-weighted
+    median and 95th percentile (%) of the largest length error through them in the
+    orthographic view (``1 - cos`` of each one's tilt from the view)."""
+    corner = disc.mesh.vertices[disc.mesh.faces]
+    normal = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0])
+    twice = np.linalg.norm(normal, axis=1)
+    towards = -axis.direction if view == "below" else axis.direction
+    facing = np.divide(normal @ towards, twice, out=np.zeros_like(twice), where=twice > 0)
+    return 0.5 * float(twice.sum()), _errors(1.0 - np.clip(facing, 0.0, 1.0), 0.5 * twice)
 
 
 def unrolled_errors(flat: FlatMesh, faces: np.ndarray) -> np.ndarray:

@@ -36,7 +36,7 @@ from potflat.mesh.distortion import DistortionSummary, face_areas, summarize
 from potflat.rollout import proxy as _proxy
 from potflat.rollout.attachments import AttachmentSelection, detect_attachments
 from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
-from potflat.rollout.base import BaseSplit, base_disc, cut_base, split_base, unrolled_errors
+from potflat.rollout.base import BaseSplit, base_disc, cut_base, disc_figures, split_base, unrolled_errors
 from potflat.rollout.border import (
     TRIM_ROUNDS,
     border_folds,
@@ -457,7 +457,9 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     clock.lap("folds")
     if base is not None and base.left_out:
         disc, disc_proxy = base_disc(mesh, base.disc_faces, axis, view=base.view, up_angle=un.seam, cut=base.cut)
-        base = dataclasses.replace(base, flat=disc, proxy=disc_proxy,
+        disc_area, orthographic = disc_figures(disc, axis, base.view)
+        base = dataclasses.replace(base, flat=disc, proxy=disc_proxy, disc_area=disc_area,
+                                   orthographic_error_pct=orthographic,
                                    distortion=summarize(disc.mesh.vertices, disc.uv, disc.mesh.faces))
         clock.lap("base")
     added = un.vertex_index >= len(V)
