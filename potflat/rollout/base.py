@@ -25,7 +25,10 @@ disc out cuts off from the rest (the inside of a foot ring between its underside
 base) go with it, the faces of them that face away from the viewer in neither image; when
 they are larger than half the disc, the wall goes on beyond it (a shoulder and a neck seen
 along an axis pointing the wrong way): no disc.
-:func:`base_disc` makes the disc's flattening.
+:func:`cut_base` then cuts the base off exactly along a plane across the axis where the disc of
+whole faces meets the wall (the faces across it split by :func:`potflat.mesh.split.split_faces`,
+the same pieces for the disc and the rollout), so the wall's lower edge and the disc's rim are
+one curve at one height. :func:`base_disc` makes the disc's flattening.
 """
 from __future__ import annotations
 
