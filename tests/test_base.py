@@ -93,6 +93,27 @@ def test_texture_coordinates_are_carried_exactly_into_the_pieces_of_both_images(
         assert np.abs(flat.texcoords - flat.vertices[flat.faces] @ A.T).max() < 1e-12
 
 
+@pytest.mark.parametrize("seam", [None, 30.0])
+def test_a_sherd_s_base_is_cut_off_whether_the_seam_is_in_its_gap_or_placed(seam):
+    """A sherd (270 degrees) of a pot with a wide, nearly flat base: with the seam placed by the
+    user the region is unwrapped from its gap and has no side to cut; the base's plane is
+    cut all the same."""
+    def radius(t):
+        return np.where(t < 0.4, 2.0 + 95.0 * t, 40.0 + 3.0 * (t - 0.4))
+
+    def height(t):
+        return np.where(t < 0.4, 0.5 * t, 0.2 + 100.0 * (t - 0.4))
+
+    mesh, *_ = revolve(radius, height, n_theta=64, n_t=40, theta_range=(0.0, 4.7), jitter=0.3)
+    res = rollout(mesh, importance="none", seam=seam)
+    cut = res.base.cut
+    assert res.base.left_out and cut is not None and len(cut.faces)
+    in_rollout = np.bincount(res.face_index, face_areas(res.flat.mesh.vertices, res.flat.mesh.faces), len(mesh.faces))
+    share = in_rollout[cut.faces] / face_areas(mesh.vertices, mesh.faces)[cut.faces]
+    # each face across the plane is in the rollout only in part (its piece above it), if at all
+    assert share.max() < 1.0 - 1e-6 and np.count_nonzero(share) > 0.5 * len(cut.faces)
+
+
 def test_keep_base_keeps_it_in_the_rollout(cup):
     res = rollout(cup.mesh, importance="none", keep_base=True)
     assert not res.base.left_out and res.base.flat is None and "keep_base" in res.base.reason

@@ -678,12 +678,15 @@ def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band,
             rel_c -= TWO_PI * np.round(np.average(rel_c[face_index], weights=area[face_index]) / TWO_PI)
     centre = rel_c[face_index]
     repeat = bool(options.overlap) and gap is None and seam_method != "gap"
-    if exact and gap is None:  # the sides cut exactly along their meridians
-        end = math.radians(options.angles[1]) if options.angles is not None else TWO_PI + (
+    if exact and (gap is None or floor is not None):  # the sides cut exactly along their meridians
+        corners = _corner_angles(theta_v, F, face_index, centre, origin)
+        start, end = lo, math.radians(options.angles[1]) if options.angles is not None else TWO_PI + (
             math.radians(options.overlap) if repeat else 0.0)
+        if gap is not None:  # no side to cut (a region with a gap): only the base's plane
+            start, end = float(corners.min()), float(corners.max())
         faces, corner_theta, origins = cut_region(
-            mesh.vertices, F, face_index, centre, _corner_angles(theta_v, F, face_index, centre, origin),
-            start=lo, end=end, repeat_from=TWO_PI if repeat else None,
+            mesh.vertices, F, face_index, centre, corners,
+            start=start, end=end, repeat_from=TWO_PI if repeat else None,
             meridian=lambda angle: (axis.point, _meridian_normal(axis, origin + angle)),
             floor=None if floor is None else (floor[0], floor[1], lambda p: floor[2](p) - origin))
         if len(faces) == 0:
