@@ -191,8 +191,9 @@ def cut_base(points: np.ndarray, faces: np.ndarray, disc_faces: np.ndarray, wall
 
 
 def _try_cut(points, rows, d, vertex_height, height, tolerance, towards):
-    """:func:`cut_base` at one ``height``: (area moved, BaseCut with its faces as rows of ``rows``,
-    mask of ``rows`` wholly in the disc), or why not (str). ``rows`` (k, 3): the disc's faces (the first ``d``), then the wall's."""
+    """:func:`cut_base` at one ``height``: (steep wall put into the disc and area moved, both over
+    the disc's area; BaseCut with its faces as rows of ``rows``; mask of ``rows`` wholly in the
+    disc), or why not (str). ``rows`` (k, 3): the disc's faces (the first ``d``), then the wall's."""
     ids = np.unique(rows)
     cut = BaseCut(height, np.zeros(0, np.int64), ids[np.abs(vertex_height[ids] - height) <= tolerance])
     ids, split = cut.split(points, rows, vertex_height)
