@@ -8,17 +8,22 @@ import json
 
 import numpy as np
 import pytest
+from _revolve import cylinder, revolve
 from potflat_cli.main import app
+from potflat_synthetic.vessels import (
+    PART_BASE,
+    PART_INNER,
+    make_vessel,
+    write_ply_colored,
+)
 from typer.testing import CliRunner
 
-from _revolve import cylinder, revolve
 from potflat.mesh.distortion import face_areas, summarize
 from potflat.mesh.embedding import signed_areas
 from potflat.mesh.split import CUT_SNAP
 from potflat.rollout import rollout
 from potflat.rollout.notes import _facing_axis_share
 from potflat.rollout.walls import FaceGraph
-from potflat_synthetic.vessels import PART_BASE, PART_INNER, make_vessel, write_ply_colored
 
 
 @pytest.fixture(scope="module")

@@ -36,7 +36,14 @@ from potflat.mesh.distortion import DistortionSummary, face_areas, summarize
 from potflat.rollout import proxy as _proxy
 from potflat.rollout.attachments import AttachmentSelection, detect_attachments
 from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
-from potflat.rollout.base import BaseSplit, base_disc, cut_base, disc_figures, split_base, unrolled_errors
+from potflat.rollout.base import (
+    BaseSplit,
+    base_disc,
+    cut_base,
+    disc_figures,
+    split_base,
+    unrolled_errors,
+)
 from potflat.rollout.border import (
     TRIM_ROUNDS,
     border_folds,
@@ -48,7 +55,6 @@ from potflat.rollout.landmarks import find_landmark, zone_centre
 from potflat.rollout.objects import _main_object, _submesh
 from potflat.rollout.options import RolloutOptions
 from potflat.rollout.profile import Profile, vessel_profile
-from potflat.rollout.topology import DiskCut, disk_cut
 from potflat.rollout.seam import (
     CutOrigins,
     _auto_seam,
@@ -58,6 +64,7 @@ from potflat.rollout.seam import (
     cut_open,
     cut_region,
 )
+from potflat.rollout.topology import DiskCut, disk_cut
 from potflat.rollout.walls import (
     FaceGraph,
     WallSelection,
