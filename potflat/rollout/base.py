@@ -184,8 +184,8 @@ def cut_base(points: np.ndarray, faces: np.ndarray, disc_faces: np.ndarray, wall
         return None, disc_faces, "; ".join(notes) + ": cut along whole faces"
     steep, moved, cut, whole, q = best
     cut = BaseCut(cut.height, both[cut.faces], cut.on_cut)
-    return cut, both[whole], (f"cut off along the plane across the axis at height {cut.height:.6g} (the {q:g}th "
-                              f"percentile of where the faces facing along the axis met the wall): {len(cut.faces)} "
+    return cut, both[whole], (f"cut off along the plane across the axis at the {q:g}th percentile of the "
+                              f"heights where the faces facing along the axis met the wall: {len(cut.faces)} "
                               f"faces split, {moved:.1%} of the disc's area moved between disc and wall, {steep:.1%} of it "
                               f"wall more than {BASE_ANGLE_DEG:g} degrees from the view put into the disc")
 
