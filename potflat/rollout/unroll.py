@@ -389,8 +389,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         un = _without(un, ~disk.faces)
     clock.lap("disk")
     for rnd in range(TRIM_ROUNDS):
-        fold = border_folds(un.flat.mesh.faces, un.flat.uv, un.face_area, table=un.table,
-                            points=un.flat.mesh.vertices)
+        fold = border_folds(un.flat.mesh.faces, un.flat.uv, un.face_area, points=un.flat.mesh.vertices)
         if not fold.any() or fold.all():
             break
         trimmed[un.face_index[fold]] = True
@@ -407,7 +406,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     clock.lap("folds")
     uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv, table=un.table)
     for _ in range(TRIM_ROUNDS):  # folds pushed against the border by untangling are trimmed
-        fold = border_folds(un.flat.mesh.faces, uv, un.face_area, table=un.table, points=un.flat.mesh.vertices)
+        fold = border_folds(un.flat.mesh.faces, uv, un.face_area, points=un.flat.mesh.vertices)
         if not fold.any() or fold.all():
             break
         trimmed[un.face_index[fold]] = True

@@ -175,11 +175,17 @@ class FaceGraph:
     @cached_property
     def _csr(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(indptr, indices, pair of each entry)``, rows sorted (:func:`potflat.mesh._kernels.pair_csr`);
-        built on first use (only :meth:`matrix` needs it)."""
+        built on first use (:meth:`matrix` and :attr:`neighbours` need it)."""
 
         indptr, indices, pair_of = pair_csr(np.ascontiguousarray(self.pairs, dtype=np.int64).reshape(-1, 2), self.m)
         dtype = np.int32 if self.m < 2**31 else np.int64
         return indptr.astype(dtype), indices.astype(dtype), pair_of
+
+    @cached_property
+    def neighbours(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(indptr, indices)``: the adjacency as CSR (m + 1,) and (2 p,) int64, neighbours sorted."""
+        indptr, indices, _ = self._csr
+        return indptr.astype(np.int64, copy=False), indices.astype(np.int64, copy=False)
 
     def matrix(self, weights: np.ndarray | None = None) -> sp.csr_matrix:
         """(m, m) CSR matrix with ``weights[pair]`` ((p,) float64, default 1) on both entries."""
