@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse
 
-from potflat.mesh._kernels.topology import edge_table, incident_faces, small_pieces, union_find, vertex_faces
+from potflat.mesh._kernels.topology import incident_faces, small_pieces, union_find, vertex_faces
 from potflat.mesh.boundary import crossing_pairs, edges_and_boundary
 from potflat.mesh.embedding import signed_areas
 from potflat.rollout.folds import overlapping_faces
@@ -38,7 +38,7 @@ CUT_OFF_FRACTION = 0.1
 
 
 def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *,
-                 points: np.ndarray | None = None) -> np.ndarray:
+                 points: np.ndarray | None = None, graph: FaceGraph | None = None) -> np.ndarray:
     """Faces at the border of a development that fold it over: to trim before relaxing.
 
     Two kinds, peeled in up to :data:`BORDER_PASSES` passes (each pass looks at the border
@@ -81,6 +81,8 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *,
         3D area of each face.
     points : (n, 3) float64, optional
         The vertices' 3D positions (to find copies of a vertex, see above).
+    graph : FaceGraph, optional
+        ``FaceGraph(faces)`` when the caller has it (its edge table and adjacency are reused).
 
     Returns
     -------
@@ -88,8 +90,8 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *,
     """
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     keep = np.ones(len(faces), bool)
-    border = _KeptBorder(faces, len(uv))
-    graph = FaceGraph(faces)
+    graph = FaceGraph(faces) if graph is None else graph
+    border = _KeptBorder(faces, len(uv), graph.edge_table)
     part = graph.components()
     part_area = np.bincount(part, area_3d)
     flat = signed_areas(faces, uv)
@@ -133,15 +135,17 @@ class _KeptBorder:
     faces : (m, 3) int64
     n : int
         Number of vertices.
+    table : tuple
+        The faces' :func:`potflat.mesh._kernels.topology.edge_table` (not modified).
     """
 
-    def __init__(self, faces: np.ndarray, n: int) -> None:
+    def __init__(self, faces: np.ndarray, n: int, table: tuple) -> None:
         self.faces = faces
-        self.edge_of, self.edges, count, self.halves = edge_table(faces, n)
+        self.edge_of, self.edges, count, self.halves = table
         self.count = count.copy()
         self.boundary = self.count[self.edge_of] == 1  # per half-edge (all faces kept)
-        many = np.flatnonzero(count > 2)  # edges of more than two faces: their halves beyond the first two
-        extra = np.flatnonzero(np.isin(self.edge_of, many)) if len(many) else np.zeros(0, np.int64)
+        many = count > 2  # edges of more than two faces: their halves beyond the first two
+        extra = np.flatnonzero(many[self.edge_of]) if many.any() else np.zeros(0, np.int64)
         self.extra_edge, self.extra = self.edge_of[extra], extra
         self.excess = (np.bincount(self.edges.ravel(), minlength=n)
                        - np.bincount(faces.ravel(), minlength=n))  # kept edges - kept corners per vertex
