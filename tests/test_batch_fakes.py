@@ -64,6 +64,9 @@ class RolloutOptions:
         if self.band is not None and not 0 <= self.band[0] < self.band[1] <= 1:
             raise InvalidOptionError(f"band must be two fractions 0 <= low < high <= 1, got {self.band}")
 
+    def input_files(self) -> tuple[str, ...]:
+        return ()
+
 
 @dataclass(frozen=True, kw_only=True)
 class RelaxOptions:
@@ -144,7 +147,7 @@ def _zone(figures: dict) -> ZoneFigures:
                        length_error_p95_pct=figures["length_error_p95_pct"], distortion=None)
 
 
-def run_relax_stage(rollout_ply, out_dir, options, *, name=None, rolled=None):
+def run_relax_stage(rollout_ply, out_dir, options, *, name=None, rolled=None, check=None):
     src, out = Path(rollout_ply), Path(out_dir)
     name = name or src.name.split(".")[0]
     _sabotage(name, "relax")

@@ -10,6 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 import test_batch_fakes as fakes
+from potflat_cli._stage import PROGRESS
 from potflat_cli.main import app
 
 COMMANDS = ("rollout", "relax", "bake", "run", "batch")
@@ -136,7 +137,7 @@ def test_run_corrupt_scan_one_line_error(tmp_path, fake_stages):
     bad.write_bytes(b"ply\nforma")
     result = cli("run", bad, "-o", tmp_path / "out")
     assert result.exit_code == 2
-    lines = result.stderr.strip().splitlines()
+    lines = [line for line in result.stderr.strip().splitlines() if not line.startswith(PROGRESS)]
     assert len(lines) == 1 and lines[0].startswith("error: ") and "bad.ply" in lines[0]
 
 

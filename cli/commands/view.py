@@ -23,7 +23,8 @@ def view_command(
     out: Annotated[Path, typer.Argument(help="Output folder of potflat run or batch.", exists=True, file_okay=False)],
     name: Annotated[Optional[str], typer.Argument(help="The run to open (NAME of NAME.png) \\[default: the only "
                                                        "run in OUT; a batch's report when there are several].")] = None,
-    port: Annotated[int, typer.Option("--port", min=0, max=65535, help="Port on 127.0.0.1 \\[default: a free one].")] = 0,
+    port: Annotated[int, typer.Option("--port", min=0, max=65535, show_default=False,
+                                             help="Port on 127.0.0.1 \\[default: a free one].")] = 0,
     no_browser: Annotated[bool, typer.Option("--no-browser", help="Print the address; do not open a browser.")] = False,
 ) -> None:
     """Open a finished run in the browser: the vessel and its flat image, linked."""
