@@ -8,7 +8,7 @@ no traceback and nothing written; a case potflat handles must succeed, and some 
 files afterwards (victims outside the output folder untouched, no ``.part`` left, the output
 texture not a link...). It prints a table (Markdown) and exits 1 if any case fails.
 
-    python benchmarks/hostile_corpus.py              # about 3-5 minutes on 2 cores
+    python benchmarks/hostile_corpus.py              # 68 cases, about 8 minutes on 2 shared cores
     python benchmarks/hostile_corpus.py --real ../shared/data/real   # + relax --preset paper on real scans
     python benchmarks/hostile_corpus.py -k yaml      # only the cases whose name contains 'yaml'
 
@@ -46,6 +46,7 @@ class Case:
     expect: int = 2  # exit code
     check: Callable[[Path, "Run"], str] | None = None  # "" if fine, else what is wrong
     timeout: float = 120.0
+    env: Callable[[Path], dict] | None = None  # folder -> environment variables to set
 
 
 @dataclass
@@ -64,10 +65,12 @@ def _limits(cap: int) -> Callable[[], None]:
     return apply
 
 
-def potflat(args: list, cwd: Path, cap: int, timeout: float, *, stop: tuple | None = None) -> Run:
-    """Run ``python -m potflat_cli ARGS``; ``stop=(condition, signal)`` sends the signal to the
-    process group once ``condition()`` holds (a negative signal: to the main process only)."""
-    env = {**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "200"}
+def potflat(args: list, cwd: Path, cap: int, timeout: float, *, stop: tuple | None = None,
+            env: dict | None = None) -> Run:
+    """Run ``python -m potflat_cli ARGS`` (with the variables ``env`` set); ``stop=(condition,
+    signal)`` sends the signal to the process group once ``condition()`` holds (a negative
+    signal: to the main process only)."""
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "200", **(env or {})}
     start = time.monotonic()
     proc = subprocess.Popen([sys.executable, "-m", "potflat_cli", *map(str, args)], cwd=cwd, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_limits(cap))
@@ -142,8 +145,13 @@ def batch_file(folder: Path, body: str, output: str = "out") -> Path:
 
 
 # --------------------------------------------------------------------------------- checks
+#: How a line of progress begins (a stage's start and end, the first-run note: stderr is not
+#: a terminal here); the error line comes after them.
+PROGRESS = "potflat: "
+
+
 def one_line(run: Run) -> str:
-    lines = run.stderr.strip().splitlines()
+    lines = [line for line in run.stderr.strip().splitlines() if not line.startswith(PROGRESS)]
     if "Traceback" in run.stderr or "╭" in run.stderr:
         return "traceback or box on stderr"
     if len(lines) != 1 or not lines[0].startswith("error: "):
@@ -255,6 +263,92 @@ def corpus(real: Path | None) -> list[Case]:
     add(Case("batch scan whose stem is ..", dotdot, 2, lambda d, r: nothing_in(Path("out"))(d, r) or (
         "" if "leading dot" in r.stderr else "not refused for its name")))
 
+    # ---- files named by files
+    def stage_file_naming(d: Path, texture: str) -> list:
+        (d / "secret").mkdir()
+        (d / "secret" / "secret.txt").write_text("the key\n")
+        big_png(d / "secret" / "photo.png", 8)
+        assert potflat(["rollout", vessel_obj(d / "scans"), "-o", d / "in", "-q"], d, 6 << 30, 120).code == 0
+        rollout = d / "in" / "pot.rollout.ply"
+        head, body = rollout.read_bytes().split(b"end_header\n", 1)
+        lines = [b"comment TextureFile " + texture.encode() if ln.startswith(b"comment TextureFile") else ln
+                 for ln in head.split(b"\n")]
+        rollout.write_bytes(b"\n".join(lines) + b"end_header\n" + body)
+        return ["relax", rollout, "-o", d / "out", "--preset", "preview"]
+
+    def nothing_copied(d: Path, run: Run) -> str:
+        copied = [p.name for p in (d / "out").glob("*texture*")] if (d / "out").exists() else []
+        return f"copied {copied}" if copied else ""
+    for label, texture in (("../secret/photo.png", "../secret/photo.png"), ("an absolute path", "SECRET/photo.png"),
+                           ("a text file", "SECRET/secret.txt")):
+        add(Case(f"stage file's TextureFile names {label} outside its folder",
+                 lambda d, t=texture: stage_file_naming(d, t.replace("SECRET", str(d / "secret"))), 2, nothing_copied))
+
+    def link_under_output(d: Path) -> list:
+        (d / "elsewhere").mkdir()
+        (d / "elsewhere" / "manifest.json").write_text('{"mine": true}')
+        (d / "out").mkdir()
+        (d / "out" / "pot").symlink_to(d / "elsewhere")
+        return ["batch", batch_file(d, f"  - path: {vessel_obj(d / 'scans').relative_to(d)}\n"), "-w", "1"]
+    add(Case("batch output OUT/NAME a symbolic link to a folder elsewhere", link_under_output, 2,
+             lambda d, r: "" if sorted(p.name for p in (d / "elsewhere").iterdir()) == ["manifest.json"]
+             and (d / "elsewhere" / "manifest.json").read_text() == '{"mine": true}' else "wrote through the link"))
+
+    def manifest_names_a_fifo(d: Path) -> list:
+        vessel_obj(d / "scans")
+        batch = batch_file(d, "  - path: scans/pot.obj\n")
+        assert potflat(["batch", batch, "-w", "1", "-q"], d, 6 << 30, 240).code == 0
+        os.mkfifo(d / "endless")  # read: blocks for ever
+        manifest = json.loads((d / "out" / "pot" / "manifest.json").read_text())
+        manifest["inputs"] = [{"path": str(d / "endless"), "sha256": "0" * 64}]
+        (d / "out" / "pot" / "manifest.json").write_text(json.dumps(manifest))
+        return ["batch", batch, "-w", "1", "-q"]
+    add(Case("planted complete manifest listing a FIFO outside as an input", manifest_names_a_fifo, 0,
+             timeout=240))
+
+    # ---- sizes: sparse huge files, huge embedded buffers
+    def sparse(path: Path, size: int, head: bytes = b"") -> Path:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "wb") as fh:
+            fh.write(head)
+            fh.truncate(size)
+        return path
+    add(Case("a 20 GB sparse file as the scan", lambda d: ["run", sparse(d / "big.obj", 20 << 30, b"v 0 0 0\n"),
+                                                            "-o", d / "out"], 2, nothing_in(Path("out")), timeout=60))
+
+    def sparse_mtl(d: Path) -> list:
+        scan = vessel_obj(d)
+        (d / "pot.mtl").unlink()
+        sparse(d / "pot.mtl", 20 << 30, b"newmtl a\nmap_Kd pot.png\n")
+        return ["run", scan, "-o", d / "out"]
+    add(Case("mtllib naming a 20 GB sparse file", sparse_mtl, 2, nothing_in(Path("out")), timeout=60))
+
+    def gltf(d: Path, payload: int, declared: int | None = None) -> list:
+        import base64
+
+        tri = struct.pack("<9f", 0, 0, 0, 100, 0, 0, 0, 100, 0) + struct.pack("<3I", 0, 1, 2)
+        with open(d / "pot.gltf", "w") as fh:  # written in pieces: the text is large
+            fh.write('{"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}], '
+                     '"meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}], '
+                     '"bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36}, '
+                     '{"buffer": 0, "byteOffset": 36, "byteLength": 12}], '
+                     '"accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", '
+                     '"min": [0, 0, 0], "max": [100, 100, 0]}, '
+                     '{"bufferView": 1, "componentType": 5125, "count": 3, "type": "SCALAR"}], '
+                     f'"buffers": [{{"byteLength": {declared or payload}, '
+                     '"uri": "data:application/octet-stream;base64,')
+            data = tri + b"\0" * (payload - len(tri))
+            piece = 3 << 20  # (a multiple of 3: base64 pieces join)
+            for start in range(0, len(data), piece):
+                fh.write(base64.b64encode(data[start:start + piece]).decode())
+            fh.write('"}]}')
+        return ["run", d / "pot.gltf", "-o", d / "out"]
+    for payload in (300 << 20, 1 << 30):  # under, and over, the size a glTF file may have
+        add(Case(f"glTF embedding a {payload >> 20} MiB buffer as a data: URI", lambda d, n=payload: gltf(d, n), 2,
+                 nothing_in(Path("out")), timeout=120))
+    add(Case("glTF buffer declaring 1 TiB over 1 kB of data", lambda d: gltf(d, 1000, declared=1 << 40), 2,
+             nothing_in(Path("out"))))
+
     # ---- one line and exit 2
     add(Case("scan in metres without --units", lambda d: ["run", vessel_obj(d, scale=1e-3), "-o", d / "out"], 2,
              lambda d, r: "" if "--units m" in r.stderr else "no unit named"))
@@ -356,14 +450,14 @@ def corpus(real: Path | None) -> list[Case]:
             ("stop", lambda: any((d / "out").glob("pot*/pot*.rollout.json")), s)],
             130, statuses({"done", "interrupted", "cancelled"}), timeout=240))
 
-    def orphans(d: Path, run: Run) -> str:
-        deadline = time.monotonic() + 15
+    def orphans(d: Path, run: Run, patience: float = 15.0) -> str:
+        deadline = time.monotonic() + patience
         while time.monotonic() < deadline:
             ps = subprocess.run(["ps", "-o", "pid=,stat=", "-s", str(run.pid)], capture_output=True, text=True)
             if not [ln for ln in ps.stdout.splitlines() if ln.split()[1][0] != "Z"]:
                 return ""
-            time.sleep(0.5)
-        return "workers outlived the killed batch by 15 s"
+            time.sleep(0.1)
+        return f"processes outlived the killed command by {patience:g} s"
     add(Case("SIGKILL to the batch process alone (workers must end with it)", lambda d: [
         "batch", batch_of(d, 3), "-w", "2", "-q",
         ("stop", lambda: any((d / "out").glob("pot*/pot*.rollout.json")), -signal.SIGKILL)],
@@ -386,6 +480,33 @@ def corpus(real: Path | None) -> list[Case]:
         return ["run", vessel_obj(d), "-o", d / "out", "--preset", "archival",
                 ("stop", lambda: (d / "out" / "pot.rollout.json").exists(), signal.SIGTERM)]
     add(Case("SIGTERM during potflat run", sigterm_run, 130, no_parts("out")))
+
+    def after(seconds: float) -> Callable[[], bool]:
+        """A condition that holds ``seconds`` after its first check (made as the process starts)."""
+        since: list[float] = []
+
+        def holds() -> bool:
+            if not since:
+                since.append(time.monotonic())
+            return time.monotonic() - since[0] >= seconds
+        return holds
+    for seconds in (0.1, 0.3, 0.6, 1.0):
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            add(Case(f"{sig.name} {seconds:g} s after potflat run starts", lambda d, t=seconds, s=sig: [
+                "run", vessel_obj(d), "-o", d / "out", "--preset", "preview", ("stop", after(t), s)],
+                130, lambda d, r: one_line(r) or no_parts("out")(d, r)))
+
+    def killed_first_run(d: Path) -> list:
+        (d / "tmp").mkdir()
+        return ["run", vessel_obj(d), "-o", d / "out",
+                ("stop", lambda: any((d / "tmp").glob("potflat-warmup-*/warmup.texture.png")), -signal.SIGKILL)]
+
+    def child_ended(d: Path, run: Run) -> str:
+        return orphans(d, run, patience=5.0) or (
+            "" if not list((d / "tmp").glob("potflat-warmup-*/warmup.texture.png")) else "the child's folder is left")
+    add(Case("SIGKILL to a first run (empty kernel cache) while its warm-up child compiles", killed_first_run,
+             -signal.SIGKILL, child_ended, timeout=240,
+             env=lambda d: {"NUMBA_CACHE_DIR": str(d / "kernel-cache"), "TMPDIR": str(d / "tmp")}))
 
     # ---- defaults and help
     def default_out(d: Path) -> list:
@@ -434,7 +555,7 @@ def main(argv: list[str] | None = None) -> int:
                 if argv_ and isinstance(argv_[-1], tuple):
                     _, condition, sig = argv_.pop()
                     stop = (condition, sig)
-                run = potflat(argv_, d, cap, case.timeout, stop=stop)
+                run = potflat(argv_, d, cap, case.timeout, stop=stop, env=case.env(d) if case.env else None)
                 problem = ""
                 if run.code != case.expect:
                     problem = f"exit {run.code}, expected {case.expect}"

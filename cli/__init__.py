@@ -22,7 +22,8 @@ def _is_the_command() -> bool:
     """Whether this process is the ``potflat`` command (the console script or ``python -m
     potflat_cli``), not a program importing the package."""
     argv = getattr(_sys, "orig_argv", [])
-    return _os.path.basename(_sys.argv[0]) in ("potflat", "potflat.exe") or argv[1:3] == ["-m", "potflat_cli"]
+    run_as_module = "-m" in argv[1:-1] and argv[argv.index("-m", 1) + 1] == "potflat_cli"  # (python -X ... -m)
+    return _os.path.basename(_sys.argv[0]) in ("potflat", "potflat.exe") or run_as_module
 
 
 if _is_the_command():

@@ -51,6 +51,7 @@ def user_errors(func):
     def wrapper(*args, **kwargs):
         from potflat.errors import PotflatError
 
+        TOLD.clear()  # a new command: not told yet
         try:
             result = func(*args, **kwargs)
             check_stop()

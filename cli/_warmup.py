@@ -154,6 +154,24 @@ def warm(folder: Path, stage: str) -> None:
         run_bake_stage(rollout_ply, folder, BakeOptions())
 
 
+#: Vertices of the generated vessel :func:`warm_everything` runs (above ``COARSE.min_vertices``:
+#: the relax stage's coarse copies compile too).
+EVERYTHING_VERTICES = 24_000
+
+
+def warm_everything(folder: Path, progress=None) -> None:
+    """Roll out, relax and bake a generated painted vessel (a textured OBJ of
+    :data:`EVERYTHING_VERTICES` vertices, written into ``folder``) with the default options, as
+    a run does, so that every kernel a run uses is compiled and cached (``potflat warmup``).
+    ``progress`` is :func:`potflat.files.pipeline.run_scan`'s."""
+    from potflat.files.pipeline import run_scan
+    from potflat_synthetic.vessels import make_vessel, write_obj
+
+    scan = write_obj(make_vessel("amphora", n_vertices=EVERYTHING_VERTICES, seed=0, texture_size=256, pose=False),
+                     folder / "scan" / "warmup.obj")
+    run_scan(scan, folder / "out", progress=progress)
+
+
 def bake_here() -> None:
     """Compile the bake kernels in this process (:func:`warm` "bake" in a temporary folder,
     removed afterwards); a failure is ignored: the run compiles what it needs as before."""

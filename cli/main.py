@@ -4,11 +4,11 @@ from __future__ import annotations
 import typer
 from typer.core import TyperGroup
 
-from potflat_cli.commands import bake, batch, plate, relax, rollout, run, view
+from potflat_cli.commands import bake, batch, plate, relax, rollout, run, view, warmup
 
 HELP = """Flatten textured 3D scans of painted pottery into true-scale images.
 
-Stages: rollout (axis, proxy, seam, unroll) -> relax (fold-free elastic relaxation) -> bake (true-scale PNG and distortion maps). 'run' does all three on one scan, 'batch' on many scans from a YAML file; 'plate' composes the publication plate; 'view' opens a finished run in the browser.
+Stages: rollout (axis, proxy, seam, unroll) -> relax (fold-free elastic relaxation) -> bake (true-scale PNG and distortion maps). 'run' does all three on one scan, 'batch' on many scans from a YAML file; 'plate' composes the publication plate; 'view' opens a finished run in the browser; 'warmup' compiles potflat's kernels once, before the first run needs them.
 
 Exit codes: 0 success, 1 some scans of a batch failed, 2 bad input or options (message on stderr), 130 interrupted.
 
@@ -177,3 +177,4 @@ app.command("run")(run.run_command)
 app.command("batch")(batch.batch_command)
 app.command("plate")(plate.plate_command)
 app.command("view")(view.view_command)
+app.command("warmup")(warmup.warmup_command)

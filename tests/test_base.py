@@ -8,16 +8,22 @@ import json
 
 import numpy as np
 import pytest
+from _revolve import cylinder, revolve
 from potflat_cli.main import app
+from potflat_synthetic.vessels import (
+    PART_BASE,
+    PART_INNER,
+    make_vessel,
+    write_ply_colored,
+)
 from typer.testing import CliRunner
 
-from _revolve import cylinder, revolve
 from potflat.mesh.distortion import face_areas, summarize
 from potflat.mesh.embedding import signed_areas
+from potflat.mesh.split import CUT_SNAP
 from potflat.rollout import rollout
 from potflat.rollout.notes import _facing_axis_share
 from potflat.rollout.walls import FaceGraph
-from potflat_synthetic.vessels import PART_BASE, PART_INNER, make_vessel, write_ply_colored
 
 
 @pytest.fixture(scope="module")
@@ -37,9 +43,12 @@ def test_a_flat_base_is_left_out_and_shown_true_seen_from_below(cup):
     base = res.base
     assert base.left_out and base.view == "below" and base.flat is not None
     base_faces = np.flatnonzero(cup.face_part == PART_BASE)
-    assert np.isin(base_faces, base.disc_faces).mean() > 0.97
-    assert not np.intersect1d(base.disc_faces, res.face_index).size  # each face in one image
-    assert np.count_nonzero(cup.face_part[res.face_index] == PART_BASE) <= 0.01 * len(base_faces)
+    assert np.isin(base_faces, np.concatenate([base.disc_faces, base.cut.faces])).mean() > 0.97
+    assert not np.intersect1d(base.disc_faces, res.face_index).size  # each face in one image, or cut between
+    # (faces across the plane the base is cut off along are in both, in pieces: the rounded
+    # corner's upper part goes with the wall)
+    in_rollout = face_areas(res.flat.mesh.vertices, res.flat.mesh.faces)[cup.face_part[res.face_index] == PART_BASE]
+    assert in_rollout.sum() <= 0.05 * face_areas(cup.mesh.vertices, cup.mesh.faces[base_faces]).sum()
     # a flat base seen along the axis is true, and not mirrored: every face counter-clockwise
     assert base.orthographic_error_pct[0] < 0.5 and base.unrolled_error_pct[0] > 20
     assert np.all(signed_areas(base.flat.mesh.faces, base.flat.uv) > 0)
@@ -50,6 +59,64 @@ def test_a_flat_base_is_left_out_and_shown_true_seen_from_below(cup):
     assert at_seam.any() and np.all(uv[at_seam, 1] > 0) and np.all(np.abs(uv[at_seam, 0]) < uv[at_seam, 1])
     assert "base faces along the axis" in base.reason
     assert _facing_axis_share(res) < 0.02
+
+
+def test_the_base_is_cut_off_at_one_height_and_the_wall_s_lower_edge_is_level(cup):
+    res = rollout(cup.mesh, importance="none")
+    cut = res.base.cut
+    assert cut is not None and len(cut.faces) > 0 and "cut off along the plane" in res.base.cut_note
+    # the rollout's boundary in its lower half, away from the seam's sides
+    faces = res.flat.mesh.faces
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    key, count = np.unique(edges[:, 0] * len(res.flat.uv) + edges[:, 1], return_counts=True)
+    boundary = np.unique(np.concatenate([key[count == 1] // len(res.flat.uv), key[count == 1] % len(res.flat.uv)]))
+    h, _, theta = res.axis.cylindrical(res.flat.mesh.vertices[boundary])
+    off_seam = np.abs((theta - np.radians(res.seam_angle) + np.pi) % (2 * np.pi) - np.pi) > np.radians(3.0)
+    lower = h[off_seam & (h < 0.5 * res.axis.height)]
+    assert len(lower) > 32  # the whole way round
+    # on the plane: a vertex the splitter counts as on it is off by at most CUT_SNAP of an
+    # edge across it
+    face_h = res.axis.cylindrical(cup.mesh.vertices)[0][cup.mesh.faces]
+    across = (face_h.min(axis=1) < cut.height) & (face_h.max(axis=1) > cut.height)
+    snap = CUT_SNAP * np.ptp(face_h[across], axis=1).max()
+    assert np.abs(lower - cut.height).max() <= snap
+    assert np.mean(np.abs(lower - cut.height) < 1e-9 * res.axis.height) > 0.5
+    # the disc's rim is the same curve: no vertex of the disc above it
+    assert res.axis.cylindrical(res.base.flat.mesh.vertices)[0].max() <= cut.height + snap
+    # a face is whole in one image or split between both
+    assert not np.intersect1d(res.base.disc_faces, cut.faces).size
+    assert np.isin(cut.faces, res.face_index).all()
+
+
+def test_texture_coordinates_are_carried_exactly_into_the_pieces_of_both_images(cup):
+    # texture coordinates linear in the position: a piece's corner has the value of its point
+    A = np.array([[0.003, -0.001, 0.002], [0.001, 0.004, -0.002]])
+    mesh = cup.mesh.replace(texcoords=cup.mesh.vertices[cup.mesh.faces] @ A.T)
+    res = rollout(mesh, importance="none")
+    assert len(res.base.cut.faces)
+    for flat in (res.flat.mesh, res.base.flat.mesh):
+        assert np.abs(flat.texcoords - flat.vertices[flat.faces] @ A.T).max() < 1e-12
+
+
+@pytest.mark.parametrize("seam", [None, 30.0])
+def test_a_sherd_s_base_is_cut_off_whether_the_seam_is_in_its_gap_or_placed(seam):
+    """A sherd (270 degrees) of a pot with a wide, nearly flat base: with the seam placed by the
+    user the region is unwrapped from its gap and has no side to cut; the base's plane is
+    cut all the same."""
+    def radius(t):
+        return np.where(t < 0.4, 2.0 + 95.0 * t, 40.0 + 3.0 * (t - 0.4))
+
+    def height(t):
+        return np.where(t < 0.4, 0.5 * t, 0.2 + 100.0 * (t - 0.4))
+
+    mesh, *_ = revolve(radius, height, n_theta=64, n_t=40, theta_range=(0.0, 4.7), jitter=0.3)
+    res = rollout(mesh, importance="none", seam=seam)
+    cut = res.base.cut
+    assert res.base.left_out and cut is not None and len(cut.faces)
+    in_rollout = np.bincount(res.face_index, face_areas(res.flat.mesh.vertices, res.flat.mesh.faces), len(mesh.faces))
+    share = in_rollout[cut.faces] / face_areas(mesh.vertices, mesh.faces)[cut.faces]
+    # each face across the plane is in the rollout only in part (its piece above it), if at all
+    assert share.max() < 1.0 - 1e-6 and np.count_nonzero(share) > 0.5 * len(cut.faces)
 
 
 def test_keep_base_keeps_it_in_the_rollout(cup):

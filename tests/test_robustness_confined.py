@@ -188,17 +188,43 @@ def _sparse(path: Path, size: int, head: bytes = b"") -> Path:
     return path
 
 
-def test_a_scan_larger_than_the_memory_is_refused_before_reading(tmp_path, monkeypatch):
+@pytest.mark.parametrize("size_mib", [64, 20])  # over the memory; under it, but not twice (20 GB on 24 GB)
+def test_a_scan_larger_than_the_memory_is_refused_before_reading(tmp_path, monkeypatch, size_mib):
     """A sparse scan file larger than the memory the process may use (a 20 GB file under an
-    8 GB limit, here 64 MiB under 32 MiB): one line with both sizes, nothing read."""
+    8 GB limit, here 64 MiB under 32 MiB), or too large to be read and parsed in it (a 20 GB
+    file on a 24 GB machine: killed without a word by the out-of-memory killer; here 20 MiB
+    under 32 MiB): one line with both sizes, nothing read."""
     from potflat.io import raw
-    from potflat.io.scan import load_scan
+    from potflat.io.scan import check_scan_file, load_scan
 
-    scan = _sparse(tmp_path / "big.obj", 64 << 20, b"v 0 0 0\n")
+    scan = _sparse(tmp_path / "big.obj", size_mib << 20, b"v 0 0 0\n")
     monkeypatch.setattr(raw, "memory_limit", lambda: 32 << 20)
     monkeypatch.setattr(Path, "read_bytes", lambda self: pytest.fail(f"{self} was read"))
-    with pytest.raises(InvalidInputError, match=r"big.obj is 64 MiB, more than the 32 MiB of memory"):
+    too_large = rf"big.obj is {size_mib} MiB; reading a scan takes at least 2 times its size, more than the 32 MiB"
+    with pytest.raises(InvalidInputError, match=too_large):
         load_scan(scan)
+    with pytest.raises(InvalidInputError, match=too_large):  # a run: before its files are looked for in it
+        check_scan_file(scan)
+
+
+def test_the_memory_a_scan_may_use_is_what_the_machine_has_available(monkeypatch):
+    """Not the machine's total memory: what other jobs hold is not potflat's to take."""
+    import resource
+
+    from potflat.io import raw
+
+    monkeypatch.setattr(resource, "getrlimit", lambda which: (resource.RLIM_INFINITY, resource.RLIM_INFINITY))
+    real_read_text = Path.read_text
+
+    def read_text(self, *args, **kwargs):
+        if str(self) == "/proc/meminfo":
+            return "MemTotal:       24000000 kB\nMemFree:         1000000 kB\nMemAvailable:    5000000 kB\n"
+        if str(self).startswith("/sys/fs/cgroup/"):
+            raise OSError("no cgroup limit")
+        return real_read_text(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "read_text", read_text)
+    assert raw.memory_limit() == 5000000 * 1024
 
 
 def test_a_huge_material_library_is_refused_by_its_size(tmp_path):

@@ -74,7 +74,11 @@ def test_cup_inner_wall_seen_from_inside(cup):
         e = cyl.flat.mesh.faces[:, :2]
         dth = (theta[e[:, 1]] - theta[e[:, 0]] + np.pi) % (2 * np.pi) - np.pi
         du = cyl.flat.uv[e[:, 1], 0] - cyl.flat.uv[e[:, 0], 0]
-        big = np.abs(dth) > 1e-3
+        # (a vertex the seam's cut counts as on its meridian has the meridian's angle there,
+        # not its own: its edges to vertices between the two, where the base is cut off, are left out)
+        u = cyl.flat.uv[:, 0]
+        seam_side = (u <= u.min() + 1e-9 * np.ptp(u)) | (u >= u.max() - 1e-9 * np.ptp(u))
+        big = (np.abs(dth) > 1e-3) & ~seam_side[e].any(axis=1)
         assert np.all(sign * du[big] * dth[big] > 0), side
 
 

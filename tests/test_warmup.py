@@ -204,3 +204,45 @@ def test_the_child_dies_with_the_run(tmp_path, how):
     finally:
         parent.kill()
         parent.wait()
+
+
+@pytest.mark.parametrize("cached", [False, True])
+def test_the_warmup_command_runs_the_stages_in_a_folder_it_removes(tmp_path, monkeypatch, cached):
+    """``potflat warmup``: the three stages on a generated vessel large enough for the coarse
+    copies, in a temporary folder removed afterwards, the child started on a cold cache and
+    ended with the command; it says what it did."""
+    import tempfile
+
+    from potflat.files import pipeline
+    from potflat_cli._stage import PROGRESS
+    from typer.testing import CliRunner
+
+    from potflat.io.scan import load_scan
+    from potflat.relax.parameters import COARSE
+    from potflat_cli.main import app
+
+    monkeypatch.setattr(potflat._jit, "kernels_cached", lambda: cached)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    scans, started = [], []
+    real_start = warmup.start
+
+    def run_scan(scan, out, progress=None, **kwargs):  # the stages' work: tested with run_scan
+        mesh = load_scan(scan).mesh
+        scans.append((len(mesh.vertices), mesh.texture_path is not None, kwargs))
+        for stage in ("rollout", "relax", "bake"):
+            progress(stage)
+        out.mkdir(parents=True)
+        (out / "warmup.png").write_bytes(b"painting")
+
+    def start():
+        started.append(real_start())
+        return started[-1]
+
+    monkeypatch.setattr(pipeline, "run_scan", run_scan)
+    monkeypatch.setattr(warmup, "start", start)
+    result = CliRunner().invoke(app, ["warmup"])
+    assert result.exit_code == 0, result.output
+    assert len(scans) == 1 and scans[0][0] >= COARSE.min_vertices and scans[0][1:] == (True, {})  # default options
+    assert (started[0] is None) == cached and (cached or started[0].process.returncode is not None)
+    assert f"{PROGRESS}kernels compiled and cached in" in result.stderr
+    assert not list(tmp_path.iterdir())  # the vessel, its outputs and the child's folder removed

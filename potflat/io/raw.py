@@ -52,10 +52,17 @@ def _triangulate(lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, int]
     return corners, poly, int(np.count_nonzero(lengths > 3)), int(np.count_nonzero(lengths < 3))
 
 
+#: A file read whole takes its bytes and what is parsed from them at once: at least this many
+#: times its size.
+READ_WHOLE_FACTOR = 2
+
+
 def memory_limit() -> int | None:
     """Bytes this process may use at most, or None when nothing says: the smallest of its
     address-space and data limits (``ulimit -v``, ``-d``), its control group's memory limit
-    (a container's or a cluster job's) and the machine's memory."""
+    (a container's or a cluster job's) and the memory the machine has available now
+    (``MemAvailable``: free and reclaimable; more would swap, or wake the kernel's
+    out-of-memory killer, which ends the run without a word and may end other jobs)."""
     import resource
 
     found = []
@@ -70,7 +77,7 @@ def memory_limit() -> int | None:
             continue
     try:
         for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemTotal:"):
+            if line.startswith("MemAvailable:"):
                 found.append(int(line.split()[1]) * 1024)
     except (OSError, ValueError, IndexError):
         pass
@@ -83,7 +90,8 @@ def _gib(n: int) -> str:
 
 def _check_fits_memory(path: Path, what: str = "a scan", limit: int | None = None) -> None:
     """Refuse, before reading, a file read whole that cannot fit: larger than ``limit`` (what a
-    file of its kind ever is) or than :func:`memory_limit` (a 20 GB file, sparse or not)."""
+    file of its kind ever is), or :data:`READ_WHOLE_FACTOR` times its size more than
+    :func:`memory_limit` (a 20 GB file, sparse or not, on a 24 GB machine)."""
     try:
         size = path.stat().st_size
     except OSError:
@@ -92,10 +100,10 @@ def _check_fits_memory(path: Path, what: str = "a scan", limit: int | None = Non
         raise InvalidInputError(f"{path} is {_gib(size)}, too large for {what} (at most {_gib(limit)}); "
                                 "check that it is the right file")
     budget = memory_limit()
-    if budget is not None and size > budget:
-        raise InvalidInputError(f"{path} is {_gib(size)}, more than the {_gib(budget)} of memory potflat may use "
-                                f"here, and {what} is read whole; give a smaller file (decimate the scan) or run "
-                                "where more memory is available")
+    if budget is not None and size * READ_WHOLE_FACTOR > budget:
+        raise InvalidInputError(f"{path} is {_gib(size)}; reading {what} takes at least {READ_WHOLE_FACTOR} times "
+                                f"its size, more than the {_gib(budget)} of memory potflat may use here; give a "
+                                "smaller file (decimate the scan) or run where more memory is available")
 
 
 def _read_bytes(path: Path, what: str = "a scan", limit: int | None = None) -> bytes:

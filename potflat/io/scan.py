@@ -31,7 +31,7 @@ from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.gltf import _gltf_inputs, _read_gltf
 from potflat.io.obj import _obj_inputs, _read_obj
 from potflat.io.ply import _ply_inputs, _read_ply
-from potflat.io.raw import _IGNORE_HINT, _check_texture, _Raw
+from potflat.io.raw import _IGNORE_HINT, _check_fits_memory, _check_texture, _Raw
 from potflat.io.stl_off import _read_trimesh
 from potflat.mesh.cleaning import (
     CleaningReport,
@@ -229,8 +229,10 @@ def check_scan_file(path: str | os.PathLike) -> Path:
     """The absolute path of a scan file that exists, is a regular non-empty file with a scan
     extension; else an :class:`InvalidInputError` naming the file and the fix.
 
-    A directory named ``x.obj``, a device (``/dev/zero``), a FIFO or a symlink loop is refused
-    here, before anything reads it or any output is written.
+    A directory named ``x.obj``, a device (``/dev/zero``), a FIFO, a symlink loop or a file
+    too large to be read in the memory potflat may use (every format is read whole) is
+    refused here, before anything reads it (the files it names included) or any output is
+    written.
     """
     path = Path(path).expanduser()
     ext = path.suffix.lower()
@@ -254,6 +256,7 @@ def check_scan_file(path: str | os.PathLike) -> Path:
                                 f"potflat reads {' '.join(SCAN_EXTENSIONS)}: convert the scan")
     if st.st_size == 0:
         raise InvalidInputError(f"{path} is empty (0 bytes); export or copy the scan again")
+    _check_fits_memory(path)
     return path
 
 

@@ -327,7 +327,7 @@ class CutOrigins:
 
 
 def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarray, corner_theta: np.ndarray, *,
-               start: float, end: float, repeat_from: float | None, meridian
+               start: float, end: float, repeat_from: float | None, meridian, floor=None
                ) -> tuple[np.ndarray, np.ndarray, CutOrigins]:
     """The region between the unwrapped angles ``start`` and ``end``, its faces cut exactly
     along the meridians there.
@@ -361,6 +361,12 @@ def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarr
     meridian : callable
         ``meridian(angle)``: a point of the axis and the unit normal of the meridian plane
         at unwrapped ``angle``, the normal pointing towards increasing angles.
+    floor : ((f,) bool, callable, callable) or None
+        A base cut off (:class:`potflat.rollout.base.BaseCut`): the scan faces it splits,
+        ``levels(ids)``, the signed height above its plane of the scan vertices ``ids``, and
+        ``angle(points)``, the angle of points (k, 3) in the region's angles (any turn); those
+        faces are cut along it first (the same pieces as the base's disc) and their pieces
+        above it kept.
 
     Returns
     -------
@@ -395,52 +401,29 @@ def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarr
     pieces_w = np.zeros((0, 3, 3))
     piece_of = np.full(len(rows_face), -1, np.int64)  # row -> its row in pieces_w
     added_edges, added_t, added_pts = np.zeros((0, 2), np.int64), np.zeros(0), np.zeros((0, 3))
-    for values in planes.values():
-        r_lo, r_hi = T.min(axis=1), T.max(axis=1)
-        across = np.zeros(len(T), bool)
-        c_row = np.zeros(len(T))
-        for c in values:
-            hit = rows_narrow & (r_lo < c) & (c < r_hi)
-            across |= hit
-            c_row[hit] = c
-        rows = np.flatnonzero(across)
-        if not len(rows):
-            continue
-        # the faces across it, on their own vertices
-        ids, local = np.unique(row_faces[rows], return_inverse=True)
-        local = local.reshape(-1, 3)
-        pts = np.concatenate([V[ids[ids < n]], added_pts[ids[ids >= n] - n]])
-        point, normal = meridian(values[0])
-        split = split_faces(pts, local, plane_levels(pts, point, normal))
-        on_cut = np.zeros(n + len(added_t), bool)
-        on_cut[ids[split.on_cut]] = True
-        if split.on_cut.size:  # a corner on the cut gets the meridian's angle, in every face
-            at = on_cut[row_faces]
-            # and so does every vertex at its angle: copies of a vertex (a non-manifold one
-            # split into fans) are not left beside it
-            at |= np.isin(T, np.unique(T[at]))
-            T[at] = values[0] + TWO_PI * np.round((T[at] - values[0]) / TWO_PI)
+
+    def splice(rows, ids, split, keep_piece, corner_theta_of):
+        """Replace each row across a cut by its pieces that ``keep_piece(piece, src)`` keeps (in place)."""
+        nonlocal T, row_faces, rows_face, rows_narrow, piece_of, pieces_w, added_edges, added_t, added_pts
         # added vertices (their ends are vertices of the scan or earlier added ones)
         base = n + len(added_t)
         added_edges = np.concatenate([added_edges, ids[split.edges]])
         added_t = np.concatenate([added_t, split.t])
-        added_pts = np.concatenate([added_pts, split.added(pts)])
-        # each row across the cut becomes its face's pieces inside the region
+        added_pts = np.concatenate([added_pts, split.added(pts_of(ids))])
         piece = np.arange(len(split.parent))  # (grouped by face, in order)
         src = rows[split.parent]
+        keep = keep_piece(piece, src)
+        piece, src = piece[keep], src[keep]
         w = split.weights[piece]
-        c_src = c_row[src]
-        keep = ((split.side[piece] > 0) & (c_src < end)) | ((split.side[piece] < 0) & (c_src > start))
-        piece, src, w, c_src = piece[keep], src[keep], w[keep], c_src[keep]
-        is_corner = w.max(axis=2) == 1.0
-        new_T = np.where(is_corner, np.take_along_axis(T[src], np.argmax(w, axis=2), axis=1), c_src[:, None])
+        new_T = corner_theta_of(w, src)
         local_faces = split.faces[piece]
         new_faces = np.where(local_faces < len(ids), ids[np.minimum(local_faces, len(ids) - 1)],
                              base + local_faces - len(ids))
         parent_w = piece_of[src]
         if len(pieces_w):  # a piece of a piece: its corners as weights of the scan face's
             w = np.where((parent_w >= 0)[:, None, None], w @ pieces_w[np.maximum(parent_w, 0)], w)
-        # splice: a row not across stays, a row across is replaced by its pieces (in place)
+        across = np.zeros(len(T), bool)
+        across[rows] = True
         counts = np.ones(len(T), np.int64)
         counts[rows] = np.bincount(src, minlength=len(T))[rows]
         pos = np.cumsum(counts) - counts
@@ -457,6 +440,60 @@ def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarr
         piece2[at] = len(kept_pieces) + np.arange(len(w))
         pieces_w = np.concatenate([pieces_w[piece_of[kept_pieces]], w])
         T, row_faces, rows_face, rows_narrow, piece_of = T2, F2, face2, narrow2, piece2
+
+    def pts_of(ids):
+        return np.concatenate([V[ids[ids < n]], added_pts[ids[ids >= n] - n]])
+
+    if floor is not None:  # the base cut off first: the pieces above the plane stay
+        cut_faces, levels, angle = floor
+        rows = np.flatnonzero(cut_faces[rows_face])
+        if len(rows):
+            ids, local = np.unique(row_faces[rows], return_inverse=True)
+            split = split_faces(V[ids], local.reshape(-1, 3), levels(ids))
+
+            def floor_theta(w, src):
+                # each corner's angle at its point, unwrapped next to its face's corners'
+                near = np.einsum("kij,kj->ki", w, T[src])
+                at = angle((w @ V[row_faces[src]]).reshape(-1, 3)).reshape(near.shape)
+                return near + (at - near + np.pi) % TWO_PI - np.pi
+
+            splice(rows, ids, split, lambda piece, src: split.side[piece] > 0, floor_theta)
+    for values in planes.values():
+        r_lo, r_hi = T.min(axis=1), T.max(axis=1)
+        across = np.zeros(len(T), bool)
+        c_row = np.zeros(len(T))
+        for c in values:
+            hit = rows_narrow & (r_lo < c) & (c < r_hi)
+            across |= hit
+            c_row[hit] = c
+        rows = np.flatnonzero(across)
+        if not len(rows):
+            continue
+        # the faces across it, on their own vertices
+        ids, local = np.unique(row_faces[rows], return_inverse=True)
+        local = local.reshape(-1, 3)
+        pts = pts_of(ids)
+        point, normal = meridian(values[0])
+        split = split_faces(pts, local, plane_levels(pts, point, normal))
+        on_cut = np.zeros(n + len(added_t), bool)
+        on_cut[ids[split.on_cut]] = True
+        if split.on_cut.size:  # a corner on the cut gets the meridian's angle, in every face
+            at = on_cut[row_faces]
+            # and so does every vertex at its angle: copies of a vertex (a non-manifold one
+            # split into fans) are not left beside it
+            at |= np.isin(T, np.unique(T[at]))
+            T[at] = values[0] + TWO_PI * np.round((T[at] - values[0]) / TWO_PI)
+
+        def keep_piece(piece, src, split=split, c_row=c_row):
+            c_src = c_row[src]
+            return ((split.side[piece] > 0) & (c_src < end)) | ((split.side[piece] < 0) & (c_src > start))
+
+        def corner_theta_of(w, src, c_row=c_row):
+            # each row across the cut becomes its face's pieces inside the region
+            is_corner = w.max(axis=2) == 1.0
+            return np.where(is_corner, np.take_along_axis(T[src], np.argmax(w, axis=2), axis=1), c_row[src][:, None])
+
+        splice(rows, ids, split, keep_piece, corner_theta_of)
     repeated = (rows_narrow & (T.min(axis=1) >= repeat_from) if repeat_from is not None
                 else np.zeros(len(T), bool))
     if repeated.any():  # repeats last

@@ -22,6 +22,7 @@ with a gap from foot to rim) needs no cut.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import asdict, dataclass, field
 
@@ -35,7 +36,14 @@ from potflat.mesh.distortion import DistortionSummary, face_areas, summarize
 from potflat.rollout import proxy as _proxy
 from potflat.rollout.attachments import AttachmentSelection, detect_attachments
 from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
-from potflat.rollout.base import BaseSplit, base_disc, split_base, unrolled_errors
+from potflat.rollout.base import (
+    BaseSplit,
+    base_disc,
+    cut_base,
+    disc_figures,
+    split_base,
+    unrolled_errors,
+)
 from potflat.rollout.border import (
     TRIM_ROUNDS,
     border_folds,
@@ -47,7 +55,6 @@ from potflat.rollout.landmarks import find_landmark, zone_centre
 from potflat.rollout.objects import _main_object, _submesh
 from potflat.rollout.options import RolloutOptions
 from potflat.rollout.profile import Profile, vessel_profile
-from potflat.rollout.topology import DiskCut, disk_cut
 from potflat.rollout.seam import (
     CutOrigins,
     _auto_seam,
@@ -57,6 +64,7 @@ from potflat.rollout.seam import (
     cut_open,
     cut_region,
 )
+from potflat.rollout.topology import DiskCut, disk_cut
 from potflat.rollout.walls import (
     FaceGraph,
     WallSelection,
@@ -356,26 +364,35 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     area = face_areas(V, F)
     h_c, r_c, theta_c = axis.cylindrical(centroid)
     del centroid
-    _, r_v, theta_v = axis.cylindrical(V)  # once for every unrolling and the seam (and the base)
+    h_v, r_v, theta_v = axis.cylindrical(V)  # once for every unrolling and the seam (and the base)
     band = options.band or (0.0, 1.0)
     landmark, landmark_notes = _find_landmark(mesh, axis, options, attachments, allowed, band, h_c, theta_c,
                                               theta_v, area)
     trimmed = np.zeros(len(F), bool)
     un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area, landmark=landmark)
     clock.lap("unroll")
-    base = None
+    base, floor = None, None
     if options.proxy != "ortho":  # (a view along the axis shows the base as it is)
         region, first = np.unique(un.face_index, return_index=True)  # (a repeat past 360 degrees once)
         base = split_base(mesh, region, unrolled_errors(un.flat, first), n_axial=n_axial, height=h_c, radius=r_c,
                           vertex_radius=r_v, vertex_theta=theta_v, area=area, vessel_height=axis.height,
                           side=options.side,
                           keep=options.keep_base)
-        del region, first
-        if base.left_out:  # unrolled again without it: the proxy is fitted to the wall alone
+        if base.left_out:  # cut off along a plane across the axis, unrolled again without it:
+            # the proxy is fitted to the wall alone
+            wall = np.setdiff1d(region, np.concatenate([base.disc_faces, base.hidden_faces]))
+            base_cut, whole, cut_note = cut_base(V, F, base.disc_faces, wall, h_v, axis.height,
+                                                 -axis.direction if base.view == "below" else axis.direction)
+            base = dataclasses.replace(base, disc_faces=whole, cut=base_cut, cut_note=cut_note)
+            if base_cut is not None and len(base_cut.faces):
+                cut_mask = np.zeros(len(F), bool)
+                cut_mask[base_cut.faces] = True
+                floor = (cut_mask, functools.partial(base_cut.levels, h_v), lambda p: axis.cylindrical(p)[2])
             allowed = allowed.copy()
             allowed[base.disc_faces] = allowed[base.hidden_faces] = False
             un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area,
-                         seam=(un.seam, un.seam_method), landmark=landmark)
+                         seam=(un.seam, un.seam_method), landmark=landmark, floor=floor)
+        del region, first
     del n_axial, r_c, r_v
     clock.lap("base")
     # a piece that is not a disk (a handle joined at both ends, a closed part, an edge of three
@@ -399,7 +416,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         graph = None
         if rnd < TRIM_ROUNDS - 1:
             un = _unroll(mesh, axis, options, allowed & ~trimmed, band, h_c, theta_c, theta_v, area,
-                         seam=(un.seam, un.seam_method), landmark=landmark)
+                         seam=(un.seam, un.seam_method), landmark=landmark, floor=floor)
         else:
             un = _without(un, ~fold)
     clock.lap("unroll")
@@ -453,8 +470,10 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
                        mm_per_unit=mesh.mm_per_unit)
     clock.lap("folds")
     if base is not None and base.left_out:
-        disc, disc_proxy = base_disc(mesh, base.disc_faces, axis, view=base.view, up_angle=un.seam)
-        base = dataclasses.replace(base, flat=disc, proxy=disc_proxy,
+        disc, disc_proxy = base_disc(mesh, base.disc_faces, axis, view=base.view, up_angle=un.seam, cut=base.cut)
+        disc_area, orthographic = disc_figures(disc, axis, base.view)
+        base = dataclasses.replace(base, flat=disc, proxy=disc_proxy, disc_area=disc_area,
+                                   orthographic_error_pct=orthographic,
                                    distortion=summarize(disc.mesh.vertices, disc.uv, disc.mesh.faces))
         clock.lap("base")
     added = un.vertex_index >= len(V)
@@ -500,13 +519,14 @@ class _Unrolled:
 
 
 def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndarray, band, h_c, theta_c,
-            theta_v, area, seam: tuple[float, str] | None = None, landmark=None) -> _Unrolled:
+            theta_v, area, seam: tuple[float, str] | None = None, landmark=None, floor=None) -> _Unrolled:
     """Select the region within ``allowed``, cut it open and develop it on the proxy (with
     ``seam`` = (radians, method) from an earlier unrolling, or a seam chosen here; angles
-    measured from ``landmark``; ``theta_v``: the angle of every scan vertex)."""
+    measured from ``landmark``; ``theta_v``: the angle of every scan vertex; ``floor``: a base
+    cut off, as :func:`potflat.rollout.seam.cut_region` takes it)."""
     V = mesh.vertices
     sub_f, corner_theta, origins, seam, seam_method, origin = _select(
-        mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area, seam, landmark)
+        mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area, seam, landmark, floor)
     face_index = origins.face_index
     inner = options.side == "inner"
 
@@ -624,7 +644,7 @@ def _in_band(axis: AxisFit, band, h_c) -> np.ndarray:
 
 
 def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c, theta_v, area,
-            seam_given: tuple[float, str] | None = None, landmark=None):
+            seam_given: tuple[float, str] | None = None, landmark=None, floor=None):
     """The region's faces (:func:`potflat.rollout.seam.cut_region`: the seam and a window's
     sides cut exactly along their meridians), their corners' unwrapped angles, where they
     come from in the scan, the seam (radians, and how it was chosen) and the angle (radians)
@@ -672,13 +692,17 @@ def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band,
             rel_c -= TWO_PI * np.round(np.average(rel_c[face_index], weights=area[face_index]) / TWO_PI)
     centre = rel_c[face_index]
     repeat = bool(options.overlap) and gap is None and seam_method != "gap"
-    if exact and gap is None:  # the sides cut exactly along their meridians
-        end = math.radians(options.angles[1]) if options.angles is not None else TWO_PI + (
+    if exact and (gap is None or floor is not None):  # the sides cut exactly along their meridians
+        corners = _corner_angles(theta_v, F, face_index, centre, origin)
+        start, end = lo, math.radians(options.angles[1]) if options.angles is not None else TWO_PI + (
             math.radians(options.overlap) if repeat else 0.0)
+        if gap is not None:  # no side to cut (a region with a gap): only the base's plane
+            start, end = float(corners.min()), float(corners.max())
         faces, corner_theta, origins = cut_region(
-            mesh.vertices, F, face_index, centre, _corner_angles(theta_v, F, face_index, centre, origin),
-            start=lo, end=end, repeat_from=TWO_PI if repeat else None,
-            meridian=lambda angle: (axis.point, _meridian_normal(axis, origin + angle)))
+            mesh.vertices, F, face_index, centre, corners,
+            start=start, end=end, repeat_from=TWO_PI if repeat else None,
+            meridian=lambda angle: (axis.point, _meridian_normal(axis, origin + angle)),
+            floor=None if floor is None else (floor[0], floor[1], lambda p: floor[2](p) - origin))
         if len(faces) == 0:
             raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
         return faces, corner_theta, origins, seam, seam_method, origin
