@@ -437,3 +437,69 @@ def relief_rows(fields, coverage, lights, gain, curve_hi, curve_span, rgb, grey_
                               alpha[..., None]], axis=-1)
     level = np.where(inside, np.rint(fields[..., 0] / mm_per_level) + zero_level, 0)
     return raking, curvature, overlay, np.clip(level, 0, 65535).astype(np.uint16)
+
+
+def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, points: np.ndarray | None = None
+                 ) -> np.ndarray:
+    """:func:`potflat.rollout.border.border_folds` rebuilding everything from the kept faces at
+    every pass (edge table, face adjacency, pieces, overlapping faces)."""
+    from potflat.mesh.boundary import edges_and_boundary
+    from potflat.mesh.embedding import signed_areas
+    from potflat.rollout import border as B
+    from potflat.rollout.folds import overlapping_faces
+    from potflat.rollout.seam import cut_open
+    from potflat.rollout.walls import FaceGraph
+
+    faces = np.asarray(faces, np.int64)
+    m, n = len(faces), len(uv)
+    keep = np.ones(m, bool)
+    graph = FaceGraph(faces)
+    part = graph.components()
+    part_area = np.bincount(part, area_3d)
+    for _ in range(B.BORDER_PASSES):
+        idx = np.flatnonzero(keep)
+        if len(idx) == 0:
+            break
+        sub, area = faces[idx], area_3d[idx]
+        edges, seg, owner = edges_and_boundary(sub, n)
+        flat = signed_areas(sub, uv)
+        drop = np.zeros(len(idx), bool)
+        if (flat <= 0).any():  # edge-on strips with a flip, touching the border
+            sel = np.flatnonzero(flat < B.EDGE_ON_RATIO * area)
+            comp = FaceGraph(sub[sel]).components()
+            k = int(comp.max()) + 1
+            has_flip = np.bincount(comp[flat[sel] <= 0], minlength=k) > 0
+            touches = np.bincount(comp[np.isin(sub[sel], seg).any(axis=1)], minlength=k) > 0
+            drop[sel] = (has_flip & touches)[comp]
+        same = None if points is None else B._same_place(points, seg)
+        f, e = (sub, edges) if same is None else (same[sub], same[edges])
+        pinched = np.bincount(e.ravel(), minlength=n) - np.bincount(f.ravel(), minlength=n) >= 2
+        local = np.flatnonzero(pinched[f].any(axis=1))
+        if len(local):  # the smaller fans at pinched vertices
+            new_faces, vertex_index, _, _, _ = cut_open(f[local], np.zeros((len(local), 3)))
+            fan_area = np.bincount(new_faces.ravel(), np.repeat(area[local], 3), len(vertex_index))
+            minor = np.zeros(len(vertex_index), bool)
+            for v in np.unique(vertex_index[pinched[vertex_index]]):
+                copies = np.flatnonzero(vertex_index == v)
+                minor[copies[copies != copies[np.argmax(fan_area[copies])]]] = True
+            drop[local] |= minor[new_faces].any(axis=1)
+        if len(idx) < m:  # pieces cut off their part
+            pairs = graph.pairs
+            piece = graph.components(keep[pairs[:, 0]] & keep[pairs[:, 1]])
+            piece_area = np.bincount(piece, np.where(keep, area_3d, 0.0))
+            small = np.array([piece_area[piece[i]] < B.CUT_OFF_FRACTION * part_area[part[i]] for i in idx])
+            drop |= small
+        if not drop.any():
+            a, b = B.crossing_segments(uv, seg)
+            if len(a):  # the crossing region: owners, overlapping or squeezed faces joined to them
+                region = np.zeros(m, bool)
+                region[idx[overlapping_faces(sub, uv) | (flat < B.SQUEEZED_RATIO * area)]] = True
+                owners = idx[np.concatenate([owner[a], owner[b]])]
+                region[owners] = True
+                pairs = graph.pairs
+                label = graph.components(region[pairs[:, 0]] & region[pairs[:, 1]])
+                drop = (region & np.isin(label, label[owners]))[idx]
+        if not drop.any():
+            break
+        keep[idx[drop]] = False
+    return ~keep

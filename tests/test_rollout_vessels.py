@@ -171,7 +171,6 @@ def test_border_folds_keeps_enclosed_folds_and_untangle_fixes_them():
     assert drop.any() and np.all(signed_areas(faces[~drop], edge) > 0)
     # the caller's edge table (computed once for a face set) gives the same answers
     table = edges_and_boundary(faces, 36)
-    np.testing.assert_array_equal(border_folds(faces, edge, area, table=table), drop)
     again, n_again, moved_again = untangle(faces, folded, table=table)
     np.testing.assert_array_equal(again, fixed)
     assert (n_again, moved_again) == (n_bad, moved)
@@ -307,14 +306,40 @@ def test_border_folds_trims_the_piece_beyond_an_edge_on_band():
     np.testing.assert_array_equal(drop, row <= 1)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_border_folds_peeling_in_place_equals_rebuilding_every_pass(seed):
+    """Updating the border around the peeled faces gives what rebuilding the kept faces' edge
+    table, pieces and overlapping faces at every pass gives (tests/reference.py), on grids
+    with a folded band, a ragged rim, a flap over the wall and vertices sharing a 3D place."""
+    import reference
+
+    rng = np.random.default_rng(seed)
+    nx, ny = 14, 18
+    x, y = np.meshgrid(np.arange(nx + 1.0), np.arange(ny + 1.0))
+    uv = np.column_stack([x.ravel(), y.ravel()])
+    q = np.arange(len(uv)).reshape(ny + 1, nx + 1)
+    a, b, c, d = q[:-1, :-1].ravel(), q[:-1, 1:].ravel(), q[1:, 1:].ravel(), q[1:, :-1].ravel()
+    faces = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    uv[q[2]] -= [0.0, 1.2 + 0.3 * seed / 5]  # a folded band near the foot
+    uv[q[-1, 1:-1:2], 1] -= rng.uniform(0.8, 2.2, len(q[-1, 1:-1:2]))  # a ragged rim
+    uv[q[ny // 2, -3:]] += [-2.5 - seed % 3, 0.4]  # a flap folded back over the wall
+    uv += rng.normal(0.0, 0.08, uv.shape)
+    area = rng.uniform(0.3, 0.7, len(faces))
+    points = np.column_stack([uv, np.zeros(len(uv))])
+    points[q[-1, 3]] = points[q[-1, 5]]  # two rim vertices at one 3D place
+    for pts in (None, points):
+        np.testing.assert_array_equal(border_folds(faces, uv, area, points=pts),
+                                      reference.border_folds(faces, uv, area, points=pts))
+
+
 def test_border_folds_reads_every_pass_off_one_edge_table(monkeypatch):
     """However many passes the trimming takes, the development's edge table is built once
-    (once more for its face adjacency, and for the flipped edge-on faces while there are
-    some), not once a pass: a pass costs a count over the kept faces, not a sort of all of
-    them (at 1M vertices 300 passes rebuilt it 452 times; this ragged rim 9 times)."""
+    (shared by the border and the face adjacency; once more for the flipped edge-on faces
+    while there are some), not once a pass: a pass updates the border around the peeled
+    faces (at 1M vertices 300 passes rebuilt it 452 times; this ragged rim 9 times)."""
     from potflat.mesh import boundary, distortion
     from potflat.mesh._kernels import topology
-    from potflat.rollout import border, walls
+    from potflat.rollout import walls
 
     nx, ny = 12, 20
     x, y = np.meshgrid(np.arange(nx + 1.0), np.arange(ny + 1.0))
@@ -328,11 +353,11 @@ def test_border_folds_reads_every_pass_off_one_edge_table(monkeypatch):
     uv[top] -= [0.0, 1.6]
     calls = []
     real = topology.edge_table
-    for module in (topology, boundary, distortion, border, walls):
+    for module in (topology, boundary, distortion, walls):
         monkeypatch.setattr(module, "edge_table", lambda *args: calls.append(1) or real(*args))
     drop = border_folds(faces, uv, np.full(len(faces), 0.5))
     assert drop.any() and np.all(signed_areas(faces[~drop], uv) > 0)
-    assert len(calls) <= 3
+    assert len(calls) <= 2
 
 
 def _two_fans_at_one_place():

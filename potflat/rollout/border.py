@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse
 
-from potflat.mesh._kernels.topology import edge_table
+from potflat.mesh._kernels.topology import incident_faces, small_pieces, union_find, vertex_faces
 from potflat.mesh.boundary import crossing_pairs, edges_and_boundary
 from potflat.mesh.embedding import signed_areas
 from potflat.rollout.folds import overlapping_faces
@@ -37,8 +37,8 @@ SQUEEZED_RATIO = 0.25
 CUT_OFF_FRACTION = 0.1
 
 
-def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *, table: tuple | None = None,
-                 points: np.ndarray | None = None) -> np.ndarray:
+def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *,
+                 points: np.ndarray | None = None, graph: FaceGraph | None = None) -> np.ndarray:
     """Faces at the border of a development that fold it over: to trim before relaxing.
 
     Two kinds, peeled in up to :data:`BORDER_PASSES` passes (each pass looks at the border
@@ -67,6 +67,10 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *, tabl
 
     Folds enclosed by well-unrolled faces (scan noise, slivers) are left to :func:`untangle`.
 
+    The edge table, face adjacency, flat areas and overlapping faces are found once; a pass
+    updates the border around the faces the last one peeled (:class:`_KeptBorder`) and
+    looks at those faces' surroundings, so a pass costs about the faces it touches.
+
     Parameters
     ----------
     faces : (m, 3) int64
@@ -75,10 +79,10 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *, tabl
         Its development.
     area_3d : (m,) float64
         3D area of each face.
-    table : tuple, optional
-        ``edges_and_boundary(faces, len(uv))`` when the caller has it (used by the first pass).
     points : (n, 3) float64, optional
         The vertices' 3D positions (to find copies of a vertex, see above).
+    graph : FaceGraph, optional
+        ``FaceGraph(faces)`` when the caller has it (its edge table and adjacency are reused).
 
     Returns
     -------
@@ -86,74 +90,138 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *, tabl
     """
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     keep = np.ones(len(faces), bool)
-    # the edges and face adjacency once; each pass reads its border off them by counting
-    edge_of, all_edges, _, _ = edge_table(faces, len(uv))
-    graph = FaceGraph(faces)
+    graph = FaceGraph(faces) if graph is None else graph
+    border = _KeptBorder(faces, len(uv), graph.edge_table)
     part = graph.components()
     part_area = np.bincount(part, area_3d)
+    flat = signed_areas(faces, uv)
+    edge_on = np.flatnonzero(flat < EDGE_ON_RATIO * area_3d)
+    flipped = np.flatnonzero(flat <= 0)
+    squeezed = np.flatnonzero(flat < SQUEEZED_RATIO * area_3d)
+    over = None  # faces lying over another among all faces (those among the kept are a subset)
+    dropped = None
     for _ in range(BORDER_PASSES):
-        idx = np.flatnonzero(keep)
-        if len(idx) == 0:
+        if not keep.any():
             break
-        sub = faces[idx]
-        full = len(idx) == len(faces)  # sub is faces itself
-        if table is not None and full:
-            edges, seg, owner = table
-        else:
-            edges, seg, owner = _kept_edges(faces, edge_of, all_edges, idx)
+        seg, owner = border.segments()
         same = None if points is None else _same_place(points, seg)
-        drop = _edge_on_strips(sub, uv, area_3d[idx], seg) | _minor_fans(sub, area_3d[idx], edges, len(uv), same)
-        if not full:
-            drop |= _cut_off(graph, keep, area_3d, part, part_area)[idx]
+        drop = (_edge_on_strips(faces, keep, flat, edge_on, flipped, seg, len(uv))
+                | _minor_fans(faces, area_3d, keep, border, same))
+        if dropped is not None:
+            drop |= _cut_off(graph, keep, area_3d, part, part_area, changed=dropped)
         if not drop.any():  # overlaps are judged on a border without folded strips
             a, b = crossing_segments(uv, seg)
             if len(a):
-                drop = _crossing_region(graph, faces, idx, uv, area_3d, idx[np.concatenate([owner[a], owner[b]])])[idx]
+                if over is None:
+                    over = np.flatnonzero(overlapping_faces(faces, uv))
+                drop = _crossing_region(graph, faces, keep, uv, over, squeezed, np.concatenate([owner[a], owner[b]]))
         if not drop.any():
             break
-        keep[idx[drop]] = False
+        keep[drop] = False
+        dropped = np.flatnonzero(drop)
+        border.drop(dropped, keep)
     return ~keep
 
 
-def _crossing_region(graph: FaceGraph, faces: np.ndarray, idx: np.ndarray, uv: np.ndarray, area_3d: np.ndarray,
-                     owners: np.ndarray) -> np.ndarray:
-    """The faces (m,) bool of the regions where the border of the faces ``idx`` crosses itself:
-    the ``owners`` of crossing segments and the faces lying over another face or squeezed
-    (:data:`SQUEEZED_RATIO`) joined to them through shared edges (``graph``: the whole
-    development's face adjacency)."""
+class _KeptBorder:
+    """The boundary of the kept faces of a mesh, updated as faces are dropped.
+
+    Holds each edge's count of kept faces, which half-edges are boundary (their edge has one
+    kept face) and each vertex's kept edges minus kept corners (:func:`_minor_fans`); dropping
+    faces updates them around those faces only.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+    n : int
+        Number of vertices.
+    table : tuple
+        The faces' :func:`potflat.mesh._kernels.topology.edge_table` (not modified).
+    """
+
+    def __init__(self, faces: np.ndarray, n: int, table: tuple) -> None:
+        self.faces = faces
+        self.edge_of, self.edges, count, self.halves = table
+        self.count = count.copy()
+        self.boundary = self.count[self.edge_of] == 1  # per half-edge (all faces kept)
+        many = count > 2  # edges of more than two faces: their halves beyond the first two
+        extra = np.flatnonzero(many[self.edge_of]) if many.any() else np.zeros(0, np.int64)
+        self.extra_edge, self.extra = self.edge_of[extra], extra
+        self.excess = (np.bincount(self.edges.ravel(), minlength=n)
+                       - np.bincount(faces.ravel(), minlength=n))  # kept edges - kept corners per vertex
+        self._vertex_faces = None
+
+    def segments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Boundary segments (b, 2) int64 in face order, and the face of each."""
+        half = np.flatnonzero(self.boundary)
+        face, k = half // 3, half % 3
+        return np.stack([self.faces[face, k], self.faces[face, (k + 1) % 3]], axis=1), face
+
+    def drop(self, dropped: np.ndarray, keep: np.ndarray) -> None:
+        """Update after the faces ``dropped`` (k,) int64 left ``keep`` (m,) bool (already cleared)."""
+        halves = (3 * dropped[:, None] + np.arange(3)).ravel()
+        edge = self.edge_of[halves]
+        np.subtract.at(self.count, edge, 1)
+        np.add.at(self.excess, self.faces[dropped].ravel(), 1)
+        self.boundary[halves] = False
+        touched = np.unique(edge)
+        gone = touched[self.count[touched] == 0]
+        np.subtract.at(self.excess, self.edges[gone].ravel(), 1)
+        near = self.halves[touched].ravel()
+        if len(self.extra):
+            near = np.concatenate([near, self.extra[np.isin(self.extra_edge, touched)]])
+        near = near[near >= 0]
+        near = near[keep[near // 3]]
+        self.boundary[near] = self.count[self.edge_of[near]] == 1
+
+    def faces_at(self, vertices: np.ndarray) -> np.ndarray:
+        """The faces (sorted, unique) with a corner at one of ``vertices`` (k,) int64."""
+        if self._vertex_faces is None:
+            self._vertex_faces = vertex_faces(int(self.excess.shape[0]), self.faces)
+        return np.unique(incident_faces(vertices, *self._vertex_faces))
+
+
+def _crossing_region(graph: FaceGraph, faces: np.ndarray, keep: np.ndarray, uv: np.ndarray, over: np.ndarray,
+                     squeezed: np.ndarray, owners: np.ndarray) -> np.ndarray:
+    """The faces (m,) bool of the regions where the border of the kept faces (``keep`` (m,)
+    bool) crosses itself: the ``owners`` of crossing segments and the kept faces lying over
+    another kept face or squeezed (:data:`SQUEEZED_RATIO`) joined to them through shared
+    edges (``graph``: the whole development's face adjacency). ``over`` are the faces lying
+    over another among all faces (a kept face lies over a kept face only if both are
+    there), ``squeezed`` the squeezed faces."""
     region = np.zeros(len(faces), bool)
-    sub = faces[idx]
-    region[idx[overlapping_faces(sub, uv) | (signed_areas(sub, uv) < SQUEEZED_RATIO * area_3d[idx])]] = True
+    cand = over[keep[over]]
+    region[cand[overlapping_faces(faces[cand], uv)]] = True
+    region[squeezed[keep[squeezed]]] = True
     region[owners] = True
-    pairs = graph.pairs
-    label = graph.components(region[pairs[:, 0]] & region[pairs[:, 1]])
-    reached = np.zeros(int(label.max()) + 1, bool)
-    reached[label[owners]] = True
-    return region & reached[label]
-
-
-def _kept_edges(faces: np.ndarray, edge_of: np.ndarray, edges: np.ndarray, idx: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`potflat.mesh.boundary.edges_and_boundary` of the faces ``idx`` of ``faces``, read
-    off the whole mesh's edge table (``edge_of``, ``edges`` from
-    :func:`potflat.mesh._kernels.topology.edge_table`) by counting each edge's kept faces: the
-    edges of the kept faces, their boundary segments (in face order) and each segment's face
-    (an index into ``idx``)."""
-    halves = (3 * idx[:, None] + np.arange(3)).ravel()
-    edge = edge_of[halves]
-    count = np.bincount(edge, minlength=len(edges))
-    one = count[edge] == 1
-    face, k = halves[one] // 3, halves[one] % 3
-    seg = np.stack([faces[face, k], faces[face, (k + 1) % 3]], axis=1)
-    return edges[count > 0], seg, np.flatnonzero(one) // 3
+    sel = np.flatnonzero(region)
+    indptr, indices = graph.neighbours
+    count = indptr[sel + 1] - indptr[sel]
+    row = np.repeat(np.arange(len(sel)), count)
+    other = indices[np.repeat(indptr[sel], count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)]
+    at = np.minimum(np.searchsorted(sel, other), len(sel) - 1)
+    inside = sel[at] == other
+    label, _ = union_find(len(sel), row[inside], at[inside])
+    reached = np.zeros(len(sel), bool)
+    reached[label[np.searchsorted(sel, owners)]] = True
+    region[sel[~reached[label]]] = False
+    return region
 
 
 def _cut_off(graph: FaceGraph, keep: np.ndarray, area_3d: np.ndarray, part: np.ndarray,
-             part_area: np.ndarray) -> np.ndarray:
+             part_area: np.ndarray, changed: np.ndarray | None = None) -> np.ndarray:
     """Kept faces (``keep`` (m,) bool) of the pieces that trimming cut off a connected part of
     the development, with less than :data:`CUT_OFF_FRACTION` of its area (see
     :func:`border_folds`); ``graph`` is the whole development's face adjacency, ``part`` (m,)
-    each face's part before trimming, ``part_area`` the parts' areas."""
+    each face's part before trimming, ``part_area`` the parts' areas.
+
+    With ``changed`` (k,) int64, the faces dropped since every piece was last at least that
+    large: only the pieces next to them are looked at, each explored until it reaches that
+    area (:func:`potflat.mesh._kernels.topology.small_pieces`)."""
+    if changed is not None:
+        indptr, indices = graph.neighbours
+        return small_pieces(indptr, indices, keep, np.ascontiguousarray(area_3d, dtype=np.float64), changed,
+                            CUT_OFF_FRACTION * part_area[part])
     pairs = graph.pairs
     piece = graph.components(keep[pairs[:, 0]] & keep[pairs[:, 1]])
     area = np.bincount(piece, np.where(keep, area_3d, 0.0))
@@ -198,23 +266,25 @@ def _same_place(points: np.ndarray, seg: np.ndarray) -> np.ndarray | None:
     return rep
 
 
-def _minor_fans(faces: np.ndarray, area_3d: np.ndarray, edges: np.ndarray, n: int,
+def _minor_fans(faces: np.ndarray, area_3d: np.ndarray, keep: np.ndarray, border: _KeptBorder,
                 same: np.ndarray | None = None) -> np.ndarray:
-    """Faces of the smaller fans at vertices whose faces form several fans (see :func:`border_folds`);
-    ``same`` (n,) maps copies of a vertex to one of them.
+    """Kept faces (``keep`` (m,) bool) of the smaller fans at vertices whose kept faces form
+    several fans (see :func:`border_folds`); ``same`` (n,) maps copies of a vertex to one of
+    them. Returns (m,) bool.
 
     A vertex with ``k`` faces in open fans has ``k`` plus one edge per fan, so a vertex
-    with at least two more edges than faces is pinched; only the faces around those are cut
-    apart (:func:`cut_open`) to find the fans.
+    with at least two more edges than faces is pinched (``border.excess``); only the faces
+    around those are cut apart (:func:`cut_open`) to find the fans.
     """
-    if same is not None:
-        faces, edges = same[faces], same[edges]
-    pinched = np.bincount(edges.ravel(), minlength=n) - np.bincount(faces.ravel(), minlength=n) >= 2
+    excess = border.excess if same is None else np.bincount(same, border.excess, len(same))
+    pinched = excess >= 2
     out = np.zeros(len(faces), bool)
     if not pinched.any():
         return out
-    local = np.flatnonzero(pinched[faces].any(axis=1))
-    new_faces, vertex_index, _, _, _ = cut_open(faces[local], np.zeros((len(local), 3)))
+    local = border.faces_at(np.flatnonzero(pinched if same is None else pinched[same]))
+    local = local[keep[local]]
+    sub = faces[local] if same is None else same[faces[local]]
+    new_faces, vertex_index, _, _, _ = cut_open(sub, np.zeros((len(local), 3)))
     fan_area = np.bincount(new_faces.ravel(), np.repeat(area_3d[local], 3), len(vertex_index))
     # keep the largest fan of each pinched vertex
     order = np.lexsort((-fan_area, vertex_index))
@@ -227,16 +297,19 @@ def _minor_fans(faces: np.ndarray, area_3d: np.ndarray, edges: np.ndarray, n: in
     return out
 
 
-def _edge_on_strips(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, seg: np.ndarray) -> np.ndarray:
-    """Edge-on strips that contain a flipped face and touch the boundary (see :func:`border_folds`)."""
-    flat = signed_areas(faces, uv)
+def _edge_on_strips(faces: np.ndarray, keep: np.ndarray, flat: np.ndarray, edge_on: np.ndarray,
+                    flipped: np.ndarray, seg: np.ndarray, n: int) -> np.ndarray:
+    """Edge-on strips of kept faces (``keep`` (m,) bool) that contain a flipped face and touch
+    the boundary ``seg`` (see :func:`border_folds`); ``flat`` (m,) the faces' flat signed areas,
+    ``edge_on`` and ``flipped`` the edge-on and flipped faces of all; ``n`` vertices.
+    Returns (m,) bool."""
     out = np.zeros(len(faces), bool)
-    if not (flat <= 0).any():
+    if not keep[flipped].any():
         return out
-    sel = np.flatnonzero(flat < EDGE_ON_RATIO * area_3d)
+    sel = edge_on[keep[edge_on]]
     sub = faces[sel]
     comp = FaceGraph(sub).components()
-    on_border = np.zeros(len(uv), bool)
+    on_border = np.zeros(n, bool)
     on_border[seg.ravel()] = True
     k = int(comp.max()) + 1
     has_flip = np.bincount(comp[flat[sel] <= 0], minlength=k) > 0

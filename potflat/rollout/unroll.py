@@ -405,12 +405,15 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         allowed[cut_faces] = False
         un = _without(un, ~disk.faces)
     clock.lap("disk")
+    graph = None  # the development's face adjacency, shared by the border_folds calls on one face set
     for rnd in range(TRIM_ROUNDS):
-        fold = border_folds(un.flat.mesh.faces, un.flat.uv, un.face_area, table=un.table,
-                            points=un.flat.mesh.vertices)
+        if graph is None:
+            graph = FaceGraph(un.flat.mesh.faces)
+        fold = border_folds(un.flat.mesh.faces, un.flat.uv, un.face_area, points=un.flat.mesh.vertices, graph=graph)
         if not fold.any() or fold.all():
             break
         trimmed[un.face_index[fold]] = True
+        graph = None
         if rnd < TRIM_ROUNDS - 1:
             un = _unroll(mesh, axis, options, allowed & ~trimmed, band, h_c, theta_c, theta_v, area,
                          seam=(un.seam, un.seam_method), landmark=landmark, floor=floor)
@@ -424,13 +427,17 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     clock.lap("folds")
     uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv, table=un.table)
     for _ in range(TRIM_ROUNDS):  # folds pushed against the border by untangling are trimmed
-        fold = border_folds(un.flat.mesh.faces, uv, un.face_area, table=un.table, points=un.flat.mesh.vertices)
+        if graph is None:
+            graph = FaceGraph(un.flat.mesh.faces)
+        fold = border_folds(un.flat.mesh.faces, uv, un.face_area, points=un.flat.mesh.vertices, graph=graph)
         if not fold.any() or fold.all():
             break
         trimmed[un.face_index[fold]] = True
         un = _without(dataclasses.replace(un, flat=un.flat.replace(uv=uv)), ~fold)
+        graph = None
         uv, more, moved_more = untangle(un.flat.mesh.faces, un.flat.uv, table=un.table)
         n_untangled, moved = n_untangled + more, moved + moved_more
+    del graph
     clock.lap("untangle")
     overlap = len(crossing_segments(uv, un.table[1])[0])
     turning = outline_turning(un.flat.mesh.faces, uv, segments=un.table[1])

@@ -159,8 +159,15 @@ class FaceGraph:
         self._faces = faces
 
     @cached_property
+    def edge_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The faces' :func:`potflat.mesh._kernels.topology.edge_table` (``edge_of, edges, count,
+        halves``), built on first use and shared by the adjacency and the caller."""
+        F = np.ascontiguousarray(self._faces, dtype=np.int64).reshape(-1, 3)
+        return edge_table(F, int(F.max()) + 1 if len(F) else 0)
+
+    @cached_property
     def _adjacency(self) -> tuple[np.ndarray, np.ndarray]:
-        return face_adjacency(self._faces, return_edges=True)
+        return face_adjacency(self._faces, return_edges=True, table=self.edge_table)
 
     @property
     def pairs(self) -> np.ndarray:
@@ -175,11 +182,17 @@ class FaceGraph:
     @cached_property
     def _csr(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(indptr, indices, pair of each entry)``, rows sorted (:func:`potflat.mesh._kernels.pair_csr`);
-        built on first use (only :meth:`matrix` needs it)."""
+        built on first use (:meth:`matrix` and :attr:`neighbours` need it)."""
 
         indptr, indices, pair_of = pair_csr(np.ascontiguousarray(self.pairs, dtype=np.int64).reshape(-1, 2), self.m)
         dtype = np.int32 if self.m < 2**31 else np.int64
         return indptr.astype(dtype), indices.astype(dtype), pair_of
+
+    @cached_property
+    def neighbours(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(indptr, indices)``: the adjacency as CSR (m + 1,) and (2 p,) int64, neighbours sorted."""
+        indptr, indices, _ = self._csr
+        return indptr.astype(np.int64, copy=False), indices.astype(np.int64, copy=False)
 
     def matrix(self, weights: np.ndarray | None = None) -> sp.csr_matrix:
         """(m, m) CSR matrix with ``weights[pair]`` ((p,) float64, default 1) on both entries."""
@@ -218,7 +231,7 @@ def unique_ints(x: np.ndarray, return_counts: bool = False):
     return u, np.diff(np.append(start, len(srt)))
 
 
-def face_adjacency(faces: np.ndarray, return_edges: bool = False):
+def face_adjacency(faces: np.ndarray, return_edges: bool = False, table: tuple | None = None):
     """Pairs of faces sharing an edge used by exactly two faces.
 
     From the linear edge table (:func:`potflat.mesh._kernels.edge_table`), in the order and
@@ -230,6 +243,8 @@ def face_adjacency(faces: np.ndarray, return_edges: bool = False):
     faces : (m, 3) int
     return_edges : bool
         Also return each pair's shared edge.
+    table : tuple, optional
+        The faces' ``edge_table(faces, faces.max() + 1)`` when the caller has it.
 
     Returns
     -------
@@ -240,7 +255,7 @@ def face_adjacency(faces: np.ndarray, return_edges: bool = False):
 
     F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
     n = int(F.max()) + 1 if len(F) else 0
-    _, edges, count, halves = edge_table(F, n)
+    _, edges, count, halves = edge_table(F, n) if table is None else table
     pairs, shared = face_pairs(edges, count, halves, n)
     return (pairs, shared) if return_edges else pairs
 

@@ -637,3 +637,70 @@ def incident_faces(verts, vf_ptr, vf_tri):
             out[k] = vf_tri[p]
             k += 1
     return out
+
+
+@leaf
+def small_pieces(indptr, indices, keep, area, changed, limit):
+    """Kept faces in the pieces next to the ``changed`` faces whose area is below their limit.
+
+    A piece is a connected set of kept faces (over the adjacency ``indptr``, ``indices``);
+    each piece with a face next to a changed face is explored from that face until its area
+    reaches that face's limit (then it is large enough, and so is any piece reaching a face
+    found so) or it is exhausted (then it is small).
+
+    Parameters
+    ----------
+    indptr : (m + 1,) int64
+    indices : (2 p,) int64
+        Face adjacency (CSR).
+    keep : (m,) bool
+    area : (m,) float64
+    changed : (k,) int64
+        Faces whose removal may have cut pieces off.
+    limit : (m,) float64
+        The area below which a piece holding the face is small.
+
+    Returns
+    -------
+    (m,) bool
+        The faces of the small pieces.
+    """
+    m = keep.shape[0]
+    # 0: not looked at, 1: in a large enough piece, 2: in a small piece, 3: being explored
+    state = np.zeros(m, np.int8)
+    stack = np.empty(m, np.int64)
+    seen = np.empty(m, np.int64)
+    for d in changed:
+        for q in range(indptr[d], indptr[d + 1]):
+            s = indices[q]
+            if not keep[s] or state[s] != 0:
+                continue
+            state[s] = 3
+            stack[0] = s
+            seen[0] = s
+            top, n_seen = 1, 1
+            total = area[s]
+            large = total >= limit[s]
+            while top > 0 and not large:
+                top -= 1
+                f = stack[top]
+                for p in range(indptr[f], indptr[f + 1]):
+                    g = indices[p]
+                    if not keep[g] or state[g] == 3:
+                        continue
+                    if state[g] == 1:
+                        large = True
+                        break
+                    state[g] = 3
+                    stack[top] = g
+                    top += 1
+                    seen[n_seen] = g
+                    n_seen += 1
+                    total += area[g]
+                    if total >= limit[s]:
+                        large = True
+                        break
+            mark = 1 if large else 2
+            for j in range(n_seen):
+                state[seen[j]] = mark
+    return state == 2
