@@ -161,13 +161,14 @@ class FaceGraph:
     @cached_property
     def edge_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The faces' :func:`potflat.mesh._kernels.topology.edge_table` (``edge_of, edges, count,
-        halves``), built on first use and shared by the adjacency and the caller."""
+        halves``), built on first use and kept: the adjacency reuses it when it is asked for
+        first (a graph whose caller never asks keeps no table, half a gigabyte at 6M faces)."""
         F = np.ascontiguousarray(self._faces, dtype=np.int64).reshape(-1, 3)
         return edge_table(F, int(F.max()) + 1 if len(F) else 0)
 
     @cached_property
     def _adjacency(self) -> tuple[np.ndarray, np.ndarray]:
-        return face_adjacency(self._faces, return_edges=True, table=self.edge_table)
+        return face_adjacency(self._faces, return_edges=True, table=self.__dict__.get("edge_table"))
 
     @property
     def pairs(self) -> np.ndarray:
