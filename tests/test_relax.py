@@ -622,12 +622,13 @@ def test_following_a_coarse_copy_uncrosses_a_wrapped_boundary(monkeypatch):
     x = np.ascontiguousarray(fan.uv)
     assert sp.overlap(x) > 0 and (signed_areas(x, F) > 0).all()
     notes: list[str] = []
-    y = relax_module.follow(sp, x, notes)
+    inside = np.ones(len(x), bool)
+    y = relax_module.follow(sp, x, x, inside, notes)
     assert y is not None and sp.overlap(y) == 0 and (signed_areas(y, F) > 0).all()
     assert _angle_sum(y, F) < 2 * np.pi and "cross itself" in notes[0]
     monkeypatch.setattr(relax_module, "COARSE", replace(relax_module.COARSE, follow_repair_rounds=0))
     notes.clear()
-    assert relax_module.follow(sp, x, notes) is None and "from the rollout" in notes[-1]
+    assert relax_module.follow(sp, x, x, inside, notes) is None and "from the rollout" in notes[-1]
 
 
 def test_boundary_vertex_with_a_large_angle_sum_does_not_wrap(monkeypatch):
@@ -696,7 +697,7 @@ def test_a_given_up_coarse_copy_leaves_its_anisotropy_limit_behind(vessel, monke
     monkeypatch.setattr(multilevel, "COARSE", replace(multilevel.COARSE, min_vertices=1000))
     kept = relax(vessel, preset="standard")
     assert [lv.level for lv in kept.levels if lv.level.startswith("fine")] == ["fine"]  # the copy's limit
-    monkeypatch.setattr(multilevel, "follow", lambda sp, x, notes: notes.append("given up") or None)
+    monkeypatch.setattr(multilevel, "follow", lambda sp, x, target, inside, notes: notes.append("given up") or None)
     given_up = relax(vessel, preset="standard")
     assert "given up" in given_up.notes and given_up.flipped == 0
     assert [lv.level for lv in given_up.levels] == ["fine, shape first", "fine"]

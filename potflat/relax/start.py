@@ -9,6 +9,7 @@ import numpy as np
 from potflat.errors import FoldedResultError
 from potflat.mesh.boundary import crossing_pairs
 from potflat.mesh.embedding import repair_folds, tutte_embedding
+from potflat.relax._kernels.simplify import extend
 from potflat.relax._kernels.springs import neighbour_means
 from potflat.relax.energy import SpringSystem
 from potflat.relax.parameters import COARSE, ENERGY
@@ -118,24 +119,49 @@ def turned_like(x: np.ndarray, reference: np.ndarray, weight: np.ndarray) -> np.
     return np.ascontiguousarray((x - ca) @ rot.T + cb)
 
 
-def follow(sp: SpringSystem, x: np.ndarray, notes: list[str]) -> np.ndarray | None:
-    """The full mesh's layout ``x`` following a relaxed coarse copy, untangled and with its
-    boundary uncrossed (:func:`uncross_boundary`); None (with a note) when it cannot be made
-    fold-free."""
-    x, n_bad = untangle(sp, x)
+def follow(sp: SpringSystem, x: np.ndarray, target: np.ndarray, inside: np.ndarray,
+           notes: list[str]) -> np.ndarray | None:
+    """The full mesh's layout following a relaxed coarse copy: ``target`` (n, 2), the copy's
+    piecewise-linear map of the start ``x`` (n, 2), where it is defined (``inside`` (n,)
+    bool) and carried by its neighbours' map elsewhere (:func:`settled_goal`), untangled and
+    with its boundary uncrossed (:func:`uncross_boundary`); None (with a note) when it
+    cannot be made fold-free."""
+    goal, n_bad = untangle(sp, settled_goal(sp, x, target, inside))
     if n_bad:
         notes.append(f"untangled {n_bad} triangles flipped by following the coarse copy")
-    folded = bool((sp.signed_areas(x) <= 0).any())
-    pairs = np.zeros((0, 2), np.int64) if folded else crossing_pairs(x, sp.boundary_segments)
+    folded = bool((sp.signed_areas(goal) <= 0).any())
+    pairs = np.zeros((0, 2), np.int64) if folded else crossing_pairs(goal, sp.boundary_segments)
     if len(pairs):
-        x = uncross_boundary(sp, x, pairs)
+        goal = uncross_boundary(sp, goal, pairs)
         notes.append(f"moved the boundary back where following the coarse copy made it cross itself "
                      f"({len(pairs)} crossing pairs of boundary segments)")
-        folded = bool((sp.signed_areas(x) <= 0).any()) or sp.overlap(x) > 0
+        folded = bool((sp.signed_areas(goal) <= 0).any()) or sp.overlap(goal) > 0
     if folded:
         notes.append("following the coarse copy folded the full mesh; relaxed the full mesh from the rollout")
         return None
-    return x
+    return goal
+
+
+def settled_goal(sp: SpringSystem, start: np.ndarray, target: np.ndarray, inside: np.ndarray) -> np.ndarray:
+    """Where the full mesh goes following a coarse copy: ``target`` (n, 2), the copy's
+    piecewise-linear map of ``start`` (n, 2), at the vertices ``inside`` (n,) the copy; every
+    other vertex (outside the copy's jagged border), ring by ring from those, carried by the
+    affine map that best fits the placed vertices near it
+    (:func:`potflat.relax._kernels.simplify.extend`), without the jumps between neighbours
+    that an extrapolation from different coarse faces makes."""
+    goal = target.copy()
+    placed = inside.copy()
+    while True:
+        on = placed[sp.faces]
+        mixed = on.any(axis=1) & ~on.all(axis=1)
+        ring = np.unique(sp.faces[mixed][~on[mixed]]).astype(np.int64)
+        if not len(ring):
+            break
+        out = np.empty((len(ring), 2))
+        extend(start, goal, placed, ring, sp.vf_ptr, sp.vf_tri, sp.faces, out)
+        goal[ring] = out
+        placed[ring] = True
+    return goal
 
 
 def uncross_boundary(sp: SpringSystem, x: np.ndarray, pairs: np.ndarray) -> np.ndarray:

@@ -86,3 +86,90 @@ def interpolate(points, cluster, uv_from, uv_to, faces, vf_ptr, vf_tri, out, ins
         out[i, 1] = p1 + b0 * (uv_to[a, 1] - uv_from[a, 1]) + b1 * (uv_to[b, 1] - uv_from[b, 1]) + b2 * (
             uv_to[d, 1] - uv_from[d, 1])
 
+
+
+@leaf
+def _moments(start, goal, x0, y0, j, m):
+    """Add the placed vertex ``j`` (position relative to ``(x0, y0)`` in ``start``, goal in
+    ``goal``) to the least-squares sums ``m`` (12,)."""
+    px, py = start[j, 0] - x0, start[j, 1] - y0
+    gx, gy = goal[j, 0], goal[j, 1]
+    m[0] += 1.0
+    m[1] += px
+    m[2] += py
+    m[3] += px * px
+    m[4] += px * py
+    m[5] += py * py
+    m[6] += gx
+    m[7] += gy
+    m[8] += px * gx
+    m[9] += px * gy
+    m[10] += py * gx
+    m[11] += py * gy
+
+
+@parallel
+def extend(start, goal, placed, verts, vf_ptr, vf_tri, faces, out):
+    """Place each listed vertex with the affine map that best carries the placed vertices
+    within two edges of it from ``start`` to ``goal`` (least squares, each counted once per
+    path to it): where their map is affine the vertex follows it exactly, and neighbouring
+    vertices so placed follow nearly the same map.
+
+    With those vertices on a line the map is a similarity (rotation and scale) instead, with
+    one a translation; a vertex without placed vertices near keeps its goal.
+
+    Parameters
+    ----------
+    start, goal : (n, 2) float64
+        The layouts the map goes from and to (``goal`` read at placed vertices only).
+    placed : (n,) bool
+    verts : (k,) int64
+        Vertices to place (none of them placed).
+    vf_ptr, vf_tri, faces
+        Incident faces of each vertex (CSR) and the faces.
+    out : (k, 2) float64
+        Their places in ``goal``'s layout.
+    """
+    for k in prange(verts.shape[0]):
+        i = verts[k]
+        x0, y0 = start[i, 0], start[i, 1]
+        m = np.zeros(12)
+        for p in range(vf_ptr[i], vf_ptr[i + 1]):
+            f = vf_tri[p]
+            for c in range(3):
+                j = faces[f, c]
+                if j == i:
+                    continue
+                if placed[j]:
+                    _moments(start, goal, x0, y0, j, m)
+                for q in range(vf_ptr[j], vf_ptr[j + 1]):  # and the placed vertices next to j
+                    g = vf_tri[q]
+                    for e in range(3):
+                        h = faces[g, e]
+                        if h != i and h != j and placed[h]:
+                            _moments(start, goal, x0, y0, h, m)
+        s1 = m[0]
+        if s1 == 0.0:
+            out[k, 0], out[k, 1] = goal[i, 0], goal[i, 1]
+            continue
+        # centred second moments: the affine fit's part A, the constant b = mean q - A mean p
+        mx, my = m[1] / s1, m[2] / s1
+        cxx, cxy, cyy = m[3] / s1 - mx * mx, m[4] / s1 - mx * my, m[5] / s1 - my * my
+        mqx, mqy = m[6] / s1, m[7] / s1
+        dxx, dxy = m[8] / s1 - mx * mqx, m[9] / s1 - mx * mqy  # cov(p_x, q)
+        dyx, dyy = m[10] / s1 - my * mqx, m[11] / s1 - my * mqy  # cov(p_y, q)
+        det = cxx * cyy - cxy * cxy
+        trace = cxx + cyy
+        if det > 1e-6 * trace * trace:  # neighbours spread in 2D: the affine fit
+            a00 = (dxx * cyy - dyx * cxy) / det  # dq_x / dp_x
+            a01 = (dyx * cxx - dxx * cxy) / det  # dq_x / dp_y
+            a10 = (dxy * cyy - dyy * cxy) / det
+            a11 = (dyy * cxx - dxy * cxy) / det
+        elif trace > 0.0:  # on a line: the similarity fit
+            a = (dxx + dyy) / trace
+            b = (dxy - dyx) / trace
+            a00, a01, a10, a11 = a, -b, b, a
+        else:  # one neighbour (or all at one place): its translation
+            a00, a01, a10, a11 = 1.0, 0.0, 0.0, 1.0
+        out[k, 0] = mqx - (a00 * mx + a01 * my)
+        out[k, 1] = mqy - (a10 * mx + a11 * my)
