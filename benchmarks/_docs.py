@@ -28,6 +28,7 @@ BLOCKS = {
     "bench_figures_knobs": PERFORMANCE_MD,
     "bench_starts": ROBUSTNESS_MD,
     "bench_view": PERFORMANCE_MD,
+    "bench_relief": PERFORMANCE_MD,
     "real_scans": PERFORMANCE_MD,
 }
 

@@ -34,7 +34,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _docs import command_line, machine, publish  # noqa: E402
-from bench_scale import add_scan_options, child_load, make_scan, run_benchmark, warm_kernels  # noqa: E402
+from _run import warm_kernels  # noqa: E402
+from bench_scale import add_scan_options, child_load, make_scan, run_benchmark  # noqa: E402
 
 BLOCK = "bench_knobs"
 #: (name, relax preset, other ``potflat run`` options), the default first (the reference of the

@@ -13,7 +13,7 @@ stages by the appearance of each stage's JSON sidecar (``NAME.rollout.json``,
 and the peak memory; for the whole run the wall time (start-up included), the CPU time of the
 child (user + system, all threads) and its peak (``VmHWM``).
 Before the first size, ``potflat run`` on the bundled amphora compiles and caches every kernel
-the runs use (:func:`warm_kernels`): the rows measure runs with warm kernels; a first run's
+the runs use (:func:`_run.warm_kernels`): the rows measure runs with warm kernels; a first run's
 compile time is measured by ``bench_first_run.py``.
 
 Targets: at 1M vertices the whole run at most 2x the trimesh load; at 3M at most 60 s and 3 GB.
@@ -30,25 +30,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
-import resource
-import shutil
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _docs import command_line, machine, publish  # noqa: E402
+from _run import STAGES, run_potflat, warm_kernels  # noqa: E402
 
 #: Targets: the whole run at 1M vertices within this multiple of the trimesh load ...
 GOAL_RATIO_1M = 2.0
 #: ... and at 3M vertices within these seconds and GB.
 GOAL_S_3M, GOAL_GB_3M = 60.0, 3.0
-STAGES = ("rollout", "relax", "bake")
-SIDE = {"rollout": ".rollout.json", "relax": ".relaxed.json", "bake": ".bake.json"}
 BLOCK = "bench_scale"
 
 
@@ -71,14 +66,6 @@ def make_scan(n_vertices: int, folder: Path, *, texture_size: int, seed: int = 0
             "generate_s": time.perf_counter() - t}
     record.write_text(json.dumps({"settings": settings, "info": info}))
     return path, info
-
-
-def _status_kb(pid: int) -> dict[str, int]:
-    try:
-        text = Path(f"/proc/{pid}/status").read_text()
-    except OSError:
-        return {}
-    return {k: int(v) for k, v in re.findall(r"^(VmRSS|VmHWM):\s+(\d+) kB", text, re.MULTILINE)}
 
 
 TRIMESH_CHILD = """
@@ -108,59 +95,14 @@ def child_load(scan: Path, code: str = TRIMESH_CHILD) -> dict:
 
 def run_benchmark(scan: Path, out: Path, *, preset: str, px_per_mm: float, extra: tuple[str, ...] = (),
                   interval: float = 0.1) -> dict:
-    """Run ``potflat run`` on ``scan`` in a child process (``extra``: more of its options);
-    sample its memory; split by stage (``out``, the benchmark's own folder, is emptied first:
-    a stage ends when its sidecar appears)."""
-    if out.exists():
-        shutil.rmtree(out)
-    cmd = [sys.executable, "-m", "potflat_cli", "run", str(scan), "-o", str(out), "--preset", preset,
-           "--px-per-mm", str(px_per_mm), *extra, "--json"]
-    samples: list[tuple[float, int]] = []
-    marks: dict[str, float] = {}
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    start = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    hwm = [0]
-
-    def sample() -> None:
-        while proc.poll() is None:
-            now = time.perf_counter() - start
-            st = _status_kb(proc.pid)
-            if "VmRSS" in st:
-                samples.append((now, st["VmRSS"]))
-                hwm[0] = max(hwm[0], st.get("VmHWM", 0))
-            for stage in STAGES:
-                if stage not in marks and (out / f"{scan.stem}{SIDE[stage]}").exists():
-                    marks[stage] = now
-            time.sleep(interval)
-
-    thread = threading.Thread(target=sample, daemon=True)
-    thread.start()
-    stdout, stderr = proc.communicate()
-    total = time.perf_counter() - start
-    thread.join()
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if proc.returncode != 0:
-        raise SystemExit(f"potflat run failed (exit {proc.returncode}):\n{stderr[-3000:]}")
-    report = json.loads(stdout)
-    rows, t0 = [], 0.0
-    for stage in STAGES:
-        t1 = marks.get(stage, total)
-        window = [kb for t, kb in samples if t0 <= t <= t1 + interval]
-        rows.append({"stage": stage, "wall_s": report["seconds"].get(stage, t1 - t0),
-                     "peak_gb": max(window, default=0) / 2**20})
-        t0 = t1
-    return {
-        "rows": rows,
-        "total_wall_s": total,
-        "run_seconds": report["seconds"],
-        "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime),
-        # the child's own high-water mark; RUSAGE_CHILDREN's ru_maxrss is not used:
-        # Linux carries the parent's resident set at fork into the child's maxrss
-        # (here the generated scan held by this process), so it overstates potflat's peak
-        "peak_gb": hwm[0] / 2**20,
-        "figures": report["figures"],
-    }
+    """Run ``potflat run`` on ``scan`` in a child process (``extra``: more of its options;
+    :func:`_run.run_potflat`): per stage its wall time and peak memory, the whole run's wall
+    and CPU time and peak, the run's figures. A failed run stops the benchmark."""
+    run = run_potflat(scan, out, ("--preset", preset, "--px-per-mm", str(px_per_mm), *extra), interval=interval)
+    if run["rc"] != 0:
+        raise SystemExit(f"potflat run failed (exit {run['rc']}):\n{run['stderr']}")
+    return {"rows": run["stages"], "total_wall_s": run["wall_s"], "run_seconds": run["report"]["seconds"],
+            "cpu_s": run["cpu_s"], "peak_gb": run["peak_gb"], "figures": run["report"]["figures"]}
 
 
 def _image(out: Path, name: str) -> str:
@@ -220,22 +162,6 @@ def table(rows: list[dict], *, command: str) -> str:
     lines += ["", *_verdicts(rows), (f"Relaxed (largest): edge-length RMS {f.get('edge_rms', float('nan')):.4f}, "
                                      f"{f.get('flipped')} flipped triangles.")]
     return "\n".join(lines) + "\n"
-
-
-def warm_kernels() -> None:
-    """Run the bundled amphora through ``potflat run`` once (in a temporary folder), then bake it
-    again at 0.5 px/mm, so that no row of the table pays for compiling a kernel (a kernel is
-    compiled again after its source file changed): the small atlas needs mip levels (the chart
-    mask's and the push-pull's kernels, which the big scans' painted-zone search and bake use)
-    only at a coarse resolution."""
-    print("compiling the kernels (potflat run on the bundled amphora) ...", flush=True)
-    sample = Path(__file__).resolve().parents[1] / "samples" / "data" / "amphora.obj"
-    with tempfile.TemporaryDirectory(prefix="potflat-scale-warm-") as tmp:
-        subprocess.run([sys.executable, "-m", "potflat_cli", "run", str(sample), "-o", tmp, "--quiet"],
-                       check=True, stdin=subprocess.DEVNULL)
-        subprocess.run([sys.executable, "-m", "potflat_cli", "bake", str(Path(tmp) / "amphora.relaxed.ply"),
-                        "-o", str(Path(tmp) / "coarse"), "--px-per-mm", "0.5", "--quiet"],
-                       check=True, stdin=subprocess.DEVNULL)
 
 
 def add_scan_options(ap: argparse.ArgumentParser) -> None:

@@ -1,5 +1,6 @@
-"""Real museum scans at full resolution: upsampled copies of the shared real scans through
-``potflat run`` with the defaults.
+"""Real museum scans at full resolution beside the synthetic vessel: upsampled copies of the
+shared real scans and the generated amphora of ``bench_scale.py`` at the same sizes, through
+``potflat run`` with the defaults, side by side in one run.
 
 Each scan of ``--data`` (default ``../shared/data/real`` beside the repository) is read as
 potflat reads it, without cleaning (exact welding only, so stray pieces, pinholes and
@@ -10,44 +11,50 @@ seams) while that stays under the target, then the longest edges are split (thei
 into 2, 3 or 4, the shorter diagonal of a quadrilateral) up to the target exactly. Textured
 copies are written as OBJ + MTL + the scan's own texture image, untextured ones as binary
 PLY, both in millimetres. The copies are cached in ``--out`` (a later run reuses a copy
-made with the same settings); the native scan itself is the ``native`` size.
+made with the same settings); the native scan itself is the ``native`` size. The synthetic
+vessel (``synthetic``: :func:`bench_scale.make_scan`, an 8192 x 8192 atlas) is generated at
+each size but ``native``, cached alike.
 
-Then, one after the other, each copy runs through ``python -m potflat_cli run COPY -o DIR
---json`` in its own process (resident memory sampled every 0.1 s; a failure is a row, not
-an abort) and the row is read off the JSON sidecars: stage times (and the rollout's steps),
-relax iterations per level, flipped triangles and boundary crossings (of the rollout and
-of the result, or of the refusal), the painted zone's length error (median, p95), the
-share of the scan's surface in the image and the share trimmed away, and the outline's
-total turning (sum of absolute exterior angles over 2 pi, all boundary loops) of the
-rollout and the relaxed layout.
+Then, size after size, each scan runs through ``python -m potflat_cli run COPY -o DIR
+--json`` in its own process (:func:`_run.run_potflat`: resident memory sampled every 0.1 s;
+a failure is a row, not an abort) and the row is read off the JSON sidecars: stage times
+(and the rollout's steps), time per vertex, relax iterations per level, flipped triangles
+and boundary crossings (of the rollout and of the result, or of the refusal), the painted
+zone's length error (median, p95), the share of the scan's surface in the image, the
+outline's total turning (sum of absolute exterior angles over 2 pi, all boundary loops) of
+the rollout and the relaxed layout, and the peak memory. Below the table, each real scan's
+whole run at 1M vertices against the synthetic vessel's.
 
 Reproduce::
 
-    python benchmarks/real_scans.py --out /tmp/real --sizes native 0.1e6 0.3e6 1e6 3e6
+    python benchmarks/real_scans.py --out /tmp/real --sizes native 0.1e6 0.3e6 1e6 3e6 --write
 """
 from __future__ import annotations
 
 import argparse
 import json
 import re
-import resource
 import shutil
-import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _docs import command_line, publish  # noqa: E402
-from bench_scale import _status_kb, warm_kernels  # noqa: E402
+from _docs import command_line, machine, publish  # noqa: E402
+from _run import run_potflat, warm_kernels  # noqa: E402
+from bench_scale import make_scan  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "real"
 SCANS = ("dragon-jar.glb", "colonoware-pot.glb", "plastic-vase.ply", "sea-vase.ply", "goblet.stl")
-SECTION = "## Real scans at full resolution"
+#: The synthetic vessel's name in ``--scans`` and the table, and its atlas (as bench_scale's).
+SYNTHETIC = "synthetic"
+SYNTHETIC_TEXTURE = 8192
+#: Target: a real scan's whole run at 1M vertices within this multiple of the synthetic vessel's.
+GOAL_RATIO = 1.5
+BLOCK = "real_scans"
 #: The copy's settings: a cached copy made with other settings is made again.
 COPY_VERSION = 1
 
@@ -199,40 +206,6 @@ def native_info(scan: Path) -> dict:
     return {"vertices": len(V), "faces": len(F), "area_mm2": float(area)}
 
 
-def run_potflat(scan: Path, out: Path, extra: tuple[str, ...] = (), interval: float = 0.1) -> dict:
-    """``potflat run`` on ``scan`` into ``out`` (emptied first) in a child process: exit code,
-    last error line, wall time, CPU time (user + system, all threads: the figure to compare
-    on a shared machine), peak resident memory (GB) and the run's JSON report."""
-    if out.exists():
-        shutil.rmtree(out)
-    cmd = [sys.executable, "-m", "potflat_cli", "run", str(scan), "-o", str(out), *extra, "--json"]
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    start = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            stdin=subprocess.DEVNULL)
-    hwm = [0]
-
-    def sample() -> None:
-        while proc.poll() is None:
-            hwm[0] = max(hwm[0], _status_kb(proc.pid).get("VmHWM", 0))
-            time.sleep(interval)
-
-    thread = threading.Thread(target=sample, daemon=True)
-    thread.start()
-    stdout, stderr = proc.communicate()
-    wall = time.perf_counter() - start
-    thread.join()
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    errors = [ln for ln in stderr.splitlines() if ln.startswith("error")]
-    try:
-        report = json.loads(stdout) if proc.returncode == 0 else None
-    except ValueError:
-        report = None
-    return {"rc": proc.returncode, "error": " ".join(stderr.split("error:", 1)[1].split()) if errors else "",
-            "wall_s": wall, "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime),
-            "peak_gb": hwm[0] / 2**20, "report": report}
-
-
 def outline_turning(ply: Path) -> float:
     """Total turning of a stage PLY's flat outline: the sum over all boundary loops of the
     absolute exterior angles, over 2 pi (1 for a convex outline)."""
@@ -253,11 +226,19 @@ def _load(path: Path) -> dict:
     return json.loads(path.read_text()) if path.is_file() else {}
 
 
+def _turning(record: dict, ply: Path) -> float | None:
+    """The outline's total turning of a stage: as its JSON records it, else measured on its PLY."""
+    for key in ("outline_turning", "turning"):
+        for node in (record, record.get("outline") or {}, record.get("distortion") or {}):
+            if isinstance(node, dict) and isinstance(node.get(key), (int, float)):
+                return float(node[key])
+    return outline_turning(ply) if ply.is_file() else None
+
+
 def figures(out: Path, name: str, run: dict, area_mm2: float) -> dict:
     """One row's figures from the sidecars in ``out`` (whatever stages were written)."""
     ro, re_, ba = (_load(out / f"{name}.{s}.json") for s in ("rollout", "relaxed", "bake"))
-    row: dict = {"rc": run["rc"], "error": run["error"], "wall_s": run["wall_s"], "cpu_s": run["cpu_s"],
-                 "peak_gb": run["peak_gb"]}
+    row: dict = {k: run[k] for k in ("rc", "error", "wall_s", "cpu_s", "peak_gb")}
     t = ro.get("timings", {})
     row["rollout_s"] = t.get("total")
     row["steps"] = {k: v for k, v in t.get("rollout_steps", {}).items() if k != "total"}
@@ -272,48 +253,65 @@ def figures(out: Path, name: str, run: dict, area_mm2: float) -> dict:
     if m:
         row["flipped"], row["crossings"] = int(m.group(1)), int(m.group(2))
     zone = re_.get("important_zone") or {}
-    imp = ro.get("importance", {})
-    row["zone"] = "none" if imp.get("uniform") else f"{100 * imp.get('zone_fraction', float('nan')):.0f}%"
+    imp = ro.get("importance") or {}
+    row["zone"] = _zone(imp)
     row["zone_err"] = (zone.get("length_error_median_pct"), zone.get("length_error_p95_pct"))
     row["in_image_pct"] = 100 * ba["surface_area_mm2"] / area_mm2 if "surface_area_mm2" in ba else None
-    row["trimmed_pct"] = 100 * ro.get("trimmed", {}).get("area_mm2", float("nan")) / area_mm2 if ro else None
-    row["turning"] = tuple(outline_turning(p) if p.is_file() else None
-                           for p in (out / f"{name}.rollout.ply", out / f"{name}.relaxed.ply"))
+    row["turning"] = (_turning(ro, out / f"{name}.rollout.ply"), _turning(re_, out / f"{name}.relaxed.ply"))
     return row
+
+
+def _zone(importance: dict) -> str:
+    """The painted zone's share of the rollout, or why there is none, in a word or two."""
+    reason = importance.get("reason", "")
+    if not importance:
+        return "-"
+    if not importance.get("uniform"):
+        return f"{100 * importance['zone_fraction']:.0f}%"
+    return "all over" if reason.startswith("painted all") else "no colours" if reason.startswith("no texture") else "none"
 
 
 def _f(x, fmt: str = ".1f") -> str:
     return "-" if x is None else format(x, fmt)
 
 
+def _per_vertex(seconds: float | None, vertices: int) -> str:
+    return _f(None if seconds is None else 1e6 * seconds / vertices, ".0f")
+
+
+def ratios(rows: list[dict], size: int = 1_000_000) -> list[str]:
+    """Each real scan's whole run at ``size`` vertices against the synthetic vessel's, wall and CPU."""
+    at = {r["scan"]: r for r in rows if r["size"] == size and r["rc"] == 0}
+    synthetic = at.get(SYNTHETIC)
+    if synthetic is None:
+        return []
+    out = [f"Whole run at {size / 1e6:g}M vertices, real scan / synthetic vessel (target at most {GOAL_RATIO:g}): "
+           + ", ".join(f"{name} {r['wall_s'] / synthetic['wall_s']:.2f} (CPU {r['cpu_s'] / synthetic['cpu_s']:.2f})"
+                       for name, r in at.items() if name != SYNTHETIC) + "."]
+    return out if len(at) > 1 else []
+
+
 def table(rows: list[dict], command: str) -> str:
-    """The Markdown section: one row per scan and size."""
-    lines = [SECTION, "",
-             f"`{command}` ({time.strftime('%Y-%m-%d')}): the real scans (native and upsampled by midpoint "
-             "subdivision) through `potflat run` with the defaults, one after the other in one run. "
-             "Times in s (the stages' own, wall), the whole run's CPU time (user + system, all threads) "
-             "and CPU time per vertex in us; relax iterations per level, coarsest "
-             "first; crossings of the rollout's outline / of the result; zone: the painted zone's share "
-             "of the rollout (none: uniform weights) and its length error, median / p95 %; image / "
-             "trimmed: share of the scan's 3D area; turning of the outline over 2 pi, rollout / relaxed.",
-             "", "| scan | vertices | result | rollout s | unroll s | untangle s | folds s | relax s | bake s "
-             "| whole s (CPU s) | CPU us/vertex | peak GB | iterations | flips | crossings | zone | zone error % "
-             "| image % | trimmed % | turning |",
-             "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---|---|---:|---:|---|"]
+    """The block of docs/performance.md: one row per scan and size, then the ratios and notes."""
+    lines = [f"`{command}` ({machine()}):", "",
+             "| scan | vertices | result | rollout s | unroll s | untangle s | relax s | bake s | whole s (CPU s) "
+             "| rollout / relax / CPU us per vertex | peak GB | iterations | flips | crossings | turning | zone "
+             "| zone error % | image % |",
+             "|---|---:|---|---:|---:|---:|---:|---:|---:|---|---:|---|---:|---|---|---|---|---:|"]
     for r in rows:
         result = "image" if r["rc"] == 0 else ("refused: " + r["error"][:60] if r["error"] else f"exit {r['rc']}")
-        steps = r["steps"]
+        v = r["vertices"]
         lines.append("| " + " | ".join([
-            r["scan"], f"{r['vertices']:,}", result, _f(r["rollout_s"]), _f(steps.get("unroll")),
-            _f(steps.get("untangle")), _f(steps.get("folds")), _f(r["relax_s"]), _f(r["bake_s"]),
-            f"{_f(r['wall_s'])} ({_f(r['cpu_s'], '.0f')})", _f(1e6 * r["cpu_s"] / r["vertices"], ".0f"),
-            _f(r["peak_gb"], ".2f"),
-            " ".join(str(it) for _, it in r["levels"]) or "-", _f(r["flipped"], "d"),
-            f"{_f(r['rollout_overlap'], 'd')} / {_f(r['crossings'], 'd')}", r["zone"],
-            f"{_f(r['zone_err'][0])} / {_f(r['zone_err'][1])}", _f(r["in_image_pct"]),
-            _f(r["trimmed_pct"]), f"{_f(r['turning'][0])} / {_f(r['turning'][1])}"]) + " |")
+            r["scan"], f"{v:,}", result, _f(r["rollout_s"]), _f(r["steps"].get("unroll")),
+            _f(r["steps"].get("untangle")), _f(r["relax_s"]), _f(r["bake_s"]),
+            f"{_f(r['wall_s'])} ({_f(r['cpu_s'], '.0f')})",
+            " / ".join([_per_vertex(r["rollout_s"], v), _per_vertex(r["relax_s"], v), _per_vertex(r["cpu_s"], v)]),
+            _f(r["peak_gb"], ".2f"), " ".join(str(it) for _, it in r["levels"]) or "-", _f(r["flipped"], "d"),
+            f"{_f(r['rollout_overlap'], 'd')} / {_f(r['crossings'], 'd')}",
+            f"{_f(r['turning'][0])} / {_f(r['turning'][1])}", r["zone"],
+            f"{_f(r['zone_err'][0])} / {_f(r['zone_err'][1])}", _f(r["in_image_pct"])]) + " |")
     notes = [f"- {r['scan']} {r['vertices']:,}: {n}" for r in rows for n in r["notes"]]
-    return "\n".join(lines + ([""] + notes if notes else []) + [""])
+    return "\n".join(lines + [""] + ratios(rows) + ([""] + notes if notes else []) + [""])
 
 
 def _size(text: str) -> str | int:
@@ -325,12 +323,32 @@ def _size(text: str) -> str | int:
         raise argparse.ArgumentTypeError(f"a size is 'native' or a vertex count, got {text!r}") from None
 
 
+def _scan_at(name: str, size: str | int, data: Path, folder: Path) -> tuple[Path, dict] | None:
+    """The file of scan ``name`` at ``size`` (made or reused in ``folder``) and its vertices,
+    faces and area (mm²); None for the synthetic vessel's ``native`` and a real scan's sizes at
+    or below its native one."""
+    if name == SYNTHETIC:
+        if size == "native":
+            return None
+        print(f"synthetic vessel with {size:,} vertices ...", flush=True)
+        path, _ = make_scan(size, folder / "scan", texture_size=SYNTHETIC_TEXTURE)
+        return path, native_info(path)
+    native = native_info(data / name)
+    if size == "native":
+        return data / name, native
+    if size <= native["vertices"]:  # (subdivision only adds vertices)
+        return None
+    print(f"{name}: copy with {size:,} vertices ...", flush=True)
+    return make_copy(data / name, size, folder / "copy")
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True, help="folder for the copies (kept, reused) and the runs")
     ap.add_argument("--sizes", type=_size, nargs="+", default=["native", 100_000, 300_000, 1_000_000, 3_000_000],
                     help="'native' and/or vertex counts (default: native 0.1e6 0.3e6 1e6 3e6)")
-    ap.add_argument("--scans", nargs="+", default=list(SCANS), help="file names in --data (default: all five)")
+    ap.add_argument("--scans", nargs="+", default=[*SCANS, SYNTHETIC],
+                    help=f"file names in --data and/or '{SYNTHETIC}' (default: all five and {SYNTHETIC})")
     ap.add_argument("--data", type=Path, default=DATA, help="folder of the real scans")
     ap.add_argument("--run-options", default="", help="more options for every `potflat run`, one string")
     ap.add_argument("--no-warm", action="store_true", help="skip compiling the kernels first")
@@ -340,24 +358,26 @@ def main(argv: list[str] | None = None) -> None:
     if not args.no_warm:
         warm_kernels()
     rows = []
-    for name in args.scans:
-        scan = args.data / name
-        for size in args.sizes:
+    for size in args.sizes:
+        for name in args.scans:
             folder = args.out / Path(name).stem / str(size)
-            if size == "native":
-                path, info = scan, native_info(scan)
-            else:
-                print(f"{name}: copy with {size:,} vertices ...", flush=True)
-                path, info = make_copy(scan, size, folder / "copy")
+            found = _scan_at(name, size, args.data, folder)
+            if found is None:
+                continue
+            path, info = found
             print(f"{name} ({info['vertices']:,} vertices): potflat run ...", flush=True)
             run = run_potflat(path, folder / "run", tuple(args.run_options.split()))
-            row = {"scan": Path(name).stem, "vertices": info["vertices"],
+            row = {"scan": Path(name).stem, "size": size, "vertices": info["vertices"],
                    **figures(folder / "run", path.stem, run, info["area_mm2"])}
-            print(f"  {'image' if run['rc'] == 0 else 'FAILED: ' + run['error']} in {run['wall_s']:.1f} s", flush=True)
+            print(f"  {'image' if run['rc'] == 0 else 'FAILED: ' + run['error']} in {run['wall_s']:.1f} s, "
+                  f"{run['cpu_s']:.0f} s CPU, {run['peak_gb']:.2f} GB", flush=True)
             (folder / "row.json").write_text(json.dumps(row, indent=1, default=str))
             rows.append(row)
-    publish("real_scans", table(rows, command_line("real_scans.py", argv if argv is not None else sys.argv[1:])), args.write)
+    publish(BLOCK, table(rows, command_line("real_scans.py", argv if argv is not None else sys.argv[1:])), args.write)
 
 
 if __name__ == "__main__":
-    main()
+    from potflat_cli._process import command_settings
+
+    with command_settings():  # as the potflat command runs: OpenMP's passive wait, the heap tuning
+        main()

@@ -25,3 +25,8 @@ class AxisNotFoundError(PotflatError):
 
 class FoldedResultError(PotflatError):
     """A flattening result would contain flipped triangles or boundary overlap."""
+
+
+class NotADiskError(FoldedResultError):
+    """A rollout that no layout in the plane shows without a fold: it is not a disk (the relax
+    stage's file layer adds what to do, from the rollout's record)."""

@@ -11,9 +11,21 @@ draws the zone's outline on the maps. Ways to obtain it:
   a pixel shows *detail* where the colour's local standard deviation (CIELAB, within
   :data:`DETAIL_MM`) is well above the surface's noise floor (a low percentile of it, times
   :data:`DETAIL_OVER_NOISE`, and at least :data:`DETAIL_MIN_DELTA_E`): brush strokes,
-  figure outlines and bands have it; glaze, clay, a lighting gradient across the vessel and
+  figure outlines and bands have it; glaze, a lighting gradient across the vessel and
   scanner noise do not. Detail closer than :data:`GAP_MM` is joined into one zone, enclosed
-  plain areas are filled, specks below :data:`MIN_ZONE_MM` across are dropped. The zone is
+  plain areas are filled, specks below :data:`MIN_ZONE_MM` across are dropped.
+
+  Clay has detail of its own (firing clouds, dirt, pinholes, chips), and so have the edges of
+  shadows and highlights, so whether there is a painting at all is decided first, where the
+  colours are evidence: not within :data:`EDGE_MARGIN_MM` of the outline or a hole (a scan's
+  texture is bled and shadowed there) nor where the layout smears the texture
+  (:data:`SMEAR_ANISOTROPY`). A zone is kept where its detail stands clear of the plain
+  surface's own (:data:`CLEAR_OVER_TEXTURE`), and there is a painting when the kept zones'
+  strokes (lines, dots and figures narrower than about :data:`GAP_MM`, measured by
+  morphological top-hats, which a step between two large areas such as a shadow's edge does
+  not move: :data:`STROKE_MM`) stand clear of the plain surface's over
+  :data:`PAINTING_FRACTION` of it. Otherwise the whole surface counts alike, and the reason
+  says so. The zone is
   then made again, the same way, from the strokes within :data:`DETAIL_REACH_MM` of it
   (pixels whose colour is unlike the plain surface's around it), so that it ends on the
   outermost strokes rather than where the detail window stops seeing them, and is softened
@@ -42,8 +54,8 @@ from potflat._jit import worker_threads
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.flat_ply import read_flat_ply
 from potflat.io.images import read_mask
-from potflat.mesh.distortion import face_areas, important_faces
-from potflat.raster.render import paint
+from potflat.mesh.distortion import face_areas, face_distortion, important_faces
+from potflat.raster.render import fill_faces, paint
 from potflat.types import FlatMesh
 
 #: Resolution of the auto detection's rendering (px/mm of the start layout).
@@ -73,6 +85,38 @@ DETAIL_REACH_MM = 3.0 * DETAIL_MM
 SOFT_EDGE_MM = 1.0
 #: A zone covering at least this share of the surface means: painted all over (no importance).
 ALL_OVER_FRACTION = 0.8
+#: Colours within this distance (mm) of the surface's outline or of a hole are no evidence of a
+#: painting: a scan's texture there is bled from the background, shadowed or blurred (70% of an
+#: unpainted photogrammetry pot's colour detail lay there).
+EDGE_MARGIN_MM = 6.0
+#: Nor are the colours where the start layout stretches the surface this many times more in one
+#: direction than across it (its anisotropy): the texture is drawn out into streaks there (a
+#: base or a foot turned towards the axis, unrolled as a flange). Stretched strips narrower than
+#: the detail window (:data:`DETAIL_MM`: single slivers of an irregular triangulation) count as
+#: evidence.
+SMEAR_ANISOTROPY = 4.0
+#: A painting stands clear of the surface's own texture (clay, firing clouds, dirt, pinholes,
+#: chips), which has detail too: detail counts as the painting's where it is this many times
+#: the :data:`TEXTURE_PERCENTILE`-th percentile of the plain surface's (the evidence farther than
+#: :data:`DETAIL_REACH_MM` from any detail). A zone is kept where at least a :data:`MIN_ZONE_MM`
+#: disc's area of its detail stands clear so.
+CLEAR_OVER_TEXTURE = 2.0
+TEXTURE_PERCENTILE = 99.0
+#: A painting is made of strokes: lines, dots, figures and the ground between them. Their
+#: contrast is measured by morphological top-hats (the colour against the surface's with such
+#: structures opened or closed away) of this radius (mm: strokes narrower than twice it) and of
+#: twice it (figures narrower than about :data:`GAP_MM`), each standing clear of the plain
+#: surface's at its own scale. A top-hat is blind to a step between two larger areas: the edge of
+#: a shadow, a highlight, a lit rim or a firing cloud, which the detail (a standard deviation)
+#: sees as well as a stroke.
+STROKE_MM = 6.0
+#: There is a painting when the strokes of its zones stand clear of the surface's own (by
+#: :data:`CLEAR_OVER_TEXTURE`, and by twice the detail threshold: a stroke's contrast, where the
+#: detail of an edge is half of it) over at least this share of the evidence; a chip, a
+#: scratch, a cluster of marks or the ragged edge of a shadow does not.
+PAINTING_FRACTION = 0.01
+#: The sentence every "no zone" finding ends with.
+ALIKE = "the whole surface counts alike"
 
 
 @dataclass(frozen=True)
@@ -180,13 +224,22 @@ def _masked_mean(values: np.ndarray, weight: np.ndarray, sigma_px: float,
     return _gaussian(values * weight[..., None], sigma_px) / norm[..., None]
 
 
-def painted_zone_image(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray | None, str]:
+def painted_zone_image(rgba: np.ndarray, px_per_mm: float, evidence: np.ndarray | None = None
+                       ) -> tuple[np.ndarray | None, str]:
     """The painted zone of an image of the painting (see the module notes).
+
+    First whether there is a painting, where the colours are evidence (away from the outline
+    and holes, :data:`EDGE_MARGIN_MM`, and within ``evidence``): zones whose detail stands
+    clear of the surface's own texture (:data:`CLEAR_OVER_TEXTURE`) and whose strokes do over
+    :data:`PAINTING_FRACTION` of it (:data:`STROKE_MM`); then where it is.
 
     Parameters
     ----------
     rgba : (h, w, 4) uint8
     px_per_mm : float
+    evidence : (h, w) bool, optional
+        Pixels whose colours can show a painting (default: all; :func:`auto_importance` leaves out
+        where the layout smears the texture, :data:`SMEAR_ANISOTROPY`).
 
     Returns
     -------
@@ -199,29 +252,95 @@ def painted_zone_image(rgba: np.ndarray, px_per_mm: float) -> tuple[np.ndarray |
     lab, covered = _lab(rgba)
     deviation = _deviation(lab, covered, px_per_mm)
     if covered.sum() < 16:
-        return None, "too little surface to look for a painting"
+        return None, f"too little surface to look for a painting: {ALIKE}"
     noise = float(np.percentile(deviation[covered], NOISE_PERCENTILE))
     threshold = max(DETAIL_OVER_NOISE * noise, DETAIL_MIN_DELTA_E)  # (CIELAB units, as a colour difference too)
     detail = ((deviation > threshold) & covered).astype(np.uint8)
-    if not detail.any():
-        return None, f"no painting found (no colour detail above {threshold:.1f} CIELAB units)"
-    # join detail into zones, fill enclosed plain areas, drop specks, then the same on the strokes
+    evidence = _evidence(covered, px_per_mm, evidence)
+    if not (detail & evidence).any():
+        return None, f"no painting found (no colour detail above {threshold:.1f} CIELAB units): {ALIKE}"
+    # join detail into zones, fill enclosed plain areas, drop specks and what does not stand
+    # clear of the surface's own texture, then the same on the strokes
     zone = _joined(detail, covered, px_per_mm)
     count, labels, stats, _ = cv2.connectedComponentsWithStats(zone, connectivity=8)
-    min_area = math.pi * (0.5 * MIN_ZONE_MM * px_per_mm) ** 2
-    keep = np.zeros(count, bool)
-    keep[1:] = stats[1:, cv2.CC_STAT_AREA] >= min_area
+    min_area = math.pi * (0.5 * MIN_ZONE_MM) ** 2  # mm²
+    big = stats[:, cv2.CC_STAT_AREA] >= min_area * px_per_mm ** 2
+    big[0] = False
+    if not big.any():
+        return None, f"no painted zone found (only specks of colour detail): {ALIKE}"
+    # a zone counts where its detail stands clear of the surface's own texture; there is a
+    # painting when the strokes of those zones do
+    plain = evidence & (cv2.dilate(zone, _disc(DETAIL_REACH_MM * px_per_mm)) == 0)
+    clear = _clear_of(deviation, plain, threshold)
+    clear_area = np.bincount(labels[(deviation > clear) & evidence], minlength=count) / px_per_mm ** 2
+    keep = big & (clear_area >= min_area)
+    strokes = _clear_strokes(lab, covered, plain, 2.0 * threshold, px_per_mm)
+    share = float(keep[labels[strokes & evidence]].sum()) / float(evidence.sum())
+    if share < PAINTING_FRACTION:
+        return None, ("no painting found: the colour detail is the surface's own texture and light (clay, firing "
+                      "clouds, dirt, chips, shadows, highlights); strokes standing clear of it cover "
+                      f"{100 * share:.2f}% of the surface, a painting's {100 * PAINTING_FRACTION:g}% or more: "
+                      f"{ALIKE} (a painting can be marked by hand: --importance mask)")
     zone = keep[labels].astype(np.uint8)
-    if not zone.any():
-        return None, "no painted zone found (only specks of colour detail)"
     zone = _on_the_strokes(zone, covered, labels, _unlike_plain(lab, zone, covered, threshold, px_per_mm),
                            px_per_mm)
     fraction = float(zone.sum()) / float(covered.sum())
     if fraction >= ALL_OVER_FRACTION:
-        return None, f"painted all over ({100 * fraction:.0f}% of the surface): the whole surface counts alike"
+        return None, f"painted all over ({100 * fraction:.0f}% of the surface): {ALIKE}"
     hard = zone.astype(np.float32)
     soft = np.maximum(hard, np.clip(_gaussian(hard, SOFT_EDGE_MM * px_per_mm), 0.0, 1.0))
     return soft, f"painted zone found in the colours (detail above {threshold:.1f} CIELAB units)"
+
+
+def _evidence(covered: np.ndarray, px_per_mm: float, evidence: np.ndarray | None) -> np.ndarray:
+    """The covered pixels (h, w) bool farther than :data:`EDGE_MARGIN_MM` from the outline and
+    holes, and in ``evidence`` (h, w) bool when given."""
+    import cv2
+
+    # distance to the nearest uncovered pixel, the image's frame counting as uncovered
+    inside = np.pad(covered, 1).astype(np.uint8)
+    far = cv2.distanceTransform(inside, cv2.DIST_L2, 5)[1:-1, 1:-1] > EDGE_MARGIN_MM * px_per_mm
+    return covered & far if evidence is None else covered & far & evidence
+
+
+def _clear_of(contrast: np.ndarray, plain: np.ndarray, least: float) -> float:
+    """The contrast (CIELAB units) a painting reaches and the surface's own texture does not:
+    :data:`CLEAR_OVER_TEXTURE` times the :data:`TEXTURE_PERCENTILE`-th percentile of
+    ``contrast`` (h, w) over the ``plain`` (h, w) bool pixels, at least ``least`` (all of it
+    when there are no plain pixels: painted all over)."""
+    if plain.sum() < 16:
+        return least
+    return max(CLEAR_OVER_TEXTURE * float(np.percentile(contrast[plain], TEXTURE_PERCENTILE)), least)
+
+
+def _clear_strokes(lab: np.ndarray, covered: np.ndarray, plain: np.ndarray, least: float,
+                   px_per_mm: float) -> np.ndarray:
+    """The pixels (h, w) bool of strokes standing clear of the plain surface's (``plain`` (h, w)
+    bool; :func:`_clear_of`, at least ``least`` CIELAB units) at either scale of
+    :data:`STROKE_MM`: per channel of the CIELAB colours ``lab`` (h, w, 3) float32, lightly
+    smoothed (a third of :data:`DETAIL_MM`), the larger of the white and the black top-hat, the
+    three combined as a colour difference (the larger scale's at half the resolution, its
+    contrast interpolated back). Uncovered pixels (``covered`` (h, w) bool False) take the
+    colour of the surface around them first, so the outline makes no stroke."""
+    import cv2
+
+    weight = covered.astype(np.float32)
+    smooth = _masked_mean(lab, weight, DETAIL_MM / 3.0 * px_per_mm)
+    around = _masked_mean(lab, weight, 2.0 * DETAIL_MM * px_per_mm)
+    channels = [np.ascontiguousarray(c) for c in np.moveaxis(np.where(covered[..., None], smooth, around), 2, 0)]
+    h, w = covered.shape
+    strokes = np.zeros(covered.shape, bool)
+    disc = _disc(STROKE_MM * px_per_mm)
+    for shrink in (1, 2):  # the same disc at half the resolution is the larger scale (as fine as its figures need)
+        size = (max(1, w // shrink), max(1, h // shrink))
+        contrast = np.zeros(size[::-1], np.float32)
+        for c in channels:
+            c = c if shrink == 1 else cv2.resize(c, size, interpolation=cv2.INTER_AREA)
+            top = np.maximum(cv2.morphologyEx(c, cv2.MORPH_TOPHAT, disc), cv2.morphologyEx(c, cv2.MORPH_BLACKHAT, disc))
+            contrast += top * top
+        contrast = np.sqrt(contrast if shrink == 1 else cv2.resize(contrast, (w, h), interpolation=cv2.INTER_LINEAR))
+        strokes |= contrast > _clear_of(contrast, plain, least)
+    return strokes
 
 
 def _unlike_plain(lab: np.ndarray, zone: np.ndarray, covered: np.ndarray, threshold: float,
@@ -341,11 +460,23 @@ def auto_importance(flat: FlatMesh) -> Importance:
 
     px_per_mm = DETECT_PX_PER_MM
     image, origin = paint(flat, px_per_mm, leave_out_untextured=True)  # no colour evidence there
-    zone, reason = painted_zone_image(image, px_per_mm)
+    pixels = _pixels(flat.uv, origin, px_per_mm * mesh.mm_per_unit)
+    zone, reason = painted_zone_image(image, px_per_mm, evidence=~_smeared(flat, pixels, image.shape[:2], px_per_mm))
     if zone is None:
         return Importance(None, "auto", 1.0, reason)
-    values = sample_image(zone, _pixels(flat.uv, origin, px_per_mm * mesh.mm_per_unit))
-    return _result(flat, values, "auto", reason)
+    return _result(flat, sample_image(zone, pixels), "auto", reason)
+
+
+def _smeared(flat: FlatMesh, pixels: np.ndarray, shape: tuple[int, int], px_per_mm: float) -> np.ndarray:
+    """The pixels (h, w) bool of ``shape`` where the flattening stretches the surface
+    :data:`SMEAR_ANISOTROPY` times more one way than the other (``pixels`` (n, 2): the
+    vertices' positions in the image), in strips at least as wide as the detail window."""
+    import cv2
+
+    mesh = flat.mesh
+    anisotropy = face_distortion(mesh.vertices, flat.uv, mesh.faces).anisotropy
+    stretched = fill_faces(pixels, mesh.faces[~(anisotropy < SMEAR_ANISOTROPY)], *shape)  # (collapsed ones too)
+    return cv2.morphologyEx(stretched.astype(np.uint8), cv2.MORPH_OPEN, _disc(DETAIL_MM * px_per_mm)) > 0
 
 
 def _reference_for(mask_path: Path, shape: tuple[int, int], reference: Path | None) -> Path:

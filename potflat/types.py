@@ -88,7 +88,7 @@ class Mesh:
         Texture coordinate of each face corner (OBJ convention, v up).
     untextured_faces : (m,) bool or None
         True for the faces that have no texture coordinates (their ``texcoords`` rows mean
-        nothing): they are drawn as untextured surface (a shaded relief) and hold no colour
+        nothing): they are drawn as untextured surface (its relief in grey) and hold no colour
         evidence of painting. None: every face is textured (an all-False flag becomes None);
         only with ``texcoords``. Follows the faces wherever ``texcoords`` does
         (:meth:`face_fields`).

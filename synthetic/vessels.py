@@ -33,7 +33,7 @@ from potflat.types import Mesh
 #: Vessel kinds accepted by :func:`make_vessel`.
 KINDS = (
     "amphora", "hydria", "lekythos", "alabastron", "kylix", "aryballos",
-    "cylinder", "cone", "cup", "sherd",
+    "cylinder", "cone", "cup", "bowl", "sherd",
 )
 
 #: Face/vertex part labels (:attr:`SyntheticVessel.face_part`).
@@ -76,6 +76,8 @@ class _Handle:
     dtheta1: float
     reach: float       # how far the loop stands off the wall (mm)
     radius: float      # tube radius (mm)
+    inner1: bool = False  # the second end on the inner wall: the handle arches over the rim
+    lift: float = 0.0  # raises the loop's middle (mm), to clear the rim
 
 
 @dataclass(frozen=True)
@@ -132,6 +134,11 @@ _SPECS: dict[str, _Spec] = {
     "cup": _Spec(
         ((0, 38), (4, 40), (20, 52), (50, 70), (75, 80), (90, 84)),
         frieze=0.5, floor=5.0, walls=2, base=True,
+    ),
+    "bowl": _Spec(
+        ((0, 40), (3, 44), (15, 62), (35, 78), (55, 86), (65, 88)),
+        frieze=0.5, floor=5.0, walls=2, base=True,
+        handles=(_Handle(0.0, 40, 0.0, 52, 0.0, 20, 5, inner1=True, lift=45),),
     ),
 }
 
@@ -407,6 +414,17 @@ def _outer_polyline(g: _Generatrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return g.s[sel], g.r[sel], g.z[sel]
 
 
+def _wall_polyline(g: _Generatrix, inner: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(r, z, normal)`` of the section polyline's points on the outer or the inner wall, the
+    normals pointing out of the vessel's material (the inner wall's into the cavity)."""
+    if inner:
+        sel = (g.s >= g.s_inner) & (g.s <= g.s_floor)
+        pr, pz = g.r[sel], g.z[sel]
+    else:
+        _, pr, pz = _outer_polyline(g)
+    return pr, pz, _normals2d(pr, pz)
+
+
 def _project_to_generatrix(g: _Generatrix, r, z) -> np.ndarray:
     """Arc length ``s`` of the nearest point of the section polyline to each ``(r, z)``."""
     from scipy.spatial import cKDTree
@@ -577,20 +595,20 @@ def _handle_mesh(g: _Generatrix, hd: _Handle, h: float, rng, sink: float) -> tup
     """Tube mesh of one handle whose open ends sink ``sink`` mm into the wall.
 
     Returns V, F, arc length and angle per vertex, and both ends as (surface point,
-    unit wall normal, indices of the end ring's vertices).
+    unit wall normal, indices of the end ring's vertices, the wall's part).
     """
-    _, pr, pz = _outer_polyline(g)
-    nrm = _normals2d(pr, pz)
 
-    def anchor(z, th):
+    def anchor(z, th, inner):
+        pr, pz, nrm = _wall_polyline(g, inner)
         i = int(np.argmin(np.abs(pz - z)))
         n3 = np.array([nrm[i, 0] * math.cos(th), nrm[i, 0] * math.sin(th), nrm[i, 1]])
         p3 = np.array([pr[i] * math.cos(th), pr[i] * math.sin(th), pz[i]])
         return p3 - sink * n3, n3
 
-    a0, n0 = anchor(hd.z0, hd.theta + hd.dtheta0)
-    a1, n1 = anchor(hd.z1, hd.theta + hd.dtheta1)
-    ctrl = np.array([a0, a0 + hd.reach * n0, a1 + hd.reach * n1, a1])
+    a0, n0 = anchor(hd.z0, hd.theta + hd.dtheta0, False)
+    a1, n1 = anchor(hd.z1, hd.theta + hd.dtheta1, hd.inner1)
+    up = np.array([0.0, 0.0, hd.lift])
+    ctrl = np.array([a0, a0 + hd.reach * n0 + up, a1 + hd.reach * n1 + up, a1])
     tt = np.linspace(0.0, 1.0, 2001)
     c = _bezier(ctrl, tt)
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(c, axis=0), axis=1))])
@@ -627,51 +645,60 @@ def _handle_mesh(g: _Generatrix, hd: _Handle, h: float, rng, sink: float) -> tup
     rows = np.repeat(np.arange(K + 1), n)
     F = _ring_strip_faces(rows, phi, n_row, 0, K).astype(np.int64)
     _check_manifold(F, len(V), holes_expected=2)
-    ends = ((a0 + sink * n0, n0, np.flatnonzero(rows == 0)), (a1 + sink * n1, n1, np.flatnonzero(rows == K)))
+    ends = ((a0 + sink * n0, n0, np.flatnonzero(rows == 0), PART_OUTER),
+            (a1 + sink * n1, n1, np.flatnonzero(rows == K), PART_INNER if hd.inner1 else PART_OUTER))
     return V, F, s, phi, ends
 
 
-def _weld_handles(V, F, arrays, face_arrays, ends, h):
+def _weld_handles(V, F, arrays, face_arrays, ends, h, keep_wall=False):
     """Weld handle tubes into the wall: cut a hole around each root, stitch it to the ring.
 
     ``arrays`` are per-vertex arrays and ``face_arrays`` per-face arrays (the first one
     the face part) to carry along; ``ends`` = (root point, wall normal, ring vertex
-    indices, tube radius). The hole (wall faces within the tube radius plus 1.5 ``h`` of
-    the root, grown where its outline is not star-shaped around the root) is stitched
-    to the tube's end ring by a strip of handle faces. Returns V, F, arrays, face arrays
-    and the stitched faces' preset chart layout (face indices, tangent-plane projection,
-    two charts per root).
+    indices, tube radius, the wall's part). The hole (wall faces within the tube radius
+    plus 1.5 ``h`` of the root, grown where its outline is not star-shaped around the root;
+    never through the other wall behind it) is stitched to the tube's end ring by a strip of
+    handle faces. ``keep_wall``: the hole's faces stay, so every edge of its outline has
+    three faces (a non-manifold join, as scans merged from several passes have). Returns V,
+    F, arrays, face arrays and the stitched faces' preset chart layout (face indices,
+    tangent-plane projection, two charts per root).
     """
     face_part = face_arrays[0]
-    wall_face = face_part == PART_OUTER  # never cut through an inner wall behind the root
-    near = np.zeros(len(V), bool)
+    near = [np.zeros(len(V), bool) for _ in ends]
     frames = []
-    for A, nA, ring, a in ends:
+    for k, (A, nA, ring, a, _) in enumerate(ends):
         d = np.linalg.norm(V - A, axis=1)
         d[ring] = np.inf
-        near |= d <= a + max(1.5 * h, 1.0)
+        near[k] |= d <= a + max(1.5 * h, 1.0)
         e1 = np.cross(nA, [1.0, 0.0, 0.0] if abs(nA[0]) < 0.9 else [0.0, 1.0, 0.0])
         e1 /= np.linalg.norm(e1)
         frames.append((e1, np.cross(nA, e1)))
     for _ in range(20):
-        remove = _remove_faces(F, wall_face & near[F].any(axis=1))
+        cut = np.zeros(len(F), bool)
+        for k, end in enumerate(ends):
+            cut |= (face_part == end[4]) & near[k][F].any(axis=1)
+        remove = _remove_faces(F, cut)
         Fk = F[~remove]
         used = np.zeros(len(V), bool)
         used[Fk.ravel()] = True
+        if keep_wall:  # (the hole's faces come back: every vertex stays)
+            used[:] = True
         old = np.flatnonzero(used)
         new = np.cumsum(used) - 1
         Vk, Fk = V[used], new[Fk]
         n = len(Vk)
         directed = np.concatenate([Fk[:, [0, 1]], Fk[:, [1, 2]], Fk[:, [2, 0]]])
         key = directed[:, 0] * n + directed[:, 1]
-        bnd = directed[~np.isin(key, directed[:, 1] * n + directed[:, 0])]
+        on_border = ~np.isin(key, directed[:, 1] * n + directed[:, 0])
+        bnd = directed[on_border]
+        bnd_part = np.tile(face_part[~remove], 3)[on_border]
         nxt = dict(zip(bnd[:, 0].tolist(), bnd[:, 1].tolist()))
         is_handle_vertex = np.zeros(n, bool)
         is_handle_vertex[Fk[face_part[~remove] == PART_HANDLE].ravel()] = True
-        start = np.flatnonzero(~is_handle_vertex[bnd[:, 0]])
         stitched, uvs, pieces, grow = [], [], [], False
-        for (A, nA, ring, _), (e1, e2) in zip(ends, frames):
-            # the wall's boundary loop nearest to the root
+        for k, ((A, nA, ring, _, part), (e1, e2)) in enumerate(zip(ends, frames)):
+            # the boundary loop of the root's wall nearest to the root
+            start = np.flatnonzero(~is_handle_vertex[bnd[:, 0]] & (bnd_part == part))
             first = bnd[start[np.argmin(np.linalg.norm(Vk[bnd[start, 0]] - A, axis=1))], 0]
             hole = [int(first)]
             while nxt[hole[-1]] != hole[0]:
@@ -683,7 +710,7 @@ def _weld_handles(V, F, arrays, face_arrays, ends, h):
             turn = _wrap(ang(np.roll(hole, -1)) - ang(hole))
             wrong = np.sign(turn) != np.sign(turn.sum())
             if np.any(wrong) or abs(abs(turn.sum()) - 2 * math.pi) > 1e-6:
-                near[old[hole[wrong | np.roll(wrong, 1)]]] = True  # cut the notch away
+                near[k][old[hole[wrong | np.roll(wrong, 1)]]] = True  # cut the notch away
                 grow = True
                 continue
             ring = new[ring]
@@ -702,9 +729,10 @@ def _weld_handles(V, F, arrays, face_arrays, ends, h):
             break
     else:
         raise InvalidOptionError("the mesh is too coarse to weld the handles; use more n_vertices")
-    V, F = Vk, Fk
+    kept = ~remove | keep_wall  # (with keep_wall every vertex stayed: the faces' indices hold)
+    V, F = Vk, np.concatenate([Fk, F[remove & kept]])
     arrays = [a[used] for a in arrays]
-    face_arrays = [a[~remove] for a in face_arrays]
+    face_arrays = [np.concatenate([a[~remove], a[remove & kept]]) for a in face_arrays]
     m0 = len(F)
     extra = np.concatenate(stitched)
     F = np.concatenate([F, extra])
@@ -780,11 +808,12 @@ def _layout_painting(g: _Generatrix, spec: _Spec, walls: int, rng, painting: str
 
 def _handle_roots(g: _Generatrix, spec: _Spec) -> list:
     """Where the profile's handles meet the wall: (canonical point, tube radius) per end."""
-    _, pr, pz = _outer_polyline(g)
     out = []
     for hd in spec.handles:
-        for z, dth in ((hd.z0, hd.dtheta0), (hd.z1, hd.dtheta1)):
-            r, th = float(np.interp(z, pz, pr)), hd.theta + dth
+        for z, dth, inner in ((hd.z0, hd.dtheta0, False), (hd.z1, hd.dtheta1, hd.inner1)):
+            pr, pz, _ = _wall_polyline(g, inner)
+            order = np.argsort(pz)
+            r, th = float(np.interp(z, pz[order], pr[order])), hd.theta + dth
             out.append((np.array([r * math.cos(th), r * math.sin(th), z]), hd.radius))
     return out
 
@@ -1254,7 +1283,7 @@ def make_vessel(
     kind : str
         One of :data:`KINDS`: a profile (``amphora`` ... ``aryballos``), a developable
         ``cylinder`` (R 100, H 200 mm) or ``cone`` frustum (R 60 -> 120 over 200 mm), a
-        two-walled ``cup`` or a ``sherd`` (fragment of ``sherd_of``).
+        two-walled ``cup`` or ``bowl`` or a ``sherd`` (fragment of ``sherd_of``).
     n_vertices : int
         Target vertex count (about; the body alone), 500 to 20,000,000.
     seed : int
@@ -1264,19 +1293,22 @@ def make_vessel(
     texture_size : int
         Side of the square texture atlas in pixels (64 to 16384).
     base : bool or None
-        Close the foot with a flat base disc (default: only for ``cup``).
+        Close the foot with a flat base disc (default: only for ``cup`` and ``bowl``).
     walls : int or None
         1 = outer wall only; 2 = outer and inner wall joined by a rounded rim, a closed
-        shell (``cup`` and ``kylix`` only; default 2 for ``cup``). The inner floor carries
+        shell (``cup``, ``bowl`` and ``kylix`` only; default 2 for ``cup`` and ``bowl``). The inner floor carries
         a painted tondo.
     thickness : float
         Wall thickness in mm for ``walls=2`` (1 to 10).
     handles : bool or str
-        Add handle tubes (``amphora``, ``hydria``, ``lekythos``, ``kylix``), part of the
+        Add handle tubes (``amphora``, ``hydria``, ``lekythos``, ``kylix``; ``bowl``: one
+        handle arching over the rim from the outer wall into the inner wall), part of the
         same mesh (:data:`PART_HANDLE`). ``True`` or ``"intersecting"``: separate tubes whose
         open ends sink 2 mm into the intact wall (as in merged scans); ``"welded"``: the wall
         is cut around each root and stitched to the tube, one manifold surface of genus
-        = number of handles (as in a single scan surface).
+        = number of handles (as in a single scan surface); ``"joined"``: stitched so, but
+        the wall under each root kept, every edge of the root's outline shared by three faces
+        (a non-manifold join).
     holes : int
         Number of holes cut into the painted outer wall (0 to 20).
     sherd_of : str
@@ -1324,8 +1356,8 @@ def make_vessel(
             raise InvalidOptionError(f"sherd_thickness applies to kind 'sherd', not {kind!r}; drop it")
     if not isinstance(pose, bool):
         raise InvalidOptionError(f"pose must be True or False, got {pose!r}")
-    if handles not in (False, True, "intersecting", "welded") or not isinstance(handles, (bool, str)):
-        raise InvalidOptionError(f"handles must be False, True, 'intersecting' or 'welded', got {handles!r}")
+    if handles not in (False, True, "intersecting", "welded", "joined") or not isinstance(handles, (bool, str)):
+        raise InvalidOptionError(f"handles must be False, True, 'intersecting', 'welded' or 'joined', got {handles!r}")
     handles = "intersecting" if handles is True else handles
     if painting not in PAINTINGS:
         raise InvalidOptionError(f"unknown painting {painting!r}; use one of {', '.join(PAINTINGS)}")
@@ -1346,7 +1378,7 @@ def make_vessel(
     if walls not in (1, 2) or isinstance(walls, bool):
         raise InvalidOptionError(f"walls must be 1 or 2, got {walls!r}")
     if walls == 2 and spec.floor is None:
-        raise InvalidOptionError(f"walls=2 is available for cup and kylix, not {kind}; use walls=1")
+        raise InvalidOptionError(f"walls=2 is available for cup, bowl and kylix, not {kind}; use walls=1")
     if handles and not spec.handles:
         raise InvalidOptionError(f"{kind} has no handles; use handles=False")
     base = (spec.base and kind != "sherd") if base is None else base
@@ -1377,8 +1409,8 @@ def make_vessel(
     ends = []
     if handles:
         for hd in spec.handles:
-            hV, hF, hs, hphi, hends = _handle_mesh(g, hd, h, rng, sink=0.0 if handles == "welded" else 2.0)
-            ends += [(A, nA, ring + len(V), hd.radius) for A, nA, ring in hends]
+            hV, hF, hs, hphi, hends = _handle_mesh(g, hd, h, rng, sink=2.0 if handles == "intersecting" else 0.0)
+            ends += [(A, nA, ring + len(V), hd.radius, part) for A, nA, ring, part in hends]
             F = np.concatenate([F, hF + len(V)])
             V = np.concatenate([V, hV])
             vs, vth = np.concatenate([vs, hs]), np.concatenate([vth, hphi])
@@ -1387,12 +1419,13 @@ def make_vessel(
             face_handle = np.concatenate([face_handle, np.full(len(hF), len(handle_radii))])
             handle_radii.append(hd.radius)
     preset = None  # caller-made chart layouts: (piece per face or -1, corner layouts)
-    if handles == "welded":
+    if handles in ("welded", "joined"):
         chi = len(V) - len(np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]),
                                                   axis=1), axis=0)) + len(F)
         V, F, (vs, vth, vertex_part), (face_part, face_handle), weld = _weld_handles(
-            V, F, [vs, vth, vertex_part], [face_part, face_handle], ends, h)
-        _check_manifold(F, len(V), holes_expected=2 - (chi - 2 * len(spec.handles)))
+            V, F, [vs, vth, vertex_part], [face_part, face_handle], ends, h, keep_wall=handles == "joined")
+        if handles == "welded":
+            _check_manifold(F, len(V), holes_expected=2 - (chi - 2 * len(spec.handles)))
         preset = (np.full(len(F), -1, np.int64), np.zeros((len(F), 3, 2)))
         preset[0][weld[0]], preset[1][weld[0]] = weld[2], weld[1]
 
@@ -1408,7 +1441,7 @@ def make_vessel(
         circles = tuple(c for c in circles if circle_ok(c))
     hole_list = []
     if holes:
-        avoid = [(A, a + 2 * h + 5.0) for A, _, _, a in ends]
+        avoid = [(A, a + 2 * h + 5.0) for A, _, _, a, _ in ends]
         hole_list = _place_holes(g, painting, holes, rng, region, avoid)
         cen = V[F].mean(axis=1)
         for hc, hr in hole_list:

@@ -1,4 +1,4 @@
-"""Slow, plain numpy reference implementations of the relax kernels (tiny meshes only)."""
+"""Slow, plain numpy reference implementations of the kernels (tiny meshes only)."""
 from __future__ import annotations
 
 import itertools
@@ -258,3 +258,123 @@ def shape_energy(V: np.ndarray, F: np.ndarray, x: np.ndarray, weight: np.ndarray
             scale * (s[0] / s[1] + s[1] / s[0] - 2.0) + rigidity * ((s[0] - 1.0) ** 2 + (s[1] - 1.0) ** 2)
             + area * (np.sqrt(log_area**2 + eps**2) - eps) + (0.0 if limit is None else limit[0] * over**2))
     return float(total)
+
+
+def relief_fit(uv: np.ndarray, P: np.ndarray, weight: np.ndarray, cell_centres: np.ndarray, node: np.ndarray,
+               sigma: float, reach: float, ridge: float) -> np.ndarray:
+    """The relief's weighted least-squares quadric about ``node``, by a direct solve: the
+    vertices whose cell centre (``cell_centres``, (n, 2)) lies within ``reach`` (uv units) of the
+    node, each weighted by its weight times the Gaussian of its cell centre's distance, fitted
+    by ``1, x, y, x^2, x y, y^2`` of its own offset (in ``sigma``); the linear terms' diagonal
+    gains ``1e-3 ridge``, the quadratic terms' ``ridge``, times the total weight. Returns the
+    coefficients (6, 3); NaN where no vertex is in reach."""
+    d = (cell_centres - node) / sigma
+    near = (d**2).sum(axis=1) <= (reach / sigma) ** 2 * (1 + 1e-12)
+    if not near.any():
+        return np.full((6, 3), np.nan)
+    g = weight[near] * np.exp(-0.5 * (d[near] ** 2).sum(axis=1))
+    x, y = ((uv[near] - node) / sigma).T
+    phi = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=1)
+    A = phi.T @ (g[:, None] * phi)
+    A += np.diag([0.0, 1e-3 * ridge, 1e-3 * ridge, ridge, ridge, ridge]) * A[0, 0]
+    return np.linalg.solve(A, phi.T @ (g[:, None] * P[near]))
+
+
+def relief_blend(uv: np.ndarray, P: np.ndarray, normal: np.ndarray, nodes: np.ndarray, coef: np.ndarray,
+                 sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each vertex's height above the blend of the fits of its four nearest nodes and its unit
+    normal in the smoothed surface's frame, loop by loop. ``nodes``: (ny, nx, 2) positions on a
+    regular grid; ``coef``: (ny, nx, 6, 3), NaN for a node without a fit."""
+    step = nodes[0, 1, 0] - nodes[0, 0, 0]
+    height = np.full(len(uv), np.nan)
+    frame = np.tile([0.0, 0.0, 1.0], (len(uv), 1))
+    for i, p in enumerate(uv):
+        f = (p - nodes[0, 0]) / step
+        base = np.floor(f).astype(int)
+        t = f - base
+        S, Su, Sv, total = np.zeros(3), np.zeros(3), np.zeros(3), 0.0
+        for dy in (0, 1):
+            for dx in (0, 1):
+                jx, jy = base[0] + dx, base[1] + dy
+                if not (0 <= jx < nodes.shape[1] and 0 <= jy < nodes.shape[0]) or np.isnan(coef[jy, jx]).any():
+                    continue
+                beta = (t[0] if dx else 1 - t[0]) * (t[1] if dy else 1 - t[1])
+                if beta <= 0:
+                    continue
+                x, y = (p - nodes[jy, jx]) / sigma
+                c = coef[jy, jx]
+                S += beta * np.array([1, x, y, x * x, x * y, y * y]) @ c
+                Su += beta * np.array([0, 1, 0, 2 * x, y, 0]) @ c / sigma
+                Sv += beta * np.array([0, 0, 1, 0, x, 2 * y]) @ c / sigma
+                total += beta
+        if total == 0:
+            continue
+        n = np.cross(Su, Sv)
+        n /= np.linalg.norm(n)
+        tu = Su / np.linalg.norm(Su)
+        tv = np.cross(n, tu)
+        height[i] = (P[i] - S / total) @ n
+        m = normal[i] / np.linalg.norm(normal[i])
+        frame[i] = [m @ tu, m @ tv, m @ n]
+    return height, frame
+
+
+def relief_blend_scalar(uv: np.ndarray, nodes: np.ndarray, coef: np.ndarray, sigma: float) -> np.ndarray:
+    """A scalar field's blend of the one-column fits ``coef`` (ny, nx, 6) of its four nearest
+    nodes at each vertex, loop by loop (NaN where none has a fit)."""
+    step = nodes[0, 1, 0] - nodes[0, 0, 0]
+    out = np.full(len(uv), np.nan)
+    for i, p in enumerate(uv):
+        f = (p - nodes[0, 0]) / step
+        base = np.floor(f).astype(int)
+        t = f - base
+        acc = total = 0.0
+        for dy in (0, 1):
+            for dx in (0, 1):
+                jx, jy = base[0] + dx, base[1] + dy
+                beta = (t[0] if dx else 1 - t[0]) * (t[1] if dy else 1 - t[1])
+                if not (0 <= jx < nodes.shape[1] and 0 <= jy < nodes.shape[0]) or beta <= 0:
+                    continue
+                x, y = (p - nodes[jy, jx]) / sigma
+                acc += beta * np.array([1, x, y, x * x, x * y, y * y]) @ coef[jy, jx]
+                total += beta
+        if total:
+            out[i] = acc / total
+    return out
+
+
+def volume_invariant(uv: np.ndarray, height: np.ndarray, weight: np.ndarray, radii) -> np.ndarray:
+    """The relief's volume invariant by all pairs: for each vertex and radius, the share of the
+    ball below the height field minus one half, ``sum w clamp(h_q - h_p, -a, a) / (2 sum w a)``
+    over the vertices within the radius (``a = sqrt(r^2 - d^2)``), averaged over the radii."""
+    out = np.empty(len(uv))
+    for p in range(len(uv)):
+        d2 = ((uv - uv[p]) ** 2).sum(axis=1)
+        values = []
+        for r in radii:
+            inside = d2 < r * r
+            a = np.sqrt(r * r - d2[inside])
+            den = (weight[inside] * a).sum()
+            if den > 0:
+                values.append((weight[inside] * np.clip(height[inside] - height[p], -a, a)).sum() / (2 * den))
+        out[p] = np.mean(values) if values else 0.0
+    return out
+
+
+def relief_rows(fields, coverage, lights, gain, curve_hi, curve_span, rgb, grey_lo, grey_scale, blend,
+                mm_per_level, zero_level):
+    """The relief's images of a strip in numpy: raking light per light (grey, alpha), the
+    concavity's grey, the overlay of painting and relief grey, the TIFF's levels."""
+    alpha = np.rint(coverage * 255.0).astype(np.uint8)
+    inside = np.isfinite(fields[..., 0])
+    to8 = lambda x: np.rint(np.clip(np.nan_to_num(x, nan=0.0), 0.0, 1.0) * 255.0).astype(np.uint8)
+    normal = fields[..., 1:4].astype(np.float64)
+    length = np.linalg.norm(normal, axis=-1)
+    raking = np.stack([np.stack([to8(np.where(length > 0, normal @ light / np.where(length > 0, length, 1) * gain, 0)),
+                                 alpha], axis=-1) for light in lights])
+    curvature = np.stack([to8(np.where(inside, (curve_hi - fields[..., 4]) / curve_span, 0)), alpha], axis=-1)
+    grey = np.where(inside, np.clip((fields[..., 0] - grey_lo) * grey_scale, 0, 1), 0.0)[..., None]
+    overlay = np.concatenate([to8((1 - blend) * np.clip(np.nan_to_num(rgb, nan=0.0), 0, 1) + blend * grey),
+                              alpha[..., None]], axis=-1)
+    level = np.where(inside, np.rint(fields[..., 0] / mm_per_level) + zero_level, 0)
+    return raking, curvature, overlay, np.clip(level, 0, 65535).astype(np.uint16)

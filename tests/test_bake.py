@@ -124,24 +124,24 @@ def test_coverage_matches_flattened_area_and_holes_transparent(tmp_path):
     res = bake(flat, px_per_mm=5, maps=())
     e1, e2 = uv[F[:, 1]] - uv[F[:, 0]], uv[F[:, 2]] - uv[F[:, 0]]
     a2 = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
-    covered = res.image[..., 3].sum() / 255.0 / 5.0**2
+    covered = res.painting[..., 3].sum() / 255.0 / 5.0**2
     assert covered == pytest.approx(a2, rel=0.01)
     assert res.figures["covered_area_mm2"] == pytest.approx(a2, rel=0.01)
-    hole = res.image[int((res.origin[1] - 20) * 5), int((30 - res.origin[0]) * 5)]
+    hole = res.painting[int((res.origin[1] - 20) * 5), int((30 - res.origin[0]) * 5)]
     assert hole[3] == 0
-    assert res.image[0, :, 3].max() == 0 and res.image[:, 0, 3].max() == 0  # transparent border
-    assert res.image[20, 20, 3] == 255  # inside
+    assert res.painting[0, :, 3].max() == 0 and res.painting[:, 0, 3].max() == 0  # transparent border
+    assert res.painting[20, 20, 3] == 255  # inside
 
 
 def test_map_values(tmp_path):
     V, F, uv = grid_mesh(20.0, 10.0, 1.0)
     uv = uv * [1.2, 1.0]  # stretch u by 20%: area ratio 1.2, anisotropy 1.2, stress > 0
     res = bake(FlatMesh(Mesh(V, F), uv), px_per_mm=4)
-    inside = res.image[..., 3] == 255
+    inside = res.painting[..., 3] == 255
     assert np.allclose(res.maps["area"][inside], math.log(1.2), atol=1e-5)  # natural log, as every area figure
     assert np.allclose(res.maps["anisotropy"][inside], 1.2, atol=1e-5)
     assert np.all(res.maps["stress"][inside] > 0)
-    assert np.isnan(res.maps["area"][~(res.image[..., 3] > 0)]).all()
+    assert np.isnan(res.maps["area"][~(res.painting[..., 3] > 0)]).all()
     assert res.figures["anisotropy"]["p95"] == pytest.approx(1.2, abs=1e-6)
     assert res.figures["area"]["max"] == pytest.approx(math.log(1.2), abs=1e-6)
 
@@ -150,8 +150,8 @@ def test_position_map_traces_back_to_the_scan():
     V, F, uv = cylinder_band(R=20.0, H=30.0)
     res = bake(FlatMesh(Mesh(V, F), uv), px_per_mm=3, maps=(), position_map=True, supersample=1)
     P = res.position
-    inside = res.image[..., 3] == 255
-    assert np.isnan(P[res.image[..., 3] == 0]).all()
+    inside = res.painting[..., 3] == 255
+    assert np.isnan(P[res.painting[..., 3] == 0]).all()
     radius = np.hypot(P[..., 0], P[..., 1])[inside]
     assert np.all(np.abs(radius - 20.0) < 0.05)  # on the cylinder (chord sag of 3.0 deg facets < 0.03 mm)
     rows, cols = np.nonzero(inside)
@@ -225,15 +225,21 @@ def test_vertex_colours_interpolated():
     assert 64 < mid[0] < 192 and 64 < mid[2] < 192  # blended half way between the columns of vertices
 
 
-def test_untextured_relief_lit_from_upper_left():
-    bump = lambda x, y: 2.0 * np.exp(-((x - 20) ** 2 + (y - 20) ** 2) / 18.0)
-    V, F, uv = grid_mesh(40.0, 40.0, 0.5, z=bump)
+def test_untextured_scan_is_baked_as_its_relief_with_a_legend():
+    """A bump 0.3 mm high and a groove 0.2 mm deep on a plane: the untextured scan's image is its
+    height in grey (the bump light, the groove dark, the plane between), a legend band below."""
+    def z(x, y):
+        return (0.3 * np.exp(-((x - 12) ** 2 + (y - 20) ** 2) / 2.0)
+                - 0.2 * np.exp(-((x - 28) ** 2) / 0.5) * (np.abs(y - 20) < 10))
+    V, F, uv = grid_mesh(40.0, 40.0, 0.25, z=z)
     res = bake(FlatMesh(Mesh(V, F), uv), px_per_mm=4, maps=())
-    img = res.image[..., 0].astype(int)
+    assert res.figures["painting"] == "relief"
+    img = res.painting[..., 0].astype(int)
     at = lambda u, v: img[int((res.origin[1] - v) * 4), int((u - res.origin[0]) * 4)]
-    upper_left, lower_right, flat_part = at(17, 23), at(23, 17), at(5, 5)
-    assert upper_left > flat_part + 15 > lower_right + 30
-    assert res.figures["painting"] == "shaded relief"
+    assert at(12, 20) == 255 and at(28, 20) == 0 and 0 < at(5, 35) < 255
+    assert len(res.image) > len(res.painting) + 50  # the legend
+    lo, hi = res.figures["relief"]["grey_range_mm"]
+    assert lo < -0.05 and 0 < hi < 0.3
 
 
 # ---------------------------------------------------------------------------- rasteriser

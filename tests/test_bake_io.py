@@ -9,8 +9,8 @@ from PIL import Image
 
 from potflat.errors import InvalidInputError
 from potflat.io import images
-from potflat.io.images import (PngWriter, read_ahead, read_texture, read_texture_grey_quarter, write_png,
-                               write_tiff_rows)
+from potflat.io.images import (PngWriter, TiffWriter, read_ahead, read_texture, read_texture_grey_quarter,
+                               write_png, write_tiff_rows)
 
 
 def _paeth_reference(raw, prev, bpp):
@@ -96,6 +96,44 @@ def test_tiff_from_strips(tmp_path, shape):
         assert page.tags["ResolutionUnit"].value == 3  # centimetre
         num, den = page.tags["XResolution"].value
         assert num / den == pytest.approx(40.0)
+
+
+@pytest.mark.parametrize("shape", [(300, 520), (513, 10)])
+def test_tiff_written_as_strips_come(tmp_path, shape):
+    """The strips handed to a TiffWriter one by one (as the bake renders them) make the image,
+    with its description."""
+    img = np.random.default_rng(3).integers(0, 65535, shape, dtype=np.uint16)
+    with TiffWriter(tmp_path / "t.tif", shape=shape, dtype=np.uint16, px_per_mm=4.0, photometric="minisblack",
+                    description="heights") as tif:
+        for r in range(0, shape[0], 37):
+            tif.write(img[r:r + 37])
+    with tifffile.TiffFile(tmp_path / "t.tif") as f:
+        assert np.array_equal(f.asarray(), img) and f.pages[0].description == "heights"
+
+
+def test_tiff_interrupted_leaves_no_file(tmp_path):
+    with pytest.raises(KeyboardInterrupt):
+        with TiffWriter(tmp_path / "t.tif", shape=(600, 40), dtype=np.uint16, px_per_mm=None,
+                        photometric="minisblack") as tif:
+            tif.write(np.zeros((300, 40), np.uint16))
+            raise KeyboardInterrupt
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_tiff_short_of_rows_leaves_no_file(tmp_path):
+    with pytest.raises(ValueError, match="100 of 600 rows"):
+        with TiffWriter(tmp_path / "t.tif", shape=(600, 40), dtype=np.uint16, px_per_mm=None,
+                        photometric="minisblack") as tif:
+            tif.write(np.zeros((100, 40), np.uint16))
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_tiff_refuses_rows_of_another_width(tmp_path):
+    with pytest.raises(ValueError, match="do not continue"):
+        with TiffWriter(tmp_path / "t.tif", shape=(600, 40), dtype=np.uint16, px_per_mm=None,
+                        photometric="minisblack") as tif:
+            tif.write(np.zeros((10, 41), np.uint16))
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_read_texture_rgb_order_and_errors(tmp_path):

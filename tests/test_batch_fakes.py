@@ -162,7 +162,7 @@ def run_relax_stage(rollout_ply, out_dir, options, *, name=None, rolled=None):
                       distortion=types.SimpleNamespace(**summary["distortion"]), zone=zone, reference=None)
 
 
-def run_bake_stage(relaxed_ply, out_dir, options, *, name=None, relaxed=None, marks=None):
+def run_bake_stage(relaxed_ply, out_dir, options, *, name=None, relaxed=None, marks=None, flat=None, base=None):
     src, out = Path(relaxed_ply), Path(out_dir)
     name = name or src.name.split(".")[0]
     _sabotage(name, "bake")

@@ -119,7 +119,9 @@ def test_the_sea_vase_example_in_the_guide(tmp_path):
          f"| trimmed | {trim['faces']} border faces, {trim['area_mm2']:,.0f} mm²",
          f"| untangled | {tangle['faces']} faces folded by the scan's own creases, {tangle['vertices_moved']} vertices moved |",
          f"| proxy | {proxy} (edge-length RMS {roll['distortion']['edge_rms']:.3f} after untangling) |",
-         f"0 flipped faces, no boundary overlap, edge-length RMS {relaxed['distortion']['edge_rms']:.3f} |")
+         f"0 flipped faces, no boundary overlap, edge-length RMS {relaxed['distortion']['edge_rms']:.3f} |",
+         f"its relief in grey, smoothed at {bake['relief']['smoothing_mm']:.0f} mm as its vertices are "
+         f"{bake['relief']['mesh_spacing_mm']:.1f} mm apart")
 
 
 def test_the_presets_and_defaults_in_the_guide():
@@ -140,6 +142,19 @@ def test_the_presets_and_defaults_in_the_guide():
          f"`--max-anisotropy` (`{standard.max_anisotropy}`",
          f"`--importance-contrast` ({standard.importance_contrast:g}, `preview` {preview.importance_contrast:g};",
          f"default {DEFAULT_PX_PER_MM:g} px/mm", f"`--max-megapixels` ({BakeOptions().max_megapixels:g})")
+
+
+def test_the_relief_defaults_in_the_guide():
+    from potflat.bake.options import BakeOptions
+    from potflat.bake.relief import RAKING_ELEVATION_DEG
+    from potflat.mesh.relief import SMOOTHING_MIN_EDGES
+
+    options = BakeOptions()
+    says("docs/guide.md", f"`--relief-mm` (default {options.relief_mm:g} mm)",
+         f"raking light at {RAKING_ELEVATION_DEG:g} degrees",
+         f"(degrees clockwise from image up; default `{','.join(f'{a:g}' for a in options.relief_light)}`)",
+         f"the relief's share (default {options.relief_blend:g})",
+         f"raised to {({2.0: 'two', 3.0: 'three', 4.0: 'four'})[SMOOTHING_MIN_EDGES]} edge lengths")
 
 
 def _docs_module():

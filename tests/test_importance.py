@@ -433,16 +433,18 @@ def test_a_painting_cut_by_the_layout_border_keeps_its_extent_there():
 
 
 def test_a_zone_thinner_than_the_detail_reach_keeps_its_extent():
-    """A faint painted line, whose detail is narrower than twice the reach, is not eroded away."""
+    """A faint painted line, whose detail is narrower than twice the reach, is not eroded away
+    (on a vessel painted with a band too: a lone faint line is too little to be a painting)."""
     px_per_mm = 2.0
     h, w = 200, 400
     img = np.zeros((h, w, 4), np.uint8)
     img[..., :3], img[..., 3] = (188, 94, 52), 255
+    img[20:40, :, :3] = (28, 22, 20)  # a band 10 mm wide, 30 mm from the line
     line = np.zeros((h, w), bool)
     line[99:101, 100:300] = True  # 1 mm wide, 100 mm long, a few CIELAB units darker
     img[line, :3] = (150, 70, 35)
     deviation, _ = imp.detail_map(img, px_per_mm)
-    detail = deviation > imp.DETAIL_MIN_DELTA_E
+    detail = deviation[60:] > imp.DETAIL_MIN_DELTA_E
     assert detail.any() and detail.sum(axis=0).max() < 2 * imp.DETAIL_REACH_MM * px_per_mm  # thinner than the reach
     zone, reason = imp.painted_zone_image(img, px_per_mm)
     assert zone is not None, reason
@@ -458,6 +460,242 @@ def test_no_painting_and_painted_all_over_give_no_importance():
     img[((xx // 20 + yy // 20) % 2 == 0)] = (28, 22, 20, 255)  # a chequer all over
     zone, reason = imp.painted_zone_image(img, 2.0)
     assert zone is None and "all over" in reason
+
+
+def _clay_image(seed=0, px_per_mm=2.0, size_mm=(200, 500)):
+    """Unpainted photographed clay: firing clouds, grain, dirt, pinholes, a cluster of ring
+    marks and a bright chip along a scratch, light falling off across the vessel, a lit band
+    along the rim and two holes whose texture is bled dark around them. Returns RGBA."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    h, w = int(size_mm[0] * px_per_mm), int(size_mm[1] * px_per_mm)
+    yy, xx = np.mgrid[0:h, 0:w] / px_per_mm  # mm
+
+    def blur(a, mm):
+        return cv2.GaussianBlur(np.asarray(a, np.float32), (0, 0), mm * px_per_mm)
+
+    clouds = blur(rng.normal(0, 1, (h, w)), 15.0)
+    light = 0.75 + 0.35 * np.cos(xx / size_mm[1] * np.pi)
+    rgb = np.array([110, 96, 82], np.float32) * (light * (1 + 0.2 * np.tanh(clouds / clouds.std())))[..., None]
+    rgb += blur(rng.normal(0, 3, (h, w, 3)), 0.4)  # grain
+    rgb -= (np.clip(4 * blur(rng.random((h, w)) < 0.002, 0.6), 0, 1) * 25)[..., None]  # dirt
+    marks = np.zeros((h, w), np.float32)
+    for _ in range(40):  # pinholes
+        cv2.circle(marks, (int(rng.uniform(0, w)), int(rng.uniform(0, h))), int(rng.uniform(0.7, 1.5) * px_per_mm), 1.0, -1)
+    for _ in range(12):  # ring marks, in a cluster
+        centre = (int((380 + rng.uniform(-25, 25)) * px_per_mm), int((120 + rng.uniform(-25, 25)) * px_per_mm))
+        cv2.circle(marks, centre, int(rng.uniform(2, 4) * px_per_mm), 0.8, max(1, int(0.6 * px_per_mm)))
+    rgb -= (blur(marks, 0.3) * 35)[..., None]
+    scratch = np.zeros((h, w), np.float32)
+    cv2.line(scratch, (int(150 * px_per_mm), int(90 * px_per_mm)), (int(175 * px_per_mm), int(80 * px_per_mm)), 1.0,
+             int(1.2 * px_per_mm))
+    rgb += (blur(scratch, 0.3) * 45)[..., None]
+    rgb += (np.clip(1 - yy / 4.0, 0, 1) * 60)[..., None]  # the lit rim
+    covered = np.ones((h, w), bool)
+    for cx, cy in ((100, 140), (300, 60)):  # holes
+        d = np.hypot(xx - cx, yy - cy)
+        covered &= d > 4
+        rgb *= (1 - 0.5 * np.clip(1 - (d - 4) / 3, 0, 1))[..., None]
+    img = np.zeros((h, w, 4), np.uint8)
+    img[..., :3] = np.clip(np.rint(rgb), 0, 255)
+    img[..., 3] = np.where(covered, 255, 0)
+    return img
+
+
+def _figures(shape, px_per_mm=2.0, x0_mm=20.0, y0_mm=110.0):
+    """A frieze 110 x 60 mm: two bands, two silhouettes and a spiral between them. (h, w) bool."""
+    import cv2
+
+    m = np.zeros(shape, np.uint8)
+
+    def p(x, y):
+        return int((x0_mm + x) * px_per_mm), int((y0_mm + y) * px_per_mm)
+
+    cv2.rectangle(m, p(0, 0), p(110, 4), 1, -1)
+    cv2.rectangle(m, p(0, 56), p(110, 60), 1, -1)
+    for x in (18, 92):
+        cv2.ellipse(m, p(x, 32), (int(9 * px_per_mm), int(16 * px_per_mm)), 0, 0, 360, 1, -1)
+    t = np.linspace(0, 6 * np.pi, 200)
+    spiral = np.stack([55 + (1 + 2.2 * t) * np.cos(t), 30 + (1 + 2.2 * t) * np.sin(t)], axis=1)
+    cv2.polylines(m, [np.array([p(x, y) for x, y in spiral], np.int32)], False, 1, max(1, int(1.5 * px_per_mm)))
+    return m > 0
+
+
+def test_unpainted_clay_gives_no_painted_zone():
+    """Clay's own texture (firing clouds, dirt, pinholes, ring marks, a chip, light, a lit rim,
+    holes) shows colour detail above the detail threshold, but none that stands clear of the
+    surface's own texture where the colours are evidence: no zone, and the reason says why."""
+    for seed in range(3):
+        img = _clay_image(seed)
+        covered = img[..., 3] > 127
+        deviation, _ = imp.detail_map(img, 2.0)
+        assert (deviation[covered] > imp.DETAIL_MIN_DELTA_E).mean() > 0.002  # there is detail to be fooled by
+        zone, reason = imp.painted_zone_image(img, 2.0)
+        assert zone is None, reason
+        assert reason.startswith("no painting found") and "own texture" in reason and imp.ALIKE in reason
+
+
+def test_a_painting_on_clay_is_found_and_the_clay_marks_are_not_joined_to_it():
+    """The same clay with a black-figure frieze (and a faded red one on the right): the zone
+    covers both friezes, not the ring marks, the rim or the holes farther than the joining
+    distance from them. (The bright chip along the scratch is as strong and long as a brush
+    stroke: on a painted surface it is one.)"""
+    from scipy import ndimage
+
+    img = _clay_image(0)
+    covered = img[..., 3] > 127
+    black = _figures(covered.shape) & covered
+    red = _figures(covered.shape, x0_mm=200.0, y0_mm=100.0) & covered
+    rgb = img[..., :3].astype(float)
+    rgb[black] = (28, 22, 20)
+    rgb[red] = 0.5 * rgb[red] + 0.5 * np.array([170.0, 50.0, 30.0])  # faded to half
+    img[..., :3] = np.clip(np.rint(rgb), 0, 255).astype(np.uint8)
+    zone, reason = imp.painted_zone_image(img, 2.0)
+    assert zone is not None, reason
+    assert zone[black].min() == 1.0 and zone[red].min() == 1.0
+    far_mm = ndimage.distance_transform_edt(~(black | red)) / 2.0
+    yy, xx = np.mgrid[0:covered.shape[0], 0:covered.shape[1]] / 2.0
+    chip = (np.abs(xx - 162) < 20) & (np.abs(yy - 85) < 15)
+    assert zone[covered & (far_mm > imp.GAP_MM) & ~chip].max() < 0.5
+
+
+def test_colour_detail_next_to_the_outline_and_holes_is_no_evidence():
+    """A lit band along the rim and dark rims around holes (texture bled at a scan's borders)
+    are strong detail, but no painting; the same band away from the border is one."""
+    img, _ = _painted_image(panel=False)
+    h, w = img.shape[:2]
+    rgb = img[..., :3].astype(float)
+    rgb[:8] += 80  # a lit band 4 mm wide along the top
+    yy, xx = np.mgrid[0:h, 0:w]
+    for cx in (200, 450, 700):  # holes 6 mm across, bled dark 3 mm around
+        d = np.hypot(xx - cx, yy - h / 2)
+        img[d <= 6, 3] = 0
+        rgb[(d > 6) & (d <= 12)] *= 0.4
+    img[..., :3] = np.clip(rgb, 0, 255).astype(np.uint8)
+    zone, reason = imp.painted_zone_image(img, 2.0)
+    assert zone is None and reason.startswith("no painting found"), reason
+    img[8:16, :, :3] = img[:8, :, :3]  # the band again, but 4 mm inside
+    img[:8, :, 3] = 0
+    moved = img.copy()
+    moved[60:68, :, :3] = np.clip(moved[60:68, :, :3].astype(float) + 80, 0, 255).astype(np.uint8)  # and 26 mm in
+    zone, reason = imp.painted_zone_image(moved, 2.0)
+    assert zone is not None and zone[60:68, 100:-100].min() == 1.0, reason
+
+
+def test_where_the_layout_smears_the_texture_is_no_evidence():
+    """A strip of the start layout stretched 5:1 (a base unrolled as a flange) draws the
+    texture's specks out into streaks: those pixels are left out of the evidence (a single
+    stretched triangle is not), and streaks there are no painting."""
+    from potflat.raster.render import make_grid
+
+    xs, ys = np.meshgrid(np.arange(0.0, 101.0, 2.0), np.arange(0.0, 61.0, 2.0))
+    V = np.column_stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)])
+    nx = xs.shape[1]
+    q = (np.arange(ys.shape[0] - 1)[:, None] * nx + np.arange(nx - 1)[None, :]).ravel()
+    F = np.concatenate([np.column_stack([q, q + 1, q + nx + 1]), np.column_stack([q, q + nx + 1, q + nx])])
+    uv = V[:, :2].copy()
+    low = uv[:, 1] < 20
+    uv[low, 1] = 20 - 5 * (20 - uv[low, 1])  # rows below 20 mm stretched 5x upright
+    flat = FlatMesh(Mesh(V, F), uv)
+    g = make_grid(flat, 2.0, 1000.0)
+    pixels = imp._pixels(uv, g.origin, 2.0)
+    smeared = imp._smeared(flat, pixels, (g.height, g.width), 2.0)
+    rows = np.flatnonzero(smeared.any(axis=1))
+    # the stretched strip spans 100 mm of the image's 140 (rows 80-280 of 280), the rest none
+    assert 0.95 * 200 < len(rows) <= 201 and rows.min() >= 79
+    assert smeared[rows.min() + 5: rows.max() - 5, 10:-10].all()
+    one = V[:, :2].copy()
+    one[F[len(F) // 2][0]] += (0.0, 1.5)  # one triangle stretched, its neighbours less
+    assert not imp._smeared(flat.replace(uv=one), imp._pixels(one, g.origin, 2.0), (g.height, g.width), 2.0).any()
+    # streaks in a smeared strip: detail, but no evidence of a painting
+    img, _ = _painted_image(panel=False)
+    rng = np.random.default_rng(1)
+    streaks = np.zeros(img.shape[:2], bool)
+    for r in rng.integers(330, 395, 30):
+        c = int(rng.integers(0, 800))
+        streaks[r:r + 2, c:c + 80] = True
+    img[streaks, :3] = (235, 230, 220)
+    assert imp.painted_zone_image(img, 2.0)[0] is not None  # taken for strokes where they are evidence
+    evidence = np.ones(img.shape[:2], bool)
+    evidence[320:, :] = False
+    zone, reason = imp.painted_zone_image(img, 2.0, evidence=evidence)
+    assert zone is None, reason
+
+
+def _glaze_in_shadow(seed=0, px_per_mm=2.0, size_mm=(200, 500)):
+    """White glaze photographed in a vessel's mouth: a cast shadow over its lower half with a
+    ragged edge 1 mm soft, a lit lip 10 mm wide below the rim, light falling off, noise.
+    Returns RGBA."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    h, w = int(size_mm[0] * px_per_mm), int(size_mm[1] * px_per_mm)
+    yy, xx = np.mgrid[0:h, 0:w] / px_per_mm
+    edge = 100 + np.cumsum(rng.normal(0, 1.5, w)) / np.sqrt(px_per_mm)  # the shadow's edge, mm
+    edge += 8 * np.sin(xx[0] / 23.0)
+    shadow = cv2.GaussianBlur((yy > edge[None, :]).astype(np.float32), (0, 0), 1.0 * px_per_mm)
+    lip = ((yy > 10) & (yy < 20)).astype(np.float32)
+    light = (0.8 + 0.2 * np.cos(xx / size_mm[1] * np.pi)) * (1 - 0.55 * shadow) * (1 + 0.12 * lip)
+    rgb = np.array([214, 212, 204], np.float32) * light[..., None] * 0.9 + rng.normal(0, 1.5, (h, w, 3))
+    img = np.zeros((h, w, 4), np.uint8)
+    img[..., :3] = np.clip(np.rint(rgb), 0, 255)
+    img[..., 3] = 255
+    return img
+
+
+def test_shadows_and_highlights_are_no_painting_and_a_line_drawing_in_them_is_one():
+    """The edge of a cast shadow and of a lit lip are strong colour detail (steps of 30-60
+    CIELAB units), but steps between two large areas, not strokes: no painting. A drawing of
+    black lines 1 mm wide across the same light and shadow is one. (The shadow's edge, detail
+    joined to the drawing's, stays in its zone.)"""
+    import cv2
+
+    for seed in range(2):
+        img = _glaze_in_shadow(seed)
+        deviation, _ = imp.detail_map(img, 2.0)
+        assert deviation.max() > 2 * imp.DETAIL_MIN_DELTA_E  # a step of 30 units or more
+        zone, reason = imp.painted_zone_image(img, 2.0)
+        assert zone is None and reason.startswith("no painting found") and "shadows" in reason, reason
+    lines = np.zeros(img.shape[:2], np.uint8)
+    for k in range(6):  # six waves, 160 mm long, 12 mm apart, crossing the shadow's edge
+        x = np.arange(300, 620)
+        y = 140 + 24 * k + 10 * np.sin(x / 15.0)
+        cv2.polylines(lines, [np.stack([x, y], axis=1).astype(np.int32)], False, 1, 2)
+    drawing = img.copy()
+    drawing[lines > 0, :3] = (30, 30, 32)
+    zone, reason = imp.painted_zone_image(drawing, 2.0)
+    assert zone is not None, reason
+    assert zone[lines > 0].min() == 1.0
+    assert zone[:50].max() < 0.5  # not the lit lip
+
+
+def test_highlights_on_black_glaze_are_no_painting_and_red_figures_on_it_are():
+    """Lustrous black glaze photographed with soft highlights (bright blobs 8-30 mm across):
+    no painting. Reserved clay figures with black lines inside them (red-figure): found, and
+    the zone covers them."""
+    import cv2
+
+    rng = np.random.default_rng(3)
+    h, w = 500, 1200
+    yy, xx = np.mgrid[0:h, 0:w]
+    rgb = np.full((h, w, 3), (30.0, 26.0, 24.0)) * (0.8 + 0.2 * np.cos(xx / w * np.pi))[..., None]
+    for _ in range(25):
+        cx, cy, r = rng.uniform(0, w), rng.uniform(0, h), rng.uniform(8, 30)
+        rgb += (np.clip(1 - np.hypot(xx - cx, yy - cy) / r, 0, 1) ** 2 * 120)[..., None]
+    rgb += rng.normal(0, 2, rgb.shape)
+    img = np.zeros((h, w, 4), np.uint8)
+    img[..., :3], img[..., 3] = np.clip(np.rint(rgb), 0, 255), 255
+    zone, reason = imp.painted_zone_image(img, 2.0)
+    assert zone is None and reason.startswith("no paint"), reason
+    figures = _figures((h, w), x0_mm=150.0, y0_mm=80.0)
+    figures = cv2.morphologyEx(figures.astype(np.uint8), cv2.MORPH_DILATE, np.ones((5, 5), np.uint8)) > 0
+    img[figures, :3] = (188, 94, 52)  # the figures reserved in the clay's colour ...
+    inner = (xx // 2 % 9 == 0) & figures & (yy > 200) & (yy < 260)
+    img[inner, :3] = (28, 22, 20)  # ... and lines drawn in them
+    zone, reason = imp.painted_zone_image(img, 2.0)
+    assert zone is not None, reason
+    assert zone[cv2.erode(figures.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0].min() == 1.0
 
 
 def _textured(vessel, folder: Path) -> Mesh:

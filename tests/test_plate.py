@@ -194,3 +194,29 @@ def test_profile_step_follows_the_edges_or_the_option(cup_run, tmp_path):
     (tmp_path / "bad.csv").write_text("a,b\n")
     with pytest.raises(InvalidInputError):
         read_profile_csv(tmp_path / "bad.csv", {})
+
+
+def test_plate_shows_the_relief_beside_the_painting(cup_run, tmp_path):
+    """plate_image both: the painting and, below it, the relief in raking light from the first
+    azimuth, each at the plate's scale; relief alone: only the raking light."""
+    from potflat.bake.options import BakeOptions
+    from potflat.files.bake_stage import run_bake_stage
+
+    relaxed = cup_run.out_dir / "cup.relaxed.ply"
+    files = run_bake_stage(relaxed, tmp_path, BakeOptions(px_per_mm=2, maps=(), relief=True, relief_light=(45, 315),
+                                                          plate=True, plate_scale="1:2", plate_image="both"))
+    plate = files.record["plate"]
+    assert plate["rollout_images"] == ["painting", "relief in raking light from 45 degrees"]
+    ns = {"svg": "http://www.w3.org/2000/svg"}
+    images = ET.parse(tmp_path / "cup.plate.svg").getroot().findall(".//svg:image", ns)
+    w_px, h_px = Image.open(tmp_path / "cup.png").size
+    assert len(images) == 3  # outside view, painting, relief
+    assert sum((int(im.get("width")), int(im.get("height"))) == (w_px, h_px) for im in images) == 2
+    alone = make_plate(relaxed, tmp_path, scale="1:2", name="cup", image="relief")
+    assert alone.record["rollout_images"] == ["relief in raking light from 45 degrees"]
+    assert alone.record["page_mm"][1] < plate["page_mm"][1]
+
+
+def test_plate_of_the_relief_needs_a_bake_with_relief(cup_run):
+    with pytest.raises(InvalidInputError, match="bake it with --relief first"):
+        make_plate(cup_run.out_dir / "cup.relaxed.ply", cup_run.out_dir, name="cup", image="relief")

@@ -659,7 +659,7 @@ def test_large_trims_and_poor_axis_fits_are_warned_with_the_option():
     flat = FlatMesh(Mesh(V, np.array([[0, 1, 2]])), V[:, :2].copy())
     result = SimpleNamespace(landmark_notes=(), region=SimpleNamespace(repeated_from=None),
                              distortion=SimpleNamespace(flipped=0), boundary_overlap=0, folds=None,
-                             other_objects_faces=0,
+                             other_objects_faces=0, disk_cut_faces=np.zeros(0, np.int64),
                              trimmed_area=20.0, flat=flat, proxy=SimpleNamespace(kind="cylinder"),
                              axis=SimpleNamespace(rms_angle_deg=14.0, direction=np.array([0.0, 1.0, 0.0])))
     notes = " ".join(_notes(result))

@@ -1,7 +1,7 @@
 """Textured scans with some faces that have no texture coordinates (faces without ``vt``, a
 second material without an image, MeshLab's hole filling, a glTF primitive without
 TEXCOORD_0): the faces are flagged (``Mesh.untextured_faces``) through loading, cleaning,
-rollout, the stage files, relax and bake; they are baked as shaded relief, never as the
+rollout, the stage files, relax and bake; they are baked as relief in grey, never as the
 texel at (0, 0), and carry no colour evidence into the painted-zone detection."""
 from __future__ import annotations
 
@@ -110,13 +110,13 @@ def test_untextured_faces_are_baked_as_relief_never_the_corner_texel(tmp_path, s
     mesh = load_scan(_obj_with_untextured(small_vessel, tmp_path / "pot.obj", untextured, "no vt")).mesh
     flat = rollout(mesh, importance="none").flat
     assert flat.mesh.untextured_faces is not None and flat.mesh.untextured_faces.sum() > 0.1 * len(flat.mesh.faces)
-    image = bake(flat, px_per_mm=2.0, maps=()).image
+    image = bake(flat, px_per_mm=2.0, maps=()).painting
     assert not _red_pixels(image).any()
     # pixels wholly on untextured faces are grey relief; those wholly on textured faces keep the painting
     r = Renderer(flat, 2.0, distortion_maps=False)
     share = np.concatenate([r.untextured_share(r0, r1) for r0, r1 in r.strips()])
     plain = flat.replace(mesh=flat.mesh.replace(texcoords=None, untextured_faces=None, texture_path=None))
-    relief = bake(plain, px_per_mm=2.0, maps=()).image  # the scan as if it had no texture at all
+    relief = bake(plain, px_per_mm=2.0, maps=()).painting  # the scan as if it had no texture at all
     assert (share == 1.0).sum() > 1000
     np.testing.assert_array_equal(image[share == 1.0], relief[share == 1.0])
     textured = share == 0.0

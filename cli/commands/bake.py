@@ -10,7 +10,7 @@ from potflat_cli._options import Json, Name, Quiet, StageOutputDir, with_stage_o
 
 HELP = """Bake a flattening (NAME.relaxed.ply, or NAME.rollout.ply to compare) into true-scale images.
 
-Writes NAME.png (the painting, RGBA, resolution stored in the file), NAME.<map>.png heat maps with colour bars, NAME.overlay.png (stress over the greyscale painting), NAME.scale-layer.png and NAME.scalebar.png, NAME.bake.json (figures and provenance); optionally NAME.tif (16-bit), NAME.position.tif (3D point per pixel) and NAME.sheet.png (rollout vs relaxed), NAME.plate.svg/.pdf/.png (--plate), NAME.flat.obj/.mtl (--obj). A rollout input writes NAME.rollout.* instead. Exit codes: 0 success, 2 bad input or options.
+Writes NAME.png (the painting, RGBA, resolution stored in the file), NAME.<map>.png heat maps with colour bars, NAME.overlay.png (stress over the greyscale painting), NAME.scale-layer.png and NAME.scalebar.png, NAME.bake.json (figures and provenance); optionally NAME.tif (16-bit), NAME.position.tif (3D point per pixel) and NAME.sheet.png (rollout vs relaxed), NAME.plate.svg/.pdf/.png (--plate), NAME.flat.obj/.mtl (--obj). A base the rollout left out (NAME.base.ply beside the input) is baked too: NAME.base.png (scale bar in the image), its maps and NAME.base.bake.json. A rollout input writes NAME.rollout.* instead. Exit codes: 0 success, 2 bad input or options.
 
 Example:  potflat bake out/amphora.relaxed.ply --dpi 600 --sheet --grid
 """

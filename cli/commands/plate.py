@@ -27,6 +27,10 @@ def plate_command(
         "--scale", metavar="1:N", help="Print scale, e.g. 1:1, 1:2, 1:5 \\[default: the largest of 1:1, 1:2, 1:3, "
                                        "1:4, 1:5, 1:10, 1:20, 1:50 that fits A4].")] = None,
     name: Name = None,
+    image: Annotated[Optional[str], typer.Option(
+        "--image", metavar="[painting|relief|both]",
+        help="The rollout as the painting (NAME.png), as its relief in raking light (NAME.raking-AZ.png of a bake "
+             "with --relief, the first azimuth) or both, one above the other \\[default: painting].")] = None,
     quiet: Quiet = False,
     json: Json = False,
 ) -> None:
@@ -38,7 +42,8 @@ def plate_command(
     from potflat.files.plate import make_plate
 
     result = run_stage(f"composing the plate of {relaxed_ply.name}",
-                       lambda: make_plate(relaxed_ply, output, scale=scale, name=name), quiet=quiet, as_json=json)
+                       lambda: make_plate(relaxed_ply, output, scale=scale, name=name, image=image or "painting"),
+                       quiet=quiet, as_json=json)
     if result is None:
         return
     s = result.record

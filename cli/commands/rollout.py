@@ -10,7 +10,7 @@ from potflat_cli._options import Json, Name, OutputDir, Quiet, with_stage_option
 
 HELP = """Unroll a vessel scan: find its rotation axis, fit a cylinder/cone/sphere, cut a seam, develop it.
 
-Writes NAME.rollout.ply (3D positions + flattened u v, texture coordinates or colours; the input of 'potflat relax'), NAME.rollout.json (axis, proxy, seam, region, walls, attachments left out, trimmed border, counts, cleaning report, distortion) and the profile NAME.profile.csv / NAME.profile.svg. The outer wall is unrolled (--side inner: the inside); handles are left out unless --keep-attachments. Angles are degrees counter-clockwise about the axis (mouth up), measured from a landmark when one is named (--seam-at X Y Z, --landmark painted|handle), else: the seam from the axis' reference direction (printed), --angles from the seam, or centred on the painted zone when --angles comes alone. Exit codes: 0 success, 2 bad input or options (e.g. no rotational symmetry: give --axis).
+Writes NAME.rollout.ply (3D positions + flattened u v, texture coordinates or colours; the input of 'potflat relax'), NAME.rollout.json (axis, proxy, seam, region, walls, attachments left out, trimmed border, counts, cleaning report, distortion) the profile NAME.profile.csv / NAME.profile.svg, and NAME.base.ply (the base, or the floor with --side inner, seen along the axis) when the development would smear it. The outer wall is unrolled (--side inner: the inside); handles are left out unless --keep-attachments, the base unless --keep-base. Angles are degrees counter-clockwise about the axis (mouth up), measured from a landmark when one is named (--seam-at X Y Z, --landmark painted|handle), else: the seam from the axis' reference direction (printed), --angles from the seam, or centred on the painted zone when --angles comes alone. Exit codes: 0 success, 2 bad input or options (e.g. no rotational symmetry: give --axis).
 
 Example:  potflat rollout scans/amphora.obj -o out --band 0.2 0.7 --proxy cone
 """
@@ -40,7 +40,7 @@ def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quie
     from rich.console import Console
 
     from potflat.mesh.distortion import distortion_words
-    from potflat.files.rollout_stage import run_rollout_stage
+    from potflat.files.rollout_stage import base_line, run_rollout_stage
 
     result = run_stage(f"rolling out {scan.name}", lambda: run_rollout_stage(scan, output or Path(name or scan.stem), options, name=name),
                        quiet=quiet, as_json=as_json)
@@ -72,6 +72,8 @@ def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quie
     if at["faces"]:
         what = "kept" if at["kept"] else "left out"
         out.print(f"attachments {what}: {len(at['components'])} ({at['faces']} faces, {at['area_mm2']:.4g} {mm2})")
+    if s["base"] is not None and s["base"]["candidate_faces"]:
+        out.print(base_line(s["base"], result.paths.get("base_ply")))
     if tr["faces"] or s["untangled"]["faces"]:
         out.print(f"trimmed {tr['faces']} folded border faces ({tr['area_mm2']:.4g} {mm2}: rim top, base "
                   f"underside, breaks); untangled {s['untangled']['faces']} folded faces inside")

@@ -9,7 +9,7 @@ import typer
 from potflat_cli._errors import check_stop, user_errors
 from potflat_cli._options import Json, Name, OutputDir, Quiet, with_stage_options
 
-HELP = """Run rollout, relax and bake on one scan: NAME.rollout.ply/.json, NAME.relaxed.ply/.json, NAME.png, NAME.bake.json and the distortion maps, all in OUTDIR.
+HELP = """Run rollout, relax and bake on one scan: NAME.rollout.ply/.json, NAME.relaxed.ply/.json, NAME.png, NAME.bake.json and the distortion maps, and NAME.base.png (the base seen from below, when left out of the rollout), all in OUTDIR.
 
 Every option of 'potflat rollout', 'potflat relax' and 'potflat bake' is accepted, with the same name and default. Exit codes: 0 success, 2 bad input or options (message on stderr), 130 interrupted.
 
@@ -38,6 +38,7 @@ def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json
     from rich.console import Console
 
     from potflat.files.pipeline import run_scan
+    from potflat.files.rollout_stage import base_line
     from potflat.mesh.distortion import distortion_words
     from potflat_cli import _warmup as potflat_warmup
     from potflat_cli._stage import say_compiling, with_compile_note
@@ -81,9 +82,15 @@ def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json
                       for k, v in figures.items() if v is not None)
     if shown:
         out.print(f"  whole-surface distortion: {distortion_words(figures)} ({shown}; area figures are natural logs)")
+    importance = result.rollout.record.get("importance")
+    if importance:  # where the painting was found, or that the whole surface counted alike
+        out.print(f"  importance ({importance['method']}): {importance['reason']}", highlight=False)
     relaxed = result.relax.record
     if relaxed.get("lengths"):
         out.print(f"  {relaxed['lengths']}")
+    base = result.rollout.record.get("base")
+    if base is not None and base["candidate_faces"]:
+        out.print(f"  {base_line(base, result.paths.get('bake.base_png'))}", highlight=False)
     for key, path in result.paths.items():
         out.print(f"  {key:<16} {path}", highlight=False)
     rolled = result.rollout.record

@@ -43,6 +43,8 @@ class MapScale:
     outline : str
         Colour of the painted zone's outline (a key of :data:`OUTLINE_RGBA`): one that stands
         out against the map's colour for no distortion, which fills the zone.
+    extend : str
+        Ends of the colour bar with an arrow for values beyond: ``max`` or ``both``.
     """
 
     name: str
@@ -51,6 +53,7 @@ class MapScale:
     cmap: str
     label: str
     outline: str = "white"
+    extend: str = "max"
 
     def lut(self) -> np.ndarray:
         """(256, 3) uint8 colour table."""
@@ -88,7 +91,7 @@ def map_scale(name: str, values: np.ndarray, *, hi: float | None = None) -> MapS
     if name == "area":
         half = hi if hi is not None else max(p99(np.abs(v)), 0.035)
         return MapScale(name, -half, half, "RdBu_r", "area ratio flat / 3D (log scale)",
-                        outline="black")  # (white at ratio 1)
+                        outline="black", extend="both")  # (white at ratio 1)
     if name == "anisotropy":
         top = hi if hi is not None else max(p99(v), 1.05)
         return MapScale(name, 1.0, top, "viridis", "anisotropy σmax / σmin (1 = no shear)")
@@ -135,8 +138,7 @@ def _colorbar(ax, scale: MapScale, fontsize: float, orientation: str = "horizont
     from matplotlib.ticker import FixedLocator, FuncFormatter, MaxNLocator
 
     mappable = ScalarMappable(Normalize(scale.lo, scale.hi), matplotlib.colormaps[scale.cmap])
-    extend = "both" if scale.name == "area" else "max"
-    cb = ax.figure.colorbar(mappable, cax=ax, orientation=orientation, extend=extend)
+    cb = ax.figure.colorbar(mappable, cax=ax, orientation=orientation, extend=scale.extend)
     cb.set_label(scale.label, fontsize=fontsize)
     cb.ax.tick_params(labelsize=fontsize)
     axis = cb.ax.xaxis if orientation == "horizontal" else cb.ax.yaxis

@@ -1,11 +1,12 @@
 """The images of a bake, composed strip by strip: the painting (with the marks and the scale
 bar drawn into it), the distortion maps with their painted-zone outline and folded hatching,
-the overlay, the scale layer and the attachment mask. One :class:`Composition` serves the
-in-memory :func:`potflat.bake.bake` and the file stage, which streams the strips to disk."""
+the overlay, the scale layer, the attachment mask and the relief's images. One
+:class:`Composition` serves the in-memory :func:`potflat.bake.bake` and the file stage, which
+streams the strips to disk."""
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -20,6 +21,7 @@ from potflat.bake.marks import (
     scale_layer_on_image,
 )
 from potflat.bake.options import BakeOptions
+from potflat.bake.relief import ReliefImages, relief_figures
 from potflat.errors import InvalidOptionError
 from potflat.raster.render import Renderer, rgba8
 from potflat.types import FlatMesh, RolloutMarks
@@ -49,6 +51,9 @@ class StripLayers:
         The scale bar (and grid) alone, transparent elsewhere.
     attachments : (k, w, 4) uint8 or None
         Where left-out attachments met the wall (None: none were left out).
+    relief : dict of str to (k, w, c) uint8
+        Each relief image's rows (:attr:`potflat.bake.relief.ReliefImages.keys`) and
+        ``"levels"``, the relief TIFF's (k, w) uint16; empty without ``relief``.
     """
 
     r0: int
@@ -60,24 +65,23 @@ class StripLayers:
     maps: dict[str, np.ndarray]
     scale_layer: np.ndarray
     attachments: np.ndarray | None
+    relief: dict[str, np.ndarray]
 
 
 class Composition:
     """How the images of one bake are composed: the maps' colour scales and legends, the scale
-    layer, the marks of the rollout.
+    layer, the marks of the rollout, the relief's images.
 
     Parameters
     ----------
     renderer : Renderer
         The flattening's renderer (its :attr:`~Renderer.face_values` gain the marks).
-    maps : tuple of str
-        Distortion maps to compose (``stress`` adds the overlay).
+    options : BakeOptions
+        Used here: ``maps`` (``stress`` adds the overlay), ``grid`` (a 10 mm grid in the scale
+        layer), ``scale_on_image`` (the scale layer drawn into the painting, in a band added
+        below it when no place is free), ``relief``, ``relief_light`` and ``relief_blend``.
     marks : RolloutMarks or None
         What the rollout marks (attachment roots, its repeat, folded faces).
-    grid : bool
-        A 10 mm grid in the scale layer.
-    scale_on_image : bool
-        Draw the scale layer into the painting (a band is added below it when no place is free).
 
     Attributes
     ----------
@@ -85,14 +89,20 @@ class Composition:
     legends : dict of str to (b, w, 4) uint8
         The legend band below each map image (and the overlay).
     layer : ScaleLayer
-    band : int
+    scale_band : int
         Rows added below the painting for its scale bar (0: none).
+    relief_legend : (b, w, 4) uint8 or None
+        The legend in mm below a painting that is the relief in grey (an untextured scan).
+    band : int
+        Rows added below the painting in all: the scale bar's and the relief's legend.
+    relief : ReliefImages or None
+        The relief's images (with ``relief``).
     covered_px : float
         Covered pixels of the painting so far (the sum of :attr:`StripLayers.coverage`).
     """
 
-    def __init__(self, renderer: Renderer, *, maps: tuple[str, ...], marks: RolloutMarks | None, grid: bool,
-                 scale_on_image: bool):
+    def __init__(self, renderer: Renderer, options: BakeOptions, *, marks: RolloutMarks | None):
+        maps, grid = options.maps, options.grid
         r = self.renderer = renderer
         n_faces = len(r.flat.mesh.faces)
         marks = marks if marks is not None else RolloutMarks()
@@ -115,7 +125,16 @@ class Composition:
         if "stress" in self.maps:
             self.legends["overlay"] = self.legends["stress"]
         self.layer = annotate.ScaleLayer(g.width, g.height, g.px_per_mm, grid=grid)
-        self.on_image, self.band = scale_layer_on_image(r, grid) if scale_on_image else (None, 0)
+        self.on_image, self.scale_band = scale_layer_on_image(r, grid) if options.scale_on_image else (None, 0)
+        self.relief_legend = None
+        if r.paints_relief:
+            lo, hi = r.relief_grey_range
+            self.relief_legend = annotate.legend_band(annotate.MapScale(
+                "relief", lo, hi, "gray", f"height above the surface smoothed at {r.relief.smoothing_mm:.3g} mm, mm",
+                extend="both"), g.width)
+        self.band = self.scale_band + (len(self.relief_legend) if self.relief_legend is not None else 0)
+        self.relief = (ReliefImages(r, lights=options.relief_light, blend=options.relief_blend) if options.relief
+                       else None)
         self.covered_px = 0.0
 
     def strips(self) -> Iterator[StripLayers]:
@@ -142,13 +161,26 @@ class Composition:
                                                  outline_rgba)
                     maps["overlay"] = annotate.draw_outline(rows, hatch, FOLDED_COLOUR)
             attachments = attachment_rows(r.scalar("attachments", r0, r1)) if len(self.attachments) else None
+            relief = self.relief.rows(r0, r1, rgb, cov) if self.relief is not None else {}
             yield StripLayers(r0=r0, r1=r1, coverage=cov, rgb=rgb, painting=painting, values=values, maps=maps,
-                              scale_layer=self.layer.rows(r0, r1), attachments=attachments)
+                              scale_layer=self.layer.rows(r0, r1), attachments=attachments, relief=relief)
 
     def band_rows(self) -> np.ndarray:
-        """The rows added below the painting for its scale bar, (band, w, 4) uint8."""
+        """The rows added below the painting: its scale bar's band and the relief's legend,
+        (band, w, 4) uint8."""
         g = self.renderer.grid
-        return self.on_image.rows(g.height, g.height + self.band)
+        parts = [self.on_image.rows(g.height, g.height + self.scale_band)] if self.scale_band else []
+        if self.relief_legend is not None:
+            parts.append(self.relief_legend)
+        return np.concatenate(parts) if parts else np.zeros((0, g.width, 4), np.uint8)
+
+    def figures(self) -> dict:
+        """The figures of ``NAME.bake.json`` (:func:`potflat.bake.marks.image_figures`) with the
+        relief's (None when neither drawn nor the painting)."""
+        r = self.renderer
+        relief = (self.relief.figures() if self.relief is not None
+                  else relief_figures(r) if r.paints_relief else None)
+        return {**image_figures(r, self.covered_px), "relief": relief}
 
 
 @dataclass(frozen=True, eq=False)
@@ -157,8 +189,10 @@ class BakeResult:
 
     Attributes
     ----------
-    image : (h, w, 4) uint8
-        The painting, RGBA; alpha is the covered fraction of each pixel (0 outside and in holes).
+    image : (h + b, w, 4) uint8
+        ``NAME.png``: the painting, RGBA, alpha the covered fraction of each pixel (0 outside
+        and in holes), and the band below it, if any (:attr:`painting` without it): the scale
+        bar's with ``scale_on_image``, the legend of an untextured scan's relief.
     maps : dict of str to (h, w) float32
         Distortion values per pixel (NaN outside): ``stress`` as the % length error around
         each vertex (:func:`potflat.mesh.distortion.vertex_length_error`, interpolated; the
@@ -178,7 +212,14 @@ class BakeResult:
     scale_layer : (h, w, 4) uint8
         The scale bar (and grid) alone: ``NAME.scale-layer.png``.
     figures : dict
-        Resolution, size, distortion figures, covered area (the figures of ``NAME.bake.json``).
+        Resolution, size, distortion figures, covered area, the relief's settings and figures
+        (the figures of ``NAME.bake.json``).
+    relief_height : (h, w) float32 or None
+        With ``relief``: the height above the smoothed scan, mm (NaN outside).
+    relief_images : dict of str to (h [+ b], w, c) uint8
+        With ``relief``: each relief image (:attr:`potflat.bake.relief.ReliefImages.keys`),
+        RGBA or grey and alpha, ``relief`` and ``curvature`` with their legend band below:
+        ``NAME.<key>.png`` of the file stage.
     """
 
     image: np.ndarray
@@ -189,6 +230,14 @@ class BakeResult:
     map_images: dict[str, np.ndarray]
     scale_layer: np.ndarray
     figures: dict
+    relief_height: np.ndarray | None = None
+    relief_images: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def painting(self) -> np.ndarray:
+        """The painting's own rows of :attr:`image`, without the band below them (the scale
+        bar's, the legend of an untextured scan's relief). Shape (h, w, 4) uint8."""
+        return self.image[:len(self.scale_layer)]
 
 
 def bake(flat: FlatMesh, *, options: BakeOptions | None = None, marks: RolloutMarks | None = None,
@@ -204,8 +253,9 @@ def bake(flat: FlatMesh, *, options: BakeOptions | None = None, marks: RolloutMa
         ``px_per_mm`` or ``dpi`` (default 4 px/mm), ``maps`` (from :data:`MAP_NAMES`),
         ``position_map`` (also return the 3D point under each pixel), ``supersample``
         (sub-samples per pixel side, 0: automatic), ``max_megapixels`` (refuse larger
-        images), ``grid`` and ``scale_on_image``; the other fields concern the files the
-        file stage writes.
+        images), ``grid``, ``scale_on_image``, and ``relief`` with ``relief_mm``,
+        ``relief_light`` and ``relief_blend``; the other fields concern the files the file
+        stage writes.
     marks : RolloutMarks, optional
         What the rollout marks on the images (:attr:`potflat.rollout.RolloutResult.marks`).
 
@@ -227,14 +277,19 @@ def bake(flat: FlatMesh, *, options: BakeOptions | None = None, marks: RolloutMa
         options = BakeOptions(**option_fields)
     elif option_fields:
         raise InvalidOptionError("give either options= or option keywords to bake(), not both")
-    r = Renderer(flat, options.resolution, supersample=options.supersample, max_megapixels=options.max_megapixels)
-    comp = Composition(r, maps=options.maps, marks=marks, grid=options.grid, scale_on_image=options.scale_on_image)
+    r = Renderer(flat, options.resolution, supersample=options.supersample, max_megapixels=options.max_megapixels,
+                 relief_mm=options.relief_mm)
+    comp = Composition(r, options, marks=marks)
     g = r.grid
     image = np.zeros((g.height + comp.band, g.width, 4), np.uint8)
     values = {m: np.empty((g.height, g.width), np.float32) for m in options.maps}
     map_images = {key: np.empty((g.height + len(legend), g.width, 4), np.uint8) for key, legend in comp.legends.items()}
     scale_layer = np.empty((g.height, g.width, 4), np.uint8)
     position = np.empty((g.height, g.width, 3), np.float32) if options.position_map else None
+    relief = comp.relief
+    height = np.empty((g.height, g.width), np.float32) if relief is not None else None
+    relief_images = {key: np.empty((g.height + len(relief.legends.get(key, ())), g.width, relief.channels[key]),
+                                   np.uint8) for key in relief.keys} if relief is not None else {}
     for s in comp.strips():
         image[s.r0:s.r1] = s.painting
         scale_layer[s.r0:s.r1] = s.scale_layer
@@ -244,9 +299,16 @@ def bake(flat: FlatMesh, *, options: BakeOptions | None = None, marks: RolloutMa
             map_images[key][s.r0:s.r1] = s.maps[key]
         if position is not None:
             position[s.r0:s.r1] = r.position(s.r0, s.r1)
+        if relief is not None:
+            height[s.r0:s.r1] = r.relief_fields(s.r0, s.r1)[..., 0]
+            for key in relief.keys:
+                relief_images[key][s.r0:s.r1] = s.relief[key]
     if comp.band:
         image[g.height:] = comp.band_rows()
     for key, legend in comp.legends.items():
         map_images[key][g.height:] = legend
+    for key, legend in (relief.legends.items() if relief is not None else ()):
+        relief_images[key][g.height:] = legend
     return BakeResult(image=image, maps=values, position=position, px_per_mm=g.px_per_mm, origin=g.origin.copy(),
-                      map_images=map_images, scale_layer=scale_layer, figures=image_figures(r, comp.covered_px))
+                      map_images=map_images, scale_layer=scale_layer, figures=comp.figures(), relief_height=height,
+                      relief_images=relief_images)

@@ -46,7 +46,7 @@ def image_figures(r: Renderer, covered_px: float) -> dict:
         "texture_px": list(r.texture.shape[1::-1]) if r.texture is not None else None,
         "texels_per_pixel_median": r.texels_per_pixel_median,
         "painting": "texture" if r.texture is not None else "vertex colours" if flat.mesh.vertex_colors is not None
-        else "shaded relief",
+        else "relief",
         "stress": {**_stats(r.vertex_stress), "unit": "sqrt(mm)"},
         "area": {**_stats(np.abs(fv["area"][valid]), w), "unit": "|ln(flat area / 3D area)|"},
         "anisotropy": {**_stats(fv["anisotropy"][valid], w), "unit": "sigma_max / sigma_min"},

@@ -48,12 +48,27 @@ def parse_scale(value) -> float | None:
     return scale
 
 
+def _number_in(value, lo: float, hi: float) -> bool:
+    """Whether ``value`` is a finite number (not a bool) from ``lo`` to ``hi``."""
+    return (not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+            and lo <= value <= hi)
+
+
 #: Distortion maps :func:`bake` can make.
 MAP_NAMES = ("stress", "area", "anisotropy")
 
 
 #: px/mm used when neither ``px_per_mm`` nor ``dpi`` is given.
 DEFAULT_PX_PER_MM = 4.0
+
+#: Raking-light azimuths drawn by default, degrees clockwise from image up (315: from the upper left).
+RELIEF_LIGHT_DEG = (315.0, 45.0)
+#: Most raking-light azimuths one bake draws.
+MAX_RELIEF_LIGHTS = 8
+#: Largest relief smoothing scale accepted, mm.
+MAX_RELIEF_MM = 1000.0
+#: What the plate can show of the rollout (``plate_image``).
+PLATE_IMAGES = ("painting", "relief", "both")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -94,6 +109,24 @@ class BakeOptions:
         Also write ``NAME.flat.obj`` + ``NAME.flat.mtl``: the scan's surface (3D, scan units)
         with the flat coordinates as texture coordinates into ``NAME.png`` (the painting
         re-baked in the flat layout), for MeshLab and Blender.
+    relief : bool
+        Also write the relief, on the pixel grid of ``NAME.png``: ``NAME.relief.tif`` (16-bit,
+        the height above the scan smoothed at ``relief_mm``, in mm: its scale is in
+        ``NAME.bake.json`` and the TIFF's description), ``NAME.relief.png`` (coloured, with a
+        legend), ``NAME.raking-AZ.png`` (raking light from each azimuth of ``relief_light``),
+        ``NAME.curvature.png`` (concave and convex detail at several radii, like MSII) and, for
+        a painted scan, ``NAME.relief-overlay.png``. An untextured scan's ``NAME.png`` is its
+        relief in grey with a legend in mm, with or without this.
+    relief_mm : float
+        Scale of the smoothed surface the relief is measured against, mm: narrower detail
+        (incisions, stamps, relief decoration) is relief, the wider form is taken out.
+    relief_light : tuple of float
+        Azimuths of the raking light, degrees clockwise from image up (315: from the upper left).
+    relief_blend : float
+        Share of the relief in ``NAME.relief-overlay.png``, 0 (the painting alone) to 1 (the relief alone).
+    plate_image : str
+        What the plate shows of the rollout: the painting, the relief (raking light from the
+        first azimuth of ``relief_light``; needs ``relief``) or both, one above the other.
     """
 
     px_per_mm: float | None = None
@@ -109,9 +142,14 @@ class BakeOptions:
     plate: bool = False
     plate_scale: str | float | None = field(default=None, metadata={"metavar": "1:N"})
     obj: bool = False
+    relief: bool = False
+    relief_mm: float = 4.0
+    relief_light: tuple[float, ...] = field(default=RELIEF_LIGHT_DEG, metadata={"metavar": "DEG,DEG"})
+    relief_blend: float = 0.5
+    plate_image: str = field(default="painting", metadata={"choices": PLATE_IMAGES})
 
     def __post_init__(self) -> None:
-        for name in ("scale_on_image", "plate", "obj"):
+        for name in ("scale_on_image", "plate", "obj", "relief"):
             if not isinstance(getattr(self, name), bool):
                 raise InvalidOptionError(f"{name} must be true or false, got {getattr(self, name)!r}")
         if self.plate_scale is not None:
@@ -132,6 +170,20 @@ class BakeOptions:
         object.__setattr__(self, "maps", tuple(dict.fromkeys(maps)))
         if isinstance(self.supersample, bool) or not isinstance(self.supersample, int) or not 0 <= self.supersample <= 8:
             raise InvalidOptionError(f"supersample must be an integer from 0 (automatic) to 8, got {self.supersample!r}")
+        if not _number_in(self.relief_mm, 0.0, MAX_RELIEF_MM) or self.relief_mm == 0:
+            raise InvalidOptionError(f"relief_mm must be a number of mm above 0 and up to {MAX_RELIEF_MM:g}, "
+                                     f"got {self.relief_mm!r}")
+        lights = (self.relief_light,) if isinstance(self.relief_light, (int, float)) else tuple(self.relief_light)
+        if not 1 <= len(lights) <= MAX_RELIEF_LIGHTS or not all(_number_in(a, -math.inf, math.inf) for a in lights):
+            raise InvalidOptionError(f"relief_light must be 1 to {MAX_RELIEF_LIGHTS} azimuths in degrees, "
+                                     f"e.g. 315,45; got {self.relief_light!r}")
+        object.__setattr__(self, "relief_light", tuple(dict.fromkeys(float(a) % 360.0 for a in lights)))
+        if not _number_in(self.relief_blend, 0.0, 1.0):
+            raise InvalidOptionError(f"relief_blend must be a number from 0 to 1, got {self.relief_blend!r}")
+        if self.plate_image not in PLATE_IMAGES:
+            raise InvalidOptionError(f"unknown plate_image {self.plate_image!r}; choose from {', '.join(PLATE_IMAGES)}")
+        if self.plate_image != "painting" and not self.relief:
+            raise InvalidOptionError(f"plate_image {self.plate_image} draws the relief: add relief (--relief)")
 
     @property
     def resolution(self) -> float:

@@ -1,10 +1,12 @@
 """The bake's file stage: bake ``NAME.relaxed.ply`` (or a rollout) into ``NAME.png``, the
 distortion maps, the scale layers, optional TIFFs, OBJ, sheet and plate, and
-``NAME.bake.json``. The images are streamed strip by strip from
+``NAME.bake.json``; the base left out of the rollout (``NAME.base.ply``) into ``NAME.base.png``
+and its own maps and ``NAME.base.bake.json``. The images are streamed strip by strip from
 :class:`potflat.bake.compose.Composition`; what the rollout marks comes in memory
 (:class:`potflat.types.RolloutMarks`) or from ``NAME.rollout.json`` beside the input."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from contextlib import ExitStack
@@ -17,16 +19,17 @@ from potflat import __version__
 from potflat._heap import reuse_freed_memory
 from potflat.bake import annotate
 from potflat.bake.compose import Composition, bake
-from potflat.bake.marks import FOLDED_COLOUR, REPEAT_COLOUR, image_figures, rgba16
+from potflat.bake.marks import FOLDED_COLOUR, REPEAT_COLOUR, rgba16
 from potflat.bake.options import BakeOptions
+from potflat.bake.relief import raking_key
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.files.names import rollout_json_beside, stage_name
+from potflat.files.names import base_ply_beside, rollout_json_beside, stage_name
 from potflat.files.plate import make_plate
 from potflat.files.provenance import provenance
 from potflat.files.relax_stage import RelaxFiles
 from potflat.io.atomic import write_bytes_atomic, write_json_atomic
 from potflat.io.flat_ply import read_flat_ply
-from potflat.io.images import PngWriter, write_png, write_tiff_rows
+from potflat.io.images import PngWriter, TiffWriter, write_png, write_tiff_rows
 from potflat.io.obj import write_textured_obj
 from potflat.raster.render import Grid, Renderer
 from potflat.types import FlatMesh, RolloutMarks, StepClock
@@ -113,7 +116,9 @@ def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: li
     when baking into the scan's own folder): the input would be replaced."""
     suffixes = (".png", ".tif", ".position.tif", ".sheet.png", ".bake.json", ".overlay.png", ".scale-layer.png",
                 ".attachments.png", ".flat.obj", ".flat.mtl", ".plate.svg", ".plate.pdf", ".plate.png",
-                ".scalebar.png", *(f".{m}.png" for m in options.maps))
+                ".scalebar.png", *(f".{m}.png" for m in options.maps),
+                *((".relief.tif", ".relief.png", ".curvature.png", ".relief-overlay.png",
+                   *(f".{raking_key(a)}.png" for a in options.relief_light)) if options.relief else ()))
     for src in (Path(p) for p in inputs if p is not None):
         for out in (out_dir / f"{name}{s}" for s in suffixes):
             if src.exists() and out.exists() and os.path.samefile(out, src):
@@ -121,10 +126,34 @@ def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: li
                                          "bake into another folder (-o) or give another --name")
 
 
+def _base_options(options: BakeOptions) -> BakeOptions:
+    """The options the base's disc is baked with: the painting's, with its scale bar drawn into
+    the image (a disc leaves a corner free), without the sheet, plate and OBJ (made of the
+    relaxed flattening)."""
+    return dataclasses.replace(options, sheet=False, plate=False, obj=False, scale_on_image=True)
+
+
+def _remove_stale_base(out_dir: Path, name: str) -> None:
+    """Remove the base images an earlier bake of ``name`` wrote into ``out_dir`` (the files its
+    ``NAME.base.bake.json`` lists) when this bake has no base: the folder's outputs stay one set."""
+    record_path = out_dir / f"{name}.base.bake.json"
+    try:
+        record = json.loads(record_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return
+    if not isinstance(record, dict) or not isinstance(record.get("files"), dict) \
+            or not isinstance(record.get("provenance"), dict) or record["provenance"].get("stage") != "bake":
+        return
+    for listed in record["files"].values():
+        if isinstance(listed, str) and listed.startswith(f"{name}.base.") and Path(listed).name == listed:
+            (out_dir / listed).unlink(missing_ok=True)
+
+
 @reuse_freed_memory()  # (its many large temporaries; its peak is under the relax stage's)
 def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, options: BakeOptions | None = None, *,
                    name: str | None = None, relaxed: RelaxFiles | None = None,
-                   marks: RolloutMarks | None = None) -> BakeFiles:
+                   marks: RolloutMarks | None = None, flat: FlatMesh | None = None,
+                   base: FlatMesh | None = None) -> BakeFiles:
     """Bake ``NAME.relaxed.ply`` (or a rollout) into images and ``NAME.bake.json``.
 
     Files (in ``out_dir``): ``NAME.png`` (painting, RGBA, resolution in the file),
@@ -134,8 +163,14 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     (the bar alone, true scale), optionally ``NAME.tif`` (16-bit RGBA),
     ``NAME.position.tif`` (float32 3D points) and ``NAME.sheet.png``, and
     ``NAME.attachments.png`` (where handles or other attachments left out by the rollout met
-    the wall); all images share the pixel grid of ``NAME.png`` (maps add a legend band
-    below it).
+    the wall), with ``relief`` ``NAME.relief.tif`` (16-bit heights in mm), ``NAME.relief.png``,
+    ``NAME.raking-AZ.png``, ``NAME.curvature.png`` and ``NAME.relief-overlay.png``
+    (:mod:`potflat.bake.relief`); all images share the pixel grid of ``NAME.png`` (maps and
+    some relief images add a legend band below it, and so does ``NAME.png`` when it is an
+    untextured scan's relief). Baking ``NAME.relaxed.ply`` also bakes the base the rollout
+    left out (``NAME.base.ply`` beside it) into ``NAME.base.png`` (its scale bar in the image),
+    its maps and ``NAME.base.bake.json``, listed under ``base_`` in :attr:`BakeFiles.paths`;
+    without a base, the base images of an earlier bake are removed.
 
     Parameters
     ----------
@@ -152,6 +187,10 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     marks : RolloutMarks, optional
         What the rollout of this run marks; read from ``NAME.rollout.json`` beside the input
         when not given.
+    flat : FlatMesh, optional
+        The flattening ``flat_ply`` holds, when the caller has it (read otherwise).
+    base : FlatMesh, optional
+        The base's disc ``NAME.base.ply`` holds, when the caller has it (read otherwise).
 
     Returns
     -------
@@ -162,7 +201,8 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     out_dir = Path(out_dir)
     name = name or stage_name(flat_ply)
     clock = StepClock()
-    flat = relaxed.flat if relaxed is not None else read_flat_ply(flat_ply)
+    if flat is None:
+        flat = relaxed.flat if relaxed is not None else read_flat_ply(flat_ply)
     rollout_ply = None
     if options.sheet:
         if not flat_ply.name.endswith(".relaxed.ply"):
@@ -183,10 +223,14 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     r = Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels,
                  summary=relaxed.distortion if relaxed is not None else None,
                  zone=relaxed.zone if relaxed is not None else None,
-                 reference=relaxed.reference if relaxed is not None else None)
+                 reference=relaxed.reference if relaxed is not None else None, relief_mm=options.relief_mm)
     g = r.grid
     clock.lap("prepare")
-    comp = Composition(r, maps=options.maps, marks=marks, grid=options.grid, scale_on_image=options.scale_on_image)
+    if options.relief or r.paints_relief:
+        r.relief  # noqa: B018 - the relief's fits, timed apart (made on first use)
+        clock.lap("relief")
+    comp = Composition(r, options, marks=marks)
+    relief = comp.relief
     paths: dict[str, Path] = {"png": out_dir / f"{name}.png"}
     with ExitStack() as stack:
         png = stack.enter_context(PngWriter(paths["png"], g.width, g.height + comp.band, 4, px_per_mm=ppm))
@@ -200,6 +244,17 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
         if len(comp.attachments):
             paths["attachments"] = out_dir / f"{name}.attachments.png"
             mask_png = stack.enter_context(PngWriter(paths["attachments"], g.width, g.height, 4, px_per_mm=ppm))
+        relief_writers = {}
+        if relief is not None:
+            paths["relief_tif"] = out_dir / f"{name}.relief.tif"
+            relief_tif = stack.enter_context(TiffWriter(paths["relief_tif"], shape=(g.height, g.width),
+                                                        dtype=np.uint16, px_per_mm=ppm, photometric="minisblack",
+                                                        description=relief.tiff_description()))
+            for key in relief.keys:
+                paths[key] = out_dir / f"{name}.{key}.png"
+                relief_writers[key] = stack.enter_context(PngWriter(
+                    paths[key], g.width, g.height + len(relief.legends.get(key, ())), relief.channels[key],
+                    px_per_mm=ppm))
         for strip in comp.strips():
             png.write(strip.painting)
             for key, writer in writers.items():
@@ -207,10 +262,16 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
             layer_png.write(strip.scale_layer)
             if strip.attachments is not None:
                 mask_png.write(strip.attachments)
+            for key, writer in relief_writers.items():
+                writer.write(strip.relief[key])
+            if relief is not None:
+                relief_tif.write(strip.relief["levels"])
         if comp.band:
             png.write(comp.band_rows())
         for key, legend in comp.legends.items():
             writers[key].write(legend)
+        for key, legend in (relief.legends.items() if relief is not None else ()):
+            relief_writers[key].write(legend)
     paths["scalebar"] = write_png(out_dir / f"{name}.scalebar.png", comp.layer.bar_image(), px_per_mm=ppm)
     clock.lap("render")
     if options.tiff:
@@ -222,8 +283,20 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
                                             shape=(g.height, g.width, 3), dtype=np.float32, px_per_mm=ppm,
                                             photometric="rgb")
     clock.lap("tiff")
-    figures = image_figures(r, comp.covered_px)
+    figures = comp.figures()
     clock.lap("figures")
+    base_files, base_ply = None, None
+    if flat_ply.name.endswith(".relaxed.ply"):
+        base_ply = base_ply_beside(flat_ply)
+        if base is None and base_ply.is_file():
+            base = read_flat_ply(base_ply)
+        if base is not None:
+            base_files = run_bake_stage(base_ply, out_dir, _base_options(options), name=f"{name}.base", flat=base,
+                                        marks=RolloutMarks())
+            paths.update({f"base_{k}": p for k, p in base_files.paths.items()})
+        else:
+            _remove_stale_base(out_dir, name)
+        clock.lap("base")
     if options.obj:
         paths["obj"] = _write_flat_obj(out_dir / f"{name}.flat.obj", flat, g, comp.band, paths["png"].name)
         paths["mtl"] = paths["obj"].with_suffix(".mtl")
@@ -232,7 +305,8 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
                                                  title=name)
     clock.lap("obj_sheet")
     inputs = ([flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else [])
-              + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else []))
+              + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else [])
+              + ([base_ply] if base_files is not None else []))
     scales = comp.scales
     record = {
         **figures,
@@ -244,10 +318,15 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
             "percent_of_surface": marks.folded_percent, "regions_total": marks.folded_regions,
             "mark": f"outlined and hatched {FOLDED_COLOUR[:3]} on the distortion maps and the overlay: where the scan "
                     "folds over itself in 3D (see NAME.rollout.json, folded)"},
+        "base": None if base_files is None else {
+            "what": "the base (the floor, inside) left out of the rollout, seen along the axis; its figures are in "
+                    f"{base_files.paths['json'].name}",
+            "files": base_files.record["files"], "image_mm": base_files.record["image_mm"],
+            "lengths": base_files.record.get("lengths")},
         "scale_bar_mm": comp.layer.bar_mm,
         "scale_on_image": None if comp.on_image is None else {
             "bar_mm": comp.on_image.bar_mm, "at_px": list(comp.on_image.at), "box_px": list(comp.on_image.box_size),
-            "band_below_px": comp.band, "grid": options.grid},
+            "band_below_px": comp.scale_band, "grid": options.grid},
         "maps": {m: {"range": [scales[m].lo, scales[m].hi], "label": scales[m].label} for m in options.maps},
         "files": {k: p.name for k, p in paths.items()},
         "provenance": provenance(stage="bake", inputs=inputs,
@@ -258,7 +337,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     record["timings"] = clock.total()  # the plate (made from these files) comes after
     write_json_atomic(paths["json"], record)
     if options.plate:
-        plate = make_plate(flat_ply, out_dir, scale=options.plate_scale, name=name)
+        plate = make_plate(flat_ply, out_dir, scale=options.plate_scale, name=name, image=options.plate_image)
         paths.update({f"plate_{k}": p for k, p in plate.paths.items()})
         record["files"].update({f"plate_{k}": p.name for k, p in plate.paths.items()})
         record["plate"] = {k: v for k, v in plate.record.items() if k not in ("files", "inputs")}

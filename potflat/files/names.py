@@ -28,3 +28,10 @@ def rollout_json_beside(flat_ply: Path) -> Path:
     ``X.relaxed.ply``."""
     stem = flat_ply.name.removesuffix(".ply").removesuffix(".relaxed").removesuffix(".rollout")
     return flat_ply.with_name(f"{stem}.rollout.json")
+
+
+def base_ply_beside(flat_ply: Path) -> Path:
+    """The base's orthographic view ``X.base.ply`` beside a stage file ``X.rollout.ply`` or
+    ``X.relaxed.ply`` (written by the rollout when it leaves the base out)."""
+    stem = flat_ply.name.removesuffix(".ply").removesuffix(".relaxed").removesuffix(".rollout")
+    return flat_ply.with_name(f"{stem}.base.ply")

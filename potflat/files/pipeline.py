@@ -193,7 +193,7 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
         # NAME.png is written before NAME.bake.json: mark it as potflat's own until the bake is done
         marker = write_json_atomic(partial_marker(out, name), {"potflat": "incomplete", "scan": str(scan)})
         baked = run_bake_stage(relaxed.paths["ply"], out, options.bake, name=name, relaxed=relaxed,
-                               marks=rolled.marks)
+                               marks=rolled.marks, base=rolled.base)
         t_bake = time.perf_counter() - t
         marker.unlink()
     seconds = StageSeconds(rollout=t_rollout, relax=t_relax, bake=t_bake, total=time.perf_counter() - start)

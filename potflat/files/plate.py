@@ -11,8 +11,9 @@ below at the same stated scale (1:1, 1:2, ...), a scale bar and a caption. It wr
 * ``NAME.plate.png``: a preview at :data:`PREVIEW_DPI`.
 
 SVG and PDF pages are sized in millimetres so that printing at 100 % gives the stated
-scale. The rollout is ``NAME.png`` as baked (its pixels embedded unchanged); the outside
-view is rendered at :data:`VIEW_DPI` on paper.
+scale. The rollout is ``NAME.png`` as baked, or its relief in raking light
+(``NAME.raking-AZ.png`` of a bake with ``--relief``), or both one above the other (its pixels
+embedded unchanged); the outside view is rendered at :data:`VIEW_DPI` on paper.
 """
 from __future__ import annotations
 
@@ -30,8 +31,9 @@ import numpy as np
 from potflat import __version__
 from potflat.bake import bake
 from potflat.bake.annotate import nice_length
-from potflat.bake.options import parse_scale
-from potflat.errors import InvalidInputError
+from potflat.bake.options import PLATE_IMAGES, parse_scale
+from potflat.bake.relief import raking_key
+from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.files.names import stage_name
 from potflat.io.atomic import write_bytes_atomic
 from potflat.io.flat_ply import read_flat_ply
@@ -84,7 +86,7 @@ class _Sources:
     relax: dict
     bake: dict
     profile: object  # Profile in mm
-    painting: np.ndarray  # NAME.png, (h, w, 4) uint8
+    rollouts: tuple  # (what, (h, w, 4) uint8) of each rollout image, top to bottom: NAME.png and/or its relief
     inputs: tuple
 
 
@@ -110,7 +112,22 @@ def _read_rgba(path: Path) -> np.ndarray:
         raise InvalidInputError(f"{path}: unreadable image ({exc}); bake it again") from None
 
 
-def _sources(relaxed_ply: Path, name: str | None, bake_dir: Path) -> _Sources:
+def _relief_image(bake: dict, bake_dir: Path, relaxed_ply: Path) -> tuple[str, Path]:
+    """What the relief image of a bake shows and its file (the raking light from the bake's
+    first azimuth)."""
+    relief = bake.get("relief") if isinstance(bake.get("relief"), dict) else {}
+    lights = relief.get("light_azimuth_deg")
+    again = f"bake it with --relief first: potflat bake {relaxed_ply} --relief"
+    if not isinstance(lights, list) or not lights:
+        raise InvalidInputError(f"the bake of {relaxed_ply.name} has no relief images; {again}")
+    key = raking_key(float(lights[0]))
+    png = bake_dir / bake.get("files", {}).get(key, f"{key}.png")
+    if not png.is_file():
+        raise InvalidInputError(f"{png} is missing; {again}")
+    return f"relief in raking light from {float(lights[0]):g} degrees", png
+
+
+def _sources(relaxed_ply: Path, name: str | None, bake_dir: Path, image: str) -> _Sources:
     if not relaxed_ply.name.endswith(".relaxed.ply"):
         raise InvalidInputError(f"{relaxed_ply.name}: the plate is made from NAME.relaxed.ply (with the rollout, "
                                 "relax and bake files beside it); give that file")
@@ -126,11 +143,15 @@ def _sources(relaxed_ply: Path, name: str | None, bake_dir: Path) -> _Sources:
     if not png.is_file():
         raise InvalidInputError(f"{png} is missing; bake it first: potflat bake {relaxed_ply}")
     profile = read_profile_csv(csv, rollout.get("profile", {}))
-    painting = _read_rgba(png)
+    shown = []
+    if image in ("painting", "both"):
+        shown.append(("painting" if bake.get("painting") != "relief" else "relief", png))
+    if image in ("relief", "both"):
+        shown.append(_relief_image(bake, bake_dir, relaxed_ply))
     return _Sources(name=name or stem, flat=read_flat_ply(relaxed_ply), rollout=rollout, relax=relax, bake=bake,
-                    profile=profile, painting=painting,
+                    profile=profile, rollouts=tuple((what, _read_rgba(path)) for what, path in shown),
                     inputs=(relaxed_ply, folder / f"{stem}.rollout.json", folder / f"{stem}.relaxed.json",
-                            bake_json, png, csv))
+                            bake_json, *(path for _, path in shown), csv))
 
 
 def view_direction(rollout_summary: dict) -> np.ndarray:
@@ -193,10 +214,10 @@ def outside_view(flat, rollout_summary: dict, px_per_mm: float):
     return bake(FlatMesh(sub, uv), px_per_mm=px_per_mm, maps=(), max_megapixels=200.0)
 
 
-def _auto_scale(drawing_mm: tuple[float, float], rollout_mm: tuple[float, float]) -> float:
+def _auto_scale(drawing_mm: tuple[float, float], rollout_mm: tuple[float, float], gaps: int = 1) -> float:
     for s in PLATE_SCALES:
         if (max(drawing_mm[0], rollout_mm[0]) * s <= CONTENT_MM[0]
-                and (drawing_mm[1] + rollout_mm[1]) * s + GAP_MM <= CONTENT_MM[1]):
+                and (drawing_mm[1] + rollout_mm[1]) * s + gaps * GAP_MM <= CONTENT_MM[1]):
             return s
     return PLATE_SCALES[-1]
 
@@ -237,19 +258,21 @@ def compose_plate(src: _Sources, scale: float | None):
     rmax = float(np.nanmax(np.r_[ro[ok], prof.inner_radius[np.isfinite(prof.inner_radius)]]))
     h_lo, h_hi = prof.height_range
     roll_ppm = float(src.bake["px_per_mm"])
-    roll_w, roll_h = src.painting.shape[1] / roll_ppm, src.painting.shape[0] / roll_ppm
+    sizes = [(img.shape[1] / roll_ppm, img.shape[0] / roll_ppm) for _, img in src.rollouts]
+    roll_w, roll_h = max(w for w, _ in sizes), sum(h for _, h in sizes)
     if scale is None:
-        scale = _auto_scale((2 * rmax, h_hi - h_lo), (roll_w, roll_h))
+        scale = _auto_scale((2 * rmax, h_hi - h_lo), (roll_w, roll_h), gaps=len(sizes))
     mpu = src.flat.mesh.mm_per_unit
     view = outside_view(src.flat, src.rollout, min(VIEW_DPI / 25.4 * scale, 40.0))
     s_px = view.px_per_mm * mpu  # view pixels per scan unit
     vx0, vy1 = view.origin * mpu  # mm: left edge, top edge
-    vh, vw = view.image.shape[:2]
+    vh, vw = view.painting.shape[:2]
     vx1, vy0 = vx0 + vw / view.px_per_mm, vy1 - vh / view.px_per_mm
     y_lo, y_hi = min(h_lo, vy0), max(h_hi, vy1)
     half = max(rmax, -vx0)
     draw_w, draw_h = 2 * half * scale, (y_hi - y_lo) * scale
-    paper_roll = (roll_w * scale, roll_h * scale)
+    gaps = GAP_MM * (len(sizes) - 1)  # between the rollout images, on paper
+    paper_roll = (roll_w * scale, roll_h * scale + gaps)
     page_w = max(draw_w, paper_roll[0], 120.0) + 2 * MARGIN_MM
     figures, where = painted_zone_distortion(src.relax)
     proxy = src.rollout.get("proxy", {}).get("type", "?")
@@ -262,7 +285,8 @@ def compose_plate(src: _Sources, scale: float | None):
          f"{preset}.", "normal"),
         (f"Distortion in the {where}: {distortion_words(figures)}.", "normal"),
         (f"Scale {label} when printed at 100 %. Left of the axis the outside view, right of it the section; "
-         "the rollout below, seen from outside, mouth up.", "normal"),
+         f"the rollout below ({', then '.join(what for what, _ in src.rollouts)}), seen from outside, mouth up.",
+         "normal"),
     ]
     chars = max(40, int((page_w - 2 * MARGIN_MM) / (FONT_PT * 25.4 / 72 * CHAR_EM)))
     lines = [(piece, weight) for text, weight in caption for piece in textwrap.wrap(text, chars)]
@@ -283,7 +307,7 @@ def compose_plate(src: _Sources, scale: float | None):
     vessel.set_axis_off()
     axis_col = int(round(-view.origin[0] * s_px))
     if axis_col > 0:
-        vessel.imshow(view.image[:, :axis_col], extent=(vx0, vx0 + axis_col / view.px_per_mm, vy0, vy1),
+        vessel.imshow(view.painting[:, :axis_col], extent=(vx0, vx0 + axis_col / view.px_per_mm, vy0, vy1),
                       interpolation="none", aspect="auto")
     hs = prof.heights
     for i, j in _runs(ok):
@@ -298,15 +322,18 @@ def compose_plate(src: _Sources, scale: float | None):
         vessel.plot([-ro[k], ro[k]], [hs[k], hs[k]], color="black", linewidth=0.4)
     vessel.plot([0, 0], [y_lo, y_hi], color="black", linewidth=0.4, linestyle=(0, (8, 2, 1.5, 2)))
 
-    # rollout below, same scale
+    # rollout images below, same scale, one above the other
     roll_top = top - draw_h - GAP_MM
-    rx = cx - paper_roll[0] / 2
-    roll = fig.add_axes((rx / page_w, (roll_top - paper_roll[1]) / page_h, paper_roll[0] / page_w,
-                         paper_roll[1] / page_h))
-    roll.imshow(src.painting, extent=(0, roll_w, 0, roll_h), interpolation="none", aspect="auto")
-    roll.set_xlim(0, roll_w)
-    roll.set_ylim(0, roll_h)
-    roll.set_axis_off()
+    y = roll_top
+    for (_, image), (w, h) in zip(src.rollouts, sizes):
+        paper_w, paper_h = w * scale, h * scale
+        rx = cx - paper_w / 2
+        roll = fig.add_axes((rx / page_w, (y - paper_h) / page_h, paper_w / page_w, paper_h / page_h))
+        roll.imshow(image, extent=(0, w, 0, h), interpolation="none", aspect="auto")
+        roll.set_xlim(0, w)
+        roll.set_ylim(0, h)
+        roll.set_axis_off()
+        y -= paper_h + GAP_MM
 
     # scale bar and caption
     bar_y = roll_top - paper_roll[1] - GAP_MM + 2.0
@@ -318,13 +345,14 @@ def compose_plate(src: _Sources, scale: float | None):
         y -= LINE_MM
     facts = {"scale": scale, "scale_label": label, "page_mm": [page_w, page_h], "drawing_mm": [draw_w, draw_h],
              "rollout_mm": list(paper_roll), "distortion_where": where, "distortion": figures, "date": date,
-             "proxy": proxy, "preset": preset, "profile_rows": int(ok.sum()),
+             "proxy": proxy, "preset": preset, "rollout_images": [what for what, _ in src.rollouts],
+             "profile_rows": int(ok.sum()),
              "profile_step_mm": float(np.median(np.diff(hs))) if len(hs) > 1 else None}
     return fig, facts
 
 
 def make_plate(relaxed_ply: str | os.PathLike, out_dir: str | os.PathLike | None = None, *,
-               scale: float | str | None = None, name: str | None = None) -> PlateFiles:
+               scale: float | str | None = None, name: str | None = None, image: str = "painting") -> PlateFiles:
     """Write ``NAME.plate.svg``, ``NAME.plate.pdf`` and ``NAME.plate.png`` for a flattened scan.
 
     Parameters
@@ -340,6 +368,9 @@ def make_plate(relaxed_ply: str | os.PathLike, out_dir: str | os.PathLike | None
         which drawing and rollout fit an A4 page.
     name : str, optional
         Output NAME and caption title; default the stage name.
+    image : str
+        The rollout as ``painting`` (``NAME.png``), as ``relief`` (the raking light from the
+        first azimuth of a bake with ``--relief``) or ``both``, one above the other.
 
     Returns
     -------
@@ -349,9 +380,11 @@ def make_plate(relaxed_ply: str | os.PathLike, out_dir: str | os.PathLike | None
     """
     import matplotlib
 
+    if image not in PLATE_IMAGES:
+        raise InvalidOptionError(f"unknown plate image {image!r}; choose from {', '.join(PLATE_IMAGES)}")
     relaxed_ply = Path(relaxed_ply)
     out = Path(out_dir) if out_dir is not None else relaxed_ply.parent
-    src = _sources(relaxed_ply, name, out)
+    src = _sources(relaxed_ply, name, out, image)
     fig, facts = compose_plate(src, parse_scale(scale))
     paths = {}
     rc = {"svg.fonttype": "none", "pdf.fonttype": 42, "svg.hashsalt": src.name}

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from potflat.errors import NotADiskError
 from potflat.files.names import relax_name
 from potflat.files.provenance import provenance
 from potflat.files.rollout_stage import RolloutFiles
@@ -68,6 +69,28 @@ def _level_for_json(level: LevelRecord) -> dict:
     return {k: v for k, v in asdict(level).items() if v is not None}
 
 
+def _not_a_disk_advice(rollout_record: dict, rollout_json: Path) -> str:
+    """What to do about a rollout that is not a disk, from what its record (``NAME.rollout.json``,
+    ``rollout_json``; ``{}`` when there is none) says the rollout did."""
+    fixes = []
+    if "disk_cut" not in rollout_record:  # made before the rollout cut such parts open
+        fixes.append("make the rollout again with potflat rollout, which cuts a handle joined at both ends, a closed "
+                     "part or an edge of three faces open")
+    attachments = rollout_record.get("attachments")
+    if isinstance(attachments, dict) and attachments.get("kept") and attachments.get("faces"):
+        fixes.append(f"run the rollout without --keep-attachments (it kept {attachments['faces']} faces of handles, "
+                     "spouts or knobs)")
+    folded = rollout_record.get("folded")
+    regions = folded.get("regions") if isinstance(folded, dict) else None
+    band = regions[0].get("band") if isinstance(regions, list) and regions and isinstance(regions[0], dict) else None
+    if isinstance(band, list) and len(band) == 2 and all(isinstance(b, (int, float)) for b in band):
+        fixes.append(f"or with --band LO HI leaving out where the scan folds over itself (in {rollout_json.name}: "
+                     f"folded.regions[].band, the largest place at {band[0]:.2f} to {band[1]:.2f})")
+    if not fixes:
+        fixes.append("leave the part that folds out of the rollout (--band LO HI, --angles A0 A1)")
+    return "; ".join(fixes)
+
+
 def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: RelaxOptions | None = None, *,
                     name: str | None = None, progress: bool = False,
                     rolled: RolloutFiles | None = None) -> RelaxFiles:
@@ -106,7 +129,19 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         flat, distortion = rolled.flat, rolled.distortion
     if flat.mesh.texture_path is not None:  # copied beside the output: missing, say so before relaxing
         check_texture_file(flat.mesh.texture_path)
-    result = relax(flat, options=options, progress=progress, distortion_before=distortion)
+    rollout_json = rollout_ply.with_name(f"{stem}.rollout.json")
+    rj = {}
+    if rolled is not None or rollout_json.exists():
+        try:
+            rj = rolled.record if rolled is not None else json.loads(rollout_json.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            rj = {}
+        if not isinstance(rj, dict):  # a sidecar holding null, a list...: nothing to copy from it
+            rj = {}
+    try:
+        result = relax(flat, options=options, progress=progress, distortion_before=distortion)
+    except NotADiskError as exc:
+        raise NotADiskError(f"{exc}: {_not_a_disk_advice(rj, rollout_json)}") from None
     clock.lap("relax")
     ply_path = out_dir / f"{name}.relaxed.ply"
     json_path = out_dir / f"{name}.relaxed.json"
@@ -138,20 +173,12 @@ def run_relax_stage(rollout_ply: str | Path, out_dir: str | Path, options: Relax
         "vertices": len(flat.mesh.vertices),
         "faces": len(flat.mesh.faces),
     }
-    rollout_json = rollout_ply.with_name(f"{stem}.rollout.json")
-    if rolled is not None or rollout_json.exists():
-        try:
-            rj = rolled.record if rolled is not None else json.loads(rollout_json.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            rj = {}
-        if not isinstance(rj, dict):  # a sidecar holding null, a list...: nothing to copy from it
-            rj = {}
-        for key in ("axis", "proxy", "units"):
-            if key in rj:
-                record[key] = rj[key]
-        folded = rj.get("folded")
-        if isinstance(folded, dict):  # where the scan folds in 3D: the figures, the faces stay in the rollout's JSON
-            record["folded"] = {k: v for k, v in folded.items() if k != "face_indices"}
+    for key in ("axis", "proxy", "units"):
+        if key in rj:
+            record[key] = rj[key]
+    folded = rj.get("folded")
+    if isinstance(folded, dict):  # where the scan folds in 3D: the figures, the faces stay in the rollout's JSON
+        record["folded"] = {k: v for k, v in folded.items() if k != "face_indices"}
     inputs = [rollout_ply] + ([rollout_json] if rollout_json.exists() else [])
     record["provenance"] = provenance(stage="relax", inputs=inputs, options=asdict(options))
     comments = (f"potflat relax preset {result.preset}",)

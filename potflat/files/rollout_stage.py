@@ -39,6 +39,9 @@ class RolloutFiles:
         Its distortion figures.
     marks : RolloutMarks
         What the bake marks on the images (attachment roots, the repeat, folded faces).
+    base : FlatMesh or None
+        The base left out of the rollout, seen along the axis, as ``NAME.base.ply`` holds it
+        (None when the rollout kept it or there is none).
     """
 
     paths: dict[str, Path]
@@ -46,6 +49,7 @@ class RolloutFiles:
     flat: FlatMesh
     distortion: DistortionSummary
     marks: RolloutMarks
+    base: FlatMesh | None = None
 
 
 @reuse_freed_memory()  # (its many large temporaries; its peak is under the relax stage's)
@@ -53,7 +57,10 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
                       name: str | None = None, check: Callable[[FlatMesh], None] | None = None) -> RolloutFiles:
     """Read a scan, roll it out, write ``NAME.rollout.ply``, ``NAME.rollout.json`` and its profile.
 
-    The rollout's profile (:attr:`RolloutResult.profile`: both walls around its axis,
+    A base left out of the rollout (:mod:`potflat.rollout.base`) is written as ``NAME.base.ply``,
+    its orthographic view along the axis, for the bake (a stale one from an earlier run into
+    the same folder is removed when this rollout keeps its base). The rollout's profile
+    (:attr:`RolloutResult.profile`: both walls around its axis,
     attachments left out) is written as ``NAME.profile.csv`` and ``NAME.profile.svg`` (a
     section drawing, see ``docs/profile.md``).
 
@@ -84,7 +91,8 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     name = check_output_name(name or scan_path.stem, what="name" if name else f"the name of {scan_path}")
     paths = {"ply": out_dir / f"{name}.rollout.ply", "json": out_dir / f"{name}.rollout.json",
              "profile_csv": out_dir / f"{name}.profile.csv", "profile_svg": out_dir / f"{name}.profile.svg"}
-    for out in paths.values():
+    base_ply = out_dir / f"{name}.base.ply"
+    for out in (*paths.values(), base_ply):
         if out.resolve() == scan_path.resolve():
             raise InvalidOptionError(
                 f"output {out} would overwrite the input scan; choose another output folder or --name")
@@ -107,13 +115,45 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     record["provenance"] = provenance(stage="rollout", inputs=[scan_path], options=options.as_dict())
     comments = (f"potflat {__version__} rollout of {scan_path.name}",)
     write_flat_ply(paths["ply"], result.flat, comments=comments)
+    base = result.base.flat if result.base is not None else None
+    if base is not None:
+        base_comments = (f"potflat {__version__} base of {scan_path.name}, seen from {result.base.view}",)
+        paths["base_ply"] = write_flat_ply(base_ply, base, comments=base_comments)
+        record["files"]["base_ply"] = base_ply.name
+    else:
+        _remove_stale_base(base_ply)
     write_profile_csv(profile, paths["profile_csv"])
     write_profile_svg(profile, paths["profile_svg"], title=f"{name}: profile ({profile.units})")
     clock.lap("write")
     record["timings"] = {**clock.total(), "rollout_steps": result.timings}
     write_json_atomic(paths["json"], record)
     return RolloutFiles(paths=paths, record=record, flat=as_stored(result.flat, paths["ply"], comments=comments),
-                        distortion=result.distortion, marks=result.marks)
+                        distortion=result.distortion, marks=result.marks,
+                        base=None if base is None else as_stored(base, base_ply, comments=base_comments))
+
+
+def base_line(base: dict, base_ply: Path | None) -> str:
+    """One line of a run's summary: where the faces at the foot facing along the axis went
+    (``base``: the ``base`` block of ``NAME.rollout.json``; ``base_ply``: the disc's file)."""
+    what = "base" if base["view"] == "below" else "floor"
+    if not base["left_out"]:
+        return f"{what} kept in the rollout ({base['candidate_faces']} faces facing along the axis): {base['reason']}"
+    where = f" in {base_ply.name}" if base_ply is not None else ""
+    return (f"{what} left out of the rollout ({base['faces_in_disc']} faces, {base['area_in_disc_mm2']:.4g} mm\N{SUPERSCRIPT TWO}, "
+            f"{base['percent_of_region']:.0f} % of the surface), shown on its own{where}: {base['reason']}; "
+            "--keep-base keeps it in the rollout")
+
+
+def _remove_stale_base(base_ply: Path) -> None:
+    """Remove ``NAME.base.ply`` when an earlier rollout into the same folder wrote it (its
+    header says so) and this one keeps its base: the folder's outputs stay one set."""
+    try:
+        with open(base_ply, "rb") as fh:
+            head = fh.read(512)
+    except OSError:
+        return
+    if head.startswith(b"ply\n") and b"\ncomment potflat " in head and b" base of " in head:
+        base_ply.unlink(missing_ok=True)
 
 
 def rollout_record(result: RolloutResult) -> dict:
@@ -141,7 +181,11 @@ def rollout_record(result: RolloutResult) -> dict:
         "boundary_overlap": result.boundary_overlap,
         "walls": result.walls.summary(),
         "attachments": _attachments_summary(result),
+        "base": result.base.summary(mesh.mm_per_unit) if result.base is not None else None,
         "trimmed": _trimmed_summary(result, mesh.mm_per_unit),
+        "disk_cut": {"faces": len(result.disk_cut_faces), "area_mm2": result.disk_cut_area * mesh.mm_per_unit ** 2,
+                     "handles": result.disk_cut.handles, "nonmanifold_edges": result.disk_cut.nonmanifold_edges,
+                     "closed_parts": result.disk_cut.closed_parts, "reason": result.disk_cut.reason},
         "notes": rollout_notes(result),
         "folded": result.folds.as_dict() if result.folds is not None else None,
         "untangled": {"faces": result.untangled_faces, "vertices_moved": result.untangled_vertices,

@@ -32,7 +32,7 @@ def _texture_target(texture: Path, ply_path: Path) -> Path:
     if os.path.samefile(texture.parent, out_dir):
         return texture
     stem = ply_path.name
-    for suffix in (".ply", ".rollout", ".relaxed"):
+    for suffix in (".ply", ".rollout", ".relaxed", ".base"):
         stem = stem[: -len(suffix)] if stem.endswith(suffix) else stem
     return out_dir / f"{stem}.texture{texture.suffix.lower()}"
 

@@ -252,7 +252,7 @@ def write_png(path, image: np.ndarray, *, px_per_mm: float | None) -> Path:
 
 
 def write_tiff_rows(path, rows: Iterable[np.ndarray], *, shape: tuple[int, ...], dtype, px_per_mm: float | None,
-                    photometric: str) -> Path:
+                    photometric: str, description: str | None = None) -> Path:
     """Write a TIFF (zlib-compressed) from an iterator of row strips, atomically.
 
     Parameters
@@ -267,6 +267,8 @@ def write_tiff_rows(path, rows: Iterable[np.ndarray], *, shape: tuple[int, ...],
         Stored as X/Y resolution in pixels per centimetre.
     photometric : str
         ``"rgb"`` or ``"minisblack"``.
+    description : str, optional
+        The ImageDescription tag (what the values mean, their scale).
 
     Returns
     -------
@@ -297,9 +299,100 @@ def write_tiff_rows(path, rows: Iterable[np.ndarray], *, shape: tuple[int, ...],
     extrasamples = {"extrasamples": ("unassalpha",)} if photometric == "rgb" and len(shape) == 3 and shape[2] == 4 else {}
     with atomic_path(path) as tmp:
         tifffile.imwrite(tmp, tiles(), shape=shape, dtype=dtype, photometric=photometric, tile=(tile, tile),
-                         compression="zlib", compressionargs={"level": 1},
+                         compression="zlib", compressionargs={"level": 1}, description=description,
                          metadata=None, **extrasamples, **kwargs)
     return Path(path)
+
+
+class _Abandoned(Exception):
+    """Raised into a :class:`TiffWriter`'s writing thread when the block around it failed."""
+
+
+class TiffWriter:
+    """Write a TIFF strip by strip as the strips come (:func:`write_tiff_rows` in a thread fed
+    by :meth:`write`), atomically: the file appears under its final name only when all rows
+    were written and the block exits without error.
+
+    Parameters
+    ----------
+    path : path-like
+    shape, dtype, px_per_mm, photometric, description
+        As :func:`write_tiff_rows` takes them.
+    """
+
+    def __init__(self, path, *, shape: tuple[int, ...], dtype, px_per_mm: float | None, photometric: str,
+                 description: str | None = None):
+        self.path = Path(path)
+        self._args = {"shape": tuple(shape), "dtype": dtype, "px_per_mm": px_per_mm, "photometric": photometric,
+                      "description": description}
+        self._rows = 0
+
+    def __enter__(self) -> Self:
+        import queue
+
+        self._queue = queue.Queue(maxsize=PNG_QUEUE)
+        self._pool = ThreadPoolExecutor(1)
+        self._job = self._pool.submit(write_tiff_rows, self.path, self._strips(), **self._args)
+        return self
+
+    def _strips(self):
+        while (item := self._queue.get()) is not None:
+            if item is _Abandoned:
+                raise _Abandoned
+            yield item
+
+    def _put(self, item) -> None:
+        import queue
+
+        while True:
+            if self._job.done():  # the writer has all rows (the end needs no telling), or it failed
+                self._job.result()
+                if item is None:
+                    return
+                raise ValueError(f"TIFF {self.path}: the writer stopped after {self._rows} rows")
+            try:
+                self._queue.put(item, timeout=0.1)
+                return
+            except queue.Full:
+                continue
+
+    def write(self, rows: np.ndarray) -> None:
+        """Append rows ``(k, w[, c])`` (converted to the TIFF's dtype)."""
+        rows = np.asarray(rows, dtype=self._args["dtype"])
+        if rows.shape[1:] != self._args["shape"][1:] or self._rows + len(rows) > self._args["shape"][0]:
+            raise ValueError(f"TIFF {self.path}: rows of shape {rows.shape} do not continue a {self._args['shape']} image")
+        self._put(rows)
+        self._rows += len(rows)
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        try:
+            if exc_type is None:
+                if self._rows != self._args["shape"][0]:
+                    self._abandon()
+                    raise ValueError(f"TIFF {self.path}: {self._rows} of {self._args['shape'][0]} rows written")
+                self._put(None)
+                self._job.result()
+            else:
+                self._abandon()
+        finally:
+            self._pool.shutdown(wait=True)
+        return False
+
+    def _abandon(self) -> None:
+        """Stop the writing thread (its temporary file is removed) and wait for it; its own
+        error, if it had one, is not the one to report."""
+        import queue
+
+        while not self._job.done():
+            try:
+                self._queue.put(_Abandoned, timeout=0.1)
+                break
+            except queue.Full:
+                continue
+        try:
+            self._job.result()
+        except Exception:  # noqa: BLE001 - the block's error (or the row count) is reported
+            pass
 
 
 def read_mask(path: str | Path) -> np.ndarray:

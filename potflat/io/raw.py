@@ -101,7 +101,7 @@ def _flag_untextured(raw: _Raw, untextured: np.ndarray, why: str) -> None:
     count = int(untextured.sum())
     if count:
         raw.untextured = untextured
-        raw.warnings.append(f"{count} faces {why}; they are drawn as untextured surface (a shaded relief) "
+        raw.warnings.append(f"{count} faces {why}; they are drawn as untextured surface (its relief in grey) "
                             "and left out of the painted-zone detection")
 
 

@@ -7,10 +7,11 @@ each pixel averages ``n x n`` sub-samples (``supersample``; also anti-aliases th
 outline, alpha = covered fraction) and, where the texture is still finer than a
 sub-sample, a mip level chosen per triangle from its texture-coordinate Jacobian
 (trilinear). Sampling per face through its own texture coordinates keeps atlas chart
-borders seamless. Vertex-coloured scans bake their colours; untextured scans bake a
-shaded relief, and so do the faces of a textured scan that have no texture coordinates
-(:attr:`potflat.types.Mesh.untextured_faces`): they never read the texture, and the
-texture's mip levels are made from the other faces' charts only.
+borders seamless. Vertex-coloured scans bake their colours; untextured scans bake their
+relief (:mod:`potflat.mesh.relief`: the height above the surface smoothed, in grey, the
+range of most heights spread over the grey levels), and so do the faces of a textured scan
+that have no texture coordinates (:attr:`potflat.types.Mesh.untextured_faces`): they never
+read the texture, and the texture's mip levels are made from the other faces' charts only.
 
 The pixel grid: ``px_per_mm`` pixels per millimetre, row 0 at the largest ``v`` (the
 mouth up), column 0 at the smallest ``u`` (not mirrored); :attr:`Grid.origin` is
@@ -31,6 +32,7 @@ import numpy as np
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.images import read_ahead, read_texture
 from potflat.mesh import distortion
+from potflat.mesh.relief import SMOOTHING_MM, SurfaceRelief, surface_relief
 from potflat.mesh.tolerances import DEGENERATE, ROUNDING
 from potflat.raster import _kernels as raster
 from potflat.raster._kernels import copy_where, halve_masked
@@ -49,68 +51,15 @@ STRIP_SAMPLES = 1 << 21
 MAX_AUTO_SUPERSAMPLE = 4
 #: Automatic supersampling stays below this many sub-samples in the whole image.
 AUTO_SUPERSAMPLE_BUDGET = 64e6
-#: Radius (mm) of the smoothed surface the shaded relief of untextured scans is lit against.
-RELIEF_RADIUS_MM = 5.0
-#: Relief exaggeration of the shaded relief (the normals' deviation from the smoothed surface is scaled by it).
-RELIEF_EXAGGERATION = 2.0
+#: Percentiles (area-weighted, of the relief's heights) that end the grey range of the relief
+#: image: the one further from the median height (the plain surface, mid grey) is black or white.
+RELIEF_GREY_PERCENTILES = (1.0, 99.0)
+#: Narrowest height range (mm) the grey range is spread over: a smooth scan's rounding is not relief.
+RELIEF_MIN_RANGE_MM = 0.01
 
 
 # --------------------------------------------------------------------------------------
 # per-mesh fields
-
-
-def _vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals, unit length. Shape (n, 3)."""
-    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    vn = np.zeros_like(V)
-    for k in range(3):
-        for j in range(3):
-            vn[:, j] += np.bincount(F[:, k], fn[:, j], len(V))
-    return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
-
-
-def _relief_normals_and_light(V: np.ndarray, uv: np.ndarray, F: np.ndarray, mm_per_unit: float) -> np.ndarray:
-    """Per-vertex normal and light direction for a shaded relief, shape (n, 6).
-
-    The light comes from the image's upper left at 45 degrees elevation, in a frame that
-    follows the surface smoothed over :data:`RELIEF_RADIUS_MM`, so the vessel's overall
-    curvature is not shaded but its relief is; the normals' deviation from the smoothed
-    surface is exaggerated by :data:`RELIEF_EXAGGERATION`."""
-    import scipy.sparse as sp
-
-    n = len(V)
-    normals = _vertex_normals(V, F)
-    # 3D direction of image-up (d X / d v) per face, accumulated to vertices by area
-    P1, P2 = V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]
-    Q1, Q2 = uv[F[:, 1]] - uv[F[:, 0]], uv[F[:, 2]] - uv[F[:, 0]]
-    det = Q1[:, 0] * Q2[:, 1] - Q1[:, 1] * Q2[:, 0]
-    ok = np.abs(det) > 0
-    safe = np.where(ok, det, 1.0)
-    # [P1 P2] = J [Q1 Q2]  ->  dX/dv = (-Q2_u P1 + Q1_u P2) / det
-    up_f = ((-Q2[:, 0])[:, None] * P1 + Q1[:, 0][:, None] * P2) / safe[:, None]
-    up_f[~ok] = 0.0
-    w = np.abs(det) * ok
-    up = np.stack([sum(np.bincount(F[:, k], up_f[:, j] * w, n) for k in range(3)) for j in range(3)], axis=1)
-    # smooth normals and up over the relief radius by neighbour averaging (diffusion)
-    edges = distortion.unique_edges(F)
-    adj = sp.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
-                        shape=(n, n)).tocsr()
-    deg = np.maximum(np.asarray(adj.sum(axis=1)).ravel(), 1.0)
-    mean_edge = float(np.mean(np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1))) * mm_per_unit if len(edges) else 1.0
-    steps = int(np.clip((RELIEF_RADIUS_MM / max(mean_edge, 1e-12)) ** 2, 1, 200))
-    smooth_n, smooth_up = normals.copy(), up.copy()
-    for _ in range(steps):
-        smooth_n = 0.5 * smooth_n + 0.5 * (adj @ smooth_n) / deg[:, None]
-        smooth_up = 0.5 * smooth_up + 0.5 * (adj @ smooth_up) / deg[:, None]
-    smooth_n /= np.maximum(np.linalg.norm(smooth_n, axis=1, keepdims=True), 1e-300)
-    t_v = smooth_up - np.einsum("ij,ij->i", smooth_up, smooth_n)[:, None] * smooth_n
-    t_v /= np.maximum(np.linalg.norm(t_v, axis=1, keepdims=True), 1e-300)
-    t_u = np.cross(t_v, smooth_n)  # right-handed: t_u x t_v = n (seen from outside)
-    light = -t_u + t_v + math.sqrt(2.0) * smooth_n
-    light /= np.maximum(np.linalg.norm(light, axis=1, keepdims=True), 1e-300)
-    relief = smooth_n + RELIEF_EXAGGERATION * (normals - smooth_n)
-    relief /= np.maximum(np.linalg.norm(relief, axis=1, keepdims=True), 1e-300)
-    return np.concatenate([relief, light], axis=1)
 
 
 def _chart_mask(texcoords: np.ndarray, height: int, width: int) -> np.ndarray:
@@ -240,13 +189,16 @@ class Renderer:
         The 3D side of ``flat``'s figures (:class:`potflat.mesh.distortion.SurfaceReference` of
         its mesh's vertices and faces) when the caller has it (the relax stage's); built when
         not given.
+    relief_mm : float
+        Scale (mm) of the smoothed surface the relief is measured against (:attr:`relief`).
     """
 
     def __init__(self, flat: FlatMesh, px_per_mm: float, *, supersample: int = 0, max_megapixels: float = 1000.0,
                  distortion_maps: bool = True, summary: distortion.DistortionSummary | None = None,
                  zone: distortion.ZoneSummary | None = None,
-                 reference: distortion.SurfaceReference | None = None):
+                 reference: distortion.SurfaceReference | None = None, relief_mm: float = SMOOTHING_MM):
         self.flat = flat
+        self.relief_mm = relief_mm
         mesh = flat.mesh
         self.faces = mesh.faces
         self.grid = make_grid(flat, px_per_mm, max_megapixels)
@@ -287,7 +239,7 @@ class Renderer:
             self.texels_per_pixel = self._texel_ratio(pix)
             self.texels_per_pixel_median = float(np.median(
                 self.texels_per_pixel if untextured is None else self.texels_per_pixel[~untextured]))
-        #: whether some faces of a textured painting are drawn as shaded relief (untextured faces)
+        #: whether some faces of a textured painting are drawn as relief (untextured faces)
         self.has_untextured = self.texture is not None and untextured is not None
         # the kernel's flag of those faces: always an array (all False without them)
         self._untextured = untextured if self.has_untextured else np.zeros(len(self.faces), bool)
@@ -311,7 +263,7 @@ class Renderer:
         self._face_cache = self._vertex_cache = None  # the strip's fields (_face_fields, _vertex_fields)
         self._face_columns = None  # face_values stacked (m, d), with their names
         self._vertex_paint = None  # per-vertex colours of a vertex-coloured painting, made on first use
-        self._relief_field = None  # per-vertex normal and light of the shaded relief, made on first use
+        self._relief_cache = None  # the strip's relief fields (relief_fields)
 
     # -- setup ---------------------------------------------------------------------
     def _texel_ratio(self, pix: np.ndarray) -> np.ndarray:
@@ -388,7 +340,7 @@ class Renderer:
         """RGB in [0, 1] (NaN outside). Shape (k, w, 3) float32.
 
         ``relief_on_untextured``: the sub-samples on untextured faces of a textured painting
-        are shaded relief (True: the painting's pixels), or are left out (False: a pixel is the
+        are relief in grey (True: the painting's pixels), or are left out (False: a pixel is the
         mean of its textured sub-samples, NaN where it has none; the colour evidence alone,
         with :meth:`untextured_share` to leave those pixels uncovered).
         """
@@ -405,25 +357,49 @@ class Renderer:
                 mixed = share > 0.0  # (NaN outside: False)
                 if mixed.any():
                     s = share[mixed][:, None]
-                    out[mixed] = np.nan_to_num(out[mixed]) * (1.0 - s) + self._relief(r0, r1)[mixed] * s
+                    out[mixed] = np.nan_to_num(out[mixed]) * (1.0 - s) + self.relief_grey(r0, r1)[mixed][:, None] * s
             return out
         if mesh.vertex_colors is not None:
             if self._vertex_paint is None:
                 self._vertex_paint = mesh.vertex_colors[:, :3] / 255.0
             return self._vertex_field(self._vertex_paint, r0, r1)
-        return self._relief(r0, r1)
+        return np.repeat(self.relief_grey(r0, r1)[..., None], 3, axis=-1)
 
-    def _relief(self, r0: int, r1: int) -> np.ndarray:
-        """Shaded relief, grey in [0, 1] (NaN outside). Shape (k, w, 3) float32."""
+    @property
+    def paints_relief(self) -> bool:
+        """Whether :meth:`painting` is the relief in grey (an untextured scan without colours)."""
+        return self.texture is None and self.flat.mesh.vertex_colors is None
+
+    @cached_property
+    def relief(self) -> SurfaceRelief:
+        """The scan's relief against itself smoothed at :attr:`relief_mm`, per vertex (made on first use)."""
         mesh = self.flat.mesh
-        if self._relief_field is None:
-            self._relief_field = _relief_normals_and_light(mesh.vertices, self.flat.uv, self.faces, mesh.mm_per_unit)
-        nl = self._vertex_field(self._relief_field, r0, r1)
-        nrm, light = nl[..., :3], nl[..., 3:]
-        dot = np.einsum("...i,...i->...", nrm, light) / np.maximum(
-            np.linalg.norm(nrm, axis=-1) * np.linalg.norm(light, axis=-1), 1e-30)
-        shade = 0.15 + 0.85 * np.clip(dot, 0.0, 1.0)
-        return np.repeat(shade[..., None], 3, axis=-1).astype(np.float32)
+        return surface_relief(mesh.vertices, self.faces, self.flat.uv, smoothing_mm=self.relief_mm,
+                              mm_per_unit=mesh.mm_per_unit)
+
+    @cached_property
+    def relief_grey_range(self) -> tuple[float, float]:
+        """The heights (mm) drawn black and white in :meth:`relief_grey`: the median height
+        (mid grey) less and plus the larger of its distances to the
+        :data:`RELIEF_GREY_PERCENTILES` of the heights, at least :data:`RELIEF_MIN_RANGE_MM` apart."""
+        lo, mid, hi = self.relief.height_percentiles((RELIEF_GREY_PERCENTILES[0], 50.0, RELIEF_GREY_PERCENTILES[1]))
+        half = max(mid - lo, hi - mid, 0.5 * RELIEF_MIN_RANGE_MM)
+        return mid - half, mid + half
+
+    def relief_fields(self, r0: int, r1: int) -> np.ndarray:
+        """The relief's per-vertex fields of the strip (:attr:`potflat.mesh.relief.SurfaceRelief.columns`:
+        height in mm, the normal in the smoothed surface's frame, concavity), NaN outside. Shape
+        (k, w, 5) float32, from one pass over the strip's sub-samples (kept for its other layers)."""
+        if self._relief_cache is None or self._relief_cache[0] != (r0, r1):
+            self._relief_cache = (r0, r1), self._vertex_field(self.relief.columns, r0, r1)
+        return self._relief_cache[1]
+
+    def relief_grey(self, r0: int, r1: int) -> np.ndarray:
+        """The relief's height in grey: :attr:`relief_grey_range` spread over [0, 1] (clipped
+        beyond; NaN outside). Shape (k, w) float32."""
+        lo, hi = self.relief_grey_range
+        grey = (self.relief_fields(r0, r1)[..., 0] - np.float32(lo)) * np.float32(1.0 / (hi - lo))
+        return np.clip(grey, 0.0, 1.0, out=grey)
 
     def untextured_share(self, r0: int, r1: int) -> np.ndarray:
         """Share of each pixel's covered sub-samples that lie on untextured faces of a textured
@@ -510,7 +486,7 @@ def paint(flat: FlatMesh, px_per_mm: float, *, supersample: int = 2,
     supersample : int
         Sub-samples per pixel side (1-8).
     leave_out_untextured : bool
-        False: untextured faces of a textured scan are drawn as shaded relief, as :func:`bake`
+        False: untextured faces of a textured scan are drawn as relief in grey, as :func:`bake`
         draws them. True: they count as not covered (alpha 0 for their share of a pixel, whose
         colour is then its textured part's alone): the colour evidence of the painting only.
 
@@ -531,6 +507,33 @@ def paint(flat: FlatMesh, px_per_mm: float, *, supersample: int = 2,
             coverage *= 1.0 - np.nan_to_num(r.untextured_share(r0, r1), nan=0.0)
         image[r0:r1] = rgba8(r.painting(r0, r1, relief_on_untextured=not leave_out), coverage)
     return image, g.origin.copy()
+
+
+def fill_faces(pixels: np.ndarray, faces: np.ndarray, height: int, width: int) -> np.ndarray:
+    """The pixels whose centre lies in one of ``faces``: a mask of whole faces, without
+    anti-aliasing (for a painting and its fields, :class:`Renderer`).
+
+    Parameters
+    ----------
+    pixels : (n, 2) float
+        Flat positions in pixels (column, row; ``(0, 0)`` the top-left corner of the image).
+    faces : (k, 3) int64
+        The faces to fill.
+    height, width : int
+        Image size.
+
+    Returns
+    -------
+    (height, width) bool
+    """
+    import cv2  # here, not at the top: importing cv2 sets LD_LIBRARY_PATH in the environment
+
+    mask = np.zeros((height, width), np.uint8)
+    if len(faces):
+        # pixel centres at integer positions for OpenCV, with 4 fractional bits
+        corners = np.round((np.asarray(pixels, np.float64)[faces] - 0.5) * 16).astype(np.int32)
+        cv2.fillPoly(mask, list(corners), 1, lineType=cv2.LINE_8, shift=4)
+    return mask.astype(bool)
 
 
 def rgba8(rgb: np.ndarray, coverage: np.ndarray) -> np.ndarray:

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from potflat.errors import FoldedResultError
+from potflat.errors import FoldedResultError, NotADiskError
 from potflat.mesh.boundary import crossing_pairs
 from potflat.mesh.embedding import repair_folds, tutte_embedding
 from potflat.relax._kernels.simplify import extend
@@ -80,7 +80,8 @@ def fold_free_start(sp: SpringSystem, x: np.ndarray, n_bad: int, notes: list[str
     Raises
     ------
     FoldedResultError
-        When neither gives a fold-free layout (the mesh is not disk-like), with the fix.
+        When the layout is mirrored; :class:`potflat.errors.NotADiskError` when neither gives
+        a fold-free layout (the mesh is not disk-like).
     """
     areas = sp.signed_areas(x)
     if np.abs(areas[areas < 0]).sum() > np.abs(areas[areas > 0]).sum():
@@ -95,11 +96,10 @@ def fold_free_start(sp: SpringSystem, x: np.ndarray, n_bad: int, notes: list[str
         return np.ascontiguousarray(y), False
     disc = tutte_embedding(faces, sp.n)
     if disc is None or (sp.signed_areas(disc) <= 0).any():
-        raise FoldedResultError(
+        raise NotADiskError(
             f"the rollout has {left} folded triangles that no fold-free layout of this mesh removes: it is not a "
             "disk (a handle kept with the wall, a closed part, or faces joined at a single edge by three or more); "
-            "nothing written: run the rollout without --keep-attachments, or with --band LO HI leaving that part "
-            "out (folded.regions[].band in the rollout's JSON: where the folds are, as --band fractions)")
+            "nothing written")
     notes.append(f"the rollout had {n_bad} flipped or degenerate triangles and {left} stayed folded after a local "
                  "repair; relaxed from Tutte's embedding of the whole mesh into a disc, then turned to the rollout's "
                  "orientation")

@@ -39,6 +39,10 @@ def rollout_notes(result) -> list[str]:
                    + "; check the axis (--axis) or try --side inner)")
         notes.append(f"{result.distortion.flipped} faces stay flipped{why}; the relax stage starts from a fold-free "
                      "layout (it refuses only a mesh that is not a disk)")
+    if len(result.disk_cut_faces):
+        notes.append(f"the selected faces were not a disk, which no layout in the plane shows without a fold: "
+                     f"{result.disk_cut.reason}; {len(result.disk_cut_faces)} faces "
+                     f"({result.disk_cut_area * result.flat.mesh.mm_per_unit ** 2:.4g} mm2) left out along the cuts")
     folded = result.folds.note() if result.folds is not None else None
     if folded:
         notes.append(folded)

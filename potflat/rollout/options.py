@@ -62,6 +62,13 @@ class RolloutOptions:
         Keep handles, spouts and knobs (parts off the surface of revolution, found by
         :func:`potflat.rollout.attachments.detect_attachments`) in the rollout; by default they are
         left out and reported, and the painting around their roots stays.
+    keep_base : bool
+        Keep the faces at the foot that face along the axis (a flat or domed base, the
+        underside of a foot; with ``side="inner"`` the floor) in the rollout. By default,
+        where the proxy's development would show them less truly than a view along the axis
+        (it smears a disc into a wide flange), they are left out of the rollout and shown as
+        their own disc, an orthographic view from below (the floor: from above),
+        ``NAME.base.png`` (:mod:`potflat.rollout.base`).
     seam_at : tuple of 3 float or None
         A point on the surface (scan coordinates, e.g. picked in MeshLab): the landmark; the
         seam goes through it (or ``seam`` degrees from it).
@@ -103,6 +110,7 @@ class RolloutOptions:
     view: tuple[float, ...] | None = field(default=None, metadata={"metavar": "x,y,z"})
     side: str = field(default="outer", metadata={"choices": SIDES})
     keep_attachments: bool = False
+    keep_base: bool = False
     seam_at: tuple[float, float, float] | None = field(default=None, metadata={"metavar": "X Y Z"})
     landmark: str | None = field(default=None, metadata={"choices": LANDMARKS})
     overlap: float = field(default=0.0, metadata={"metavar": "DEG"})
@@ -147,8 +155,9 @@ class RolloutOptions:
             object.__setattr__(self, "profile_mm", step)
         if self.side not in SIDES:
             raise InvalidOptionError(f"side {self.side!r} is unknown; use outer or inner")
-        if not isinstance(self.keep_attachments, bool):
-            raise InvalidOptionError(f"keep_attachments must be true or false, got {self.keep_attachments!r}")
+        for name in ("keep_attachments", "keep_base"):
+            if not isinstance(getattr(self, name), bool):
+                raise InvalidOptionError(f"{name} must be true or false, got {getattr(self, name)!r}")
         if self.units is not None:
             if canonical_units(self.units) is None:
                 raise InvalidOptionError(f"units {self.units!r} is unknown; use one of {', '.join(UNITS_MM)}")

@@ -4,8 +4,9 @@
 disk-topology mesh covering every selected face, with seam vertices duplicated (one copy per
 side) and no triangle altered. The selected faces are the painted side asked for (the outer
 wall, or the inner one seen from inside: :mod:`potflat.rollout.walls`), without attachments such as
-handles (:mod:`potflat.rollout.attachments`) and without the border faces that fold the development
-over (the rim top, a base's underside, break faces: :func:`border_folds`); folds inside the
+handles (:mod:`potflat.rollout.attachments`), without a base the development would smear (shown
+apart, seen along the axis: :mod:`potflat.rollout.base`) and without the border faces that fold
+the development over (the rim top, a base's underside, break faces: :func:`border_folds`); folds inside the
 region, from the scan itself, are unfolded (:func:`untangle`), so the result has no flipped
 face and no overlapping border, and everything left out is reported. The file stage
 (reading a scan, writing ``NAME.rollout.ply`` and its sidecars) is
@@ -33,6 +34,7 @@ from potflat.mesh.distortion import DistortionSummary, face_areas, summarize
 from potflat.rollout import proxy as _proxy
 from potflat.rollout.attachments import AttachmentSelection, detect_attachments
 from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
+from potflat.rollout.base import BaseSplit, base_disc, split_base, unrolled_errors
 from potflat.rollout.border import (
     TRIM_ROUNDS,
     border_folds,
@@ -44,6 +46,7 @@ from potflat.rollout.landmarks import find_landmark, zone_centre
 from potflat.rollout.objects import _main_object, _submesh
 from potflat.rollout.options import RolloutOptions
 from potflat.rollout.profile import Profile, vessel_profile
+from potflat.rollout.topology import DiskCut, disk_cut
 from potflat.rollout.seam import (
     _auto_seam,
     _corner_angles,
@@ -171,6 +174,17 @@ class RolloutResult:
         The vessel's profile (:func:`potflat.rollout.profile.vessel_profile` of both walls
         around :attr:`axis`, attachments left out unless kept; height bins of
         ``options.profile_mm``).
+    base : BaseSplit or None
+        Where the faces at the foot that face along the axis went (:mod:`potflat.rollout.base`):
+        left out of :attr:`flat` and shown as their own disc (``base.flat``), or kept; None
+        for the ``ortho`` proxy (a view already).
+    disk_cut : DiskCut or None
+        What made the selected faces other than a disk (:mod:`potflat.rollout.topology`); its
+        ``faces`` are of the first development.
+    disk_cut_faces : (c,) int64
+        Input faces left out to make the selection a disk.
+    disk_cut_area : float
+        Their 3D area, scan units squared.
     """
 
     flat: FlatMesh
@@ -201,6 +215,10 @@ class RolloutResult:
     timings: dict = field(default_factory=dict)
     folds: ScanFolds | None = None
     profile: Profile | None = None
+    base: BaseSplit | None = None
+    disk_cut: DiskCut | None = None
+    disk_cut_faces: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    disk_cut_area: float = 0.0
 
     @property
     def side(self) -> str:
@@ -228,7 +246,10 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
     After the axis, the attachments (handles, spouts, knobs) are found and, unless
     ``keep_attachments``, left out; the painted side (``side``: the outer wall, or the inner
     one seen from inside with ``u`` mirrored so that faces keep their orientation) is
-    selected, so the two walls of a cup are never mixed. Strips at the region's border
+    selected, so the two walls of a cup are never mixed. Faces at the foot facing along the
+    axis that the development would show less truly than a view along it (a base, a floor)
+    are left out and shown as their own disc (:attr:`RolloutResult.base`; ``keep_base``
+    keeps them). Strips at the region's border
     that are edge-on to the proxy and fold over in the development (the rim top, a base's
     underside, a sherd's break faces) are trimmed and reported (:func:`border_folds`);
     folds inside the region (scan noise) stay for the relax stage to untangle.
@@ -313,18 +334,44 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
                              face_mask=None if options.keep_attachments or not attachments.n_faces
                              else ~attachments.face_mask)
     centroid = frame.centroid  # (the faces' centroids, computed with the frame)
+    n_axial = frame.n_axial
     del frame
     clock.lap("profile")
 
     area = face_areas(V, F)
-    h_c, _, theta_c = axis.cylindrical(centroid)
+    h_c, r_c, theta_c = axis.cylindrical(centroid)
     del centroid
-    theta_v = axis.cylindrical(V)[2]  # once for every unrolling and the seam
+    _, r_v, theta_v = axis.cylindrical(V)  # once for every unrolling and the seam (and the base)
     band = options.band or (0.0, 1.0)
     landmark, landmark_notes = _find_landmark(mesh, axis, options, attachments, allowed, band, h_c, theta_c,
                                               theta_v, area)
     trimmed = np.zeros(len(F), bool)
     un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area, landmark=landmark)
+    clock.lap("unroll")
+    base = None
+    if options.proxy != "ortho":  # (a view along the axis shows the base as it is)
+        region, first = np.unique(un.face_index, return_index=True)  # (a repeat past 360 degrees once)
+        base = split_base(mesh, region, unrolled_errors(un.flat, first), n_axial=n_axial, height=h_c, radius=r_c,
+                          vertex_radius=r_v, vertex_theta=theta_v, area=area, vessel_height=axis.height,
+                          side=options.side,
+                          keep=options.keep_base)
+        del region, first
+        if base.left_out:  # unrolled again without it: the proxy is fitted to the wall alone
+            allowed = allowed.copy()
+            allowed[base.disc_faces] = allowed[base.hidden_faces] = False
+            un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area,
+                         seam=(un.seam, un.seam_method), landmark=landmark)
+    del n_axial, r_c, r_v
+    clock.lap("base")
+    # a piece that is not a disk (a handle joined at both ends, a closed part, an edge of three
+    # faces) cannot be laid flat without a fold: cut into one
+    disk = disk_cut(un.flat.mesh.faces, un.flat.mesh.vertices, attachments.vertex_offset[un.vertex_index])
+    cut_faces = np.unique(un.face_index[disk.faces])
+    if len(cut_faces):
+        allowed = allowed.copy()
+        allowed[cut_faces] = False
+        un = _without(un, ~disk.faces)
+    clock.lap("disk")
     for rnd in range(TRIM_ROUNDS):
         fold = border_folds(un.flat.mesh.faces, un.flat.uv, area[un.face_index], table=un.table)
         if not fold.any() or fold.all():
@@ -381,6 +428,11 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
                        height=axis.cylindrical(cut.vertices)[0], vessel_height=axis.height, angle_deg=theta_deg,
                        mm_per_unit=mesh.mm_per_unit)
     clock.lap("folds")
+    if base is not None and base.left_out:
+        disc, disc_proxy = base_disc(mesh, base.disc_faces, axis, view=base.view, up_angle=un.seam)
+        base = dataclasses.replace(base, flat=disc, proxy=disc_proxy,
+                                   distortion=summarize(disc.mesh.vertices, disc.uv, disc.mesh.faces))
+        clock.lap("base")
     return RolloutResult(
         flat=flat.replace(importance=importance.values), importance=importance, axis=axis, proxy=un.proxy,
         seam_angle=float(math.degrees(un.seam) % 360.0), seam_method=un.seam_method, region=region,
@@ -391,7 +443,8 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         untangled_faces=n_untangled, untangled_vertices=moved, boundary_overlap=overlap,
         other_objects_faces=int(other_objects.sum()), landmark=landmark,
         theta_origin=float(math.degrees(un.origin) % 360.0), landmark_notes=tuple(landmark_notes),
-        timings=clock.total(), folds=folds, profile=profile)
+        timings=clock.total(), folds=folds, profile=profile, base=base, disk_cut=disk,
+        disk_cut_faces=cut_faces.astype(np.int64), disk_cut_area=float(area[cut_faces].sum()))
 
 
 @dataclass(frozen=True, eq=False)

@@ -479,18 +479,16 @@ def zone_mask_png(scene) -> bytes:
     whose corners' mean importance is at least 0.5), PNG; all white without a painted zone."""
     import io
 
-    import cv2
     import numpy as np
     from PIL import Image
 
+    from potflat.raster.render import fill_faces
+
     g, d = scene.grid, scene.display
-    mask = np.zeros((g.height, g.width), np.uint8)
     painted = d.importance[d.faces].mean(axis=1) >= 0.5
-    if len(painted):
-        tris = np.round(d.pixels[d.faces[painted]] * 16).astype(np.int32)  # 4 fractional bits
-        cv2.fillPoly(mask, list(tris), 255, lineType=cv2.LINE_8, shift=4)
+    mask = fill_faces(d.pixels, d.faces[painted], g.height, g.width)
     buf = io.BytesIO()
-    Image.fromarray(mask).save(buf, format="PNG", compress_level=1)
+    Image.fromarray(mask.astype(np.uint8) * 255).save(buf, format="PNG", compress_level=1)
     return buf.getvalue()
 
 
