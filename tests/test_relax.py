@@ -622,13 +622,12 @@ def test_following_a_coarse_copy_uncrosses_a_wrapped_boundary(monkeypatch):
     x = np.ascontiguousarray(fan.uv)
     assert sp.overlap(x) > 0 and (signed_areas(x, F) > 0).all()
     notes: list[str] = []
-    inside = np.ones(len(x), bool)
-    y = relax_module.follow(sp, x, x, inside, notes)
+    y = relax_module.follow(sp, x, x, notes)
     assert y is not None and sp.overlap(y) == 0 and (signed_areas(y, F) > 0).all()
     assert _angle_sum(y, F) < 2 * np.pi and "cross itself" in notes[0]
     monkeypatch.setattr(relax_module, "COARSE", replace(relax_module.COARSE, follow_repair_rounds=0))
     notes.clear()
-    assert relax_module.follow(sp, x, x, inside, notes) is None and "from the rollout" in notes[-1]
+    assert relax_module.follow(sp, x, x, notes) is None and "from the rollout" in notes[-1]
 
 
 def _grid(k=12):
@@ -685,7 +684,7 @@ def test_following_keeps_the_copy_where_untangling_leaves_folds(monkeypatch):
     sp = spring_system(V, F, k=1.0, relative=True)
     monkeypatch.setattr(relax_module, "untangle", lambda sp, x: (x, int((sp.signed_areas(x) <= 0).sum())))
     notes: list[str] = []
-    y = relax_module.follow(sp, x, goal, np.ones(len(x), bool), notes)
+    y = relax_module.follow(sp, x, goal, notes)
     assert y is not None and (signed_areas(y, F) > 0).all() and sp.overlap(y) == 0
     assert "stop short" in notes[-1]
 
@@ -756,7 +755,7 @@ def test_a_given_up_coarse_copy_leaves_its_anisotropy_limit_behind(vessel, monke
     monkeypatch.setattr(multilevel, "COARSE", replace(multilevel.COARSE, min_vertices=1000))
     kept = relax(vessel, preset="standard")
     assert [lv.level for lv in kept.levels if lv.level.startswith("fine")] == ["fine"]  # the copy's limit
-    monkeypatch.setattr(multilevel, "follow", lambda sp, x, target, inside, notes: notes.append("given up") or None)
+    monkeypatch.setattr(multilevel, "follow", lambda sp, x, target, notes: notes.append("given up") or None)
     given_up = relax(vessel, preset="standard")
     assert "given up" in given_up.notes and given_up.flipped == 0
     assert [lv.level for lv in given_up.levels] == ["fine, shape first", "fine"]

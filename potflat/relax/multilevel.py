@@ -60,7 +60,6 @@ class CoarseStart:
 
     result: RelaxResult | None  # None: the copy could not be relaxed fold-free
     uv: np.ndarray | None  # (n, 2) float64: the full mesh's layout following the copy's
-    inside: np.ndarray | None  # (n,) bool: the vertices inside the copy (where ``uv`` is its map's)
     final: bool  # the full mesh only follows (preview at the image's resolution), no iterations on it
     notes: list[str]
 
@@ -144,15 +143,14 @@ def coarse_start(flat: FlatMesh, options: RelaxOptions, settings: RelaxPreset, p
                      replace(options, simplify_mm=0.0, time_budget=budget, true_scale=False), progress, tagged,
                      summaries=False, limit=limit)
     except FoldedResultError as exc:
-        return CoarseStart(result=None, uv=None, inside=None, final=False, notes=[
+        return CoarseStart(result=None, uv=None, final=False, notes=[
             f"the {len(simple.vertices)}-vertex coarse copy could not be relaxed fold-free ({exc}); "
             "relaxed the full mesh from the rollout"])
     what = (f"relaxed a coarse copy at {spacing:g} mm resolution ({len(simple.vertices)} vertices); the full mesh "
             "follows it piecewise linearly" if final else
             f"started from a relaxed coarse copy ({len(simple.vertices)} vertices)")
     notes = [what] + [f"coarse copy: {note}" for note in sub.notes]
-    moved, inside = interpolate(simple, uv, sub.flat.uv)
-    return CoarseStart(result=sub, uv=moved, inside=inside, final=final, notes=notes)
+    return CoarseStart(result=sub, uv=interpolate(simple, uv, sub.flat.uv)[0], final=final, notes=notes)
 
 
 def painted_zone(flat: FlatMesh, settings: RelaxPreset) -> bool:
@@ -344,7 +342,7 @@ def _start(sp: SpringSystem, x: np.ndarray, frame: _Frame, plan: _Plan, fold_fre
     t_follow = time.perf_counter()
     followed = None
     if plan.coarse is not None:
-        followed = follow(sp, x, frame.into(plan.coarse.uv), plan.coarse.inside[frame.order], notes)
+        followed = follow(sp, x, frame.into(plan.coarse.uv), notes)
         if followed is not None:
             x = followed
             if fold_free:
@@ -437,7 +435,7 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
             plan = replace(plan, softer=softer, notes=softer.note(settings.importance_contrast) + notes,
                            limit=found if plan.limit == "auto" and found is not None else plan.limit)
         # only the copy's result is read from here on (peak memory: the solve comes next)
-        coarse = None if plan.coarse is None else replace(plan.coarse, uv=None, inside=None)
+        coarse = None if plan.coarse is None else replace(plan.coarse, uv=None)
         plan = replace(plan, coarse=None)  # (``coarse`` is what is left of it)
         # the setup's freed temporaries back to the system before the solve (the stage's peak;
         # 140 MiB at 3M vertices after a rollout in the same process, whose arrays fill the heap)

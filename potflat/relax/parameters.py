@@ -206,13 +206,12 @@ class CoarseParameters:
     much smaller than the edges leave blocks empty: the goblet scan's copy at 2 mm cells
     covered 38% of its vertices); meshes of at least ``min_vertices`` start their solve from
     a relaxed copy with about ``cell_vertices`` vertices per cell (which nests in turn).
-    Vertices outside the copy's jagged border follow the affine map that best fits their
-    neighbours' (:func:`potflat.relax.start.settled_goal`). Where following a copy makes the
-    full mesh's boundary cross itself (a kink of a few boundary vertices outside the copy's
-    border), the crossing vertices are moved to their neighbours' mean for at most
-    ``follow_repair_rounds`` rounds, widening the moved region every ``follow_repair_widen``
-    rounds, before the copy is given up (1M benchmark amphora: one crossing, fixed in one
-    round; giving the copy up cost 1365 iterations, 168 s, instead of about 60).
+    Where following a copy makes the full mesh's boundary cross itself (a kink of a few
+    boundary vertices outside the copy's border), the crossing vertices are moved to their
+    neighbours' mean for at most ``follow_repair_rounds`` rounds, widening the moved region
+    every ``follow_repair_widen`` rounds, before the copy is given up (1M benchmark amphora:
+    one crossing, fixed in one round; giving the copy up cost 1365 iterations, 168 s,
+    instead of about 60).
     Where untangling leaves the followed layout folded, the full mesh instead moves from its
     start towards it in ``approach_steps`` equal shares and at most ``approach_rounds``
     rounds, each vertex as far as keeps every face around it above ``approach_floor`` of its

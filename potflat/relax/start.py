@@ -9,7 +9,6 @@ import numpy as np
 from potflat.errors import FoldedResultError, NotADiskError
 from potflat.mesh.boundary import crossing_pairs
 from potflat.mesh.embedding import repair_folds, tutte_embedding
-from potflat.relax._kernels.simplify import extend
 from potflat.mesh._kernels.topology import incident_faces
 from potflat.relax._kernels.springs import neighbour_means
 from potflat.relax._kernels.steps import vertex_max_steps
@@ -121,14 +120,13 @@ def turned_like(x: np.ndarray, reference: np.ndarray, weight: np.ndarray) -> np.
     return np.ascontiguousarray((x - ca) @ rot.T + cb)
 
 
-def follow(sp: SpringSystem, x: np.ndarray, target: np.ndarray, inside: np.ndarray,
-           notes: list[str]) -> np.ndarray | None:
+def follow(sp: SpringSystem, x: np.ndarray, target: np.ndarray, notes: list[str]) -> np.ndarray | None:
     """The full mesh's layout following a relaxed coarse copy: ``target`` (n, 2), the copy's
-    piecewise-linear map of the start ``x`` (n, 2), where it is defined (``inside`` (n,)
-    bool) and carried by its neighbours' map elsewhere (:func:`settled_goal`), untangled and
-    with its boundary uncrossed (:func:`uncross_boundary`); None (with a note) when it
-    cannot be made fold-free."""
-    goal, n_bad = untangle(sp, settled_goal(sp, x, target, inside))
+    piecewise-linear map of the fold-free start ``x`` (n, 2), untangled; where untangling
+    leaves it folded, approached from ``x`` as near as stays fold-free (:func:`approach`);
+    with its boundary uncrossed (:func:`uncross_boundary`). None (with a note) when it
+    cannot be made fold-free and uncrossed."""
+    goal, n_bad = untangle(sp, target)
     if n_bad:
         notes.append(f"untangled {n_bad} triangles flipped by following the coarse copy")
     folded = int((sp.signed_areas(goal) <= 0).sum())
@@ -217,28 +215,6 @@ def _doubled_areas(x: np.ndarray, tri: np.ndarray) -> np.ndarray:
     """Doubled signed areas of the triangles ``tri`` (k, 3) at ``x`` (n, 2)."""
     e1, e2 = x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]]
     return e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-
-
-def settled_goal(sp: SpringSystem, start: np.ndarray, target: np.ndarray, inside: np.ndarray) -> np.ndarray:
-    """Where the full mesh goes following a coarse copy: ``target`` (n, 2), the copy's
-    piecewise-linear map of ``start`` (n, 2), at the vertices ``inside`` (n,) the copy; every
-    other vertex (outside the copy's jagged border), ring by ring from those, carried by the
-    affine map that best fits the placed vertices near it
-    (:func:`potflat.relax._kernels.simplify.extend`), without the jumps between neighbours
-    that an extrapolation from different coarse faces makes."""
-    goal = target.copy()
-    placed = inside.copy()
-    while True:
-        on = placed[sp.faces]
-        mixed = on.any(axis=1) & ~on.all(axis=1)
-        ring = np.unique(sp.faces[mixed][~on[mixed]]).astype(np.int64)
-        if not len(ring):
-            break
-        out = np.empty((len(ring), 2))
-        extend(start, goal, placed, ring, sp.vf_ptr, sp.vf_tri, sp.faces, out)
-        goal[ring] = out
-        placed[ring] = True
-    return goal
 
 
 def uncross_boundary(sp: SpringSystem, x: np.ndarray, pairs: np.ndarray) -> np.ndarray:
