@@ -8,7 +8,7 @@ import numpy as np
 
 from potflat.errors import FoldedResultError, NotADiskError
 from potflat.mesh.boundary import crossing_pairs
-from potflat.mesh.embedding import repair_folds, tutte_embedding
+from potflat.mesh.embedding import repair_folds, signed_areas, tutte_embedding
 from potflat.mesh._kernels.topology import incident_faces
 from potflat.relax._kernels.springs import neighbour_means
 from potflat.relax._kernels.steps import vertex_max_steps
@@ -180,7 +180,7 @@ def approach(sp: SpringSystem, start: np.ndarray, goal: np.ndarray) -> tuple[np.
         near = np.flatnonzero(touched)
         touched[near] = False
         while True:  # a face below its floor or crossing boundary segments: their moved vertices go back
-            low = near[_doubled_areas(y, faces[near]) < floors[near]]
+            low = near[2.0 * signed_areas(faces[near], y) < floors[near]]
             back = faces[low].ravel()
             if guard:
                 back = np.concatenate([back, seg[crossing_pairs(y, seg).ravel()].ravel()])
@@ -209,12 +209,6 @@ def _aligned(x: np.ndarray, goal: np.ndarray) -> np.ndarray:
     if not np.linalg.det(a) > 0:
         return x.copy()
     return np.ascontiguousarray((x - mx) @ a + mg)
-
-
-def _doubled_areas(x: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    """Doubled signed areas of the triangles ``tri`` (k, 3) at ``x`` (n, 2)."""
-    e1, e2 = x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]]
-    return e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
 
 
 def uncross_boundary(sp: SpringSystem, x: np.ndarray, pairs: np.ndarray) -> np.ndarray:
