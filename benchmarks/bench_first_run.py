@@ -4,8 +4,11 @@ runs, which load them from Numba's cache.
 ``python -m potflat_cli run samples/data/amphora.obj -o OUT`` in a child process, as a user
 runs it (start-up included): ``--rounds`` times with an empty kernel cache (a fresh
 ``NUMBA_CACHE_DIR``: the first run of an installation), each followed by a run on the cache it
-filled (a later run). The figures are medians of the rounds. Installing potflat is not
-counted.
+filled (a later run). The figures are medians and ranges of the rounds, with the machine's
+load average (1 minute) at the start and end of each run: on a shared machine the first run
+takes as long as the cores it gets. What the first run compiles is counted from the cache it
+fills: the kernels (one index file each) and their type signatures (one data file each), in
+the run and its warm-up child process. Installing potflat is not counted.
 
 Reproduce (blocks ``bench_first_run`` of docs/performance.md and ``bench_first_run_readme`` of
 README.md)::
@@ -29,13 +32,21 @@ from _docs import ROOT, command_line, machine, publish  # noqa: E402
 SAMPLE = ROOT / "samples" / "data" / "amphora.obj"
 
 
-def timed_run(cache: Path, out: Path) -> float:
-    """Seconds of one ``potflat run`` of the sample with Numba's cache in ``cache``."""
+def timed_run(cache: Path, out: Path) -> tuple[float, list[float]]:
+    """Seconds of one ``potflat run`` of the sample with Numba's cache in ``cache``, and the
+    load averages (1 minute) at its start and end."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
+    load = [os.getloadavg()[0]]
     t = time.perf_counter()
     subprocess.run([sys.executable, "-m", "potflat_cli", "run", str(SAMPLE), "-o", str(out), "--quiet"],
                    check=True, env=env, stdin=subprocess.DEVNULL)
-    return time.perf_counter() - t
+    seconds = time.perf_counter() - t
+    return seconds, load + [os.getloadavg()[0]]
+
+
+def compiled(cache: Path) -> tuple[int, int]:
+    """Kernels and type signatures Numba cached in ``cache``."""
+    return len(list(cache.rglob("*.nbi"))), len(list(cache.rglob("*.nbc")))
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -44,22 +55,36 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--write", action="store_true",
                     help="rewrite its blocks in docs/performance.md and README.md")
     args = ap.parse_args(argv)
-    first, later = [], []
+    first, later, loads, counts = [], [], {"first": [], "later": []}, set()
     for rnd in range(args.rounds):
         with tempfile.TemporaryDirectory(prefix="potflat-first-run-") as tmp:
-            first.append(timed_run(Path(tmp) / "cache", Path(tmp) / "first"))
-            later.append(timed_run(Path(tmp) / "cache", Path(tmp) / "later"))
-        print(f"round {rnd + 1}: first run {first[-1]:.1f} s, later run {later[-1]:.1f} s", flush=True)
+            seconds, load = timed_run(Path(tmp) / "cache", Path(tmp) / "first")
+            first.append(seconds)
+            loads["first"] += load
+            counts.add(compiled(Path(tmp) / "cache"))
+            seconds, load = timed_run(Path(tmp) / "cache", Path(tmp) / "later")
+            later.append(seconds)
+            loads["later"] += load
+        print(f"round {rnd + 1}: first run {first[-1]:.1f} s, later run {later[-1]:.1f} s, "
+              f"load {min(loads['first']):.1f}-{max(loads['first']):.1f}", flush=True)
     f, g = statistics.median(first), statistics.median(later)
+    kernels = "/".join(str(k) for k, _ in sorted(counts))
+    signatures = "/".join(str(n) for _, n in sorted(counts))
+
+    def load_range(key: str) -> str:
+        return f"{min(loads[key]):.1f}-{max(loads[key]):.1f}"
     command = command_line("bench_first_run.py", argv if argv is not None else sys.argv[1:])
     publish("bench_first_run",
-            f"`{command}` ({machine()}), medians of {args.rounds} rounds:\n\n"
-            "| run of the sample | seconds (range) |\n|---|---:|\n"
-            f"| first (compiles the kernels) | {f:.0f} ({min(first):.0f}-{max(first):.0f}) |\n"
-            f"| later (kernels cached) | {g:.0f} ({min(later):.0f}-{max(later):.0f}) |\n", args.write)
+            f"`{command}` ({machine()}), medians of {args.rounds} rounds; the first run compiled {kernels} "
+            f"kernels, {signatures} type signatures (the run and its warm-up child):\n\n"
+            "| run of the sample | seconds (range) | load average (1 min) |\n|---|---:|---:|\n"
+            f"| first (compiles the kernels) | {f:.0f} ({min(first):.0f}-{max(first):.0f}) | {load_range('first')} |\n"
+            f"| later (kernels cached) | {g:.0f} ({min(later):.0f}-{max(later):.0f}) | {load_range('later')} |\n",
+            args.write)
     publish("bench_first_run_readme",
-            f"On a {os.cpu_count()}-core machine shared with other jobs, the first run of the sample took "
-            f"{f:.0f} s (it compiles the kernels once) and later runs {g:.0f} s, medians of {args.rounds}; "
+            f"On a {os.cpu_count()}-core machine shared with other jobs (load average {load_range('first')}), the "
+            f"first run of the sample took {min(first) / 60:.1f}-{max(first) / 60:.1f} minutes (it compiles "
+            f"{kernels} kernels once; longer when other jobs take the cores) and later runs {g:.0f} s, {args.rounds} rounds; "
             "installing is not counted ([performance](docs/performance.md#first-run)).\n", args.write)
 
 if __name__ == "__main__":

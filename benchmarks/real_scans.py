@@ -22,7 +22,8 @@ a failure is a row, not an abort) and the row is read off the JSON sidecars: sta
 and boundary crossings (of the rollout and of the result, or of the refusal), the painted
 zone's length error (median, p95), the share of the scan's surface in the image, the
 outline's total turning (sum of absolute exterior angles over 2 pi, all boundary loops) of
-the rollout and the relaxed layout, and the peak memory. Below the table, each real scan's
+the rollout and the relaxed layout and of the scan's boundary on the surface (what a layout
+keeping every triangle's shape turns), and the peak memory. Below the table, each real scan's
 whole run at 1M vertices against the synthetic vessel's.
 
 Reproduce::
@@ -206,33 +207,8 @@ def native_info(scan: Path) -> dict:
     return {"vertices": len(V), "faces": len(F), "area_mm2": float(area)}
 
 
-def outline_turning(ply: Path) -> float:
-    """Total turning of a stage PLY's flat outline: the sum over all boundary loops of the
-    absolute exterior angles, over 2 pi (1 for a convex outline)."""
-    from potflat.io.flat_ply import read_flat_ply
-    from potflat.mesh.embedding import boundary_loops
-
-    flat = read_flat_ply(ply)
-    total = 0.0
-    for loop in boundary_loops(flat.mesh.faces, len(flat.uv)):
-        p = flat.uv[loop]
-        d = np.roll(p, -1, axis=0) - p
-        a = np.arctan2(d[:, 1], d[:, 0])
-        total += float(np.abs((np.roll(a, -1) - a + np.pi) % (2 * np.pi) - np.pi).sum())
-    return total / (2 * np.pi)
-
-
 def _load(path: Path) -> dict:
     return json.loads(path.read_text()) if path.is_file() else {}
-
-
-def _turning(record: dict, ply: Path) -> float | None:
-    """The outline's total turning of a stage: as its JSON records it, else measured on its PLY."""
-    for key in ("outline_turning", "turning"):
-        for node in (record, record.get("outline") or {}, record.get("distortion") or {}):
-            if isinstance(node, dict) and isinstance(node.get(key), (int, float)):
-                return float(node[key])
-    return outline_turning(ply) if ply.is_file() else None
 
 
 def figures(out: Path, name: str, run: dict, area_mm2: float) -> dict:
@@ -257,7 +233,8 @@ def figures(out: Path, name: str, run: dict, area_mm2: float) -> dict:
     row["zone"] = _zone(imp)
     row["zone_err"] = (zone.get("length_error_median_pct"), zone.get("length_error_p95_pct"))
     row["in_image_pct"] = 100 * ba["surface_area_mm2"] / area_mm2 if "surface_area_mm2" in ba else None
-    row["turning"] = (_turning(ro, out / f"{name}.rollout.ply"), _turning(re_, out / f"{name}.relaxed.ply"))
+    turning = re_.get("outline_turning") or {}
+    row["turning"] = (ro.get("outline_turning"), turning.get("relaxed"), turning.get("surface"))
     return row
 
 
@@ -308,7 +285,7 @@ def table(rows: list[dict], command: str) -> str:
             " / ".join([_per_vertex(r["rollout_s"], v), _per_vertex(r["relax_s"], v), _per_vertex(r["cpu_s"], v)]),
             _f(r["peak_gb"], ".2f"), " ".join(str(it) for _, it in r["levels"]) or "-", _f(r["flipped"], "d"),
             f"{_f(r['rollout_overlap'], 'd')} / {_f(r['crossings'], 'd')}",
-            f"{_f(r['turning'][0])} / {_f(r['turning'][1])}", r["zone"],
+            f"{_f(r['turning'][0])} / {_f(r['turning'][1])} ({_f(r['turning'][2])})", r["zone"],
             f"{_f(r['zone_err'][0])} / {_f(r['zone_err'][1])}", _f(r["in_image_pct"])]) + " |")
     notes = [f"- {r['scan']} {r['vertices']:,}: {n}" for r in rows for n in r["notes"]]
     return "\n".join(lines + [""] + ratios(rows) + ([""] + notes if notes else []) + [""])

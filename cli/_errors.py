@@ -3,16 +3,28 @@ from __future__ import annotations
 
 import functools
 import sys
+from pathlib import Path
 
 import typer
+
+from potflat_cli import INTERRUPTED
 
 #: Exit codes, documented in docs/cli.md.
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 #: Signals received (SIGINT, SIGTERM): checked between stages, between a batch's results and
 #: at the end, since the KeyboardInterrupt the handler raises is lost when it lands in a finaliser.
 STOP: list[int] = []
-#: What an interrupted command says.
-INTERRUPTED = "interrupted; outputs already finished are kept, none is half-written"
+#: Whether this command said it was interrupted (:func:`interrupted`: once).
+TOLD: list[bool] = []
+
+
+def interrupted() -> "typer.Exit":
+    """Say :data:`INTERRUPTED` (once per command, whichever layer sees the stop first) and
+    return the Exit (code 130) to raise."""
+    if not TOLD:
+        TOLD.append(True)
+        print(f"error: {INTERRUPTED}", file=sys.stderr)
+    return typer.Exit(code=130)
 
 
 def check_stop() -> None:
@@ -44,10 +56,16 @@ def user_errors(func):
             check_stop()
             return result
         except KeyboardInterrupt:
-            raise fail(INTERRUPTED, 130) from None
+            raise interrupted() from None
+        except MemoryError:
+            from potflat.errors import out_of_memory
+
+            # the command's input: its first path argument (the scan, stage file or batch file)
+            given = next((v for v in (*args, *kwargs.values()) if isinstance(v, Path)), "the input")
+            raise fail(str(out_of_memory(given))) from None
         except Exception as exc:
             if STOP:  # whatever the interrupt broke: e.g. a Numba call it landed in raises SystemError
-                raise fail(INTERRUPTED, 130) from None
+                raise interrupted() from None
             if isinstance(exc, PotflatError):
                 raise fail(str(exc)) from None
             if isinstance(exc, (FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError)):

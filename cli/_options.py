@@ -35,6 +35,8 @@ StageOutputDir = Annotated[Optional[Path], typer.Option(
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing but errors.")]
 Json = Annotated[bool, typer.Option("--json", help="Print a JSON summary to stdout (nothing else).")]
 Name = Annotated[Optional[str], typer.Option("--name", help="Output file name stem \\[default: the scan's stem].")]
+StageName = Annotated[Optional[str], typer.Option(
+    "--name", help="Output file name stem \\[default: the input's NAME, as in NAME.relaxed.ply].")]
 
 _PANELS = {"rollout": "Rollout options", "relax": "Relax options", "bake": "Bake options"}
 #: Longest list of allowed values shown as the metavar (``[a|b|c]``); a longer one shows ``NAME``.
@@ -54,17 +56,38 @@ def _cli_type(tp: Any) -> Any:
     return Optional[str]
 
 
-def _plain(text: str) -> str:
-    """Docstring markup as plain text: ``x`` as 'x', :role:`~a.b` as b, :role:`t <a.b>` as t."""
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def _cli_literal(text: str, fields: set[str]) -> str:
+    """A docstring literal (````x````) in the command line's words: an option's field name as
+    its flag (``seam_at`` -> --seam-at, ``proxy="ortho"`` -> --proxy ortho), a quoted value
+    without its quotes (``"auto"`` -> auto), anything else in quotes."""
+    name, eq, value = text.partition("=")
+    if name.strip() in fields:
+        return _flag(name.strip()) + (f" {value.strip().strip(chr(34) + chr(39))}" if eq else "")
+    if len(text) > 1 and text[0] == text[-1] and text[0] in "\"'":
+        return text[1:-1]
+    return f"'{text}'"
+
+
+def _plain(text: str, fields: set[str] = frozenset()) -> str:
+    """Docstring markup in the command line's words: a parenthesised reference to the code
+    (``(:mod:`potflat.importance`)``) dropped, :role:`~a.b` as b, :role:`t <a.b>` as t, a
+    literal by :func:`_cli_literal` (field names of ``fields`` as flags), ``None`` (an
+    option not given) as "not given"."""
+    text = re.sub(r"\s*\(:\w+:`[^`]*`\)", "", text)
     text = re.sub(r":\w+:`~?([^`<]*?)\s*<[^>]*>`", r"\1", text)
-    text = re.sub(r":\w+:`~([^`]*)`", lambda m: m.group(1).rsplit(".", 1)[-1], text)
-    text = re.sub(r":\w+:`([^`]*)`", r"\1", text)
-    return text.replace("``", "'").replace("[", "\\[")
+    text = re.sub(r":\w+:`~?([^`]*)`", lambda m: m.group(1).rsplit(".", 1)[-1], text)
+    text = re.sub(r"``([^`]*)``", lambda m: _cli_literal(m.group(1), fields), text)
+    text = re.sub(r"\bNone\b", "not given", text)
+    return text.replace("[", "\\[")
 
 
 def field_help(cls: type) -> dict[str, str]:
     """Each field's description in the numpydoc ``Attributes`` section of ``cls``'s docstring,
-    as plain text (a line ``a, b : type`` describes both)."""
+    in the command line's words (:func:`_plain`; a line ``a, b : type`` describes both)."""
     doc = inspect.getdoc(cls) or ""
     out: dict[str, str] = {}
     current: list[str] = []
@@ -79,7 +102,8 @@ def field_help(cls: type) -> dict[str, str]:
                 out[name] = (out[name] + " " + line.strip()).strip()
         elif line.strip():
             current = []
-    return {name: _plain(text) for name, text in out.items()}
+    fields = {f.name for options in STAGE_OPTIONS.values() for f in dataclasses.fields(options)}
+    return {name: _plain(text, fields) for name, text in out.items()}
 
 
 def _shown(value: Any) -> str:

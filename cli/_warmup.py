@@ -1,6 +1,6 @@
 """Compile the relax and bake stages' kernels early on a first run, on both cores.
 
-A first run (no kernels in Numba's disk cache yet) compiles some seventy kernels one after
+A first run (no kernels in Numba's disk cache yet) compiles over a hundred kernels one after
 the other, each on first use, on one core: the rollout's, then the relax stage's, then the
 bake stage's. :func:`start` runs this module in a child process that relaxes a small
 generated vessel (:func:`vessel`) in a temporary folder, so that the relax kernels are
@@ -11,16 +11,20 @@ from the cache. (Baking first, before the rollout, was as fast but kept a bad sc
 refusal waiting for the bake kernels.) Best effort: a kernel the child has not cached yet
 when the run needs it is compiled by the run as before. Nothing is written but Numba's cache
 and temporary folders, which the run removes (the child removes its own too when it ends by
-itself).
+itself). The child ends with the run however the run ends, killed outright (SIGKILL)
+included: it watches a pipe whose other end only the run holds (the run's end closes when it
+dies), and on Linux the kernel also sends it SIGTERM when the run dies (``PR_SET_PDEATHSIG``).
 """
 from __future__ import annotations
 
 import math
+import os
 import shutil
 import signal
 import subprocess
 import sys
 import tempfile
+import threading
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -38,14 +42,18 @@ AROUND, ALONG = 240, 100
 BAND = (0.35, 0.65)
 #: Seconds the run waits for a stopped child to end before killing it.
 STOP_TIMEOUT_S = 5.0
+#: ``prctl`` option: the signal the kernel sends a process when its parent dies (linux/prctl.h).
+PR_SET_PDEATHSIG = 1
 
 
 class Warmup:
-    """The child process of :func:`start` and its folder; :meth:`stop` ends both (idempotent)."""
+    """The child process of :func:`start`, its folder and the run's end of the pipe the child
+    watches (:func:`_die_with_parent`); :meth:`stop` ends them (idempotent)."""
 
-    def __init__(self, process: subprocess.Popen, folder: Path):
+    def __init__(self, process: subprocess.Popen, folder: Path, pipe: int):
         self.process = process
         self.folder = folder
+        self.pipe = pipe
 
     def stop(self) -> None:
         """End the child if it still runs (SIGTERM, then SIGKILL: a kernel being compiled
@@ -57,6 +65,9 @@ class Warmup:
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait()
+        if self.pipe >= 0:
+            os.close(self.pipe)
+            self.pipe = -1
         shutil.rmtree(self.folder, ignore_errors=True)
 
 
@@ -72,12 +83,21 @@ def start() -> Warmup | None:
     except OSError:
         return None
     try:
-        process = subprocess.Popen([sys.executable, "-m", "potflat_cli._warmup", str(folder)],
-                                   stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        watched, held = os.pipe()  # (neither end is inherited by other children of the run)
     except OSError:
         shutil.rmtree(folder, ignore_errors=True)
         return None
-    return Warmup(process, folder)
+    try:
+        process = subprocess.Popen([sys.executable, "-m", "potflat_cli._warmup", str(folder), str(watched),
+                                    str(os.getpid())], pass_fds=(watched,),
+                                   stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    except OSError:
+        os.close(held)
+        shutil.rmtree(folder, ignore_errors=True)
+        return None
+    finally:
+        os.close(watched)
+    return Warmup(process, folder, held)
 
 
 def vessel(folder: Path) -> FlatMesh:
@@ -149,11 +169,45 @@ def bake_here() -> None:
         shutil.rmtree(folder, ignore_errors=True)
 
 
-def _main(folder: str) -> int:
-    def stopped(signum, frame):
-        raise SystemExit(1)
+def _die_with_parent(parent: int, pipe: int, folder: Path) -> None:
+    """End this child, removing its ``folder``, when the run that started it (process ``parent``)
+    ends, however it ends: a thread waits for the end of file on ``pipe`` (the read end of a
+    pipe whose write end only the run holds: the system closes it when the run dies) and,
+    on Linux, the kernel sends SIGTERM when the run dies (``PR_SET_PDEATHSIG``; :func:`_main`
+    handles it). The thread also ends the child while its main thread compiles.
+    The run starts the child from its main thread (the death signal follows the thread that
+    started the child)."""
+    if sys.platform.startswith("linux"):
+        import ctypes
 
-    signal.signal(signal.SIGTERM, stopped)
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+        except (OSError, AttributeError):  # no prctl: the pipe alone
+            pass
+    if os.getppid() != parent:  # the run died before the death signal was asked for
+        _end(folder)
+
+    def watch() -> None:
+        try:
+            while os.read(pipe, 64):
+                pass
+        except OSError:
+            pass
+        _end(folder)
+
+    threading.Thread(target=watch, name="potflat-warmup-parent", daemon=True).start()
+
+
+def _end(folder: Path) -> None:
+    """Remove ``folder`` and end this child at once (no interpreter shutdown: seconds with
+    Numba's compiler loaded)."""
+    shutil.rmtree(folder, ignore_errors=True)
+    os._exit(1)
+
+
+def _main(folder: str, pipe: str, parent: str) -> int:
+    signal.signal(signal.SIGTERM, lambda signum, frame: _end(Path(folder)))  # the run's stop, or its death
+    _die_with_parent(int(parent), int(pipe), Path(folder))
     try:
         warm(Path(folder), "relax")
     except (Exception, KeyboardInterrupt):
@@ -164,4 +218,4 @@ def _main(folder: str) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(_main(sys.argv[1]))
+    sys.exit(_main(*sys.argv[1:4]))

@@ -74,10 +74,11 @@ class _Group(TyperGroup):
         except ImportError:
             import click
 
-        from potflat_cli._errors import EXIT_USAGE, INTERRUPTED, STOP, fail
+        from potflat_cli._errors import EXIT_USAGE, STOP, TOLD, fail, interrupted
         from potflat_cli._process import command_settings
 
         STOP.clear()
+        TOLD.clear()
         args = list(sys.argv[1:] if args is None else args)
         if threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
@@ -89,6 +90,8 @@ class _Group(TyperGroup):
         try:
             with command_settings():
                 code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+            if STOP:  # (Typer turns an interrupt outside a command into exit code 130, silently)
+                code = interrupted().exit_code
         except click.exceptions.NoArgsIsHelpError as exc:
             exc.show()
             code = EXIT_USAGE
@@ -97,9 +100,12 @@ class _Group(TyperGroup):
             message = " ".join(exc.format_message().split()).rstrip(".")
             fail(f"{message[:1].lower()}{message[1:]}; see '{command} --help'", exc.exit_code)
             code = exc.exit_code
-        except typer.Abort:
-            fail(INTERRUPTED, 130)
-            code = 130
+        except (typer.Abort, KeyboardInterrupt):
+            code = interrupted().exit_code
+        except Exception:
+            if not STOP:
+                raise
+            code = interrupted().exit_code  # whatever the interrupt broke while the command was being built
         sys.exit(code or 0)
 
     def resolve_command(self, ctx, args):
@@ -108,16 +114,32 @@ class _Group(TyperGroup):
             pairs = {opt for p in command.params if p.nargs == 2 for opt in p.opts}
             rest = split_pairs(rest, pairs)  # --band 0.2,0.8 as --band 0.2 0.8
             if "--help" in rest:
-                _show_choices(command)
+                _show_choices(command, ctx)
         return name, command, rest
 
+    def get_help_option(self, ctx):
+        option = super().get_help_option(ctx)
+        _show_metavars([*self.params, option])  # 'potflat --help': nothing after --help and --version either
+        return option
 
-def _show_choices(command) -> None:
-    """In ``--help``: nothing after on/off flags (instead of ``<bool>``), and ``A B|A,B`` for
-    the options that take two values."""
-    for param in getattr(command, "params", ()):
+
+def _show_choices(command, ctx) -> None:
+    """:func:`_show_metavars` for a command's parameters and its ``--help``."""
+    _show_metavars([*getattr(command, "params", ()), command.get_help_option(ctx)])
+
+
+def _show_metavars(params) -> None:
+    """In ``--help``: nothing after on/off flags, ``--help`` included (instead of ``<bool>``),
+    arguments by their name in capitals in the usage line (``SCAN``, not ``{scan}``), and
+    ``A B|A,B`` for the options that take two values."""
+    for param in params:
+        if param is None:
+            continue
         if getattr(param, "is_flag", False):
             param.metavar = ""
+        elif param.param_type_name == "argument":  # (Typer writes a required one as '{scan}')
+            shown = param.name.upper() if param.required else f"[{param.name.upper()}]"
+            param._usage_display_name = lambda shown=shown: shown
         elif param.nargs == 2 and param.metavar is None:  # --band 0.2 0.8 or --band 0.2,0.8 (split_pairs)
             param.metavar = "A B|A,B"
 

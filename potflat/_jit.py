@@ -56,7 +56,7 @@ def worker_threads() -> int:
 
 def kernels_cached() -> bool:
     """Whether the kernels were compiled and cached by an earlier run of this potflat with this
-    Numba (else the first call of each compiles it: about a minute in all, worth telling the user).
+    Numba (else the first call of each compiles it: a few minutes in all, worth telling the user).
 
     Read from the spring kernels' cache index files (in the package's ``__pycache__`` folders,
     or under ``NUMBA_CACHE_DIR``): an index counts when it was written after the source file

@@ -27,6 +27,20 @@ class FoldedResultError(PotflatError):
     """A flattening result would contain flipped triangles or boundary overlap."""
 
 
+def out_of_memory(path) -> InvalidInputError:
+    """The one-line error for running out of memory on the input ``path`` (a
+    :class:`MemoryError` anywhere while it is read or flattened)."""
+    import os
+
+    try:
+        size = os.stat(path).st_size
+        shown = f" ({size / 1024**3:.1f} GiB)" if size >= 1024**3 else f" ({size / 1024**2:.0f} MiB)"
+    except (OSError, TypeError, ValueError):
+        shown = ""
+    return InvalidInputError(f"{path}{shown}: out of memory reading or flattening it; give a smaller file (decimate "
+                             "the scan) or run where more memory is available")
+
+
 class NotADiskError(FoldedResultError):
     """A rollout that no layout in the plane shows without a fold: it is not a disk (the relax
     stage's file layer adds what to do, from the rollout's record)."""

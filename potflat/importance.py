@@ -549,7 +549,8 @@ def image_mask_importance(flat: FlatMesh, mask_path: str | Path, reference: str 
     """Importance from a mask painted over an image potflat made (white = important).
 
     The image's ``NAME.bake.json`` (``reference``; default: the one beside the mask whose
-    image has the mask's size) gives its pixel grid and the flattening it was baked from.
+    image has the mask's size) gives its pixel grid and the flattening it was baked from (read
+    from the JSON's own folder, whatever folder the JSON names).
     Each vertex of ``flat`` is located on that flattening's 3D surface (the closest point of
     the nearest faces) and reads the mask where that point lies in the image. On the same
     scan this is exact: a vertex finds itself.
@@ -571,17 +572,18 @@ def image_mask_importance(flat: FlatMesh, mask_path: str | Path, reference: str 
         meta = json.loads(ref_json.read_text())
         origin = np.asarray(meta["origin_uv"], dtype=np.float64)
         px_per_unit = float(meta["px_per_unit"])
-        ply = Path(meta["provenance"]["inputs"][0]["path"])
+        ply_name = Path(meta["provenance"]["inputs"][0]["path"]).name
     except (OSError, ValueError, KeyError, IndexError, TypeError):
         raise InvalidInputError(f"{ref_json} is not a potflat bake JSON; name the NAME.bake.json of the image "
                                 "the mask was painted over") from None
     if meta.get("image_px") != [mask.shape[1], mask.shape[0]]:
         raise InvalidInputError(f"the mask {mask_path} is {mask.shape[1]} x {mask.shape[0]} px but the image of "
                                 f"{ref_json} is {meta.get('image_px')}; paint the mask over that image at its size")
-    if not ply.is_file():
-        ply = ref_json.parent / ply.name
-    if not ply.is_file():
-        raise InvalidInputError(f"the flattening {ply.name} named by {ref_json} is missing; keep it beside the image")
+    # the flattening is read beside the JSON the user named, never where the JSON points
+    ply = ref_json.parent / ply_name
+    if not ply.is_file() or ply.resolve().parent != ref_json.parent.resolve():
+        raise InvalidInputError(f"the flattening {ply_name!r} named by {ref_json} is not beside it; keep the "
+                                "image's stage PLY in its folder")
     ref = read_flat_ply(ply)
     RV, RF = ref.mesh.vertices, ref.mesh.faces
     centroids = RV[RF].mean(axis=1)

@@ -27,10 +27,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from potflat_synthetic.vessels import PART_INNER, PART_OUTER, SyntheticVessel
 
 from potflat.errors import InvalidOptionError
 from potflat.types import Mesh
-from potflat_synthetic.vessels import PART_INNER, PART_OUTER, SyntheticVessel
 
 #: Defect kinds accepted by :func:`add_defects`.
 DEFECTS = ("crease", "flap", "spikes", "sheet", "nonmanifold", "noise")

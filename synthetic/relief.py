@@ -19,18 +19,18 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-
-from potflat.errors import InvalidOptionError
-from potflat.types import FlatMesh, Mesh
-from potflat_synthetic.vessels import (
-    _SPECS,
-    _check_float,
-    _check_int,
+from potflat_synthetic.geometry import (
     _Generatrix,
     _normals2d,
     _planar_delaunay,
+    _project_to_generatrix,
     _revolve,
 )
+from potflat_synthetic.spec import _SPECS
+from potflat_synthetic.vessels import _check_float, _check_int
+
+from potflat.errors import InvalidOptionError
+from potflat.types import FlatMesh, Mesh
 
 #: Walls :func:`relief_patch` and :func:`relief_vessel` can carry the decoration on.
 RELIEF_KINDS = ("hydria", "sphere")
@@ -140,7 +140,6 @@ class ReliefScan:
     def wall_coordinates(self, points) -> tuple[np.ndarray, np.ndarray]:
         """Arc length ``s`` (mm) and angle ``theta`` (rad) of the points of the wall nearest
         ``points`` ``(k, 3)`` (on or near the scan)."""
-        from potflat_synthetic.vessels import _project_to_generatrix
 
         p = np.asarray(points, float).reshape(-1, 3)
         return _project_to_generatrix(self._geometry, np.hypot(p[:, 0], p[:, 1]), p[:, 2]), np.arctan2(p[:, 1], p[:, 0])

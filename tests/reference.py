@@ -260,6 +260,65 @@ def shape_energy(V: np.ndarray, F: np.ndarray, x: np.ndarray, weight: np.ndarray
     return float(total)
 
 
+def clip_faces(points: np.ndarray, faces: np.ndarray, level: np.ndarray, snap: float):
+    """Each triangle clipped by the zero set of a level linear along edges (Sutherland-Hodgman
+    against both half-spaces), the kernel's contract for ``potflat.mesh.split.split_faces``.
+
+    Vertices closer to the cut than ``snap`` of a crossing edge (by the level's change along
+    it) count as on it, as do those at level 0.
+
+    Returns
+    -------
+    polygons : list of dict
+        Per face, ``{+1: [points], -1: [points]}``: the corners of the part on each side (a
+        part with no area is left out).
+    added : dict
+        ``(a, b) -> t`` for every edge (smaller vertex first) cut at ``(1 - t) x[a] + t x[b]``.
+    on_cut : list of int
+        The vertices on the cut, sorted.
+    """
+    level = np.array(level, dtype=float)
+    near = set()
+    for tri in faces:
+        for c in range(3):
+            a, b = int(tri[c]), int(tri[(c + 1) % 3])
+            if level[a] == 0.0:
+                near.add(a)
+            if level[a] * level[b] < 0:
+                t = level[a] / (level[a] - level[b])
+                if t < snap:
+                    near.add(a)
+                if t > 1 - snap:
+                    near.add(b)
+    for v in near:
+        level[v] = 0.0
+    added, polygons = {}, []
+    for tri in faces:
+        parts = {}
+        for side in (1, -1):
+            poly = []
+            for c in range(3):
+                a, b = int(tri[c]), int(tri[(c + 1) % 3])
+                la, lb = side * level[a], side * level[b]
+                if la >= 0:
+                    poly.append(points[a])
+                if la * lb < 0:
+                    lo, hi = min(a, b), max(a, b)
+                    t = level[lo] / (level[lo] - level[hi])
+                    added[(lo, hi)] = t
+                    poly.append(points[lo] + t * (points[hi] - points[lo]))
+            if len(poly) >= 3 and any(side * level[int(v)] > 0 for v in tri):
+                parts[side] = poly
+        polygons.append(parts)
+    return polygons, added, sorted(near)
+
+
+def polygon_area(poly) -> float:
+    """Area of a planar polygon in 3D (corners in order)."""
+    p = np.asarray(poly, float)
+    return 0.5 * float(np.linalg.norm(sum(np.cross(p[i], p[(i + 1) % len(p)]) for i in range(len(p)))))
+
+
 def relief_fit(uv: np.ndarray, P: np.ndarray, weight: np.ndarray, cell_centres: np.ndarray, node: np.ndarray,
                sigma: float, reach: float, ridge: float) -> np.ndarray:
     """The relief's weighted least-squares quadric about ``node``, by a direct solve: the

@@ -397,7 +397,7 @@ def test_refuses_non_finite_uv(painted_plane):
 
 
 def test_refuses_giant_image(painted_plane):
-    with pytest.raises(InvalidOptionError, match="px_per_mm .* or less"):
+    with pytest.raises(InvalidOptionError, match="--px-per-mm .* or less"):
         bake(painted_plane, px_per_mm=2000)
 
 

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from potflat.types import FlatMesh
+from potflat_synthetic import spec
 from potflat_synthetic import vessels as synthetic
 
 
@@ -32,7 +33,7 @@ def test_painted_circles_round_and_true_scale(developed_cylinder):
     ppm = 3.0
     res = bake(flat, px_per_mm=ppm, maps=())
     img = res.image
-    want = 2 * synthetic.CIRCLE_RADIUS * ppm
+    want = 2 * spec.CIRCLE_RADIUS * ppm
     found = 0
     for feature in vessel.features:
         x, y, h = vessel.to_canonical(feature.centre)[0]
@@ -43,7 +44,7 @@ def test_painted_circles_round_and_true_scale(developed_cylinder):
         row = int((res.origin[1] - h) * ppm)
         # half-way between the circle's colour and the ground it is painted on: unbiased by blur
         rgb = img[..., :3].astype(int)
-        mask = ((np.abs(rgb - np.array(feature.colour)).sum(-1) < np.abs(rgb - np.array(synthetic.TERRACOTTA)).sum(-1))
+        mask = ((np.abs(rgb - np.array(feature.colour)).sum(-1) < np.abs(rgb - np.array(spec.TERRACOTTA)).sum(-1))
                 & (img[..., 3] == 255))
         _, labels = cv2.connectedComponents(mask.astype(np.uint8))
         assert labels[row, col] > 0  # the circle is where the development puts it
@@ -68,6 +69,6 @@ def test_atlas_charts_leave_no_gap(developed_cylinder):
     assert inside.sum() > 0.8 * (alpha > 0).sum()
     assert (alpha[inside] == 255).all()
     # no atlas background (grey) leaks in at chart borders
-    grey = np.abs(res.image[..., :3].astype(int) - np.array(synthetic.ATLAS_BACKGROUND)).sum(-1) < 12
+    grey = np.abs(res.image[..., :3].astype(int) - np.array(spec.ATLAS_BACKGROUND)).sum(-1) < 12
     assert not (grey & inside).any()
     assert res.figures["covered_area_mm2"] == pytest.approx(res.figures["flattened_area_mm2"], rel=0.01)

@@ -118,8 +118,11 @@ def test_force_redoes_all(three):
 
 
 def test_incomplete_outputs_or_changed_texture_rerun(three):
-    texture = three.parent / "scans" / "amphora-2.png"  # read by the fake rollout, in its provenance
+    texture = three.parent / "scans" / "amphora-2.png"  # read by the fake rollout, named by the scan's MTL
     texture.write_bytes(b"texture v1")
+    (three.parent / "scans" / "amphora-2.mtl").write_text("newmtl painted\nmap_Kd amphora-2.png\n")
+    with open(three.parent / "scans" / "amphora-2.obj", "a") as fh:
+        fh.write("mtllib amphora-2.mtl\n")
     run_batch(load_batch(three), workers=1)
     res = three.parent / "results"
     (res / "amphora-1" / "amphora-1.area.png").unlink()
@@ -236,7 +239,8 @@ BAD = {
     "scans not a list": ("output: r/\nscans: {path: a.obj}\n", 2, "non-empty list"),
     "scan without path": ("output: r/\nscans:\n  - band: [0, 1]\n", 3, "without 'path:'"),
     "defaults not a mapping": ("output: r/\ndefaults: [1, 2]\nscans: [a.obj]\n", 2, "must be a mapping"),
-    "same scan twice": ("output: r/\nscans:\n  - a.obj\n  - '*.obj'\n", 4, "already listed on line 3"),
+    "same scan twice": ("output: r/\nscans:\n  - a.obj\n  - '*.obj'\n", 4,
+                        "listed on line 3, is listed again on line 4"),
     "same output name": ("output: r/\nscans:\n  - a.obj\n  - sub/a.obj\n", 4, "would both write"),
     "not a scan format": ("output: r/\nscans:\n  - notes.txt\n", 3, "not a scan format"),
     "glob matching no scan": ("output: r/\nscans:\n  - '*.txt'\n", 3, "matches 1 files but no scan"),

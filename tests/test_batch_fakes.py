@@ -64,6 +64,9 @@ class RolloutOptions:
         if self.band is not None and not 0 <= self.band[0] < self.band[1] <= 1:
             raise InvalidOptionError(f"band must be two fractions 0 <= low < high <= 1, got {self.band}")
 
+    def input_files(self) -> tuple[str, ...]:
+        return ()
+
 
 @dataclass(frozen=True, kw_only=True)
 class RelaxOptions:
@@ -144,7 +147,7 @@ def _zone(figures: dict) -> ZoneFigures:
                        length_error_p95_pct=figures["length_error_p95_pct"], distortion=None)
 
 
-def run_relax_stage(rollout_ply, out_dir, options, *, name=None, rolled=None):
+def run_relax_stage(rollout_ply, out_dir, options, *, name=None, rolled=None, check=None):
     src, out = Path(rollout_ply), Path(out_dir)
     name = name or src.name.split(".")[0]
     _sabotage(name, "relax")
@@ -155,6 +158,7 @@ def run_relax_stage(rollout_ply, out_dir, options, *, name=None, rolled=None):
                "important_zone": {"area_fraction": 0.25, "length_error_median_pct": 1.0 + data[1] / 1e3,
                                   "length_error_p95_pct": 2.5},
                "rest": {"area_fraction": 0.75, "length_error_median_pct": 30.0, "length_error_p95_pct": 55.0},
+               "outline_turning": {"rollout": 1.5, "relaxed": 1.6, "ratio": 1.6 / 1.5},
                "provenance": provenance(stage="relax", inputs=[src], options=asdict(options))}
     js = write_json_atomic(out / f"{name}.relaxed.json", summary)
     zone = ZoneSummary(important_zone=_zone(summary["important_zone"]), rest=_zone(summary["rest"]), lengths="")

@@ -10,6 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 import test_batch_fakes as fakes
+from potflat_cli._stage import PROGRESS
 from potflat_cli.main import app
 
 COMMANDS = ("rollout", "relax", "bake", "run", "batch")
@@ -94,6 +95,13 @@ def test_run_writes_everything_and_json(tmp_path, fake_stages):
     assert rollout["provenance"]["options"]["band"] == [0.1, 0.9]
 
 
+def test_run_summary_says_how_ragged_the_outline_is(tmp_path, fake_stages):
+    scan = fakes.write_scan(tmp_path / "vase.obj")
+    result = cli("run", scan, "-o", tmp_path / "out")
+    assert result.exit_code == 0, result.output
+    assert "outline: turns 1.60 times round (the rollout's 1.50, 1.07x" in " ".join(result.stdout.split())
+
+
 def test_run_default_output_is_name_in_the_current_folder(tmp_path, fake_stages, monkeypatch):
     """Never the scan's folder (often an archive or read-only) unless asked: ./NAME/."""
     scan = fakes.write_scan(tmp_path / "archive" / "vase.obj")
@@ -129,7 +137,7 @@ def test_run_corrupt_scan_one_line_error(tmp_path, fake_stages):
     bad.write_bytes(b"ply\nforma")
     result = cli("run", bad, "-o", tmp_path / "out")
     assert result.exit_code == 2
-    lines = result.stderr.strip().splitlines()
+    lines = [line for line in result.stderr.strip().splitlines() if not line.startswith(PROGRESS)]
     assert len(lines) == 1 and lines[0].startswith("error: ") and "bad.ply" in lines[0]
 
 

@@ -76,7 +76,8 @@ def test_no_symmetry_is_a_clear_error(tmp_path):
     box.export(path)
     result = runner.invoke(app, ["rollout", str(path), "-o", str(tmp_path)])
     assert result.exit_code == 2
-    assert "--axis px,py,pz,dx,dy,dz" in result.output and len(result.output.strip().splitlines()) == 1
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "--axis px,py,pz,dx,dy,dz" in errors[0], result.output
 
 
 def test_output_may_not_overwrite_the_input(tmp_path):

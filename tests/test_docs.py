@@ -177,6 +177,16 @@ def test_every_generated_block_is_marked_once_in_its_document():
         assert marked <= {n for n, d in docs.BLOCKS.items() if d == doc}, f"{doc}: no benchmark writes {marked}"
 
 
+def test_no_generated_block_holds_a_heading():
+    """The headings stay outside the blocks (the hand-written part of each document)."""
+    docs = _docs_module()
+    for name, doc in docs.BLOCKS.items():
+        begin, end = docs.markers(name)
+        text = doc.read_text()
+        block = text[text.index(begin):text.index(end)]
+        assert not re.search(r"^#", block, re.MULTILINE), f"{doc.name}: block {name} holds a heading"
+
+
 def test_a_block_is_replaced_between_its_markers_only():
     docs = _docs_module()
     text = "# T\n\nhand\n<!-- begin: a -->\nold\n<!-- end: a -->\nafter\n"

@@ -39,10 +39,10 @@ def vessel():
 
 
 def _seam_azimuths(res):
-    """Azimuths of the vertices the cut duplicated."""
-    idx = res.vertex_index
-    counts = np.bincount(idx)
-    return _azimuth(res.flat.mesh.vertices[counts[idx] > 1])
+    """Azimuths of the vertices the cut duplicated (a copy at the same place)."""
+    V = res.flat.mesh.vertices
+    _, inverse, counts = np.unique(V, axis=0, return_inverse=True, return_counts=True)
+    return _azimuth(V[counts[inverse.ravel()] > 1])
 
 
 def test_seam_at_a_point(vessel):

@@ -153,7 +153,7 @@ def test_run_scan_hands_the_flattening_on_in_memory(tmp_path, monkeypatch):
     import potflat.io.flat_ply
     from potflat_synthetic.vessels import make_vessel, write_obj
 
-    scan = write_obj(make_vessel("amphora", n_vertices=3000, seed=2, texture_size=64), tmp_path / "in" / "a.obj")
+    scan = write_obj(make_vessel("amphora", n_vertices=3000, seed=2, texture_size=128), tmp_path / "in" / "a.obj")
 
     def no_reading(path):
         raise AssertionError(f"run_scan read {path} back")
@@ -198,7 +198,7 @@ def test_run_scan_computes_each_flattenings_figures_once(tmp_path, monkeypatch):
     from potflat.files.bake_stage import run_bake_stage
     from potflat_synthetic.vessels import make_vessel, write_obj
 
-    scan = write_obj(make_vessel("amphora", n_vertices=3000, seed=2, texture_size=64), tmp_path / "in" / "a.obj")
+    scan = write_obj(make_vessel("amphora", n_vertices=3000, seed=2, texture_size=128), tmp_path / "in" / "a.obj")
     stage, computed = ["before"], []
     summarize, zone_summary = distortion.SurfaceReference.summarize, distortion.zone_summary
 
@@ -256,7 +256,7 @@ def test_the_painted_zone_outline_stands_out_on_every_map(tmp_path):
 
     from potflat_synthetic.vessels import make_vessel, write_obj
 
-    scan = write_obj(make_vessel("amphora", n_vertices=3000, seed=2, texture_size=64), tmp_path / "in" / "a.obj")
+    scan = write_obj(make_vessel("amphora", n_vertices=3000, seed=2, texture_size=128), tmp_path / "in" / "a.obj")
     result = run_scan(scan, tmp_path / "out", relax={"preset": "preview"},
                       bake={"px_per_mm": 2.0, "maps": ("stress", "area", "anisotropy")})
     assert result.relax.record["important_zone"]["area_fraction"] < 1  # a painted zone was found

@@ -90,7 +90,21 @@ def test_plate_auto_scale_fits_a4(cup_run):
     plate = make_plate(cup_run.out_dir / "cup.relaxed.ply", cup_run.out_dir, name="cup")
     w, h = plate.record["page_mm"]
     assert plate.record["scale"] in (1.0, 0.5, 1 / 3, 0.25, 0.2, 0.1, 0.05, 0.02)
-    assert w <= 210 and plate.record["scale"] <= 0.5  # the cup's rollout is wider than 180 mm at 1:1
+    assert w <= 210 and h <= 297 and plate.record["paper"] == "A4"  # the whole page, caption included
+    assert plate.record["scale"] <= 0.5  # the cup's rollout is wider than 180 mm at 1:1
+
+
+def test_a_plate_larger_than_a4_says_so_and_names_the_scales_that_fit(cup_run):
+    """At 1:1 the cup's page is larger than A3: the command says so, with the largest scale that
+    fits A4 and A3, and the record keeps the paper and those scales."""
+    res = CliRunner().invoke(app, ["plate", str(cup_run.out_dir / "cup.relaxed.ply"), "--scale", "1:1"],
+                             env={"COLUMNS": "300"})
+    assert res.exit_code == 0, res.output
+    record = json.loads((cup_run.out_dir / "cup.bake.json").read_text())["plate"]  # (the run's, at 1:2)
+    plate = make_plate(cup_run.out_dir / "cup.relaxed.ply", cup_run.out_dir, scale="1:1", name="cup").record
+    a4, a3 = plate["largest_scale_on"]["A4"], plate["largest_scale_on"]["A3"]
+    assert plate["paper"] is None and a4 and a3 and record["paper"] in ("A4", "A3", None)
+    assert f"larger than A3: {a4} fits A4, {a3} fits A3" in " ".join(res.stdout.split())
 
 
 def test_plate_cli_and_its_errors(cup_run, tmp_path):

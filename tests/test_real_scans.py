@@ -16,10 +16,7 @@ from potflat_cli.main import app
 
 SCANS = ("dragon-jar.glb", "colonoware-pot.glb", "plastic-vase.ply", "sea-vase.ply", "goblet.stl")
 SIDES = ("outer", "inner")
-#: Walls refused for now (the run fails, so the test does; strict: it fails the day they give an image).
-REFUSED = {("colonoware-pot.glb", "inner"): "not a disk (faces joined at single edges): refused, not cut into one"}
-WALLS = [pytest.param(scan, side, marks=pytest.mark.xfail(strict=True, reason=REFUSED[scan, side]))
-         if (scan, side) in REFUSED else (scan, side) for scan in SCANS for side in SIDES]
+WALLS = [(scan, side) for scan in SCANS for side in SIDES]
 
 
 @dataclass(frozen=True)

@@ -395,6 +395,10 @@ def test_run_relax_stage_writes_ply_and_json(tmp_path, vessel):
     assert js["axis"] == [0, 0, 1] and js["proxy"]["kind"] == "cylinder"
     assert js["provenance"]["stage"] == "relax" and len(js["energy_history"]) >= 1
     assert js["distortion"]["edge_rms"] < js["distortion_before"]["edge_rms"]
+    turning = js["outline_turning"]  # the rollout's and the relaxed outline's, the same mesh
+    assert turning["rollout"] >= 1.0 and turning["relaxed"] >= 1.0
+    assert np.isclose(turning["ratio"], turning["relaxed"] / turning["rollout"])
+    assert turning["surface"] >= 1.0
 
 
 def test_cli_relax(tmp_path, vessel):
@@ -406,6 +410,7 @@ def test_cli_relax(tmp_path, vessel):
     res = runner.invoke(app, ["relax", str(src), "-o", str(tmp_path / "o"), "--preset", "preview"])
     assert res.exit_code == 0, res.output
     assert "fold-free" in res.output and (tmp_path / "o" / "hydria.relaxed.json").exists()
+    assert "outline: turns" in res.output
     res = runner.invoke(app, ["relax", str(src), "--stiffness", "0"])
     assert res.exit_code == 2 and "stiffness" in res.output
     res = runner.invoke(app, ["relax", "--help"])

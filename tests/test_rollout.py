@@ -10,7 +10,8 @@ from _revolve import cone, cylinder, vase
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.files.rollout_stage import run_rollout_stage
 from potflat.io.flat_ply import read_flat_ply
-from potflat.mesh.distortion import face_distortion
+from potflat.mesh.distortion import edge_length_error, face_distortion
+from potflat.mesh.split import CUT_SNAP
 from potflat.rollout.axis import _boundary_loops
 from potflat.rollout.seam import cut_open
 from potflat.rollout.unroll import RolloutOptions, rollout
@@ -18,13 +19,13 @@ from potflat.rollout.unroll import RolloutOptions, rollout
 #: The shared real scans (CI has ../shared beside the repository).
 
 
-def _local(res, local, Rot):
+def _local(res, Rot, shift):
     """Local (unposed) coordinates of the output vertices, seen along the fitted axis.
 
     Returns theta (counter-clockwise about the fitted axis), height along it, radius; an
     open tube may be oriented either way, so local z and theta change sign with it.
     """
-    p = local[res.vertex_index]
+    p = (res.flat.mesh.vertices - shift) @ Rot
     s = np.sign(res.axis.direction @ Rot[:, 2])
     return s * np.arctan2(p[:, 1], p[:, 0]), s * p[:, 2], np.hypot(p[:, 0], p[:, 1])
 
@@ -50,35 +51,65 @@ def _wrap(x):
     return (x + np.pi) % (2 * np.pi) - np.pi
 
 
+def _on_seam(res):
+    """Output vertices on the seam's two sides (their development's angle is 0 or one turn)."""
+    theta = res.flat.uv[:, 0] / res.proxy.params["radius"]
+    return (np.abs(theta) < 1e-12) | (np.abs(theta - 2 * np.pi) < 1e-12)
+
+
+def _edges(F):
+    return np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1), axis=0)
+
+
+def _edge_rms_off_seam(res):
+    """The rollout's edge-length RMS over the edges not touching the seam (whose vertices may
+    have moved onto its meridian by up to CUT_SNAP of an edge)."""
+    e = _edges(res.flat.mesh.faces)
+    e = e[~_on_seam(res)[e].any(axis=1)]
+    return np.sqrt(np.mean(edge_length_error(res.flat.mesh.vertices, res.flat.uv, e) ** 2))
+
+
 def test_posed_cylinder_unrolls_exactly():
     R0 = 30.0
-    mesh, Rot, _, local = cylinder(R=R0, seed=7)
+    mesh, Rot, shift, _ = cylinder(R=R0, seed=7)
     res = rollout(mesh, proxy="cylinder")
-    th, z, _ = _local(res, local, Rot)
+    th, z, _ = _local(res, Rot, shift)
     uv = res.flat.uv
     assert np.isclose(res.proxy.params["radius"], R0, rtol=1e-12)
-    # the flat point of every vertex is (R theta, h): v is the height, u / R the angle
+    # the flat point of every vertex is (R theta, h): v is the height, u / R the angle; the
+    # seam is cut exactly along its meridian: its vertices lie on it (added on the edges
+    # crossing it, or moved onto it by at most CUT_SNAP of an edge)
     np.testing.assert_allclose(uv[:, 1], z - z.min(), atol=1e-9)
+    seam = _on_seam(res)
+    assert seam.sum() >= 2 * 25  # (25 rows of vertices, each side)
     offset = _wrap(uv[:, 0] / R0 - th)
-    np.testing.assert_allclose(_wrap(offset - offset[0]), 0, atol=1e-10)
-    # the only distortion left is the faceting (chord vs arc), predicted edge by edge
+    ref = offset[np.flatnonzero(~seam)[0]]
+    np.testing.assert_allclose(_wrap(offset[~seam] - ref), 0, atol=1e-10)
+    step = 2 * np.pi / 64
+    assert np.abs(_wrap(offset[seam] - ref)).max() < 1.5 * CUT_SNAP * step
+    # the only distortion left is the faceting (chord vs arc), predicted edge by edge where
+    # no end was moved onto the seam
     F = res.flat.mesh.faces
-    e = np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1), axis=0)
+    e = _edges(F)
     dth = _wrap(th[e[:, 1]] - th[e[:, 0]])
     dz = z[e[:, 1]] - z[e[:, 0]]
-    predicted = np.hypot(R0 * dth, dz) / np.hypot(2 * R0 * np.sin(dth / 2), dz) - 1
+    length = np.linalg.norm(res.flat.mesh.vertices[e[:, 1]] - res.flat.mesh.vertices[e[:, 0]], axis=1)
+    predicted = np.hypot(R0 * dth, dz) / length - 1
+    actual = np.linalg.norm(uv[e[:, 1]] - uv[e[:, 0]], axis=1) / length - 1
+    exact = ~(seam[e[:, 0]] | seam[e[:, 1]])
+    np.testing.assert_allclose(actual[exact], predicted[exact], atol=1e-9)
     d = res.distortion
-    assert np.isclose(d.edge_rms, np.sqrt(np.mean(predicted**2)), rtol=1e-8)
-    assert d.flipped == 0
-    assert abs(d.scale - 1) < np.max(predicted) + 1e-12  # flat area = 3D area up to faceting
+    assert d.edge_rms < 0.02 and d.flipped == 0  # (the moves onto the seam)
+    assert abs(d.scale - 1) < np.max(predicted) + 1e-3  # flat area = 3D area up to faceting
 
 
 def test_cylinder_distortion_is_only_faceting():
-    """Halving the angular step divides the rollout's edge error by about 4 (chord vs arc)."""
-    coarse = rollout(cylinder(seed=1, n_theta=48, n_t=12)[0], proxy="cylinder").distortion
-    fine = rollout(cylinder(seed=1, n_theta=96, n_t=12)[0], proxy="cylinder").distortion
-    assert 3.0 < coarse.edge_rms / fine.edge_rms < 5.0
-    assert fine.area_max_abs_log < 1e-3 and fine.flipped == 0
+    """Halving the angular step divides the rollout's edge error by about 4 (chord vs arc)
+    away from the seam (where vertices may move onto its meridian by CUT_SNAP of an edge)."""
+    coarse = rollout(cylinder(seed=1, n_theta=48, n_t=12)[0], proxy="cylinder")
+    fine = rollout(cylinder(seed=1, n_theta=96, n_t=12)[0], proxy="cylinder")
+    assert 3.0 < _edge_rms_off_seam(coarse) / _edge_rms_off_seam(fine) < 5.0
+    assert fine.distortion.area_max_abs_log < 1e-3 and fine.distortion.flipped == 0
 
 
 @pytest.mark.parametrize("r0,r1", [(40.0, 20.0), (20.0, 45.0)])
@@ -87,42 +118,54 @@ def test_posed_cone_unrolls_exactly(r0, r1):
     mesh, Rot, shift, local = cone(r0, r1, H, seed=8, cap=False)
     res = rollout(mesh, proxy="cone")
     p = res.proxy.params
-    # every vertex keeps its exact distance from the apex, and the angle at the apex is
-    # the angle about the axis times sin(alpha): the isometric development
+    # every scan vertex keeps its exact distance from the apex, and the angle at the apex is
+    # the angle about the axis times sin(alpha): the isometric development (the vertices
+    # added on the seam lie on chords, inside the cone; the seam's own vertices are moved
+    # onto its meridian by at most CUT_SNAP of an edge)
     apex_local = np.array([0, 0, -r0 * H / (r1 - r0)])
-    th, z, _ = _local(res, local, Rot)
-    slant = np.linalg.norm(local[res.vertex_index] - apex_local, axis=1)
+    th, z, _ = _local(res, Rot, shift)
+    scan = res.vertex_index >= 0
+    slant = np.linalg.norm(local[res.vertex_index[scan]] - apex_local, axis=1)
     mid = np.radians(p["bisector_deg"])
     apex_uv = np.array([p["reference_radius"] * mid, p["reference_height"] - p["reference_radius"] / p["generator"][1]])
     d = res.flat.uv - apex_uv
-    np.testing.assert_allclose(np.linalg.norm(d, axis=1), slant, rtol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(d[scan], axis=1), slant, rtol=1e-9)
     sin_a = abs(r1 - r0) / np.hypot(r1 - r0, H)
     assert np.isclose(np.sin(np.radians(p["half_angle_deg"])), sin_a, rtol=1e-9)
     ang = np.arctan2(d[:, 0], np.sign(p["generator"][1]) * d[:, 1])
     offset = _wrap(ang / sin_a - th)
-    np.testing.assert_allclose(_wrap(offset - offset[0]), 0, atol=1e-9)
-    assert res.distortion.flipped == 0 and res.distortion.edge_rms < 1e-3
+    # the seam's sides are the two rays from the apex at the ends of the sector
+    side = np.abs(np.abs(ang / sin_a) - np.pi) < 1e-9
+    assert side.sum() >= 2 * 25
+    np.testing.assert_allclose(_wrap(offset[~side] - offset[~side][0]), 0, atol=1e-9)
+    assert res.distortion.flipped == 0 and res.distortion.edge_rms < 0.02
 
 
 def test_no_face_is_lost_and_the_mesh_becomes_a_disk():
     mesh, *_ = vase(seed=2)
     res = rollout(mesh)
     fm = res.flat.mesh
-    assert len(fm.faces) == len(mesh.faces) == res.region.faces
-    np.testing.assert_array_equal(np.sort(res.face_index), np.arange(len(mesh.faces)))
-    # same triangles, same 3D corners, same area
-    np.testing.assert_array_equal(fm.vertices[fm.faces], mesh.vertices[mesh.faces[res.face_index]])
-    assert np.isclose(_areas(fm.vertices, fm.faces).sum(), _areas(mesh.vertices, mesh.faces).sum(), rtol=1e-14)
-    # the cut: one copy per seam vertex (at least one per row of the grid's 25 rows; the cut
-    # follows edges, so it may zigzag), a disk with one boundary
+    assert len(fm.faces) == res.region.faces
+    np.testing.assert_array_equal(np.unique(res.face_index), np.arange(len(mesh.faces)))
+    # faces not cut are the same triangles with the same 3D corners; the pieces of a cut face
+    # cover it exactly, and their new corners lie on its edges
+    pieces = np.bincount(res.face_index) > 1
+    assert res.cut_faces == pieces.sum() > 0
+    whole = ~pieces[res.face_index]
+    np.testing.assert_array_equal(fm.vertices[fm.faces[whole]], mesh.vertices[mesh.faces[res.face_index[whole]]])
+    np.testing.assert_allclose(np.bincount(res.face_index, _areas(fm.vertices, fm.faces)), _areas(mesh.vertices, mesh.faces),
+                               rtol=1e-12)
+    # the cut: one copy per seam vertex (at least one per row of the grid's 24 rows), the
+    # added ones among them; a disk with one boundary
     assert 25 <= res.seam_vertices <= 50 and res.split_vertices == 0 and res.region.cut
-    assert len(fm.vertices) == len(mesh.vertices) + res.seam_vertices
+    assert res.cut_vertices > 0 and np.count_nonzero(res.vertex_index < 0) == 2 * res.cut_vertices
+    assert len(fm.vertices) == len(mesh.vertices) + res.seam_vertices + res.cut_vertices
     assert _euler(fm.faces) == 1
     assert len(_boundary_loops(fm)) == 1
     # the two copies of a seam vertex are one turn apart
-    v, counts = np.unique(res.vertex_index, return_counts=True)
+    v, counts = np.unique(res.vertex_index[res.vertex_index >= 0], return_counts=True)
     twins = v[counts == 2]
-    assert len(twins) == res.seam_vertices
+    assert len(twins) == res.seam_vertices - res.cut_vertices
     u = res.flat.uv[:, 0]
     for t in twins[:5]:
         a, b = np.flatnonzero(res.vertex_index == t)
@@ -132,7 +175,7 @@ def test_no_face_is_lost_and_the_mesh_becomes_a_disk():
 def test_upright_and_not_mirrored():
     mesh, Rot, shift, local = vase(seed=3, cap=True)  # closed foot: mouth known to be +z local
     res = rollout(mesh, band=(0.03, 1.0), proxy="cylinder")
-    th, z, _ = _local(res, local, Rot)
+    th, z, _ = _local(res, Rot, shift)
     uv = res.flat.uv
     assert res.axis.direction @ Rot[:, 2] > 0.999
     assert np.corrcoef(uv[:, 1], z)[0, 1] > 0.999  # higher on the vessel = higher in the image
@@ -140,31 +183,39 @@ def test_upright_and_not_mirrored():
     e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
     dth = _wrap(th[e[:, 1]] - th[e[:, 0]])
     du = uv[e[:, 1], 0] - uv[e[:, 0], 0]
-    big = np.abs(dth) > 1e-3
+    # (edges to a vertex moved onto the seam's meridian, by at most CUT_SNAP of an edge, aside)
+    big = (np.abs(dth) > 1e-3) & ~_on_seam(res)[e].any(axis=1)
     assert np.all(np.sign(du[big]) == np.sign(dth[big]))  # larger angle (CCW) = further right
     fd = face_distortion(res.flat.mesh.vertices, uv, F)
     assert np.all(fd.area_2d > 0)
     assert res.distortion.flipped == 0
 
 
-def test_band_and_angles_select_faces_by_centroid():
+def test_band_selects_by_centroid_and_angles_cut_exactly():
     mesh, Rot, shift, local = cylinder(seed=5, n_theta=72)
     res = rollout(mesh, band=(0.25, 0.5), angles=(-40.0, 70.0), seam=200.0, proxy="cylinder")
     c = local[mesh.faces].mean(axis=1)
     s = np.sign(res.axis.direction @ Rot[:, 2])
-    rel = s * (np.degrees(np.arctan2(c[:, 1], c[:, 0])) - _local_angle(res, Rot, 200.0))
-    rel = (rel + 40.0) % 360.0 - 40.0
+    to_seam = _local_angle(res, Rot, 200.0)
+    rel = (s * (np.degrees(np.arctan2(c[:, 1], c[:, 0])) - to_seam) + 40.0) % 360.0 - 40.0
+    corner = s * (np.degrees(np.arctan2(local[mesh.faces][..., 1], local[mesh.faces][..., 0])) - to_seam)
+    corner = rel[:, None] + (corner - rel[:, None] + 180.0) % 360.0 - 180.0
     frac = c[:, 2] / 80.0 if s > 0 else 1 - c[:, 2] / 80.0
-    expect = np.flatnonzero((frac >= 0.25) & (frac <= 0.5) & (rel <= 70.0))
-    np.testing.assert_array_equal(res.face_index, expect)
-    assert not res.region.cut and res.seam_vertices == 0
+    # the band by the faces' centroids, the angles by the faces' spans: cut at the window's sides
+    meets = np.any([(corner.max(axis=1) + k > -40.0) & (corner.min(axis=1) + k < 70.0) for k in (-360, 0, 360)], axis=0)
+    expect = np.flatnonzero((frac >= 0.25) & (frac <= 0.5) & meets)
+    np.testing.assert_array_equal(np.unique(res.face_index), expect)
+    assert res.cut_faces > 0 and not res.region.cut and res.seam_vertices == 0
     lo, hi = res.region.theta_range_deg
-    assert -45 < lo < -35 and 65 < hi < 75
+    assert np.isclose(lo, -40.0, atol=1e-9) and np.isclose(hi, 70.0, atol=1e-9)
     assert res.region.angles_deg == (-40.0, 70.0) and res.seam_method == "user"
     assert np.isclose(res.seam_angle, 200.0)
-    # u = R * angle from the seam: the requested range maps to [-40, 70] degrees of arc
+    # u = R * angle from the seam: the requested range maps to [-40, 70] degrees of arc, the
+    # sides straight
     u = res.flat.uv[:, 0] / res.proxy.params["radius"]
-    assert -45 < np.degrees(u.min()) < -35 and 65 < np.degrees(u.max()) < 75
+    assert np.isclose(np.degrees(u.min()), -40.0, atol=1e-9) and np.isclose(np.degrees(u.max()), 70.0, atol=1e-9)
+    for side in (u.min(), u.max()):
+        assert np.count_nonzero(u == side) >= 8  # (8 rows of vertices in the band, each side)
 
 
 def test_sherd_is_not_cut():
@@ -191,7 +242,7 @@ def test_holes_stay_holes():
     holes = [(1.0, 1.6, 0.3, 0.6), (4.0, 4.3, 0.1, 0.9)]
     mesh, Rot, _, _ = cylinder(seed=6, holes=holes)
     res = rollout(mesh)
-    assert len(res.flat.mesh.faces) == len(mesh.faces)
+    assert len(np.unique(res.face_index)) == len(mesh.faces)
     assert res.distortion.flipped == 0 and res.proxy.kind == "cylinder"
     # the automatic seam runs through the long hole (least to cut): one hole is left inside
     assert 4.0 < np.radians(_local_angle(res, Rot, res.seam_angle)) < 4.3
@@ -231,7 +282,23 @@ def test_seam_from_the_texture(tmp_path):
     res = rollout(mesh.replace(texcoords=tc, texture_path=tex))
     assert res.seam_method == "texture"
     assert 203 < _local_angle(res, Rot, res.seam_angle) < 247
-    np.testing.assert_array_equal(res.flat.mesh.texcoords, tc[res.face_index])
+    # faces not cut keep their texture coordinates; a piece's corner has its face's texture
+    # map at the corner's place (barycentric coordinates in the face)
+    fm = res.flat.mesh
+    cut = np.bincount(res.face_index)[res.face_index] > 1
+    np.testing.assert_array_equal(fm.texcoords[~cut], tc[res.face_index[~cut]])
+    tri = mesh.vertices[mesh.faces[res.face_index[cut]]]
+    p = fm.vertices[fm.faces[cut]]
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    d = p - tri[:, None, 0]
+    g = np.stack([np.einsum("ij,ij->i", e1, e1), np.einsum("ij,ij->i", e1, e2), np.einsum("ij,ij->i", e2, e2)], axis=1)
+    r1, r2 = np.einsum("ikj,ij->ik", d, e1), np.einsum("ikj,ij->ik", d, e2)
+    det = g[:, 0] * g[:, 2] - g[:, 1] ** 2
+    b1 = (g[:, 2, None] * r1 - g[:, 1, None] * r2) / det[:, None]
+    b2 = (g[:, 0, None] * r2 - g[:, 1, None] * r1) / det[:, None]
+    t = tc[res.face_index[cut]]
+    want = t[:, None, 0] + b1[..., None] * (t[:, None, 1] - t[:, None, 0]) + b2[..., None] * (t[:, None, 2] - t[:, None, 0])
+    np.testing.assert_allclose(fm.texcoords[cut], want, atol=1e-12)
 
 
 def test_ortho_cutout_is_seen_face_on():
@@ -251,7 +318,7 @@ def test_manual_axis_option():
     res = rollout(mesh, axis=(*shift, *(-Rot[:, 2])), flip=True)
     assert res.axis.method == "manual"
     np.testing.assert_allclose(res.axis.direction, Rot[:, 2], atol=1e-12)
-    assert res.proxy.kind == "cone" and res.distortion.edge_rms < 1e-3
+    assert res.proxy.kind == "cone" and res.distortion.edge_rms < 0.02
 
 
 def test_rollout_is_deterministic():
@@ -425,10 +492,13 @@ def test_run_rollout_stage_refuses_to_overwrite_its_input(tmp_path):
 def test_real_goblet_band_rolls_out(tmp_path, real_scans):
     out = run_rollout_stage(real_scans / "goblet.stl", tmp_path)
     s = out.record
-    # the goblet is a closed shell: its outer wall is unrolled, less the folded base underside
+    # the goblet is a closed shell: its outer wall is unrolled, less the foot's underside (which
+    # faces along the axis: a disc of its own) and any border faces that fold over
     assert s["walls"]["two_walled"] and s["walls"]["faces_inner"] > 0
-    assert s["counts"]["faces"] + s["trimmed"]["faces"] == s["walls"]["faces_selected"]
-    assert 0 < s["trimmed"]["faces"] < 0.02 * s["counts"]["faces"]
+    assert s["base"]["left_out"] and s["base"]["faces_in_disc"] > 0 and s["base"]["faces_in_neither"] == 0
+    assert (s["counts"]["input_faces_unrolled"] + s["trimmed"]["faces"] + s["base"]["faces_in_disc"]
+            == s["walls"]["faces_selected"])
+    assert s["trimmed"]["faces"] < 0.02 * s["counts"]["faces"]
     assert s["distortion"]["flipped"] == 0 and s["boundary_overlap"] == 0
     assert s["axis"]["direction"][2] > 0.999
 
@@ -441,9 +511,9 @@ def test_synthetic_samples_from_the_generator():
         cos = abs(res.axis.direction @ sv.axis_direction) / np.linalg.norm(sv.axis_direction)
         assert np.degrees(np.arccos(min(cos, 1.0))) < 0.05, kind
         assert res.distortion.flipped == 0, kind
-        assert len(res.flat.mesh.faces) == len(sv.mesh.faces)
+        assert len(np.unique(res.face_index)) == len(sv.mesh.faces)
         if kind != "sherd":
-            assert res.proxy.kind == kind and res.distortion.edge_rms < 1e-3
+            assert res.proxy.kind == kind and res.distortion.edge_rms < 0.02
         else:
             assert res.seam_method == "gap" and res.seam_vertices == 0
 
@@ -455,7 +525,7 @@ def test_face_mask_restricts_the_region():
     res = rollout(mesh, face_mask=mask, band=(0.2, 0.8))
     assert np.all(mask[res.face_index])
     full = rollout(mesh, band=(0.2, 0.8))
-    np.testing.assert_array_equal(res.face_index, full.face_index[mask[full.face_index]])
+    np.testing.assert_array_equal(np.unique(res.face_index), np.unique(full.face_index[mask[full.face_index]]))
     with pytest.raises(InvalidInputError, match="face_mask"):
         rollout(mesh, face_mask=np.ones(3, bool))
 

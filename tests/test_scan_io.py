@@ -665,7 +665,7 @@ def test_missing_texture_file(tmp_path):
     (tmp_path / "atlas.png").unlink()
     with pytest.raises(InvalidInputError) as e:
         load_scan(obj)
-    _one_line(e, "seam.obj", "atlas.png", "not found", "texture='ignore'")
+    _one_line(e, "seam.obj", "atlas.png", "not found", "--no-texture")
     scan = load_scan(obj, texture="ignore")
     assert scan.mesh.texcoords is None and len(scan.mesh.vertices) == 20
 
@@ -706,7 +706,7 @@ def test_texture_decompression_bomb(tmp_path):
     (tmp_path / "atlas.png").write_bytes(png)
     with pytest.raises(InvalidInputError) as e:
         load_scan(obj)
-    _one_line(e, "atlas.png", "100000 x 100000", "max_texture_pixels")
+    _one_line(e, "atlas.png", "100000 x 100000", "decompression bomb", "--no-texture")
     # the limit is configurable: a small genuine texture over a tiny limit is refused too
     _png(tmp_path / "atlas.png", (64, 64))
     with pytest.raises(InvalidInputError):

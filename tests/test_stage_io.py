@@ -15,9 +15,11 @@ def _flat(tmp_path, with_texture=True, with_colors=False, stress=False):
     tex = None
     tc = None
     if with_texture:
+        from PIL import Image
+
         tex = tmp_path / "src" / "atlas.png"
         tex.parent.mkdir()
-        tex.write_bytes(b"\x89PNG fake")
+        Image.new("RGB", (4, 4), (10, 20, 30)).save(tex)
         tc = rng.uniform(size=(3, 3, 2))
     colors = rng.integers(0, 255, size=(5, 3)) if with_colors else None
     mesh = Mesh(V, F, texcoords=tc, texture_path=tex, vertex_colors=colors, units="cm")

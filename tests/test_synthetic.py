@@ -9,10 +9,11 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from potflat.errors import InvalidOptionError
-from potflat_synthetic.vessels import (
+from potflat_synthetic.spec import (
     ATLAS_BACKGROUND, BLACK, CIRCLE_RADIUS, CREAM, PAINTINGS, PART_HANDLE, PART_INNER, PART_OUTER,
-    SHADING_RANGE, TERRACOTTA, make_vessel, write_obj, write_ply_colored,
+    SHADING_RANGE, TERRACOTTA,
 )
+from potflat_synthetic.vessels import make_vessel, write_obj, write_ply_colored
 
 SMALL = dict(n_vertices=3000, texture_size=256)
 
@@ -371,7 +372,7 @@ def test_sherd_is_one_patch_of_the_requested_width():
 
 
 def test_thick_sherd_is_a_closed_fragment_with_a_plain_back():
-    from potflat_synthetic.vessels import CLAY, PART_BREAK
+    from potflat_synthetic.spec import CLAY, PART_BREAK
 
     v = make_vessel("sherd", sherd_thickness=6.0, holes=1, seed=1, n_vertices=3000, texture_size=256)
     V, F = v.mesh.vertices, v.mesh.faces

@@ -61,13 +61,24 @@ def _obj_with_untextured(vessel, path, untextured: np.ndarray, how: str):
 
 
 def _original_faces(vessel, mesh: Mesh) -> np.ndarray:
-    """Index (m,) of the generated vessel's face that each face of a loaded ``mesh`` is."""
+    """Index (m,) of the generated vessel's face that each face of a loaded ``mesh`` is (or is
+    a piece of: the seam cuts faces)."""
     from scipy.spatial import cKDTree
 
     V, F = vessel.mesh.vertices, vessel.mesh.faces
-    dist, index = cKDTree(V[F].mean(axis=1)).query(mesh.vertices[mesh.faces].mean(axis=1))
-    assert dist.max() < 1e-3
-    return index
+    p = mesh.vertices[mesh.faces].mean(axis=1)
+    _, near = cKDTree(V[F].mean(axis=1)).query(p, k=8)
+    # the nearest face whose triangle holds the point (barycentric coordinates in [0, 1], on its plane)
+    a, b, c = (V[F[near, i]] for i in range(3))
+    e1, e2, d = b - a, c - a, p[:, None] - a
+    g11, g12, g22 = (e1 * e1).sum(-1), (e1 * e2).sum(-1), (e2 * e2).sum(-1)
+    r1, r2 = (d * e1).sum(-1), (d * e2).sum(-1)
+    det = g11 * g22 - g12**2
+    s, t = (g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det
+    off = np.linalg.norm(d - s[..., None] * e1 - t[..., None] * e2, axis=-1)
+    holds = (s > -1e-6) & (t > -1e-6) & (s + t < 1 + 1e-6) & (off < 1e-3)
+    assert holds.any(axis=1).all()
+    return near[np.arange(len(p)), np.argmax(holds, axis=1)]
 
 
 @pytest.fixture(scope="module")

@@ -1,9 +1,10 @@
 """``potflat view``: the server's safety, the links between the views, the measure, the edits
 and the rerun, checked in a real headless Chromium (Debian's, driven by Playwright) on the
-amphora sample run once for the whole module."""
+amphora sample run once (with ``--relief``) for the whole module."""
 from __future__ import annotations
 
 import http.client
+import io
 import json
 import shlex
 import shutil
@@ -23,12 +24,15 @@ CHROMIUM_ARGS = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swi
                  "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
                  "--disable-dev-shm-usage"]
 PX_PER_MM = 4.0
+#: The relief's images of a run with ``--relief`` (default lights), in the layer switch's order.
+RELIEF = ["relief", "raking-315", "raking-45", "curvature", "relief-overlay"]
 
 
 def _run_sample(out: Path) -> Path:
     from potflat.files.pipeline import run_scan
 
-    run_scan(SAMPLE, out, relax={"preset": "preview"}, bake={"px_per_mm": PX_PER_MM, "position_map": True})
+    run_scan(SAMPLE, out, relax={"preset": "preview"},
+             bake={"px_per_mm": PX_PER_MM, "position_map": True, "relief": True})
     return out
 
 
@@ -94,7 +98,6 @@ def page(browser, served):
 
 def _share_drawn(png: bytes) -> float:
     """Share of a screenshot's pixels that differ from the page's background (59, 59, 59)."""
-    import io
 
     from PIL import Image
 
@@ -121,13 +124,68 @@ def test_page_loads_without_console_errors_and_both_views_render(browser, served
         assert _share_drawn(page.locator("#flat").screenshot()) > 0.3     # the image's tiles
         assert page.evaluate("potflat.firstRenderMs") > 0
         layers = page.evaluate("[...document.querySelectorAll('#layer option')].map(o => o.value)")
-        assert layers == ["painting", "stress", "area", "anisotropy"]
+        assert layers == ["painting", "stress", "area", "anisotropy", *RELIEF]
         page.select_option("#layer", "stress")
         page.wait_for_function("document.getElementById('legend').complete && "
                                "document.getElementById('legend').naturalWidth > 0")
         assert errors == []
     finally:
         page.close()
+
+
+def test_the_layer_switch_shows_the_relief_images_with_their_legends(page):
+    """Each relief image of a --relief run is a layer: the image shows it, the relief and the
+    curvature with the legend band below their PNG, the raking light and the overlay with a
+    line saying what they are."""
+    from PIL import Image
+
+    def flat_view():
+        return np.asarray(Image.open(io.BytesIO(page.locator("#flat").screenshot())).convert("L"), float)
+
+    shown = {}
+    for layer in ["painting", *RELIEF]:
+        page.select_option("#layer", layer)
+        page.wait_for_function(f"potflat.layerShown === {json.dumps(layer)}")
+        page.wait_for_timeout(300)
+        shown[layer] = flat_view()
+        legend = page.evaluate("(() => { const l = document.getElementById('legend'); return l.style.display === 'block' "
+                               "? l.src : null; })()")
+        label = page.text_content("#layerlabel")
+        if layer in ("relief", "curvature"):
+            page.wait_for_function("document.getElementById('legend').complete && "
+                                   "document.getElementById('legend').naturalWidth > 0")
+            assert legend and legend.split("?")[0].endswith(f"/legend/{layer}.png") and label == ""
+        elif layer != "painting":
+            assert legend is None and label, layer
+    assert "raking light" in page.evaluate("potflat.scene.layers.find(l => l.name === 'raking-315').label")
+    rows = min(a.shape[0] for a in shown.values())  # (a legend below the image takes some of its height)
+
+    def differ(a, b):
+        return np.abs(shown[a][:rows] - shown[b][:rows]).mean()
+
+    for layer in RELIEF:  # each image differs from the painting and from the others
+        assert differ(layer, "painting") > 2.0, layer
+    assert differ("raking-315", "raking-45") > 1.0
+    page.select_option("#layer", "painting")
+    page.wait_for_function("potflat.layerShown === 'painting'")
+
+
+def test_a_relief_layers_tiles_and_legend_are_its_pngs(served, run_dir):
+    """The tiles of the relief layer are NAME.relief.png's pixels; its legend is the band below them."""
+    from PIL import Image
+
+    g = served.scene.grid
+    top = served.server.runs.layer("amphora", "relief").top
+    status, body = _get(served, f"/_potflat/api/amphora/dzi/relief_files/{top}/1_1.png")
+    assert status == 200
+    png = np.asarray(Image.open(run_dir / "amphora.relief.png").convert("RGBA"))
+    tile = np.asarray(Image.open(io.BytesIO(body)).convert("RGBA"))
+    assert np.array_equal(tile, png[512:1024, 512:1024])
+    status, body = _get(served, "/_potflat/api/amphora/legend/curvature.png")
+    legend = np.asarray(Image.open(io.BytesIO(body)).convert("RGBA"))
+    curvature = np.asarray(Image.open(run_dir / "amphora.curvature.png").convert("RGBA"))
+    assert status == 200 and np.array_equal(legend, curvature[g.height:])
+    assert _get(served, "/_potflat/api/amphora/legend/raking-45.png")[0] == 404
 
 
 def test_click_on_the_image_marks_the_position_maps_point_on_the_vessel(page, served, run_dir):
@@ -183,6 +241,22 @@ def test_measure_gives_the_image_and_the_vessel_distance(page, served):
     direct = scene.measure(tuple(got[0]), tuple(got[1]))
     assert m["surface_mm"] == pytest.approx(direct["surface_mm"], rel=1e-9)
     assert "on the vessel" in page.text_content("#measure")
+    # a short length on the smooth belly: the true distance is the chord between the position
+    # map's points (the surface bends by much less than 0.5 % over 10 mm there)
+    import tifffile
+
+    position = tifffile.imread(served.server.runs.folders["amphora"] / "amphora.position.tif")
+    page.evaluate("potflat.measurePoints = []; potflat.measure = null")
+    for q in ([1200.5, 900.5], [1240.5, 900.5]):
+        c = page.evaluate(f"potflat.imageToClient({q})")
+        page.mouse.click(c["x"], c["y"])
+        page.wait_for_timeout(400)  # two quick clicks this close would be a double click: a zoom
+    page.wait_for_function("potflat.measure !== null")
+    m = page.evaluate("potflat.measure")
+    got = np.asarray(page.evaluate("potflat.measurePoints"))
+    ends = [position[int(y), int(x)].astype(float) for x, y in got]
+    true_mm = np.linalg.norm(ends[1] - ends[0]) * scene.grid.mm_per_unit
+    assert 8.0 < true_mm < 12.0 and m["surface_mm"] == pytest.approx(true_mm, rel=5e-3)
     page.click("[data-tool=look]")
 
 
@@ -222,6 +296,7 @@ def test_seam_click_and_painted_mask_rerun_as_the_command_line_does(browser, run
     from PIL import Image
 
     from potflat.io.flat_ply import read_flat_ply
+    from potflat.view.edits import recorded_options
 
     folder = tmp_path / "edited"
     shutil.copytree(run_dir, folder)
@@ -256,15 +331,18 @@ def test_seam_click_and_painted_mask_rerun_as_the_command_line_does(browser, run
                                timeout=600_000)
         rerun = page.evaluate("potflat.rerun")
         assert rerun["state"] == "done", rerun["message"]
+        page.wait_for_function("potflat.scene.rollout.importance === 'mask'")
+        shown = page.text_content("#command")
         page.close()
     finally:
         served.close()
     command = rerun["command"]
     words = shlex.split(command)
     assert words[:2] == ["potflat", "run"] and "--seam-at" in words and "--importance-mask" in words
-    recorded = json.loads((folder / "amphora.options.json").read_text())
-    assert recorded["command"] == command and recorded["rollout"]["importance"] == "mask"
-    assert np.allclose(recorded["rollout"]["seam_at"], seam_at)
+    # the options used are those the stages' sidecars record, and the page shows their command
+    assert shown == command
+    recorded = recorded_options(folder, "amphora")["rollout"]
+    assert recorded.importance == "mask" and np.allclose(recorded.seam_at, seam_at)
     mask = np.asarray(Image.open(folder / "amphora.mask.png"))
     assert 0 < (mask == 255).mean() < 1
     # the same command line into another folder gives the same outputs
@@ -277,6 +355,251 @@ def test_seam_click_and_painted_mask_rerun_as_the_command_line_does(browser, run
     assert np.array_equal(a.uv, b.uv) and np.array_equal(a.importance, b.importance)
     assert np.array_equal(np.asarray(Image.open(folder / "amphora.png")), np.asarray(Image.open(other / "amphora.png")))
     assert json.loads((folder / "amphora.rollout.json").read_text())["seam"]["method"] == "point"
+    # one consistent set: the files of that command, and the mask it reads
+    made = {p.name for p in other.iterdir()}
+    assert {p.name for p in folder.iterdir()} == made | {"amphora.mask.png", "amphora.mask.bake.json",
+                                                         "amphora.mask.relaxed.ply"}
+
+
+def _with_a_lug(run_dir: Path, folder: Path, scene) -> np.ndarray:
+    """A copy of the run in ``folder`` whose scan has a lug the rollout left out: a 30 mm
+    square (untextured) 25 mm out from the belly, apart from the body. Its centre."""
+    shutil.copytree(run_dir, folder)
+    scan = folder / "scan"
+    scan.mkdir()
+    for part in ("amphora.obj", "amphora.mtl", "amphora.png"):
+        shutil.copy(SAMPLE.with_name(part), scan / part)
+    i = int(np.argmin(np.abs(scene.pixels - [0.5 * scene.grid.width, 0.5 * scene.grid.height]).sum(axis=1)))
+    d = _outward(scene, scene.flat.mesh.vertices[i])
+    centre = scene.flat.mesh.vertices[i] + 25.0 * d
+    a = np.asarray(scene.rollout["axis"]["direction"])
+    u = np.cross(a, d)
+    corners = [centre + 15.0 * (su * u + sa * a) for su, sa in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+    n = sum(1 for line in (scan / "amphora.obj").read_text().splitlines() if line.startswith("v "))
+    with open(scan / "amphora.obj", "a") as f:
+        f.writelines("v " + " ".join(repr(float(x)) for x in c) + "\n" for c in corners)
+        f.write(f"f {n + 1} {n + 2} {n + 3}\nf {n + 1} {n + 3} {n + 4}\n")
+    sidecar = folder / "amphora.rollout.json"
+    record = json.loads(sidecar.read_text())
+    record["input"] = str(scan / "amphora.obj")
+    sidecar.write_text(json.dumps(record))
+    return centre
+
+
+def test_the_vessel_is_the_whole_scan_and_a_part_left_out_is_not_in_the_image(browser, served, run_dir, tmp_path):
+    """The vessel is drawn from the whole scan (a lug the rollout left out too); a click on the
+    lug says it is not in the image, a click on the belly still marks its flat position."""
+    centre = _with_a_lug(run_dir, tmp_path / "lug", served.scene)
+    lug = _Served(tmp_path / "lug")
+    try:
+        page = _open(browser, lug)
+        page.wait_for_function("potflat.timings.scan !== undefined || (potflat.scan && !potflat.scan.mesh)",
+                               timeout=120_000)
+        scan = page.evaluate("potflat.scan.mesh")
+        assert scan is not None, page.evaluate("potflat.scan.message")
+        assert scan["faces"] == len(served.scene.flat.mesh.faces) + 2 and not scan["decimated"]
+        scene = lug.scene
+        d = _outward(scene, centre)
+        page.evaluate(f"potflat.lookFrom({centre.tolist()}, {d.tolist()}, 200)")
+        s = page.evaluate(f"potflat.project({centre.tolist()})")
+        page.mouse.click(s["x"], s["y"])
+        page.wait_for_function("potflat.readout !== null")
+        readout = page.evaluate("potflat.readout")
+        assert readout["outside"] and np.linalg.norm(np.asarray(readout["point"]) - centre) < 1.0
+        assert page.evaluate("potflat.markerFlat") is None and "not in the image" in page.text_content("#readout")
+        # beside the lug, the belly: in the image, at its vertex's flat position
+        i = int(np.argmin(np.abs(scene.pixels - [0.3 * scene.grid.width, 0.5 * scene.grid.height]).sum(axis=1)))
+        point = scene.flat.mesh.vertices[i]
+        page.evaluate(f"potflat.lookFrom({point.tolist()}, {_outward(scene, point).tolist()}, 200)")
+        s = page.evaluate(f"potflat.project({point.tolist()})")
+        page.mouse.click(s["x"], s["y"])
+        page.wait_for_function("potflat.markerFlat !== null")
+        assert np.linalg.norm(np.asarray(page.evaluate("potflat.markerFlat")) - scene.pixels[i]) < 2.0
+        page.close()
+    finally:
+        lug.close()
+
+
+def _with_a_base(run_dir: Path, folder: Path, *, record: bool = True) -> np.ndarray:
+    """A copy of the run in ``folder`` with a base's disc as the bake writes it beside the
+    painting (``NAME.base.png``, listed under ``base`` in ``NAME.bake.json``; with ``record``,
+    ``NAME.base.bake.json`` giving its grid): a 300 x 200 px image, left half red, right half
+    blue, a 40 px grey legend band below. Its pixels (RGBA)."""
+    from PIL import Image
+
+    shutil.copytree(run_dir, folder)
+    disc = np.zeros((240, 300, 4), np.uint8)
+    disc[..., 3] = 255
+    disc[:200, :150, 0] = 220
+    disc[:200, 150:, 2] = 220
+    disc[200:, :, :3] = 128
+    Image.fromarray(disc).save(folder / "amphora.base.png")
+    if record:
+        (folder / "amphora.base.bake.json").write_text(json.dumps({"image_px": [300, 200], "px_per_mm": 4.0}))
+    bake = json.loads((folder / "amphora.bake.json").read_text())
+    bake["base"] = {"what": "the base left out of the rollout, seen along the axis",
+                    "files": {"png": "amphora.base.png", "json": "amphora.base.bake.json"}}
+    (folder / "amphora.bake.json").write_text(json.dumps(bake))
+    return disc
+
+
+def test_the_base_disc_is_a_layer_on_its_own_grid_not_linked(browser, run_dir, tmp_path):
+    """A run with a base's disc offers it in the layer switch: the image shows its pixels on
+    its own grid, its legend band below; a click on it marks nothing on the vessel and says
+    so; the vessel keeps the painting; back on the painting the views are linked again."""
+    from PIL import Image
+
+    disc = _with_a_base(run_dir, tmp_path / "base")
+    based = _Served(tmp_path / "base")
+    try:
+        entry = [e for e in json.loads(_get(based, "/_potflat/api/amphora/scene.json")[1])["layers"]
+                 if e["name"] == "base"]
+        assert entry and entry[0]["size"] == [300, 200] and not entry[0]["linked"] and entry[0]["legend"]
+        status, dzi = _get(based, "/_potflat/api/amphora/dzi/base.dzi")
+        assert status == 200 and b'Width="300" Height="200"' in dzi
+        top = based.server.runs.layer("amphora", "base").top
+        tile = np.asarray(Image.open(io.BytesIO(_get(based, f"/_potflat/api/amphora/dzi/base_files/{top}/0_0.png")[1])))
+        assert np.array_equal(tile, disc[:200])
+        legend = np.asarray(Image.open(io.BytesIO(_get(based, "/_potflat/api/amphora/legend/base.png")[1])))
+        assert np.array_equal(legend, disc[200:])
+
+        errors: list[str] = []
+        page = _open(browser, based, errors)
+        page.select_option("#layer", "base")
+        page.wait_for_function("potflat.layerShown === 'base'")
+        page.wait_for_timeout(300)
+        shot = np.asarray(Image.open(io.BytesIO(page.locator("#flat").screenshot())).convert("RGB")).astype(int)
+        assert ((shot[..., 0] > 180) & (shot[..., 2] < 60)).mean() > 0.05   # the red half
+        assert ((shot[..., 2] > 180) & (shot[..., 0] < 60)).mean() > 0.05   # the blue half
+        page.evaluate("potflat.marker3d = null")
+        c = page.evaluate("potflat.imageToClient([75, 100])")
+        page.mouse.click(c["x"], c["y"])
+        page.wait_for_function("document.getElementById('readout').textContent.includes('not linked')")
+        assert page.evaluate("potflat.marker3d") is None and page.evaluate("potflat.vesselShown") == "painting"
+        page.select_option("#layer", "painting")
+        page.wait_for_function("potflat.layerShown === 'painting'")
+        c = page.evaluate("potflat.imageToClient([1500.5, 950.5])")
+        page.mouse.click(c["x"], c["y"])
+        page.wait_for_function("potflat.marker3d !== null")
+        assert errors == []
+        page.close()
+    finally:
+        based.close()
+
+
+def test_a_base_listed_without_its_image_or_grid_is_tolerated(run_dir, tmp_path):
+    """Without NAME.base.png the run has no base layer; without NAME.base.bake.json the disc
+    takes its PNG's size (its band below then counts as image)."""
+    from potflat.view.server import layer_entries
+    from potflat.view.scene import Scene
+
+    _with_a_base(run_dir, tmp_path / "nogrid", record=False)
+    entry = [e for e in layer_entries(Scene(tmp_path / "nogrid", "amphora")) if e["name"] == "base"]
+    assert entry and entry[0]["size"] == [300, 240] and not entry[0]["legend"]
+    shutil.copytree(tmp_path / "nogrid", tmp_path / "gone")
+    (tmp_path / "gone" / "amphora.base.png").unlink()
+    names = [e["name"] for e in layer_entries(Scene(tmp_path / "gone", "amphora"))]
+    assert "base" not in names and names[0] == "painting"
+
+
+def test_a_scan_moved_away_leaves_the_unrolled_part_with_one_line(run_dir, tmp_path):
+    from potflat.view.scene import Scene
+
+    moved = tmp_path / "moved"
+    shutil.copytree(run_dir, moved)
+    record = json.loads((moved / "amphora.rollout.json").read_text())
+    record["input"] = str(tmp_path / "gone.obj")
+    (moved / "amphora.rollout.json").write_text(json.dumps(record))
+    whole = Scene(moved, "amphora").whole()
+    assert whole.display is None and "gone.obj" in whole.message and "\n" not in whole.message
+
+
+def test_a_pick_behind_the_surface_seen_is_not_in_the_image(served):
+    """The full flattening's hit counts only at the depth where the vessel is seen."""
+    scene = served.scene
+    i = int(np.argmin(np.abs(scene.pixels - [0.5 * scene.grid.width, 0.5 * scene.grid.height]).sum(axis=1)))
+    V = scene.flat.mesh.vertices
+    d = _outward(scene, V[i])
+    origin = V[i] + 300 * d
+    assert scene.ray_to_surface(origin, -d, V[i], depth=300.0) is not None
+    assert scene.ray_to_surface(origin, -d, V[i], depth=280.0) is None  # something 20 mm in front of it
+
+
+def test_the_whole_scan_drawn_whole_keeps_its_faces_and_texture_coordinates():
+    from potflat.io.scan import load_scan
+    from potflat.view.display import scan_display_mesh
+
+    mesh = load_scan(SAMPLE, clean=False).mesh
+    d = scan_display_mesh(mesh, np.ones(len(mesh.vertices), bool), faces=10**6)
+    assert not d.decimated and len(d.faces) == len(mesh.faces)
+    assert np.array_equal(d.vertices[d.faces], mesh.vertices[mesh.faces].astype(np.float32))
+    assert np.array_equal(d.texcoords[d.faces], mesh.texcoords.astype(np.float32))
+    assert (d.unrolled == 1).all() and np.allclose(np.linalg.norm(d.normals, axis=1), 1, atol=1e-6)
+
+
+def test_texture_vertices_are_the_corners_with_one_vertex_and_one_texture_position():
+    """The quick grouping (each vertex's first corner, a hash table for the rest) numbers the
+    groups of (vertex, texture coordinates) in order of first corner, seams included."""
+    from potflat.io.scan import load_scan
+    from potflat.view.display import _texture_vertices
+
+    mesh = load_scan(SAMPLE, clean=False).mesh
+    fv, uv = mesh.faces.ravel(), mesh.texcoords.reshape(-1, 2) + 0.0
+    ids: dict = {}
+    expected = [ids.setdefault((int(v), float(a), float(b)), len(ids)) for v, (a, b) in zip(fv, uv)]
+    got = _texture_vertices(fv, uv, len(mesh.vertices))
+    assert np.array_equal(got, expected)
+    assert len(ids) > len(np.unique(fv))  # the sample's texture has seams
+
+
+def test_a_decimated_scan_keeps_its_texture_seam_apart_and_has_no_cracks():
+    """A cylinder textured by angle and height, its texture seam along one line: the decimated
+    copy's texture coordinates are those of its vertices' places, on each side of the seam."""
+    from potflat.types import Mesh
+    from potflat.view.display import scan_display_mesh
+
+    n_t, n_h, R, H = 360, 120, 100.0, 300.0
+    t = np.arange(n_t + 1) * 2 * np.pi / n_t  # the last column repeats the first, at u = 1
+    z = np.linspace(0, H, n_h)
+    V = np.stack([np.tile(R * np.cos(t[:-1]), n_h), np.tile(R * np.sin(t[:-1]), n_h), np.repeat(z, n_t)], axis=1)
+    idx = np.arange(n_h)[:, None] * n_t + np.arange(n_t + 1)[None] % n_t
+    uv_idx = np.stack(np.meshgrid(t / (2 * np.pi), z / H), axis=-1)
+    quads = [(idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:], idx[1:, :-1])]
+    a, b, c, e = (q.ravel() for q in quads[0])
+    F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, e], 1)])
+    ua, ub, uc, ue = (uv_idx[:-1, :-1].reshape(-1, 2), uv_idx[:-1, 1:].reshape(-1, 2), uv_idx[1:, 1:].reshape(-1, 2),
+                      uv_idx[1:, :-1].reshape(-1, 2))
+    T = np.concatenate([np.stack([ua, ub, uc], 1), np.stack([ua, uc, ue], 1)])
+    mesh = Mesh(vertices=V, faces=F, texcoords=T, texture_path=SAMPLE.with_name("amphora.png"))
+    d = scan_display_mesh(mesh, np.zeros(len(V), bool), faces=8000)
+    assert d.decimated and 4000 < len(d.faces) <= 10000 and (d.unrolled == 0).all()
+    P, uv = d.vertices.astype(float), d.texcoords.astype(float)
+    theta = np.arctan2(P[:, 1], P[:, 0]) % (2 * np.pi) / (2 * np.pi)
+    on_seam = np.minimum(theta, 1 - theta) < 0.02
+    # away from the seam, u is the angle; at it, 0 or 1 by the side the faces are on
+    assert np.abs(uv[~on_seam, 0] - theta[~on_seam]).max() < 0.01
+    assert np.abs(uv[:, 1] - P[:, 2] / H).max() < 0.02
+    assert np.ptp(uv[d.faces, 0], axis=1).max() < 0.05  # no face textured across the whole image
+    # no cracks: every display edge that is not the cylinder's top or bottom is shared by two faces
+    # once the seam's copies (same position) are one
+    _, pos = np.unique(d.vertices, axis=0, return_inverse=True)
+    E = np.sort(pos.ravel()[d.faces][:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, uses = np.unique(E, axis=0, return_counts=True)
+    assert (uses == 1).sum() < 0.05 * len(uses)
+
+
+def test_level_segments_follow_a_linear_field():
+    from potflat.view.display import level_segments
+
+    x, y = np.meshgrid(np.linspace(0, 1, 11), np.linspace(0, 1, 11))
+    V = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
+    idx = np.arange(121).reshape(11, 11)
+    a, b, c, e = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, e], 1)])
+    seg = level_segments(V, F, V[:, 0] + 0.5 * V[:, 1], 0.73)
+    assert len(seg) > 0 and np.allclose(seg[..., 0] + 0.5 * seg[..., 1], 0.73, atol=1e-6)
+    crossed = ((V[F, 0] + 0.5 * V[F, 1] >= 0.73).sum(axis=1) % 3) != 0
+    assert len(seg) == crossed.sum()
 
 
 # ---------------------------------------------------------------------- the server's safety
@@ -323,8 +646,6 @@ def test_paths_outside_the_folder_are_refused(served, run_dir, tmp_path):
 
 
 def test_a_mask_of_the_wrong_size_is_refused(served, tmp_path):
-    import io
-
     from PIL import Image
 
     buf = io.BytesIO()
@@ -341,8 +662,8 @@ def test_picking_on_the_full_mesh_from_a_decimated_display_mesh(served):
     from potflat.view.display import display_mesh
 
     scene = served.scene
-    small = display_mesh(scene.flat, scene.pixels, faces=4000)
-    assert small.decimated and 2000 < len(small.faces) < 6000 and len(scene.seam) > 0
+    small = display_mesh(scene.flat, scene.pixels, px_per_unit=scene.grid.px_per_unit, faces=4000)
+    assert small.decimated and 2000 < len(small.faces) < 6000 and len(scene.lines["seam"]) > 0
     assert (small.pixels >= -1).all() and (small.pixels[:, 0] <= scene.grid.width + 1).all()
     rng = np.random.default_rng(1)
     V = scene.flat.mesh.vertices
@@ -430,6 +751,25 @@ def test_the_batch_report_opens_each_view_when_served(browser, run_dir, tmp_path
     finally:
         server.shutdown()
         server.server_close()
+
+
+def test_a_scan_of_a_batch_is_not_rerun_from_the_page(run_dir, tmp_path):
+    """In a batch's folder the edits still give the command line, but the rerun and the mask
+    are refused with one line (the batch's summary describes the scan's outputs)."""
+    folder = tmp_path / "batch"
+    shutil.copytree(run_dir, folder / "amphora")
+    (folder / "summary.json").write_text("{}")
+    batch = _Served(folder)
+    try:
+        status, body = _get(batch, "/_potflat/api/amphora/options", method="POST", body=b'{"overlap": 20}')
+        assert status == 200 and "--overlap 20.0" in json.loads(body)["command"]
+        for path, method, body in (("rerun", "POST", b'{"overlap": 20}'), ("mask", "PUT", b"png")):
+            status, answer = _get(batch, f"/_potflat/api/amphora/{path}", method=method, body=body)
+            assert status == 400 and "belongs to a batch" in json.loads(answer)["error"], path
+        assert not (folder / "amphora" / "amphora.mask.png").exists()
+        assert json.loads(_get(batch, "/_potflat/api/amphora/rerun")[1])["state"] == "idle"
+    finally:
+        batch.close()
 
 
 def test_view_command_prints_the_address_and_stops_on_ctrl_c(run_dir):

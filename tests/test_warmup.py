@@ -3,6 +3,8 @@ the bake kernels compiled in the run first."""
 from __future__ import annotations
 
 import json
+import os
+import sys
 import time
 
 import numpy as np
@@ -127,3 +129,78 @@ def test_the_run_compiles_the_bake_kernels_only_after_its_rollout(tmp_path, monk
     result = CliRunner().invoke(app, ["run", str(scan), "-o", str(tmp_path / "out")])
     assert (result.exit_code != 0) == bool(refused_at), result.output
     assert baked == ([] if refused_at else [True])
+
+
+#: A run in a fresh process (``sys.argv[1]``: the temporary folder) that starts the child on a
+#: cold kernel cache, prints the child's process id and waits to be killed.
+PARENT = """
+import sys, tempfile, time
+import potflat._jit
+from potflat_cli import _warmup
+potflat._jit.kernels_cached = lambda: False
+tempfile.tempdir = sys.argv[1]
+child = _warmup.start()
+print(child.process.pid, flush=True)
+time.sleep(600)
+"""
+
+
+def _gone(pid: int) -> bool:
+    """Whether process ``pid`` has ended (and been reaped, or is a zombie)."""
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] == "Z"
+    except FileNotFoundError:
+        return True
+
+
+def _wait_at_work(folder, pid: int) -> None:
+    deadline = time.monotonic() + 120
+    while not list(folder.glob("potflat-warmup-*/warmup.texture.png")):  # compiling in its folder
+        assert not _gone(pid), "the child ended before it made its folder"
+        if time.monotonic() > deadline:
+            pytest.fail("the child made no folder in 120 s")
+        time.sleep(0.05)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.parametrize("how", ["parent killed", "pipe closed"])
+def test_the_child_dies_with_the_run(tmp_path, how):
+    """The run killed outright (SIGKILL: no stop(), no finaliser) ends its child within 2 s,
+    by the death signal and by the pipe; the pipe alone (its end closed while the run lives)
+    ends it too. Either way the child removes its folder."""
+    import signal
+    import subprocess
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cold-cache")}  # compiling: a minute of work
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    script = PARENT if how == "parent killed" else PARENT.replace(
+        "time.sleep(600)", "import os; time.sleep(float(sys.stdin.readline())); os.close(child.pipe); time.sleep(600)")
+    parent = subprocess.Popen([sys.executable, "-c", script, str(temp)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                              text=True, env=env)
+    try:
+        pid = int(parent.stdout.readline())
+        _wait_at_work(temp, pid)
+        if how == "parent killed":
+            parent.send_signal(signal.SIGKILL)
+            parent.wait()
+        else:
+            parent.stdin.write("0\n")
+            parent.stdin.flush()
+        deadline = time.monotonic() + 2.0
+        while not _gone(pid) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        alive = not _gone(pid)
+        if alive:
+            os.kill(pid, signal.SIGKILL)
+        assert not alive, f"the child outlived the {how} by 2 s"
+        if how == "pipe closed":
+            assert parent.poll() is None  # the run lives: the pipe ended the child, not a death signal
+        deadline = time.monotonic() + 2.0
+        while list(temp.iterdir()) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert not list(temp.iterdir())
+    finally:
+        parent.kill()
+        parent.wait()

@@ -6,7 +6,7 @@ from typing import Annotated
 
 import typer
 from potflat_cli._errors import user_errors
-from potflat_cli._options import Json, Name, Quiet, StageOutputDir, with_stage_options
+from potflat_cli._options import Json, Quiet, StageName, StageOutputDir, with_stage_options
 
 HELP = """Bake a flattening (NAME.relaxed.ply, or NAME.rollout.ply to compare) into true-scale images.
 
@@ -21,7 +21,7 @@ Input = Annotated[Path, typer.Argument(help="NAME.relaxed.ply (or NAME.rollout.p
 
 @user_errors
 @with_stage_options("bake")
-def bake_command(flat_ply: Input, output: StageOutputDir = None, name: Name = None, quiet: Quiet = False,
+def bake_command(flat_ply: Input, output: StageOutputDir = None, name: StageName = None, quiet: Quiet = False,
                  json: Json = False, *, options: dict) -> None:
     """Bake a flattening into true-scale images and distortion maps."""
     _bake(flat_ply, output, options["bake"], name=name, quiet=quiet, as_json=json)

@@ -6,7 +6,7 @@ from typing import Annotated, Optional
 
 import typer
 from potflat_cli._errors import user_errors
-from potflat_cli._options import Json, Name, OutputDir, Quiet
+from potflat_cli._options import Json, Quiet, StageName, StageOutputDir
 
 HELP = """Compose the archaeological plate of a flattened scan: the outside view and the profile section side by side (left and right of the axis), the rollout below at one stated scale, a scale bar and a caption (name, computed from a 3D scan, proxy, preset, distortion, scale, date, potflat version).
 
@@ -22,11 +22,11 @@ Input = Annotated[Path, typer.Argument(help="NAME.relaxed.ply written by potflat
 @user_errors
 def plate_command(
     relaxed_ply: Input,
-    output: OutputDir = None,
+    output: StageOutputDir = None,
     scale: Annotated[Optional[str], typer.Option(
         "--scale", metavar="1:N", help="Print scale, e.g. 1:1, 1:2, 1:5 \\[default: the largest of 1:1, 1:2, 1:3, "
                                        "1:4, 1:5, 1:10, 1:20, 1:50 that fits A4].")] = None,
-    name: Name = None,
+    name: StageName = None,
     image: Annotated[Optional[str], typer.Option(
         "--image", metavar="[painting|relief|both]",
         help="The rollout as the painting (NAME.png), as its relief in raking light (NAME.raking-AZ.png of a bake "
@@ -39,7 +39,7 @@ def plate_command(
     from potflat_cli._stage import run_stage
     from rich.console import Console
 
-    from potflat.files.plate import make_plate
+    from potflat.files.plate import make_plate, paper_words
 
     result = run_stage(f"composing the plate of {relaxed_ply.name}",
                        lambda: make_plate(relaxed_ply, output, scale=scale, name=name, image=image or "painting"),
@@ -49,7 +49,7 @@ def plate_command(
     s = result.record
     out = Console(highlight=False)
     out.print(f"[bold]{result.paths['svg']}[/]: {s['page_mm'][0]:.1f} x {s['page_mm'][1]:.1f} mm at "
-              f"{s['scale_label']}, distortion in the {s['distortion_where']}; also "
+              f"{s['scale_label']} ({paper_words(s)}), distortion in the {s['distortion_where']}; also "
               f"{result.paths['pdf'].name}, {result.paths['png'].name}")
 
 

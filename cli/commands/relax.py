@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from potflat_cli._errors import user_errors
-from potflat_cli._options import Json, Name, Quiet, StageOutputDir, with_stage_options
+from potflat_cli._options import Json, Quiet, StageName, StageOutputDir, with_stage_options
 
 HELP = """Relax a rollout into a fold-free flattening: writes NAME.relaxed.ply (with per-vertex stress) and NAME.relaxed.json (energy history, flips, boundary check, distortion before/after, timings, provenance).
 
@@ -23,17 +23,19 @@ Input = Annotated[Path, typer.Argument(help="NAME.rollout.ply written by 'potfla
 
 @user_errors
 @with_stage_options("relax")
-def relax_command(rollout_ply: Input, output: StageOutputDir = None, name: Name = None, quiet: Quiet = False,
+def relax_command(rollout_ply: Input, output: StageOutputDir = None, name: StageName = None, quiet: Quiet = False,
                   json: Json = False, *, options: dict) -> None:
     """Relax a rollout into a fold-free flattening."""
     # imported here, not at the top: 'potflat --help' stays free of Numba and SciPy
+    from potflat.mesh.boundary import turning_words
     from potflat.mesh.distortion import distortion_words
     from potflat.files.relax_stage import run_relax_stage
-    from potflat_cli._stage import run_stage, with_compile_note
+    from potflat._jit import kernels_cached
+    from potflat_cli._stage import FIRST_RUN, run_stage
 
     show_progress = sys.stderr.isatty() and not (quiet or json)
-    if show_progress and with_compile_note("") != "":
-        print(f"note: {with_compile_note('').strip(' ()')}", file=sys.stderr)
+    if show_progress and not kernels_cached():
+        print(f"note: {FIRST_RUN}", file=sys.stderr)
     out = run_stage(None if show_progress else f"relaxing {rollout_ply.name}",
                     lambda: run_relax_stage(rollout_ply, output if output is not None else rollout_ply.parent,
                                             options["relax"], name=name, progress=show_progress),
@@ -51,6 +53,7 @@ def relax_command(rollout_ply: Input, output: StageOutputDir = None, name: Name 
                f"mean |ln area ratio| {before['area_mean_abs_log']:.4f} -> {after['area_mean_abs_log']:.4f}, {fold}")
     typer.echo(f"  whole surface now: {distortion_words({**after, 'flipped': None})}")
     typer.echo(f"  {s['lengths']}")
+    typer.echo(f"  {turning_words(s['outline_turning'])}")
 
 
 relax_command.__doc__ = HELP

@@ -39,13 +39,14 @@ def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json
 
     from potflat.files.pipeline import run_scan
     from potflat.files.rollout_stage import base_line
+    from potflat.mesh.boundary import turning_words
     from potflat.mesh.distortion import distortion_words
     from potflat_cli import _warmup as potflat_warmup
-    from potflat_cli._stage import say_compiling, with_compile_note
+    from potflat_cli._stage import StageLog, say_compiling, with_compile_note
 
     scan = Path(scan)
     err = Console(stderr=True, quiet=quiet or as_json)
-    started, warmup = [], None
+    started, warmup, log = [], None, StageLog(err)
     with err.status(f"{scan.name}: starting") as status:
         def progress(stage: str) -> None:
             nonlocal warmup
@@ -56,6 +57,7 @@ def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json
                 # on a first run the relax kernels compile in a child process meanwhile
                 warmup = potflat_warmup.start()
             status.update(with_compile_note(f"{scan.name}: {stage}"))
+            log.start(f"{scan.name}: {stage}")
             if stage == "relax" and warmup is not None:
                 # the scan rolled out (bad input is refused before this): the bake kernels
                 # compile here while the child finishes the relax kernels
@@ -63,6 +65,7 @@ def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json
         out_dir = output or Path(name or scan.stem)  # ./NAME/, never the scan's folder
         try:
             result = run_scan(scan, out_dir, name=name, progress=progress, **options)
+            log.end()
         finally:
             if warmup is not None:
                 warmup.stop()
@@ -78,16 +81,17 @@ def _run(scan: Path, output: Path | None, name: str | None, quiet: bool, as_json
     out = Console()
     out.print(f"[bold]{result.name}[/]: done in {result.seconds.total:.1f} s, "
               f"outputs in {result.out_dir}")
-    shown = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
-                      for k, v in figures.items() if v is not None)
-    if shown:
-        out.print(f"  whole-surface distortion: {distortion_words(figures)} ({shown}; area figures are natural logs)")
+    out.print(f"  whole-surface distortion: {distortion_words(figures)}"
+              + (f", shapes stretched at most {figures['anisotropy_p95']:.2f} times over 95 % of the surface"
+                 if figures.get("anisotropy_p95") is not None else ""))
     importance = result.rollout.record.get("importance")
     if importance:  # where the painting was found, or that the whole surface counted alike
         out.print(f"  importance ({importance['method']}): {importance['reason']}", highlight=False)
     relaxed = result.relax.record
     if relaxed.get("lengths"):
         out.print(f"  {relaxed['lengths']}")
+    if relaxed.get("outline_turning"):
+        out.print(f"  {turning_words(relaxed['outline_turning'])}", highlight=False)
     base = result.rollout.record.get("base")
     if base is not None and base["candidate_faces"]:
         out.print(f"  {base_line(base, result.paths.get('bake.base_png'))}", highlight=False)

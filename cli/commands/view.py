@@ -8,9 +8,9 @@ import typer
 
 from potflat_cli._errors import user_errors
 
-HELP = """Open a finished run in the browser: on the left the vessel in 3D with its texture, the painted zone's outline and the seam; on the right the flat image with deep zoom and its distortion maps. The two are linked (hover or click either), a readout gives the point's position in mm and the local length error and anisotropy, and two clicks measure a distance on the image and on the vessel.
+HELP = """Open a finished run in the browser: on the left the whole scan in 3D with its texture, the seam, the image's edge and the painted zone's outline; on the right the flat image with deep zoom, its distortion maps, (with --relief) its relief images and the base's disc when the rollout left the base out (on its own grid, not linked). The two are linked (hover or click either), a readout gives the point's position in mm and the local length error and anisotropy, and two clicks measure a distance on the image and on the vessel.
 
-Edit and rerun from the page: the seam through a clicked point, an angle window or an overlap dragged on the image, the painted zone with a brush; 'Rerun' runs the stages whose options changed, writes NAME.options.json beside the outputs and shows the equivalent command line.
+Edit and rerun from the page: the seam through a clicked point, an angle window or an overlap dragged on the image, the painted zone with a brush; 'Rerun' runs the stages whose options changed into the run's folder, as the equivalent 'potflat run' command the page shows does (each stage's JSON records its options).
 
 OUT is the output folder of 'potflat run' (or of 'potflat batch': the report links each scan to its view). The page is served on 127.0.0.1 only, on a free port, with a random token in its address, until Ctrl-C. Exit codes: 2 bad input, 130 stopped (Ctrl-C).
 
@@ -23,7 +23,8 @@ def view_command(
     out: Annotated[Path, typer.Argument(help="Output folder of potflat run or batch.", exists=True, file_okay=False)],
     name: Annotated[Optional[str], typer.Argument(help="The run to open (NAME of NAME.png) \\[default: the only "
                                                        "run in OUT; a batch's report when there are several].")] = None,
-    port: Annotated[int, typer.Option("--port", min=0, max=65535, help="Port on 127.0.0.1 \\[default: a free one].")] = 0,
+    port: Annotated[int, typer.Option("--port", min=0, max=65535, show_default=False,
+                                             help="Port on 127.0.0.1 \\[default: a free one].")] = 0,
     no_browser: Annotated[bool, typer.Option("--no-browser", help="Print the address; do not open a browser.")] = False,
 ) -> None:
     """Open a finished run in the browser: the vessel and its flat image, linked."""

@@ -80,10 +80,9 @@ class BakeOptions:
     px_per_mm : float or None
         Output resolution in pixels per millimetre (give this or ``dpi``; default 4).
     dpi : float or None
-        Output resolution in dots per inch (``px_per_mm = dpi / 25.4``).
+        Output resolution in dots per inch (25.4 dpi is 1 px/mm).
     maps : tuple of str
-        Distortion maps to write, from :data:`MAP_NAMES` (``"none"``: no maps); ``stress``
-        also writes the overlay.
+        Distortion maps to write (``"none"``: no maps); ``"stress"`` also writes the overlay.
     sheet : bool
         Write the rollout-vs-relaxed comparison sheet (needs ``NAME.rollout.ply`` beside the input).
     position_map : bool
@@ -100,8 +99,8 @@ class BakeOptions:
         Draw the scale bar (and the grid, with ``grid``) into ``NAME.png`` itself, where it
         covers no painting (in a band added below the image when no such place is free).
     plate : bool
-        Also write the archaeological plate ``NAME.plate.svg/.pdf/.png``
-        (:mod:`potflat.files.plate`; needs the rollout's and relaxation's files beside the input).
+        Also write the archaeological plate ``NAME.plate.svg/.pdf/.png`` (needs the rollout's
+        and relaxation's files beside the input).
     plate_scale : str, float or None
         Print scale of the plate, e.g. ``1:2`` or 0.5; None: the largest of 1:1, 1:2, 1:3, 1:4, 1:5,
         1:10, 1:20, 1:50 at which it fits an A4 page.

@@ -23,7 +23,9 @@ from potflat.bake.marks import FOLDED_COLOUR, REPEAT_COLOUR, rgba16
 from potflat.bake.options import BakeOptions
 from potflat.bake.relief import raking_key
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.files.names import base_ply_beside, rollout_json_beside, stage_name
+from potflat.files.names import (BASE_NAME_SUFFIX, STAGE_OUTPUTS, STAGES_FROM, base_ply_beside, rollout_json_beside,
+                                 stage_name)
+from potflat.files.outputs import superseding
 from potflat.files.plate import make_plate
 from potflat.files.provenance import provenance
 from potflat.files.relax_stage import RelaxFiles
@@ -114,11 +116,7 @@ def _write_flat_obj(path: Path, flat: FlatMesh, g: Grid, band: int, texture_name
 def _check_not_inputs(out_dir: Path, name: str, options: BakeOptions, inputs: list) -> None:
     """Refuse to bake when an output name is an input file (e.g. the scan's texture ``NAME.png``
     when baking into the scan's own folder): the input would be replaced."""
-    suffixes = (".png", ".tif", ".position.tif", ".sheet.png", ".bake.json", ".overlay.png", ".scale-layer.png",
-                ".attachments.png", ".flat.obj", ".flat.mtl", ".plate.svg", ".plate.pdf", ".plate.png",
-                ".scalebar.png", *(f".{m}.png" for m in options.maps),
-                *((".relief.tif", ".relief.png", ".curvature.png", ".relief-overlay.png",
-                   *(f".{raking_key(a)}.png" for a in options.relief_light)) if options.relief else ()))
+    suffixes = (*STAGE_OUTPUTS["bake"], *(f".{raking_key(a)}.png" for a in options.relief_light))
     for src in (Path(p) for p in inputs if p is not None):
         for out in (out_dir / f"{name}{s}" for s in suffixes):
             if src.exists() and out.exists() and os.path.samefile(out, src):
@@ -131,22 +129,6 @@ def _base_options(options: BakeOptions) -> BakeOptions:
     the image (a disc leaves a corner free), without the sheet, plate and OBJ (made of the
     relaxed flattening)."""
     return dataclasses.replace(options, sheet=False, plate=False, obj=False, scale_on_image=True)
-
-
-def _remove_stale_base(out_dir: Path, name: str) -> None:
-    """Remove the base images an earlier bake of ``name`` wrote into ``out_dir`` (the files its
-    ``NAME.base.bake.json`` lists) when this bake has no base: the folder's outputs stay one set."""
-    record_path = out_dir / f"{name}.base.bake.json"
-    try:
-        record = json.loads(record_path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return
-    if not isinstance(record, dict) or not isinstance(record.get("files"), dict) \
-            or not isinstance(record.get("provenance"), dict) or record["provenance"].get("stage") != "bake":
-        return
-    for listed in record["files"].values():
-        if isinstance(listed, str) and listed.startswith(f"{name}.base.") and Path(listed).name == listed:
-            (out_dir / listed).unlink(missing_ok=True)
 
 
 @reuse_freed_memory()  # (its many large temporaries; its peak is under the relax stage's)
@@ -169,8 +151,7 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
     some relief images add a legend band below it, and so does ``NAME.png`` when it is an
     untextured scan's relief). Baking ``NAME.relaxed.ply`` also bakes the base the rollout
     left out (``NAME.base.ply`` beside it) into ``NAME.base.png`` (its scale bar in the image),
-    its maps and ``NAME.base.bake.json``, listed under ``base_`` in :attr:`BakeFiles.paths`;
-    without a base, the base images of an earlier bake are removed.
+    its maps and ``NAME.base.bake.json``, listed under ``base_`` in :attr:`BakeFiles.paths`.
 
     Parameters
     ----------
@@ -219,127 +200,131 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
         marks = marks_from_record(record, len(flat.mesh.faces))
     elif not rollout_json.is_file():
         rollout_json = None
-    ppm = options.resolution
-    r = Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels,
-                 summary=relaxed.distortion if relaxed is not None else None,
-                 zone=relaxed.zone if relaxed is not None else None,
-                 reference=relaxed.reference if relaxed is not None else None, relief_mm=options.relief_mm)
-    g = r.grid
-    clock.lap("prepare")
-    if options.relief or r.paints_relief:
-        r.relief  # noqa: B018 - the relief's fits, timed apart (made on first use)
-        clock.lap("relief")
-    comp = Composition(r, options, marks=marks)
-    relief = comp.relief
-    paths: dict[str, Path] = {"png": out_dir / f"{name}.png"}
-    with ExitStack() as stack:
-        png = stack.enter_context(PngWriter(paths["png"], g.width, g.height + comp.band, 4, px_per_mm=ppm))
-        writers = {}
-        for key, legend in comp.legends.items():
-            paths[key] = out_dir / f"{name}.{key}.png"
-            writers[key] = stack.enter_context(PngWriter(paths[key], g.width, g.height + len(legend), 4,
-                                                         px_per_mm=ppm))
-        paths["scale_layer"] = out_dir / f"{name}.scale-layer.png"
-        layer_png = stack.enter_context(PngWriter(paths["scale_layer"], g.width, g.height, 4, px_per_mm=ppm))
-        if len(comp.attachments):
-            paths["attachments"] = out_dir / f"{name}.attachments.png"
-            mask_png = stack.enter_context(PngWriter(paths["attachments"], g.width, g.height, 4, px_per_mm=ppm))
-        relief_writers = {}
-        if relief is not None:
-            paths["relief_tif"] = out_dir / f"{name}.relief.tif"
-            relief_tif = stack.enter_context(TiffWriter(paths["relief_tif"], shape=(g.height, g.width),
-                                                        dtype=np.uint16, px_per_mm=ppm, photometric="minisblack",
-                                                        description=relief.tiff_description()))
-            for key in relief.keys:
+    with superseding(out_dir, name, STAGES_FROM["bake"],
+                     keep=lambda: (p for p in (flat_ply, flat.mesh.texture_path, rollout_ply, rollout_json,
+                                                        base_ply_beside(flat_ply)) if p)):
+        ppm = options.resolution
+        try:
+            r = Renderer(flat, ppm, supersample=options.supersample, max_megapixels=options.max_megapixels,
+                         summary=relaxed.distortion if relaxed is not None else None,
+                         zone=relaxed.zone if relaxed is not None else None,
+                         reference=relaxed.reference if relaxed is not None else None, relief_mm=options.relief_mm)
+        except InvalidOptionError as exc:  # the image's size: name the file
+            raise InvalidOptionError(f"{flat_ply}: {exc}") from None
+        g = r.grid
+        clock.lap("prepare")
+        if options.relief or r.paints_relief:
+            r.relief  # noqa: B018 - the relief's fits, timed apart (made on first use)
+            clock.lap("relief")
+        comp = Composition(r, options, marks=marks)
+        relief = comp.relief
+        paths: dict[str, Path] = {"png": out_dir / f"{name}.png"}
+        with ExitStack() as stack:
+            png = stack.enter_context(PngWriter(paths["png"], g.width, g.height + comp.band, 4, px_per_mm=ppm))
+            writers = {}
+            for key, legend in comp.legends.items():
                 paths[key] = out_dir / f"{name}.{key}.png"
-                relief_writers[key] = stack.enter_context(PngWriter(
-                    paths[key], g.width, g.height + len(relief.legends.get(key, ())), relief.channels[key],
-                    px_per_mm=ppm))
-        for strip in comp.strips():
-            png.write(strip.painting)
-            for key, writer in writers.items():
-                writer.write(strip.maps[key])
-            layer_png.write(strip.scale_layer)
-            if strip.attachments is not None:
-                mask_png.write(strip.attachments)
-            for key, writer in relief_writers.items():
-                writer.write(strip.relief[key])
+                writers[key] = stack.enter_context(PngWriter(paths[key], g.width, g.height + len(legend), 4,
+                                                             px_per_mm=ppm))
+            paths["scale_layer"] = out_dir / f"{name}.scale-layer.png"
+            layer_png = stack.enter_context(PngWriter(paths["scale_layer"], g.width, g.height, 4, px_per_mm=ppm))
+            if len(comp.attachments):
+                paths["attachments"] = out_dir / f"{name}.attachments.png"
+                mask_png = stack.enter_context(PngWriter(paths["attachments"], g.width, g.height, 4, px_per_mm=ppm))
+            relief_writers = {}
             if relief is not None:
-                relief_tif.write(strip.relief["levels"])
-        if comp.band:
-            png.write(comp.band_rows())
-        for key, legend in comp.legends.items():
-            writers[key].write(legend)
-        for key, legend in (relief.legends.items() if relief is not None else ()):
-            relief_writers[key].write(legend)
-    paths["scalebar"] = write_png(out_dir / f"{name}.scalebar.png", comp.layer.bar_image(), px_per_mm=ppm)
-    clock.lap("render")
-    if options.tiff:
-        paths["tiff"] = write_tiff_rows(out_dir / f"{name}.tif",
-                                        (rgba16(r.painting(a, b), r.coverage(a, b)) for a, b in r.strips()),
-                                        shape=(g.height, g.width, 4), dtype=np.uint16, px_per_mm=ppm, photometric="rgb")
-    if options.position_map:
-        paths["position"] = write_tiff_rows(out_dir / f"{name}.position.tif", (r.position(a, b) for a, b in r.strips()),
-                                            shape=(g.height, g.width, 3), dtype=np.float32, px_per_mm=ppm,
-                                            photometric="rgb")
-    clock.lap("tiff")
-    figures = comp.figures()
-    clock.lap("figures")
-    base_files, base_ply = None, None
-    if flat_ply.name.endswith(".relaxed.ply"):
-        base_ply = base_ply_beside(flat_ply)
-        if base is None and base_ply.is_file():
-            base = read_flat_ply(base_ply)
-        if base is not None:
-            base_files = run_bake_stage(base_ply, out_dir, _base_options(options), name=f"{name}.base", flat=base,
-                                        marks=RolloutMarks())
-            paths.update({f"base_{k}": p for k, p in base_files.paths.items()})
-        else:
-            _remove_stale_base(out_dir, name)
-        clock.lap("base")
-    if options.obj:
-        paths["obj"] = _write_flat_obj(out_dir / f"{name}.flat.obj", flat, g, comp.band, paths["png"].name)
-        paths["mtl"] = paths["obj"].with_suffix(".mtl")
-    if rollout_ply is not None:
-        paths["sheet"] = _write_comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat,
-                                                 title=name)
-    clock.lap("obj_sheet")
-    inputs = ([flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else [])
-              + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else [])
-              + ([base_ply] if base_files is not None else []))
-    scales = comp.scales
-    record = {
-        **figures,
-        "overlap": None if not len(comp.repeated) else {
-            "deg": marks.overlap_deg, "repeated_faces": int(comp.repeated.sum()),
-            "mark": f"dashed line {REPEAT_COLOUR[:3]} where the repeat past 360 degrees starts"},
-        "folded": None if not len(comp.folded) else {
-            "faces": int(len(marks.folded_faces)), "area_mm2": marks.folded_area_mm2,
-            "percent_of_surface": marks.folded_percent, "regions_total": marks.folded_regions,
-            "mark": f"outlined and hatched {FOLDED_COLOUR[:3]} on the distortion maps and the overlay: where the scan "
-                    "folds over itself in 3D (see NAME.rollout.json, folded)"},
-        "base": None if base_files is None else {
-            "what": "the base (the floor, inside) left out of the rollout, seen along the axis; its figures are in "
-                    f"{base_files.paths['json'].name}",
-            "files": base_files.record["files"], "image_mm": base_files.record["image_mm"],
-            "lengths": base_files.record.get("lengths")},
-        "scale_bar_mm": comp.layer.bar_mm,
-        "scale_on_image": None if comp.on_image is None else {
-            "bar_mm": comp.on_image.bar_mm, "at_px": list(comp.on_image.at), "box_px": list(comp.on_image.box_size),
-            "band_below_px": comp.scale_band, "grid": options.grid},
-        "maps": {m: {"range": [scales[m].lo, scales[m].hi], "label": scales[m].label} for m in options.maps},
-        "files": {k: p.name for k, p in paths.items()},
-        "provenance": provenance(stage="bake", inputs=inputs,
-                                 options={**asdict(options), "px_per_mm_effective": ppm, "name": name}),
-    }
-    paths["json"] = out_dir / f"{name}.bake.json"
-    record["files"]["json"] = paths["json"].name
-    record["timings"] = clock.total()  # the plate (made from these files) comes after
-    write_json_atomic(paths["json"], record)
-    if options.plate:
-        plate = make_plate(flat_ply, out_dir, scale=options.plate_scale, name=name, image=options.plate_image)
-        paths.update({f"plate_{k}": p for k, p in plate.paths.items()})
-        record["files"].update({f"plate_{k}": p.name for k, p in plate.paths.items()})
-        record["plate"] = {k: v for k, v in plate.record.items() if k not in ("files", "inputs")}
+                paths["relief_tif"] = out_dir / f"{name}.relief.tif"
+                relief_tif = stack.enter_context(TiffWriter(paths["relief_tif"], shape=(g.height, g.width),
+                                                            dtype=np.uint16, px_per_mm=ppm, photometric="minisblack",
+                                                            description=relief.tiff_description()))
+                for key in relief.keys:
+                    paths[key] = out_dir / f"{name}.{key}.png"
+                    relief_writers[key] = stack.enter_context(PngWriter(
+                        paths[key], g.width, g.height + len(relief.legends.get(key, ())), relief.channels[key],
+                        px_per_mm=ppm))
+            for strip in comp.strips():
+                png.write(strip.painting)
+                for key, writer in writers.items():
+                    writer.write(strip.maps[key])
+                layer_png.write(strip.scale_layer)
+                if strip.attachments is not None:
+                    mask_png.write(strip.attachments)
+                for key, writer in relief_writers.items():
+                    writer.write(strip.relief[key])
+                if relief is not None:
+                    relief_tif.write(strip.relief["levels"])
+            if comp.band:
+                png.write(comp.band_rows())
+            for key, legend in comp.legends.items():
+                writers[key].write(legend)
+            for key, legend in (relief.legends.items() if relief is not None else ()):
+                relief_writers[key].write(legend)
+        paths["scalebar"] = write_png(out_dir / f"{name}.scalebar.png", comp.layer.bar_image(), px_per_mm=ppm)
+        clock.lap("render")
+        if options.tiff:
+            paths["tiff"] = write_tiff_rows(out_dir / f"{name}.tif",
+                                            (rgba16(r.painting(a, b), r.coverage(a, b)) for a, b in r.strips()),
+                                            shape=(g.height, g.width, 4), dtype=np.uint16, px_per_mm=ppm, photometric="rgb")
+        if options.position_map:
+            paths["position"] = write_tiff_rows(out_dir / f"{name}.position.tif", (r.position(a, b) for a, b in r.strips()),
+                                                shape=(g.height, g.width, 3), dtype=np.float32, px_per_mm=ppm,
+                                                photometric="rgb")
+        clock.lap("tiff")
+        figures = comp.figures()
+        clock.lap("figures")
+        base_files, base_ply = None, None
+        if flat_ply.name.endswith(".relaxed.ply"):
+            base_ply = base_ply_beside(flat_ply)
+            if base is None and base_ply.is_file():
+                base = read_flat_ply(base_ply)
+            if base is not None:
+                base_files = run_bake_stage(base_ply, out_dir, _base_options(options),
+                                            name=f"{name}{BASE_NAME_SUFFIX}", flat=base, marks=RolloutMarks())
+                paths.update({f"base_{k}": p for k, p in base_files.paths.items()})
+            clock.lap("base")
+        if options.obj:
+            paths["obj"] = _write_flat_obj(out_dir / f"{name}.flat.obj", flat, g, comp.band, paths["png"].name)
+            paths["mtl"] = paths["obj"].with_suffix(".mtl")
+        if rollout_ply is not None:
+            paths["sheet"] = _write_comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat,
+                                                     title=name)
+        clock.lap("obj_sheet")
+        inputs = ([flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else [])
+                  + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else [])
+                  + ([base_ply] if base_files is not None else []))
+        scales = comp.scales
+        record = {
+            **figures,
+            "overlap": None if not len(comp.repeated) else {
+                "deg": marks.overlap_deg, "repeated_faces": int(comp.repeated.sum()),
+                "mark": f"dashed line {REPEAT_COLOUR[:3]} where the repeat past 360 degrees starts"},
+            "folded": None if not len(comp.folded) else {
+                "faces": int(len(marks.folded_faces)), "area_mm2": marks.folded_area_mm2,
+                "percent_of_surface": marks.folded_percent, "regions_total": marks.folded_regions,
+                "mark": f"outlined and hatched {FOLDED_COLOUR[:3]} on the distortion maps and the overlay: where the scan "
+                        "folds over itself in 3D (see NAME.rollout.json, folded)"},
+            "base": None if base_files is None else {
+                "what": "the base (the floor, inside) left out of the rollout, seen along the axis; its figures are in "
+                        f"{base_files.paths['json'].name}",
+                "files": base_files.record["files"], "image_mm": base_files.record["image_mm"],
+                "lengths": base_files.record.get("lengths")},
+            "scale_bar_mm": comp.layer.bar_mm,
+            "scale_on_image": None if comp.on_image is None else {
+                "bar_mm": comp.on_image.bar_mm, "at_px": list(comp.on_image.at), "box_px": list(comp.on_image.box_size),
+                "band_below_px": comp.scale_band, "grid": options.grid},
+            "maps": {m: {"range": [scales[m].lo, scales[m].hi], "label": scales[m].label} for m in options.maps},
+            "files": {k: p.name for k, p in paths.items()},
+            "provenance": provenance(stage="bake", inputs=inputs,
+                                     options={**asdict(options), "px_per_mm_effective": ppm, "name": name}),
+        }
+        paths["json"] = out_dir / f"{name}.bake.json"
+        record["files"]["json"] = paths["json"].name
+        record["timings"] = clock.total()  # the plate (made from these files) comes after
         write_json_atomic(paths["json"], record)
+        if options.plate:
+            plate = make_plate(flat_ply, out_dir, scale=options.plate_scale, name=name, image=options.plate_image)
+            paths.update({f"plate_{k}": p for k, p in plate.paths.items()})
+            record["files"].update({f"plate_{k}": p.name for k, p in plate.paths.items()})
+            record["plate"] = {k: v for k, v in plate.record.items() if k not in ("files", "inputs")}
+            write_json_atomic(paths["json"], record)
     return BakeFiles(paths=paths, record=record)

@@ -17,13 +17,10 @@ from potflat.files.bake_stage import BakeFiles, run_bake_stage
 from potflat.files.options import RunOptions, resolve_options
 from potflat.files.relax_stage import RelaxFiles, run_relax_stage
 from potflat.files.rollout_stage import RolloutFiles, run_rollout_stage
-from potflat.io.atomic import (
-    check_output_name,
-    output_lock,
-    remove_stale_parts,
-    write_json_atomic,
-)
-from potflat.io.scan import check_scan_file
+from potflat.files.names import STAGES_FROM
+from potflat.files.outputs import superseding
+from potflat.io.atomic import check_output_name, write_json_atomic
+from potflat.io.scan import check_scan_file, scan_inputs
 from potflat.mesh.distortion import bounds
 from potflat.raster.render import image_size
 from potflat.types import FlatMesh
@@ -133,16 +130,21 @@ def _preview_at_image_resolution(options: RunOptions) -> RunOptions:
     return options
 
 
-def _image_check(bake: BakeOptions) -> Callable[[FlatMesh], None]:
-    """A check of the rollout's flattening: would the baked image be of a sane size? Run before
-    the rollout writes anything, so an absurd resolution (or a scan in the wrong unit) stops the
-    run before any file exists rather than at the bake, after rollout and relax."""
+def _image_check(bake: BakeOptions, scan: Path) -> Callable[[FlatMesh], None]:
+    """A check of a flattening: would the baked image be of a sane size? Run on the rollout's
+    before the rollout writes anything, so an absurd resolution stops the run before any file
+    exists, and on the relaxed one (its extent is the image's, up to 1.6 times the rollout's
+    area) before the relax stage writes: :func:`run_scan` then removes the rollout's files too.
+    The message names the scan."""
     def check(flat: FlatMesh) -> None:
         used = np.zeros(len(flat.uv), bool)
         used[flat.mesh.faces.ravel()] = True
         if used.any():
             lo, hi = bounds(flat.uv[used])
-            image_size((hi - lo) * flat.mesh.mm_per_unit, bake.resolution, bake.max_megapixels)
+            try:
+                image_size((hi - lo) * flat.mesh.mm_per_unit, bake.resolution, bake.max_megapixels)
+            except InvalidOptionError as exc:
+                raise InvalidOptionError(f"{scan}: {exc}") from None
     return check
 
 
@@ -170,7 +172,9 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
     Raises
     ------
     PotflatError
-        From the stage that failed; outputs of the stages already done are kept.
+        From the stage that failed. The outputs in ``out_dir`` stay one consistent set
+        (:func:`potflat.files.outputs.superseding`): an earlier run's are restored, or, with
+        none, the stages this run finished are kept.
     """
     scan = Path(scan_path)
     out = Path(out_dir)
@@ -180,22 +184,33 @@ def run_scan(scan_path, out_dir, *, rollout=None, relax=None, bake=None, name: s
     _check_painting_name_is_free(out, name)
     say = progress if progress is not None else (lambda stage: None)
     start = time.perf_counter()
-    with output_lock(out):
-        remove_stale_parts(out)  # left by a killed run; no other potflat process writes here now
+    inputs = (scan, *scan_inputs(scan), *options.rollout.input_files())
+    with superseding(out, name, STAGES_FROM["rollout"], keep=lambda: inputs) as run:
         say("rollout")
         t = time.perf_counter()
-        rolled = run_rollout_stage(scan, out, options.rollout, name=name, check=_image_check(options.bake))
+        image_check = _image_check(options.bake, scan)
+        rolled = run_rollout_stage(scan, out, options.rollout, name=name, check=image_check)
+        run.done("rollout")
         t_rollout, t = time.perf_counter() - t, time.perf_counter()
         say("relax")
-        relaxed = run_relax_stage(rolled.paths["ply"], out, options.relax, name=name, rolled=rolled)
+        try:
+            relaxed = run_relax_stage(rolled.paths["ply"], out, options.relax, name=name, rolled=rolled,
+                                      check=image_check)
+        except InvalidOptionError:  # the image size: this run's options, not the scan, so nothing of it stays
+            run.finished.clear()
+            raise
+        run.done("relax")
         t_relax, t = time.perf_counter() - t, time.perf_counter()
         say("bake")
         # NAME.png is written before NAME.bake.json: mark it as potflat's own until the bake is done
         marker = write_json_atomic(partial_marker(out, name), {"potflat": "incomplete", "scan": str(scan)})
-        baked = run_bake_stage(relaxed.paths["ply"], out, options.bake, name=name, relaxed=relaxed,
-                               marks=rolled.marks, base=rolled.base)
+        try:
+            baked = run_bake_stage(relaxed.paths["ply"], out, options.bake, name=name, relaxed=relaxed,
+                                   marks=rolled.marks, base=rolled.base)
+            run.done("bake")
+        finally:  # (a failed or interrupted bake's images are removed with it)
+            marker.unlink(missing_ok=True)
         t_bake = time.perf_counter() - t
-        marker.unlink()
     seconds = StageSeconds(rollout=t_rollout, relax=t_relax, bake=t_bake, total=time.perf_counter() - start)
     return ScanResult(name=name, scan=scan, out_dir=out, rollout=rolled,
                       relax=dataclasses.replace(relaxed, reference=None), bake=baked, seconds=seconds)

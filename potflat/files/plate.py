@@ -43,8 +43,9 @@ from potflat.types import FlatMesh
 
 #: Scales tried when none is given, largest first (drawing mm per vessel mm).
 PLATE_SCALES = (1.0, 1 / 2, 1 / 3, 1 / 4, 1 / 5, 1 / 10, 1 / 20, 1 / 50)
-#: The automatic scale keeps drawing and rollout within this area (A4 portrait minus margins), mm.
-CONTENT_MM = (180.0, 240.0)
+#: Paper sizes the plate's page is measured against (portrait, mm), smallest first: the automatic
+#: scale is the largest of :data:`PLATE_SCALES` whose page fits the first.
+PAPERS = {"A4": (210.0, 297.0), "A3": (297.0, 420.0)}
 #: Page margin, gap between the parts, caption font size (pt) and line height, mm.
 MARGIN_MM, GAP_MM, FONT_PT, LINE_MM = 12.0, 8.0, 7.5, 4.2
 #: Mean width of a caption character in ems (for wrapping the caption to the page).
@@ -214,12 +215,42 @@ def outside_view(flat, rollout_summary: dict, px_per_mm: float):
     return bake(FlatMesh(sub, uv), px_per_mm=px_per_mm, maps=(), max_megapixels=200.0)
 
 
-def _auto_scale(drawing_mm: tuple[float, float], rollout_mm: tuple[float, float], gaps: int = 1) -> float:
-    for s in PLATE_SCALES:
-        if (max(drawing_mm[0], rollout_mm[0]) * s <= CONTENT_MM[0]
-                and (drawing_mm[1] + rollout_mm[1]) * s + gaps * GAP_MM <= CONTENT_MM[1]):
-            return s
-    return PLATE_SCALES[-1]
+def _page_mm(scale: float, drawing_mm: tuple[float, float], rollout_mm: tuple[float, float], gaps_mm: float,
+             caption: list[tuple[str, str]]) -> tuple[float, float, list[tuple[str, str]]]:
+    """The page's width and height (mm) at ``scale`` for a drawing and rollout images of these
+    sizes (vessel mm; ``gaps_mm`` between the images, on paper), and the caption's lines wrapped
+    to its width."""
+    draw_w, draw_h = drawing_mm[0] * scale, drawing_mm[1] * scale
+    roll_w, roll_h = rollout_mm[0] * scale, rollout_mm[1] * scale + gaps_mm
+    page_w = max(draw_w, roll_w, 120.0) + 2 * MARGIN_MM
+    chars = max(40, int((page_w - 2 * MARGIN_MM) / (FONT_PT * 25.4 / 72 * CHAR_EM)))
+    lines = [(piece, weight) for text, weight in caption for piece in textwrap.wrap(text, chars)]
+    page_h = 2 * MARGIN_MM + draw_h + GAP_MM + roll_h + GAP_MM + 8.0 + len(lines) * LINE_MM
+    return page_w, page_h, lines
+
+
+def _fits(page_mm, paper: str) -> bool:
+    """Whether a page of ``page_mm`` (width, height) fits on ``paper``, upright or turned."""
+    return all(a <= b + 1e-6 for a, b in zip(sorted(page_mm), PAPERS[paper]))
+
+
+def paper_of(page_mm) -> str | None:
+    """The smallest of :data:`PAPERS` a page of ``page_mm`` (width, height) fits; None when
+    it fits none."""
+    return next((name for name in PAPERS if _fits(page_mm, name)), None)
+
+
+def paper_words(facts: dict) -> str:
+    """The page's paper in words, from the plate's ``facts`` (its record): ``fits A4``,
+    ``fits A3, larger than A4: 1:5 fits A4`` or ``larger than A3: 1:10 fits A4, 1:5 fits A3``."""
+    names, paper = list(PAPERS), facts["paper"]
+    if paper == names[0]:
+        return f"fits {paper}"
+    smaller = names[:names.index(paper)] if paper else names
+    size = f"fits {paper}, larger than {names[0]}" if paper else f"larger than {names[-1]}"
+    hints = [f"{facts['largest_scale_on'][name]} fits {name}" for name in smaller
+             if facts["largest_scale_on"].get(name)]
+    return size + (": " + ", ".join(hints) if hints else "")
 
 
 def _plate_date() -> str:
@@ -260,38 +291,48 @@ def compose_plate(src: _Sources, scale: float | None):
     roll_ppm = float(src.bake["px_per_mm"])
     sizes = [(img.shape[1] / roll_ppm, img.shape[0] / roll_ppm) for _, img in src.rollouts]
     roll_w, roll_h = max(w for w, _ in sizes), sum(h for _, h in sizes)
-    if scale is None:
-        scale = _auto_scale((2 * rmax, h_hi - h_lo), (roll_w, roll_h), gaps=len(sizes))
-    mpu = src.flat.mesh.mm_per_unit
-    view = outside_view(src.flat, src.rollout, min(VIEW_DPI / 25.4 * scale, 40.0))
-    s_px = view.px_per_mm * mpu  # view pixels per scan unit
-    vx0, vy1 = view.origin * mpu  # mm: left edge, top edge
-    vh, vw = view.painting.shape[:2]
-    vx1, vy0 = vx0 + vw / view.px_per_mm, vy1 - vh / view.px_per_mm
-    y_lo, y_hi = min(h_lo, vy0), max(h_hi, vy1)
-    half = max(rmax, -vx0)
-    draw_w, draw_h = 2 * half * scale, (y_hi - y_lo) * scale
     gaps = GAP_MM * (len(sizes) - 1)  # between the rollout images, on paper
-    paper_roll = (roll_w * scale, roll_h * scale + gaps)
-    page_w = max(draw_w, paper_roll[0], 120.0) + 2 * MARGIN_MM
     figures, where = painted_zone_distortion(src.relax)
     proxy = src.rollout.get("proxy", {}).get("type", "?")
     preset = src.relax.get("preset") or src.relax.get("options", {}).get("preset", "?")
     date = _plate_date()
+
+    def caption(scale: float) -> list[tuple[str, str]]:
+        return [
+            (src.name, "bold"),
+            (f"Rollout computed from a 3D scan by potflat {__version__} on {date}: proxy {proxy}, relaxation "
+             f"preset {preset}.", "normal"),
+            (f"Distortion in the {where}: {distortion_words(figures)}.", "normal"),
+            (f"Scale {scale_label(scale)} when printed at 100 %. Left of the axis the outside view, right of it "
+             f"the section; the rollout below ({', then '.join(what for what, _ in src.rollouts)}), seen from "
+             "outside, mouth up.", "normal"),
+        ]
+
+    def drawing(px_per_mm: float):
+        """The outside view at ``px_per_mm`` and the drawing's half width and heights (vessel mm)."""
+        view = outside_view(src.flat, src.rollout, px_per_mm)
+        vx0, vy1 = view.origin * src.flat.mesh.mm_per_unit  # mm: left edge, top edge
+        vy0 = vy1 - view.painting.shape[0] / view.px_per_mm
+        return view, max(rmax, -vx0), min(h_lo, vy0), max(h_hi, vy1)
+
+    def largest_on(paper: str, extent: tuple[float, float]) -> float | None:
+        """The largest of :data:`PLATE_SCALES` at which the page fits ``paper``."""
+        return next((s for s in PLATE_SCALES
+                     if _fits(_page_mm(s, extent, (roll_w, roll_h), gaps, caption(s))[:2], paper)), None)
+
+    if scale is None:  # the largest whose page fits A4, from the view's extent at 1 px/mm (+ a pixel each side)
+        _, half, y_lo, y_hi = drawing(1.0)
+        scale = largest_on(next(iter(PAPERS)), (2 * half + 2.0, y_hi - y_lo + 2.0)) or PLATE_SCALES[-1]
+    view, half, y_lo, y_hi = drawing(min(VIEW_DPI / 25.4 * scale, 40.0))
+    s_px = view.px_per_mm * src.flat.mesh.mm_per_unit  # view pixels per scan unit
+    vx0, vy1 = view.origin * src.flat.mesh.mm_per_unit
+    vy0 = vy1 - view.painting.shape[0] / view.px_per_mm
+    extent = (2 * half, y_hi - y_lo)
+    draw_w, draw_h = extent[0] * scale, extent[1] * scale
+    paper_roll = (roll_w * scale, roll_h * scale + gaps)
     label = scale_label(scale)
-    caption = [
-        (src.name, "bold"),
-        (f"Rollout computed from a 3D scan by potflat {__version__} on {date}: proxy {proxy}, relaxation preset "
-         f"{preset}.", "normal"),
-        (f"Distortion in the {where}: {distortion_words(figures)}.", "normal"),
-        (f"Scale {label} when printed at 100 %. Left of the axis the outside view, right of it the section; "
-         f"the rollout below ({', then '.join(what for what, _ in src.rollouts)}), seen from outside, mouth up.",
-         "normal"),
-    ]
-    chars = max(40, int((page_w - 2 * MARGIN_MM) / (FONT_PT * 25.4 / 72 * CHAR_EM)))
-    lines = [(piece, weight) for text, weight in caption for piece in textwrap.wrap(text, chars)]
-    caption_lines = len(lines)
-    page_h = (2 * MARGIN_MM + draw_h + GAP_MM + paper_roll[1] + GAP_MM + 8.0 + caption_lines * LINE_MM)
+    page_w, page_h, lines = _page_mm(scale, extent, (roll_w, roll_h), gaps, caption(scale))
+    fits = {paper: scale_label(s) if (s := largest_on(paper, extent)) else None for paper in PAPERS}
     fig = Figure(figsize=(page_w / 25.4, page_h / 25.4), facecolor="white")
     paper = fig.add_axes((0, 0, 1, 1))
     paper.set_xlim(0, page_w)
@@ -343,7 +384,8 @@ def compose_plate(src: _Sources, scale: float | None):
     for text, weight in lines:
         paper.text(MARGIN_MM, y, text, fontsize=FONT_PT, fontweight=weight, va="top", wrap=False)
         y -= LINE_MM
-    facts = {"scale": scale, "scale_label": label, "page_mm": [page_w, page_h], "drawing_mm": [draw_w, draw_h],
+    facts = {"scale": scale, "scale_label": label, "page_mm": [page_w, page_h], "paper": paper_of((page_w, page_h)),
+             "largest_scale_on": fits, "drawing_mm": [draw_w, draw_h],
              "rollout_mm": list(paper_roll), "distortion_where": where, "distortion": figures, "date": date,
              "proxy": proxy, "preset": preset, "rollout_images": [what for what, _ in src.rollouts],
              "profile_rows": int(ok.sum()),

@@ -7,13 +7,17 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from potflat import __version__
 from potflat._heap import reuse_freed_memory
 from potflat.errors import InvalidOptionError
+from potflat.files.names import STAGES_FROM
+from potflat.files.outputs import superseding
 from potflat.files.provenance import provenance
 from potflat.io.atomic import check_output_name, write_json_atomic
 from potflat.io.flat_ply import as_stored, write_flat_ply
-from potflat.io.scan import check_plausible_size, load_scan
+from potflat.io.scan import check_plausible_size, check_scan_file, load_scan, scan_inputs
 from potflat.mesh.distortion import DistortionSummary
 from potflat.rollout.notes import rollout_notes
 from potflat.rollout.options import RolloutOptions
@@ -58,8 +62,7 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     """Read a scan, roll it out, write ``NAME.rollout.ply``, ``NAME.rollout.json`` and its profile.
 
     A base left out of the rollout (:mod:`potflat.rollout.base`) is written as ``NAME.base.ply``,
-    its orthographic view along the axis, for the bake (a stale one from an earlier run into
-    the same folder is removed when this rollout keeps its base). The rollout's profile
+    its orthographic view along the axis, for the bake. The rollout's profile
     (:attr:`RolloutResult.profile`: both walls around its axis,
     attachments left out) is written as ``NAME.profile.csv`` and ``NAME.profile.svg`` (a
     section drawing, see ``docs/profile.md``).
@@ -96,37 +99,38 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
         if out.resolve() == scan_path.resolve():
             raise InvalidOptionError(
                 f"output {out} would overwrite the input scan; choose another output folder or --name")
-    clock = StepClock()
-    loaded = load_scan(scan_path, units=options.units, texture="use" if options.texture else "ignore")
-    check_plausible_size(loaded, scan_path)
-    mesh, cleaning = loaded.mesh, loaded.report.as_dict()
-    del loaded
-    clock.lap("load")
-    result = rollout(mesh, options=options)
-    clock.lap("rollout")
-    if check is not None:
-        check(result.flat)
-    del mesh
-    profile = result.profile
-    record = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_record(result),
-              "profile": profile.summary(),
-              "cleaning": cleaning,
-              "files": {role: path.name for role, path in paths.items()}}
-    record["provenance"] = provenance(stage="rollout", inputs=[scan_path], options=options.as_dict())
-    comments = (f"potflat {__version__} rollout of {scan_path.name}",)
-    write_flat_ply(paths["ply"], result.flat, comments=comments)
-    base = result.base.flat if result.base is not None else None
-    if base is not None:
-        base_comments = (f"potflat {__version__} base of {scan_path.name}, seen from {result.base.view}",)
-        paths["base_ply"] = write_flat_ply(base_ply, base, comments=base_comments)
-        record["files"]["base_ply"] = base_ply.name
-    else:
-        _remove_stale_base(base_ply)
-    write_profile_csv(profile, paths["profile_csv"])
-    write_profile_svg(profile, paths["profile_svg"], title=f"{name}: profile ({profile.units})")
-    clock.lap("write")
-    record["timings"] = {**clock.total(), "rollout_steps": result.timings}
-    write_json_atomic(paths["json"], record)
+    check_scan_file(scan_path)
+    with superseding(out_dir, name, STAGES_FROM["rollout"],
+                     keep=lambda: (scan_path, *scan_inputs(scan_path), *options.input_files())):
+        clock = StepClock()
+        loaded = load_scan(scan_path, units=options.units, texture="use" if options.texture else "ignore")
+        check_plausible_size(loaded, scan_path)
+        mesh, cleaning = loaded.mesh, loaded.report.as_dict()
+        del loaded
+        clock.lap("load")
+        result = rollout(mesh, options=options)
+        clock.lap("rollout")
+        if check is not None:
+            check(result.flat)
+        del mesh
+        profile = result.profile
+        record = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_record(result),
+                  "profile": profile.summary(),
+                  "cleaning": cleaning,
+                  "files": {role: path.name for role, path in paths.items()}}
+        record["provenance"] = provenance(stage="rollout", inputs=[scan_path], options=options.as_dict())
+        comments = (f"potflat {__version__} rollout of {scan_path.name}",)
+        write_flat_ply(paths["ply"], result.flat, comments=comments)
+        base = result.base.flat if result.base is not None else None
+        if base is not None:
+            base_comments = (f"potflat {__version__} base of {scan_path.name}, seen from {result.base.view}",)
+            paths["base_ply"] = write_flat_ply(base_ply, base, comments=base_comments)
+            record["files"]["base_ply"] = base_ply.name
+        write_profile_csv(profile, paths["profile_csv"])
+        write_profile_svg(profile, paths["profile_svg"], title=f"{name}: profile ({profile.units})")
+        clock.lap("write")
+        record["timings"] = {**clock.total(), "rollout_steps": result.timings}
+        write_json_atomic(paths["json"], record)
     return RolloutFiles(paths=paths, record=record, flat=as_stored(result.flat, paths["ply"], comments=comments),
                         distortion=result.distortion, marks=result.marks,
                         base=None if base is None else as_stored(base, base_ply, comments=base_comments))
@@ -142,18 +146,6 @@ def base_line(base: dict, base_ply: Path | None) -> str:
     return (f"{what} left out of the rollout ({base['faces_in_disc']} faces, {base['area_in_disc_mm2']:.4g} mm\N{SUPERSCRIPT TWO}, "
             f"{base['percent_of_region']:.0f} % of the surface), shown on its own{where}: {base['reason']}; "
             "--keep-base keeps it in the rollout")
-
-
-def _remove_stale_base(base_ply: Path) -> None:
-    """Remove ``NAME.base.ply`` when an earlier rollout into the same folder wrote it (its
-    header says so) and this one keeps its base: the folder's outputs stay one set."""
-    try:
-        with open(base_ply, "rb") as fh:
-            head = fh.read(512)
-    except OSError:
-        return
-    if head.startswith(b"ply\n") and b"\ncomment potflat " in head and b" base of " in head:
-        base_ply.unlink(missing_ok=True)
 
 
 def rollout_record(result: RolloutResult) -> dict:
@@ -172,13 +164,18 @@ def rollout_record(result: RolloutResult) -> dict:
         "counts": {
             "vertices": len(mesh.vertices), "faces": len(mesh.faces),
             "input_faces": result.region.faces_total,
-            "input_vertices_used": int(len(result.vertex_index) - result.seam_vertices - result.split_vertices),
+            "input_faces_unrolled": int(np.count_nonzero(np.bincount(result.face_index))),
+            "input_vertices_used": int(len(result.vertex_index) - result.seam_vertices - result.split_vertices
+                                       - result.cut_vertices),
             "seam_vertices_duplicated": result.seam_vertices,
+            "vertices_added_by_cut": result.cut_vertices,
+            "faces_split_by_cut": result.cut_faces,
             "nonmanifold_vertices_split": result.split_vertices,
         },
         "distortion": result.distortion.as_dict(),
         "importance": result.importance.as_dict() if result.importance is not None else None,
         "boundary_overlap": result.boundary_overlap,
+        "outline_turning": result.outline_turning,
         "walls": result.walls.summary(),
         "attachments": _attachments_summary(result),
         "base": result.base.summary(mesh.mm_per_unit) if result.base is not None else None,

@@ -182,6 +182,45 @@ def output_lock(folder: str | os.PathLike, *, what: str = "potflat") -> Iterator
         os.close(fd)
 
 
+def own_subfolder(root: str | os.PathLike, folder: str | os.PathLike, *, create: bool) -> Path:
+    """Check that ``folder``, a folder potflat writes in below the output folder ``root``, is
+    potflat's to write in: a real folder (not a symbolic link) whose real path lies inside
+    ``root``'s, or missing (then made here, without following links, if ``create``).
+
+    Returns
+    -------
+    Path
+        ``folder``.
+
+    Raises
+    ------
+    InvalidInputError
+        For a symbolic link (planted: it would send the outputs elsewhere), a file, or a folder
+        outside ``root``: one line naming it and the fix.
+    """
+    import stat
+
+    root, folder = Path(root), Path(folder)
+    try:
+        if create and not os.path.lexists(folder):
+            os.mkdir(folder)  # the folder in which it is made was checked by the caller
+        st = os.lstat(folder)
+    except FileNotFoundError:
+        return folder
+    except OSError as exc:
+        raise InvalidInputError(f"cannot write to {folder}: {exc.strerror or exc}; choose a writable output "
+                                "folder (-o)") from None
+    if stat.S_ISLNK(st.st_mode):
+        raise InvalidInputError(f"{folder} is a symbolic link (to {os.readlink(folder)}); potflat writes only into "
+                                "folders of its own under the output folder: remove the link or choose another "
+                                "output folder (-o)")
+    if not stat.S_ISDIR(st.st_mode):
+        raise InvalidInputError(f"{folder} is not a folder; remove it or choose another output folder (-o)")
+    if folder.resolve().parent != root.resolve():
+        raise InvalidInputError(f"{folder} lies outside {root}; choose another output folder (-o)")
+    return folder
+
+
 def remove_stale_parts(folder: str | os.PathLike) -> int:
     """Remove the hidden ``.NAME.*.part`` temporaries a killed run left in ``folder``.
 

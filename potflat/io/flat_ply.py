@@ -21,7 +21,9 @@ import numpy as np
 from potflat.errors import InvalidInputError
 from potflat.io._kernels.ply_png import float32_exact
 from potflat.io.atomic import atomic_path
+from potflat.io.images import check_texture_image
 from potflat.io.ply import _ply_header
+from potflat.io.raw import _read_bytes
 from potflat.mesh.distortion import row_blocks
 from potflat.types import UNITS_MM, FlatMesh, Mesh
 
@@ -45,13 +47,15 @@ def _place_texture(texture: Path, ply_path: Path) -> str:
     name of ``ply_path``): a name no stage writes (a texture ``NAME.png`` would otherwise be
     replaced by the baked ``NAME.png``) and no other scan's texture can take (one output
     folder, several scans with a ``texture.jpg``). A stale file of that name is replaced; an
-    identical copy is kept.
+    identical copy is kept. Only an image that decodes is copied
+    (:func:`~potflat.io.images.check_texture_image`).
     """
     import filecmp
 
     target = _texture_target(texture, ply_path)
     if target == texture:
         return target.name
+    check_texture_image(texture)
     if target.is_file() and not target.is_symlink() and os.stat(target).st_nlink == 1 \
             and filecmp.cmp(target, texture, shallow=False):
         return target.name
@@ -185,6 +189,23 @@ def as_stored(flat: FlatMesh, path: str | os.PathLike, *, comments: tuple[str, .
                     importance=flat.importance)
 
 
+def _texture_beside(path: Path, texture_name: str) -> Path:
+    """The texture a stage PLY names (``comment TextureFile NAME``): a file in the PLY's own
+    folder, as :func:`write_flat_ply` places it. A name with a folder in it, an absolute path, or
+    a link leading out of the folder is refused: a stage file never chooses what potflat reads or
+    copies elsewhere."""
+    folder = path.parent.resolve()
+    try:
+        texture = (folder / texture_name).resolve()
+    except (OSError, RuntimeError):  # a symbolic link loop: reported as missing when it is read
+        texture = folder / texture_name
+    if texture_name in ("", ".", "..") or Path(texture_name).name != texture_name or texture.parent != folder:
+        raise InvalidInputError(f"{path} names the texture {texture_name!r}, which is not a file beside it; put "
+                                "the texture image in the stage file's folder and name it there (comment "
+                                "TextureFile NAME), or roll the scan out again")
+    return texture
+
+
 def read_flat_ply(path: str | os.PathLike) -> FlatMesh:
     """Read a stage PLY written by :func:`write_flat_ply` (or any tool using its layout).
 
@@ -201,7 +222,8 @@ def read_flat_ply(path: str | os.PathLike) -> FlatMesh:
     Raises
     ------
     InvalidInputError
-        When the file is missing, truncated, or not a triangle stage PLY.
+        When the file is missing, truncated, or not a triangle stage PLY, or names a texture
+        that is not beside it.
     """
 
     path = Path(path)
@@ -209,7 +231,7 @@ def read_flat_ply(path: str | os.PathLike) -> FlatMesh:
         if not stat.S_ISREG(path.stat().st_mode):
             raise InvalidInputError(f"{path} is not a regular file (a folder, device or pipe); give a stage file "
                                     "written by potflat")
-        data = path.read_bytes()
+        data = _read_bytes(path, "a stage file")
     except (OSError, RuntimeError) as exc:
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else "a symbolic link loop"
         raise InvalidInputError(f"cannot read {path}: {reason}; give a stage file written by potflat") from None
@@ -273,7 +295,7 @@ def read_flat_ply(path: str | os.PathLike) -> FlatMesh:
     texcoords, texture_path, untextured = None, None, None
     if texture_name is not None and "texcoord" in face.dtype.names:
         texcoords = face["texcoord"].reshape(-1, 3, 2).astype(np.float64)
-        texture_path = (path.parent / texture_name).resolve()
+        texture_path = _texture_beside(path, texture_name)
         if "untextured" in face.dtype.names:
             if not np.isin(face["untextured"], (0, 1)).all():
                 raise InvalidInputError(f"{path} has face untextured flags other than 0 and 1; write it again")

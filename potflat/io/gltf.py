@@ -25,10 +25,10 @@ from potflat.io.stl_off import _trimesh_load
 def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
     import trimesh
 
-    try:
-        used = _gltf_document(path)[0].get("extensionsUsed")
-    except InvalidInputError:
-        used = None  # (a broken file: trimesh's reading says what is wrong with it)
+    doc, bin_length = _gltf_json(path)
+    _check_gltf_sizes(path, doc, bin_length)
+    _check_gltf_nodes(path, doc)
+    used = doc.get("extensionsUsed")
     if isinstance(used, list) and "KHR_draco_mesh_compression" in used:
         try:  # trimesh decodes Draco with DracoPy; without it, it returns all-zero positions
             import DracoPy  # noqa: F401
@@ -72,6 +72,173 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
                      "(meshes without TEXCOORD_0) have no texture coordinates")
     raw.texture = images[0]
     return raw
+
+
+#: Most data a glTF may embed as base64 text (``data:`` URIs), decoded: decoding takes about five
+#: times as much memory (the text, its copies, the bytes); a larger scan comes as a GLB or with
+#: a ``.bin`` file.
+MAX_EMBEDDED_BYTES = 256 << 20
+#: Most JSON a glTF/GLB holds besides its embedded data (nodes, accessors, materials).
+MAX_JSON_BYTES = 64 << 20
+#: Bytes of each glTF component type.
+_COMPONENT_BYTES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
+#: Components of each accessor type.
+_TYPE_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+
+
+def _gltf_json(path: Path) -> tuple[dict, int]:
+    """The JSON of a glTF or GLB (read alone: of a GLB its JSON chunk, never its binary chunk)
+    and the length of a GLB's binary chunk (0 for a .gltf).
+
+    Raises
+    ------
+    InvalidInputError
+        For JSON over :data:`MAX_JSON_BYTES` plus :data:`MAX_EMBEDDED_BYTES` as base64 (checked
+        from the file's size or the GLB's chunk header, before reading), or not a glTF.
+    """
+    most = MAX_JSON_BYTES + MAX_EMBEDDED_BYTES * 4 // 3
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(20)
+        glb = head[:4] == b"glTF"
+        if glb:
+            if len(head) < 20:
+                raise InvalidInputError(f"{path} is not a valid GLB file (cut short); export the scan again")
+            length = struct.unpack_from("<I", head, 12)[0]
+        else:
+            length = size
+        if length > most:
+            raise InvalidInputError(f"{path} holds {length / 2**20:.0f} MiB of glTF JSON, over the "
+                                    f"{most / 2**20:.0f} MiB limit (data embedded as base64 text); export the scan as "
+                                    "GLB or glTF with a .bin file")
+        text = fh.read(length) if glb else head + fh.read()
+        bin_length = 0
+        if glb:
+            chunk = fh.read(8)
+            bin_length = struct.unpack_from("<I", chunk)[0] if len(chunk) == 8 else 0
+            bin_length = min(bin_length, max(0, size - 28 - length))  # what the file holds
+    try:
+        doc = json.loads(text)
+    except ValueError:
+        doc = None
+    if not isinstance(doc, dict):
+        raise InvalidInputError(f"{path} is not valid glTF{' (GLB)' if glb else ''} JSON; export the scan again")
+    return doc, bin_length
+
+
+def _check_gltf_sizes(path: Path, doc: dict, bin_length: int) -> None:
+    """Refuse, before anything is decoded, a glTF whose declared sizes its data cannot back or
+    memory cannot hold: more than :data:`MAX_EMBEDDED_BYTES` embedded as ``data:`` URIs, a
+    buffer longer than its data (the base64 text, the GLB's binary chunk, the ``.bin`` file) or
+    than the memory the process may use, views past their buffer, accessors past their view."""
+    from potflat.io.raw import memory_limit
+
+    def broken(what: str) -> InvalidInputError:
+        return InvalidInputError(f"{path}: {what}; the file is corrupt or hostile: export the scan again")
+
+    def items(key: str) -> list[dict]:
+        value = doc.get(key) or []
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise broken(f"'{key}' is not a list of objects")
+        return value
+
+    def number(item: dict, key: str, default: int | None = None) -> int:
+        value = item.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise broken(f"{key} {value!r} is not a count of bytes or items")
+        return value
+
+    embedded = sum(len(item["uri"]) * 3 // 4 for key in ("buffers", "images") for item in items(key)
+                   if isinstance(item.get("uri"), str) and item["uri"].startswith("data:"))
+    if embedded > MAX_EMBEDDED_BYTES:
+        raise InvalidInputError(f"{path} embeds {embedded / 2**20:.0f} MiB as base64 text (data: URIs), over the "
+                                f"{MAX_EMBEDDED_BYTES / 2**20:.0f} MiB limit; export the scan as GLB or glTF "
+                                "with a .bin file")
+    budget = memory_limit()
+    lengths = []
+    for k, buffer in enumerate(items("buffers")):
+        declared = number(buffer, "byteLength")
+        uri = buffer.get("uri")
+        if uri is None:
+            held, where = bin_length, "the GLB's binary chunk"
+        elif isinstance(uri, str) and uri.startswith("data:"):
+            held, where = len(uri.split(",", 1)[-1]) * 3 // 4, "its base64 text"
+        else:
+            source = _find_file(str(uri), path.parent)
+            held, where = (source.stat().st_size if source.is_file() else 0), f"the file {uri}"
+        if declared > held:
+            raise broken(f"buffer {k} declares {declared} bytes but {where} holds {held}")
+        if budget is not None and declared > budget:
+            raise InvalidInputError(f"{path}: buffer {k} is {declared / 2**30:.1f} GiB, more than the memory potflat "
+                                    "may use here; give a smaller scan (decimate it)")
+        lengths.append(declared)
+    views = []
+    for k, view in enumerate(items("bufferViews")):
+        buffer, offset, length = number(view, "buffer"), number(view, "byteOffset", 0), number(view, "byteLength")
+        if buffer >= len(lengths) or offset + length > lengths[buffer]:
+            raise broken(f"buffer view {k} reaches past its buffer")
+        views.append(length)
+    for k, accessor in enumerate(items("accessors")):
+        count = number(accessor, "count")
+        element = (_COMPONENT_BYTES.get(accessor.get("componentType"), 4)
+                   * _TYPE_COMPONENTS.get(accessor.get("type"), 16))
+        if "bufferView" in accessor:
+            view = number(accessor, "bufferView")
+            if view >= len(views) or number(accessor, "byteOffset", 0) + count * element > views[view]:
+                raise broken(f"accessor {k} ({count} items) reaches past its buffer view")
+        elif budget is not None and count * element > budget:  # zeros, or compressed (Draco): decoded here
+            raise InvalidInputError(f"{path}: accessor {k} declares {count} items ({count * element / 2**30:.1f} "
+                                    "GiB), more than the memory potflat may use here; give a smaller scan")
+
+
+def _check_gltf_nodes(path: Path, doc: dict) -> None:
+    """Refuse a glTF whose nodes are no hierarchy of objects (glTF 2.0: disjoint trees, each
+    node the child of one node at most, the scenes' nodes roots): a node among its own
+    descendants, a node with two parents or a scene listing a child would make a reader loop,
+    or draw the same part twice."""
+    nodes = doc.get("nodes") or []
+    if not isinstance(nodes, list):
+        nodes = []
+    parent: dict[int, int] = {}
+    for k, node in enumerate(nodes):
+        children = node.get("children") or [] if isinstance(node, dict) else []
+        for child in children if isinstance(children, list) else []:
+            if not isinstance(child, int) or isinstance(child, bool) or not 0 <= child < len(nodes):
+                raise InvalidInputError(f"{path}: node {k} names a child {child!r} that does not exist; the file is "
+                                        "corrupt: export the scan again")
+            if child in parent or child == k:
+                why = "is its own child" if child == k else f"has two parents (nodes {parent[child]} and {k})"
+                raise InvalidInputError(f"{path}: node {child} {why}: its nodes are no tree of objects; the file is "
+                                        "corrupt: export the scan again")
+            parent[child] = k
+    for k in parent:  # a cycle: following the parents from k comes back to k
+        seen, at = {k}, parent[k]
+        while at in parent:
+            if at in seen:
+                raise InvalidInputError(f"{path}: node {at} is among its own descendants (a cycle of nodes): its "
+                                        "nodes are no tree of objects; the file is corrupt: export the scan again")
+            seen.add(at)
+            at = parent[at]
+    for scene in doc.get("scenes") or []:
+        roots = scene.get("nodes") or [] if isinstance(scene, dict) else []
+        listed = [r for r in roots if isinstance(r, int) and r in parent] if isinstance(roots, list) else []
+        if listed:
+            raise InvalidInputError(f"{path}: a scene lists node {listed[0]}, a child of node {parent[listed[0]]}, "
+                                    "as a root: it would be drawn twice; the file is corrupt: export the scan again")
+
+
+def _gltf_inputs(path: Path) -> list[Path]:
+    """The files loading the glTF/GLB at ``path`` reads besides it: the buffers and images it
+    names by URI (those that exist; embedded data is part of the file). Of a GLB only the JSON
+    chunk is read."""
+    try:
+        doc = _gltf_json(path)[0]
+    except InvalidInputError:  # the load says what is wrong
+        return []
+    uris = [item.get("uri") for key in ("buffers", "images")
+            for item in (doc.get(key) or []) if isinstance(item, dict)]
+    found = (_find_file(uri, path.parent) for uri in uris if isinstance(uri, str) and not uri.startswith("data:"))
+    return [p for p in found if p.is_file()]
 
 
 def _gltf_images(path: Path) -> list[Path]:

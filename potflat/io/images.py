@@ -99,6 +99,46 @@ def check_texture_file(path: str | os.PathLike) -> None:
         raise InvalidInputError(f"texture {path} not found; put the texture image beside the stage PLY")
 
 
+#: Textures :func:`check_texture_image` decoded, by (file, its mtime, its size).
+_DECODED: set[tuple] = set()
+
+
+def check_texture_image(path: str | os.PathLike) -> None:
+    """Raise :class:`InvalidInputError` unless the texture at ``path`` is an image that decodes
+    (within :data:`TEXTURE_BUDGET_BYTES`): checked before a texture is copied beside a stage
+    file, so nothing but an image is ever copied. The decode is OpenCV's reduced read (an eighth
+    of the size, in grey: a JPEG is decoded at that size) for an image of at least 64 pixels a
+    side; a file once decoded, unchanged since, is not decoded again in this process.
+    """
+    import cv2
+    from PIL import Image
+
+    check_texture_file(path)
+    key = _ahead_key("decoded", path)
+    if key in _DECODED:
+        return
+    old = Image.MAX_IMAGE_PIXELS
+    try:
+        Image.MAX_IMAGE_PIXELS = None  # the budget below is the limit
+        with Image.open(path) as im:
+            width, height, mode = *im.size, im.mode
+    except Exception:  # noqa: BLE001 - Pillow raises many types for what is not an image
+        raise InvalidInputError(f"texture {path} is not an image; put the scan's texture image (PNG, JPEG...) "
+                                "beside the stage PLY") from None
+    finally:
+        Image.MAX_IMAGE_PIXELS = old
+    check_texture_budget(path, width, height, mode)
+    try:
+        img = cv2.imread(str(path), cv2.IMREAD_REDUCED_GRAYSCALE_8 if min(width, height) >= 64 else
+                         cv2.IMREAD_GRAYSCALE)
+    except cv2.error:
+        img = None
+    if img is None or not img.size:
+        raise InvalidInputError(f"texture {path} does not decode as an image (corrupt or cut short); restore "
+                                "the scan's texture image")
+    _DECODED.add(key)
+
+
 def _decode_texture(path: str | os.PathLike) -> np.ndarray:
     """:func:`read_texture` without the read-ahead."""
     import cv2

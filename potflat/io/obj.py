@@ -36,6 +36,8 @@ from potflat.io.raw import (
 
 #: Bytes of an OBJ file per thread at least: smaller files are parsed in one range.
 OBJ_RANGE_BYTES = 4 << 20
+#: Largest material library (MTL) read: text of a few lines per material.
+MTL_MAX_BYTES = 16 << 20
 
 
 def parse_obj(buf: np.ndarray, ranges: int | None = None) -> tuple:
@@ -214,22 +216,59 @@ def _map_kd_file(args: str) -> str:
     return " ".join(toks[i:])
 
 
-def _obj_material_textures(obj: Path, libs: list[str]) -> dict[str, Path]:
-    """Material name -> texture path (``map_Kd``) from the OBJ's material libraries."""
-    out: dict[str, Path] = {}
+def _material_libraries(obj: Path, libs: list[str], *, strict: bool = True) -> list[Path]:
+    """The MTL files the OBJ's ``mtllib`` statements name (one statement may name several,
+    separated by spaces); a missing one raises (``strict``) or is left out."""
+    out = []
     for lib in libs:
         mtl = _find_file(lib, obj.parent)
         if not mtl.is_file() and " " in lib:
             parts = [_find_file(p, obj.parent) for p in lib.split()]
             if all(p.is_file() for p in parts):
-                for p in parts:
-                    out.update(_obj_material_textures(obj, [str(p)]))
+                out += parts
                 continue
-        if not mtl.is_file():
+        if mtl.is_file():
+            out.append(mtl)
+        elif strict:
             raise InvalidInputError(f"{obj}: material library {lib} not found; restore it beside the "
                                     f"OBJ {_IGNORE_HINT}")
+    return out
+
+
+#: An OBJ's ``mtllib`` statement (a line of its own), as :func:`parse_obj` finds it.
+_MTLLIB_LINE = re.compile(rb"^[ \t]*mtllib[ \t]+([^\r\n]*)", re.MULTILINE)
+
+
+def _obj_inputs(path: Path, *, block: int = 8 << 20) -> list[Path]:
+    """The files loading the OBJ at ``path`` reads besides it: its material libraries and their
+    texture images (those that exist). The OBJ is read in blocks of ``block`` bytes."""
+    libs, carry, skipping = [], b"", False
+    with open(path, "rb") as fh:
+        while data := fh.read(block):
+            if skipping:  # inside a line longer than a block: no mtllib statement
+                newline = data.find(b"\n")
+                if newline < 0:
+                    continue
+                data, skipping = data[newline + 1:], False
+            data = carry + data
+            cut = data.rfind(b"\n") + 1
+            libs += [_text(m.group(1)).strip() for m in _MTLLIB_LINE.finditer(data, 0, cut)]
+            carry = data[cut:]
+            if len(carry) > block:
+                carry, skipping = b"", True
+    if not skipping:
+        libs += [_text(m.group(1)).strip() for m in _MTLLIB_LINE.finditer(carry)]
+    mtls = _material_libraries(path, [lib for lib in libs if lib], strict=False)
+    textures = _obj_material_textures(path, [str(m) for m in mtls])
+    return list(dict.fromkeys([*mtls, *(t for t in textures.values() if t.is_file())]))
+
+
+def _obj_material_textures(obj: Path, libs: list[str]) -> dict[str, Path]:
+    """Material name -> texture path (``map_Kd``) from the OBJ's material libraries."""
+    out: dict[str, Path] = {}
+    for mtl in _material_libraries(obj, libs):
         current = None
-        for line in _text(_read_bytes(mtl)).splitlines():
+        for line in _text(_read_bytes(mtl, "a material library", MTL_MAX_BYTES)).splitlines():
             parts = line.strip().split(None, 1)
             if not parts:
                 continue

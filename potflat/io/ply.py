@@ -217,6 +217,28 @@ def _ply_ascii(body: bytes, elements: list[_PlyElement], path: Path) -> None:
                    if len(p) == 3 else np.array(cols[p[0]]) for p in el.props}
 
 
+def _texture_names(comments: list[str]) -> list[str]:
+    """The texture images a PLY header names (MeshLab's ``comment TextureFile NAME``)."""
+    return [c.split(None, 1)[1].strip() for c in comments
+            if c.split(None, 1)[0:1] == ["TextureFile"] and len(c.split(None, 1)) > 1]
+
+
+#: Bytes of a PLY read for its header alone (:func:`_ply_inputs`).
+PLY_HEADER_BYTES = 1 << 20
+
+
+def _ply_inputs(path: Path) -> list[Path]:
+    """The files loading the PLY at ``path`` reads besides it: the texture images its header
+    names (those that exist); only the header is read."""
+    with open(path, "rb") as fh:
+        head = fh.read(PLY_HEADER_BYTES)
+    try:
+        comments = _ply_header(head, path)[1]
+    except InvalidInputError:  # no header in the first megabyte: the load says what is wrong
+        return []
+    return [p for p in (_find_file(name, path.parent) for name in _texture_names(comments)) if p.is_file()]
+
+
 def _read_ply(path: Path, texture: str, max_pixels: int) -> _Raw:
     data = _read_bytes(path)
     fmt, comments, elements, body_start = _ply_header(data, path)
@@ -248,8 +270,7 @@ def _read_ply(path: Path, texture: str, max_pixels: int) -> _Raw:
         parts = c.split()
         if len(parts) >= 2 and parts[0] == "units" and canonical_units(parts[1]):
             raw.units = canonical_units(parts[1])
-    names = [c.split(None, 1)[1].strip() for c in comments
-             if c.split(None, 1)[0:1] == ["TextureFile"] and len(c.split(None, 1)) > 1]
+    names = _texture_names(comments)
 
     colors = [k for k in (("red", "green", "blue"), ("r", "g", "b"),
                           ("diffuse_red", "diffuse_green", "diffuse_blue")) if set(k) <= set(vert.data)]

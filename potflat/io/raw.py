@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from potflat.errors import InvalidInputError
+from potflat.errors import InvalidInputError, out_of_memory
 from potflat.io.atomic import atomic_path
 from potflat.io.images import check_texture_budget
 
@@ -52,11 +52,62 @@ def _triangulate(lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, int]
     return corners, poly, int(np.count_nonzero(lengths > 3)), int(np.count_nonzero(lengths < 3))
 
 
-def _read_bytes(path: Path) -> bytes:
+def memory_limit() -> int | None:
+    """Bytes this process may use at most, or None when nothing says: the smallest of its
+    address-space and data limits (``ulimit -v``, ``-d``), its control group's memory limit
+    (a container's or a cluster job's) and the machine's memory."""
+    import resource
+
+    found = []
+    for which in (resource.RLIMIT_AS, resource.RLIMIT_DATA):
+        soft = resource.getrlimit(which)[0]
+        if soft != resource.RLIM_INFINITY:
+            found.append(soft)
+    for name in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            found.append(int(Path(name).read_text().split()[0]))
+        except (OSError, ValueError, IndexError):  # absent, or "max"
+            continue
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemTotal:"):
+                found.append(int(line.split()[1]) * 1024)
+    except (OSError, ValueError, IndexError):
+        pass
+    return min(found) if found else None
+
+
+def _gib(n: int) -> str:
+    return f"{n / 1024**3:.1f} GiB" if n >= 1024**3 else f"{n / 1024**2:.0f} MiB"
+
+
+def _check_fits_memory(path: Path, what: str = "a scan", limit: int | None = None) -> None:
+    """Refuse, before reading, a file read whole that cannot fit: larger than ``limit`` (what a
+    file of its kind ever is) or than :func:`memory_limit` (a 20 GB file, sparse or not)."""
+    try:
+        size = path.stat().st_size
+    except OSError:
+        return  # the reader says why it cannot read it
+    if limit is not None and size > limit:
+        raise InvalidInputError(f"{path} is {_gib(size)}, too large for {what} (at most {_gib(limit)}); "
+                                "check that it is the right file")
+    budget = memory_limit()
+    if budget is not None and size > budget:
+        raise InvalidInputError(f"{path} is {_gib(size)}, more than the {_gib(budget)} of memory potflat may use "
+                                f"here, and {what} is read whole; give a smaller file (decimate the scan) or run "
+                                "where more memory is available")
+
+
+def _read_bytes(path: Path, what: str = "a scan", limit: int | None = None) -> bytes:
+    """The bytes of a file read whole (``what`` it is, for the messages), after
+    :func:`_check_fits_memory`; running out of memory while reading is one line too."""
+    _check_fits_memory(path, what, limit)
     try:
         return path.read_bytes()
     except OSError as exc:
         raise InvalidInputError(f"cannot read {path}: {exc.strerror or exc}; check permissions") from None
+    except MemoryError:
+        raise out_of_memory(path) from None
 
 
 def _text(data: bytes) -> str:
@@ -110,7 +161,8 @@ def _truncated(path: Path, element: str) -> InvalidInputError:
                              "the file is cut short: copy or export it again")
 
 
-_IGNORE_HINT = "or pass texture='ignore' (CLI --no-texture) to load it untextured"
+#: The way out of a texture problem, in the command line's words (the API's ``texture="ignore"``).
+_IGNORE_HINT = "or pass --no-texture to load it untextured"
 
 
 def _texture_cache() -> Path:
@@ -162,7 +214,7 @@ def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source
     W, H = cols * cw, rows * ch
     if W * H > max_pixels:
         raise InvalidInputError(f"{source}: its {len(paths)} texture images would make a {W} x {H} atlas, over "
-                                f"max_texture_pixels={max_pixels}; re-export with one texture {_IGNORE_HINT}")
+                                f"the limit of {max_pixels} pixels; re-export with one texture {_IGNORE_HINT}")
     key = json.dumps([[str(p), p.stat().st_size, p.stat().st_mtime_ns] for p in paths]).encode()
     target = _texture_cache() / (hashlib.sha256(key).hexdigest()[:32] + ".png")
     if not target.exists():
@@ -228,8 +280,8 @@ def _check_texture(tex: Path, source: Path, max_pixels: int) -> tuple[Path, tupl
                 if w <= 0 or h <= 0 or w * h > max_pixels:
                     raise InvalidInputError(
                         f"{source}: texture {tex.name} declares {w} x {h} pixels, over the limit of "
-                        f"{max_pixels} (a corrupt file or decompression bomb); restore a sane image, "
-                        f"raise max_texture_pixels if it is genuine, {_IGNORE_HINT}")
+                        f"{max_pixels} (a corrupt file or decompression bomb); restore a sane image "
+                        f"{_IGNORE_HINT}")
                 try:
                     check_texture_budget(tex, w, h, im.mode)
                 except InvalidInputError as exc:

@@ -28,9 +28,9 @@ from pathlib import Path
 import numpy as np
 
 from potflat.errors import InvalidInputError, InvalidOptionError
-from potflat.io.gltf import _read_gltf
-from potflat.io.obj import _read_obj
-from potflat.io.ply import _read_ply
+from potflat.io.gltf import _gltf_inputs, _read_gltf
+from potflat.io.obj import _obj_inputs, _read_obj
+from potflat.io.ply import _ply_inputs, _read_ply
 from potflat.io.raw import _IGNORE_HINT, _check_texture, _Raw
 from potflat.io.stl_off import _read_trimesh
 from potflat.mesh.cleaning import (
@@ -202,6 +202,27 @@ def load_scan(path: str | os.PathLike, *, units: str | None = None, clean: bool 
 
 # ---------------------------------------------------------------------------------------
 # shared steps
+
+
+def scan_inputs(path: str | os.PathLike) -> tuple[Path, ...]:
+    """The files :func:`load_scan` reads besides the scan itself, found from the scan alone:
+    an OBJ's material libraries and their textures, a PLY's texture, a glTF's buffers and
+    images named by URI. Those that do not exist are left out (loading says so).
+
+    Parameters
+    ----------
+    path : path-like
+        A scan file (checked by :func:`check_scan_file`).
+
+    Returns
+    -------
+    tuple of Path
+        Absolute paths, in the order the scan names them.
+    """
+    path = Path(path)
+    finder = {".obj": _obj_inputs, ".ply": _ply_inputs, ".gltf": _gltf_inputs, ".glb": _gltf_inputs}.get(
+        path.suffix.lower())
+    return tuple(p.resolve() for p in finder(path)) if finder is not None else ()
 
 
 def check_scan_file(path: str | os.PathLike) -> Path:

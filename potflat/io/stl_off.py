@@ -8,20 +8,23 @@ from pathlib import Path
 
 import numpy as np
 
-from potflat.errors import InvalidInputError
-from potflat.io.raw import _Raw, _read_bytes, _truncated
+from potflat.errors import InvalidInputError, out_of_memory
+from potflat.io.raw import _check_fits_memory, _Raw, _truncated
 from potflat.types import canonical_units
 
 
 def _trimesh_load(path: Path, **kwargs):
     import trimesh
 
+    _check_fits_memory(path)  # trimesh reads the file whole
     try:
         with _warnings.catch_warnings():
             _warnings.simplefilter("ignore")
             return trimesh.load(str(path), process=False, **kwargs)
     except InvalidInputError:
         raise
+    except MemoryError:
+        raise out_of_memory(path) from None
     except Exception as exc:  # noqa: BLE001 - trimesh raises many types for corrupt files
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise InvalidInputError(f"{path} cannot be read as {path.suffix[1:].upper()} ({msg[:120]}); "
@@ -41,7 +44,8 @@ def _read_trimesh(path: Path, texture: str, max_pixels: int) -> _Raw:
     if vc is not None and len(vc) == len(raw.vertices):
         raw.colors = np.asarray(vc, np.uint8)
     if path.suffix.lower() == ".stl":
-        head = _read_bytes(path)[:80].decode("latin-1")
+        with open(path, "rb") as fh:
+            head = fh.read(80).decode("latin-1")
         m = re.search(r"UNITS\s*=\s*([A-Za-z]+)", head)
         if m and canonical_units(m.group(1)):
             raw.units = canonical_units(m.group(1))

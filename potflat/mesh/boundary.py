@@ -83,3 +83,88 @@ def edges_and_boundary(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarra
     owner, k = half // 3, half % 3
     return edges, np.stack([F[owner, k], F[owner, (k + 1) % 3]], axis=1), owner
 
+
+def outline_turning(faces: np.ndarray, uv: np.ndarray, *, segments: np.ndarray | None = None) -> float:
+    """Total turning of a flattening's outline: the sum of the absolute exterior angles at
+    every boundary vertex, over all boundary loops (the outline and the holes), over 2 pi.
+
+    A convex outline without holes turns once (1.0); every tooth of a saw-toothed edge adds
+    about twice its angle, so the figure measures how ragged the outline is.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+    uv : (n, 2) float64
+    segments : (b, 2) int64, optional
+        The boundary segments (``edges_and_boundary(faces, n)[1]``) when the caller has them.
+
+    Returns
+    -------
+    float
+    """
+    uv = np.ascontiguousarray(uv, dtype=np.float64)
+    if segments is None:
+        segments = edges_and_boundary(faces, len(uv))[1]
+    seg = np.ascontiguousarray(segments, dtype=np.int64).reshape(-1, 2)
+    if len(seg) == 0:
+        return 0.0
+    # each segment is followed by one that starts where it ends (the k-th arriving at a
+    # vertex by the k-th leaving it, where the boundary touches itself)
+    into = np.argsort(seg[:, 1], kind="stable")
+    out_of = np.argsort(seg[:, 0], kind="stable")
+    if not np.array_equal(seg[into, 1], seg[out_of, 0]):
+        raise ValueError("the boundary segments do not form closed loops")
+    d = uv[seg[:, 1]] - uv[seg[:, 0]]
+    d1, d2 = d[into], d[out_of]
+    angle = np.arctan2(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0], (d1 * d2).sum(axis=1))
+    return float(np.abs(angle).sum() / (2.0 * np.pi))
+
+
+def surface_turning(vertices: np.ndarray, faces: np.ndarray, *, segments: np.ndarray | None = None) -> float:
+    """Total turning of a mesh's boundary on the surface itself: at every boundary vertex,
+    ``pi`` (once per pass of the boundary through it) less the sum of its faces' 3D corner
+    angles there (the boundary's geodesic turning), absolute, summed over 2 pi.
+
+    It is :func:`outline_turning` of a flattening that keeps every triangle's shape, so a
+    layout's outline turning set against it tells what the layout adds to (or takes from) the
+    raggedness of the scan's own boundary.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    faces : (m, 3) int64
+    segments : (b, 2) int64, optional
+        The boundary segments (``edges_and_boundary(faces, n)[1]``) when the caller has them.
+
+    Returns
+    -------
+    float
+    """
+    V = np.ascontiguousarray(vertices, dtype=np.float64)
+    F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    if segments is None:
+        segments = edges_and_boundary(F, len(V))[1]
+    seg = np.ascontiguousarray(segments, dtype=np.int64).reshape(-1, 2)
+    if len(seg) == 0:
+        return 0.0
+    passes = np.bincount(seg[:, 0], minlength=len(V))
+    near = F[(passes[F] > 0).any(axis=1)]
+    P = V[near]
+    total = np.zeros(len(V))
+    for c in range(3):
+        a, b = P[:, (c + 1) % 3] - P[:, c], P[:, (c + 2) % 3] - P[:, c]
+        angle = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), (a * b).sum(axis=1))
+        total += np.bincount(near[:, c], angle, minlength=len(V))
+    ends = np.flatnonzero(passes)
+    return float(np.abs(np.pi * passes[ends] - total[ends]).sum() / (2.0 * np.pi))
+
+
+def turning_words(turning: dict) -> str:
+    """One line on how ragged the relaxed outline is beside the rollout's, from the relaxed
+    JSON's ``outline_turning`` (:func:`outline_turning` of each)."""
+    ratio = turning.get("ratio")
+    surface = turning.get("surface")
+    return (f"outline: turns {turning['relaxed']:.2f} times round (the rollout's {turning['rollout']:.2f}"
+            + (f", {ratio:.2f}x" if ratio is not None else "")
+            + (f"; the scan's boundary on the surface {surface:.2f}" if surface is not None else "")
+            + "; 1 is a convex outline without holes)")

@@ -151,12 +151,12 @@ def image_size(extent_mm, px_per_mm: float, max_megapixels: float) -> tuple[int,
         suggest = px_per_mm * math.sqrt(max_megapixels * 1e6 / (width * height)) * 0.99
         raise InvalidOptionError(
             f"{px_per_mm:g} px/mm would make a {width} x {height} image ({width * height / 1e6:.0f} megapixels, "
-            f"over the {max_megapixels:g} MP limit); use px_per_mm {suggest:.3g} or less")
+            f"over the {max_megapixels:g} MP limit, --max-megapixels); use --px-per-mm {suggest:.3g} or less")
     longest = max(w_mm, h_mm)
     if longest * px_per_mm < MIN_PAINTING_PX:
         raise InvalidOptionError(
             f"{px_per_mm:g} px/mm would make the {w_mm:.3g} x {h_mm:.3g} mm painting a {width} x {height} pixel "
-            f"image; use px_per_mm {MIN_PAINTING_PX / max(longest, 1e-300):.3g} or more")
+            f"image; use --px-per-mm {MIN_PAINTING_PX / max(longest, 1e-300):.3g} or more")
     return width, height
 
 

@@ -51,7 +51,7 @@ from potflat.relax.options import RelaxOptions
 from potflat.relax.parameters import COARSE, ENERGY, SOLVER, RelaxPreset
 from potflat.relax.result import LevelRecord, RelaxResult, RelaxTimings
 from potflat.relax.simplify import cell_side, grid_simplification, interpolate
-from potflat.relax.start import fold_free_start, follow, turned_like, untangle
+from potflat.relax.start import check_not_mirrored, fold_free_start, follow, turned_like, untangle
 from potflat.types import FlatMesh, Mesh
 
 @dataclass(frozen=True)
@@ -329,6 +329,7 @@ def _start(sp: SpringSystem, x: np.ndarray, frame: _Frame, plan: _Plan, fold_fre
     whether it follows the copy and the seconds spent following it."""
     folded_start = None
     if fold_free:
+        check_not_mirrored(sp, x)
         x, n_bad = untangle(sp, x)
         if n_bad:
             if (sp.signed_areas(x) <= 0).any():
@@ -466,6 +467,7 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
                 turn[sp.faces[sp.signed_areas(folded_start) <= 0].ravel()] = 0.0
             # the rollout's layout (its orientation is the result's) or the folded start
             x = turned_like(x, frame.into(uv) if folded_start is None else folded_start, turn)
+            finite = finite and bool(np.isfinite(x).all())
         del sp, hier  # release the spring system before the distortion summaries (peak memory)
     if fold_free and (flipped or overlap or not finite):
         raise FoldedResultError(

@@ -78,8 +78,8 @@ class RelaxOptions:
         no less round than without it); inf: no limit. None: the preset's (``"auto"``).
     importance_contrast : float or None
         How much stiffer the important (painted) zone is than plain surface (>= 1): springs,
-        barrier and shape term of plain surface are weighted ``1 / importance_contrast``, so
-        the distortion goes there. 1: the whole surface alike. Used when the flattening
+        barrier and shape term of plain surface are weighted one over the contrast, so the
+        distortion goes there. 1: the whole surface alike. Used when the flattening
         carries an importance (:attr:`potflat.types.FlatMesh.importance`). None: the preset's.
     true_scale : bool or None
         Scale the result uniformly so that the median length scale in the important zone

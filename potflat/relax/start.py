@@ -50,6 +50,24 @@ def untangle(sp: SpringSystem, x: np.ndarray, rounds: int = 200) -> tuple[np.nda
     return x, n_bad
 
 
+def check_not_mirrored(sp: SpringSystem, x: np.ndarray) -> None:
+    """Refuse a start ``x`` (the rollout's layout, before untangling moves it) whose area
+    mostly faces the other way: it shows the surface from the wrong side (every face flipped,
+    as pages joined on one edge unroll: nothing is left to turn the result by).
+
+    Raises
+    ------
+    FoldedResultError
+        With the fix.
+    """
+    areas = sp.signed_areas(x)
+    facing, away = areas[areas > 0].sum(), -areas[areas < 0].sum()
+    if away > facing:
+        raise FoldedResultError(
+            "the rollout is mirrored (most of its area faces the other way): it shows the surface from the wrong "
+            "side; nothing written: make it again with potflat rollout (--side inner for a vessel's inside)")
+
+
 def unfold_ears(sp: SpringSystem, x: np.ndarray, tips: np.ndarray) -> None:
     """Mirror every folded ear among ``tips`` (boundary vertices of one face) about its base,
     the line through its other two corners (a tip on that line is moved off it by
@@ -84,11 +102,6 @@ def fold_free_start(sp: SpringSystem, x: np.ndarray, n_bad: int, notes: list[str
         When the layout is mirrored; :class:`potflat.errors.NotADiskError` when neither gives
         a fold-free layout (the mesh is not disk-like).
     """
-    areas = sp.signed_areas(x)
-    if np.abs(areas[areas < 0]).sum() > np.abs(areas[areas > 0]).sum():
-        raise FoldedResultError(
-            "the rollout is mirrored (most of its area faces the other way): it shows the surface from the wrong "
-            "side; nothing written: make it again with potflat rollout (--side inner for a vessel's inside)")
     faces = sp.faces.astype(np.int64)
     y, repaired, left = repair_folds(faces, x)
     if not left:
@@ -112,7 +125,8 @@ def turned_like(x: np.ndarray, reference: np.ndarray, weight: np.ndarray) -> np.
     vertex counting with ``weight`` (n,): the relaxed layout keeps the rollout's orientation
     (axis vertical, mouth up) however the solver turned it on the way (the energy does not
     care; a weak plain surface lets it drift)."""
-    w = weight / weight.sum()
+    total = weight.sum()
+    w = weight / total if total > 0 else np.full(len(x), 1.0 / len(x))  # nothing counts more: all alike
     ca, cb = w @ x, w @ reference
     h = ((x - ca) * w[:, None]).T @ (reference - cb)
     angle = math.atan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1])

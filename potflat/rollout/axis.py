@@ -62,6 +62,11 @@ MAX_PROFILE_DEVIATION = 0.05
 #: Largest median normal-to-meridian angle (degrees) of a vessel: fluted scans reach ~9, scans
 #: with noise comparable to their edge length ~30 (the profile test is the main one).
 MAX_MEDIAN_ANGLE_DEG = 35.0
+#: Evidence of an axis: the scan's points in :data:`SUPPORT_SLICES` equal height slices, at
+#: least this many in a typical (median) occupied slice. Fewer (a tetrahedron: one point per
+#: slice) show no radius at any height, and so no rotation, whatever the fit says.
+MIN_POINTS_PER_SLICE = 3
+SUPPORT_SLICES = 8
 #: Vertices used at most by the fits (an area-proportional, seeded subsample beyond this).
 MAX_FIT_POINTS = 100_000
 #: Vertices used at most by the profile polish (area-proportional, seeded subsample).
@@ -624,6 +629,7 @@ def estimate_axis(mesh: Mesh, *, flip: bool = False, profile: bool = True,
                 if _median_sin(cs, n, area, p2, d2) <= 1.02 * _median_sin(cs, n, area, point, direction) + DEGENERATE:
                     point, direction, method = p2, d2, "normals+profile"
     point = centre + size * point
+    _check_support(mesh, lines[0], point, direction)
     residuals = axis_residuals(mesh, point, direction, lines=lines)
     rms_angle, median_angle, _, prof = residuals
     if _unsymmetric(median_angle, prof, max_median_angle_deg):
@@ -641,6 +647,20 @@ def estimate_axis(mesh: Mesh, *, flip: bool = False, profile: bool = True,
     direction, orientation = orient(mesh, point, direction, lines=lines)
     return _finish(mesh, point, direction, method=method, orientation=orientation, flip=flip, note=note,
                    lines=lines, residuals=residuals)
+
+
+def _check_support(mesh: Mesh, points: np.ndarray, point, direction) -> None:
+    """Refuse an axis that too few points of the scan show (:data:`MIN_POINTS_PER_SLICE`)."""
+    h = (points - point) @ direction
+    lo, hi = float(h.min()), float(h.max())
+    idx = np.clip(((h - lo) / max(hi - lo, 1e-300) * SUPPORT_SLICES).astype(np.int64), 0, SUPPORT_SLICES - 1)
+    count = np.bincount(idx, minlength=SUPPORT_SLICES)
+    typical = float(np.median(count[count > 0]))
+    if typical < MIN_POINTS_PER_SLICE:
+        raise AxisNotFoundError(
+            f"{mesh.source or 'the scan'} is no vessel to unroll: {len(points)} points with {len(mesh.faces)} faces, "
+            f"{typical:g} at a typical height (at least {MIN_POINTS_PER_SLICE} show a radius there); give the "
+            "scan of a vessel or a sherd, or its axis with --axis px,py,pz,dx,dy,dz")
 
 
 def _used(mesh: Mesh) -> np.ndarray:

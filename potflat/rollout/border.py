@@ -8,6 +8,7 @@ import scipy.sparse
 from potflat.mesh._kernels.topology import edge_table
 from potflat.mesh.boundary import crossing_pairs, edges_and_boundary
 from potflat.mesh.embedding import signed_areas
+from potflat.rollout.folds import overlapping_faces
 from potflat.rollout.seam import cut_open
 from potflat.rollout.walls import (
     FaceGraph,
@@ -28,12 +29,16 @@ TRIM_ROUNDS = 3
 
 #: Passes of :func:`border_folds` over one development (each peels what the last exposed).
 BORDER_PASSES = 50
+#: Where the border crosses itself, faces whose flat area is below this fraction of their 3D
+#: area (the thin rows along a fold) are trimmed with the crossing region (:func:`border_folds`).
+SQUEEZED_RATIO = 0.25
 #: A piece that trimming cuts off a connected part of the development is trimmed with it
 #: when its area is below this fraction of that part's (:func:`border_folds`).
 CUT_OFF_FRACTION = 0.1
 
 
-def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *, table: tuple | None = None) -> np.ndarray:
+def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *, table: tuple | None = None,
+                 points: np.ndarray | None = None) -> np.ndarray:
     """Faces at the border of a development that fold it over: to trim before relaxing.
 
     Two kinds, peeled in up to :data:`BORDER_PASSES` passes (each pass looks at the border
@@ -44,12 +49,17 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *, tabl
       of a hole through a thick wall). A connected strip of edge-on faces that contains a
       flipped face (signed area <= 0) and reaches the boundary (the outline, the seam, a
       hole) is not part of the painted surface and cannot be unrolled without a fold.
-    * **overlapping border**: faces owning boundary segments that cross or touch another
-      boundary segment (a ragged rim or hole edge whose thin border faces overlap their
-      neighbours).
+    * **overlapping border**: where boundary segments cross or touch another boundary
+      segment (a ragged rim or hole edge whose thin border faces overlap their neighbours, a
+      flap folded back over the wall), the whole crossing region at once: the faces owning
+      them and, joined to them through shared edges, the faces lying over another
+      (:func:`potflat.rollout.folds.overlapping_faces`: both sheets) or squeezed below
+      :data:`SQUEEZED_RATIO` of their 3D area (the thin rows of a fold).
     * **pinched vertices**: where a vertex's faces form separate fans (they meet at the
       vertex only, e.g. after trimming), all but the fan of largest area are left out, so
-      the development does not touch itself.
+      the development does not touch itself. Boundary vertices at the same 3D place (with
+      ``points``: the copies of a non-manifold vertex that cleaning the scan split into one
+      per fan) count as one vertex.
     * **cut-off pieces**: a piece that trimming separated from a connected part of the
       development, with less than :data:`CUT_OFF_FRACTION` of that part's area (the
       outside of a foot beyond the edge-on band where the surface turns under): left as
@@ -67,6 +77,8 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *, tabl
         3D area of each face.
     table : tuple, optional
         ``edges_and_boundary(faces, len(uv))`` when the caller has it (used by the first pass).
+    points : (n, 3) float64, optional
+        The vertices' 3D positions (to find copies of a vertex, see above).
 
     Returns
     -------
@@ -89,17 +101,35 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *, tabl
             edges, seg, owner = table
         else:
             edges, seg, owner = _kept_edges(faces, edge_of, all_edges, idx)
-        drop = _edge_on_strips(sub, uv, area_3d[idx], seg) | _minor_fans(sub, area_3d[idx], edges, len(uv))
+        same = None if points is None else _same_place(points, seg)
+        drop = _edge_on_strips(sub, uv, area_3d[idx], seg) | _minor_fans(sub, area_3d[idx], edges, len(uv), same)
         if not full:
             drop |= _cut_off(graph, keep, area_3d, part, part_area)[idx]
         if not drop.any():  # overlaps are judged on a border without folded strips
             a, b = crossing_segments(uv, seg)
-            drop[owner[a]] = True
-            drop[owner[b]] = True
+            if len(a):
+                drop = _crossing_region(graph, faces, idx, uv, area_3d, idx[np.concatenate([owner[a], owner[b]])])[idx]
         if not drop.any():
             break
         keep[idx[drop]] = False
     return ~keep
+
+
+def _crossing_region(graph: FaceGraph, faces: np.ndarray, idx: np.ndarray, uv: np.ndarray, area_3d: np.ndarray,
+                     owners: np.ndarray) -> np.ndarray:
+    """The faces (m,) bool of the regions where the border of the faces ``idx`` crosses itself:
+    the ``owners`` of crossing segments and the faces lying over another face or squeezed
+    (:data:`SQUEEZED_RATIO`) joined to them through shared edges (``graph``: the whole
+    development's face adjacency)."""
+    region = np.zeros(len(faces), bool)
+    sub = faces[idx]
+    region[idx[overlapping_faces(sub, uv) | (signed_areas(sub, uv) < SQUEEZED_RATIO * area_3d[idx])]] = True
+    region[owners] = True
+    pairs = graph.pairs
+    label = graph.components(region[pairs[:, 0]] & region[pairs[:, 1]])
+    reached = np.zeros(int(label.max()) + 1, bool)
+    reached[label[owners]] = True
+    return region & reached[label]
 
 
 def _kept_edges(faces: np.ndarray, edge_of: np.ndarray, edges: np.ndarray, idx: np.ndarray
@@ -153,13 +183,32 @@ def crossing_segments(uv: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.n
     return a[real], b[real]
 
 
-def _minor_fans(faces: np.ndarray, area_3d: np.ndarray, edges: np.ndarray, n: int) -> np.ndarray:
-    """Faces of the smaller fans at vertices whose faces form several fans (see :func:`border_folds`).
+def _same_place(points: np.ndarray, seg: np.ndarray) -> np.ndarray | None:
+    """Each vertex's representative among the boundary vertices (``seg`` (b, 2)) at its 3D
+    place (the lowest index), itself elsewhere; None when no two are at one place."""
+    ends = np.unique(seg)
+    p = points[ends]
+    order = np.lexsort(p.T[::-1])
+    dup = np.all(p[order[1:]] == p[order[:-1]], axis=1)
+    if not dup.any():
+        return None
+    first = np.concatenate([[True], ~dup])
+    rep = np.arange(len(points))
+    rep[ends[order]] = ends[order][np.flatnonzero(first)[np.cumsum(first) - 1]]
+    return rep
+
+
+def _minor_fans(faces: np.ndarray, area_3d: np.ndarray, edges: np.ndarray, n: int,
+                same: np.ndarray | None = None) -> np.ndarray:
+    """Faces of the smaller fans at vertices whose faces form several fans (see :func:`border_folds`);
+    ``same`` (n,) maps copies of a vertex to one of them.
 
     A vertex with ``k`` faces in open fans has ``k`` plus one edge per fan, so a vertex
     with at least two more edges than faces is pinched; only the faces around those are cut
     apart (:func:`cut_open`) to find the fans.
     """
+    if same is not None:
+        faces, edges = same[faces], same[edges]
     pinched = np.bincount(edges.ravel(), minlength=n) - np.bincount(faces.ravel(), minlength=n) >= 2
     out = np.zeros(len(faces), bool)
     if not pinched.any():

@@ -12,6 +12,11 @@ from potflat.mesh.distortion import face_areas
 WARN_TRIMMED_FRACTION = 0.05
 
 
+#: Warn when the side unrolled (``--side``) is less than this share of the scan's area: the scan
+#: shows little of that wall (the sea vase's inside: 6 %, a piece of its neck).
+WARN_SIDE_FRACTION = 0.2
+
+
 #: Warn when the axis' RMS normal-to-meridian angle (degrees) is above this.
 WARN_AXIS_RMS_DEG = 5.0
 
@@ -26,6 +31,14 @@ def rollout_notes(result) -> list[str]:
     """Warnings for the rollout's JSON and summary (``result`` a
     :class:`~potflat.rollout.unroll.RolloutResult`): what the user should know before relaxing."""
     notes = list(result.landmark_notes)
+    walls = result.walls
+    total = walls.outer_area + walls.inner_area
+    share = (walls.outer_area if walls.side == "outer" else walls.inner_area) / total if total > 0 else 1.0
+    if share < WARN_SIDE_FRACTION:
+        other = "inner" if walls.side == "outer" else "outer"
+        notes.append(f"the {walls.side} wall unrolled here is only {100 * share:.0f} % of the scan's surface (the "
+                     f"{other} wall: {100 - 100 * share:.0f} %): the scan shows little of it, e.g. a neck or a mouth "
+                     f"seen from within; if the painting is on the {other} side, unroll it with --side {other}")
     if result.region.repeated_from is not None:
         notes.append(f"{len(result.flat.mesh.faces) - result.region.repeated_from} faces repeat the first "
                      f"{result.region.overlap_deg:g} degrees after the seam past 360 degrees (their distortion is "

@@ -33,8 +33,8 @@ class RolloutOptions:
         the file declares (a PLY ``comment units``, an STL header, glTF's metres), else mm.
         Used when reading the file; :func:`rollout` itself uses :attr:`Mesh.units`.
     texture : bool
-        Use the scan's texture image; False loads the geometry (and vertex colours) only,
-        e.g. when the texture file is missing or corrupt. Used when reading the file.
+        Use the scan's texture image; off: the geometry (and vertex colours) only, e.g. when
+        the texture file is missing or corrupt. Used when reading the file.
     proxy : str
         ``auto``, ``cylinder``, ``cone``, ``sphere`` or ``ortho``.
     axis : tuple of 6 float or None
@@ -47,7 +47,7 @@ class RolloutOptions:
     band : (float, float) or None
         Height band as fractions of the axial extent, 0 = foot, 1 = mouth.
     angles : (float, float) or None
-        Angle range in degrees, e.g. ``(-60, 60)``, at most 360 wide: from the landmark when
+        Angle range in degrees, e.g. -60 to 60, at most 360 wide: from the landmark when
         one is named, else from ``seam`` when given, else from the painted zone's centre (the
         window is centred on the painting; the seam stays automatic).
     view : tuple of 3 float or None
@@ -59,9 +59,8 @@ class RolloutOptions:
         seen from within: a cup's interior, a kylix tondo). Two-walled scans are split at
         the rim (:func:`potflat.rollout.walls.select_wall`).
     keep_attachments : bool
-        Keep handles, spouts and knobs (parts off the surface of revolution, found by
-        :func:`potflat.rollout.attachments.detect_attachments`) in the rollout; by default they are
-        left out and reported, and the painting around their roots stays.
+        Keep handles, spouts and knobs (parts off the surface of revolution) in the rollout;
+        by default they are left out and reported, and the painting around their roots stays.
     keep_base : bool
         Keep the faces at the foot that face along the axis (a flat or domed base, the
         underside of a foot; with ``side="inner"`` the floor) in the rollout. By default,
@@ -94,9 +93,9 @@ class RolloutOptions:
         For ``mask``: the ``NAME.bake.json`` of the image the mask was painted over (default:
         the one beside the mask whose image has the mask's size).
     importance_band : (float, float) or None
-        For ``band``: heights as fractions of the axial extent (0 foot, 1 mouth).
+        For ``importance="band"``: heights as fractions of the axial extent (0 foot, 1 mouth).
     importance_arc : (float, float) or None
-        For ``band``: angle range in degrees from the seam.
+        For ``importance="band"``: angle range in degrees from the seam.
     """
 
     units: str | None = field(default=None, metadata={"choices": tuple(UNITS_MM)})
@@ -181,6 +180,11 @@ class RolloutOptions:
             if self.proxy != "ortho":
                 raise InvalidOptionError("view applies only to proxy ortho; add --proxy ortho or drop --view")
             object.__setattr__(self, "view", view)
+
+    def input_files(self) -> tuple[str, ...]:
+        """The files these options name, which the rollout reads: the importance mask and the
+        bake JSON it was painted over."""
+        return tuple(p for p in (self.importance_mask, self.importance_image) if p is not None)
 
     def as_dict(self) -> dict:
         """The options as a JSON-ready dict."""

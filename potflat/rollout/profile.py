@@ -43,7 +43,8 @@ _MIN_BIN_WEIGHT_FRACTION = 0.01
 #: Automatic bin width in median edge lengths (as fine as the scan's edges), and the bin count limits.
 _AUTO_BIN_EDGES = 1.0
 _AUTO_BINS_MIN, _AUTO_BINS_MAX = 8, 5000
-#: Runs of at most this many empty bins between measured ones are interpolated.
+#: Runs of at most this many empty bins between measured ones are interpolated (so are longer
+#: runs that the wall's faces cross: long triangles of a designed mesh, as the goblet's underside).
 _MAX_GAP_BINS = 2
 #: Faces reaching closer to the axis than this fraction of the largest radius count as base/floor.
 _NEAR_AXIS_FRACTION = 0.25
@@ -224,7 +225,7 @@ def vessel_profile(mesh: Mesh, axis_point, axis_direction, *, bins: int | None =
             low = total < _MIN_BIN_WEIGHT_FRACTION * np.median(total[total > 0])
             q25[low] = q50[low] = q75[low] = hmed[low] = np.nan
         b = np.clip(np.searchsorted(edges, hh[verts], side="right") - 1, 0, int(bins) - 1)
-        out[name] = (_at_centres(centres, hmed, q50), (q75 - q25) / 1.349,
+        out[name] = (_at_centres(centres, hmed, q50, _crossed(hh, F[sel], edges)), (q75 - q25) / 1.349,
                      np.bincount(b, minlength=int(bins)).astype(np.int64))
     rmax = float(np.nanmax(np.r_[out["outer"][0], 0.0]))
     r_f = r_v[mesh.faces]
@@ -251,13 +252,27 @@ def vessel_profile(mesh: Mesh, axis_point, axis_direction, *, bins: int | None =
     )
 
 
-def _at_centres(centres: np.ndarray, h: np.ndarray, r: np.ndarray) -> np.ndarray:
+def _crossed(h: np.ndarray, faces: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Which height bins (``edges``) the faces cross: (bins,) bool, from each face's lowest
+    to its highest corner (``h`` the vertices' heights)."""
+    bins = len(edges) - 1
+    if not len(faces):
+        return np.zeros(bins, bool)
+    hf = h[faces]
+    lo = np.clip(np.searchsorted(edges, hf.min(axis=1), side="right") - 1, 0, bins - 1)
+    hi = np.clip(np.searchsorted(edges, hf.max(axis=1), side="right") - 1, 0, bins - 1)
+    starts = np.bincount(lo, minlength=bins + 1) - np.bincount(hi + 1, minlength=bins + 1)
+    return np.cumsum(starts)[:bins] > 0
+
+
+def _at_centres(centres: np.ndarray, h: np.ndarray, r: np.ndarray, crossed: np.ndarray | None = None) -> np.ndarray:
     """Radius at the bin centres from per-bin (median height, median radius) points.
 
     Within a bin where r(h) is monotonic, the weighted median radius is the radius at the
     weighted median height, so the points lie on the profile; linear interpolation moves
     them to the bin centres. Gaps of up to ``_MAX_GAP_BINS`` empty bins (a coarse mesh) are
-    bridged; longer gaps and the ends stay NaN.
+    bridged, and so are longer ones the wall's faces cross throughout (``crossed``: triangles
+    longer than the bins, with no vertex there); other gaps (holes) and the ends stay NaN.
     """
     ok = np.isfinite(h) & np.isfinite(r)
     out = np.full(len(centres), np.nan)
@@ -278,7 +293,7 @@ def _at_centres(centres: np.ndarray, h: np.ndarray, r: np.ndarray) -> np.ndarray
     keep = ok.copy()
     idx = np.flatnonzero(ok)
     for i, j in itertools.pairwise(idx):
-        if 1 < j - i <= _MAX_GAP_BINS + 1:
+        if 1 < j - i <= _MAX_GAP_BINS + 1 or (j - i > 1 and crossed is not None and crossed[i + 1:j].all()):
             keep[i + 1:j] = True
     out[keep] = est[keep]
     return out

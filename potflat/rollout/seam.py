@@ -1,12 +1,16 @@
 """Where the rollout is cut open: the seam's angle (where the painting is least dense, a gap,
-or the user's), and the cut that duplicates the vertices along it."""
+or the user's), the faces cut exactly along the seam's meridian and a window's sides
+(:func:`cut_region`), and the cut that duplicates the vertices along them (:func:`cut_open`)."""
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
 from potflat.io.images import read_texture_grey_quarter
 from potflat.mesh._kernels.geometry import corner_angles, texel_spread
 from potflat.mesh._kernels.topology import corner_joins, half_edge_keys, union_find
+from potflat.mesh.split import plane_levels, split_faces
 from potflat.mesh.tolerances import ROUNDING
 from potflat.types import Mesh
 
@@ -228,3 +232,239 @@ def _corner_angles(theta_v: np.ndarray, F: np.ndarray, idx: np.ndarray, centre: 
                   np.ascontiguousarray(idx, dtype=np.int64), np.ascontiguousarray(centre, dtype=np.float64),
                   float(shift), out)
     return out
+
+
+@dataclass(frozen=True, eq=False)
+class CutOrigins:
+    """Where the faces and vertices of a cut region come from in the scan (:func:`cut_region`).
+
+    Attributes
+    ----------
+    face_index : (m,) int64
+        The scan face of each face (a face cut in pieces appears once per piece).
+    repeated : (m,) bool
+        Faces that repeat the start past 360 degrees (they come last).
+    pieces : (p,) int64
+        The faces that are pieces of a cut scan face.
+    weights : (p, 3, 3) float64
+        Their corners as weights of their scan face's corners.
+    added_edges : (j, 2) int64
+        The edge each added vertex (index ``n + j``) lies on; an end may be an earlier added
+        vertex.
+    added_t : (j,) float64
+        Where on it: ``(1 - t) x[a] + t x[b]``.
+    n : int
+        Vertices of the scan.
+    """
+
+    face_index: np.ndarray
+    repeated: np.ndarray
+    pieces: np.ndarray
+    weights: np.ndarray
+    added_edges: np.ndarray
+    added_t: np.ndarray
+    n: int
+
+    @classmethod
+    def whole(cls, face_index: np.ndarray, repeated: np.ndarray, n: int) -> "CutOrigins":
+        """Scan faces taken whole (a region that needs no cut)."""
+        return cls(face_index=face_index, repeated=repeated, pieces=np.zeros(0, np.int64),
+                   weights=np.zeros((0, 3, 3)), added_edges=np.zeros((0, 2), np.int64), added_t=np.zeros(0), n=n)
+
+    def vertex_values(self, values: np.ndarray, index: np.ndarray) -> np.ndarray:
+        """A per-vertex value of the scan at the vertices ``index``, the added ones
+        interpolated along their edges.
+
+        Parameters
+        ----------
+        values : (n, ...) array
+            Positions, or colours (rounded back to their integer type).
+        index : (k,) int64
+            Vertices (``>= n``: added).
+
+        Returns
+        -------
+        (k, ...) array of the dtype of ``values``
+        """
+        index = np.asarray(index, np.int64)
+        added = index >= self.n
+        if not added.any():
+            return np.take(values, index, axis=0)
+        at = np.zeros((len(self.added_t),) + values.shape[1:])
+        done = np.zeros(len(self.added_t), bool)
+        ends = self.added_edges
+        while not done.all():  # (an added vertex may lie on an edge of earlier ones: a few rounds)
+            known = (ends < self.n) | done[np.maximum(ends - self.n, 0)]
+            ready = np.flatnonzero(~done & known.all(axis=1))
+            a, b = (np.where((e < self.n).reshape((-1,) + (1,) * (values.ndim - 1)),
+                             np.take(values, np.minimum(e, self.n - 1), axis=0), at[np.maximum(e - self.n, 0)])
+                    for e in ends[ready].T)
+            t = self.added_t[ready].reshape((-1,) + (1,) * (values.ndim - 1))
+            at[ready] = a + t * (b - a)
+            done[ready] = True
+        if np.issubdtype(values.dtype, np.integer):
+            info = np.iinfo(values.dtype)
+            at = np.clip(np.rint(at), info.min, info.max)
+        out = np.empty((len(index),) + values.shape[1:], values.dtype)
+        out[~added] = np.take(values, index[~added], axis=0)
+        out[added] = at[index[added] - self.n]
+        return out
+
+    def face_fields(self, mesh: Mesh) -> dict:
+        """``mesh.face_fields`` of the faces' scan faces (:meth:`potflat.types.Mesh.face_fields`),
+        the pieces' texture coordinates interpolated within their scan face."""
+        fields = mesh.face_fields(self.face_index)
+        if fields["texcoords"] is not None and len(self.pieces):
+            fields["texcoords"][self.pieces] = self.weights @ mesh.texcoords[self.face_index[self.pieces]]
+        return fields
+
+    def subset(self, keep: np.ndarray) -> "CutOrigins":
+        """The same for the faces ``keep`` ((m,) bool) selects."""
+        row = np.cumsum(keep) - 1
+        kept = keep[self.pieces]
+        return CutOrigins(face_index=self.face_index[keep], repeated=self.repeated[keep], pieces=row[self.pieces[kept]],
+                          weights=self.weights[kept], added_edges=self.added_edges, added_t=self.added_t, n=self.n)
+
+
+def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarray, corner_theta: np.ndarray, *,
+               start: float, end: float, repeat_from: float | None, meridian
+               ) -> tuple[np.ndarray, np.ndarray, CutOrigins]:
+    """The region between the unwrapped angles ``start`` and ``end``, its faces cut exactly
+    along the meridians there.
+
+    Every face lies at its unwrapped angles and a turn before and after; each such copy
+    that reaches into ``(start, end)`` is kept, and a copy across ``start``, ``end`` or
+    ``repeat_from`` is cut along that angle's meridian half-plane
+    (:func:`potflat.mesh.split.split_faces`): vertices are added where edges cross it, and
+    the pieces outside the region are left out. So the region's sides are exact meridians
+    (straight in every development) at any resolution. A corner on a cut (added, or
+    closer to the meridian than :data:`potflat.mesh.split.CUT_SNAP` of its edge) gets
+    exactly the meridian's angle. Faces spanning half a turn or more (around the axis
+    itself) are not cut: kept once where their centre lies in the region.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+    F : (f, 3) int64
+        The scan.
+    faces : (k,) int64
+        The candidate faces, in order.
+    centre : (k,) float64
+        Their unwrapped angles (radians from the origin of the region's angles).
+    corner_theta : (k, 3) float64
+        Their corners' angles unwrapped to within pi of ``centre``.
+    start, end : float
+        The region, unwrapped radians; ``end - start`` at most one and a half turns.
+    repeat_from : float or None
+        Where a repeat past 360 degrees starts (faces beyond it are ``repeated``); None: no
+        repeat.
+    meridian : callable
+        ``meridian(angle)``: a point of the axis and the unit normal of the meridian plane
+        at unwrapped ``angle``, the normal pointing towards increasing angles.
+
+    Returns
+    -------
+    faces : (m, 3) int64
+        The region's faces: index ``i < n`` is vertex ``i`` of the scan, ``n + j`` the
+        ``j``-th added vertex (:class:`CutOrigins`).
+    corner_theta : (m, 3) float64
+        Unwrapped angle of each corner; exactly the meridian's at a corner on a cut.
+    origins : CutOrigins
+    """
+    n = len(V)
+    lo, hi = corner_theta.min(axis=1), corner_theta.max(axis=1)
+    narrow = hi - lo < np.pi
+    parts = []
+    for k in (0, -1, 1):
+        shift = TWO_PI * k
+        meets = narrow & (hi + shift > start) & (lo + shift < end)
+        if k == 0:
+            meets |= ~narrow & (centre >= start) & (centre <= end)
+        sel = np.flatnonzero(meets)
+        parts.append((sel, corner_theta[sel] + shift))
+    rows_face = np.concatenate([faces[sel] for sel, _ in parts])
+    T = np.concatenate([t for _, t in parts])
+    rows_narrow = np.concatenate([narrow[sel] for sel, _ in parts])
+    del parts
+    row_faces = np.take(F, rows_face, axis=0)
+    # the cut angles, grouped by meridian (angles a whole turn apart share one)
+    cuts = sorted({start, end} | ({repeat_from} if repeat_from is not None else set()))
+    planes: dict[float, list[float]] = {}
+    for c in cuts:
+        planes.setdefault(round(float(c % TWO_PI), 12) % round(TWO_PI, 12), []).append(c)
+    pieces_w = np.zeros((0, 3, 3))
+    piece_of = np.full(len(rows_face), -1, np.int64)  # row -> its row in pieces_w
+    added_edges, added_t, added_pts = np.zeros((0, 2), np.int64), np.zeros(0), np.zeros((0, 3))
+    for values in planes.values():
+        r_lo, r_hi = T.min(axis=1), T.max(axis=1)
+        across = np.zeros(len(T), bool)
+        c_row = np.zeros(len(T))
+        for c in values:
+            hit = rows_narrow & (r_lo < c) & (c < r_hi)
+            across |= hit
+            c_row[hit] = c
+        rows = np.flatnonzero(across)
+        if not len(rows):
+            continue
+        # the faces across it, on their own vertices
+        ids, local = np.unique(row_faces[rows], return_inverse=True)
+        local = local.reshape(-1, 3)
+        pts = np.concatenate([V[ids[ids < n]], added_pts[ids[ids >= n] - n]])
+        point, normal = meridian(values[0])
+        split = split_faces(pts, local, plane_levels(pts, point, normal))
+        on_cut = np.zeros(n + len(added_t), bool)
+        on_cut[ids[split.on_cut]] = True
+        if split.on_cut.size:  # a corner on the cut gets the meridian's angle, in every face
+            at = on_cut[row_faces]
+            # and so does every vertex at its angle: copies of a vertex (a non-manifold one
+            # split into fans) are not left beside it
+            at |= np.isin(T, np.unique(T[at]))
+            T[at] = values[0] + TWO_PI * np.round((T[at] - values[0]) / TWO_PI)
+        # added vertices (their ends are vertices of the scan or earlier added ones)
+        base = n + len(added_t)
+        added_edges = np.concatenate([added_edges, ids[split.edges]])
+        added_t = np.concatenate([added_t, split.t])
+        added_pts = np.concatenate([added_pts, split.added(pts)])
+        # each row across the cut becomes its face's pieces inside the region
+        piece = np.arange(len(split.parent))  # (grouped by face, in order)
+        src = rows[split.parent]
+        w = split.weights[piece]
+        c_src = c_row[src]
+        keep = ((split.side[piece] > 0) & (c_src < end)) | ((split.side[piece] < 0) & (c_src > start))
+        piece, src, w, c_src = piece[keep], src[keep], w[keep], c_src[keep]
+        is_corner = w.max(axis=2) == 1.0
+        new_T = np.where(is_corner, np.take_along_axis(T[src], np.argmax(w, axis=2), axis=1), c_src[:, None])
+        local_faces = split.faces[piece]
+        new_faces = np.where(local_faces < len(ids), ids[np.minimum(local_faces, len(ids) - 1)],
+                             base + local_faces - len(ids))
+        parent_w = piece_of[src]
+        if len(pieces_w):  # a piece of a piece: its corners as weights of the scan face's
+            w = np.where((parent_w >= 0)[:, None, None], w @ pieces_w[np.maximum(parent_w, 0)], w)
+        # splice: a row not across stays, a row across is replaced by its pieces (in place)
+        counts = np.ones(len(T), np.int64)
+        counts[rows] = np.bincount(src, minlength=len(T))[rows]
+        pos = np.cumsum(counts) - counts
+        stay = np.flatnonzero(~across)
+        at = pos[src] + np.arange(len(src)) - np.searchsorted(src, src)
+        out_n = int(counts.sum())
+        T2, F2 = np.empty((out_n, 3)), np.empty((out_n, 3), np.int64)
+        face2, narrow2, piece2 = np.empty(out_n, np.int64), np.ones(out_n, bool), np.full(out_n, -1, np.int64)
+        T2[pos[stay]], F2[pos[stay]], face2[pos[stay]], narrow2[pos[stay]] = (
+            T[stay], row_faces[stay], rows_face[stay], rows_narrow[stay])
+        T2[at], F2[at], face2[at] = new_T, new_faces, rows_face[src]
+        kept_pieces = stay[piece_of[stay] >= 0]
+        piece2[pos[kept_pieces]] = np.arange(len(kept_pieces))
+        piece2[at] = len(kept_pieces) + np.arange(len(w))
+        pieces_w = np.concatenate([pieces_w[piece_of[kept_pieces]], w])
+        T, row_faces, rows_face, rows_narrow, piece_of = T2, F2, face2, narrow2, piece2
+    repeated = (rows_narrow & (T.min(axis=1) >= repeat_from) if repeat_from is not None
+                else np.zeros(len(T), bool))
+    if repeated.any():  # repeats last
+        order = np.concatenate([np.flatnonzero(~repeated), np.flatnonzero(repeated)])
+        T, row_faces, rows_face, piece_of, repeated = (a[order] for a in (T, row_faces, rows_face, piece_of, repeated))
+    pieces = np.flatnonzero(piece_of >= 0)
+    weights = pieces_w[piece_of[pieces]]
+    cut = ~np.all(weights == np.eye(3), axis=(1, 2))  # (not a face left whole by its vertices on the cut)
+    return row_faces, T, CutOrigins(face_index=rows_face, repeated=repeated, pieces=pieces[cut], weights=weights[cut],
+                                    added_edges=added_edges, added_t=added_t, n=n)
+

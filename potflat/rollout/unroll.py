@@ -1,8 +1,9 @@
 """Stage 1, rollout: find the axis, select the region, cut a seam and unroll on a proxy.
 
 ``rollout(mesh)`` returns a :class:`RolloutResult` whose :attr:`~RolloutResult.flat` is a
-disk-topology mesh covering every selected face, with seam vertices duplicated (one copy per
-side) and no triangle altered. The selected faces are the painted side asked for (the outer
+disk-topology mesh covering every selected face, cut exactly along the seam's meridian (the
+faces across it split, as GigaMesh does: :func:`potflat.rollout.seam.cut_region`) with the
+vertices on the seam duplicated (one copy per side). The selected faces are the painted side asked for (the outer
 wall, or the inner one seen from inside: :mod:`potflat.rollout.walls`), without attachments such as
 handles (:mod:`potflat.rollout.attachments`), without a base the development would smear (shown
 apart, seen along the axis: :mod:`potflat.rollout.base`) and without the border faces that fold
@@ -29,7 +30,7 @@ import numpy as np
 from potflat import importance as _importance
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.images import read_ahead
-from potflat.mesh.boundary import edges_and_boundary
+from potflat.mesh.boundary import edges_and_boundary, outline_turning
 from potflat.mesh.distortion import DistortionSummary, face_areas, summarize
 from potflat.rollout import proxy as _proxy
 from potflat.rollout.attachments import AttachmentSelection, detect_attachments
@@ -48,11 +49,13 @@ from potflat.rollout.options import RolloutOptions
 from potflat.rollout.profile import Profile, vessel_profile
 from potflat.rollout.topology import DiskCut, disk_cut
 from potflat.rollout.seam import (
+    CutOrigins,
     _auto_seam,
     _corner_angles,
     _covered,
     _gap_middle,
     cut_open,
+    cut_region,
 )
 from potflat.rollout.walls import (
     FaceGraph,
@@ -129,11 +132,16 @@ class RolloutResult:
     distortion : DistortionSummary
         Distortion of the rollout.
     face_index : (m_out,) int64
-        Input face of each output face.
+        Input face of each output face (a face the seam or a window's side cut appears once
+        per piece).
     vertex_index : (n_out,) int64
-        Input vertex of each output vertex.
+        Input vertex of each output vertex; -1 for a vertex the cut added on an input edge.
     seam_vertices : int
         Vertex copies added by the cut (each seam vertex once more).
+    cut_vertices, cut_faces : int
+        Vertices the cut added where the seam's meridian (or a window's side) crosses an
+        input edge (each once: their copies are in ``seam_vertices``), and input faces it
+        split into pieces.
     split_vertices : int
         Vertex copies added where the input was not manifold (a vertex whose faces form
         separate fans becomes one vertex per fan).
@@ -158,6 +166,10 @@ class RolloutResult:
     boundary_overlap : int
         Crossing pairs of boundary segments left in the development (0: its outline and
         holes do not overlap).
+    outline_turning : float
+        Total turning of the development's outline and holes
+        (:func:`potflat.mesh.boundary.outline_turning`: 1 for a convex outline; a ragged
+        edge adds about twice the angle of every tooth).
     other_objects_faces : int
         Faces of separate objects left out.
     landmark : Landmark or None
@@ -207,7 +219,10 @@ class RolloutResult:
     untangled_faces: int
     untangled_vertices: int
     boundary_overlap: int
+    outline_turning: float = 0.0
     other_objects_faces: int = 0
+    cut_vertices: int = 0
+    cut_faces: int = 0
     landmark: object = None
     theta_origin: float = 0.0
     landmark_notes: tuple = ()
@@ -365,7 +380,8 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     clock.lap("base")
     # a piece that is not a disk (a handle joined at both ends, a closed part, an edge of three
     # faces) cannot be laid flat without a fold: cut into one
-    disk = disk_cut(un.flat.mesh.faces, un.flat.mesh.vertices, attachments.vertex_offset[un.vertex_index])
+    disk = disk_cut(un.flat.mesh.faces, un.flat.mesh.vertices,
+                    un.origins.vertex_values(attachments.vertex_offset, un.vertex_index))
     cut_faces = np.unique(un.face_index[disk.faces])
     if len(cut_faces):
         allowed = allowed.copy()
@@ -373,7 +389,8 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         un = _without(un, ~disk.faces)
     clock.lap("disk")
     for rnd in range(TRIM_ROUNDS):
-        fold = border_folds(un.flat.mesh.faces, un.flat.uv, area[un.face_index], table=un.table)
+        fold = border_folds(un.flat.mesh.faces, un.flat.uv, un.face_area, table=un.table,
+                            points=un.flat.mesh.vertices)
         if not fold.any() or fold.all():
             break
         trimmed[un.face_index[fold]] = True
@@ -390,7 +407,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     clock.lap("folds")
     uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv, table=un.table)
     for _ in range(TRIM_ROUNDS):  # folds pushed against the border by untangling are trimmed
-        fold = border_folds(un.flat.mesh.faces, uv, area[un.face_index], table=un.table)
+        fold = border_folds(un.flat.mesh.faces, uv, un.face_area, table=un.table, points=un.flat.mesh.vertices)
         if not fold.any() or fold.all():
             break
         trimmed[un.face_index[fold]] = True
@@ -399,6 +416,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         n_untangled, moved = n_untangled + more, moved + moved_more
     clock.lap("untangle")
     overlap = len(crossing_segments(uv, un.table[1])[0])
+    turning = outline_turning(un.flat.mesh.faces, uv, segments=un.table[1])
     distortion = un.distortion
     if n_untangled:
         distortion = summarize(un.flat.mesh.vertices, uv, un.flat.mesh.faces, edges=un.table[0])
@@ -408,9 +426,8 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         roots = np.flatnonzero(attachments.root_faces(F)[un.face_index]).astype(np.int64)
 
     theta_deg = np.degrees(un.theta)
-    first = np.zeros(len(un.face_index), bool)
-    first[np.unique(un.face_index, return_index=True)[1]] = True  # repeats come last
-    repeated_from = int(np.argmin(first)) if not first.all() else None
+    repeated = un.origins.repeated  # (they come last)
+    repeated_from = int(np.argmax(repeated)) if repeated.any() else None
     region = Region(
         band=tuple(band), angles_deg=options.angles,
         height_range=(float(h_c[un.face_index].min()), float(h_c[un.face_index].max())),
@@ -419,7 +436,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         overlap_deg=options.overlap if repeated_from is not None else 0.0, repeated_from=repeated_from)
     cut = un.flat.mesh
     if mesh.texcoords is not None:  # attached once, to the final faces (see _unroll)
-        cut = cut.replace(**mesh.face_fields(un.face_index))
+        cut = cut.replace(**un.origins.face_fields(mesh))
     flat = un.flat.replace(mesh=cut, uv=uv)
     clock.lap("checks")
     importance = _find_importance(flat, options, axis, theta_deg)
@@ -433,14 +450,17 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         base = dataclasses.replace(base, flat=disc, proxy=disc_proxy,
                                    distortion=summarize(disc.mesh.vertices, disc.uv, disc.mesh.faces))
         clock.lap("base")
+    added = un.vertex_index >= len(V)
     return RolloutResult(
         flat=flat.replace(importance=importance.values), importance=importance, axis=axis, proxy=un.proxy,
         seam_angle=float(math.degrees(un.seam) % 360.0), seam_method=un.seam_method, region=region,
-        distortion=distortion, face_index=un.face_index, vertex_index=un.vertex_index,
+        distortion=distortion, face_index=un.face_index, vertex_index=np.where(added, -1, un.vertex_index),
         seam_vertices=un.seam_vertices, split_vertices=un.split_vertices, walls=walls,
+        cut_vertices=len(np.unique(un.vertex_index[added])),
+        cut_faces=len(np.unique(un.face_index[un.origins.pieces])),
         attachments=attachments, attachments_kept=options.keep_attachments, attachment_roots=roots,
         trimmed=np.flatnonzero(trimmed).astype(np.int64), trimmed_area=float(area[trimmed].sum()),
-        untangled_faces=n_untangled, untangled_vertices=moved, boundary_overlap=overlap,
+        untangled_faces=n_untangled, untangled_vertices=moved, boundary_overlap=overlap, outline_turning=turning,
         other_objects_faces=int(other_objects.sum()), landmark=landmark,
         theta_origin=float(math.degrees(un.origin) % 360.0), landmark_notes=tuple(landmark_notes),
         timings=clock.total(), folds=folds, profile=profile, base=base, disk_cut=disk,
@@ -455,6 +475,7 @@ class _Unrolled:
     proxy: _proxy.Proxy
     distortion: DistortionSummary
     face_index: np.ndarray
+    #: the scan vertex of each vertex (``>= origins.n``: added by the cut)
     vertex_index: np.ndarray
     theta: np.ndarray
     seam: float
@@ -465,6 +486,10 @@ class _Unrolled:
     #: ``edges_and_boundary`` of the development's faces (its edges, boundary segments and their
     #: faces), found once for each face set
     table: tuple
+    #: where the faces and vertices come from (pieces of cut faces, added vertices, repeats)
+    origins: CutOrigins
+    #: 3D area of each face
+    face_area: np.ndarray
 
 
 def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndarray, band, h_c, theta_c,
@@ -473,9 +498,9 @@ def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndar
     ``seam`` = (radians, method) from an earlier unrolling, or a seam chosen here; angles
     measured from ``landmark``; ``theta_v``: the angle of every scan vertex)."""
     V = mesh.vertices
-    face_index, seam, seam_method, corner_theta, origin = _select(
+    sub_f, corner_theta, origins, seam, seam_method, origin = _select(
         mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area, seam, landmark)
-    sub_f = np.take(mesh.faces, face_index, axis=0)  # (rows gathered by take: 2x faster than indexing)
+    face_index = origins.face_index
     inner = options.side == "inner"
 
     if options.proxy == "ortho":  # a projection: nothing to cut
@@ -494,11 +519,15 @@ def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndar
     # without texture coordinates (and untextured-face flags): rollout() attaches them to the
     # final faces only (a copy per unrolling would be the largest array here)
     cut_mesh = Mesh(
-        V[vertex_index], new_faces, texture_path=mesh.texture_path,
-        vertex_colors=None if mesh.vertex_colors is None else mesh.vertex_colors[vertex_index],
+        origins.vertex_values(V, vertex_index), new_faces, texture_path=mesh.texture_path,
+        vertex_colors=None if mesh.vertex_colors is None else origins.vertex_values(mesh.vertex_colors, vertex_index),
         units=mesh.units, source=mesh.source)
+    face_area = area[face_index]
+    if len(origins.pieces):
+        face_area[origins.pieces] = face_areas(cut_mesh.vertices, new_faces[origins.pieces])
     h, r, _ = axis.cylindrical(cut_mesh.vertices)
-    vert_area = np.bincount(new_faces.ravel(), np.repeat(area[face_index] / 3.0, 3), len(vertex_index))
+    vert_area = np.bincount(new_faces.ravel(), np.repeat(face_area / 3.0, 3), len(vertex_index))
+    vert_area[vertex_index >= len(V)] = 0.0  # the proxy is fitted to the scan's vertices (not the cut's, on chords)
     # the inner side is seen from the axis: u runs clockwise (seen from above), which is the
     # development of -theta (an exact mirror of u for every proxy)
     dev_theta = -theta_new if inner else theta_new
@@ -520,7 +549,7 @@ def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndar
         uv = _proxy.develop(prox, h, r, dev_theta)
         summary = summarize(cut_mesh.vertices, uv, new_faces, edges=table[0])
     return _Unrolled(FlatMesh(cut_mesh, uv), prox, summary, face_index, vertex_index, theta_new, seam,
-                     seam_method, n_seam, n_split, origin, table)
+                     seam_method, n_seam, n_split, origin, table, origins, face_area)
 
 
 def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
@@ -539,7 +568,7 @@ def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
     table = edges_and_boundary(cut.faces, len(used))
     return _Unrolled(FlatMesh(cut, uv), un.proxy, summarize(cut.vertices, uv, cut.faces, edges=table[0]),
                      un.face_index[keep], vertex_index, un.theta[used], un.seam, un.seam_method, seam, copies - seam,
-                     un.origin, table)
+                     un.origin, table, un.origins.subset(keep), un.face_area[keep])
 
 
 #: Seam methods of a seam placed by the user (an angle, a point, a landmark), not chosen here.
@@ -571,11 +600,11 @@ def _painted_zone_centre(mesh: Mesh, axis: AxisFit, options: RolloutOptions, fac
     un = _unroll(mesh, axis, plain, face_mask, band, h_c, theta_c, theta_v, area)
     flat = un.flat
     if mesh.texcoords is not None:
-        flat = flat.replace(mesh=flat.mesh.replace(**mesh.face_fields(un.face_index)))
+        flat = flat.replace(mesh=flat.mesh.replace(**un.origins.face_fields(mesh)))
     importance = _find_importance(flat, options, axis, np.degrees(un.theta))
     if importance.values is None:
         return None, importance.reason
-    vertex_area = np.bincount(flat.mesh.faces.ravel(), np.repeat(area[un.face_index] / 3.0, 3), len(flat.uv))
+    vertex_area = np.bincount(flat.mesh.faces.ravel(), np.repeat(un.face_area / 3.0, 3), len(flat.uv))
     angle, length = zone_centre(axis.cylindrical(flat.mesh.vertices)[2], importance.values * vertex_area)
     if angle is None:
         return None, f"the importance zone goes round evenly (resultant {length:.3f})"
@@ -589,8 +618,10 @@ def _in_band(axis: AxisFit, band, h_c) -> np.ndarray:
 
 def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c, theta_v, area,
             seam_given: tuple[float, str] | None = None, landmark=None):
-    """Faces of the region, the seam (radians, and how it was chosen), the corners' unwrapped
-    angles and the angle (radians) they are measured from.
+    """The region's faces (:func:`potflat.rollout.seam.cut_region`: the seam and a window's
+    sides cut exactly along their meridians), their corners' unwrapped angles, where they
+    come from in the scan, the seam (radians, and how it was chosen) and the angle (radians)
+    the angles are measured from.
 
     With an overlap the faces within ``overlap`` degrees after the seam are listed twice, the
     repeats last, their angles one turn on."""
@@ -618,7 +649,8 @@ def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band,
     # centroid angle from the origin, in [lo, lo + 2 pi): faces are unwrapped around it
     lo = math.radians(options.angles[0]) if options.angles is not None else 0.0
     rel_c = (theta_c - origin - lo) % TWO_PI + lo
-    if options.angles is not None:
+    exact = options.proxy != "ortho"  # (a projection has no sides to cut)
+    if options.angles is not None and not exact:
         keep &= rel_c <= math.radians(options.angles[1])
     face_index = np.flatnonzero(keep)
     if len(face_index) == 0:
@@ -632,12 +664,33 @@ def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band,
             rel_c = (theta_c - origin - gap) % TWO_PI + gap
             rel_c -= TWO_PI * np.round(np.average(rel_c[face_index], weights=area[face_index]) / TWO_PI)
     centre = rel_c[face_index]
-    if options.overlap and gap is None and seam_method != "gap":
+    repeat = bool(options.overlap) and gap is None and seam_method != "gap"
+    if exact and gap is None:  # the sides cut exactly along their meridians
+        end = math.radians(options.angles[1]) if options.angles is not None else TWO_PI + (
+            math.radians(options.overlap) if repeat else 0.0)
+        faces, corner_theta, origins = cut_region(
+            mesh.vertices, F, face_index, centre, _corner_angles(theta_v, F, face_index, centre, origin),
+            start=lo, end=end, repeat_from=TWO_PI if repeat else None,
+            meridian=lambda angle: (axis.point, _meridian_normal(axis, origin + angle)))
+        if len(faces) == 0:
+            raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
+        return faces, corner_theta, origins, seam, seam_method, origin
+    repeated = np.zeros(len(face_index), bool)
+    if repeat:
         again = face_index[rel_c[face_index] < math.radians(options.overlap)]
         face_index = np.concatenate([face_index, again])
         centre = np.concatenate([centre, rel_c[again] + TWO_PI])
+        repeated = np.concatenate([repeated, np.ones(len(again), bool)])
     corner_theta = _corner_angles(theta_v, F, face_index, centre, origin)
-    return face_index, seam, seam_method, corner_theta, origin
+    return (np.take(F, face_index, axis=0), corner_theta, CutOrigins.whole(face_index, repeated, len(mesh.vertices)),
+            seam, seam_method, origin)
+
+
+def _meridian_normal(axis: AxisFit, angle: float) -> np.ndarray:
+    """Unit normal of the meridian half-plane at ``angle`` (radians from the axis' reference),
+    towards increasing angles: the signed distance of a point is ``r sin(theta - angle)``."""
+    other = np.cross(axis.direction, axis.reference)
+    return math.cos(angle) * other - math.sin(angle) * axis.reference
 
 
 def _default_view(axis: AxisFit, theta_c: np.ndarray, area: np.ndarray, seam: float) -> np.ndarray:

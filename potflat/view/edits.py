@@ -9,10 +9,11 @@ in ``provenance.options``). The page edits the rollout's: the seam through a poi
 ``NAME.mask.relaxed.ply``): the rerun replaces ``NAME.png``, and the mask must keep meaning
 the same place on the vessel for the command line that reproduces the rerun.
 
-The rerun is :func:`potflat.files.pipeline.run_scan` on the scan the rollout read, with
-the edited rollout options and the relax and bake options as recorded, so every stage after
-the rollout runs again. ``NAME.options.json`` beside the outputs records the options used and
-the equivalent command line.
+The rerun is :func:`potflat.files.pipeline.run_scan` (what ``potflat run`` calls) on the
+scan the rollout read, into the run's folder under its name, with the edited rollout options
+and the relax and bake options as recorded, so every stage after the rollout runs again and
+the folder holds one consistent set. The options used are recorded as for every run, in each
+stage's sidecar; the page's command line is made from them (:func:`command_line`).
 """
 from __future__ import annotations
 
@@ -26,10 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from potflat import __version__
 from potflat.errors import InvalidInputError, InvalidOptionError, PotflatError
 from potflat.files.options import STAGE_OPTIONS, STAGES, option_types, options_dict
-from potflat.files.pipeline import run_scan
 from potflat.io.atomic import atomic_path, write_json_atomic
 from potflat.io.images import write_png
 
@@ -311,12 +310,11 @@ class Rerun:
         return self.as_dict()
 
     def _run(self, scan: Path, folder: Path, name: str, options: dict[str, Any], on_done) -> None:
+        from potflat.files.pipeline import run_scan  # here: the stages' modules load only for a rerun
+
         t = time.perf_counter()
         try:
             run_scan(scan, folder, name=name, **options)
-            write_json_atomic(folder / f"{name}.options.json", {
-                "scan": str(scan), "name": name, "potflat": __version__, "command": self.command,
-                **{stage: options_dict(options[stage]) for stage in STAGES}})
             on_done()
             state, message = "done", f"{name}: {', '.join(self.stages)} done"
         except PotflatError as exc:

@@ -20,14 +20,15 @@ from pathlib import Path
 
 import numpy as np
 
-from potflat.raster.render import Renderer
-from potflat.errors import InvalidInputError
+from potflat.errors import InvalidInputError, PotflatError
 from potflat.io.flat_ply import read_flat_ply
-from potflat.mesh.distortion import face_distortion, length_error
+from potflat.mesh.distortion import ZONE_THRESHOLD, face_distortion, length_error
+from potflat.raster.render import Renderer
 from potflat.rollout.axis import cylindrical
 from potflat.types import FlatMesh
-from potflat.view.display import display_mesh, seam_segments
+from potflat.view.display import ScanDisplay, boundary_segments, display_mesh, level_segments, rows_in, scan_display_mesh
 from potflat.view.geodesic import SurfaceGraph
+from potflat.view.tiles import texture_jpeg
 
 #: Candidate faces tested for a pick: the nearest by centroid to the display mesh's hit.
 PICK_CANDIDATES = 256
@@ -36,6 +37,52 @@ LOCATE_CANDIDATES = 16
 #: How the face lookups are built: unbalanced, not compacted (at 6M faces three times faster
 #: to build than the default, as fast to query).
 TREE = {"balanced_tree": False, "compact_nodes": False}
+#: A pick's hit on the full flattening is the point seen on the vessel when it is at most this
+#: many display cells (of the two display meshes, added) farther or nearer along the ray.
+PICK_CELLS = 2.0
+
+
+@dataclass(frozen=True)
+class WholeScan:
+    """The whole scan as the page draws it, or why it cannot.
+
+    Attributes
+    ----------
+    display : ScanDisplay or None
+        None when the scan cannot be read (``message`` says why).
+    texture : bytes or None
+        The scan's texture as JPEG (:func:`potflat.view.tiles.texture_jpeg`).
+    scan : str
+        The scan file the rollout read.
+    message : str
+        Empty, or one line: why only the flattened part is drawn.
+    """
+
+    display: ScanDisplay | None
+    texture: bytes | None
+    scan: str
+    message: str
+
+
+@dataclass(frozen=True)
+class BaseImage:
+    """The base's disc the bake writes beside the painting when the rollout left the base out:
+    an orthographic view along the axis, on its own pixel grid (not linked to the vessel).
+
+    Attributes
+    ----------
+    path : Path
+        ``NAME.base.png``.
+    width, height : int
+        The disc image's size, pixels (rows below it: its legend band, if any).
+    px_per_mm : float or None
+        Its resolution (None when ``NAME.base.bake.json`` cannot be read).
+    """
+
+    path: Path
+    width: int
+    height: int
+    px_per_mm: float | None
 
 
 @dataclass(frozen=True)
@@ -114,6 +161,36 @@ class Scene:
                                     "with potflat") from None
         self.pixels = self.grid.pixels(self.flat.uv)
         self._lock = threading.Lock()
+        self._whole_lock = threading.Lock()
+        self._whole: WholeScan | None = None
+
+    @cached_property
+    def base_image(self) -> BaseImage | None:
+        """The base's disc (``NAME.base.png``, written when the rollout left the base out), or
+        None when the run has none. Its size is its own grid's (``NAME.base.bake.json``), else
+        the PNG's."""
+        entry = self.bake.get("base")
+        listed = entry.get("files") if isinstance(entry, dict) else None
+        png = listed.get("png") if isinstance(listed, dict) else None
+        if not (isinstance(png, str) and png.startswith(f"{self.name}.base") and Path(png).name == png):
+            png = f"{self.name}.base.png"
+        path = self.folder / png
+        if not path.is_file():
+            return None
+        try:
+            record = json.loads((self.folder / f"{self.name}.base.bake.json").read_text(encoding="utf-8"))
+            width, height = (int(v) for v in record["image_px"])
+            px_per_mm = float(record["px_per_mm"])
+        except (OSError, ValueError, TypeError, KeyError):
+            from PIL import Image
+
+            try:
+                with Image.open(path) as img:
+                    width, height = img.size
+            except OSError:
+                return None
+            px_per_mm = None
+        return BaseImage(path=path, width=width, height=height, px_per_mm=px_per_mm)
 
     # ---------------------------------------------------------------- lazily built parts
     @property
@@ -124,13 +201,53 @@ class Scene:
 
     @cached_property
     def _display(self):
-        return display_mesh(self.flat, self.pixels)
+        return display_mesh(self.flat, self.pixels, px_per_unit=self.grid.px_per_unit)
 
     @cached_property
-    def seam(self) -> np.ndarray:
-        """The seam's segments on the surface, (s, 2, 3) float32 (:func:`potflat.view.display.seam_segments`)."""
+    def lines(self) -> dict[str, np.ndarray]:
+        """The lines drawn on the vessel, each (s, 2, 3) float32: ``seam`` (the cut), ``edge``
+        (the rest of the flattening's boundary: the image's edge) and ``outline`` (the painted
+        zone's: where the importance crosses :data:`potflat.mesh.distortion.ZONE_THRESHOLD`;
+        none without a painted zone)."""
+        V, F = self.flat.mesh.vertices, self.flat.mesh.faces
+        seam, edge = boundary_segments(V, F)
+        outline = (np.zeros((0, 2, 3), np.float32) if self.flat.importance is None
+                   else level_segments(V, F, self.flat.importance, ZONE_THRESHOLD))
+        return {"seam": seam, "edge": edge, "outline": outline}
 
-        return seam_segments(self.flat.mesh.vertices, self.flat.mesh.faces)
+    def whole(self) -> WholeScan:
+        """The whole scan (the file the rollout read, as loaded) for the page: made once, by the
+        first caller, under its own lock (the links' lookups stay free meanwhile)."""
+        with self._whole_lock:
+            if self._whole is None:
+                self._whole = self._load_whole()
+            return self._whole
+
+    def _load_whole(self) -> WholeScan:
+        from potflat.io.scan import load_scan
+
+        given = self.rollout.get("input")
+        if not given:
+            return WholeScan(None, None, "", f"{self.name}.rollout.json does not name its scan")
+        scan = Path(given)
+        options = (self.rollout.get("provenance") or {}).get("options") or {}
+        try:  # as the rollout loaded it, without the cleaning (stray pieces are part of the scan too)
+            mesh = load_scan(scan, units=options.get("units"), texture="use" if options.get("texture", True) else "ignore",
+                             clean=False).mesh
+            display = scan_display_mesh(mesh, rows_in(mesh.vertices, self.flat.mesh.vertices))
+            texture = texture_jpeg(mesh.texture_path) if display.texcoords is not None else None
+        except PotflatError as exc:
+            return WholeScan(None, None, str(scan), str(exc).splitlines()[0])
+        return WholeScan(display, texture, str(scan), "")
+
+    @property
+    def pick_tolerance(self) -> float:
+        """How far along a pick's ray (scan units) its hit on the full flattening may be from
+        the point seen on the vessel (:data:`PICK_CELLS` display cells)."""
+        whole = self._whole
+        spacing = self._display.spacing + (whole.display.spacing if whole is not None and whole.display else 0.0)
+        V = self.flat.mesh.vertices
+        return PICK_CELLS * spacing + 1e-6 * float(np.ptp(V, axis=0).max())
 
     @cached_property
     def _face_figures(self) -> tuple[np.ndarray, np.ndarray]:
@@ -190,9 +307,12 @@ class Scene:
 
     def warm(self) -> None:
         """Build the lookups a first click needs (in a background thread after the page opened)."""
-        for part in ("_display", "seam", "position", "_flat_tree", "_surface_tree", "_face_figures", "geodesics"):
+        for part in ("_display", "lines", "position", "_flat_tree", "_surface_tree", "_face_figures"):
             with self._lock:
                 getattr(self, part)
+        self.whole()
+        with self._lock:
+            self.geodesics  # noqa: B018 - the measure's (made on first use)
 
     # ---------------------------------------------------------------- the links
     def locate_pixel(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -243,7 +363,7 @@ class Scene:
         face, bary, _ = self.locate_pixel(np.array([[math.floor(x) + 0.5, math.floor(y) + 0.5]]))
         return self.readout(int(face[0]), point, np.array([x, y]))
 
-    def ray_to_surface(self, origin, direction, near, hint=None) -> dict | None:
+    def ray_to_surface(self, origin, direction, near, hint=None, depth=None) -> dict | None:
         """Cast a ray on the full mesh near ``near`` (where it hit the display mesh).
 
         Parameters
@@ -255,11 +375,16 @@ class Scene:
         hint : (2,) float, optional
             The display mesh's flat position there (pixels): of two hits at the same depth (the
             seam's two sides), the one nearer to it.
+        depth : float, optional
+            Distance along the ray (scan units) to the surface seen on the vessel (the whole scan's display
+            mesh): a hit farther or nearer than :attr:`pick_tolerance` is another part of the
+            vessel than the one seen there (seen: a part left out of the flattening).
 
         Returns
         -------
         dict or None
-            The readout of the hit (:meth:`readout`), None when the ray misses the candidates.
+            The readout of the hit (:meth:`readout`), None when the ray misses the candidates
+            or the surface seen is not in the flattening.
         """
         o = np.asarray(origin, np.float64).reshape(3)
         d = np.asarray(direction, np.float64).reshape(3)
@@ -275,6 +400,8 @@ class Scene:
         if not hit.any():
             return None
         t_min = t[hit].min()
+        if depth is not None and abs(t_min - float(depth)) > self.pick_tolerance:
+            return None
         near_hits = np.flatnonzero(hit & (t <= t_min + 1e-9 * max(1.0, abs(t_min))))
         best = near_hits[0]
         pix = np.einsum("ij,ijk->ik", lam[near_hits], self.pixels[F[cand[near_hits]]])

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs, unquote, urlsplit
 
-from potflat.errors import InvalidInputError, PotflatError
+from potflat.errors import InvalidInputError, InvalidOptionError, PotflatError
 from potflat.files.options import options_dict
 from potflat.io.atomic import _finite
 from potflat.mesh.distortion import painted_zone_distortion
@@ -46,6 +46,11 @@ PREFIX = "/_potflat"
 WARM_AFTER_S = 15.0
 #: Largest JSON body accepted.
 MAX_JSON_BYTES = 1 << 20
+#: Why a scan of a batch is not rerun from the page (the batch's summary, report and manifest
+#: describe its outputs).
+BATCH_RERUN = ("this scan belongs to a batch (summary.json in the folder given): rerunning it here would leave the "
+               "batch's summary and report describing other outputs; run the command shown into another folder, or "
+               "change the batch's YAML and run potflat batch again")
 #: Content types of the page's assets and the run's files.
 TYPES = {".js": "text/javascript; charset=utf-8", ".html": "text/html; charset=utf-8", ".css": "text/css",
          ".json": "application/json", ".png": "image/png", ".svg": "image/svg+xml", ".csv": "text/csv",
@@ -113,20 +118,88 @@ class Runs:
         with self._lock:
             key = (name, layer)
             if key not in self._layers:
-                self._layers[key] = Layer(files[layer], scene.grid.width, scene.grid.height)
+                self._layers[key] = Layer(files[layer], *layer_size(scene, layer))
             return self._layers[key]
 
 
+#: The relief's images in the order the page offers them (``raking-``: ``raking-AZ``, one per
+#: light azimuth, in the order the bake lists them).
+RELIEF_LAYERS = ("relief", "raking-", "curvature", "relief-overlay")
+
+
+#: The layer of the base's disc (:attr:`potflat.view.scene.Scene.base_image`).
+BASE_LAYER = "base"
+
+
 def layer_files(scene) -> dict[str, Path]:
-    """The images of a run by layer name: ``painting`` and each distortion map that is there."""
+    """The images of a run by layer name: ``painting``, each distortion map, each of the
+    relief's images (``relief``, ``raking-AZ``, ``curvature``, ``relief-overlay``) and the
+    base's disc (``base``) that is there."""
     out = {"painting": scene.folder / f"{scene.name}.png"}
     made = scene.bake.get("maps") or {}
     asked = (scene.bake.get("provenance") or {}).get("options", {}).get("maps") or []
-    for m in [m for m in asked if m in made] + [m for m in made if m not in asked]:  # in the order asked
+    files = scene.bake.get("files") or {}
+    relief = [k for kind in RELIEF_LAYERS for k in files if k == kind or (kind == "raking-" and k.startswith(kind))]
+    for m in [m for m in asked if m in made] + [m for m in made if m not in asked] + relief:  # in the order asked
         path = scene.folder / f"{scene.name}.{m}.png"
         if path.is_file():
             out[m] = path
+    if scene.base_image is not None:
+        out[BASE_LAYER] = scene.base_image.path
     return out
+
+
+def layer_size(scene, layer: str) -> tuple[int, int]:
+    """Width and height (pixels) of ``layer``'s image: the bake's grid, or the base disc's own."""
+    if layer == BASE_LAYER:
+        return scene.base_image.width, scene.base_image.height
+    return scene.grid.width, scene.grid.height
+
+
+def layer_entries(scene) -> list[dict]:
+    """The page's layer switch: each layer's ``name``, its ``title`` in the switch, its
+    ``label`` (what its colours or greys say) and whether a ``legend`` band is below it."""
+    from PIL import Image
+
+    maps = scene.bake.get("maps") or {}
+    relief = scene.bake.get("relief") or {}
+    entries = []
+    for key, path in layer_files(scene).items():
+        if key == "painting":
+            untextured = scene.bake.get("painting") == "relief"
+            title = "relief in grey (no texture)" if untextured else "painting"
+            label = (f"height above the surface smoothed at {relief.get('smoothing_mm', 0):.3g} mm, in grey"
+                     if untextured else "the scan's texture")
+        elif key in maps:
+            title, label = f"{key} map", maps[key].get("label", key)
+        elif key == "relief":
+            title = "relief: height"
+            label = f"height above the surface smoothed at {relief.get('smoothing_mm', 0):.3g} mm, mm"
+        elif key.startswith("raking-"):
+            azimuth = key[len("raking-"):]
+            title = f"relief: raking light from {azimuth}°"
+            label = (f"raking light at {relief.get('light_elevation_deg', 20):g}° from azimuth {azimuth}° "
+                     "(clockwise from the image's up)")
+        elif key == "curvature":
+            title, label = "relief: curvature", "concavity (MSII-like): dark grooves, light ridges"
+        elif key == BASE_LAYER:
+            base = scene.base_image
+            title = "base, seen along the axis"
+            label = ("the base left out of the rollout, seen along the axis"
+                     + (f" at {base.px_per_mm:g} px/mm" if base.px_per_mm else "")
+                     + ": its own image, not linked to the vessel")
+        else:
+            title = "painting + relief"
+            label = f"painting and relief blended (relief share {relief.get('overlay_blend') or 0:g})"
+        try:
+            with Image.open(path) as img:
+                legend = img.height > layer_size(scene, key)[1]
+        except OSError:
+            legend = False
+        entries.append({"name": key, "title": title, "label": label, "legend": legend,
+                        "range": maps.get(key, {}).get("range"), "linked": key != BASE_LAYER,
+                        "size": list(layer_size(scene, key))})
+    return entries
 
 
 def scene_json(runs: Runs, name: str) -> dict:
@@ -145,12 +218,10 @@ def scene_json(runs: Runs, name: str) -> dict:
         rollout = _plain(options["rollout"])
     except InvalidInputError as exc:
         command, rollout = f"(cannot rerun: {exc})", {}
-    maps = scene.bake.get("maps") or {}
     return {
         "name": name, "folder": str(scene.folder), "width": g.width, "height": g.height, "px_per_mm": g.px_per_mm,
         "mm_per_unit": g.mm_per_unit, "units": scene.flat.mesh.units,
-        "layers": [{"name": k, "label": maps.get(k, {}).get("label", "painting") if k != "painting" else "painting",
-                    "range": maps.get(k, {}).get("range")} for k in layer_files(scene)],
+        "layers": layer_entries(scene),
         "mesh": {**display.counts(), "decimated": display.decimated, "full_vertices": len(scene.flat.uv),
                  "full_faces": len(scene.flat.mesh.faces)},
         "axis": scene.rollout.get("axis"), "seam": scene.rollout.get("seam"), "region": scene.rollout.get("region"),
@@ -190,12 +261,14 @@ class ViewServer(ThreadingHTTPServer):
         return f"{base}{path}?token={self.token}"
 
     def warm(self, names) -> threading.Thread:
-        """Load runs and build their lookups in a background thread (the first clicks are then quick)."""
+        """Load runs in a background thread: what the page asks first, then the whole scan (its
+        display copy is ready soon after the first render), then the lookups for clicks."""
         def work():
             for name in names:
                 try:
                     self.runs.layer(name, "painting").texture()  # the page's first requests
                     self.runs.scene(name).display
+                    self.runs.scene(name).whole()
                     self.runs.opened.wait(timeout=WARM_AFTER_S)
                     self.runs.scene(name).warm()
                 except Exception:  # reported when the page asks for it
@@ -326,6 +399,8 @@ class Handler(BaseHTTPRequestHandler):
         elif method == "POST":
             self._post(name, what, self._body(MAX_JSON_BYTES))
         elif method == "PUT" and what == "mask":
+            if runs.batch:
+                raise InvalidOptionError(BATCH_RERUN)
             scene = runs.scene(name)
             saved = save_mask(scene.folder, name, self._body(MAX_MASK_BYTES), (scene.grid.width, scene.grid.height))
             self._json({"saved": saved.name})
@@ -349,11 +424,25 @@ class Handler(BaseHTTPRequestHandler):
         elif what == "mesh.bin":
             self._send(200, runs.scene(name).display.as_bytes(), "application/octet-stream")
             runs.opened.set()
-        elif what == "seam.bin":
+        elif what == "lines" and len(rest) == 1 and rest[0] in ("seam.bin", "edge.bin", "outline.bin"):
             scene = runs.scene(name)
             with scene._lock:
-                seam = scene.seam
-            self._send(200, seam.astype("<f4").tobytes(), "application/octet-stream")
+                lines = scene.lines[rest[0][:-4]]
+            self._send(200, lines.astype("<f4").tobytes(), "application/octet-stream")
+        elif what == "scan.json":
+            whole = runs.scene(name).whole()
+            self._json({"scan": whole.scan, "message": whole.message,
+                        "mesh": None if whole.display is None else whole.display.counts()})
+        elif what == "scan.bin":
+            whole = runs.scene(name).whole()
+            if whole.display is None:
+                raise _Refused(HTTPStatus.NOT_FOUND, whole.message)
+            self._send(200, whole.display.as_bytes(), "application/octet-stream")
+        elif what == "scan-texture.jpg":
+            whole = runs.scene(name).whole()
+            if whole.texture is None:
+                raise _Refused(HTTPStatus.NOT_FOUND, "the scan has no texture")
+            self._send(200, whole.texture, "image/jpeg")
         elif what == "dzi" and len(rest) == 1 and rest[0].endswith(".dzi"):
             self._send(200, runs.layer(name, rest[0][:-4]).dzi().encode(), "application/xml")
         elif what == "dzi" and len(rest) == 3 and rest[0].endswith("_files"):
@@ -393,10 +482,16 @@ class Handler(BaseHTTPRequestHandler):
                 self._json({"hit": scene.pixel_to_surface(x, y)})
             else:
                 ray = data.get("ray") or {}
-                hint = ray.get("hint")
-                self._json({"hit": scene.ray_to_surface(_numbers(ray.get("origin"), 3), _numbers(ray.get("direction"), 3),
-                                                        _numbers(ray.get("near"), 3),
-                                                        None if hint is None else _numbers(hint, 2))})
+                hint, depth = ray.get("hint"), ray.get("depth")
+                near = _numbers(ray.get("near"), 3)
+                hit = scene.ray_to_surface(_numbers(ray.get("origin"), 3), _numbers(ray.get("direction"), 3), near,
+                                           None if hint is None else _numbers(hint, 2),
+                                           None if depth is None else _numbers([depth], 1)[0])
+                # a point seen on the vessel that is not in the flattening: where it is, and that it is not in the image
+                outside = None if hit is not None or depth is None else {
+                    "point": list(near), "point_mm": [c * scene.grid.mm_per_unit for c in near],
+                    "angle_deg": scene.angle_deg(near)}
+                self._json({"hit": hit, "outside": outside})
         elif what == "measure":
             self._json({"measure": scene.measure(_numbers(data.get("a"), 2), _numbers(data.get("b"), 2))})
         elif what in ("options", "rerun"):
@@ -411,6 +506,8 @@ class Handler(BaseHTTPRequestHandler):
             if what == "options":
                 self._json({"rollout": _plain(options["rollout"]),
                             "command": command_line(scan_of(scene.folder, name), scene.folder, name, options)})
+            elif runs.batch:
+                raise InvalidOptionError(BATCH_RERUN)
             else:
                 self._json(runs.rerun(name).start(scene.folder, name, options, lambda: runs.reload(name)))
         elif what == "angle":

@@ -18,6 +18,9 @@ TILE = 512
 #: Longest side of the image the 3D view wraps around the vessel: an overview (the flat view
 #: has every pixel); a smaller texture is decoded and uploaded sooner on a software renderer.
 TEXTURE_PX = 2048
+#: Longest side of the scan's own texture in the 3D view (a scan's atlas is finer than the
+#: flattening's overview: its pixels are spread over the whole scan, in charts).
+SCAN_TEXTURE_PX = 4096
 
 
 class Layer:
@@ -89,18 +92,41 @@ class Layer:
     def texture(self) -> bytes:
         """The image at most :data:`TEXTURE_PX` on its longest side, as JPEG on white (the 3D
         view's texture; made once)."""
-        from PIL import Image
-
         if self._texture is not None:
             return self._texture
         level = self.top - max(0, math.ceil(math.log2(max(self.width, self.height) / TEXTURE_PX)))
-        img = self.level(level)
-        flat = Image.new("RGB", img.size, (255, 255, 255))
-        flat.paste(img, mask=img.getchannel("A"))
-        buf = io.BytesIO()
-        flat.save(buf, format="JPEG", quality=90)
-        self._texture = buf.getvalue()
+        self._texture = _jpeg(self.level(level))
         return self._texture
+
+
+def texture_jpeg(path: Path, longest: int = SCAN_TEXTURE_PX) -> bytes:
+    """A scan's texture image (:func:`potflat.io.images.read_texture`) at most ``longest``
+    pixels on its longest side, as JPEG (the whole scan's texture in the 3D view)."""
+    import cv2
+    import numpy as np
+    from PIL import Image
+
+    from potflat.io.images import read_texture
+
+    rgb = read_texture(path)
+    if rgb.dtype == np.uint16:
+        rgb = (rgb >> 8).astype(np.uint8)
+    scale = longest / max(rgb.shape[:2])
+    if scale < 1.0:
+        rgb = cv2.resize(rgb, (max(1, round(rgb.shape[1] * scale)), max(1, round(rgb.shape[0] * scale))),
+                         interpolation=cv2.INTER_AREA)
+    return _jpeg(Image.fromarray(np.ascontiguousarray(rgb)).convert("RGBA"))
+
+
+def _jpeg(img) -> bytes:
+    """JPEG bytes of an RGBA image over white."""
+    from PIL import Image
+
+    flat = Image.new("RGB", img.size, (255, 255, 255))
+    flat.paste(img, mask=img.getchannel("A"))
+    buf = io.BytesIO()
+    flat.save(buf, format="JPEG", quality=90)
+    return buf.getvalue()
 
 
 def _png(img) -> bytes:

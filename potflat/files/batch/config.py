@@ -275,13 +275,17 @@ class _Validator:
         self.path = path
         self.base = path.resolve().parent
         self.output_override = output
-        self.problems: list[str] = []
+        self.found: dict[str, int] = {}  # each problem's text and line, as found
         self.options = option_stages()
 
+    @property
+    def problems(self) -> list[str]:
+        """The problems found, in line order."""
+        return sorted(self.found, key=self.found.get)
+
     def problem(self, line: int, message: str) -> None:
-        text = f"{self.path}:{line}: {message}"
-        if text not in self.problems:  # e.g. a bad default seen again by every scan entry
-            self.problems.append(text)
+        # (once: e.g. a bad default seen again by every scan entry)
+        self.found.setdefault(f"{self.path}:{line}: {message}", line)
 
     def batch(self, data: Any) -> Batch:
         if not isinstance(data, _LineDict):
@@ -373,9 +377,7 @@ class _Validator:
                 built[stage] = cls(**{k: v for k, (v, _) in given.items()})
             except (InvalidOptionError, TypeError, ValueError) as exc:
                 message = " ".join(str(exc).split())
-                at = next((ln for k, (_, ln) in given.items() if k in message
-                           or k.replace("_", "-") in message), line)
-                self.problem(at, message)
+                self.problem(_culprit_line(cls, given, message, line), message)
                 return None
         return RunOptions(**built)
 
@@ -391,6 +393,8 @@ class _Validator:
             return []
         jobs: list[ScanJob] = []
         seen_files: dict[Path, int] = {}
+        repeats: dict[Path, list[int]] = {}  # lines listing a scan again
+        patterns: set[int] = set()  # lines of entries whose path is a pattern
         seen_names: dict[str, tuple[Path, int]] = {}
         base_lines = {stage: dict(v) for stage, v in base.items()}
         built_defaults = None
@@ -406,6 +410,8 @@ class _Validator:
                 continue
             self.check_option_keys(entry, where="scan entry", extra=SCAN_KEYS)
             files = self.scan_files(entry, output)
+            if isinstance(entry.get("path"), str) and glob.escape(entry["path"]) != entry["path"]:
+                patterns.add(line)
             name = entry.get("name")
             if name is not None:
                 try:
@@ -435,8 +441,7 @@ class _Validator:
                         self.problem(line, f"{exc} (with 'name:')")
                         continue
                 if scan in seen_files:
-                    self.problem(line, f"{scan} is already listed on line {seen_files[scan]}; "
-                                 "list each scan once (narrow the pattern)")
+                    repeats.setdefault(scan, []).append(line)
                     continue
                 seen_files[scan] = line
                 folder_key = scan_name.casefold()  # one folder on case-insensitive file systems
@@ -449,6 +454,12 @@ class _Validator:
                 if options is not None:
                     jobs.append(ScanJob(name=scan_name, scan=scan, out_dir=output / scan_name,
                                         options=options, line=line))
+        for scan, again in repeats.items():  # one line per scan, however often it is listed again
+            first = seen_files[scan]
+            shown = ", ".join(map(str, again[:5])) + (f" and {len(again) - 5} more" if len(again) > 5 else "")
+            narrow = " (narrow the pattern)" if patterns & {first, *again} else ""
+            self.problem(again[0], f"{scan}, listed on line {first}, is listed again on line{'s' * (len(again) > 1)} "
+                         f"{shown}; list each scan once{narrow}")
         return jobs
 
     def scan_files(self, entry: _LineDict, output: Path) -> list[Path]:
@@ -496,6 +507,24 @@ class _Validator:
                     else f"no file (looked in {self.base})")
             self.problem(line, f"pattern '{value}' matches {what}; fix the pattern or the folder")
         return matches
+
+
+def _culprit_line(cls: type, given: dict[str, tuple[Any, int]], message: str, line: int) -> int:
+    """The line of the option that made ``cls(**given)`` fail with ``message``: of the options
+    without which it builds, the first one refused even alone (a bad value), else the first
+    (two options that do not go together), else the first the message names, else ``line``
+    (the scan entry's)."""
+    def builds(keys) -> bool:
+        try:
+            cls(**{k: given[k][0] for k in keys})
+        except (InvalidOptionError, TypeError, ValueError):
+            return False
+        return True
+
+    fixes = [k for k in given if builds([other for other in given if other != k])]
+    bad = [k for k in fixes if not builds([k])] or fixes
+    named = [k for k in given if any(form in message for form in (k, k.replace("_", "-"), k.replace("_", " ")))]
+    return given[(bad or named)[0]][1] if bad or named else line
 
 
 def _shown(value: Any) -> str:

@@ -23,15 +23,14 @@ from potflat.errors import InvalidOptionError, PotflatError
 from potflat.files.batch.config import Batch, ScanJob
 from potflat.files.batch.manifest import (
     MANIFEST,
-    external_inputs,
     is_complete,
+    job_inputs,
     job_key,
-    output_inside,
     read_manifest,
 )
 from potflat.files.batch.report import write_report
 from potflat.files.pipeline import FIGURES, ZONE_FIGURES, run_scan
-from potflat.io.atomic import output_lock, write_bytes_atomic, write_json_atomic
+from potflat.io.atomic import output_lock, own_subfolder, write_bytes_atomic, write_json_atomic
 
 #: Statuses of a scan in a batch summary.
 STATUSES = ("done", "skipped", "failed", "interrupted", "cancelled")
@@ -104,12 +103,16 @@ def run_job(job: ScanJob, key: str, *, threads: int | None = None) -> ScanReport
 
     The old manifest is first replaced by a partial one (``complete: false``, the marker of
     potflat's own unfinished outputs); the new one is written last, after every output, so an
-    interrupted or failed scan is never taken as complete. Outputs that an earlier
-    run wrote and this one did not (e.g. a map no longer asked for) are removed.
-    ``error.log`` in the scan folder keeps the traceback of a failure.
+    interrupted or failed scan is never taken as complete. The scan folder's outputs stay one
+    consistent set (:func:`potflat.run_scan`: an earlier run's are replaced whole, or restored
+    when this one fails). ``error.log`` in the scan folder keeps the traceback of a failure.
     """
 
     start = time.perf_counter()
+    try:
+        own_subfolder(job.out_dir.parent, job.out_dir, create=True)
+    except PotflatError as exc:
+        return _report(job, "failed", error=one_line(exc))
     old = read_manifest(job.out_dir) or {}
     old_outputs = old.get("outputs") if isinstance(old.get("outputs"), dict) else {}
     try:
@@ -124,11 +127,6 @@ def run_job(job: ScanJob, key: str, *, threads: int | None = None) -> ScanReport
             p = Path(p).resolve()
             rel = p.relative_to(job.out_dir.resolve()).as_posix()
             outputs[rel] = p.stat().st_size
-        for rel in old_outputs:
-            target = output_inside(job.out_dir, rel)
-            if rel not in outputs and target is not None and rel != MANIFEST:
-                with contextlib.suppress(OSError):
-                    target.unlink()
         with contextlib.suppress(FileNotFoundError):
             (job.out_dir / "error.log").unlink()
         seconds = time.perf_counter() - start
@@ -136,7 +134,7 @@ def run_job(job: ScanJob, key: str, *, threads: int | None = None) -> ScanReport
         write_json_atomic(job.out_dir / MANIFEST, {
             "complete": True, "key": key, "name": job.name, "scan": str(job.scan), "potflat": __version__,
             "options": job.options_json(), "outputs": outputs,
-            "inputs": external_inputs(result, job), "figures": figures,
+            "inputs": [str(p) for p in job_inputs(job)], "figures": figures,
             "seconds": round(seconds, 3)})
         return _report(job, "done", seconds, figures)
     except Exception as exc:  # noqa: BLE001 - failure isolation: any error is this scan's
@@ -256,6 +254,8 @@ def run_batch(batch: Batch, *, workers: int | None = None, scheduler: str | None
     emit = on_result or (lambda report: None)
     if workers is not None and workers < 1:
         raise InvalidOptionError(f"--workers must be at least 1, got {workers}")
+    for job in batch.jobs:  # a folder under the output planted as a link: refused before any work
+        own_subfolder(batch.output, job.out_dir, create=False)
     client = _dask_client(scheduler) if scheduler is not None else None  # fail before any work
     with output_lock(batch.output, what="potflat batch"):
         try:

@@ -94,7 +94,7 @@ def centres_inside(faces, uv, ox, oy, cell, gx, gy, start, items, centres, first
         if fill and counts[j] == 0:
             continue
         b0, b1, b2 = np.uint64(faces[j, 0]), np.uint64(faces[j, 1]), np.uint64(faces[j, 2])
-        x0, x1, y0, y1 = _box_cells(faces, uv, j, ox, oy, cell, gx, gy)
+        x0, x1, y0, y1 = _box_cells(faces, uv, np.int64(j), ox, oy, cell, gx, gy)  # (one compile: j is unsigned)
         n_in = 0
         for cx in range(x0, x1 + 1):
             for cy in range(y0, y1 + 1):

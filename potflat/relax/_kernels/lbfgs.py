@@ -64,8 +64,8 @@ def combine(q, c, src, a, y, diag, scale, s, out):
         for blk in range(nb):
             out[blk] = _combine_block(q, c, src, a, y, diag, scale, s, blk)
     else:
-        for blk in prange(nb):
-            out[blk] = _combine_block(q, c, src, a, y, diag, scale, s, blk)
+        for blk in prange(nb):  # (prange's index is unsigned: cast, so the block compiles once)
+            out[blk] = _combine_block(q, c, src, a, y, diag, scale, s, np.int64(blk))
 
 
 @leaf
@@ -111,8 +111,8 @@ def pair(q, t, g_new, g_old, diag, s_out, y_out, out_sy, out_yhy):
         for blk in range(nb):
             out_sy[blk], out_yhy[blk] = _pair_block(q, t, g_new, g_old, diag, s_out, y_out, blk)
     else:
-        for blk in prange(nb):
-            out_sy[blk], out_yhy[blk] = _pair_block(q, t, g_new, g_old, diag, s_out, y_out, blk)
+        for blk in prange(nb):  # (prange's index is unsigned: cast, so the block compiles once)
+            out_sy[blk], out_yhy[blk] = _pair_block(q, t, g_new, g_old, diag, s_out, y_out, np.int64(blk))
 
 
 @parallel

@@ -67,7 +67,8 @@ def interpolate(points, cluster, uv_from, uv_to, faces, vf_ptr, vf_tri, out, ins
     for i in prange(points.shape[0]):
         p0, p1 = points[i, 0], points[i, 1]
         c = cluster[i]
-        best, best_min, b0, b1, b2 = _scan_fan(p0, p1, c, uv_from, faces, vf_ptr, vf_tri, -1, -np.inf, 0.0, 0.0, 0.0)
+        best, best_min, b0, b1, b2 = _scan_fan(p0, p1, c, uv_from, faces, vf_ptr, vf_tri, np.int64(-1), -np.inf, 0.0,
+                                               0.0, 0.0)  # (np.int64: a literal -1 would be a second compile)
         if not best_min >= -1e-12:  # not inside a face of c: try the faces of c's neighbours
             for k in range(vf_ptr[c], vf_ptr[c + 1]):
                 for corner in range(3):

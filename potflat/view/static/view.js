@@ -15,7 +15,7 @@ const $ = id => document.getElementById(id);
 
 // what the page shows and the tests read
 const state = {
-  ready: false, firstRenderMs: null, scene: null, tool: 'look', layer: 'painting',
+  ready: false, firstRenderMs: null, scene: null, scan: null, tool: 'look', layer: 'painting', layerShown: null,
   marker3d: null, markerFlat: null, readout: null, measure: null, measurePoints: [],
   edits: {}, maskDirty: false, rerun: null, window: null, overlap: null,
 };
@@ -34,6 +34,13 @@ async function api(path, options = {}) {
 const post = (path, body) => api(path, { method: 'POST', body: JSON.stringify(body),
                                          headers: { 'Content-Type': 'application/json' } }).then(r => r.json());
 function status(text, warn = false) { const s = $('status'); s.textContent = text; s.className = warn ? 'warn' : ''; }
+// a layer on the image's grid is linked to the vessel; the base's disc has its own grid
+const linked = (layer = state.layer) => {
+  const entry = state.scene && state.scene.layers.find(l => l.name === layer);
+  return !entry || entry.linked !== false;
+};
+// the layer drawn on the vessel: the image's, or the painting while an unlinked image is shown
+const vesselLayer = layer => (linked(layer) ? layer : 'painting');
 const fmt = (v, d = 1) => (v === null || v === undefined || !isFinite(v)) ? '-' : Number(v).toFixed(d);
 
 // ------------------------------------------------------------------ the vessel (three.js)
@@ -46,30 +53,59 @@ const camera = new THREE.PerspectiveCamera(30, 1, 1, 1e5);
 const controls = new OrbitControls(camera, canvas);
 controls.enableDamping = false;
 controls.addEventListener('change', () => render());
-let mesh = null, seamLines = null, pathLine = null;
+// mesh: the flattening's surface (textured with the image's layer, linked to it); scanMesh: the
+// whole scan with its own texture (loaded after the first render); lines: seam, edge, outline
+let mesh = null, scanMesh = null, pathLine = null;
+const lines = {};
 const markers = {};
 const textureLoader = new THREE.TextureLoader();
 let maskTexture = null;
 
 const vertexShader = `
-attribute float importance;
-varying vec2 vUv; varying float vImp; varying vec3 vN;
+varying vec2 vUv; varying vec3 vN;
 void main() {
-  vUv = uv; vImp = importance; vN = normalize(normalMatrix * normal);
+  vUv = uv; vN = normalize(normalMatrix * normal);
   gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0);
 }`;
 const fragmentShader = `
-uniform sampler2D map; uniform sampler2D mask; uniform float maskOn; uniform float outlineOn;
-varying vec2 vUv; varying float vImp; varying vec3 vN;
+uniform sampler2D map; uniform sampler2D mask; uniform float maskOn;
+varying vec2 vUv; varying vec3 vN;
 void main() {
   vec3 c = texture2D(map, vUv).rgb;
   c *= 0.6 + 0.4 * abs(vN.z);
   if (!gl_FrontFacing) c *= 0.55;
   if (maskOn > 0.5) { float m = texture2D(mask, vUv).a; c = mix(c, vec3(0.15, 0.55, 1.0), 0.45 * m); }
-  if (outlineOn > 0.5) {
-    float w = fwidth(vImp);
-    if (w > 0.0 && abs(vImp - 0.5) < 1.2 * w) c = vec3(0.1, 0.95, 0.35);
-  }
+  gl_FragColor = vec4(c, 1.0);
+}`;
+// the whole scan: its texture (clay where it has none), its unrolled part hidden under the image
+const CLAY = 'vec3(0.78, 0.62, 0.5)';
+const scanVertexShader = `
+attribute float unrolled;
+#ifdef COLORS
+attribute vec3 tint;
+#endif
+varying vec2 vUv; varying vec3 vN; varying float vUnrolled; varying vec3 vTint;
+void main() {
+  vUv = uv; vN = normalize(normalMatrix * normal); vUnrolled = unrolled;
+#ifdef COLORS
+  vTint = tint;
+#else
+  vTint = ${CLAY};
+#endif
+  gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0);
+}`;
+const scanFragmentShader = `
+uniform sampler2D map; uniform float hideUnrolled;
+varying vec2 vUv; varying vec3 vN; varying float vUnrolled; varying vec3 vTint;
+void main() {
+  if (hideUnrolled > 0.5 && vUnrolled > 0.5) discard;
+#ifdef TEXTURED
+  vec3 c = vUv.x < 0.0 ? ${CLAY} : texture2D(map, vUv).rgb;
+#else
+  vec3 c = vTint;
+#endif
+  c *= 0.6 + 0.4 * abs(vN.z);
+  if (vN.z < 0.0) c *= 0.55;  // the inside: by the full mesh's normals (a clustered face may be turned)
   gl_FragColor = vec4(c, 1.0);
 }`;
 
@@ -94,44 +130,103 @@ async function loadVessel(s) {
   const n = s.mesh.vertices, m = s.mesh.faces;
   let off = 0;
   const take = (T, count) => { const a = new T(buf, off, count); off += count * 4; return a; };
-  const pos = take(Float32Array, 3 * n), pix = take(Float32Array, 2 * n), imp = take(Float32Array, n);
+  const pos = take(Float32Array, 3 * n), pix = take(Float32Array, 2 * n);
   const faces = take(Uint32Array, 3 * m);
   const uv = new Float32Array(2 * n);
   for (let i = 0; i < n; i++) { uv[2 * i] = pix[2 * i] / s.width; uv[2 * i + 1] = 1 - pix[2 * i + 1] / s.height; }
   const g = new THREE.BufferGeometry();
   g.setAttribute('position', new THREE.BufferAttribute(pos, 3));
   g.setAttribute('uv', new THREE.BufferAttribute(uv, 2));
-  g.setAttribute('importance', new THREE.BufferAttribute(imp, 1));
   g.setIndex(new THREE.BufferAttribute(faces, 1));
   g.computeVertexNormals();
   g.computeBoundsTree();
   g.userData.pixels = pix;
   const material = new THREE.ShaderMaterial({
     vertexShader, fragmentShader, side: THREE.DoubleSide, polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 1,
-    uniforms: { map: { value: null }, mask: { value: null }, maskOn: { value: 0 }, outlineOn: { value: s.painted_zone ? 1 : 0 } },
+    uniforms: { map: { value: null }, mask: { value: null }, maskOn: { value: 0 } },
   });
   if (mesh) { scene3.remove(mesh); mesh.geometry.dispose(); }
   mesh = new THREE.Mesh(g, material);
   scene3.add(mesh);
+  showMeshes();
   g.computeBoundingSphere();
   const r = g.boundingSphere.radius;
   for (const [key, color] of [['link', 0xffdd00], ['seam', 0xff00ff], ['a', 0x00e5ff], ['b', 0x00e5ff]]) {
     if (markers[key]) scene3.remove(markers[key]);
     markers[key] = markerSphere(color, r * 0.012);
   }
-  await setTexture(state.layer);
+  await setTexture(vesselLayer(state.layer));
   mark('texture');
-  $('meshinfo').textContent = `${s.mesh.faces.toLocaleString()} faces drawn` +
-    (s.mesh.decimated ? ` (of ${s.mesh.full_faces.toLocaleString()}; picking on the full mesh)` : '');
+  meshInfo();
 }
 
-async function loadSeam() {  // after the first render: the full mesh's cut edges
-  const seam = new Float32Array(await (await api('seam.bin')).arrayBuffer());
-  if (seamLines) { scene3.remove(seamLines); seamLines.geometry.dispose(); }
-  const sg = new THREE.BufferGeometry();
-  sg.setAttribute('position', new THREE.BufferAttribute(seam, 3));
-  seamLines = new THREE.LineSegments(sg, new THREE.LineBasicMaterial({ color: 0xff00ff }));
-  scene3.add(seamLines);
+function meshInfo(note = '') {
+  const s = state.scene, w = state.scan, count = v => v.toLocaleString();
+  const flat = `unrolled part: ${count(s.mesh.faces)} faces drawn` +
+    (s.mesh.decimated ? ` of ${count(s.mesh.full_faces)}` : '');
+  const whole = w && w.mesh ? `scan: ${count(w.mesh.faces)} faces drawn${w.mesh.decimated ? ' (decimated)' : ''}; ` : '';
+  $('meshinfo').textContent = `${whole}${flat}; picking on the full mesh${note ? ` | ${note}` : ''}`;
+}
+
+// after the first render: the whole scan as loaded, with its own texture (the server reads the scan
+// file the run names, in the background: seconds for a large one)
+async function loadScan() {
+  const info = await (await api('scan.json')).json();
+  state.scan = info;
+  if (!info.mesh) { meshInfo(`the vessel shows the unrolled part only: ${info.message}`); return; }
+  const buf = await (await api('scan.bin')).arrayBuffer();
+  const n = info.mesh.vertices, m = info.mesh.faces;
+  let off = 0;
+  const take = (T, count) => { const a = new T(buf, off, count); off += count * 4; return a; };
+  const g = new THREE.BufferGeometry();
+  g.setAttribute('position', new THREE.BufferAttribute(take(Float32Array, 3 * n), 3));
+  g.setAttribute('normal', new THREE.BufferAttribute(take(Float32Array, 3 * n), 3));
+  if (info.mesh.texcoords) g.setAttribute('uv', new THREE.BufferAttribute(take(Float32Array, 2 * n), 2));
+  g.setAttribute('unrolled', new THREE.BufferAttribute(take(Float32Array, n), 1));
+  if (info.mesh.colors) g.setAttribute('tint', new THREE.BufferAttribute(take(Float32Array, 3 * n), 3));
+  g.setIndex(new THREE.BufferAttribute(take(Uint32Array, 3 * m), 1));
+  g.computeBoundsTree();
+  const defines = {};
+  if (info.mesh.texcoords) defines.TEXTURED = 1;
+  if (info.mesh.colors) defines.COLORS = 1;
+  const material = new THREE.ShaderMaterial({
+    vertexShader: scanVertexShader, fragmentShader: scanFragmentShader, defines, side: THREE.DoubleSide,
+    polygonOffset: true, polygonOffsetFactor: 2, polygonOffsetUnits: 4,
+    uniforms: { map: { value: null }, hideUnrolled: { value: 0 } },
+  });
+  if (info.mesh.texcoords) {
+    const tex = await textureLoader.loadAsync(`${API}/scan-texture.jpg?token=${TOKEN}`);
+    tex.colorSpace = THREE.NoColorSpace;
+    tex.anisotropy = renderer.capabilities.getMaxAnisotropy();
+    material.uniforms.map.value = tex;
+  }
+  if (scanMesh) { scene3.remove(scanMesh); scanMesh.geometry.dispose(); }
+  scanMesh = new THREE.Mesh(g, material);
+  scene3.add(scanMesh);
+  showMeshes();
+  mark('scan');
+  meshInfo();
+}
+
+// what the vessel shows: the scan's own texture, or the image's layer on the unrolled part (also
+// while painting the zone: the brush's strokes are drawn on the image)
+function showMeshes() {
+  const image = $('onvessel').checked || state.tool === 'paint' || state.tool === 'erase';
+  if (mesh) mesh.visible = image || !scanMesh;
+  if (scanMesh) scanMesh.material.uniforms.hideUnrolled.value = image ? 1 : 0;
+  render();
+}
+
+async function loadLines() {  // after the first render: the full mesh's seam, its edge, the painted zone's outline
+  for (const [kind, color] of [['seam', 0xff00ff], ['edge', 0xf0f0f0], ['outline', 0x19f25a]]) {
+    const points = new Float32Array(await (await api(`lines/${kind}.bin`)).arrayBuffer());
+    if (lines[kind]) { scene3.remove(lines[kind]); lines[kind].geometry.dispose(); }
+    const lg = new THREE.BufferGeometry();
+    lg.setAttribute('position', new THREE.BufferAttribute(points, 3));
+    lines[kind] = new THREE.LineSegments(lg, new THREE.LineBasicMaterial({ color }));
+    scene3.add(lines[kind]);
+  }
+  lines.outline.visible = $('outline').checked;
   render();
 }
 
@@ -154,6 +249,8 @@ function frameVessel(s) {
 }
 
 async function setTexture(layer) {
+  if (mesh.material.uniforms.map.value && state.vesselShown === layer) return;
+  state.vesselShown = layer;
   const tex = await textureLoader.loadAsync(`${API}/texture/${encodeURIComponent(layer)}.jpg?token=${TOKEN}`);
   tex.colorSpace = THREE.NoColorSpace;  // the shader writes the image's values as they are
   tex.anisotropy = renderer.capabilities.getMaxAnisotropy();
@@ -165,16 +262,26 @@ async function setTexture(layer) {
 
 const raycaster = new THREE.Raycaster();
 raycaster.firstHitOnly = true;
+// The surface seen under a screen point (the nearer of the scan and the unrolled part, as drawn),
+// its distance along the ray, and where the unrolled part is there when it is the surface seen
+// (its flat position: the hint; within the two display meshes' cells of each other).
 function rayAt(clientX, clientY) {
   const rect = canvas.getBoundingClientRect();
   const ndc = new THREE.Vector2(((clientX - rect.left) / rect.width) * 2 - 1, -((clientY - rect.top) / rect.height) * 2 + 1);
   raycaster.setFromCamera(ndc, camera);
-  const hits = mesh ? raycaster.intersectObject(mesh) : [];
-  if (!hits.length) return null;
-  const h = hits[0], pix = mesh.geometry.userData.pixels, f = h.face;
-  const b = h.barycoord || new THREE.Vector3(1 / 3, 1 / 3, 1 / 3);
-  const hint = [0, 1].map(j => b.x * pix[2 * f.a + j] + b.y * pix[2 * f.b + j] + b.z * pix[2 * f.c + j]);
-  return { point: h.point, hint, ray: raycaster.ray.clone() };
+  const flat = mesh ? raycaster.intersectObject(mesh)[0] : null;
+  const whole = scanMesh ? raycaster.intersectObject(scanMesh)[0] : null;
+  const seen = [mesh && mesh.visible ? flat : null, whole].filter(h => h).sort((a, b) => a.distance - b.distance)[0];
+  if (!seen) return null;
+  const cells = state.scene.mesh.spacing + (state.scan && state.scan.mesh ? state.scan.mesh.spacing : 0);
+  const linked = flat && Math.abs(flat.distance - seen.distance) <= 2 * cells + 1e-6 * camera.far ? flat : null;
+  let hint = null;
+  if (linked) {
+    const pix = mesh.geometry.userData.pixels, f = linked.face;
+    const b = linked.barycoord || new THREE.Vector3(1 / 3, 1 / 3, 1 / 3);
+    hint = [0, 1].map(j => b.x * pix[2 * f.a + j] + b.y * pix[2 * f.b + j] + b.z * pix[2 * f.c + j]);
+  }
+  return { point: (linked || seen).point, seen: seen.point, depth: seen.distance, hint, ray: raycaster.ray.clone() };
 }
 
 function place(key, point) {
@@ -232,6 +339,7 @@ function drawOverlay() {
   overlay.width = rect.width; overlay.height = rect.height;
   const ctx = overlay.getContext('2d');
   ctx.clearRect(0, 0, overlay.width, overlay.height);
+  if (!linked(state.layerShown || state.layer)) return;  // marks are on the image's grid
   const toLocal = p => { const c = imageToClient(p); return [c.x - rect.left, c.y - rect.top]; };
   const [x0, y0] = toLocal([0, 0]), [x1, y1] = toLocal([s.width, s.height]);
   if (mask && (state.tool === 'paint' || state.tool === 'erase')) {
@@ -269,7 +377,7 @@ function hookFlat() {
   });
   let dragStart = null;
   viewer.addHandler('canvas-press', e => {
-    if (!['window', 'overlap', 'paint', 'erase'].includes(state.tool)) return;
+    if (!['window', 'overlap', 'paint', 'erase'].includes(state.tool) || !linked()) return;
     const rect = viewer.element.getBoundingClientRect();
     dragStart = clientToImage(rect.left + e.position.x, rect.top + e.position.y);
     if (state.tool === 'paint' || state.tool === 'erase') brush(dragStart);
@@ -299,6 +407,11 @@ function hookFlat() {
 }
 
 async function linkFromPixel(p, clicked) {
+  if (!linked()) {
+    if (clicked) $('readout').textContent = 'This image is not linked to the vessel: switch to the painting or a map ' +
+      'to link the image with the vessel.';
+    return null;
+  }
   const { hit } = await post('pick', { pixel: p });
   if (!hit) { if (clicked) status('not on the surface'); return null; }
   state.markerFlat = p; state.marker3d = hit.point; state.readout = hit;
@@ -307,6 +420,7 @@ async function linkFromPixel(p, clicked) {
 }
 
 async function flatClick(p) {
+  if (!linked()) return linkFromPixel(p, true);
   if (state.tool === 'measure') return addMeasurePoint(p);
   if (state.tool === 'look' || state.tool === 'seam') return linkFromPixel(p, true);
 }
@@ -330,6 +444,12 @@ async function addMeasurePoint(p) {
     `the vessel (${how}; straight through space ${fmt(measure.chord_mm, 2)} mm): the image's length is off by ` +
     `${fmt(measure.error_pct, 2)} %.`;
 }
+function showOutside(o) {
+  $('readout').textContent = `Vessel: ${o.point_mm.map(v => fmt(v)).join(', ')} mm (scan coordinates)` +
+    (o.angle_deg === null ? '' : `, ${fmt(o.angle_deg)}° about the axis`) +
+    ' | not in the image: this part of the scan was left out of the rollout (a handle, the rim top, the base or ' +
+    'another wall; the white line is the image\'s edge)';
+}
 function removePath() { if (pathLine) { scene3.remove(pathLine); pathLine.geometry.dispose(); pathLine = null; } }
 
 function showReadout(h) {
@@ -346,11 +466,11 @@ canvas.addEventListener('pointerdown', e => {
   down = { x: e.clientX, y: e.clientY, button: e.button };
   if ((state.tool === 'paint' || state.tool === 'erase') && e.button === 0) {
     const h = rayAt(e.clientX, e.clientY);
-    if (h) { brush(h.hint); canvas.setPointerCapture(e.pointerId); down.painting = true; }
+    if (h && h.hint) { brush(h.hint); canvas.setPointerCapture(e.pointerId); down.painting = true; }
   }
 });
 canvas.addEventListener('pointermove', e => {
-  if (down && down.painting) { const h = rayAt(e.clientX, e.clientY); if (h) brush(h.hint); }
+  if (down && down.painting) { const h = rayAt(e.clientX, e.clientY); if (h && h.hint) brush(h.hint); }
 });
 canvas.addEventListener('pointerup', async e => {
   const d = down; down = null;
@@ -363,15 +483,22 @@ canvas.addEventListener('pointerup', async e => {
 async function vesselClick(x, y) {
   const h = rayAt(x, y);
   if (!h) { status('no surface there'); return null; }
-  const { hit } = await post('pick', { ray: { origin: h.ray.origin.toArray(), direction: h.ray.direction.toArray(),
-                                              near: h.point.toArray(), hint: h.hint } });
+  const { hit, outside } = await post('pick', { ray: { origin: h.ray.origin.toArray(), direction: h.ray.direction.toArray(),
+                                                       near: h.point.toArray(), hint: h.hint, depth: h.depth } });
+  if (!hit && outside) {  // a part of the scan left out of the rollout
+    state.marker3d = outside.point; state.markerFlat = null; state.readout = { ...outside, outside: true };
+    place('link', outside.point); showOutside(outside);
+    if (state.tool === 'seam') { state.edits.seam_at = outside.point; place('seam', outside.point); await preview(); }
+    render(); drawOverlay();
+    return state.readout;
+  }
   if (!hit) { status('no surface there'); return null; }
   state.marker3d = hit.point; state.markerFlat = hit.pixel; state.readout = hit;
   place('link', hit.point); showReadout(hit);
   if (state.tool === 'seam') { state.edits.seam_at = hit.point; place('seam', hit.point); await preview(); }
   if (state.tool === 'measure') await addMeasurePoint(hit.pixel);
   const c = imageToClient(hit.pixel), rect = viewer.element.getBoundingClientRect();
-  if (c.x < rect.left || c.x > rect.right || c.y < rect.top || c.y > rect.bottom) {
+  if (linked() && (c.x < rect.left || c.x > rect.right || c.y < rect.top || c.y > rect.bottom)) {
     viewer.viewport.panTo(viewer.viewport.imageToViewportCoordinates(new OpenSeadragon.Point(...hit.pixel)));
   }
   render(); drawOverlay();
@@ -497,7 +624,7 @@ async function rerun() {
       state.edits = {}; state.window = null; state.overlap = null; mask = null; maskSmall = null;
       await start(true);
     }
-  } catch (err) { status(err.message, true); } finally { button.disabled = false; }
+  } catch (err) { status(err.message, true); } finally { button.disabled = state.scene.batch; }
 }
 
 // ------------------------------------------------------------------ the page
@@ -508,12 +635,13 @@ function setTool(tool) {
   controls.mouseButtons = { LEFT: painting ? null : THREE.MOUSE.ROTATE, MIDDLE: THREE.MOUSE.DOLLY, RIGHT: painting ? THREE.MOUSE.ROTATE : THREE.MOUSE.PAN };
   if (painting) { ensureMask(); if (!state.zoneLoaded) { state.zoneLoaded = true; loadZone(); } }
   if (mesh) mesh.material.uniforms.maskOn.value = painting ? 1 : 0;
-  render(); drawOverlay();
+  showMeshes(); drawOverlay();
 }
 
-function showLegend(layer) {
-  const legend = $('legend');
-  if (layer === 'painting') { legend.style.display = 'none'; return; }
+function showLegend(layer) {  // the legend band below the layer's image, else what its greys or colours are
+  const legend = $('legend'), entry = state.scene.layers.find(l => l.name === layer);
+  $('layerlabel').textContent = entry && !entry.legend && layer !== 'painting' ? entry.label : '';
+  if (!entry || !entry.legend) { legend.style.display = 'none'; legend.removeAttribute('src'); return; }
   legend.src = `${API}/legend/${encodeURIComponent(layer)}.png?token=${TOKEN}`;
   legend.style.display = 'block';
 }
@@ -532,32 +660,41 @@ async function start(again = false) {
   select.innerHTML = '';
   for (const l of s.layers) {
     const o = document.createElement('option'); o.value = l.name;
-    o.textContent = l.name === 'painting' ? 'painting' : `${l.name} map`; select.appendChild(o);
+    o.textContent = l.title; o.title = l.label; select.appendChild(o);
   }
   if (!s.layers.some(l => l.name === state.layer)) state.layer = 'painting';
   select.value = state.layer;
   $('command').textContent = s.command;
+  $('rerun').disabled = s.batch;  // a batch's summary and report describe its scans' outputs
+  $('rerun').title = s.batch ? 'a scan of a batch: run the command shown into another folder, or change the ' +
+    'batch\'s YAML and run potflat batch again' : '';
   if (s.lengths) $('measure').textContent = s.lengths.charAt(0).toUpperCase() + s.lengths.slice(1) + '.';
   await Promise.all([loadVessel(s).then(() => { if (!again) frameVessel(s); resize3d(); mark('vessel'); }),
                      openFlat(s, state.layer, again).then(() => mark('image'))]);
   showLegend(state.layer);
+  state.layerShown = state.layer;
   state.zoneLoaded = false;
   if (state.marker3d) place('link', state.marker3d);
   if (state.edits.seam_at) place('seam', state.edits.seam_at);
   render(); drawOverlay();
   if (!again) state.firstRenderMs = performance.now() - started;
   state.ready = true;
-  loadSeam().catch(err => status(err.message, true));
+  loadLines().catch(err => status(err.message, true));
+  loadScan().catch(err => meshInfo(`the vessel shows the unrolled part only: ${err.message}`));
   if (!again) status(`opened in ${(state.firstRenderMs / 1000).toFixed(2)} s`);
 }
 
 $('layer').addEventListener('change', async e => {
-  state.layer = e.target.value;
-  showLegend(state.layer);
-  await Promise.all([openFlat(state.scene, state.layer, true), setTexture(state.layer)]);
+  const layer = state.layer = e.target.value;
+  showLegend(layer);
+  await Promise.all([openFlat(state.scene, layer, linked(layer) && linked(state.layerShown)),
+                     setTexture(vesselLayer(layer))]);
+  state.layerShown = layer;
+  drawOverlay();
 });
 for (const b of document.querySelectorAll('[data-tool]')) b.addEventListener('click', () => setTool(b.dataset.tool));
-$('outline').addEventListener('change', e => { if (mesh) { mesh.material.uniforms.outlineOn.value = e.target.checked && state.scene.painted_zone ? 1 : 0; render(); } });
+$('outline').addEventListener('change', e => { if (lines.outline) { lines.outline.visible = e.target.checked; render(); } });
+$('onvessel').addEventListener('change', showMeshes);
 $('rerun').addEventListener('click', rerun);
 window.addEventListener('resize', () => { resize3d(); drawOverlay(); });
 

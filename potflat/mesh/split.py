@@ -1,0 +1,176 @@
+"""Faces cut exactly along a plane, as GigaMesh cuts a mesh at its prime meridian.
+
+:func:`split_faces` cuts triangles along the zero set of a per-vertex level that is linear
+along edges (a plane's signed distance, :func:`plane_levels`): a vertex is added where an
+edge crosses the cut, shared by the faces of that edge, and each face becomes the pieces
+on either side. What a mesh carries follows the pieces (:class:`FaceSplit`): added
+vertices interpolate per-vertex values along their edge, piece corners interpolate
+per-corner values (texture coordinates) within their face, per-face values (untextured
+flags) are inherited.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from potflat.mesh._kernels.split import split_pieces
+
+#: A vertex closer to the cut than this fraction of a crossing edge (measured by the level's
+#: change along it) counts as on the cut: no piece is a sliver thinner than that.
+CUT_SNAP = 0.2
+
+
+@dataclass(frozen=True, eq=False)
+class FaceSplit:
+    """Faces cut into pieces along a level set (:func:`split_faces`).
+
+    Attributes
+    ----------
+    faces : (k, 3) int64
+        The pieces, oriented like their face. Index ``i < n`` is vertex ``i`` of the input,
+        ``n + j`` the ``j``-th added vertex.
+    parent : (k,) int64
+        The face (a row of the faces given) each piece is part of; a face's pieces follow
+        each other, in the order of the faces (a face not cut is one piece).
+    side : (k,) int8
+        Sign of the level on each piece: +1, -1, or 0 when all its corners are on the cut.
+    weights : (k, 3, 3) float64
+        Each piece corner as weights of its face's three corners (each row sums to 1): a
+        per-corner value of a piece is ``weights @ values`` of its face (:meth:`corners`).
+    edges : (j, 2) int64
+        The edge each added vertex lies on (the smaller index first).
+    t : (j,) float64
+        Where on it: ``(1 - t) x[a] + t x[b]`` for ``edges[j] = (a, b)``, ``0 < t < 1``.
+    on_cut : (s,) int64
+        Vertices of the faces given that lie on the cut: level 0, or closer to it than
+        :data:`CUT_SNAP` of a crossing edge (the cut goes through
+        them, so no piece is a sliver). Sorted.
+    n : int
+        Number of vertices of the input.
+    """
+
+    faces: np.ndarray
+    parent: np.ndarray
+    side: np.ndarray
+    weights: np.ndarray
+    edges: np.ndarray
+    t: np.ndarray
+    on_cut: np.ndarray
+    n: int
+
+    def added(self, values: np.ndarray) -> np.ndarray:
+        """A per-vertex value at the added vertices, interpolated along their edges.
+
+        Parameters
+        ----------
+        values : (n, ...) float64
+            The value at the input's vertices (positions, colours as floats, levels).
+
+        Returns
+        -------
+        (j, ...) float64
+        """
+        values = np.asarray(values, dtype=np.float64)
+        t = self.t.reshape((-1,) + (1,) * (values.ndim - 1))
+        a, b = values[self.edges[:, 0]], values[self.edges[:, 1]]
+        return a + t * (b - a)
+
+    def corners(self, corner_values: np.ndarray) -> np.ndarray:
+        """A per-corner value of the faces given (texture coordinates), at the pieces' corners.
+
+        Parameters
+        ----------
+        corner_values : (m, 3, d) float64
+            The value at each corner of the faces given.
+
+        Returns
+        -------
+        (k, 3, d) float64
+        """
+        return self.weights @ np.asarray(corner_values, dtype=np.float64)[self.parent]
+
+
+def plane_levels(points: np.ndarray, point: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """Signed distance of ``points`` (k, 3) to the plane through ``point`` with unit ``normal``: (k,) float64."""
+    return (np.asarray(points, dtype=np.float64) - np.asarray(point, dtype=np.float64)) @ np.asarray(normal, float)
+
+
+def split_faces(points: np.ndarray, faces: np.ndarray, level: np.ndarray, *, snap: float = CUT_SNAP) -> FaceSplit:
+    """Cut triangles along the zero set of a level that is linear along edges.
+
+    Each edge whose ends have levels of opposite signs gets a vertex where the linear
+    interpolation of the level is 0 (on the plane, for a plane's signed distance), one per
+    edge whatever the number of faces on it. A vertex closer to the cut than ``snap`` times
+    the level's change along a crossing edge counts as on it (the edge is not cut there),
+    so every added vertex lies at least that fraction of its edge from both ends. A face is
+    then one piece (no cut edge), two (one cut edge: the cut runs through the opposite
+    corner) or three (two cut edges; the quadrilateral split along its shorter diagonal).
+
+    Faces sharing a cut edge must be cut together: give them all, or the mesh gets a crack.
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+        Vertex positions.
+    faces : (m, 3) int64
+        The faces to cut.
+    level : (n,) float64
+        The level of every vertex, e.g. :func:`plane_levels`.
+    snap : float
+        See above; 0 cuts every crossing edge however close to a vertex.
+
+    Returns
+    -------
+    FaceSplit
+
+    Raises
+    ------
+    ValueError
+        When the arrays do not fit together, a value is not finite, or ``snap`` is not in
+        ``[0, 0.5)``.
+    """
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    level = np.array(level, dtype=np.float64)  # a copy: vertices on the cut are set to 0
+    n = len(points)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"points must be (n, 3), got {points.shape}")
+    if level.shape != (n,):
+        raise ValueError(f"level must have one value per point, shape ({n},), got {level.shape}")
+    if len(faces) and (faces.min() < 0 or faces.max() >= n):
+        raise ValueError("faces name vertices outside points")
+    if not (np.isfinite(level).all() and np.isfinite(points).all()):
+        raise ValueError("points and level must be finite")
+    if not 0.0 <= snap < 0.5:
+        raise ValueError(f"snap must be in [0, 0.5), got {snap}")
+    tail, head = faces, np.roll(faces, -1, axis=1)  # corner c's outgoing edge
+    lt, lh = level[tail], level[head]
+    crossing = lt * lh < 0
+    # vertices within snap of a crossing edge's cut are put on it
+    frac = np.divide(lt, lt - lh, out=np.ones_like(lt), where=crossing)
+    near = np.zeros(n, bool)
+    near[tail[crossing & (frac < snap)]] = True
+    near[head[crossing & (frac > 1.0 - snap)]] = True
+    near[faces[level[faces] == 0.0]] = True
+    on_cut = np.flatnonzero(near)
+    level[on_cut] = 0.0
+    lt, lh = level[tail], level[head]
+    crossing = lt * lh < 0
+    a, b = np.minimum(tail, head)[crossing], np.maximum(tail, head)[crossing]
+    keys, which = np.unique(a * np.int64(n) + b, return_inverse=True)
+    edges = np.stack([keys // n, keys % n], axis=1)
+    la, lb = level[edges[:, 0]], level[edges[:, 1]]
+    t = la / (la - lb)
+    pa, pb = points[edges[:, 0]], points[edges[:, 1]]
+    added = pa + t[:, None] * (pb - pa)
+    cut = np.full(faces.shape, -1, np.int64)
+    cut[crossing] = n + which.ravel()
+    k = 3 * len(faces)
+    out_faces, out_parent = np.empty((k, 3), np.int64), np.empty(k, np.int64)
+    out_side, out_weights = np.empty(k, np.int8), np.empty((k, 3, 3))
+    count = split_pieces(faces, level, cut, points, added, out_faces, out_parent, out_side, out_weights)
+    if count < 0:
+        raise ValueError("a face has three edges crossing the cut: the level is not linear along its edges")
+    return FaceSplit(faces=out_faces[:count], parent=out_parent[:count], side=out_side[:count],
+                     weights=out_weights[:count], edges=edges, t=t, on_cut=on_cut, n=n)
