@@ -627,12 +627,71 @@ def test_following_a_coarse_copy_uncrosses_a_wrapped_boundary(monkeypatch):
     x = np.ascontiguousarray(fan.uv)
     assert sp.overlap(x) > 0 and (signed_areas(x, F) > 0).all()
     notes: list[str] = []
-    y = relax_module.follow(sp, x, notes)
+    y = relax_module.follow(sp, x, x, notes)
     assert y is not None and sp.overlap(y) == 0 and (signed_areas(y, F) > 0).all()
     assert _angle_sum(y, F) < 2 * np.pi and "cross itself" in notes[0]
     monkeypatch.setattr(relax_module, "COARSE", replace(relax_module.COARSE, follow_repair_rounds=0))
     notes.clear()
-    assert relax_module.follow(sp, x, notes) is None and "from the rollout" in notes[-1]
+    assert relax_module.follow(sp, x, x, notes) is None and "from the rollout" in notes[-1]
+
+
+def _grid(k=12):
+    """A ``k`` x ``k`` vertex grid of unit squares (two triangles each), flat in 3D: the rest
+    positions (n, 3), faces (m, 3) and its fold-free layout (n, 2)."""
+    i, j = np.meshgrid(np.arange(k), np.arange(k), indexing="xy")
+    x = np.stack([i.ravel(), j.ravel()], axis=1).astype(float)
+    a = (np.arange(k - 1)[None, :] + k * np.arange(k - 1)[:, None]).ravel()
+    F = np.concatenate([np.stack([a, a + 1, a + k + 1], axis=1), np.stack([a, a + k + 1, a + k], axis=1)])
+    return np.c_[x, np.zeros(len(x))], F, x
+
+
+def _folded_goal(x, k, c):
+    """``x`` turned, stretched and moved, with vertex ``c`` pulled 2.5 edges across its
+    neighbours (its fan folds), and the corner vertex 0 pulled below the bottom edge's far
+    end (the boundary crosses itself)."""
+    angle = 0.3
+    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    goal = x @ rot.T * 1.2 + (5.0, -2.0)
+    goal[c] += 2.5 * 1.2 * rot[:, 0]
+    goal[0] = goal[k - 2] - 0.5 * 1.2 * rot[:, 1] - 0.2 * 1.2 * rot[:, 0]
+    return np.ascontiguousarray(goal)
+
+
+def test_approach_stops_short_only_around_the_folds():
+    """The fold-free start moves to a followed layout that folds a vertex's fan and crosses
+    its boundary: no face flips or falls below its floor, the boundary does not cross, and
+    every vertex away from the fold and the crossing ends exactly where the followed layout
+    has it."""
+    from potflat.relax.start import approach
+
+    k = 12
+    V, F, x = _grid(k)
+    c = 6 * k + 5
+    goal = _folded_goal(x, k, c)
+    sp = spring_system(V, F, k=1.0, relative=True)
+    assert (signed_areas(goal, F) <= 0).any() and sp.overlap(goal) > 0
+    y, short = approach(sp, x, goal)
+    assert (signed_areas(y, F) > 0).all() and sp.overlap(y) == 0
+    away = (np.abs(x - x[c]).max(axis=1) > 4) & (np.abs(x - x[0]).max(axis=1) > k - 2)
+    assert np.array_equal(y[away], goal[away])
+    assert 0 < short <= (~away).sum()
+
+
+def test_following_keeps_the_copy_where_untangling_leaves_folds(monkeypatch):
+    """Where untangling the followed layout leaves folds, the full mesh still follows the
+    copy (fold-free, boundary uncrossed, a note says how many vertices stopped short) rather
+    than giving it up."""
+    from potflat.relax import start as relax_module
+
+    k = 12
+    V, F, x = _grid(k)
+    goal = _folded_goal(x, k, 6 * k + 5)
+    sp = spring_system(V, F, k=1.0, relative=True)
+    monkeypatch.setattr(relax_module, "untangle", lambda sp, x: (x, int((sp.signed_areas(x) <= 0).sum())))
+    notes: list[str] = []
+    y = relax_module.follow(sp, x, goal, notes)
+    assert y is not None and (signed_areas(y, F) > 0).all() and sp.overlap(y) == 0
+    assert "stop short" in notes[-1]
 
 
 def test_boundary_vertex_with_a_large_angle_sum_does_not_wrap(monkeypatch):
@@ -701,7 +760,7 @@ def test_a_given_up_coarse_copy_leaves_its_anisotropy_limit_behind(vessel, monke
     monkeypatch.setattr(multilevel, "COARSE", replace(multilevel.COARSE, min_vertices=1000))
     kept = relax(vessel, preset="standard")
     assert [lv.level for lv in kept.levels if lv.level.startswith("fine")] == ["fine"]  # the copy's limit
-    monkeypatch.setattr(multilevel, "follow", lambda sp, x, notes: notes.append("given up") or None)
+    monkeypatch.setattr(multilevel, "follow", lambda sp, x, target, notes: notes.append("given up") or None)
     given_up = relax(vessel, preset="standard")
     assert "given up" in given_up.notes and given_up.flipped == 0
     assert [lv.level for lv in given_up.levels] == ["fine, shape first", "fine"]

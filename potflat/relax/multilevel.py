@@ -86,15 +86,16 @@ class SofterStart:
 
 
 def softer_start(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, deadline: float,
-                 limit) -> SofterStart:
+                 limit, copies: bool = True) -> SofterStart:
     """The relaxation of the full mesh at the lower importance contrast
     :attr:`SOLVER.contrast_start <potflat.relax.parameters.SolverParameters.contrast_start>`,
     from which the higher one is reached (when :func:`contrast_staged` and no relaxed coarse
-    copy takes it)."""
+    copy takes it); without ``copies`` no coarse copy of its own (one was given up)."""
     low = SOLVER.contrast_start
     budget = budget_left(deadline)
     sub = _relax(flat, replace(options, importance_contrast=low, time_budget=budget, true_scale=False), progress,
-                 callback, summaries=False, fine_iterations=SOLVER.contrast_start_iterations, limit=limit)
+                 callback, summaries=False, fine_iterations=SOLVER.contrast_start_iterations, limit=limit,
+                 copies=copies)
     return SofterStart(uv=sub.flat.uv, contrast=low, result=replace(sub, flat=None))
 
 
@@ -256,11 +257,11 @@ def _checked_arrays(flat: FlatMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 def _plan(flat: FlatMesh, options: RelaxOptions, settings: RelaxPreset, progress: bool, callback,
-          deadline: float, limit) -> _Plan:
+          deadline: float, limit, copies: bool) -> _Plan:
     """Relax what comes before ``flat`` itself: a coarse copy (which nests), or else, with a
     painted zone at a high contrast, a first solve at a lower contrast; and find the area
     term's weight and the anisotropy limit (``limit``: one found by an earlier solve, or
-    ``"auto"``: from the settings)."""
+    ``"auto"``: from the settings); a coarse copy only with ``copies``."""
     fold_free = settings.solver != "dynamics"
     # a painted zone takes no area term: the plain surface takes the distortion already, and
     # the area term would trade the painting's shape for its area
@@ -271,7 +272,7 @@ def _plan(flat: FlatMesh, options: RelaxOptions, settings: RelaxPreset, progress
     # relaxes at the lower contrast first), so the full mesh is solved once; without a relaxed
     # copy (a small mesh, or one that could not be relaxed fold-free) the full mesh takes the
     # lower contrast's first solve itself
-    coarse = coarse_start(flat, options, settings, progress, callback, deadline, limit) if fold_free else None
+    coarse = coarse_start(flat, options, settings, progress, callback, deadline, limit) if fold_free and copies else None
     softer = None
     if fold_free and contrast_staged(flat, settings) and (coarse is None or coarse.result is None):
         softer = softer_start(flat, options, progress, callback, deadline, limit)
@@ -319,22 +320,13 @@ def _spring_system(V: np.ndarray, F: np.ndarray, start_uv: np.ndarray, flat: Fla
 
 
 def _start(sp: SpringSystem, x: np.ndarray, frame: _Frame, plan: _Plan, fold_free: bool,
-           notes: list[str]) -> tuple[np.ndarray, np.ndarray | None, CoarseStart | None, float]:
-    """The solve's start from the layout ``x`` (n, 2, solver frame): the relaxed coarse copy's
-    layout when the full mesh can follow it, untangled and fold-free (fold-free presets).
+           notes: list[str]) -> tuple[np.ndarray, np.ndarray | None, bool, float]:
+    """The solve's start from the layout ``x`` (n, 2, solver frame): untangled and fold-free
+    (fold-free presets), then where the relaxed coarse copy takes it when that can be made
+    fold-free (:func:`potflat.relax.start.follow`).
 
     Returns the start, the folded layout it replaces when it is Tutte's disc (else None),
-    the coarse copy still in use (None when following it failed) and the seconds spent
-    following it."""
-    coarse = plan.coarse
-    t_follow = time.perf_counter()
-    if coarse is not None:
-        followed = follow(sp, frame.into(coarse.uv), notes)
-        if followed is None:
-            coarse = None
-        else:  # only the copy's result is read from here on (peak memory: the solve comes next)
-            x, coarse = followed, replace(coarse, uv=None)
-    t_follow = time.perf_counter() - t_follow
+    whether it follows the copy and the seconds spent following it."""
     folded_start = None
     if fold_free:
         check_not_mirrored(sp, x)
@@ -348,10 +340,19 @@ def _start(sp: SpringSystem, x: np.ndarray, frame: _Frame, plan: _Plan, fold_fre
             else:
                 notes.append(f"untangled {n_bad} flipped or degenerate triangles of the rollout before relaxing")
         wrapped = sp.guard_boundary(x)
-        if wrapped:
-            notes.append(f"{wrapped} boundary vertices already wrap past 2 pi in the start; their angle "
-                         "sums are not guarded (the final boundary check still applies)")
-    return x, folded_start, coarse, t_follow
+    t_follow = time.perf_counter()
+    followed = None
+    if plan.coarse is not None:
+        followed = follow(sp, x, frame.into(plan.coarse.uv), notes)
+        if followed is not None:
+            x = followed
+            if fold_free:
+                wrapped = sp.guard_boundary(x)
+    t_follow = time.perf_counter() - t_follow
+    if fold_free and wrapped:
+        notes.append(f"{wrapped} boundary vertices already wrap past 2 pi in the start; their angle "
+                     "sums are not guarded (the final boundary check still applies)")
+    return x, folded_start, followed is not None, t_follow
 
 
 def _solve(sp: SpringSystem, x: np.ndarray, hier: GridHierarchy, frame: _Frame, V: np.ndarray,
@@ -390,13 +391,14 @@ def _solve(sp: SpringSystem, x: np.ndarray, hier: GridHierarchy, frame: _Frame, 
 
 def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, summaries: bool,
            before: DistortionSummary | None = None,
-           fine_iterations: int | None = None, limit="auto") -> RelaxResult:
+           fine_iterations: int | None = None, limit="auto", copies: bool = True) -> RelaxResult:
     """:func:`relax`; without ``summaries`` (a coarse copy, whose layout is all its caller
     reads) the result's distortion summaries are None and its stress is not computed;
     ``before``: the start's summary when the caller has it (with ``summaries`` only);
     ``fine_iterations``: when a coarse copy was relaxed, at most this many iterations on
     ``flat`` itself (a first solve that only smooths); ``limit``: the anisotropy limit found
-    by an earlier solve (``"auto"``: from the settings)."""
+    by an earlier solve (``"auto"``: from the settings); ``copies``: whether a coarse copy
+    may be relaxed first."""
     settings = options.resolved()
     V, uv, F = _checked_arrays(flat)
     n = len(V)
@@ -407,19 +409,34 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
         unit = mean_edge_length(V, F)
     if not unit > 0:
         raise InvalidInputError("all edges of the rollout have zero length; check the scan's units and faces")
-    plan = _plan(flat, options, settings, progress, callback, deadline, limit)
-    notes = plan.notes
+    plan = _plan(flat, options, settings, progress, callback, deadline, limit, copies)
     with numba_threads(options.threads):
-        start_uv = flat.uv if plan.softer is None else plan.softer.uv
-        sp, hier, frame, weight = _spring_system(V, F, start_uv, flat, settings, plan, unit)
-        x = frame.into(start_uv) * (settings.stretch if plan.softer is None else 1.0)
-        del start_uv
-        if plan.softer is not None:  # its layout is in x now (peak memory)
-            plan = replace(plan, softer=replace(plan.softer, uv=None))
-        x, folded_start, coarse, t_follow = _start(sp, x, frame, plan, fold_free, notes)
-        if plan.coarse is not None and coarse is None and plan.limit_of_copy:
-            # the copy's limit fits the copy's layout, not the rollout this solve starts from
-            plan = replace(plan, limit="auto", limit_of_copy=False)
+        while True:
+            notes = list(plan.notes)
+            start_uv = flat.uv if plan.softer is None else plan.softer.uv
+            sp, hier, frame, weight = _spring_system(V, F, start_uv, flat, settings, plan, unit)
+            x = frame.into(start_uv) * (settings.stretch if plan.softer is None else 1.0)
+            del start_uv
+            if plan.softer is not None:  # its layout is in x now (peak memory)
+                plan = replace(plan, softer=replace(plan.softer, uv=None))
+            x, folded_start, followed, t_follow = _start(sp, x, frame, plan, fold_free, notes)
+            if plan.coarse is None or followed:
+                break
+            # the copy is given up: every decision taken because of it is taken again (its
+            # anisotropy limit fits the copy's layout, not the rollout; the first solve at the
+            # lower importance contrast was the copy's)
+            plan = replace(plan, coarse=None, notes=notes)
+            if plan.limit_of_copy:
+                plan = replace(plan, limit="auto", limit_of_copy=False)
+            if not contrast_staged(flat, settings):
+                break
+            del sp, hier, x, folded_start
+            softer = softer_start(flat, options, progress, callback, deadline, plan.limit, copies=False)
+            found = softer.result.anisotropy_limit
+            plan = replace(plan, softer=softer, notes=softer.note(settings.importance_contrast) + notes,
+                           limit=found if plan.limit == "auto" and found is not None else plan.limit)
+        # only the copy's result is read from here on (peak memory: the solve comes next)
+        coarse = None if plan.coarse is None else replace(plan.coarse, uv=None)
         plan = replace(plan, coarse=None)  # (``coarse`` is what is left of it)
         # the setup's freed temporaries back to the system before the solve (the stage's peak;
         # 140 MiB at 3M vertices after a rollout in the same process, whose arrays fill the heap)

@@ -212,6 +212,11 @@ class CoarseParameters:
     every ``follow_repair_widen`` rounds, before the copy is given up (1M benchmark amphora:
     one crossing, fixed in one round; giving the copy up cost 1365 iterations, 168 s,
     instead of about 60).
+    Where untangling leaves the followed layout folded, the full mesh instead moves from its
+    start towards it in ``approach_steps`` equal shares and at most ``approach_rounds``
+    rounds, each vertex as far as keeps every face around it above ``approach_floor`` of its
+    smaller area (start or followed; ``approach_margin`` of the bound where one limits), so
+    that it stops short only around the folds (:func:`potflat.relax.start.approach`).
     """
 
     min_copy: int = 100
@@ -221,6 +226,10 @@ class CoarseParameters:
     cell_vertices: float = 16.0
     follow_repair_rounds: int = 30
     follow_repair_widen: int = 3
+    approach_steps: int = 30
+    approach_rounds: int = 100
+    approach_floor: float = 0.1
+    approach_margin: float = 0.9
 
 
 #: The energy's barriers and floors.

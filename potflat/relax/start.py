@@ -8,8 +8,10 @@ import numpy as np
 
 from potflat.errors import FoldedResultError, NotADiskError
 from potflat.mesh.boundary import crossing_pairs
-from potflat.mesh.embedding import repair_folds, tutte_embedding
+from potflat.mesh.embedding import repair_folds, signed_areas, tutte_embedding
+from potflat.mesh._kernels.topology import incident_faces
 from potflat.relax._kernels.springs import neighbour_means
+from potflat.relax._kernels.steps import vertex_max_steps
 from potflat.relax.energy import SpringSystem
 from potflat.relax.parameters import COARSE, ENERGY
 
@@ -132,24 +134,95 @@ def turned_like(x: np.ndarray, reference: np.ndarray, weight: np.ndarray) -> np.
     return np.ascontiguousarray((x - ca) @ rot.T + cb)
 
 
-def follow(sp: SpringSystem, x: np.ndarray, notes: list[str]) -> np.ndarray | None:
-    """The full mesh's layout ``x`` following a relaxed coarse copy, untangled and with its
-    boundary uncrossed (:func:`uncross_boundary`); None (with a note) when it cannot be made
-    fold-free."""
-    x, n_bad = untangle(sp, x)
+def follow(sp: SpringSystem, x: np.ndarray, target: np.ndarray, notes: list[str]) -> np.ndarray | None:
+    """The full mesh's layout following a relaxed coarse copy: ``target`` (n, 2), the copy's
+    piecewise-linear map of the fold-free start ``x`` (n, 2), untangled; where untangling
+    leaves it folded, approached from ``x`` as near as stays fold-free (:func:`approach`);
+    with its boundary uncrossed (:func:`uncross_boundary`). None (with a note) when it
+    cannot be made fold-free and uncrossed."""
+    goal, n_bad = untangle(sp, target)
     if n_bad:
         notes.append(f"untangled {n_bad} triangles flipped by following the coarse copy")
-    folded = bool((sp.signed_areas(x) <= 0).any())
-    pairs = np.zeros((0, 2), np.int64) if folded else crossing_pairs(x, sp.boundary_segments)
+    folded = int((sp.signed_areas(goal) <= 0).sum())
+    if folded:
+        goal, short = approach(sp, x, goal)
+        notes.append(f"untangling left {folded} triangles of the followed layout folded; {short} vertices around "
+                     "them stop short of it")
+        folded = int((sp.signed_areas(goal) <= 0).sum())
+    pairs = np.zeros((0, 2), np.int64) if folded else crossing_pairs(goal, sp.boundary_segments)
     if len(pairs):
-        x = uncross_boundary(sp, x, pairs)
+        goal = uncross_boundary(sp, goal, pairs)
         notes.append(f"moved the boundary back where following the coarse copy made it cross itself "
                      f"({len(pairs)} crossing pairs of boundary segments)")
-        folded = bool((sp.signed_areas(x) <= 0).any()) or sp.overlap(x) > 0
+        folded = bool((sp.signed_areas(goal) <= 0).any()) or sp.overlap(goal) > 0
     if folded:
         notes.append("following the coarse copy folded the full mesh; relaxed the full mesh from the rollout")
         return None
-    return x
+    return goal
+
+
+def approach(sp: SpringSystem, start: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, int]:
+    """A fold-free layout as near ``goal`` (n, 2, folded somewhere) as the fold-free ``start``
+    (n, 2) reaches: ``start``, carried by the orientation-preserving affine map that fits it
+    to ``goal`` best, moves towards ``goal`` in ``COARSE.approach_steps`` shares, each vertex
+    as far along its share as keeps every face around it above ``COARSE.approach_floor`` of
+    its smaller area (aligned start or goal); a vertex whose move still lets a face fall below
+    that, or lets the boundary cross itself (when it does not at the start), goes back for
+    the round. Every vertex whose faces allow it ends at ``goal``; the
+    others (around the folds) stop short. Returns the layout and how many stopped short."""
+    y = _aligned(start, goal)
+    faces = sp.faces
+    a_start, a_goal = sp.signed_areas(y), sp.signed_areas(goal)
+    floors = 2.0 * COARSE.approach_floor * np.where(a_goal > 0, np.minimum(a_start, a_goal), a_start)
+    del a_start, a_goal
+    seg = sp.boundary_segments
+    guard = len(crossing_pairs(y, seg, max_pairs=1)) == 0  # the boundary stays uncrossed if it starts so
+    active = np.arange(sp.n, dtype=np.int64)
+    touched = np.zeros(sp.m, bool)
+    for r in range(COARSE.approach_rounds):
+        share = 1.0 / max(COARSE.approach_steps - r, 1)
+        d = np.zeros_like(y)
+        d[active] = (goal[active] - y[active]) * share
+        t = np.empty(len(active))
+        vertex_max_steps(y, d, faces, sp.vf_ptr, sp.vf_tri, floors, active, t)
+        t[t < 1.0] *= COARSE.approach_margin
+        prev = y[active]
+        y[active] += t[:, None] * d[active]
+        row = np.full(sp.n, -1, np.int64)
+        row[active] = np.arange(len(active))
+        touched[incident_faces(active, sp.vf_ptr, sp.vf_tri)] = True
+        near = np.flatnonzero(touched)
+        touched[near] = False
+        while True:  # a face below its floor or crossing boundary segments: their moved vertices go back
+            low = near[2.0 * signed_areas(faces[near], y) < floors[near]]
+            back = faces[low].ravel()
+            if guard:
+                back = np.concatenate([back, seg[crossing_pairs(y, seg).ravel()].ravel()])
+            back = np.unique(back).astype(np.int64)
+            back = back[row[back] >= 0]
+            back = back[(y[back] != prev[row[back]]).any(axis=1)]
+            if not len(back):
+                break
+            y[back] = prev[row[back]]
+            t[row[back]] = 0.0
+            near = np.unique(incident_faces(back, sp.vf_ptr, sp.vf_tri))
+        done = t >= 1.0 if share >= 1.0 else np.zeros(len(active), bool)
+        y[active[done]] = goal[active[done]]
+        moved = bool((t > 0).any())
+        active = active[~done]
+        if not len(active) or (share >= 1.0 and not moved):
+            break
+    return y, len(active)
+
+
+def _aligned(x: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    """``x`` (n, 2) carried by the affine map that fits it to ``goal`` (n, 2) best (least
+    squares), or as it is when that map mirrors or flattens."""
+    mx, mg = x.mean(axis=0), goal.mean(axis=0)
+    a, *_ = np.linalg.lstsq(x - mx, goal - mg, rcond=None)
+    if not np.linalg.det(a) > 0:
+        return x.copy()
+    return np.ascontiguousarray((x - mx) @ a + mg)
 
 
 def uncross_boundary(sp: SpringSystem, x: np.ndarray, pairs: np.ndarray) -> np.ndarray:

@@ -86,4 +86,3 @@ def interpolate(points, cluster, uv_from, uv_to, faces, vf_ptr, vf_tri, out, ins
             uv_to[d, 0] - uv_from[d, 0])
         out[i, 1] = p1 + b0 * (uv_to[a, 1] - uv_from[a, 1]) + b1 * (uv_to[b, 1] - uv_from[b, 1]) + b2 * (
             uv_to[d, 1] - uv_from[d, 1])
-

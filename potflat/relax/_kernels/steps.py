@@ -205,3 +205,35 @@ def _positive_roots(c0, c1, c2):
     if lo > hi:
         lo, hi = hi, lo
     return lo, hi
+
+
+@parallel
+def vertex_max_steps(x, d, faces, vf_ptr, vf_tri, floors, verts, out):
+    """For each listed vertex, the largest ``t <= 1`` for which ``x + t d`` keeps every face
+    around it above its floor (all vertices moving along ``d`` together); 0 for a vertex with
+    a face at or below its floor that ``d`` does not grow.
+
+    Parameters
+    ----------
+    x, d : (n, 2) float64
+    faces : (m, 3) int32
+    vf_ptr, vf_tri
+        Incident faces of each vertex (CSR).
+    floors : (m,) float64
+        Each face's least signed area, doubled.
+    verts : (k,) int64
+    out : (k,) float64
+    """
+    for k in prange(verts.shape[0]):
+        i = verts[k]
+        best = 1.0
+        for p in range(vf_ptr[i], vf_ptr[i + 1]):
+            c0, c1, c2 = _area_polynomial(x, d, faces, vf_tri[p], 1.0)
+            c0 -= floors[vf_tri[p]]
+            if c0 <= 0.0:
+                if c1 < 0.0 or (c1 == 0.0 and c2 < 0.0):
+                    best = 0.0
+                continue
+            if not _no_root_up_to(c0, c1, c2, best):
+                best = min(best, _first_root(c0, c1, c2))
+        out[k] = best
