@@ -148,6 +148,10 @@ def follow(sp: SpringSystem, x: np.ndarray, target: np.ndarray, notes: list[str]
         goal, short = approach(sp, x, goal)
         notes.append(f"untangling left {folded} triangles of the followed layout folded; {short} vertices around "
                      "them stop short of it")
+        if short > COARSE.approach_most_short * sp.n:
+            notes.append(f"more than {100 * COARSE.approach_most_short:g}% of the vertices stop short: relaxed the "
+                         "full mesh from the rollout")
+            return None
         folded = int((sp.signed_areas(goal) <= 0).sum())
     pairs = np.zeros((0, 2), np.int64) if folded else crossing_pairs(goal, sp.boundary_segments)
     if len(pairs):
