@@ -56,8 +56,6 @@ SYNTHETIC_TEXTURE = 8192
 #: Target: a real scan's whole run at 1M vertices within this multiple of the synthetic vessel's.
 GOAL_RATIO = 1.5
 BLOCK = "real_scans"
-#: Relaxation notes every multilevel run gives, left out of the notes under the table.
-ROUTINE = ("started from a relaxed coarse copy",)
 #: The copy's settings: a cached copy made with other settings is made again.
 COPY_VERSION = 1
 
@@ -271,7 +269,7 @@ def ratios(rows: list[dict], size: int = 1_000_000) -> list[str]:
 
 
 def table(rows: list[dict], command: str) -> str:
-    """The block of docs/performance.md: one row per scan and size, then the ratios and notes."""
+    """The block of docs/performance.md: one row per scan and size, then the ratios."""
     lines = [f"`{command}` ({machine()}):", "",
              "| scan | vertices | result | rollout s | unroll s | untangle s | relax s | bake s | whole s (CPU s) "
              "| rollout / relax / CPU us per vertex | peak GB | iterations | flips | crossings | turning | zone "
@@ -289,8 +287,7 @@ def table(rows: list[dict], command: str) -> str:
             f"{_f(r['rollout_overlap'], 'd')} / {_f(r['crossings'], 'd')}",
             f"{_f(r['turning'][0])} / {_f(r['turning'][1])} ({_f(r['turning'][2])})", r["zone"],
             f"{_f(r['zone_err'][0])} / {_f(r['zone_err'][1])}", _f(r["in_image_pct"])]) + " |")
-    notes = [f"- {r['scan']} {r['vertices']:,}: {n}" for r in rows for n in r["notes"] if not n.startswith(ROUTINE)]
-    return "\n".join(lines + [""] + ratios(rows) + ([""] + notes if notes else []) + [""])
+    return "\n".join(lines + [""] + ratios(rows) + [""])
 
 
 def _size(text: str) -> str | int:
