@@ -36,6 +36,42 @@ def test_repair_folds_fixes_an_interior_fold_and_moves_nothing_far_away():
     assert repair_folds(F, flat.uv)[1:] == (0, 0)  # nothing to do on a clean layout
 
 
+def test_repair_folds_with_a_reference_carries_its_image_over_exactly():
+    """With a fold-free reference layout, a folded cluster at the border (boundary vertices
+    included) inside a ring that is a similarity image of the reference is refilled with that
+    image: mean value coordinates inside and similar faces along the border reproduce it (to
+    rounding), whatever the triangles' shapes; without the reference the border stays folded."""
+    flat = meshes.vessel_rollout(2000, seed=4)
+    F, ref = flat.mesh.faces, flat.uv
+    turn = 1.3 * np.array([[np.cos(0.7), np.sin(0.7)], [-np.sin(0.7), np.cos(0.7)]])
+    image = ref @ turn + np.array([5.0, -2.0])
+    loop = max(boundary_loops(F, len(ref)), key=len)
+    uv = image.copy()
+    for v in loop[len(loop) // 3:len(loop) // 3 + 3]:  # boundary vertices pushed in over their neighbours
+        nbr = np.unique(F[(F == v).any(axis=1)])
+        uv[v] += 4.0 * (image[nbr].mean(axis=0) - image[v])
+    assert (signed_areas(uv, F) <= 0).sum() >= 2
+    fixed, repaired, left = repair_folds(F, uv, reference=ref)
+    assert left == 0 and repaired >= 2
+    np.testing.assert_allclose(fixed, image, atol=1e-9 * np.ptp(image))
+    assert repair_folds(F, uv)[2] > 0  # boundary vertices fixed without a reference
+
+
+def test_repair_folds_with_a_reference_reproduces_an_affine_image_inside():
+    """Away from the border, mean value coordinates carry any affine image over exactly."""
+    flat = meshes.vessel_rollout(2000, seed=4)
+    F, ref = flat.mesh.faces, flat.uv
+    image = ref @ np.array([[1.3, 0.4], [-0.2, 0.7]]) + np.array([5.0, -2.0])  # shear: not a similarity
+    v = _interior_vertex(F, len(ref))
+    uv = image.copy()
+    nbr = np.unique(F[(F == v).any(axis=1)])
+    uv[v] += 3.0 * (image[nbr].mean(axis=0) - image[v]) + 4.0 * (image[nbr].max(axis=0) - image[nbr].min(axis=0))
+    assert (signed_areas(uv, F) <= 0).sum() >= 2
+    fixed, repaired, left = repair_folds(F, uv, reference=ref)
+    assert left == 0 and repaired >= 2
+    np.testing.assert_allclose(fixed, image, atol=1e-9 * np.ptp(image))
+
+
 def test_tutte_embedding_is_fold_free_with_holes_and_several_parts():
     flat = meshes.vessel_rollout(2000, seed=5)
     F = flat.mesh.faces

@@ -472,9 +472,9 @@ def test_line_search_never_accepts_an_overlapping_boundary(vessel, monkeypatch):
     real = relax_module.SpringSystem.overlap
     seen = []
 
-    def record(self, x):
+    def record(self, x, max_pairs=1000):
         seen.append(x.copy())
-        return real(self, x)
+        return real(self, x, max_pairs)
 
     monkeypatch.setattr(relax_module.SpringSystem, "overlap", record)
     free = relax(vessel, preset="standard")
@@ -483,9 +483,9 @@ def test_line_search_never_accepts_an_overlapping_boundary(vessel, monkeypatch):
     wall = start[v, 0] + 0.5 * (end[v, 0] - start[v, 0])
     assert end[v, 0] < wall - 0.1
 
-    def walled(self, x):
+    def walled(self, x, max_pairs=1000):
         seen.append(x.copy())
-        return 5 if x[v, 0] < wall else real(self, x)
+        return 5 if x[v, 0] < wall else real(self, x, max_pairs)
 
     seen.clear()
     monkeypatch.setattr(relax_module.SpringSystem, "overlap", walled)
@@ -677,6 +677,29 @@ def test_approach_stops_short_only_around_the_folds():
     assert 0 < short <= (~away).sum()
 
 
+def _no_repair(faces, uv, reference=None, max_rings=0):
+    return uv, 0, int((signed_areas(uv, faces) <= 0).sum())
+
+
+def test_following_re_embeds_the_folds_untangling_leaves(monkeypatch):
+    """Where untangling the followed layout leaves folds, each folded cluster is re-embedded
+    in the start's shape inside its surroundings: the full mesh follows the copy exactly away
+    from them, and no vertex stops short."""
+    from potflat.relax import start as relax_module
+
+    k = 12
+    V, F, x = _grid(k)
+    goal = _folded_goal(x, k, 6 * k + 5)
+    sp = spring_system(V, F, k=1.0, relative=True)
+    monkeypatch.setattr(relax_module, "untangle", lambda sp, x, rounds: (x, int((sp.signed_areas(x) <= 0).sum())))
+    notes: list[str] = []
+    y = relax_module.follow(sp, x, goal, notes)
+    assert y is not None and (signed_areas(y, F) > 0).all() and sp.overlap(y) == 0
+    assert "re-embedded" in notes[-1] and not any("stop short" in n for n in notes)
+    moved = np.flatnonzero((y != goal).any(axis=1))
+    assert 0 < len(moved) < 0.5 * len(x)
+
+
 def test_following_keeps_the_copy_where_untangling_leaves_folds(monkeypatch):
     """Where untangling the followed layout leaves folds, the full mesh still follows the
     copy (fold-free, boundary uncrossed, a note says how many vertices stopped short) rather
@@ -690,7 +713,8 @@ def test_following_keeps_the_copy_where_untangling_leaves_folds(monkeypatch):
     V, F, x = _grid(k)
     goal = _folded_goal(x, k, 6 * k + 5)
     sp = spring_system(V, F, k=1.0, relative=True)
-    monkeypatch.setattr(relax_module, "untangle", lambda sp, x: (x, int((sp.signed_areas(x) <= 0).sum())))
+    monkeypatch.setattr(relax_module, "untangle", lambda sp, x, rounds: (x, int((sp.signed_areas(x) <= 0).sum())))
+    monkeypatch.setattr(relax_module, "repair_folds", _no_repair)
     monkeypatch.setattr(relax_module, "COARSE", replace(relax_module.COARSE, approach_most_short=1.0))
     notes: list[str] = []
     y = relax_module.follow(sp, x, goal, notes)
@@ -709,7 +733,8 @@ def test_following_gives_the_copy_up_where_too_many_vertices_stop_short(monkeypa
     V, F, x = _grid(k)
     goal = _folded_goal(x, k, 6 * k + 5)
     sp = spring_system(V, F, k=1.0, relative=True)
-    monkeypatch.setattr(relax_module, "untangle", lambda sp, x: (x, int((sp.signed_areas(x) <= 0).sum())))
+    monkeypatch.setattr(relax_module, "untangle", lambda sp, x, rounds: (x, int((sp.signed_areas(x) <= 0).sum())))
+    monkeypatch.setattr(relax_module, "repair_folds", _no_repair)
     monkeypatch.setattr(relax_module, "COARSE", replace(relax_module.COARSE, approach_most_short=0.0))
     notes: list[str] = []
     assert relax_module.follow(sp, x, goal, notes) is None

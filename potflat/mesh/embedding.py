@@ -4,8 +4,9 @@ global Tutte embedding.
 A start layout with folded (flipped) triangles cannot be relaxed by a flip-free solver.
 :func:`repair_folds` re-embeds each cluster of flipped faces inside its fixed surroundings:
 the cluster's vertices, grown ring by ring, are placed at the harmonic (Tutte, uniform
-weights) interpolation of the ring around them, until no face around them is flipped. Where
-that fails, :func:`tutte_embedding` maps the whole mesh into a disc: the longest boundary
+weights) interpolation of the ring around them, or, given a fold-free layout the folded one
+derives from, in that layout's shape (mean value coordinates inside, similar faces along
+the mesh's boundary), until no face around them is flipped. Where that fails, :func:`tutte_embedding` maps the whole mesh into a disc: the longest boundary
 loop on a circle (by arc length), every other vertex the mean of its neighbours, holes closed
 by a virtual vertex each. By Tutte's theorem this has no flipped triangle on a disk-topology
 mesh whose graph is 3-connected (any triangulated disk without edges joining two boundary
@@ -57,26 +58,6 @@ def _adjacency(faces: np.ndarray, n: int):
     return a
 
 
-def _harmonic(adj, uv: np.ndarray, free: np.ndarray) -> np.ndarray:
-    """``uv`` with the ``free`` vertices moved to the uniform-weight harmonic interpolation
-    of the others (each free vertex the mean of its neighbours)."""
-    import scipy.sparse as sp
-    from scipy.sparse.linalg import spsolve
-
-    idx = np.flatnonzero(free)
-    out = uv.copy()
-    if not len(idx):
-        return out
-    deg = np.asarray(adj.sum(axis=1)).ravel()
-    a_ff = adj[idx][:, idx]
-    a_fb = adj[idx][:, ~free]
-    lap = sp.diags(deg[idx]) - a_ff
-    rhs = a_fb @ uv[~free]
-    sol = spsolve(lap.tocsc(), rhs)
-    out[idx] = np.asarray(sol).reshape(-1, 2)
-    return out
-
-
 def boundary_loops(faces: np.ndarray, n: int) -> list[np.ndarray]:
     """The boundary loops of a triangle mesh, each as vertex indices in the order of its faces'
     edges (counter-clockwise around the surface; the outer loop of a disk runs with the
@@ -84,7 +65,9 @@ def boundary_loops(faces: np.ndarray, n: int) -> list[np.ndarray]:
     he = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     key = he[:, 0].astype(np.int64) * n + he[:, 1]
     rev = he[:, 1].astype(np.int64) * n + he[:, 0]
-    border = he[~np.isin(key, rev)]
+    present = np.sort(key)  # (sorted and searched: np.isin hashes, 3 s at 3M half-edges)
+    at = np.minimum(np.searchsorted(present, rev), len(present) - 1)
+    border = he[present[at] != rev]
     nxt: dict[int, int] = {}
     for a, b in border:
         nxt.setdefault(int(a), int(b))
@@ -102,19 +85,31 @@ def boundary_loops(faces: np.ndarray, n: int) -> list[np.ndarray]:
     return loops
 
 
-def repair_folds(faces: np.ndarray, uv: np.ndarray, *, max_rings: int = REPAIR_MAX_RINGS
-                 ) -> tuple[np.ndarray, int, int]:
+def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | None = None,
+                 max_rings: int = REPAIR_MAX_RINGS) -> tuple[np.ndarray, int, int]:
     """Re-embed every cluster of flipped faces inside its fixed surroundings.
 
     Each cluster (flipped faces sharing vertices) frees its vertices and one more ring at a
-    time, up to ``max_rings``, and places them harmonically inside the fixed rest; a cluster
-    is done when no face touching a freed vertex is flipped. Mesh-boundary vertices stay
-    fixed (their ring would be open).
+    time, up to ``max_rings``, and places them inside the fixed rest; a cluster is done when
+    no face touching a freed vertex is flipped.
+
+    Without ``reference`` the freed vertices are the harmonic interpolation (Tutte, uniform
+    weights) of the ring around them, and mesh-boundary vertices stay fixed (their ring would
+    be open). With a fold-free ``reference`` layout of the same mesh (the layout ``uv``
+    derives from), the freed vertices keep its shape: an inner vertex is the mean of its
+    neighbours by their mean value coordinates in ``reference`` (Floater's: positive on a
+    fold-free layout, and exact for any affine image of it, whatever the triangles' shapes),
+    and mesh-boundary vertices are freed too, each the mean over its faces of where the face
+    similar to its ``reference`` shape built on the other two corners puts it (weighted by
+    the square of that opposite edge's length), all solved at once. A cluster whose ring is
+    a similarity image of ``reference`` is refilled with that image.
 
     Parameters
     ----------
     faces : (m, 3) int64
     uv : (n, 2) float64
+    reference : (n, 2) float64, optional
+        A fold-free layout of the mesh.
     max_rings : int
 
     Returns
@@ -126,7 +121,10 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, max_rings: int = REPAIR_M
     left : int
         Faces still flipped (0: fold-free).
     """
+    import scipy.sparse as sp
     import scipy.sparse.csgraph as csg
+
+    from potflat.mesh._kernels.topology import incident_faces, vertex_faces
 
     n = len(uv)
     uv = np.ascontiguousarray(uv, dtype=np.float64).copy()
@@ -134,30 +132,110 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, max_rings: int = REPAIR_M
     start = int(flipped.sum())
     if not start:
         return uv, 0, 0
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
     adj = _adjacency(faces, n)
     on_border = np.zeros(n, bool)
     for loop in boundary_loops(faces, n):
         on_border[loop] = True
+    vf_ptr, vf_tri = vertex_faces(n, faces)
     # clusters: flipped faces joined through shared vertices
-    bad = faces[flipped]
     touched = np.zeros(n, bool)
-    touched[bad.ravel()] = True
-    sub = adj[touched][:, touched]
-    _, label = csg.connected_components(sub, directed=False)
+    touched[faces[flipped].ravel()] = True
     verts = np.flatnonzero(touched)
+    _, label = csg.connected_components(adj[verts][:, verts], directed=False)
     for c in range(label.max() + 1 if len(label) else 0):
-        region = np.zeros(n, bool)
-        region[verts[label == c]] = True
+        region = verts[label == c]
         for _ in range(max_rings):
-            free = region & ~on_border
-            trial = _harmonic(adj, uv, free)
-            near = region[faces].any(axis=1)
+            if reference is None:
+                free, rows = region[~on_border[region]], adj[region[~on_border[region]]]
+            else:
+                inner, border = region[~on_border[region]], region[on_border[region]]
+                free = np.concatenate([inner, border])
+                rows = sp.vstack([_mean_value_rows(inner, reference, faces, vf_ptr, vf_tri, n),
+                                  _similar_rows(border, reference, faces, vf_ptr, vf_tri, n)]).tocsr()
+            trial = _solve_rows(uv, free, rows)
+            near = np.unique(incident_faces(region, vf_ptr, vf_tri))
             if np.all(signed_areas(faces[near], trial) > 0):
                 uv = trial
                 break
-            region = region | (adj @ region.astype(np.float64) > 0)
+            region = np.union1d(region, adj[region].indices)
     left = int((signed_areas(faces, uv) <= 0).sum())
     return uv, start - left, left
+
+
+def _solve_rows(uv: np.ndarray, free: np.ndarray, rows) -> np.ndarray:
+    """``uv`` (n, 2) with each ``free`` (k,) vertex the combination of the others given by its
+    row of ``rows`` ((k, n) sparse, real or complex: a complex weight turns and scales the
+    neighbour's position, as points of the complex plane), rows normalised to sum 1, solved
+    for all free vertices at once."""
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import spsolve
+
+    out = uv.copy()
+    if not len(free):
+        return out
+    rows = sp.diags(1.0 / np.asarray(rows.sum(axis=1)).ravel()) @ rows
+    col = np.full(len(uv), -1, np.int64)
+    col[free] = np.arange(len(free))
+    w = rows.tocoo()
+    inner = col[w.col] >= 0
+    k = len(free)
+    lap = sp.eye(k, dtype=w.data.dtype) - sp.coo_matrix((w.data[inner], (w.row[inner], col[w.col[inner]])), shape=(k, k))
+    fixed = sp.coo_matrix((w.data[~inner], (w.row[~inner], w.col[~inner])), shape=(k, len(uv))).tocsr()
+    if np.iscomplexobj(w.data):
+        z = spsolve(lap.tocsc(), fixed @ (uv[:, 0] + 1j * uv[:, 1]))
+        out[free] = np.stack([z.real, z.imag], axis=1)
+    else:
+        out[free] = np.asarray(spsolve(lap.tocsc(), fixed @ uv)).reshape(-1, 2)
+    return out
+
+
+def _similar_rows(verts: np.ndarray, reference: np.ndarray, faces: np.ndarray, vf_ptr: np.ndarray,
+                  vf_tri: np.ndarray, n: int):
+    """For each of ``verts`` (k,), over its faces ``(v, a, b)``: ``v = a + r (b - a)`` with
+    the complex ratio ``r = (x_v - x_a) / (x_b - x_a)`` of ``reference`` (the face similar to
+    its reference shape), weighted by ``|x_b - x_a|^2``: a (k, n) complex sparse matrix, rows
+    not normalised."""
+    import scipy.sparse as sp
+
+    from potflat.mesh._kernels.topology import incident_faces
+
+    counts = vf_ptr[verts + 1] - vf_ptr[verts]
+    row = np.repeat(np.arange(len(verts)), counts)
+    tri = faces[incident_faces(verts, vf_ptr, vf_tri)]
+    corner = np.argmax(tri == verts[row, None], axis=1)
+    pick = np.arange(len(tri))
+    v, a, b = tri[pick, corner], tri[pick, (corner + 1) % 3], tri[pick, (corner + 2) % 3]
+    z = reference[:, 0] + 1j * reference[:, 1]
+    base = z[b] - z[a]
+    weight = np.abs(base) ** 2
+    ratio = (z[v] - z[a]) / np.where(weight > 0, base, 1.0)
+    weight = np.where(weight > 0, weight, 0.0)
+    return sp.coo_matrix((np.concatenate([weight * (1.0 - ratio), weight * ratio]),
+                          (np.concatenate([row, row]), np.concatenate([a, b]))), shape=(len(verts), n)).tocsr()
+
+
+def _mean_value_rows(verts: np.ndarray, reference: np.ndarray, faces: np.ndarray, vf_ptr: np.ndarray,
+                     vf_tri: np.ndarray, n: int):
+    """Mean value coordinates of each of ``verts`` (k,) in ``reference`` (n, 2): its one-ring
+    neighbours' weights ``(tan(a/2) + tan(b/2)) / |x_v - x_u|``, ``a, b`` its angles at ``v``
+    in the two faces on edge ``vu``; a (k, n) sparse matrix, rows not normalised."""
+    import scipy.sparse as sp
+
+    from potflat.mesh._kernels.topology import incident_faces
+
+    counts = vf_ptr[verts + 1] - vf_ptr[verts]
+    row = np.repeat(np.arange(len(verts)), counts)
+    tri = faces[incident_faces(verts, vf_ptr, vf_tri)]
+    corner = np.argmax(tri == verts[row, None], axis=1)
+    pick = np.arange(len(tri))
+    v, b, c = tri[pick, corner], tri[pick, (corner + 1) % 3], tri[pick, (corner + 2) % 3]
+    eb, ec = reference[b] - reference[v], reference[c] - reference[v]
+    lb, lc = np.linalg.norm(eb, axis=1), np.linalg.norm(ec, axis=1)
+    cos = np.clip((eb * ec).sum(axis=1) / np.maximum(lb * lc, 1e-300), -1.0, 1.0)
+    half = np.tan(0.5 * np.arccos(cos))
+    w = np.concatenate([half / np.maximum(lb, 1e-300), half / np.maximum(lc, 1e-300)])
+    return sp.coo_matrix((w, (np.concatenate([row, row]), np.concatenate([b, c]))), shape=(len(verts), n)).tocsr()
 
 
 def _disc(faces: np.ndarray, n: int, scale: float) -> np.ndarray | None:
@@ -180,7 +258,8 @@ def _disc(faces: np.ndarray, n: int, scale: float) -> np.ndarray | None:
     uv[outer, 1] = radius * np.sin(angle)
     free = np.ones(total, bool)
     free[outer] = False
-    return _harmonic(_adjacency(all_faces, total), uv, free)[:n]
+    inner = np.flatnonzero(free)
+    return _solve_rows(uv, inner, _adjacency(all_faces, total)[inner])[:n]
 
 
 def tutte_embedding(faces: np.ndarray, n: int, scale: float = 1.0) -> np.ndarray | None:

@@ -254,9 +254,9 @@ class SpringSystem:
         signed_areas_2d(np.ascontiguousarray(x, dtype=np.float64), self.faces, out)
         return out
 
-    def overlap(self, x: np.ndarray) -> int:
-        """Crossing pairs of boundary segments at ``x`` (counting stops at 1000)."""
-        return len(crossing_pairs(x, self.boundary_segments, max_pairs=1000))
+    def overlap(self, x: np.ndarray, max_pairs: int = 1000) -> int:
+        """Crossing pairs of boundary segments at ``x`` (counting stops at ``max_pairs``)."""
+        return len(crossing_pairs(x, self.boundary_segments, max_pairs=max_pairs))
 
     def laplacian_bound(self) -> float:
         """An upper bound of the spring graph Laplacian's largest eigenvalue from the actual

@@ -177,12 +177,14 @@ class LBFGS:
             for _ in range(50):
                 kl.combine(self.trial.reshape(-1), 1.0, self.x.reshape(-1), t, self.q, _NO_VECTOR, 1.0,
                            _NO_VECTOR, self._part)
+                if self.guard_overlap and sp.overlap(self.trial, max_pairs=1):  # (first: far cheaper than the energy)
+                    self.contacts += 1
+                    t *= 0.5
+                    continue
                 En, _es, gn = sp.evaluate(self.trial, out=trial_grad)
                 if math.isfinite(En) and En <= self.E + SOLVER.armijo * t * gd:
-                    if not self.guard_overlap or sp.overlap(self.trial) == 0:
-                        accepted = True
-                        break
-                    self.contacts += 1
+                    accepted = True
+                    break
                 t *= 0.5
             if not accepted or t == 0.0:
                 converged = True  # no descent possible at machine precision

@@ -212,7 +212,15 @@ class CoarseParameters:
     every ``follow_repair_widen`` rounds, before the copy is given up (1M benchmark amphora:
     one crossing, fixed in one round; giving the copy up cost 1365 iterations, 168 s,
     instead of about 60).
-    Where untangling leaves the followed layout folded, the full mesh instead moves from its
+    Following untangles for ``follow_untangle_rounds`` only, then re-embeds each cluster
+    left folded in the start's shape inside its surroundings, grown by up to
+    ``follow_reembed_rings`` rings (:func:`potflat.mesh.embedding.repair_folds`).
+    Untangling's ever wider averaging bends the boundary out of shape around a fold it
+    cannot undo (at 1M the dragon jar's folds went from 242 to 16 in 20 rounds, then back up
+    to 122 after 200); the folds it leaves are mostly strips of slivers along the boundary
+    (subdivided slivers of the scan), which 12 rings did not reach across on the goblet
+    and the plastic vase and 40 did.
+    Where that still leaves the followed layout folded, the full mesh instead moves from its
     start towards it in ``approach_steps`` equal shares and at most ``approach_rounds``
     rounds, each vertex as far as keeps every face around it above ``approach_floor`` of its
     smaller area (start or followed; ``approach_margin`` of the bound where one limits), so
@@ -230,6 +238,8 @@ class CoarseParameters:
     cell_vertices: float = 16.0
     follow_repair_rounds: int = 30
     follow_repair_widen: int = 3
+    follow_untangle_rounds: int = 20
+    follow_reembed_rings: int = 40
     approach_steps: int = 30
     approach_rounds: int = 100
     approach_floor: float = 0.1

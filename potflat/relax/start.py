@@ -136,14 +136,21 @@ def turned_like(x: np.ndarray, reference: np.ndarray, weight: np.ndarray) -> np.
 
 def follow(sp: SpringSystem, x: np.ndarray, target: np.ndarray, notes: list[str]) -> np.ndarray | None:
     """The full mesh's layout following a relaxed coarse copy: ``target`` (n, 2), the copy's
-    piecewise-linear map of the fold-free start ``x`` (n, 2), untangled; where untangling
-    leaves it folded, approached from ``x`` as near as stays fold-free (:func:`approach`);
-    with its boundary uncrossed (:func:`uncross_boundary`). None (with a note) when it
-    cannot be made fold-free and uncrossed."""
-    goal, n_bad = untangle(sp, target)
+    piecewise-linear map of the fold-free start ``x`` (n, 2), untangled for
+    ``COARSE.follow_untangle_rounds``; each cluster that untangling leaves folded re-embedded
+    in ``x``'s shape inside its surroundings (:func:`potflat.mesh.embedding.repair_folds`
+    with ``x`` as the reference, at most ``COARSE.follow_reembed_rings`` rings); where that fails, approached from ``x`` as near as stays
+    fold-free (:func:`approach`); with its boundary uncrossed (:func:`uncross_boundary`).
+    None (with a note) when it cannot be made fold-free and uncrossed."""
+    goal, n_bad = untangle(sp, target, rounds=COARSE.follow_untangle_rounds)
     if n_bad:
         notes.append(f"untangled {n_bad} triangles flipped by following the coarse copy")
     folded = int((sp.signed_areas(goal) <= 0).sum())
+    if folded:
+        goal, repaired, folded = repair_folds(sp.faces.astype(np.int64), goal, reference=x,
+                                              max_rings=COARSE.follow_reembed_rings)
+        notes.append(f"re-embedded {repaired} triangles that untangling left folded inside their surroundings, "
+                     "in the start's shape")
     if folded:
         goal, short = approach(sp, x, goal)
         notes.append(f"untangling left {folded} triangles of the followed layout folded; {short} vertices around "
@@ -197,14 +204,11 @@ def approach(sp: SpringSystem, start: np.ndarray, goal: np.ndarray) -> tuple[np.
         touched[incident_faces(active, sp.vf_ptr, sp.vf_tri)] = True
         near = np.flatnonzero(touched)
         touched[near] = False
-        while True:  # a face below its floor or crossing boundary segments: their moved vertices go back
+        while True:  # a face below its floor, else crossing boundary segments: their moved vertices go back
             low = near[2.0 * signed_areas(faces[near], y) < floors[near]]
-            back = faces[low].ravel()
-            if guard:
-                back = np.concatenate([back, seg[crossing_pairs(y, seg).ravel()].ravel()])
-            back = np.unique(back).astype(np.int64)
-            back = back[row[back] >= 0]
-            back = back[(y[back] != prev[row[back]]).any(axis=1)]
+            back = _moved(faces[low].ravel(), row, y, prev)
+            if guard and not len(back):  # (the crossing test looks at the whole boundary: once the faces hold)
+                back = _moved(seg[crossing_pairs(y, seg).ravel()].ravel(), row, y, prev)
             if not len(back):
                 break
             y[back] = prev[row[back]]
@@ -217,6 +221,14 @@ def approach(sp: SpringSystem, start: np.ndarray, goal: np.ndarray) -> tuple[np.
         if not len(active) or (share >= 1.0 and not moved):
             break
     return y, len(active)
+
+
+def _moved(v: np.ndarray, row: np.ndarray, y: np.ndarray, prev: np.ndarray) -> np.ndarray:
+    """The vertices among ``v`` that are moving (``row`` (n,) their row in ``prev``, -1: not)
+    and are away from their position ``prev`` of the round's start."""
+    v = np.unique(v).astype(np.int64)
+    v = v[row[v] >= 0]
+    return v[(y[v] != prev[row[v]]).any(axis=1)]
 
 
 def _aligned(x: np.ndarray, goal: np.ndarray) -> np.ndarray:
