@@ -140,8 +140,9 @@ def coarse_start(flat: FlatMesh, options: RelaxOptions, settings: RelaxPreset, p
             importance = np.bincount(simple.cluster, flat.importance, len(simple.vertices)) / np.maximum(count, 1)
         sub = _relax(FlatMesh(Mesh(simple.vertices, simple.faces, units=flat.mesh.units), simple.uv,
                               importance=importance),
-                     replace(options, simplify_mm=0.0, time_budget=budget, true_scale=False), progress, tagged,
-                     summaries=False, limit=limit)
+                     replace(options, simplify_mm=0.0, time_budget=budget, true_scale=False,
+                             tol=settings.tol if final else settings.tol * COARSE.start_tol_factor),
+                     progress, tagged, summaries=False, limit=limit)
     except FoldedResultError as exc:
         return CoarseStart(result=None, uv=None, final=False, notes=[
             f"the {len(simple.vertices)}-vertex coarse copy could not be relaxed fold-free ({exc}); "

@@ -212,6 +212,11 @@ class CoarseParameters:
     every ``follow_repair_widen`` rounds, before the copy is given up (1M benchmark amphora:
     one crossing, fixed in one round; giving the copy up cost 1365 iterations, 168 s,
     instead of about 60).
+    A copy the full mesh starts from is solved to ``start_tol_factor`` times the
+    tolerance (its iterations are cheap; stopped at the full tolerance the goblet's 1M copy
+    kept 42 faces squeezed below 1/20 of their area, which the full mesh then kept: 0.1 % of
+    the surface at anisotropy above 20; at a tenth, the 1M relaxations took 1-2 s less on
+    the synthetic vessel and the colonoware pot, 10 s less on the sea vase).
     Following untangles for ``follow_untangle_rounds`` only, then re-embeds each cluster
     left folded in the start's shape inside its surroundings, grown by up to
     ``follow_reembed_rings`` rings (:func:`potflat.mesh.embedding.repair_folds`).
@@ -232,6 +237,7 @@ class CoarseParameters:
     """
 
     min_copy: int = 100
+    start_tol_factor: float = 0.1
     max_fraction: float = 1.0 / 3.0
     min_coverage: float = 0.95
     min_vertices: int = 20_000
