@@ -86,7 +86,7 @@ def boundary_loops(faces: np.ndarray, n: int) -> list[np.ndarray]:
 
 
 def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | None = None,
-                 floor: np.ndarray | None = None, max_rings: int = REPAIR_MAX_RINGS) -> tuple[np.ndarray, int, int]:
+                 max_rings: int = REPAIR_MAX_RINGS) -> tuple[np.ndarray, int, int]:
     """Re-embed every cluster of flipped faces inside its fixed surroundings.
 
     Each cluster (flipped faces sharing vertices) frees its vertices and one more ring at a
@@ -110,9 +110,6 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
     uv : (n, 2) float64
     reference : (n, 2) float64, optional
         A fold-free layout of the mesh.
-    floor : (m,) float64, optional
-        A face counts as folded when its signed area is at most its floor (default 0: when
-        flipped or degenerate); a face squeezed nearly flat is as bad a start as a flipped one.
     max_rings : int
 
     Returns
@@ -120,9 +117,9 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
     uv : (n, 2) float64
         The repaired layout.
     repaired : int
-        Folded faces at the start that are no longer folded.
+        Flipped faces at the start that are no longer flipped.
     left : int
-        Faces still folded (0: none).
+        Faces still flipped (0: fold-free).
     """
     import scipy.sparse as sp
     import scipy.sparse.csgraph as csg
@@ -131,8 +128,7 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
 
     n = len(uv)
     uv = np.ascontiguousarray(uv, dtype=np.float64).copy()
-    floor = np.zeros(len(faces)) if floor is None else floor
-    flipped = signed_areas(faces, uv) <= floor
+    flipped = signed_areas(faces, uv) <= 0
     start = int(flipped.sum())
     if not start:
         return uv, 0, 0
@@ -159,11 +155,11 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
                                   _similar_rows(border, reference, faces, vf_ptr, vf_tri, n)]).tocsr()
             trial = _solve_rows(uv, free, rows)
             near = np.unique(incident_faces(region, vf_ptr, vf_tri))
-            if np.all(signed_areas(faces[near], trial) > floor[near]):
+            if np.all(signed_areas(faces[near], trial) > 0):
                 uv = trial
                 break
             region = np.union1d(region, adj[region].indices)
-    left = int((signed_areas(faces, uv) <= floor).sum())
+    left = int((signed_areas(faces, uv) <= 0).sum())
     return uv, start - left, left
 
 
