@@ -112,3 +112,14 @@ def test_the_colonoware_pots_inside_is_cut_into_a_disk_and_relaxes(real_scans):
     assert res.disk_cut_area < 0.01 * face_areas(res.flat.mesh.vertices, res.flat.mesh.faces).sum()
     out = relax(res.flat)
     assert out.flipped == 0 and out.boundary_overlap == 0
+
+
+def test_vertices_per_piece_counts_a_vertex_shared_by_two_pieces_in_both():
+    """Each piece's distinct vertices: by scattering when every vertex lies in one piece, by
+    sorting when cuts left one in two (a bowtie: two triangles meeting at vertex 2)."""
+    from potflat.rollout.topology import _vertices_per_piece
+
+    apart = np.array([[0, 1, 2], [3, 4, 5], [3, 5, 6]])
+    np.testing.assert_array_equal(_vertices_per_piece(apart, np.repeat([0, 1, 1], 3), 7, 2), [3, 4])
+    bowtie = np.array([[0, 1, 2], [2, 3, 4]])
+    np.testing.assert_array_equal(_vertices_per_piece(bowtie, np.repeat([0, 1], 3), 5, 2), [3, 3])

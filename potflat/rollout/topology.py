@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components, dijkstra, minimum_spanning_tree
+from scipy.sparse.csgraph import dijkstra, minimum_spanning_tree
 
 from potflat.mesh._kernels.topology import edge_table, union_find
 from potflat.rollout.walls import FaceGraph, unique_ints
@@ -167,6 +167,18 @@ def _handle_cycles(faces: np.ndarray, vertices: np.ndarray, base: int) -> list[t
     return sorted(cycles, key=lambda c: c[0])
 
 
+def _vertices_per_piece(faces: np.ndarray, corner_piece: np.ndarray, n: int, k: int) -> np.ndarray:
+    """How many distinct vertices each of ``k`` pieces has, from the piece of every corner of
+    ``faces`` (m, 3) (``corner_piece`` (3 m,)): a vertex lies in one piece (its faces' fans
+    are split) unless cuts left it in several, then counted by sorting (piece, vertex) keys."""
+    corners = faces.ravel()
+    owner = np.full(n, -1, np.int64)
+    owner[corners] = corner_piece
+    if np.array_equal(owner[corners], corner_piece):  # (no (3 m,) keys sorted: 3M vertices, 0.3 GB less)
+        return np.bincount(owner[owner >= 0], minlength=k)
+    return np.bincount(unique_ints(corner_piece * n + corners) // n, minlength=k)
+
+
 def disk_cut(faces: np.ndarray, vertices: np.ndarray, offset: np.ndarray | None = None) -> DiskCut:
     """Faces to leave out of a development so that every piece is a disk with holes.
 
@@ -193,18 +205,19 @@ def disk_cut(faces: np.ndarray, vertices: np.ndarray, offset: np.ndarray | None 
     for _ in range(MAX_CUTS):
         idx = np.flatnonzero(~leave)
         sub = faces[idx]
-        edge_of, edges, count, _ = edge_table(sub, n)
+        table = edge_table(sub, n)
+        edge_of, edges, count, _ = table
         extra = _nonmanifold_extra(sub, vertices, edge_of, edges, count)
         if extra.any():
             nonmanifold += int(np.count_nonzero(count >= 3))
             leave[idx[extra]] = True
             continue
-        piece = FaceGraph(sub).components()
+        piece = FaceGraph(sub, table).components()  # (the graph and its pairs go at once: peak memory)
+        del table
         k = int(piece.max()) + 1 if len(piece) else 0
         # Euler characteristic and boundary loops of every piece
         corner_piece = np.repeat(piece, 3)
-        vert_key = unique_ints(corner_piece * n + sub.ravel())
-        n_vert = np.bincount(vert_key // n, minlength=k)
+        n_vert = _vertices_per_piece(sub, corner_piece, n, k)
         edge_piece = np.empty(len(edges), np.int64)
         edge_piece[edge_of] = corner_piece
         n_edge = np.bincount(edge_piece, minlength=k)

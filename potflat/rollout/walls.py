@@ -152,11 +152,15 @@ class FaceGraph:
     Parameters
     ----------
     faces : (m, 3) int
+    table : tuple, optional
+        The faces' :attr:`edge_table` when the caller has it (not built a second time).
     """
 
-    def __init__(self, faces: np.ndarray) -> None:
+    def __init__(self, faces: np.ndarray, table: tuple | None = None) -> None:
         self.m = len(faces)
         self._faces = faces
+        if table is not None:
+            self.__dict__["edge_table"] = table
 
     @cached_property
     def edge_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
