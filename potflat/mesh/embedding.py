@@ -6,9 +6,10 @@ A start layout with folded (flipped) triangles cannot be relaxed by a flip-free 
 the cluster's vertices, grown ring by ring, are placed at the harmonic (Tutte, uniform
 weights) interpolation of the ring around them, or, given a fold-free layout the folded one
 derives from, in that layout's shape (mean value coordinates inside, similar faces along
-the mesh's boundary), until no face around them is flipped. Where that fails, :func:`tutte_embedding` maps the whole mesh into a disc: the longest boundary
-loop on a circle (by arc length), every other vertex the mean of its neighbours, holes closed
-by a virtual vertex each. By Tutte's theorem this has no flipped triangle on a disk-topology
+the mesh's boundary), until no face around them is flipped. Where that fails,
+:func:`tutte_embedding` maps the whole mesh into a disc: the longest boundary loop on a
+circle (by arc length), every other vertex the mean of its neighbours, holes closed by a
+virtual vertex each. By Tutte's theorem this has no flipped triangle on a disk-topology
 mesh whose graph is 3-connected (any triangulated disk without edges joining two boundary
 vertices across the interior in a degenerate way; measured, not assumed: the caller checks).
 """
@@ -20,6 +21,7 @@ import numpy as np
 
 from potflat.mesh.distortion import bounds
 from potflat.mesh._kernels.geometry import signed_areas_2d as face_areas
+from potflat.mesh._kernels.topology import incident_faces, vertex_faces
 
 #: Rings by which a folded cluster is grown at most before giving up on local repair.
 REPAIR_MAX_RINGS = 12
@@ -124,8 +126,6 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
     import scipy.sparse as sp
     import scipy.sparse.csgraph as csg
 
-    from potflat.mesh._kernels.topology import incident_faces, vertex_faces
-
     n = len(uv)
     uv = np.ascontiguousarray(uv, dtype=np.float64).copy()
     flipped = signed_areas(faces, uv) <= 0
@@ -180,7 +180,8 @@ def _solve_rows(uv: np.ndarray, free: np.ndarray, rows) -> np.ndarray:
     w = rows.tocoo()
     inner = col[w.col] >= 0
     k = len(free)
-    lap = sp.eye(k, dtype=w.data.dtype) - sp.coo_matrix((w.data[inner], (w.row[inner], col[w.col[inner]])), shape=(k, k))
+    among = sp.coo_matrix((w.data[inner], (w.row[inner], col[w.col[inner]])), shape=(k, k))
+    lap = sp.eye(k, dtype=w.data.dtype) - among
     fixed = sp.coo_matrix((w.data[~inner], (w.row[~inner], w.col[~inner])), shape=(k, len(uv))).tocsr()
     if np.iscomplexobj(w.data):
         z = spsolve(lap.tocsc(), fixed @ (uv[:, 0] + 1j * uv[:, 1]))
@@ -198,14 +199,7 @@ def _similar_rows(verts: np.ndarray, reference: np.ndarray, faces: np.ndarray, v
     not normalised."""
     import scipy.sparse as sp
 
-    from potflat.mesh._kernels.topology import incident_faces
-
-    counts = vf_ptr[verts + 1] - vf_ptr[verts]
-    row = np.repeat(np.arange(len(verts)), counts)
-    tri = faces[incident_faces(verts, vf_ptr, vf_tri)]
-    corner = np.argmax(tri == verts[row, None], axis=1)
-    pick = np.arange(len(tri))
-    v, a, b = tri[pick, corner], tri[pick, (corner + 1) % 3], tri[pick, (corner + 2) % 3]
+    row, v, a, b = _corners(verts, faces, vf_ptr, vf_tri)
     z = reference[:, 0] + 1j * reference[:, 1]
     base = z[b] - z[a]
     weight = np.abs(base) ** 2
@@ -222,20 +216,24 @@ def _mean_value_rows(verts: np.ndarray, reference: np.ndarray, faces: np.ndarray
     in the two faces on edge ``vu``; a (k, n) sparse matrix, rows not normalised."""
     import scipy.sparse as sp
 
-    from potflat.mesh._kernels.topology import incident_faces
-
-    counts = vf_ptr[verts + 1] - vf_ptr[verts]
-    row = np.repeat(np.arange(len(verts)), counts)
-    tri = faces[incident_faces(verts, vf_ptr, vf_tri)]
-    corner = np.argmax(tri == verts[row, None], axis=1)
-    pick = np.arange(len(tri))
-    v, b, c = tri[pick, corner], tri[pick, (corner + 1) % 3], tri[pick, (corner + 2) % 3]
+    row, v, b, c = _corners(verts, faces, vf_ptr, vf_tri)
     eb, ec = reference[b] - reference[v], reference[c] - reference[v]
     lb, lc = np.linalg.norm(eb, axis=1), np.linalg.norm(ec, axis=1)
     cos = np.clip((eb * ec).sum(axis=1) / np.maximum(lb * lc, 1e-300), -1.0, 1.0)
     half = np.tan(0.5 * np.arccos(cos))
     w = np.concatenate([half / np.maximum(lb, 1e-300), half / np.maximum(lc, 1e-300)])
     return sp.coo_matrix((w, (np.concatenate([row, row]), np.concatenate([b, c]))), shape=(len(verts), n)).tocsr()
+
+
+def _corners(verts: np.ndarray, faces: np.ndarray, vf_ptr: np.ndarray, vf_tri: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every face around each of ``verts`` (k,) as ``(row, v, a, b)``, (s,) int64 each: the
+    row of ``verts`` it belongs to, and the face's corners in order from that vertex ``v``."""
+    row = np.repeat(np.arange(len(verts)), vf_ptr[verts + 1] - vf_ptr[verts])
+    tri = faces[incident_faces(verts, vf_ptr, vf_tri)]
+    corner = np.argmax(tri == verts[row, None], axis=1)
+    pick = np.arange(len(tri))
+    return row, tri[pick, corner], tri[pick, (corner + 1) % 3], tri[pick, (corner + 2) % 3]
 
 
 def _disc(faces: np.ndarray, n: int, scale: float) -> np.ndarray | None:

@@ -139,9 +139,10 @@ def follow(sp: SpringSystem, x: np.ndarray, target: np.ndarray, notes: list[str]
     piecewise-linear map of the fold-free start ``x`` (n, 2), untangled for
     ``COARSE.follow_untangle_rounds``; each cluster that untangling leaves folded re-embedded
     in ``x``'s shape inside its surroundings (:func:`potflat.mesh.embedding.repair_folds`
-    with ``x`` as the reference, at most ``COARSE.follow_reembed_rings`` rings); where that fails, approached from ``x`` as near as stays
-    fold-free (:func:`approach`); with its boundary uncrossed (:func:`uncross_boundary`).
-    None (with a note) when it cannot be made fold-free and uncrossed."""
+    with ``x`` as the reference, at most ``COARSE.follow_reembed_rings`` rings); where that
+    fails, approached from ``x`` as near as stays fold-free (:func:`approach`); with its
+    boundary uncrossed (:func:`uncross_boundary`). None (with a note) when it cannot be made
+    fold-free and uncrossed."""
     goal, n_bad = untangle(sp, target, rounds=COARSE.follow_untangle_rounds)
     if n_bad:
         notes.append(f"untangled {n_bad} triangles flipped by following the coarse copy")
@@ -153,8 +154,8 @@ def follow(sp: SpringSystem, x: np.ndarray, target: np.ndarray, notes: list[str]
                      "in the start's shape")
     if folded:
         goal, short = approach(sp, x, goal)
-        notes.append(f"untangling left {folded} triangles of the followed layout folded; {short} vertices around "
-                     "them stop short of it")
+        notes.append(f"untangling and re-embedding left {folded} triangles of the followed layout folded; {short} "
+                     "vertices around them stop short of it")
         if short > COARSE.approach_most_short * sp.n:
             notes.append(f"more than {100 * COARSE.approach_most_short:g}% of the vertices stop short: relaxed the "
                          "full mesh from the rollout")
