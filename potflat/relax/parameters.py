@@ -217,14 +217,16 @@ class CoarseParameters:
     kept 42 faces squeezed below 1/20 of their area, which the full mesh then kept: 0.1 % of
     the surface at anisotropy above 20; at a tenth, the 1M relaxations took 1-2 s less on
     the synthetic vessel and the colonoware pot, 10 s less on the sea vase).
-    Following untangles for ``follow_untangle_rounds`` only, then re-embeds each cluster
-    left folded in the start's shape inside its surroundings, grown by up to
-    ``follow_reembed_rings`` rings (:func:`potflat.mesh.embedding.repair_folds`).
-    Untangling's ever wider averaging bends the boundary out of shape around a fold it
-    cannot undo (at 1M the dragon jar's folds went from 242 to 16 in 20 rounds, then back up
-    to 122 after 200); the folds it leaves are mostly strips of slivers along the boundary
-    (subdivided slivers of the scan), which 12 rings did not reach across on the goblet
-    and the plastic vase and 40 did.
+    Following untangles for the first of ``follow_untangle_rounds``, then re-embeds each
+    cluster left folded in the start's shape inside its surroundings, grown by up to
+    ``follow_reembed_rings`` rings (:func:`potflat.mesh.embedding.repair_folds`); where
+    clusters are left, the same after the next number of rounds. Untangling's ever wider
+    averaging bends the boundary out of shape around a fold it cannot undo (at 1M the dragon
+    jar's folds went from 242 to 16 in 20 rounds, then back up to 122 after 200, which 40
+    rings do not all re-embed), yet on the goblet at 0.1M it is the 200 rounds' layout that
+    re-embeds (20 rounds: 17 triangles left at 40 rings, and at 100); the folds left are
+    mostly strips of slivers along the boundary (subdivided slivers of the scan), which 12
+    rings did not reach across on the goblet and the plastic vase at 1M and 40 did.
     Where that still leaves the followed layout folded, the full mesh instead moves from its
     start towards it in ``approach_steps`` equal shares and at most ``approach_rounds``
     rounds, each vertex as far as keeps every face around it above ``approach_floor`` of its
@@ -244,7 +246,7 @@ class CoarseParameters:
     cell_vertices: float = 16.0
     follow_repair_rounds: int = 30
     follow_repair_widen: int = 3
-    follow_untangle_rounds: int = 20
+    follow_untangle_rounds: tuple[int, ...] = (20, 200)
     follow_reembed_rings: int = 40
     approach_steps: int = 30
     approach_rounds: int = 100

@@ -136,20 +136,30 @@ def turned_like(x: np.ndarray, reference: np.ndarray, weight: np.ndarray) -> np.
 
 def follow(sp: SpringSystem, x: np.ndarray, target: np.ndarray, notes: list[str]) -> np.ndarray | None:
     """The full mesh's layout following a relaxed coarse copy: ``target`` (n, 2), the copy's
-    piecewise-linear map of the fold-free start ``x`` (n, 2), untangled for
-    ``COARSE.follow_untangle_rounds``; each cluster that untangling leaves folded re-embedded
-    in ``x``'s shape inside its surroundings (:func:`potflat.mesh.embedding.repair_folds`
-    with ``x`` as the reference, at most ``COARSE.follow_reembed_rings`` rings); where that
-    fails, approached from ``x`` as near as stays fold-free (:func:`approach`); with its
-    boundary uncrossed (:func:`uncross_boundary`). None (with a note) when it cannot be made
-    fold-free and uncrossed."""
-    goal, n_bad = untangle(sp, target, rounds=COARSE.follow_untangle_rounds)
+    piecewise-linear map of the fold-free start ``x`` (n, 2), untangled; each cluster that
+    untangling leaves folded re-embedded in ``x``'s shape inside its surroundings
+    (:func:`potflat.mesh.embedding.repair_folds` with ``x`` as the reference, at most
+    ``COARSE.follow_reembed_rings`` rings), after each number of untangling rounds in
+    ``COARSE.follow_untangle_rounds`` in turn until none is left folded; where that fails,
+    approached from ``x`` as near as stays fold-free (:func:`approach`) from the one that
+    left the fewest; with its boundary uncrossed (:func:`uncross_boundary`). None (with a
+    note) when it cannot be made fold-free and uncrossed."""
+    best = None
+    for rounds in COARSE.follow_untangle_rounds:
+        goal, n_bad = untangle(sp, target, rounds=rounds)
+        folded = int((sp.signed_areas(goal) <= 0).sum())
+        repaired = 0
+        if folded:
+            goal, repaired, folded = repair_folds(sp.faces.astype(np.int64), goal, reference=x,
+                                                  max_rings=COARSE.follow_reembed_rings)
+        if best is None or folded < best[3]:
+            best = (goal, n_bad, repaired, folded)
+        if not folded:
+            break
+    goal, n_bad, repaired, folded = best
     if n_bad:
         notes.append(f"untangled {n_bad} triangles flipped by following the coarse copy")
-    folded = int((sp.signed_areas(goal) <= 0).sum())
-    if folded:
-        goal, repaired, folded = repair_folds(sp.faces.astype(np.int64), goal, reference=x,
-                                              max_rings=COARSE.follow_reembed_rings)
+    if repaired:
         notes.append(f"re-embedded {repaired} triangles that untangling left folded inside their surroundings, "
                      "in the start's shape")
     if folded:
