@@ -227,6 +227,14 @@ class CoarseParameters:
     re-embeds (20 rounds: 17 triangles left at 40 rings, and at 100); the folds left are
     mostly strips of slivers along the boundary (subdivided slivers of the scan), which 12
     rings did not reach across on the goblet and the plastic vase at 1M and 40 did.
+    The followed layout is the full mesh's start only when its energy is at most
+    ``follow_most_energy`` times the rollout's: a copy whose cells straddle sharp creases
+    (the plastic vase's flutes) can leave the full mesh worse off than the rollout (its
+    followed start at 1.20, 1.26, 1.13 and 2.36 times the rollout's energy at 0.1M, 0.3M, 1M
+    and 3M; at 1M 529 full-mesh iterations, 53 s, against 176 + 46, 20 s, from the
+    rollout), while a start just above the rollout's can still be the faster one (goblet at
+    0.1M: 1.01 times, 408 iterations against 830 + 104); the other shared scans' followed
+    starts are 0.01-0.9 times the rollout's energy.
     Where that still leaves the followed layout folded, the full mesh instead moves from its
     start towards it in ``approach_steps`` equal shares and at most ``approach_rounds``
     rounds, each vertex as far as keeps every face around it above ``approach_floor`` of its
@@ -248,6 +256,7 @@ class CoarseParameters:
     follow_repair_widen: int = 3
     follow_untangle_rounds: tuple[int, ...] = (20, 200)
     follow_reembed_rings: int = 40
+    follow_most_energy: float = 1.1
     approach_steps: int = 30
     approach_rounds: int = 100
     approach_floor: float = 0.1
