@@ -681,10 +681,12 @@ def _no_repair(faces, uv, reference=None, max_rings=0):
     return uv, 0, int((signed_areas(uv, faces) <= 0).sum())
 
 
-def test_following_re_embeds_the_folds_untangling_leaves(monkeypatch):
-    """Where untangling the followed layout leaves folds, each folded cluster is re-embedded
-    in the start's shape inside its surroundings: the full mesh follows the copy exactly away
-    from them, and no vertex stops short."""
+def _folded_follow(monkeypatch, *, repair: bool, **coarse):
+    """A 12 x 12 grid's start, a followed layout that folds a fan and crosses the boundary
+    (:func:`_folded_goal`), its spring system, and ``follow`` with untangling that does
+    nothing (re-embedding too unless ``repair``; ``coarse``: COARSE fields to set)."""
+    from dataclasses import replace
+
     from potflat.relax import start as relax_module
 
     k = 12
@@ -692,8 +694,19 @@ def test_following_re_embeds_the_folds_untangling_leaves(monkeypatch):
     goal = _folded_goal(x, k, 6 * k + 5)
     sp = spring_system(V, F, k=1.0, relative=True)
     monkeypatch.setattr(relax_module, "untangle", lambda sp, x, rounds: (x, int((sp.signed_areas(x) <= 0).sum())))
+    if not repair:
+        monkeypatch.setattr(relax_module, "repair_folds", _no_repair)
+    monkeypatch.setattr(relax_module, "COARSE", replace(relax_module.COARSE, **coarse))
+    return F, x, goal, sp, relax_module.follow
+
+
+def test_following_re_embeds_the_folds_untangling_leaves(monkeypatch):
+    """Where untangling the followed layout leaves folds, each folded cluster is re-embedded
+    in the start's shape inside its surroundings: the full mesh follows the copy exactly away
+    from them, and no vertex stops short."""
+    F, x, goal, sp, follow = _folded_follow(monkeypatch, repair=True)
     notes: list[str] = []
-    y = relax_module.follow(sp, x, goal, notes)
+    y = follow(sp, x, goal, notes)
     assert y is not None and (signed_areas(y, F) > 0).all() and sp.overlap(y) == 0
     assert "re-embedded" in notes[-1] and not any("stop short" in n for n in notes)
     moved = np.flatnonzero((y != goal).any(axis=1))
@@ -705,19 +718,9 @@ def test_following_keeps_the_copy_where_untangling_leaves_folds(monkeypatch):
     copy (fold-free, boundary uncrossed, a note says how many vertices stopped short) rather
     than giving it up (on a grid this small the few vertices stopped short are a large share:
     the share that gives the copy up is lifted)."""
-    from dataclasses import replace
-
-    from potflat.relax import start as relax_module
-
-    k = 12
-    V, F, x = _grid(k)
-    goal = _folded_goal(x, k, 6 * k + 5)
-    sp = spring_system(V, F, k=1.0, relative=True)
-    monkeypatch.setattr(relax_module, "untangle", lambda sp, x, rounds: (x, int((sp.signed_areas(x) <= 0).sum())))
-    monkeypatch.setattr(relax_module, "repair_folds", _no_repair)
-    monkeypatch.setattr(relax_module, "COARSE", replace(relax_module.COARSE, approach_most_short=1.0))
+    F, x, goal, sp, follow = _folded_follow(monkeypatch, repair=False, approach_most_short=1.0)
     notes: list[str] = []
-    y = relax_module.follow(sp, x, goal, notes)
+    y = follow(sp, x, goal, notes)
     assert y is not None and (signed_areas(y, F) > 0).all() and sp.overlap(y) == 0
     assert "stop short" in notes[-1]
 
@@ -725,19 +728,9 @@ def test_following_keeps_the_copy_where_untangling_leaves_folds(monkeypatch):
 def test_following_gives_the_copy_up_where_too_many_vertices_stop_short(monkeypatch):
     """Where more than ``approach_most_short`` of the vertices stop short of the followed
     layout, the copy is given up (the full mesh relaxes from the rollout), and a note says why."""
-    from dataclasses import replace
-
-    from potflat.relax import start as relax_module
-
-    k = 12
-    V, F, x = _grid(k)
-    goal = _folded_goal(x, k, 6 * k + 5)
-    sp = spring_system(V, F, k=1.0, relative=True)
-    monkeypatch.setattr(relax_module, "untangle", lambda sp, x, rounds: (x, int((sp.signed_areas(x) <= 0).sum())))
-    monkeypatch.setattr(relax_module, "repair_folds", _no_repair)
-    monkeypatch.setattr(relax_module, "COARSE", replace(relax_module.COARSE, approach_most_short=0.0))
+    F, x, goal, sp, follow = _folded_follow(monkeypatch, repair=False, approach_most_short=0.0)
     notes: list[str] = []
-    assert relax_module.follow(sp, x, goal, notes) is None
+    assert follow(sp, x, goal, notes) is None
     assert "stop short" in notes[-2] and "relaxed the full mesh from the rollout" in notes[-1]
 
 
