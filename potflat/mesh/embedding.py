@@ -108,7 +108,7 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
 
     Parameters
     ----------
-    faces : (m, 3) int64
+    faces : (m, 3) int (any integer type)
     uv : (n, 2) float64
     reference : (n, 2) float64, optional
         A fold-free layout of the mesh.

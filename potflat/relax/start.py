@@ -150,7 +150,7 @@ def follow(sp: SpringSystem, x: np.ndarray, target: np.ndarray, notes: list[str]
         folded = int((sp.signed_areas(goal) <= 0).sum())
         repaired = 0
         if folded:
-            goal, repaired, folded = repair_folds(sp.faces.astype(np.int64), goal, reference=x,
+            goal, repaired, folded = repair_folds(sp.faces, goal, reference=x,
                                                   max_rings=COARSE.follow_reembed_rings)
         if best is None or folded < best[3]:
             best = (goal, n_bad, repaired, folded)
