@@ -266,7 +266,8 @@ def test_face_graph_components_match_scipy():
 
 
 class _GivenPairs(FaceGraph):
-    """A face graph of given pairs (any multigraph), for testing :meth:`FaceGraph.matrix`."""
+    """A face graph of given pairs (any multigraph), for testing :meth:`FaceGraph.matrix` and
+    :meth:`FaceGraph.neighbour_sum`."""
 
     def __init__(self, m, pairs):
         self.m = m
@@ -293,23 +294,38 @@ def test_face_graph_matrix_matches_the_sorting_reference(seed):
     j = np.concatenate([pairs[:, 1], pairs[:, 0]])
     order = np.argsort(i * m + j, kind="stable")
     indptr = np.concatenate([[0], np.cumsum(np.bincount(i, minlength=m))]).astype(np.int32)
-    for w in (None, weights):
-        data = np.ones(2 * len(pairs)) if w is None else np.concatenate([w, w])[order]
-        ref = sp.csr_matrix((data, j[order].astype(np.int32), indptr.copy()), shape=(m, m))
-        ref.eliminate_zeros()
-        got = _GivenPairs(m, pairs).matrix(w)
-        for a, b in ((got.indptr, ref.indptr), (got.indices, ref.indices), (got.data, ref.data)):
-            assert a.dtype == b.dtype and np.array_equal(a, b)
+    ref = sp.csr_matrix((np.concatenate([weights, weights])[order], j[order].astype(np.int32), indptr), shape=(m, m))
+    ref.eliminate_zeros()
+    got = _GivenPairs(m, pairs).matrix(weights)
+    for a, b in ((got.indptr, ref.indptr), (got.indices, ref.indices), (got.data, ref.data)):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_face_graph_neighbour_sum_is_the_adjacency_times_x(seed):
+    """Each pair adds its other end's value to both ends (repeated pairs count each time, a
+    face without neighbours gets 0): the dense adjacency matrix times x."""
+    rng = np.random.default_rng(seed)
+    m = 40
+    pairs = rng.integers(0, m - 1, size=(90, 2))
+    pairs = np.concatenate([pairs, pairs[:10]])
+    x = rng.normal(size=m)
+    dense = np.zeros((m, m))
+    for a, b in pairs:
+        dense[a, b] += 1.0
+        dense[b, a] += 1.0
+    got = _GivenPairs(m, pairs).neighbour_sum(x)
+    assert np.allclose(got, dense @ x, rtol=1e-13, atol=1e-13) and got[m - 1] == 0.0
 
 
 def test_select_wall_takes_the_callers_face_graph():
     V, F, _, _ = vm.cup(n_theta=16)
     mesh, p, a = _posed(V, F)
     own = select_wall(mesh, p, a, side="inner")
-    given = select_wall(mesh, p, a, side="inner", graph=FaceGraph(mesh.faces))
+    given = select_wall(mesh, p, a, side="inner", graph=FaceGraph(mesh.faces, shared=True))
     assert own.two_walled and np.array_equal(own.labels, given.labels)
     assert np.array_equal(own.face_mask, given.face_mask)
-    for wrong in (FaceGraph(mesh.faces[:-1]), mesh.faces):
+    for wrong in (FaceGraph(mesh.faces[:-1], shared=True), FaceGraph(mesh.faces), mesh.faces):
         with pytest.raises(InvalidInputError, match="FaceGraph"):
             select_wall(mesh, p, a, graph=wrong)
 
@@ -321,12 +337,20 @@ def test_face_graph_finds_the_adjacency_once_on_first_use(monkeypatch):
     real = walls.face_adjacency
     monkeypatch.setattr(walls, "face_adjacency", lambda *a, **k: calls.append(1) or real(*a, **k))
     F = np.asarray(vm.cup(n_theta=16)[1], np.int64)
-    graph = walls.FaceGraph(F)
+    graph = walls.FaceGraph(F, shared=True)
     assert not calls and graph.m == len(F)
     pairs, shared = real(F, return_edges=True)
     assert np.array_equal(graph.pairs, pairs) and np.array_equal(graph.shared, shared)
     graph.components()
     assert len(calls) == 1
+
+
+def test_face_graph_keeps_shared_edges_only_when_asked():
+    F = np.asarray(vm.cup(n_theta=16)[1], np.int64)
+    graph = FaceGraph(F)
+    assert len(graph.pairs)
+    with pytest.raises(ValueError, match="shared=True"):
+        _ = graph.shared
 
 
 def test_cylindrical_matches_numpy_reference():

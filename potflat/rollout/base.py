@@ -158,7 +158,7 @@ def cut_base(points: np.ndarray, faces: np.ndarray, disc_faces: np.ndarray, wall
     """
     d = len(disc_faces)
     both = np.concatenate([disc_faces, wall_faces]).astype(np.int64)
-    graph = FaceGraph(np.take(faces, both, axis=0))
+    graph = FaceGraph(np.take(faces, both, axis=0), shared=True)
     pairs = graph.pairs
     meet = (pairs[:, 0] < d) != (pairs[:, 1] < d)
     if not meet.any():
@@ -202,7 +202,7 @@ def _try_cut(points, rows, d, vertex_height, height, tolerance, towards):
     on_plane = np.zeros(len(pts), bool)
     on_plane[len(ids):] = True
     on_plane[split.on_cut] = True
-    pieces = FaceGraph(split.faces)
+    pieces = FaceGraph(split.faces, shared=True)
     part = pieces.components(~on_plane[pieces.shared].all(axis=1))  # (pieces meet across the plane along it)
     in_disc = split.parent < d
     disc_area = np.bincount(part, piece_area * in_disc)
@@ -377,7 +377,7 @@ def split_base(mesh: Mesh, region: np.ndarray, unrolled_error: np.ndarray, *, n_
     # and every face facing along the axis that the development folds edge-on (the averaging
     # misses a flat base's last faces at a sharp corner, and the fan of a few large triangles);
     # never a face turned away (it would fold the view)
-    cand = ((_smooth(facing, w, graph.matrix(), BASE_SMOOTH) > along)
+    cand = ((_smooth(facing, w, graph, BASE_SMOOTH) > along)
             | ((facing > along) & (dev > 1.0 - EDGE_ON_RATIO))) & (facing > 0.0)
     if cand.any():
         piece = graph.components(cand[graph.pairs[:, 0]] & cand[graph.pairs[:, 1]])

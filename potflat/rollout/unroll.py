@@ -341,7 +341,8 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
             other_objects = ~main
             face_mask = main if face_mask is None else face_mask & main
     clock.lap("axis")
-    graph = FaceGraph(F)  # the face adjacency, found once for the attachments (if they need it) and the walls
+    # the face adjacency, found once for the attachments (if they need it) and the walls
+    graph = FaceGraph(F, shared=True)
     attachments = detect_attachments(mesh, axis.point, axis.direction, graph=graph)
     clock.lap("attachments")
     frame = face_frame(mesh, *check_axis(axis.point, axis.direction), graph=graph)  # the walls' and the profile's
@@ -390,8 +391,10 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
                 floor = (cut_mask, functools.partial(base_cut.levels, h_v), lambda p: axis.cylindrical(p)[2])
             allowed = allowed.copy()
             allowed[base.disc_faces] = allowed[base.hidden_faces] = False
+            seam = (un.seam, un.seam_method)
+            del un  # (peak memory: the unrolling it replaces is not held while it is made)
             un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area,
-                         seam=(un.seam, un.seam_method), landmark=landmark, floor=floor)
+                         seam=seam, landmark=landmark, floor=floor)
         del region, first
     del n_axial, r_c, r_v
     clock.lap("base")
@@ -415,8 +418,10 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         trimmed[un.face_index[fold]] = True
         graph = None
         if rnd < TRIM_ROUNDS - 1:
+            seam = (un.seam, un.seam_method)
+            del un, fold
             un = _unroll(mesh, axis, options, allowed & ~trimmed, band, h_c, theta_c, theta_v, area,
-                         seam=(un.seam, un.seam_method), landmark=landmark, floor=floor)
+                         seam=seam, landmark=landmark, floor=floor)
         else:
             un = _without(un, ~fold)
     clock.lap("unroll")

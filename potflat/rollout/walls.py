@@ -36,7 +36,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.mesh._kernels.geometry import edge_lengths, face_geometry, radial_parts
-from potflat.mesh._kernels.topology import edge_table, face_pairs, pair_csr, union_find
+from potflat.mesh._kernels.topology import edge_table, face_pairs, pair_csr, pair_sums, union_find
 from potflat.mesh.tolerances import DEGENERATE, ROUNDING
 from potflat.rollout.options import SIDES  # the sides select_wall accepts
 from potflat.types import Mesh
@@ -95,12 +95,13 @@ def check_mesh(mesh: Mesh) -> None:
         raise InvalidInputError(f"the mesh{where} has face indices outside its vertex list")
 
 
-def check_graph(graph, mesh: Mesh) -> None:
+def check_graph(graph, mesh: Mesh, shared: bool = False) -> None:
     """Raise :class:`InvalidInputError` unless ``graph`` is None or a :class:`FaceGraph` of
-    ``mesh``'s faces (one node per face)."""
-    if graph is not None and (not isinstance(graph, FaceGraph) or graph.m != len(mesh.faces)):
-        raise InvalidInputError(f"graph must be FaceGraph(mesh.faces) ({len(mesh.faces)} faces), "
-                                f"got {graph!r}")
+    ``mesh``'s faces (one node per face), keeping its shared edges if ``shared``."""
+    if graph is not None and (not isinstance(graph, FaceGraph) or graph.m != len(mesh.faces)
+                              or (shared and not graph.keeps_shared)):
+        want = "FaceGraph(mesh.faces, shared=True)" if shared else "FaceGraph(mesh.faces)"
+        raise InvalidInputError(f"graph must be {want} ({len(mesh.faces)} faces), got {graph!r}")
 
 
 @dataclass(frozen=True)
@@ -154,11 +155,15 @@ class FaceGraph:
     faces : (m, 3) int
     table : tuple, optional
         The faces' :attr:`edge_table` when the caller has it (not built a second time).
+    shared : bool
+        Keep each pair's shared edge (:attr:`shared`; 0.14 GB at 6M faces, so only for a
+        caller that reads it).
     """
 
-    def __init__(self, faces: np.ndarray, table: tuple | None = None) -> None:
+    def __init__(self, faces: np.ndarray, table: tuple | None = None, *, shared: bool = False) -> None:
         self.m = len(faces)
         self._faces = faces
+        self.keeps_shared = shared
         if table is not None:
             self.__dict__["edge_table"] = table
 
@@ -171,8 +176,9 @@ class FaceGraph:
         return edge_table(F, int(F.max()) + 1 if len(F) else 0)
 
     @cached_property
-    def _adjacency(self) -> tuple[np.ndarray, np.ndarray]:
-        return face_adjacency(self._faces, return_edges=True, table=self.__dict__.get("edge_table"))
+    def _adjacency(self) -> tuple[np.ndarray, np.ndarray | None]:
+        pairs, shared = face_adjacency(self._faces, return_edges=True, table=self.__dict__.get("edge_table"))
+        return pairs, shared if self.keeps_shared else None
 
     @property
     def pairs(self) -> np.ndarray:
@@ -181,7 +187,9 @@ class FaceGraph:
 
     @property
     def shared(self) -> np.ndarray:
-        """The edge each pair shares (p, 2) int64."""
+        """The edge each pair shares (p, 2) int64 (a graph built with ``shared=True``)."""
+        if not self.keeps_shared:
+            raise ValueError("this FaceGraph was built without its shared edges: build it with shared=True")
         return self._adjacency[1]
 
     @cached_property
@@ -199,13 +207,19 @@ class FaceGraph:
         indptr, indices, _ = self._csr
         return indptr.astype(np.int64, copy=False), indices.astype(np.int64, copy=False)
 
-    def matrix(self, weights: np.ndarray | None = None) -> sp.csr_matrix:
-        """(m, m) CSR matrix with ``weights[pair]`` ((p,) float64, default 1) on both entries."""
+    def matrix(self, weights: np.ndarray) -> sp.csr_matrix:
+        """(m, m) CSR matrix with ``weights[pair]`` ((p,) float64) on both entries (zeros left out)."""
         indptr, indices, pair_of = self._csr
-        data = np.ones(len(indices)) if weights is None else np.asarray(weights, np.float64)[pair_of]
+        data = np.asarray(weights, np.float64)[pair_of]
         A = sp.csr_matrix((data, indices.copy(), indptr.copy()), shape=(self.m, self.m))
         A.eliminate_zeros()  # works in place on the index arrays, hence the copies
         return A
+
+    def neighbour_sum(self, x: np.ndarray) -> np.ndarray:
+        """The sum of ``x`` ((m,) float64) over each face's edge neighbours (:meth:`matrix` times
+        ``x``, without building the matrix: 0.4 GB at 6M faces)."""
+        return pair_sums(np.ascontiguousarray(self.pairs, dtype=np.int64).reshape(-1, 2),
+                         np.ascontiguousarray(x, dtype=np.float64))
 
     def components(self, pair_mask: np.ndarray | None = None) -> np.ndarray:
         """Connected-component label (m,) int64 of every face, over the pairs in ``pair_mask``
@@ -294,7 +308,7 @@ def face_frame(mesh: Mesh, axis_point: np.ndarray, axis_direction: np.ndarray, *
                adjacency: bool = True, graph: FaceGraph | None = None) -> FaceFrame:
     """Compute :class:`FaceFrame` for a validated mesh and axis (``adjacency=False`` skips
     the face adjacency, which only the wall labelling needs; ``graph``: the mesh's
-    :class:`FaceGraph` when the caller has it)."""
+    :class:`FaceGraph` with its shared edges when the caller has it)."""
     V, F = mesh.vertices, mesh.faces
     # one parallel pass over the faces; the cross products become the unit normals in place
     normal, dbl, _, centroid = face_geometry(np.ascontiguousarray(V, dtype=np.float64),
@@ -304,7 +318,7 @@ def face_frame(mesh: Mesh, axis_point: np.ndarray, axis_direction: np.ndarray, *
     normal[~ok] = 0.0
     height, radius, radial = cylindrical(centroid, axis_point, axis_direction)
     if adjacency:
-        graph = FaceGraph(F) if graph is None else graph
+        graph = FaceGraph(F, shared=True) if graph is None else graph
         pairs, edges = graph.pairs, graph.shared
         edge_length = edge_lengths(np.ascontiguousarray(V, dtype=np.float64),
                                    np.ascontiguousarray(edges, dtype=np.int64))
@@ -355,14 +369,14 @@ def _largest_region(mask: np.ndarray, graph: FaceGraph, area: np.ndarray) -> np.
     return mask & (comp == int(np.argmax(comp_area)))
 
 
-def _smooth(values: np.ndarray, area: np.ndarray, A: sp.csr_matrix, iterations: int) -> np.ndarray:
-    """Area-weighted average over each face and its edge neighbours, ``iterations`` times."""
-    denom = area + A @ area
+def _smooth(values: np.ndarray, area: np.ndarray, graph: FaceGraph, iterations: int) -> np.ndarray:
+    """Area-weighted average over each face and its edge neighbours in ``graph``, ``iterations`` times."""
+    denom = area + graph.neighbour_sum(area)
     denom[denom <= 0] = 1.0
     x = values
     for _ in range(iterations):
         wx = area * x
-        x = (wx + A @ wx) / denom
+        x = (wx + graph.neighbour_sum(wx)) / denom
     return x
 
 
@@ -519,7 +533,7 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         Faces whose smoothed radial normal component is below this (0-1) are treated as
         horizontal (base, floor, rim top) and take the side of the wall they connect to.
     graph : FaceGraph, optional
-        ``FaceGraph(mesh.faces)`` when the caller has it (built here otherwise).
+        ``FaceGraph(mesh.faces, shared=True)`` when the caller has it (built here otherwise).
     frame : FaceFrame, optional
         ``face_frame(mesh, axis_point, axis_direction)`` (with the adjacency) when the caller
         has it (computed here otherwise).
@@ -554,7 +568,7 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         if exclude.shape != (len(mesh.faces),) or exclude.dtype != bool:
             raise InvalidInputError(
                 f"exclude must be a boolean mask with one entry per face ({len(mesh.faces)}), got {exclude.shape}")
-    check_graph(graph, mesh)
+    check_graph(graph, mesh, shared=True)
     fr = face_frame(mesh, p, a, graph=graph) if frame is None else frame
     labels, inverted = wall_labels(fr, flat_tolerance=float(flat_tolerance))
     want = OUTER if side == "outer" else INNER
@@ -614,8 +628,7 @@ def wall_labels(fr: FaceFrame, *, flat_tolerance: float = 0.25) -> tuple[np.ndar
 def _label_once(fr: FaceFrame, flat_tolerance: float, sign: float) -> np.ndarray:
     m = len(fr.area)
     adj = fr.adjacency
-    A = fr.graph.matrix()
-    s = _smooth(sign * fr.n_radial, fr.area, A, _SMOOTH_ITERATIONS)
+    s = _smooth(sign * fr.n_radial, fr.area, fr.graph, _SMOOTH_ITERATIONS)
     labels = np.where(s >= 0, OUTER, INNER).astype(np.int8)
     seed = np.abs(s) >= flat_tolerance
     if not seed.any():

@@ -429,6 +429,30 @@ def corner_joins(F, theta, key, order):
 
 
 @leaf
+def pair_sums(pairs, x):
+    """Sum of ``x`` over each node's partners: the symmetric adjacency matrix of ``pairs``
+    times ``x``, without the matrix (serial, in the pairs' order).
+
+    Parameters
+    ----------
+    pairs : (p, 2) int64
+        Node pairs, in ``[0, m)``.
+    x : (m,) float64
+
+    Returns
+    -------
+    (m,) float64
+    """
+    out = np.zeros(x.shape[0])
+    for e in range(pairs.shape[0]):
+        a = pairs[e, 0]
+        b = pairs[e, 1]
+        out[a] += x[b]
+        out[b] += x[a]
+    return out
+
+
+@leaf
 def pair_csr(pairs, m):
     """Symmetric CSR adjacency of ``m`` nodes from node pairs, each pair once per endpoint.
 
