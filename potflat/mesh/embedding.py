@@ -132,24 +132,29 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
     start = int(flipped.sum())
     if not start:
         return uv, 0, 0
+    # (the mesh's edges are only looked at around the clusters: a whole-mesh adjacency and
+    # boundary would be most of the relax stage's peak memory at 3M vertices)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
-    adj = _adjacency(faces, n)
-    on_border = np.zeros(n, bool)
-    for loop in boundary_loops(faces, n):
-        on_border[loop] = True
     vf_ptr, vf_tri = vertex_faces(n, faces)
     # clusters: flipped faces joined through shared vertices
     touched = np.zeros(n, bool)
     touched[faces[flipped].ravel()] = True
     verts = np.flatnonzero(touched)
-    _, label = csg.connected_components(adj[verts][:, verts], directed=False)
+    edges, _ = _fan_edges(verts, faces, vf_ptr, vf_tri)
+    edges = edges[touched[edges].all(axis=1)]
+    local = np.full(n, -1, np.int64)
+    local[verts] = np.arange(len(verts))
+    _, label = csg.connected_components(sp.coo_matrix((np.ones(len(edges)), (local[edges[:, 0]], local[edges[:, 1]])),
+                                                      shape=(len(verts), len(verts))), directed=False)
     for c in range(label.max() + 1 if len(label) else 0):
         region = verts[label == c]
         for _ in range(max_rings):
+            edges, count = _fan_edges(region, faces, vf_ptr, vf_tri)
+            on_border = np.isin(region, edges[count == 1])
+            inner, border = region[~on_border], region[on_border]
             if reference is None:
-                free, rows = region[~on_border[region]], adj[region[~on_border[region]]]
+                free, rows = inner, _neighbour_rows(inner, edges, n)
             else:
-                inner, border = region[~on_border[region]], region[on_border[region]]
                 free = np.concatenate([inner, border])
                 rows = sp.vstack([_mean_value_rows(inner, reference, faces, vf_ptr, vf_tri, n),
                                   _similar_rows(border, reference, faces, vf_ptr, vf_tri, n)]).tocsr()
@@ -158,9 +163,34 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
             if np.all(signed_areas(faces[near], trial) > 0):
                 uv = trial
                 break
-            region = np.union1d(region, adj[region].indices)
+            region = np.union1d(region, edges.ravel())  # (the vertices of the faces around it)
     left = int((signed_areas(faces, uv) <= 0).sum())
     return uv, start - left, left
+
+
+def _fan_edges(verts: np.ndarray, faces: np.ndarray, vf_ptr: np.ndarray, vf_tri: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The edges of the faces around ``verts`` (k,): (e, 2) int64, each once (smaller end
+    first, sorted), and the number of faces on each (e,) int64, which is the mesh's for every
+    edge with an end in ``verts`` (1: an edge of the mesh's boundary)."""
+    tri = faces[np.unique(incident_faces(verts, vf_ptr, vf_tri))]
+    edges = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    edges, count = np.unique(edges, axis=0, return_counts=True)
+    return edges, count
+
+
+def _neighbour_rows(verts: np.ndarray, edges: np.ndarray, n: int):
+    """Each of ``verts`` (k,)'s edge neighbours among ``edges`` ((e, 2), each once; all of a
+    vertex's edges there), weight 1: a (k, n) sparse matrix."""
+    import scipy.sparse as sp
+
+    row = np.full(n, -1, np.int64)
+    row[verts] = np.arange(len(verts))
+    a, b = edges[:, 0], edges[:, 1]
+    ends = [(row[a], b), (row[b], a)]
+    r = np.concatenate([r[r >= 0] for r, _ in ends])
+    c = np.concatenate([c[r >= 0] for r, c in ends])
+    return sp.coo_matrix((np.ones(len(r)), (r, c)), shape=(len(verts), n)).tocsr()
 
 
 def _solve_rows(uv: np.ndarray, free: np.ndarray, rows) -> np.ndarray:
