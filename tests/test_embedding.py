@@ -8,7 +8,8 @@ import pytest
 from _bench_meshes import meshes, signed_areas
 
 from potflat.errors import FoldedResultError, NotADiskError
-from potflat.mesh.embedding import boundary_loops, repair_folds, tutte_embedding
+from potflat.mesh._kernels.topology import edge_table, vertex_faces
+from potflat.mesh.embedding import boundary_loops, fan_edges, neighbour_rows, repair_folds, tutte_embedding
 from potflat.relax import relax
 from potflat.relax import multilevel
 
@@ -20,6 +21,28 @@ def _interior_vertex(faces, n):
     ring = np.zeros(n, bool)
     ring[faces[border[faces].any(axis=1)].ravel()] = True
     return int(np.flatnonzero(~ring)[len(np.flatnonzero(~ring)) // 2])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_fan_edges_and_neighbour_rows_match_the_whole_mesh(seed):
+    """Around a few vertices (border ones among them): every mesh edge with an end there, once,
+    with the mesh's face count (1 on the boundary); and each vertex's neighbours, weight 1."""
+    flat = meshes.vessel_rollout(600, seed=seed)
+    F = np.ascontiguousarray(flat.mesh.faces, dtype=np.int64)
+    n = len(flat.uv)
+    _, all_edges, all_count, _ = edge_table(F, n)
+    verts = np.unique(np.random.default_rng(seed).choice(n, 25, replace=False))
+    verts = np.union1d(verts, boundary_loops(F, n)[0][:3])
+    edges, count = fan_edges(verts, F, *vertex_faces(n, F))
+    assert np.all(edges[:, 0] < edges[:, 1]) and len(np.unique(edges, axis=0)) == len(edges)
+    mine = np.isin(all_edges, verts).any(axis=1)
+    lookup = {tuple(e): c for e, c in zip(edges.tolist(), count, strict=True)}
+    assert all(lookup.get(tuple(e)) == c for e, c in zip(all_edges[mine].tolist(), all_count[mine], strict=True))
+    dense = np.zeros((n, n))
+    dense[all_edges[:, 0], all_edges[:, 1]] = dense[all_edges[:, 1], all_edges[:, 0]] = 1.0
+    rows = neighbour_rows(verts, edges, n)
+    np.testing.assert_array_equal(rows.toarray(), dense[verts])
+    assert np.all(np.diff(rows.indptr) > 0)
 
 
 def test_repair_folds_fixes_an_interior_fold_and_moves_nothing_far_away():

@@ -140,7 +140,7 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
     touched = np.zeros(n, bool)
     touched[faces[flipped].ravel()] = True
     verts = np.flatnonzero(touched)
-    edges, _ = _fan_edges(verts, faces, vf_ptr, vf_tri)
+    edges, _ = fan_edges(verts, faces, vf_ptr, vf_tri)
     edges = edges[touched[edges].all(axis=1)]
     local = np.full(n, -1, np.int64)
     local[verts] = np.arange(len(verts))
@@ -149,11 +149,11 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
     for c in range(label.max() + 1 if len(label) else 0):
         region = verts[label == c]
         for _ in range(max_rings):
-            edges, count = _fan_edges(region, faces, vf_ptr, vf_tri)
+            edges, count = fan_edges(region, faces, vf_ptr, vf_tri)
             on_border = np.isin(region, edges[count == 1])
             inner, border = region[~on_border], region[on_border]
             if reference is None:
-                free, rows = inner, _neighbour_rows(inner, edges, n)
+                free, rows = inner, neighbour_rows(inner, edges, n)
             else:
                 free = np.concatenate([inner, border])
                 rows = sp.vstack([_mean_value_rows(inner, reference, faces, vf_ptr, vf_tri, n),
@@ -168,18 +168,21 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
     return uv, start - left, left
 
 
-def _fan_edges(verts: np.ndarray, faces: np.ndarray, vf_ptr: np.ndarray, vf_tri: np.ndarray
+def fan_edges(verts: np.ndarray, faces: np.ndarray, vf_ptr: np.ndarray, vf_tri: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray]:
     """The edges of the faces around ``verts`` (k,): (e, 2) int64, each once (smaller end
     first, sorted), and the number of faces on each (e,) int64, which is the mesh's for every
     edge with an end in ``verts`` (1: an edge of the mesh's boundary)."""
-    tri = faces[np.unique(incident_faces(verts, vf_ptr, vf_tri))]
-    edges = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
-    edges, count = np.unique(edges, axis=0, return_counts=True)
-    return edges, count
+    n = len(vf_ptr) - 1
+    tri = faces[np.unique(incident_faces(verts, vf_ptr, vf_tri))].astype(np.int64)
+    ends = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    key = np.sort(ends[:, 0] * n + ends[:, 1])  # (sorted by hand: np.unique of rows is far slower)
+    first = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    count = np.diff(np.r_[first, len(key)])
+    return np.stack([key[first] // n, key[first] % n], axis=1), count
 
 
-def _neighbour_rows(verts: np.ndarray, edges: np.ndarray, n: int):
+def neighbour_rows(verts: np.ndarray, edges: np.ndarray, n: int):
     """Each of ``verts`` (k,)'s edge neighbours among ``edges`` ((e, 2), each once; all of a
     vertex's edges there), weight 1: a (k, n) sparse matrix."""
     import scipy.sparse as sp

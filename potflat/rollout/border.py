@@ -3,11 +3,10 @@ faces) trimmed off, and faces folded inside it untangled."""
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse
 
 from potflat.mesh._kernels.topology import incident_faces, small_pieces, union_find, vertex_faces
 from potflat.mesh.boundary import crossing_pairs, edges_and_boundary
-from potflat.mesh.embedding import signed_areas
+from potflat.mesh.embedding import fan_edges, neighbour_rows, signed_areas
 from potflat.rollout.folds import overlapping_faces
 from potflat.rollout.seam import cut_open
 from potflat.rollout.walls import (
@@ -348,29 +347,28 @@ def untangle(faces: np.ndarray, uv: np.ndarray, *, table: tuple | None = None) -
     if n_bad == 0:
         return uv, 0, 0
     n = len(uv)
-    edges, seg, _ = table if table is not None else edges_and_boundary(faces, n)
-    A = scipy.sparse.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]],
-                                                            np.r_[edges[:, 1], edges[:, 0]])), shape=(n, n)).tocsr()
-    deg = np.maximum(np.diff(A.indptr), 1).astype(np.float64)
+    seg = (table if table is not None else edges_and_boundary(faces, n))[1]
     movable = np.ones(n, bool)
     movable[seg.ravel()] = False
-    # faces of each vertex (CSR), to re-check only the faces around the moved vertices
-    corner_order = np.argsort(faces.ravel(), kind="stable")
-    vf_ptr = np.concatenate([[0], np.cumsum(np.bincount(faces.ravel(), minlength=n))])
+    # the faces of each vertex: the edges and faces around the moved vertices only are looked at
+    vf_ptr, vf_tri = vertex_faces(n, np.ascontiguousarray(faces, dtype=np.int64))
     x = uv.copy()
     region = np.zeros(n, bool)
     region[faces[bad].ravel()] = True
+    idx = rows = degree = near = None  # (the region's vertices, neighbour rows, degrees and faces while it stays)
     for r in range(UNTANGLE_ROUNDS):
         if r % UNTANGLE_WIDEN == UNTANGLE_WIDEN - 1:  # widen the region around persistent tangles
-            region |= (A @ region.astype(np.float64)) > 0
+            region[faces[np.unique(incident_faces(np.flatnonzero(region), vf_ptr, vf_tri))].ravel()] = True
         region &= movable
-        idx = np.flatnonzero(region)
-        if len(idx) == 0:
+        grown = np.flatnonzero(region)
+        if len(grown) == 0:
             break
-        x[idx] = (A[idx] @ x) / deg[idx, None]
-        count = vf_ptr[idx + 1] - vf_ptr[idx]
-        offset = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-        near = np.unique(corner_order[np.repeat(vf_ptr[idx], count) + offset] // 3)
+        if idx is None or not np.array_equal(grown, idx):
+            idx = grown
+            rows = neighbour_rows(idx, fan_edges(idx, faces, vf_ptr, vf_tri)[0], n)
+            degree = np.maximum(np.diff(rows.indptr), 1)[:, None].astype(np.float64)
+            near = np.unique(incident_faces(idx, vf_ptr, vf_tri))
+        x[idx] = (rows @ x) / degree
         still = near[signed_areas(faces[near], x) <= 0]
         if len(still) == 0:
             break
