@@ -56,7 +56,7 @@ class RolloutFiles:
     base: FlatMesh | None = None
 
 
-@reuse_freed_memory()  # (its many large temporaries; its peak is under the relax stage's)
+@reuse_freed_memory()  # (its many large temporaries: see reuse_freed_memory for the trade)
 def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None, *,
                       name: str | None = None, check: Callable[[FlatMesh], None] | None = None) -> RolloutFiles:
     """Read a scan, roll it out, write ``NAME.rollout.ply``, ``NAME.rollout.json`` and its profile.
