@@ -201,7 +201,7 @@ def run_case(case: Case, variants: dict[str, dict], log=print) -> list[dict]:
             log(f"  {case.name} {case.painting}: {name} failed: {type(exc).__name__}: {exc}")
             return
         imp = r.importance
-        rows.append(_row(case, name, res.flat, res.timings["setup"] + res.timings["solve"],
+        rows.append(_row(case, name, res.flat, res.timings.setup + res.timings.solve,
                          zone_fraction=None if imp is None or imp.values is None else imp.zone_fraction,
                          keywords=keywords, **extra))
 
@@ -235,7 +235,7 @@ def run_case(case: Case, variants: dict[str, dict], log=print) -> list[dict]:
         r, _ = rolled({})
         exact = case.zone(r.flat.mesh.vertices).astype(np.float64)
         res = relax(r.flat.replace(importance=exact))
-        rows.append(_row(case, "exact zone", res.flat, res.timings["setup"] + res.timings["solve"],
+        rows.append(_row(case, "exact zone", res.flat, res.timings.setup + res.timings.solve,
                          zone_fraction=float(exact.mean()), keywords={}))
     assert all(np.isfinite(row["area"]) for row in rows)
     return rows

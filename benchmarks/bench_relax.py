@@ -93,8 +93,8 @@ def _worker(size_m: float, method: str, budget: float, target: float | None) -> 
             kw["weighting"] = weighting
         r = relax(flat, callback=cb if preset == "paper" else None, **kw)
         uv = r.flat.uv
-        out.update(seconds=r.timings["solve"] + r.timings["setup"], solve=r.timings["solve"],
-                   setup=r.timings["setup"], iterations=r.iterations, converged=r.converged,
+        out.update(seconds=r.timings.solve + r.timings.setup, solve=r.timings.solve,
+                   setup=r.timings.setup, iterations=r.iterations, converged=r.converged,
                    levels=[(lv.level, lv.iterations) for lv in r.levels], notes=list(r.notes))
         if preset == "paper" and target is not None and trace:
             # time at which the dynamics first reached the target energy (its own, per spring)

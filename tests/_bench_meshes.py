@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 
-def _load(name: str):
+def load_benchmark(name: str):
+    """The module ``benchmarks/NAME.py``."""
     spec = importlib.util.spec_from_file_location(name, Path(__file__).parents[1] / "benchmarks" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module  # dataclasses look their module up
@@ -18,8 +19,8 @@ def _load(name: str):
     return module
 
 
-meshes = _load("_meshes")
-figures = _load("_figures")
+meshes = load_benchmark("_meshes")
+figures = load_benchmark("_figures")
 
 #: Relax options of the springs alone (no shape term, no final scaling): what the tests of the
 #: springs' edge-length figures run.
