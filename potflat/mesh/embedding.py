@@ -140,7 +140,7 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
     touched = np.zeros(n, bool)
     touched[faces[flipped].ravel()] = True
     verts = np.flatnonzero(touched)
-    edges, _ = fan_edges(verts, faces, vf_ptr, vf_tri)
+    edges, _ = fan_edges(np.unique(incident_faces(verts, vf_ptr, vf_tri)), faces, n)
     edges = edges[touched[edges].all(axis=1)]
     local = np.full(n, -1, np.int64)
     local[verts] = np.arange(len(verts))
@@ -149,7 +149,8 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
     for c in range(label.max() + 1 if len(label) else 0):
         region = verts[label == c]
         for _ in range(max_rings):
-            edges, count = fan_edges(region, faces, vf_ptr, vf_tri)
+            near = np.unique(incident_faces(region, vf_ptr, vf_tri))
+            edges, count = fan_edges(near, faces, n)
             on_border = np.isin(region, edges[count == 1])
             inner, border = region[~on_border], region[on_border]
             if reference is None:
@@ -159,7 +160,6 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
                 rows = sp.vstack([_mean_value_rows(inner, reference, faces, vf_ptr, vf_tri, n),
                                   _similar_rows(border, reference, faces, vf_ptr, vf_tri, n)]).tocsr()
             trial = _solve_rows(uv, free, rows)
-            near = np.unique(incident_faces(region, vf_ptr, vf_tri))
             if np.all(signed_areas(faces[near], trial) > 0):
                 uv = trial
                 break
@@ -168,13 +168,13 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
     return uv, start - left, left
 
 
-def fan_edges(verts: np.ndarray, faces: np.ndarray, vf_ptr: np.ndarray, vf_tri: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray]:
-    """The edges of the faces around ``verts`` (k,): (e, 2) int64, each once (smaller end
-    first, sorted), and the number of faces on each (e,) int64, which is the mesh's for every
-    edge with an end in ``verts`` (1: an edge of the mesh's boundary)."""
-    n = len(vf_ptr) - 1
-    tri = faces[np.unique(incident_faces(verts, vf_ptr, vf_tri))].astype(np.int64)
+def fan_edges(around: np.ndarray, faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The edges of the faces ``around`` ((s,) int, unique: every face with a corner at some
+    vertices, as ``np.unique(incident_faces(verts, ...))`` gives them) of a mesh of ``n``
+    vertices: (e, 2) int64, each once (smaller end first, sorted), and the number of those
+    faces on each (e,) int64, which is the mesh's for every edge with an end at those
+    vertices (1: an edge of the mesh's boundary)."""
+    tri = faces[around].astype(np.int64)
     ends = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
     key = np.sort(ends[:, 0] * n + ends[:, 1])  # (sorted by hand: np.unique of rows is far slower)
     first = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])

@@ -365,9 +365,9 @@ def untangle(faces: np.ndarray, uv: np.ndarray, *, table: tuple | None = None) -
             break
         if idx is None or not np.array_equal(grown, idx):
             idx = grown
-            rows = neighbour_rows(idx, fan_edges(idx, faces, vf_ptr, vf_tri)[0], n)
-            degree = np.maximum(np.diff(rows.indptr), 1)[:, None].astype(np.float64)
             near = np.unique(incident_faces(idx, vf_ptr, vf_tri))
+            rows = neighbour_rows(idx, fan_edges(near, faces, n)[0], n)
+            degree = np.maximum(np.diff(rows.indptr), 1)[:, None].astype(np.float64)
         x[idx] = (rows @ x) / degree
         still = near[signed_areas(faces[near], x) <= 0]
         if len(still) == 0:
