@@ -21,6 +21,7 @@ with a gap from foot to rim) needs no cut.
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import math
@@ -29,6 +30,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from potflat import importance as _importance
+from potflat._heap import release_free_memory
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.io.images import read_ahead
 from potflat.mesh.boundary import edges_and_boundary, outline_turning
@@ -317,16 +319,18 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         if face_mask.dtype != bool or face_mask.shape != (len(F),):
             raise InvalidInputError(f"face_mask must be a bool array of shape ({len(F)},), got "
                                     f"{face_mask.dtype} {face_mask.shape}")
-    textured = mesh.texcoords is not None and mesh.texture_path is not None
-    # the texture's decodes (the seam's brightness, the painted zone's colours) run on the second
-    # core while the axis and the attachments are found, steps that keep about one core busy
-    with read_ahead(mesh.texture_path if textured else None, grey_quarter=options.seam is None,
-                    rgb=options.importance == "auto"):
-        return _rollout_steps(mesh, options, face_mask)
+    texture = mesh.texture_path if mesh.texcoords is not None and mesh.texture_path is not None else None
+    # the texture's decodes run on the second core: the seam's brightness while the axis and
+    # the attachments are found (steps that keep about one core busy), the painted zone's
+    # colours once the unrolling's peak of memory is past (``later``)
+    with read_ahead(texture, grey_quarter=options.seam is None), contextlib.ExitStack() as later:
+        return _rollout_steps(mesh, options, face_mask, texture, later)
 
 
-def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | None) -> RolloutResult:
-    """:func:`rollout` after its checks of the input."""
+def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | None, texture,
+                   later: contextlib.ExitStack) -> RolloutResult:
+    """:func:`rollout` after its checks of the input; ``texture`` the path of the texture it
+    reads (None: none), ``later`` holds the read-aheads it starts."""
     V, F = mesh.vertices, mesh.faces
     clock = StepClock()
     other_objects = np.zeros(len(F), bool)
@@ -375,6 +379,9 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     base, floor = None, None
     if options.proxy != "ortho":  # (a view along the axis shows the base as it is)
         region, first = np.unique(un.face_index, return_index=True)  # (a repeat past 360 degrees once)
+        # (peak memory: the development's edge table is not held while the base is decided; it
+        # is found again only when the development stays)
+        un = dataclasses.replace(un, table=None)
         base = split_base(mesh, region, unrolled_errors(un.flat, first), n_axial=n_axial, height=h_c, radius=r_c,
                           vertex_radius=r_v, vertex_theta=theta_v, area=area, vessel_height=axis.height,
                           side=options.side,
@@ -396,6 +403,8 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
             un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area,
                          seam=seam, landmark=landmark, floor=floor)
         del region, first
+        if un.table is None:
+            un = dataclasses.replace(un, table=edges_and_boundary(un.flat.mesh.faces, len(un.vertex_index)))
     del n_axial, r_c, r_v
     clock.lap("base")
     # a piece that is not a disk (a handle joined at both ends, a closed part, an edge of three
@@ -444,6 +453,11 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         n_untangled, moved = n_untangled + more, moved + moved_more
     del graph
     clock.lap("untangle")
+    # past the unrolling's peak: the memory its temporaries left free goes back to the system
+    # (else the painted zone's texture and paint land above it), and the full texture for the
+    # painted zone's colours is decoded beside the checks
+    release_free_memory()
+    later.enter_context(read_ahead(texture, rgb=options.importance == "auto"))
     overlap = len(crossing_segments(uv, un.table[1])[0])
     turning = outline_turning(un.flat.mesh.faces, uv, segments=un.table[1])
     distortion = un.distortion
