@@ -26,6 +26,7 @@ import dataclasses
 import functools
 import math
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -327,8 +328,8 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
         return _rollout_steps(mesh, options, face_mask, texture, later)
 
 
-def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | None, texture,
-                   later: contextlib.ExitStack) -> RolloutResult:
+def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | None,
+                   texture: Path | None, later: contextlib.ExitStack) -> RolloutResult:
     """:func:`rollout` after its checks of the input; ``texture`` the path of the texture it
     reads (None: none), ``later`` holds the read-aheads it starts."""
     V, F = mesh.vertices, mesh.faces
