@@ -33,8 +33,9 @@ def test_fan_edges_and_neighbour_rows_match_the_whole_mesh(seed):
     _, all_edges, all_count, _ = edge_table(F, n)
     verts = np.unique(np.random.default_rng(seed).choice(n, 25, replace=False))
     verts = np.union1d(verts, boundary_loops(F, n)[0][:3])
-    edges, count = fan_edges(np.unique(incident_faces(verts, *vertex_faces(n, F))), F, n)
+    edges, count = fan_edges(np.unique(incident_faces(verts, *vertex_faces(n, F))), F)
     assert np.all(edges[:, 0] < edges[:, 1]) and len(np.unique(edges, axis=0)) == len(edges)
+    assert np.all(np.diff(edges[:, 0] * n + edges[:, 1]) > 0)  # sorted
     mine = np.isin(all_edges, verts).any(axis=1)
     lookup = {tuple(e): c for e, c in zip(edges.tolist(), count, strict=True)}
     assert all(lookup.get(tuple(e)) == c for e, c in zip(all_edges[mine].tolist(), all_count[mine], strict=True))

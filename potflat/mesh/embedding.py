@@ -21,7 +21,7 @@ import numpy as np
 
 from potflat.mesh.distortion import bounds
 from potflat.mesh._kernels.geometry import signed_areas_2d as face_areas
-from potflat.mesh._kernels.topology import incident_faces, vertex_faces
+from potflat.mesh._kernels.topology import edge_table, incident_faces, vertex_faces
 
 #: Rings by which a folded cluster is grown at most before giving up on local repair.
 REPAIR_MAX_RINGS = 12
@@ -48,16 +48,9 @@ def signed_areas(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
 
 
 def _adjacency(faces: np.ndarray, n: int):
-    """Symmetric vertex adjacency (CSR, ones) of the mesh edges."""
-    import scipy.sparse as sp
-
-    i = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]])
-    j = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]])
-    a = sp.coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n)).tocsr()
-    a = ((a + a.T) > 0).astype(np.float64)
-    a.setdiag(0.0)
-    a.eliminate_zeros()
-    return a
+    """Symmetric vertex adjacency (CSR, ones) of the mesh edges (none from a vertex to itself)."""
+    edges = fan_edges(np.arange(len(faces)), faces)[0]
+    return neighbour_rows(np.arange(n), edges[edges[:, 0] != edges[:, 1]], n)
 
 
 def boundary_loops(faces: np.ndarray, n: int) -> list[np.ndarray]:
@@ -140,7 +133,7 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
     touched = np.zeros(n, bool)
     touched[faces[flipped].ravel()] = True
     verts = np.flatnonzero(touched)
-    edges, _ = fan_edges(np.unique(incident_faces(verts, vf_ptr, vf_tri)), faces, n)
+    edges, _ = fan_edges(np.unique(incident_faces(verts, vf_ptr, vf_tri)), faces)
     edges = edges[touched[edges].all(axis=1)]
     local = np.full(n, -1, np.int64)
     local[verts] = np.arange(len(verts))
@@ -150,7 +143,7 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
         region = verts[label == c]
         for _ in range(max_rings):
             near = np.unique(incident_faces(region, vf_ptr, vf_tri))
-            edges, count = fan_edges(near, faces, n)
+            edges, count = fan_edges(near, faces)
             on_border = np.isin(region, edges[count == 1])
             inner, border = region[~on_border], region[on_border]
             if reference is None:
@@ -168,18 +161,16 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
     return uv, start - left, left
 
 
-def fan_edges(around: np.ndarray, faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+def fan_edges(around: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The edges of the faces ``around`` ((s,) int, unique: every face with a corner at some
-    vertices, as ``np.unique(incident_faces(verts, ...))`` gives them) of a mesh of ``n``
-    vertices: (e, 2) int64, each once (smaller end first, sorted), and the number of those
-    faces on each (e,) int64, which is the mesh's for every edge with an end at those
-    vertices (1: an edge of the mesh's boundary)."""
-    tri = faces[around].astype(np.int64)
-    ends = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
-    key = np.sort(ends[:, 0] * n + ends[:, 1])  # (sorted by hand: np.unique of rows is far slower)
-    first = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-    count = np.diff(np.r_[first, len(key)])
-    return np.stack([key[first] // n, key[first] % n], axis=1), count
+    vertices, as ``np.unique(incident_faces(verts, ...))`` gives them): (e, 2) int64, each
+    once (smaller end first, sorted), and the number of those faces on each (e,) int64,
+    which is the mesh's for every edge with an end at those vertices (1: an edge of the
+    mesh's boundary). The edge table of those faces alone, their vertices numbered
+    compactly (its cost is theirs, not the mesh's)."""
+    verts, local = np.unique(faces[around], return_inverse=True)
+    _, edges, count, _ = edge_table(local.reshape(-1, 3).astype(np.int64), len(verts))
+    return verts[edges].astype(np.int64), count
 
 
 def neighbour_rows(verts: np.ndarray, edges: np.ndarray, n: int):

@@ -366,7 +366,7 @@ def untangle(faces: np.ndarray, uv: np.ndarray, *, table: tuple | None = None) -
         if idx is None or not np.array_equal(grown, idx):
             idx = grown
             near = np.unique(incident_faces(idx, vf_ptr, vf_tri))
-            rows = neighbour_rows(idx, fan_edges(near, faces, n)[0], n)
+            rows = neighbour_rows(idx, fan_edges(near, faces)[0], n)
             degree = np.maximum(np.diff(rows.indptr), 1)[:, None].astype(np.float64)
         x[idx] = (rows @ x) / degree
         still = near[signed_areas(faces[near], x) <= 0]
