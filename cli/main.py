@@ -32,20 +32,21 @@ def split_pairs(args: list[str], pair_options) -> list[str]:
 
 
 def _interrupt(signum, frame) -> None:
-    """Ctrl-C and SIGTERM (a cluster's or a service manager's stop): clean up and stop."""
+    """Ctrl-C and SIGTERM (a cluster's or a service manager's stop): clean up and stop (outside
+    Numba's compiler: :func:`potflat._interrupts.raise_interrupt`)."""
+    from potflat._interrupts import raise_interrupt
     from potflat_cli._errors import STOP
 
     STOP.append(signum)  # remembered: an interrupt raised inside a finaliser is swallowed by Python
-    raise KeyboardInterrupt
+    raise_interrupt(signum, frame)
 
 
 def _quiet_unraisable(unraisable) -> None:
     """``sys.unraisablehook``: an interrupt raised where Python cannot raise it (a finaliser, a
     weakref callback) is remembered (:data:`STOP`) and ends the command with its one line, so
     Python's "Exception ignored ... Traceback" is not printed for it. Once stopping, neither is
-    a finaliser's error: an interrupt that landed while Numba compiled leaves half-made LLVM
-    objects whose finalisers fail (llvmlite's ``ValueRef`` without ``_as_parameter_``).
-    Before a stop, every unraisable error is printed."""
+    a finaliser's error (whatever the interrupt broke). Before a stop, every unraisable error
+    is printed."""
     import sys
 
     from potflat_cli._errors import STOP
@@ -74,6 +75,8 @@ class _Group(TyperGroup):
         except ImportError:
             import click
 
+        from potflat._interrupts import ignore_interrupts
+        from potflat_cli import _is_the_command
         from potflat_cli._errors import EXIT_USAGE, STOP, TOLD, fail, interrupted
         from potflat_cli._process import command_settings
 
@@ -106,6 +109,11 @@ class _Group(TyperGroup):
             if not STOP:
                 raise
             code = interrupted().exit_code  # whatever the interrupt broke while the command was being built
+        if _is_the_command() and threading.current_thread() is threading.main_thread():
+            # done: a stop signal from here on changes nothing, and Python's shutdown (a few
+            # tenths of a second with Numba loaded) puts the default handlers back, which would
+            # let it kill the finished command (exit -15 instead of its code)
+            ignore_interrupts()
         sys.exit(code or 0)
 
     def resolve_command(self, ctx, args):

@@ -29,7 +29,7 @@ from typer.testing import CliRunner
 from potflat.errors import FoldedResultError, InvalidInputError
 from potflat.files.batch.config import BatchFileError, load_batch
 from potflat.files.batch.execution import run_batch
-from potflat.files.batch.manifest import MANIFEST, is_complete, job_key, read_manifest
+from potflat.files.batch.manifest import MANIFEST, read_manifest
 
 runner = CliRunner()
 
@@ -522,9 +522,7 @@ def test_an_interrupt_inside_a_finaliser_prints_no_traceback(capsys, monkeypatch
     """The handler's KeyboardInterrupt raised inside a weakref callback or a finaliser is
     "unraisable": Python printed "Exception ignored in ... Traceback" (1 SIGTERM in 40 at a
     random moment); the command's one line says it all. So is a finaliser's error once
-    stopping (an interrupt that landed while Numba compiled: llvmlite's half-made objects fail
-    in their finalisers; seen once in a run of the test suite). Before a stop, unraisable errors
-    are printed."""
+    stopping (whatever the interrupt broke). Before a stop, unraisable errors are printed."""
     from potflat_cli._errors import STOP
     from potflat_cli.main import _quiet_unraisable
 
@@ -584,6 +582,56 @@ def test_python_m_ends_an_interrupt_that_left_an_exec_with_130(tmp_path):
                        capture_output=True, text=True, env=env, timeout=120)
     assert r.returncode == 130 and "error: interrupted" in r.stderr and "Traceback" not in r.stderr, (r.returncode,
                                                                                                      r.stderr[-1000:])
+
+
+def test_an_interrupt_inside_numba_s_compiler_is_raised_once_it_returns():
+    """Ctrl-C or SIGTERM landing while Numba compiles a kernel (or loads it from its cache) is
+    raised once the compiler has returned: raised inside it, it can leave a kernel half-linked,
+    and a kernel loaded later crashes the process (segmentation fault). The signal is sent
+    from the typing of a call, inside the compiler."""
+    import numba
+    from numba.extending import overload
+
+    from potflat._interrupts import raise_interrupt
+
+    def marker():
+        return 1
+
+    @overload(marker)
+    def _typed_marker():
+        os.kill(os.getpid(), signal.SIGTERM)
+        sum(range(10_000))  # bytecodes where the handler runs, inside the compiler
+        return lambda: 1
+
+    @numba.njit
+    def kernel():
+        return marker()
+
+    previous = signal.signal(signal.SIGTERM, raise_interrupt)
+    compiled = []
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            compiled.append(kernel())
+            time.sleep(10)  # the deferred interrupt ends this at once
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert compiled == [1]
+    assert signal.getsignal(signal.SIGALRM) is signal.SIG_DFL
+
+
+def test_a_finished_command_ignores_stop_signals_while_python_shuts_down():
+    """Once the command's exit code is decided, Ctrl-C and SIGTERM are ignored: Python's shutdown
+    (tenths of a second with Numba loaded) puts the default handlers back, which would let a
+    late SIGTERM kill a finished run (exit -15)."""
+    script = ("import signal, sys\n"
+              "sys.argv = ['potflat', '--version']\n"
+              "from potflat_cli.main import app\n"
+              "try:\n"
+              "    app()\n"
+              "except SystemExit as end:\n"
+              "    print(end.code, *(signal.getsignal(s) is signal.SIG_IGN for s in (signal.SIGINT, signal.SIGTERM)))\n")
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert r.stdout.split()[-3:] == ["0", "True", "True"], (r.stdout, r.stderr)
 
 
 def test_sigterm_ends_a_run_like_ctrl_c(tmp_path):

@@ -18,6 +18,7 @@ from typing import Any, Callable
 
 from potflat import __version__
 from potflat import _heap
+from potflat._interrupts import raise_interrupt
 from potflat._jit import numba_threads
 from potflat.errors import InvalidOptionError, PotflatError
 from potflat.files.batch.config import Batch, ScanJob
@@ -324,17 +325,13 @@ def _worker_start(parent: int) -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, _interrupt)
+    signal.signal(signal.SIGTERM, raise_interrupt)
     with contextlib.suppress(Exception):
         import ctypes
 
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
     if os.getppid() != parent:  # the parent died before the line above
         os._exit(130)
-
-
-def _interrupt(signum, frame) -> None:
-    raise KeyboardInterrupt
 
 
 def _run_job_in_worker(job: ScanJob, key: str, threads: int, heap_tuning: bool) -> ScanReport:
