@@ -12,7 +12,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: Layers from the bottom up: a module may import its own layer's and lower layers' modules.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("potflat.errors", "potflat.types", "potflat._jit", "potflat._lazy", "potflat._heap"),
+    ("potflat.errors", "potflat.types", "potflat._jit", "potflat._lazy", "potflat._heap",
+     "potflat._interrupts"),
     ("potflat.mesh",),
     ("potflat.io",),
     ("potflat.raster",),
