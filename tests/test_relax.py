@@ -645,6 +645,40 @@ def _grid(k=12):
     return np.c_[x, np.zeros(len(x))], F, x
 
 
+@pytest.mark.parametrize("centre", [(7, 7), (7, 1)], ids=["inside", "at the boundary"])
+def test_extreme_faces_of_a_start_are_relaxed_locally(centre):
+    """Faces squeezed to anisotropy 23 in a fold-free layout (a 3 x 3 block of vertices
+    squeezed to 8% of its height, inside the grid or with the grid's bottom edge) are relaxed
+    with the vertices more than the rings around them fixed: the energy drops, the squeeze
+    is undone, the layout stays fold-free and its boundary uncrossed; a layout without an
+    extreme face is returned as it is."""
+    from potflat.mesh.distortion import face_distortion
+    from potflat.relax.local import relax_extremes
+    from potflat.relax.parameters import COARSE
+
+    V, F, x0 = _grid(16)
+    sp = spring_system(V, F, k=1.0, relative=True, shape=1.0, area=1.0)
+    sp.set_area_and_limit(1.0, 1.2)
+    x = x0.copy()
+    block = (np.abs(x0[:, 0] - centre[0]) <= 1) & (np.abs(x0[:, 1] - centre[1]) <= 1)
+    x[block, 1] = centre[1] + 0.08 * (x0[block, 1] - centre[1])
+    before = face_distortion(V, x, F).anisotropy
+    assert (signed_areas(x, F) > 0).all() and before.max() > 20
+    sp.guard_boundary(x)
+    notes: list[str] = []
+    y = relax_extremes(sp, x, V, notes)
+    after = face_distortion(V, y, F).anisotropy
+    assert len(notes) == 1 and "anisotropy above" in notes[0]
+    assert sp.evaluate(y)[0] < sp.evaluate(x)[0] and after.max() < 2.0
+    assert (signed_areas(y, F) > 0).all() and sp.overlap(y) == 0
+    extreme_vertices = np.unique(F[before > COARSE.local_anisotropy])
+    reach = np.abs(x0[extreme_vertices] - centre).max() + COARSE.local_rings  # (a ring: one step in x or y)
+    far = np.abs(x0 - centre).max(axis=1) > reach
+    assert np.array_equal(y[far], x[far]) and not np.array_equal(y[~far], x[~far])
+    notes.clear()
+    assert relax_extremes(sp, x0, V, notes) is x0 and not notes
+
+
 def _folded_goal(x, k, c):
     """``x`` turned, stretched and moved, with vertex ``c`` pulled 2.5 edges across its
     neighbours (its fan folds), and the corner vertex 0 pulled below the bottom edge's far

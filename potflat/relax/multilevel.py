@@ -47,6 +47,7 @@ from potflat.relax.dynamics import paper_dynamics
 from potflat.relax.energy import SpringSystem, importance_weights, mean_edge_length
 from potflat.relax.hierarchy import GridHierarchy
 from potflat.relax.lbfgs import minimise
+from potflat.relax.local import relax_extremes
 from potflat.relax.options import RelaxOptions
 from potflat.relax.parameters import COARSE, ENERGY, SOLVER, RelaxPreset
 from potflat.relax.result import LevelRecord, RelaxResult, RelaxTimings
@@ -320,12 +321,14 @@ def _spring_system(V: np.ndarray, F: np.ndarray, start_uv: np.ndarray, flat: Fla
     return sp, hier, frame, weight
 
 
-def _start(sp: SpringSystem, x: np.ndarray, frame: _Frame, plan: _Plan, fold_free: bool,
-           notes: list[str]) -> tuple[np.ndarray, np.ndarray | None, bool, float]:
-    """The solve's start from the layout ``x`` (n, 2, solver frame): untangled and fold-free
-    (fold-free presets), then where the relaxed coarse copy takes it when that can be made
-    fold-free (:func:`potflat.relax.start.follow`) and, for a copy that is only the solve's
-    start, has an energy at most ``COARSE.follow_most_energy`` times ``x``'s.
+def _start(sp: SpringSystem, x: np.ndarray, V: np.ndarray, frame: _Frame, plan: _Plan, fold_free: bool,
+           notes: list[str], *, local: bool) -> tuple[np.ndarray, np.ndarray | None, bool, float]:
+    """The solve's start from the layout ``x`` (n, 2, solver frame) of the rest positions ``V``
+    (n, 3): untangled and fold-free (fold-free presets), then where the relaxed coarse copy
+    takes it when that can be made fold-free (:func:`potflat.relax.start.follow`) and, for a
+    copy that is only the solve's start, has an energy at most ``COARSE.follow_most_energy``
+    times ``x``'s; then, with ``local``, with its extreme faces relaxed locally
+    (:func:`potflat.relax.local.relax_extremes`).
 
     Returns the start, the folded layout it replaces when it is Tutte's disc (else None),
     whether it follows the copy and the seconds spent following it."""
@@ -355,6 +358,10 @@ def _start(sp: SpringSystem, x: np.ndarray, frame: _Frame, plan: _Plan, fold_fre
                              "the full mesh from the rollout")
                 followed, wrapped = None, wrapped_x
                 sp.guard_boundary(x)
+            elif judged and local:
+                relaxed = relax_extremes(sp, followed, np.take(V, frame.order, axis=0) / frame.unit, notes)
+                if relaxed is not followed:
+                    followed, wrapped = relaxed, sp.guard_boundary(relaxed)
         if followed is not None:
             x = followed
     t_follow = time.perf_counter() - t_follow
@@ -428,7 +435,9 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
             del start_uv
             if plan.softer is not None:  # its layout is in x now (peak memory)
                 plan = replace(plan, softer=replace(plan.softer, uv=None))
-            x, folded_start, followed, t_follow = _start(sp, x, frame, plan, fold_free, notes)
+            # (the full mesh only: in the copies, whose layouts only start the next, it changed which
+            # copy the full mesh follows, and the plastic vase's 1M copy then took 699 iterations)
+            x, folded_start, followed, t_follow = _start(sp, x, V, frame, plan, fold_free, notes, local=summaries)
             if plan.coarse is None or followed:
                 break
             # the copy is given up: every decision taken because of it is taken again (its

@@ -244,6 +244,14 @@ class CoarseParameters:
     leave costs the full mesh more than a solve from the rollout, and the copy is given up
     (1M copies: the dragon jar's 2.6 % short took 509 full-mesh iterations, 50 s, against 286
     iterations, 18 s, from the rollout; the plastic vase's 0.5 % took 315, 38 s).
+    A followed start that the full mesh solves has its faces of anisotropy above
+    ``local_anisotropy``, grown by ``local_rings`` rings, relaxed first with every other
+    vertex fixed, for at most ``local_iterations`` iterations to the tolerance ``local_tol``
+    (:func:`potflat.relax.local.relax_extremes`): they hold most of the followed start's
+    energy (the anisotropy limit's term) and took most of the full mesh's iterations (1M
+    copies, full-mesh iterations without and with: sea vase 118 and 24, dragon jar 81 and 48,
+    goblet 93 and 82, colonoware pot 91 and 70; with a threshold of 2 the sea vase's
+    patches took 65,000 vertices and the relaxed start made the boundary overlap).
     """
 
     min_copy: int = 100
@@ -262,6 +270,10 @@ class CoarseParameters:
     approach_floor: float = 0.1
     approach_margin: float = 0.9
     approach_most_short: float = 0.01
+    local_anisotropy: float = 5.0
+    local_rings: int = 2
+    local_iterations: int = 300
+    local_tol: float = 1e-7
 
 
 #: The energy's barriers and floors.
