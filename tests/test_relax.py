@@ -677,6 +677,8 @@ def test_extreme_faces_of_a_start_are_relaxed_locally(centre):
     assert np.array_equal(y[far], x[far]) and not np.array_equal(y[~far], x[~far])
     notes.clear()
     assert relax_extremes(sp, x0, V, notes) is x0 and not notes
+    sp.fixed = far  # a spring system's fixed vertices: zero gradient rows
+    assert not sp.evaluate(x)[2][far].any() and sp.evaluate(x)[2][~far].any()
 
 
 def _folded_goal(x, k, c):

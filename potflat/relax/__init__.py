@@ -5,7 +5,8 @@ options, light to import), :mod:`.parameters` (the typed presets and the energy'
 solvers' and the coarse copies' constants), :mod:`.multilevel` (:func:`relax`: the schedule
 of coarse copies and solves), :mod:`.energy` (the spring energy and its barriers),
 :mod:`.lbfgs` (the fold-free solver), :mod:`.dynamics` (the paper's dynamics),
-:mod:`.start` (untangled, fold-free starts), :mod:`.control` (iteration control),
+:mod:`.start` (untangled, fold-free starts), :mod:`.local` (a followed start's extreme faces
+relaxed with the rest fixed), :mod:`.control` (iteration control),
 :mod:`.result` (what a relaxation gives), :mod:`.hierarchy` (the multilevel preconditioner),
 :mod:`.simplify` (coarse copies), :mod:`._kernels` (Numba kernels). Names are imported on
 first use.

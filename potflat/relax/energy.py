@@ -133,6 +133,7 @@ class SpringSystem:
         self.isolated = np.diff(self.vf_ptr) == 0
         self.bprev, self.bnext = boundary_neighbours(self.boundary_segments, n)
         self.bguard = np.zeros(n, bool)  # set by guard_boundary()
+        self.fixed: np.ndarray | None = None  # (n,) bool: vertices held in place (zero gradient); None: none
         self.contact = False  # set by guard_boundary()
         seg = self.boundary_segments
         # the contact search's grid cell (at least the barrier's reach)
@@ -185,8 +186,8 @@ class SpringSystem:
     def evaluate(self, x: np.ndarray, *, barrier: bool = True,
                  out: np.ndarray | None = None) -> tuple[float, float, np.ndarray]:
         """Total energy, elastic energy (springs and shape term) and gradient at ``x``
-        (written into ``out`` (n, 2) when given, else a fresh array). Also sets ``diag``,
-        the Hessian diagonal bound at ``x``."""
+        (written into ``out`` (n, 2) when given, else a fresh array; zero at the ``fixed``
+        vertices). Also sets ``diag``, the Hessian diagonal bound at ``x``."""
         g = np.empty((self.n, 2)) if out is None else out
         w = self.weights
         face_terms(x, self.faces, self.a_ref, ENERGY.barrier_eps, self.rest_shape, w.shape, w.rigidity, w.area,
@@ -200,7 +201,7 @@ class SpringSystem:
                                 ENERGY.boundary_gap, g, self._es, self._eb, self.diag)
         es = float(np.sum(self._es)) + float(np.sum(self._e_face))  # (zeros without per-face terms)
         if not barrier:
-            return es, es, g
+            return es, es, self._held(g)
         eb = float(np.sum(self._eb))
         ef = face_barrier(x, self.faces, self._areas, self.a_ref, ENERGY.barrier_mu, self.k, ENERGY.barrier_eps,
                                   self.relative, self.weight, g, self.diag, self._below)
@@ -208,7 +209,13 @@ class SpringSystem:
         if self.contact:
             ec = contact_barrier(x, self.boundary_segments, self.bprev, self.bnext, ENERGY.contact_gap,
                                          ENERGY.contact_mu * self.k, self._contact_cell, self.weight, g, self.diag)
-        return es + eb + ef + ec, es, g
+        return es + eb + ef + ec, es, self._held(g)
+
+    def _held(self, g: np.ndarray) -> np.ndarray:
+        """``g`` (n, 2) with the rows of the :attr:`fixed` vertices set to zero."""
+        if self.fixed is not None:
+            g[self.fixed] = 0.0
+        return g
 
     def spring_energy(self, x: np.ndarray) -> float:
         """Elastic energy without the barriers: the springs (Eq. 1 with the 1/2 per spring,

@@ -129,10 +129,13 @@ class LBFGS:
 
     def _smooth_limiting(self, t: float, gd: float) -> tuple[float, float]:
         """Smooth the direction ``q`` at the vertices of the limiting faces (those flagged by
-        the step bound ``t``); kept only when it still descends and allows a longer step.
+        the step bound ``t``, not ``sp.fixed``); kept only when it still descends and allows a
+        longer step.
         Returns the step and ``g . q``."""
         sp = self.sp
         verts = flagged_face_vertices(self._limiting, sp.faces, self._seen)
+        if sp.fixed is not None:
+            verts = verts[~sp.fixed[verts]]
         if not 0 < len(verts) <= SOLVER.smooth_max_fraction * sp.n:  # none: the boundary limits the step
             return t, gd
         dx = self.q.reshape(-1, 2)

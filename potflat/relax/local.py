@@ -21,8 +21,8 @@ from potflat.relax.parameters import COARSE
 
 class _Patch(SpringSystem):
     """The spring system of some faces of a mesh's (``whole``), with the per-face terms,
-    weights and limit of ``whole`` and the vertices not ``free`` fixed (zero gradient); its
-    overlap is that of ``whole``'s boundary in ``layout`` with the patch's vertices moved."""
+    weights and limit of ``whole`` and the vertices not ``free`` :attr:`fixed`; its overlap is
+    that of ``whole``'s boundary in ``layout`` with the patch's vertices moved."""
 
     def __init__(self, whole: SpringSystem, V: np.ndarray, faces: np.ndarray, vertices: np.ndarray,
                  free: np.ndarray, layout: np.ndarray):
@@ -38,12 +38,6 @@ class _Patch(SpringSystem):
         self.weights = whole.weights
         self.fixed = ~free[vertices]
         self.whole, self.vertices, self.layout = whole, vertices, layout
-
-    def evaluate(self, x: np.ndarray, *, barrier: bool = True,
-                 out: np.ndarray | None = None) -> tuple[float, float, np.ndarray]:
-        energy, elastic, g = super().evaluate(x, barrier=barrier, out=out)
-        g[self.fixed] = 0.0
-        return energy, elastic, g
 
     def overlap(self, x: np.ndarray, max_pairs: int = 1000) -> int:
         self.layout[self.vertices] = x

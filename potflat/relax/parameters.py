@@ -250,8 +250,7 @@ class CoarseParameters:
     (:func:`potflat.relax.local.relax_extremes`): they hold most of the followed start's
     energy (the anisotropy limit's term) and took most of the full mesh's iterations (1M
     copies, full-mesh iterations without and with: sea vase 118 and 24, dragon jar 81 and 48,
-    goblet 93 and 82, colonoware pot 91 and 70; with a threshold of 2 the sea vase's
-    patches took 65,000 vertices and the relaxed start made the boundary overlap).
+    goblet 93 and 83, colonoware pot 91 and 70).
     """
 
     min_copy: int = 100
