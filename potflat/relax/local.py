@@ -44,7 +44,8 @@ class _Patch(SpringSystem):
         return self.whole.overlap(self.layout, max_pairs)
 
 
-def relax_extremes(sp: SpringSystem, x: np.ndarray, V: np.ndarray, notes: list[str]) -> np.ndarray:
+def relax_extremes(sp: SpringSystem, x: np.ndarray, V: np.ndarray, notes: list[str], *,
+                   deadline: float = math.inf) -> np.ndarray:
     """``x`` (n, 2) with its patches of extreme faces relaxed, every other vertex fixed.
 
     The faces whose anisotropy in ``x`` exceeds ``COARSE.local_anisotropy``, grown by
@@ -65,6 +66,8 @@ def relax_extremes(sp: SpringSystem, x: np.ndarray, V: np.ndarray, notes: list[s
         Rest positions as ``sp`` was built from them (its vertex order and units).
     notes : list of str
         Appended to when the patches are relaxed.
+    deadline : float
+        ``time.perf_counter()`` at which the patches' solve stops (the relaxation's time budget).
 
     Returns
     -------
@@ -92,7 +95,7 @@ def relax_extremes(sp: SpringSystem, x: np.ndarray, V: np.ndarray, notes: list[s
     # the contact barrier between the patch's boundary segments, when they do not overlap at the start
     patch.contact = len(patch.boundary_segments) >= 3 and SpringSystem.overlap(patch, start) == 0
     solver = LBFGS(patch, start, None, guard_overlap=sp.overlap(x) == 0)
-    run = RunControl(COARSE.local_iterations, math.inf, None, None)
+    run = RunControl(COARSE.local_iterations, deadline, None, None)
     _, iterations = solver.run(run, max_iter=COARSE.local_iterations, tol=COARSE.local_tol, hist=[solver.E])
     relaxed = x.copy()
     relaxed[vertices] = solver.x

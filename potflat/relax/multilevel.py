@@ -322,13 +322,13 @@ def _spring_system(V: np.ndarray, F: np.ndarray, start_uv: np.ndarray, flat: Fla
 
 
 def _start(sp: SpringSystem, x: np.ndarray, V: np.ndarray, frame: _Frame, plan: _Plan, fold_free: bool,
-           notes: list[str], *, local: bool) -> tuple[np.ndarray, np.ndarray | None, bool, float]:
+           notes: list[str], *, local: bool, deadline: float) -> tuple[np.ndarray, np.ndarray | None, bool, float]:
     """The solve's start from the layout ``x`` (n, 2, solver frame) of the rest positions ``V``
     (n, 3): untangled and fold-free (fold-free presets), then where the relaxed coarse copy
     takes it when that can be made fold-free (:func:`potflat.relax.start.follow`) and, for a
     copy that is only the solve's start, has an energy at most ``COARSE.follow_most_energy``
     times ``x``'s; then, with ``local``, with its extreme faces relaxed locally
-    (:func:`potflat.relax.local.relax_extremes`).
+    (:func:`potflat.relax.local.relax_extremes`, stopped at ``deadline``).
 
     Returns the start, the folded layout it replaces when it is Tutte's disc (else None),
     whether it follows the copy and the seconds spent following it."""
@@ -359,7 +359,8 @@ def _start(sp: SpringSystem, x: np.ndarray, V: np.ndarray, frame: _Frame, plan: 
                 followed, wrapped = None, wrapped_x
                 sp.guard_boundary(x)
             elif judged and local:
-                relaxed = relax_extremes(sp, followed, np.take(V, frame.order, axis=0) / frame.unit, notes)
+                relaxed = relax_extremes(sp, followed, np.take(V, frame.order, axis=0) / frame.unit, notes,
+                                         deadline=deadline)
                 if relaxed is not followed:
                     followed, wrapped = relaxed, sp.guard_boundary(relaxed)
         if followed is not None:
@@ -437,7 +438,8 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
                 plan = replace(plan, softer=replace(plan.softer, uv=None))
             # (the full mesh only: in the copies, whose layouts only start the next, it changed which
             # copy the full mesh follows, and the plastic vase's 1M copy then took 699 iterations)
-            x, folded_start, followed, t_follow = _start(sp, x, V, frame, plan, fold_free, notes, local=summaries)
+            x, folded_start, followed, t_follow = _start(sp, x, V, frame, plan, fold_free, notes, local=summaries,
+                                                         deadline=deadline)
             if plan.coarse is None or followed:
                 break
             # the copy is given up: every decision taken because of it is taken again (its
