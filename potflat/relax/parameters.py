@@ -249,7 +249,7 @@ class CoarseParameters:
     vertex fixed, for at most ``local_iterations`` iterations to the tolerance ``local_tol``
     (:func:`potflat.relax.local.relax_extremes`): they hold most of the followed start's
     energy (the anisotropy limit's term) and took most of the full mesh's iterations (1M
-    copies, full-mesh iterations without and with: sea vase 118 and 24, dragon jar 81 and 48,
+    copies, full-mesh iterations without and with: sea vase 118 and 28, dragon jar 81 and 48,
     goblet 93 and 83, colonoware pot 91 and 70).
     """
 
