@@ -18,6 +18,9 @@ from potflat.relax.energy import SpringSystem
 from potflat.relax.lbfgs import LBFGS
 from potflat.relax.parameters import COARSE
 
+#: Faces whose anisotropy is computed at once (bounds the temporaries of the 3D frames).
+_FACES_PER_PASS = 1 << 20
+
 
 class _Patch(SpringSystem):
     """The spring system of some faces of a mesh's (``whole``), with the per-face terms,
@@ -75,7 +78,10 @@ def relax_extremes(sp: SpringSystem, x: np.ndarray, V: np.ndarray, notes: list[s
         The layout; ``x`` itself when no face is extreme or the relaxed layout is not kept.
     """
     faces = sp.faces
-    extreme = face_distortion(V, x, faces.astype(np.int64)).anisotropy > COARSE.local_anisotropy
+    extreme = np.empty(len(faces), bool)
+    for lo in range(0, len(faces), _FACES_PER_PASS):  # (in passes: all faces' figures at once set the stage's peak)
+        part = faces[lo:lo + _FACES_PER_PASS].astype(np.int64)
+        extreme[lo:lo + len(part)] = face_distortion(V, x, part).anisotropy > COARSE.local_anisotropy
     if not extreme.any():
         return x
     free = np.zeros(sp.n, bool)

@@ -148,7 +148,6 @@ class _KeptBorder:
         self.extra_edge, self.extra = self.edge_of[extra], extra
         self.excess = (np.bincount(self.edges.ravel(), minlength=n)
                        - np.bincount(faces.ravel(), minlength=n))  # kept edges - kept corners per vertex
-        self._vertex_faces = None
 
     def segments(self) -> tuple[np.ndarray, np.ndarray]:
         """Boundary segments (b, 2) int64 in face order, and the face of each."""
@@ -174,10 +173,11 @@ class _KeptBorder:
         self.boundary[near] = self.count[self.edge_of[near]] == 1
 
     def faces_at(self, vertices: np.ndarray) -> np.ndarray:
-        """The faces (sorted, unique) with a corner at one of ``vertices`` (k,) int64."""
-        if self._vertex_faces is None:
-            self._vertex_faces = vertex_faces(int(self.excess.shape[0]), self.faces)
-        return np.unique(incident_faces(vertices, *self._vertex_faces))
+        """The faces (sorted, unique) with a corner at one of ``vertices`` (k,) int64 (a mask
+        over the corners: a vertex-to-face table of the whole mesh would set the rollout's peak)."""
+        at = np.zeros(len(self.excess), bool)
+        at[vertices] = True
+        return np.flatnonzero(at[self.faces].any(axis=1))
 
 
 def _crossing_region(graph: FaceGraph, faces: np.ndarray, keep: np.ndarray, uv: np.ndarray, over: np.ndarray,
