@@ -645,6 +645,39 @@ def _grid(k=12):
     return np.c_[x, np.zeros(len(x))], F, x
 
 
+def test_a_local_relaxation_keeps_clear_of_the_boundary_around_it():
+    """A squeezed block at the edge of one prong of a slit grid (a slit one unit wide), whose
+    rest is 2.5 times as wide as it is laid out, pushes that prong's edge across the slit
+    when relaxed with the rest fixed: the other prong's boundary is outside the patch, yet
+    the whole mesh's contact barrier keeps the edge off it (without it the edge comes within
+    3e-13 of the other prong)."""
+    from potflat.relax.local import relax_extremes
+    from potflat.relax.parameters import ENERGY
+
+    V, F, x0 = _grid(16)
+    centre = x0[F].mean(axis=1)
+    F = F[~((centre[:, 0] > 7) & (centre[:, 0] < 8) & (centre[:, 1] > 2))]  # every vertex stays used
+    block = (x0[:, 0] >= 5) & (x0[:, 0] <= 7) & (x0[:, 1] >= 9) & (x0[:, 1] <= 12)
+    V[block, 0] = 5 + 2.5 * (x0[block, 0] - 5)
+    x = x0.copy()
+    x[block, 0] = 5 + 0.3 * (x0[block, 0] - 5)
+    sp = spring_system(V, F, k=1.0, relative=True, shape=1.0, area=1.0)
+    sp.set_area_and_limit(1.0, 1.2)
+    assert (signed_areas(x, F) > 0).all() and sp.overlap(x) == 0
+    sp.guard_boundary(x)
+    notes: list[str] = []
+    y = relax_extremes(sp, x, V, notes)
+    assert notes and (signed_areas(y, F) > 0).all() and sp.overlap(y) == 0
+    seg = sp.boundary_segments
+    right = seg[(x0[seg, 0] >= 8).all(axis=1) & (x0[seg, 1] >= 2).all(axis=1)]
+    left = np.flatnonzero(sp.boundary & (x0[:, 0] <= 7) & (x0[:, 1] >= 2))
+    a, b = y[right[:, 0]][None], y[right[:, 1]][None]
+    p = y[left][:, None]
+    t = np.clip(((p - a) * (b - a)).sum(-1) / ((b - a) ** 2).sum(-1), 0.0, 1.0)
+    gap = np.linalg.norm(a + t[..., None] * (b - a) - p, axis=-1).min()
+    assert y[left, 0].max() > 7.5 and gap > 0.05 * ENERGY.contact_gap
+
+
 @pytest.mark.parametrize("centre", [(7, 7), (7, 1)], ids=["inside", "at the boundary"])
 def test_extreme_faces_of_a_start_are_relaxed_locally(centre):
     """Faces squeezed to anisotropy 23 in a fold-free layout (a 3 x 3 block of vertices

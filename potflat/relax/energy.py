@@ -171,17 +171,28 @@ class SpringSystem:
         Vertices whose fan already wraps past ``2 pi`` at ``x`` (or whose boundary is not a
         simple path through them) stay unguarded. Returns how many already wrapped.
         """
-        cand = np.nonzero((self.bprev >= 0) & (self.bnext >= 0) & (self.bprev != self.bnext))[0]
-        theta = np.zeros(self.n)
-        if len(cand):
-            boundary_angle_sums(x, cand, self.vf_ptr, self.vf_tri, self.faces, theta)
-        ok = theta[cand] < 2.0 * math.pi - SOLVER.boundary_angle_slack
+        cand, ok = self._angle_sums_below(x)
         self.bverts = np.ascontiguousarray(cand[ok])
         self.bguard = np.zeros(self.n, bool)
         self.bguard[self.bverts] = True
         self._bblocks = np.empty(max(1, -(-len(self.bverts) // BLOCK)))
         self.contact = len(self.boundary_segments) >= 3 and self.overlap(x) == 0
         return int((~ok).sum())
+
+    def wrapped(self, x: np.ndarray) -> np.ndarray:
+        """The boundary vertices whose fan wraps past ``2 pi`` at ``x`` (their boundary folds over
+        its own faces, which the crossing test of boundary segments does not see), (k,) int64."""
+        cand, ok = self._angle_sums_below(x)
+        return cand[~ok]
+
+    def _angle_sums_below(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The boundary vertices on a simple boundary path, (k,) int64, and whether their angle
+        sum at ``x`` is below ``2 pi`` (k,) bool."""
+        cand = np.nonzero((self.bprev >= 0) & (self.bnext >= 0) & (self.bprev != self.bnext))[0]
+        theta = np.zeros(self.n)
+        if len(cand):
+            boundary_angle_sums(x, cand, self.vf_ptr, self.vf_tri, self.faces, theta)
+        return cand, theta[cand] < 2.0 * math.pi - SOLVER.boundary_angle_slack
 
     def evaluate(self, x: np.ndarray, *, barrier: bool = True,
                  out: np.ndarray | None = None) -> tuple[float, float, np.ndarray]:
@@ -205,11 +216,22 @@ class SpringSystem:
         eb = float(np.sum(self._eb))
         ef = face_barrier(x, self.faces, self._areas, self.a_ref, ENERGY.barrier_mu, self.k, ENERGY.barrier_eps,
                                   self.relative, self.weight, g, self.diag, self._below)
-        ec = 0.0
-        if self.contact:
-            ec = contact_barrier(x, self.boundary_segments, self.bprev, self.bnext, ENERGY.contact_gap,
-                                         ENERGY.contact_mu * self.k, self._contact_cell, self.weight, g, self.diag)
-        return es + eb + ef + ec, es, self._held(g)
+        return es + eb + ef + self._contact_barrier(x, g), es, self._held(g)
+
+    def _contact_barrier(self, x: np.ndarray, g: np.ndarray) -> float:
+        """The contact barrier's energy at ``x`` while it is on (else 0); its gradient and
+        Hessian bound are added to ``g`` (n, 2) and :attr:`diag`."""
+        if not self.contact:
+            return 0.0
+        return contact_barrier(x, self.boundary_segments, self.bprev, self.bnext, ENERGY.contact_gap,
+                               ENERGY.contact_mu * self.k, self._contact_cell, self.weight, g, self.diag)
+
+    def _contact_step(self, x: np.ndarray, d: np.ndarray, t: float, shrink: float) -> float:
+        """``t`` limited by the boundary pairs of the contact barrier while it is on."""
+        if not self.contact:
+            return t
+        return contact_max_step(x, d, self.boundary_segments, self.bprev, self.bnext, ENERGY.contact_gap,
+                                self._contact_cell, t, shrink)
 
     def _held(self, g: np.ndarray) -> np.ndarray:
         """``g`` (n, 2) with the rows of the :attr:`fixed` vertices set to zero."""
@@ -250,10 +272,7 @@ class SpringSystem:
         if len(self.bverts):
             boundary_max_step(x, d, self.bverts, self.bprev, self.bnext, self._bblocks)
             t = min(t, float(self._bblocks.min()))
-        if self.contact:
-            t = contact_max_step(x, d, self.boundary_segments, self.bprev, self.bnext, ENERGY.contact_gap,
-                                         self._contact_cell, t, shrink)
-        return t
+        return self._contact_step(x, d, t, shrink)
 
     def signed_areas(self, x: np.ndarray) -> np.ndarray:
         """Signed area of every face at ``x``, shape (m,)."""

@@ -13,10 +13,11 @@ import math
 import numpy as np
 
 from potflat.mesh.distortion import face_distortion
+from potflat.relax._kernels.overlap import contact_barrier, contact_max_step
 from potflat.relax.control import RunControl
 from potflat.relax.energy import SpringSystem
 from potflat.relax.lbfgs import LBFGS
-from potflat.relax.parameters import COARSE
+from potflat.relax.parameters import COARSE, ENERGY
 
 #: Faces whose anisotropy is computed at once (bounds the temporaries of the 3D frames).
 _FACES_PER_PASS = 1 << 20
@@ -24,8 +25,10 @@ _FACES_PER_PASS = 1 << 20
 
 class _Patch(SpringSystem):
     """The spring system of some faces of a mesh's (``whole``), with the per-face terms,
-    weights and limit of ``whole`` and the vertices not ``free`` :attr:`fixed`; its overlap is
-    that of ``whole``'s boundary in ``layout`` with the patch's vertices moved."""
+    weights and limit of ``whole`` and the vertices not ``free`` :attr:`fixed`; its overlap and
+    contact barrier are those of ``whole``'s boundary in ``layout`` with the patch's vertices
+    moved (a patch's own boundary runs through the mesh and misses the boundary segments
+    around it that its vertices can come near)."""
 
     def __init__(self, whole: SpringSystem, V: np.ndarray, faces: np.ndarray, vertices: np.ndarray,
                  free: np.ndarray, layout: np.ndarray):
@@ -41,6 +44,37 @@ class _Patch(SpringSystem):
         self.weights = whole.weights
         self.fixed = ~free[vertices]
         self.whole, self.vertices, self.layout = whole, vertices, layout
+        # the whole boundary, its vertices numbered apart: rows of it in the patch, and their patch vertices
+        on = np.flatnonzero(whole.boundary)
+        row = np.full(whole.n, -1, np.int64)
+        row[on] = np.arange(len(on))
+        self._seg = np.ascontiguousarray(row[whole.boundary_segments])
+        self._prev = np.where(whole.bprev[on] >= 0, row[whole.bprev[on]], -1).astype(whole.bprev.dtype)
+        self._next = np.where(whole.bnext[on] >= 0, row[whole.bnext[on]], -1).astype(whole.bnext.dtype)
+        self._weight = whole.weight[on] if len(whole.weight) else whole.weight
+        self._at = np.ascontiguousarray(layout[on])
+        self._rows = np.flatnonzero(local[on] >= 0)
+        self._mine = local[on][self._rows]
+
+    def _contact_barrier(self, x: np.ndarray, g: np.ndarray) -> float:
+        if not self.whole.contact:
+            return 0.0
+        self._at[self._rows] = x[self._mine]
+        grad, diag = np.zeros_like(self._at), np.zeros(len(self._at))
+        energy = contact_barrier(self._at, self._seg, self._prev, self._next, ENERGY.contact_gap,
+                                 ENERGY.contact_mu * self.whole.k, self.whole._contact_cell, self._weight, grad, diag)
+        g[self._mine] += grad[self._rows]
+        self.diag[self._mine] += diag[self._rows]
+        return energy
+
+    def _contact_step(self, x: np.ndarray, d: np.ndarray, t: float, shrink: float) -> float:
+        if not self.whole.contact:
+            return t
+        self._at[self._rows] = x[self._mine]
+        along = np.zeros_like(self._at)
+        along[self._rows] = d[self._mine]
+        return contact_max_step(self._at, along, self._seg, self._prev, self._next, ENERGY.contact_gap,
+                                self.whole._contact_cell, t, shrink)
 
     def overlap(self, x: np.ndarray, max_pairs: int = 1000) -> int:
         self.layout[self.vertices] = x
@@ -55,9 +89,9 @@ def relax_extremes(sp: SpringSystem, x: np.ndarray, V: np.ndarray, notes: list[s
     ``COARSE.local_rings`` rings of vertices, are relaxed by L-BFGS (Jacobi preconditioned,
     at most ``COARSE.local_iterations`` iterations, tolerance ``COARSE.local_tol``) with the
     energy of ``sp``; a boundary vertex of the mesh keeps all its faces in the patch, so its
-    angle sum stays guarded, and the line search rejects steps that make the whole mesh's
-    boundary overlap (when it did not). Kept (with a note) when fold-free and of lower energy
-    than ``x``.
+    angle sum stays guarded, the contact barrier acts between the whole mesh's boundary
+    segments, and the line search rejects steps that make the whole mesh's boundary overlap
+    (when it did not). Kept (with a note) when fold-free and of lower energy than ``x``.
 
     Parameters
     ----------
@@ -98,8 +132,6 @@ def relax_extremes(sp: SpringSystem, x: np.ndarray, V: np.ndarray, notes: list[s
     patch = _Patch(sp, V, patch_faces, vertices, free, x.copy())
     start = np.ascontiguousarray(x[vertices])
     patch.guard_boundary(start)
-    # the contact barrier between the patch's boundary segments, when they do not overlap at the start
-    patch.contact = len(patch.boundary_segments) >= 3 and SpringSystem.overlap(patch, start) == 0
     solver = LBFGS(patch, start, None, guard_overlap=sp.overlap(x) == 0)
     run = RunControl(COARSE.local_iterations, deadline, None, None)
     _, iterations = solver.run(run, max_iter=COARSE.local_iterations, tol=COARSE.local_tol, hist=[solver.E])

@@ -52,7 +52,7 @@ from potflat.relax.options import RelaxOptions
 from potflat.relax.parameters import COARSE, ENERGY, SOLVER, RelaxPreset
 from potflat.relax.result import LevelRecord, RelaxResult, RelaxTimings
 from potflat.relax.simplify import cell_side, grid_simplification, interpolate
-from potflat.relax.start import check_not_mirrored, fold_free_start, follow, turned_like, untangle
+from potflat.relax.start import check_not_mirrored, fold_free_start, follow, turned_like, untangle, unwrap_boundary
 from potflat.types import FlatMesh, Mesh
 
 @dataclass(frozen=True)
@@ -344,6 +344,7 @@ def _start(sp: SpringSystem, x: np.ndarray, V: np.ndarray, frame: _Frame, plan: 
                     folded_start = None
             else:
                 notes.append(f"untangled {n_bad} flipped or degenerate triangles of the rollout before relaxing")
+        x = unwrap_boundary(sp, x, notes, "the rollout")
         wrapped = sp.guard_boundary(x)
     t_follow = time.perf_counter()
     followed = None

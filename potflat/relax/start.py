@@ -142,8 +142,9 @@ def follow(sp: SpringSystem, x: np.ndarray, target: np.ndarray, notes: list[str]
     ``COARSE.follow_reembed_rings`` rings), after each number of untangling rounds in
     ``COARSE.follow_untangle_rounds`` in turn until none is left folded; where that fails,
     approached from ``x`` as near as stays fold-free (:func:`approach`) from the one that
-    left the fewest; with its boundary uncrossed (:func:`uncross_boundary`). None (with a
-    note) when it cannot be made fold-free and uncrossed."""
+    left the fewest; with its boundary uncrossed (:func:`uncross_boundary`) and unwrapped
+    (:func:`unwrap_boundary`). None (with a note) when it cannot be made fold-free and
+    uncrossed."""
     best = None
     for rounds in COARSE.follow_untangle_rounds:
         goal, n_bad = untangle(sp, target, rounds=rounds)
@@ -180,7 +181,7 @@ def follow(sp: SpringSystem, x: np.ndarray, target: np.ndarray, notes: list[str]
     if folded:
         notes.append("following the coarse copy folded the full mesh; relaxed the full mesh from the rollout")
         return None
-    return goal
+    return unwrap_boundary(sp, goal, notes, "the followed layout")
 
 
 def approach(sp: SpringSystem, start: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, int]:
@@ -275,3 +276,45 @@ def uncross_boundary(sp: SpringSystem, x: np.ndarray, pairs: np.ndarray) -> np.n
         x, _ = untangle(sp, x)
         pairs = crossing_pairs(x, seg)
     return x
+
+
+def unwrap_boundary(sp: SpringSystem, x: np.ndarray, notes: list[str], start: str) -> np.ndarray:
+    """``x`` (n, 2, fold-free, its boundary uncrossed) with every boundary vertex whose fan
+    wraps past ``2 pi`` (:meth:`SpringSystem.wrapped`) unwrapped: those vertices, a ring
+    more every ``COARSE.follow_repair_widen`` rounds, move to their edge neighbours' mean,
+    untangling after each round, for at most ``COARSE.follow_repair_rounds`` rounds, then the
+    boundary is uncrossed where that made it cross itself (:func:`uncross_boundary`). Kept
+    (with a note naming ``start``, the layout ``x`` is) when fold-free, uncrossed and with
+    fewer such vertices; else ``x``.
+
+    A wrapped fan is a fold of the boundary over its own faces that no crossing test of
+    boundary segments sees and no angle-sum barrier guards: the solve's steps that wrap it
+    further make boundary segments two apart cross, the line search halves them, and the
+    whole solve stalls there before it has converged."""
+    wrapped = sp.wrapped(x)
+    if not len(wrapped) or sp.overlap(x):
+        return x
+    y = x.copy()
+    region = np.zeros(sp.n, bool)
+    left = wrapped
+    for r in range(COARSE.follow_repair_rounds):
+        region[left] = True
+        if r % COARSE.follow_repair_widen == COARSE.follow_repair_widen - 1:
+            region[sp.faces[region[sp.faces].any(axis=1)].ravel()] = True
+        verts = np.nonzero(region)[0]
+        mean = np.empty((len(verts), 2))
+        neighbour_means(y, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
+        y[verts] = mean
+        y, _ = untangle(sp, y)
+        left = sp.wrapped(y)
+        if not len(left):
+            break
+    pairs = crossing_pairs(y, sp.boundary_segments)
+    if len(pairs):
+        y = uncross_boundary(sp, y, pairs)
+        left = sp.wrapped(y)
+    if len(left) >= len(wrapped) or (sp.signed_areas(y) <= 0).any() or sp.overlap(y) > 0:
+        return x
+    notes.append(f"unwrapped {len(wrapped) - len(left)} boundary vertices whose triangles wrapped past 2 pi in "
+                 f"{start} (the boundary folded over itself)")
+    return y
