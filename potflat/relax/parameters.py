@@ -249,8 +249,10 @@ class CoarseParameters:
     vertex fixed, for at most ``local_iterations`` iterations to the tolerance ``local_tol``
     (:func:`potflat.relax.local.relax_extremes`): they hold most of the followed start's
     energy (the anisotropy limit's term) and took most of the full mesh's iterations (1M
-    copies, full-mesh iterations without and with: sea vase 118 and 28, dragon jar 81 and 48,
-    goblet 93 and 83, colonoware pot 91 and 70).
+    copies, full-mesh iterations without and with: sea vase 440 and 98, dragon jar 81 and 48,
+    goblet 93 and 81, colonoware pot 192 and 135). The same ``follow_repair_*`` rounds
+    unwrap a start's boundary vertices whose triangles wrap past 2 pi
+    (:func:`potflat.relax.start.unwrap_boundary`).
     """
 
     min_copy: int = 100
