@@ -267,15 +267,22 @@ def uncross_boundary(sp: SpringSystem, x: np.ndarray, pairs: np.ndarray) -> np.n
         if not len(pairs):
             break
         region[seg[pairs.ravel()].ravel()] = True
-        if r % COARSE.follow_repair_widen == COARSE.follow_repair_widen - 1:
-            region[sp.faces[region[sp.faces].any(axis=1)].ravel()] = True
-        verts = np.nonzero(region)[0]
-        mean = np.empty((len(verts), 2))
-        neighbour_means(x, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
-        x[verts] = mean
-        x, _ = untangle(sp, x)
+        x = _averaged(sp, x, region, r)
         pairs = crossing_pairs(x, seg)
     return x
+
+
+def _averaged(sp: SpringSystem, x: np.ndarray, region: np.ndarray, r: int) -> np.ndarray:
+    """Round ``r`` of a boundary repair: ``region`` (n,) bool widened by a ring every
+    ``COARSE.follow_repair_widen`` rounds (in place), its vertices moved to their edge
+    neighbours' mean in ``x`` (n, 2, in place), then untangled. Returns the positions."""
+    if r % COARSE.follow_repair_widen == COARSE.follow_repair_widen - 1:
+        region[sp.faces[region[sp.faces].any(axis=1)].ravel()] = True
+    verts = np.nonzero(region)[0]
+    mean = np.empty((len(verts), 2))
+    neighbour_means(x, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
+    x[verts] = mean
+    return untangle(sp, x)[0]
 
 
 def unwrap_boundary(sp: SpringSystem, x: np.ndarray, notes: list[str], start: str) -> np.ndarray:
@@ -299,13 +306,7 @@ def unwrap_boundary(sp: SpringSystem, x: np.ndarray, notes: list[str], start: st
     left = wrapped
     for r in range(COARSE.follow_repair_rounds):
         region[left] = True
-        if r % COARSE.follow_repair_widen == COARSE.follow_repair_widen - 1:
-            region[sp.faces[region[sp.faces].any(axis=1)].ravel()] = True
-        verts = np.nonzero(region)[0]
-        mean = np.empty((len(verts), 2))
-        neighbour_means(y, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
-        y[verts] = mean
-        y, _ = untangle(sp, y)
+        y = _averaged(sp, y, region, r)
         left = sp.wrapped(y)
         if not len(left):
             break
