@@ -362,7 +362,7 @@ def _start(sp: SpringSystem, x: np.ndarray, V: np.ndarray, frame: _Frame, plan: 
             elif judged and local:
                 relaxed = relax_extremes(sp, followed, np.take(V, frame.order, axis=0) / frame.unit, notes,
                                          deadline=deadline)
-                if relaxed is not followed:  # (pressed against the angle-sum barrier, a vertex can end within its slack)
+                if relaxed is not followed:  # (a vertex pressed against the angle-sum barrier can end in its slack)
                     relaxed = unwrap_boundary(sp, relaxed, notes, "the relaxed patches")
                     followed, wrapped = relaxed, sp.guard_boundary(relaxed)
         if followed is not None:
