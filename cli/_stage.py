@@ -27,7 +27,7 @@ def say_compiling(console) -> None:
     from potflat._jit import kernels_cached
 
     if not console.is_terminal and not kernels_cached():
-        console.print(f"{PROGRESS}{FIRST_RUN}", highlight=False)
+        console.print(f"{PROGRESS}{FIRST_RUN}", highlight=False, soft_wrap=True)
 
 
 class StageLog:
