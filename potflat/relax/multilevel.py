@@ -438,8 +438,8 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
             del start_uv
             if plan.softer is not None:  # its layout is in x now (peak memory)
                 plan = replace(plan, softer=replace(plan.softer, uv=None))
-            # (the full mesh only: in the copies, whose layouts only start the next, it changed which
-            # copy the full mesh follows, and the plastic vase's 1M copy then took 699 iterations)
+            # (the local step on the full mesh only: a copy's layout only starts the next, and
+            # relaxed locally it can change which copy the full mesh follows)
             x, folded_start, followed, t_follow = _start(sp, x, V, frame, plan, fold_free, notes, local=summaries,
                                                          deadline=deadline)
             if plan.coarse is None or followed:
