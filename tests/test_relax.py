@@ -131,17 +131,17 @@ def test_limiting_faces_are_those_whose_own_bound_is_below_the_cap(bumpy):
     assert max_step_of(x, d, sp.faces, np.arange(sp.m), 1.0, 1.0) == t
 
 
-def test_max_step_near_equals_the_full_bound_after_a_local_change(bumpy):
+def test_max_face_step_near_equals_the_full_bound_after_a_local_change(bumpy):
     sp = spring_system(bumpy.mesh.vertices, bumpy.mesh.faces, k=1.0, relative=False)
     x = np.ascontiguousarray(bumpy.uv)
     rng = np.random.default_rng(2)
     for _ in range(5):
         d = 0.5 * rng.normal(size=x.shape)
         flags = np.empty(sp.m, bool)
-        sp.max_step(x, d, cap=1.0, limiting=flags)
+        sp.max_face_step(x, d, cap=1.0, limiting=flags)
         verts = flagged_face_vertices(flags, sp.faces, np.zeros(sp.n, bool))
         d[verts] = 0.5 * rng.normal(size=(len(verts), 2))  # changed at the limiting faces' vertices only
-        assert sp.max_step_near(x, d, verts, 1.0, 1.0) == sp.max_step(x, d, cap=1.0)
+        assert sp.max_face_step_near(x, d, verts, 1.0, 1.0) == sp.max_face_step(x, d, cap=1.0)
 
 
 def test_flagged_face_vertices_and_incident_faces_match_numpy():
@@ -676,6 +676,138 @@ def test_a_local_relaxation_keeps_clear_of_the_boundary_around_it():
     t = np.clip(((p - a) * (b - a)).sum(-1) / ((b - a) ** 2).sum(-1), 0.0, 1.0)
     gap = np.linalg.norm(a + t[..., None] * (b - a) - p, axis=-1).min()
     assert y[left, 0].max() > 7.5 and gap > 0.05 * ENERGY.contact_gap
+
+
+def _narrow_slit(width=0.4):
+    """The 16 x 16 grid of :func:`_grid` with a slit up from row 2 between columns 7 and 8,
+    the right prong laid out so that the slit is ``width`` wide (its rest one unit wide) and
+    a third of a row higher (no vertex level with one across): rest positions, faces and the
+    layout."""
+    V, F, x0 = _grid(16)
+    centre = x0[F].mean(axis=1)
+    F = F[~((centre[:, 0] > 7) & (centre[:, 0] < 8) & (centre[:, 1] > 2))]
+    x = x0.copy()
+    right = x0[:, 0] >= 8
+    x[right, 0] -= 1.0 - width  # the base's squares between the prongs squeezed and sheared
+    x[right, 1] += 1.0 / 3.0
+    return V, F, x
+
+
+def _push_into_slit(x):
+    """A direction pressing the right prong's edge into the slit around its middle (row 10)."""
+    d = np.zeros_like(x)
+    d[:, 0] = -np.exp(-((x[:, 0] - 7.4) ** 2 + (x[:, 1] - 10) ** 2) / 8) * (x[:, 0] > 7.2)
+    return d
+
+
+def test_boundary_limits_are_the_constraints_holding_the_step():
+    """The fan's apex turning to 2 pi is listed with its bound; a prong pressed into a slit
+    gives the pairs that lose their share of distance (times the segment's length) at their
+    bounds; the least bound is
+    the boundary's step bound, and scaling a constraint's three vertices' moves by ``s``
+    moves its bound to ``t / s``."""
+    from potflat.relax.parameters import ENERGY
+
+    gap, shrink = 0.3, 0.8
+    fan = _saddle_fan(flat_gap=gap)
+    sp = spring_system(fan.mesh.vertices, fan.mesh.faces, k=1.0, relative=True)
+    x = np.ascontiguousarray(fan.uv)
+    sp.guard_boundary(x)
+    d = np.zeros_like(x)
+    d[-1] = (0.0, 1.0)  # (as in the test above: the apex's angle sum reaches 2 pi at sin(gap))
+    trios, bounds = sp.boundary_limits(x, d, 10.0, shrink)
+    apex = np.flatnonzero(trios[:, 0] == 0)
+    assert len(apex) == 1 and set(trios[apex[0], 1:]) == {sp.bprev[0], sp.bnext[0]}
+    assert bounds[apex[0]] == pytest.approx(np.sin(gap), rel=1e-12)
+    assert bounds.min() == sp.boundary_step(x, d, 10.0, shrink)
+
+    V, F, x = _narrow_slit()
+    sp = spring_system(V, F, k=1.0, relative=True)
+    sp.guard_boundary(x)
+    d = _push_into_slit(x)
+    trios, bounds = sp.boundary_limits(x, d, 10.0, shrink)
+    assert len(bounds) > 3 and (bounds < 10.0).all()
+    assert bounds.min() == sp.boundary_step(x, d, 10.0, shrink)
+
+    def distance(y, v, a, b):  # times the segment's length: twice the area of the pair's triangle
+        e, r = y[b] - y[a], y[v] - y[a]
+        return abs(e[0] * r[1] - e[1] * r[0])
+
+    for (v, a, b), t in zip(trios, bounds):
+        assert distance(x, v, a, b) < ENERGY.contact_gap * np.linalg.norm(x[b] - x[a])
+        assert distance(x + 0.999 * t * d, v, a, b) > (1 - shrink) * distance(x, v, a, b) > distance(
+            x + 1.001 * t * d, v, a, b)
+    k = int(np.argmin(bounds))
+    slower = d.copy()
+    slower[trios[k]] *= 0.5
+    again, later = sp.boundary_limits(x, slower, 10.0, shrink)
+    row = np.flatnonzero((again == trios[k]).all(axis=1))[0]
+    assert later[row] == pytest.approx(2 * bounds[k], rel=1e-9)
+
+
+def test_ease_scales_matches_a_shortest_path_reference():
+    """The scales are the sources' values plus the shortest path over the neighbour lists,
+    each edge as long as its length over ``width t`` times its ends' larger move (at most 1);
+    the lowered vertices are listed once each; the search stops past ``max_visit``."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    from potflat.relax._kernels.steps import ease_scales
+
+    V, F, x = _grid(10)
+    sp = spring_system(V, F, k=1.0, relative=True)
+    rng = np.random.default_rng(5)
+    d = rng.normal(size=x.shape)
+    sources = np.array([12, 13, 57], np.int64)
+    values = np.array([0.1, 0.3, 0.05])
+    t, width = 0.7, 2.0
+    scale = np.ones(sp.n)
+    lowered = ease_scales(x, d, sp.ptr, sp.nbr, sources, values, t, width, sp.n, scale)
+    u = np.repeat(np.arange(sp.n), np.diff(sp.ptr))
+    v = sp.nbr.astype(np.int64)
+    move = np.linalg.norm(d, axis=1)
+    w = np.linalg.norm(x[u] - x[v], axis=1) / (width * t * np.maximum(move[u], move[v]))
+    n = sp.n  # one more node: the sources' common start
+    graph = coo_matrix((np.r_[w, values], (np.r_[u, np.full(3, n)], np.r_[v, sources])), shape=(n + 1, n + 1))
+    want = np.minimum(dijkstra(graph.tocsr(), indices=n)[:n], 1.0)
+    np.testing.assert_allclose(scale, want, rtol=1e-12, atol=1e-15)
+    assert 0 < len(lowered) < sp.n and sorted(lowered) == sorted(np.flatnonzero(want < 1.0))
+    scale[:] = 1.0
+    assert len(ease_scales(x, d, sp.ptr, sp.nbr, sources, values, t, width, 5, scale)) > 5
+
+
+def test_easing_the_direction_frees_a_step_held_at_the_boundary(monkeypatch):
+    """A direction pressing one prong of a slit into the other: the contact bound holds the
+    whole step to a fraction of what the faces allow; eased, the direction still descends,
+    the step is the faces' (the pressing vertices' moves scaled down, everything away from
+    them unchanged) and keeps every face, angle sum and contact pair within its bound."""
+    import dataclasses
+
+    import potflat.relax.lbfgs as rx
+    from potflat.relax.lbfgs import LBFGS
+
+    SOLVER = dataclasses.replace(rx.SOLVER, smooth_max_fraction=0.5)  # (a small mesh)
+    monkeypatch.setattr(rx, "SOLVER", SOLVER)
+    V, F, x = _narrow_slit()
+    sp = spring_system(V, F, k=1.0, relative=True)
+    sp.guard_boundary(x)
+    solver = LBFGS(sp, x)
+    d = _push_into_slit(x)
+    solver.q[:] = d.ravel()
+    solver.g = -solver.q.copy()  # (a descent direction)
+    gd = float(solver.g @ solver.q)
+    t_faces = sp.max_face_step(x, d, cap=1.0 / SOLVER.step_fraction, shrink=SOLVER.step_shrink)
+    t = sp.boundary_step(x, d, t_faces, SOLVER.step_shrink)
+    assert t < 0.5 * t_faces
+    t_eased, gd_eased = solver._ease_boundary(t, t_faces, gd)
+    eased = solver.q.reshape(-1, 2)
+    assert t_eased == t_faces and solver.eased == 1 and gd_eased < 0.0
+    assert gd_eased == pytest.approx(float(solver.g @ solver.q), rel=1e-12)
+    assert sp.boundary_step(x, eased, t_faces, SOLVER.step_shrink) == t_faces
+    assert sp.max_face_step(x, eased, cap=t_faces, shrink=SOLVER.step_shrink) == t_faces
+    changed = np.flatnonzero((eased != d).any(axis=1))
+    assert 0 < len(changed) < sp.n // 4 and (np.abs(eased[changed]) <= np.abs(d[changed])).all()
+    assert (solver._scale == 1.0).all()  # the work space is left as found
 
 
 @pytest.mark.parametrize("centre", [(7, 7), (7, 1)], ids=["inside", "at the boundary"])

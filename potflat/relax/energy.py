@@ -20,7 +20,7 @@ from potflat.mesh.distortion import (
     weighted_percentile,
 )
 from potflat.relax._kernels import springs as kernels_springs
-from potflat.relax._kernels.overlap import contact_barrier, contact_max_step
+from potflat.relax._kernels.overlap import contact_barrier, contact_max_step, contact_pair_steps
 from potflat.relax._kernels.springs import (
     BLOCK,
     boundary_angle_sums,
@@ -32,7 +32,7 @@ from potflat.relax._kernels.springs import (
     face_terms,
     shape_coefficients,
 )
-from potflat.relax._kernels.steps import boundary_max_step, max_step, max_step_of
+from potflat.relax._kernels.steps import boundary_max_step, boundary_vertex_steps, max_step, max_step_of
 from potflat.relax.parameters import ENERGY, SOLVER
 
 
@@ -233,6 +233,13 @@ class SpringSystem:
         return contact_max_step(x, d, self.boundary_segments, self.bprev, self.bnext, ENERGY.contact_gap,
                                 self._contact_cell, t, shrink)
 
+    def _contact_limits(self, x: np.ndarray, d: np.ndarray, cap: float, shrink: float) -> tuple[np.ndarray, np.ndarray]:
+        """The contact part of :meth:`boundary_limits` (none while the contact barrier is off)."""
+        if not self.contact:
+            return np.empty((0, 3), np.int64), np.empty(0)
+        return contact_pair_steps(x, d, self.boundary_segments, self.bprev, self.bnext, ENERGY.contact_gap,
+                                  self._contact_cell, float(cap), float(shrink))
+
     def _held(self, g: np.ndarray) -> np.ndarray:
         """``g`` (n, 2) with the rows of the :attr:`fixed` vertices set to zero."""
         if self.fixed is not None:
@@ -249,23 +256,27 @@ class SpringSystem:
         """Largest ``t`` (at most ``cap``) keeping every face of ``x + t d`` above ``1 - shrink``
         of its area at ``x`` (``shrink = 1``: positively oriented), every guarded boundary
         vertex's angle sum below ``2 pi`` and every boundary pair of the contact barrier above
-        ``1 - shrink`` of its distance (:meth:`_boundary_step`). With ``limiting`` ((m,) bool)
-        also flag the faces whose own bound is below ``cap``."""
+        ``1 - shrink`` of its distance: :meth:`boundary_step` of :meth:`max_face_step`."""
+        return self.boundary_step(x, d, self.max_face_step(x, d, cap, shrink, limiting), shrink)
+
+    def max_face_step(self, x: np.ndarray, d: np.ndarray, cap: float = np.inf, shrink: float = 1.0,
+                      limiting: np.ndarray | None = None) -> float:
+        """The faces' part of :meth:`max_step`. With ``limiting`` ((m,) bool) also flag the faces
+        whose own bound is below ``cap``."""
         if self.m == 0:
             return cap
         max_step(x, d, self.faces, float(cap), float(shrink), self._blocks,
                          _NO_FLAGS if limiting is None else limiting)
-        return self._boundary_step(x, d, float(self._blocks.min()), float(shrink))
+        return float(self._blocks.min())
 
-    def max_step_near(self, x: np.ndarray, d: np.ndarray, verts: np.ndarray, cap: float, shrink: float) -> float:
-        """:meth:`max_step` for a direction ``d`` changed at ``verts`` only, from one for which
-        no face away from them was limiting (its bound was at least ``cap``): only the faces
-        around ``verts``, the guarded boundary and the contact pairs are tested."""
+    def max_face_step_near(self, x: np.ndarray, d: np.ndarray, verts: np.ndarray, cap: float, shrink: float) -> float:
+        """:meth:`max_face_step` for a direction ``d`` changed at ``verts`` only, from one for
+        which no face away from them was limiting (its bound was at least ``cap``): only the
+        faces around ``verts`` are tested."""
         faces = incident_faces(verts, self.vf_ptr, self.vf_tri)
-        return self._boundary_step(x, d, max_step_of(x, d, self.faces, faces, float(cap), float(shrink)),
-                                   float(shrink))
+        return max_step_of(x, d, self.faces, faces, float(cap), float(shrink))
 
-    def _boundary_step(self, x: np.ndarray, d: np.ndarray, t: float, shrink: float) -> float:
+    def boundary_step(self, x: np.ndarray, d: np.ndarray, t: float, shrink: float) -> float:
         """``t`` limited by the guarded boundary vertices' angle sums along ``x + t d`` and, while
         the contact barrier is on, by the boundary pairs it acts on (each may lose at most
         ``shrink`` of its distance, as a face of its area)."""
@@ -273,6 +284,24 @@ class SpringSystem:
             boundary_max_step(x, d, self.bverts, self.bprev, self.bnext, self._bblocks)
             t = min(t, float(self._bblocks.min()))
         return self._contact_step(x, d, t, shrink)
+
+    def boundary_limits(self, x: np.ndarray, d: np.ndarray, cap: float, shrink: float) -> tuple[np.ndarray, np.ndarray]:
+        """The boundary's constraints of :meth:`boundary_step` that hold a step along ``d`` below
+        ``cap``: each one's three vertices, (k, 3) int64 (a guarded vertex and its boundary
+        neighbours; a boundary vertex and the segment it nears), and its bound, (k,) float64.
+        Moving a constraint's three vertices by ``s d`` instead moves its bound to ``t / s``."""
+        trios, bounds = [np.empty((0, 3), np.int64)], [np.empty(0)]
+        if len(self.bverts):
+            own = np.empty(len(self.bverts))
+            boundary_vertex_steps(x, d, self.bverts, self.bprev, self.bnext, own)
+            held = own < cap
+            b = self.bverts[held]
+            trios.append(np.stack([b, self.bprev[b], self.bnext[b]], axis=1).astype(np.int64))
+            bounds.append(own[held])
+        trio, bound = self._contact_limits(x, d, cap, shrink)
+        trios.append(trio)
+        bounds.append(bound)
+        return np.concatenate(trios), np.concatenate(bounds)
 
     def signed_areas(self, x: np.ndarray) -> np.ndarray:
         """Signed area of every face at ``x``, shape (m,)."""

@@ -9,6 +9,7 @@ import numpy as np
 from potflat.mesh._kernels.topology import flagged_face_vertices
 from potflat.relax._kernels import lbfgs as kernels_lbfgs
 from potflat.relax._kernels.springs import neighbour_means
+from potflat.relax._kernels.steps import ease_scales
 from potflat.relax.control import RunControl, relative_change
 from potflat.relax.energy import SpringSystem
 from potflat.relax.hierarchy import GridHierarchy, MultilevelPreconditioner
@@ -41,6 +42,8 @@ class LBFGS:
         self.guard_overlap = guard_overlap
         self.contacts = 0  # trial points rejected because the boundary would overlap
         self.smoothed = 0  # directions smoothed at the vertices of limiting faces
+        self.eased = 0  # directions scaled down around the boundary constraints holding the step
+        self._scale: np.ndarray | None = None  # work space of the easing, all 1
         self._limiting = np.empty(sp.m, bool)  # faces holding the step below the natural one
         self._seen = np.zeros(sp.n, bool)  # work space of the smoothing
         size = 2 * sp.n
@@ -129,14 +132,14 @@ class LBFGS:
 
     def _smooth_limiting(self, t: float, gd: float) -> tuple[float, float]:
         """Smooth the direction ``q`` at the vertices of the limiting faces (those flagged by
-        the step bound ``t``, not ``sp.fixed``); kept only when it still descends and allows a
-        longer step.
-        Returns the step and ``g . q``."""
+        the faces' step bound ``t``, not ``sp.fixed``); kept only when it still descends and
+        the faces allow a longer step.
+        Returns the faces' step bound and ``g . q``."""
         sp = self.sp
         verts = flagged_face_vertices(self._limiting, sp.faces, self._seen)
         if sp.fixed is not None:
             verts = verts[~sp.fixed[verts]]
-        if not 0 < len(verts) <= SOLVER.smooth_max_fraction * sp.n:  # none: the boundary limits the step
+        if not 0 < len(verts) <= SOLVER.smooth_max_fraction * sp.n:
             return t, gd
         dx = self.q.reshape(-1, 2)
         before = dx[verts]
@@ -147,11 +150,58 @@ class LBFGS:
         # g . q changed at verts only (no pass over the whole mesh)
         g = self.g.reshape(-1, 2)[verts]
         gd_smooth = gd + float(np.sum(g * (dx[verts] - before)))
-        t_smooth = SOLVER.step_fraction * sp.max_step_near(self.x, dx, verts, 1.0 / SOLVER.step_fraction, SOLVER.step_shrink)
+        t_smooth = sp.max_face_step_near(self.x, dx, verts, 1.0 / SOLVER.step_fraction, SOLVER.step_shrink)
         if gd_smooth < 0.0 and t_smooth > t:
             self.smoothed += 1
             return t_smooth, gd_smooth
         dx[verts] = before
+        return t, gd
+
+    def _ease_boundary(self, t: float, t_faces: float, gd: float) -> tuple[float, float]:
+        """Scale the direction ``q`` down around the boundary constraints that hold its step
+        ``t`` below the faces' bound ``t_faces``, so the rest of the mesh takes the faces' step.
+
+        Each holding constraint's three vertices (:meth:`SpringSystem.boundary_limits`) move by
+        the share of the step their bound allows, and the scale rises back to 1 over a ramp as
+        wide as ``SOLVER.ease_width`` times the move (:func:`ease_scales`), in up to
+        ``SOLVER.ease_rounds`` rounds (a constraint the scaling itself brings closer is eased in
+        the next). Kept when the eased direction descends further along its bound (``t g . q``
+        lower) and concerns at most ``SOLVER.smooth_max_fraction`` of the vertices.
+        Returns the step bound and ``g . q``."""
+        sp, shrink = self.sp, SOLVER.step_shrink
+        dx = self.q.reshape(-1, 2)
+        if self._scale is None:
+            self._scale = np.ones(sp.n)
+        scale, budget = self._scale, int(SOLVER.smooth_max_fraction * sp.n)
+        lowered, before = [], []
+        t_eased = t
+        for _ in range(SOLVER.ease_rounds):
+            trios, bounds = sp.boundary_limits(self.x, dx, t_faces, shrink)
+            if not len(bounds):
+                break
+            values = bounds[:, None] / t_faces * scale[np.maximum(trios, 0)]
+            held = trios >= 0  # (a local relaxation's fixed vertices outside it: -1)
+            new = ease_scales(self.x, dx, sp.ptr, sp.nbr, trios[held], values[held], t_faces, SOLVER.ease_width,
+                              budget, scale)
+            lowered.append(new)
+            before.append(dx[new])
+            budget -= len(new)
+            if budget < 0:
+                break
+            verts = np.concatenate(lowered)
+            dx[verts] = np.concatenate(before) * scale[verts, None]
+            t_eased = sp.boundary_step(self.x, dx, sp.max_face_step_near(self.x, dx, verts, t_faces, shrink), shrink)
+            if t_eased >= t_faces:
+                break
+        verts = np.concatenate(lowered) if lowered else np.empty(0, np.int64)
+        original = np.concatenate(before) if before else np.empty((0, 2))
+        scale[verts] = 1.0
+        g = self.g.reshape(-1, 2)[verts]
+        gd_eased = gd + float(np.sum(g * (dx[verts] - original)))
+        if budget >= 0 and gd_eased < 0.0 and t_eased * gd_eased < t * gd:
+            self.eased += 1
+            return t_eased, gd_eased
+        dx[verts] = original
         return t, gd
 
     def run(self, run: RunControl, *, max_iter: int, tol: float, hist: list[float]) -> tuple[bool, int]:
@@ -171,10 +221,14 @@ class LBFGS:
                     converged = True  # zero gradient
                     break
             dx = self.q.reshape(-1, 2)
-            t = SOLVER.step_fraction * sp.max_step(self.x, dx, cap=1.0 / SOLVER.step_fraction, shrink=SOLVER.step_shrink,
-                                            limiting=self._limiting)
-            if t < 1.0:  # a face or the boundary holds the step below the natural one
-                t, gd = self._smooth_limiting(t, gd)
+            t_faces = sp.max_face_step(self.x, dx, cap=1.0 / SOLVER.step_fraction, shrink=SOLVER.step_shrink,
+                                       limiting=self._limiting)
+            if t_faces < 1.0 / SOLVER.step_fraction:  # faces hold the step below the natural one
+                t_faces, gd = self._smooth_limiting(t_faces, gd)
+            t = sp.boundary_step(self.x, dx, t_faces, SOLVER.step_shrink)
+            if t < t_faces:  # the boundary holds it lower still
+                t, gd = self._ease_boundary(t, t_faces, gd)
+            t *= SOLVER.step_fraction
             trial_grad = self.grads[1 - self.cur]
             accepted = False
             for _ in range(50):
@@ -230,12 +284,13 @@ def minimise(sp: SpringSystem, x: np.ndarray, hier: GridHierarchy, *, tol: float
     solver = LBFGS(sp, x, precond, guard_overlap=sp.overlap(x) == 0)
     del x  # the solver holds its own copy (peak memory)
     conv, its = solver.run(run, max_iter=run.max_iter, tol=tol, hist=[solver.E])
-    contacts, smoothed = solver.contacts, solver.smoothed
+    contacts, smoothed, eased = solver.contacts, solver.smoothed, solver.eased
     if contacts:
         notes.append(f"the boundary touched itself: {contacts} trial steps that would have made it "
                      "overlap were shortened")
     x = solver.x
     del solver
     record = LevelRecord(level=run.level, vertices=sp.n, iterations=its, energy=sp.spring_energy(x),
-                         seconds=time.perf_counter() - t0, boundary_contact=contacts > 0, smoothed_directions=smoothed)
+                         seconds=time.perf_counter() - t0, boundary_contact=contacts > 0, smoothed_directions=smoothed,
+                         eased_directions=eased)
     return x, conv and not run.stopped, record

@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from potflat.mesh.distortion import face_distortion
-from potflat.relax._kernels.overlap import contact_barrier, contact_max_step
+from potflat.relax._kernels.overlap import contact_barrier, contact_max_step, contact_pair_steps
 from potflat.relax.control import RunControl
 from potflat.relax.energy import SpringSystem
 from potflat.relax.lbfgs import LBFGS
@@ -75,6 +75,19 @@ class _Patch(SpringSystem):
         along[self._rows] = d[self._mine]
         return contact_max_step(self._at, along, self._seg, self._prev, self._next, ENERGY.contact_gap,
                                 self.whole._contact_cell, t, shrink)
+
+    def _contact_limits(self, x: np.ndarray, d: np.ndarray, cap: float, shrink: float) -> tuple[np.ndarray, np.ndarray]:
+        """The whole boundary's pairs, their vertices outside the patch (fixed) given as -1."""
+        if not self.whole.contact:
+            return np.empty((0, 3), np.int64), np.empty(0)
+        self._at[self._rows] = x[self._mine]
+        along = np.zeros_like(self._at)
+        along[self._rows] = d[self._mine]
+        trio, bound = contact_pair_steps(self._at, along, self._seg, self._prev, self._next, ENERGY.contact_gap,
+                                         self.whole._contact_cell, float(cap), float(shrink))
+        patch_of_row = np.full(len(self._at), -1, np.int64)
+        patch_of_row[self._rows] = self._mine
+        return patch_of_row[trio], bound
 
     def overlap(self, x: np.ndarray, max_pairs: int = 1000) -> int:
         self.layout[self.vertices] = x

@@ -144,6 +144,11 @@ class SolverParameters:
         vertices), the direction at their vertices is replaced by their edge neighbours'
         mean, ``smooth_rounds`` times, if at most ``smooth_max_fraction`` of the vertices
         are concerned.
+    ease_rounds, ease_width : int, float
+        Direction easing: when the boundary (a guarded angle sum or a contact pair) holds the
+        step below the faces' bound, the direction is scaled down around the constraints
+        holding it, rising back to 1 over ``ease_width`` times the eased move, in up to
+        ``ease_rounds`` rounds (within ``smooth_max_fraction`` of the vertices).
     precond_theta : float
         Weight of the multilevel preconditioner's coarse terms against its Jacobi term
         (measured: 1 needs 30-50% more iterations than 2; 4 about as many as 2 but more
@@ -186,6 +191,8 @@ class SolverParameters:
     step_shrink: float = 0.8
     smooth_rounds: int = 3
     smooth_max_fraction: float = 0.01
+    ease_rounds: int = 3
+    ease_width: float = 4.0
     precond_theta: float = 2.0
     window_lbfgs: int = 10
     window_dynamics: int = 100

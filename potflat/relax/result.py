@@ -32,6 +32,9 @@ class LevelRecord:
         were shortened); L-BFGS levels only.
     smoothed_directions : int or None
         Search directions smoothed at the faces limiting the step; L-BFGS levels only.
+    eased_directions : int or None
+        Search directions scaled down around the boundary constraints limiting the step;
+        L-BFGS levels only.
     dt : float or None
         The dynamics' time step; the dynamics only.
     importance_contrast : float or None
@@ -45,6 +48,7 @@ class LevelRecord:
     vertices: int | None = None
     boundary_contact: bool | None = None
     smoothed_directions: int | None = None
+    eased_directions: int | None = None
     dt: float | None = None
     importance_contrast: float | None = None
 

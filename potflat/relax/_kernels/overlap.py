@@ -137,6 +137,29 @@ def contact_barrier(x, seg, bprev, bnext, dhat, kappa, cell, weight, grad, diag)
 
 
 @leaf
+def _pair_step(x, d, seg, v, s, dhat, shrink, best):
+    """The contact step bound of boundary vertex ``v`` against segment ``s``, or ``best`` when
+    it is no lower (the pair is not bounded, or keeps ``1 - shrink`` of its distance up to
+    ``best``): see :func:`contact_max_step`."""
+    a = seg[s, 0]
+    b = seg[s, 1]
+    rx = x[v, 0] - x[a, 0]
+    ry = x[v, 1] - x[a, 1]
+    ex = x[b, 0] - x[a, 0]
+    ey = x[b, 1] - x[a, 1]
+    ee = ex * ex + ey * ey
+    cross = ex * ry - ey * rx  # |ab| times the signed distance of v from the line
+    if ee <= 0.0 or not 0.0 < rx * ex + ry * ey < ee or cross * cross >= dhat * dhat * ee:
+        return best
+    c0, c1, c2 = triangle_area_polynomial(x, d, np.uint32(a), np.uint32(b), np.uint32(v), shrink)
+    if cross < 0.0:  # v on the right of a -> b: the area is negative, and must stay so
+        c0, c1, c2 = -c0, -c1, -c2
+    if _no_root_up_to(c0, c1, c2, best):
+        return best
+    return min(best, _first_root(c0, c1, c2))
+
+
+@leaf
 def contact_max_step(x, d, seg, bprev, bnext, dhat, cell, cap, shrink):
     """Largest ``t <= cap`` for which no pair of :func:`contact_barrier` whose vertex's foot
     lies inside the segment comes closer to the segment's line along ``x + t d`` than
@@ -158,26 +181,36 @@ def contact_max_step(x, d, seg, bprev, bnext, dhat, cell, cap, shrink):
     shrink : float
         Largest fraction of its distance a pair may lose, in (0, 1].
     """
-    nb = seg.shape[0]
-    if nb < 3:
+    if seg.shape[0] < 3:
         return cap
     verts, segs = _near_pairs(x, seg, bprev, bnext, dhat, cell)
     best = cap
     for p in range(verts.shape[0]):
-        v = verts[p]
-        a = seg[segs[p], 0]
-        b = seg[segs[p], 1]
-        rx = x[v, 0] - x[a, 0]
-        ry = x[v, 1] - x[a, 1]
-        ex = x[b, 0] - x[a, 0]
-        ey = x[b, 1] - x[a, 1]
-        ee = ex * ex + ey * ey
-        cross = ex * ry - ey * rx  # |ab| times the signed distance of v from the line
-        if ee <= 0.0 or not 0.0 < rx * ex + ry * ey < ee or cross * cross >= dhat * dhat * ee:
-            continue
-        c0, c1, c2 = triangle_area_polynomial(x, d, np.uint32(a), np.uint32(b), np.uint32(v), shrink)
-        if cross < 0.0:  # v on the right of a -> b: the area is negative, and must stay so
-            c0, c1, c2 = -c0, -c1, -c2
-        if not _no_root_up_to(c0, c1, c2, best):
-            best = min(best, _first_root(c0, c1, c2))
+        best = _pair_step(x, d, seg, verts[p], segs[p], dhat, shrink, best)
     return best
+
+
+@leaf
+def contact_pair_steps(x, d, seg, bprev, bnext, dhat, cell, cap, shrink):
+    """The pairs of :func:`contact_max_step` whose own bound is below ``cap``: their vertex
+    and the segment's two, (k, 3) int64, and the bounds, (k,) float64 (in the pairs' order)."""
+    if seg.shape[0] < 3:
+        return np.empty((0, 3), np.int64), np.empty(0)
+    verts, segs = _near_pairs(x, seg, bprev, bnext, dhat, cell)
+    bound = np.empty(verts.shape[0])
+    k = 0
+    for p in range(verts.shape[0]):
+        bound[p] = _pair_step(x, d, seg, verts[p], segs[p], dhat, shrink, cap)
+        if bound[p] < cap:
+            k += 1
+    trio = np.empty((k, 3), np.int64)
+    out = np.empty(k)
+    k = 0
+    for p in range(verts.shape[0]):
+        if bound[p] < cap:
+            trio[k, 0] = verts[p]
+            trio[k, 1] = seg[segs[p], 0]
+            trio[k, 2] = seg[segs[p], 1]
+            out[k] = bound[p]
+            k += 1
+    return trio, out

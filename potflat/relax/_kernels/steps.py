@@ -5,6 +5,7 @@ Arrays in, arrays out, no I/O; deterministic for any thread count.
 """
 from __future__ import annotations
 
+import heapq
 import math
 
 import numpy as np
@@ -132,14 +133,41 @@ def _first_root(c0, c1, c2):
     return best
 
 
-@parallel
-def boundary_max_step(x, d, verts, bprev, bnext, out):
-    """Per block of guarded boundary vertices, the largest ``t`` before the vertex's angle
-    sum at ``x + t d`` reaches ``2 pi`` (its two boundary edges align, pointing the same way).
+@leaf
+def _angle_step(x, d, b, nx, pv):
+    """The largest ``t`` before boundary vertex ``b``'s angle sum at ``x + t d`` reaches
+    ``2 pi`` (inf: never), with ``nx`` and ``pv`` its boundary neighbours.
 
     With ``u = x_nxt - x_b`` and ``w = x_prv - x_b`` the angle sum is a multiple of ``2 pi``
     exactly where ``cross(u, w) = 0`` (a quadratic in ``t``) and ``dot(u, w) > 0``; starting
     below ``2 pi`` with no face flipping, the first such ``t`` is where it reaches ``2 pi``.
+    """
+    ux = x[nx, 0] - x[b, 0]
+    uy = x[nx, 1] - x[b, 1]
+    wx = x[pv, 0] - x[b, 0]
+    wy = x[pv, 1] - x[b, 1]
+    dux = d[nx, 0] - d[b, 0]
+    duy = d[nx, 1] - d[b, 1]
+    dwx = d[pv, 0] - d[b, 0]
+    dwy = d[pv, 1] - d[b, 1]
+    c0 = ux * wy - uy * wx
+    c1 = ux * dwy - uy * dwx + dux * wy - duy * wx
+    c2 = dux * dwy - duy * dwx
+    e0 = ux * wx + uy * wy
+    e1 = ux * dwx + uy * dwy + dux * wx + duy * wy
+    e2 = dux * dwx + duy * dwy
+    r1, r2 = _positive_roots(c0, c1, c2)
+    if e0 + r1 * (e1 + r1 * e2) > 0.0:
+        return r1
+    if e0 + r2 * (e1 + r2 * e2) > 0.0:
+        return r2
+    return np.inf
+
+
+@parallel
+def boundary_max_step(x, d, verts, bprev, bnext, out):
+    """Per block of guarded boundary vertices, the largest ``t`` before the vertex's angle
+    sum at ``x + t d`` reaches ``2 pi`` (:func:`_angle_step`).
 
     Parameters
     ----------
@@ -155,28 +183,17 @@ def boundary_max_step(x, d, verts, bprev, bnext, out):
         best = np.inf
         for s in range(blk * BLOCK, min(nv, (blk + 1) * BLOCK)):
             b = verts[s]
-            nx = bnext[b]
-            pv = bprev[b]
-            ux = x[nx, 0] - x[b, 0]
-            uy = x[nx, 1] - x[b, 1]
-            wx = x[pv, 0] - x[b, 0]
-            wy = x[pv, 1] - x[b, 1]
-            dux = d[nx, 0] - d[b, 0]
-            duy = d[nx, 1] - d[b, 1]
-            dwx = d[pv, 0] - d[b, 0]
-            dwy = d[pv, 1] - d[b, 1]
-            c0 = ux * wy - uy * wx
-            c1 = ux * dwy - uy * dwx + dux * wy - duy * wx
-            c2 = dux * dwy - duy * dwx
-            e0 = ux * wx + uy * wy
-            e1 = ux * dwx + uy * dwy + dux * wx + duy * wy
-            e2 = dux * dwx + duy * dwy
-            r1, r2 = _positive_roots(c0, c1, c2)
-            if r1 < best and e0 + r1 * (e1 + r1 * e2) > 0.0:
-                best = r1
-            elif r2 < best and e0 + r2 * (e1 + r2 * e2) > 0.0:
-                best = r2
+            best = min(best, _angle_step(x, d, b, bnext[b], bprev[b]))
         out[blk] = best
+
+
+@parallel
+def boundary_vertex_steps(x, d, verts, bprev, bnext, out):
+    """:func:`boundary_max_step` per vertex: ``out`` (b,) float64, each guarded boundary
+    vertex's own bound (:func:`_angle_step`)."""
+    for s in prange(verts.shape[0]):
+        b = verts[s]
+        out[s] = _angle_step(x, d, b, bnext[b], bprev[b])
 
 
 @leaf
@@ -237,3 +254,67 @@ def vertex_max_steps(x, d, faces, vf_ptr, vf_tri, floors, verts, out):
             if not _no_root_up_to(c0, c1, c2, best):
                 best = min(best, _first_root(c0, c1, c2))
         out[k] = best
+
+
+@leaf
+def ease_scales(x, d, ptr, nbr, sources, values, t, width, max_visit, scale):
+    """Lower a direction's per-vertex scales around the vertices that hold its step.
+
+    Each source vertex's scale becomes at most its value, and every vertex's at most a
+    source's value plus the length of a path to it in ``x`` over ``width * t`` times the
+    larger ``|d|`` of each edge's two ends (Dijkstra's search over the neighbour lists): the
+    scaled direction's moves differ between neighbours by at most ``1 / width`` of their
+    distance more than ``d``'s over a step of ``t``.
+
+    Parameters
+    ----------
+    x, d : (n, 2) float64
+        Positions and direction.
+    ptr, nbr : (n + 1,) and (e,) int64
+        Neighbours of each vertex (CSR).
+    sources : (k,) int64
+    values : (k,) float64
+        The sources' scales, in [0, 1).
+    t, width : float
+        The step aimed at, and the ramp's width in steps.
+    max_visit : int
+        The search stops after lowering this many vertices.
+    scale : (n,) float64
+        In/out: each vertex's scale (1: unchanged).
+
+    Returns
+    -------
+    (j,) int64
+        The vertices whose scale went from 1 to below it, in order (``j > max_visit``: stopped).
+    """
+    heap = [(0.0, np.int64(0))]
+    heap.pop()
+    lowered = [np.int64(0)]
+    lowered.pop()
+    for p in range(sources.shape[0]):
+        v = np.int64(sources[p])
+        if values[p] < scale[v]:
+            if scale[v] == 1.0:
+                lowered.append(v)
+            scale[v] = values[p]
+            heapq.heappush(heap, (values[p], v))
+    while heap and len(lowered) <= max_visit:
+        s, u = heapq.heappop(heap)
+        if s > scale[u]:
+            continue
+        du = math.hypot(d[u, 0], d[u, 1])
+        for q in range(ptr[u], ptr[u + 1]):
+            v = np.int64(nbr[q])
+            reach = width * t * max(du, math.hypot(d[v, 0], d[v, 1]))
+            if reach <= 0.0:
+                continue
+            sv = s + math.hypot(x[v, 0] - x[u, 0], x[v, 1] - x[u, 1]) / reach
+            if sv < scale[v]:
+                if scale[v] == 1.0:
+                    lowered.append(v)
+                scale[v] = sv
+                heapq.heappush(heap, (sv, v))
+    out = np.empty(len(lowered), np.int64)
+    for p in range(len(lowered)):
+        out[p] = lowered[p]
+    return out
