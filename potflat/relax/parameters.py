@@ -256,8 +256,9 @@ class CoarseParameters:
     vertex fixed, for at most ``local_iterations`` iterations to the tolerance ``local_tol``
     (:func:`potflat.relax.local.relax_extremes`): they hold most of the followed start's
     energy (the anisotropy limit's term) and took most of the full mesh's iterations (1M
-    copies, full-mesh iterations without and with: sea vase 440 and 98, dragon jar 81 and 48,
-    goblet 93 and 81, colonoware pot 192 and 135). The same ``follow_repair_*`` rounds
+    copies, full-mesh iterations without and with: sea vase 162 and 86, dragon jar 81 and 48,
+    goblet 90 and 83, colonoware pot 190 and 96; with 300 local iterations the sea vase's
+    full mesh took 101). The same ``follow_repair_*`` rounds
     unwrap a start's boundary vertices whose triangles wrap past 2 pi
     (:func:`potflat.relax.start.unwrap_boundary`).
     """
@@ -280,7 +281,7 @@ class CoarseParameters:
     approach_most_short: float = 0.01
     local_anisotropy: float = 5.0
     local_rings: int = 2
-    local_iterations: int = 300
+    local_iterations: int = 100
     local_tol: float = 1e-7
 
 
