@@ -128,10 +128,17 @@ def test_area_term_gathers_area_distortion_within_the_anisotropy_of_a_solve_with
     assert [lv.level for lv in without.levels] == ["fine"]
     assert [lv.level for lv in r.levels] == ["fine, shape first", "fine"]
     assert without.anisotropy_limit is None
-    # that first solve is the solve without the area term: the limit is its 80th percentile
-    fd = face_distortion(flat.mesh.vertices, without.flat.uv, F)
+    # that first solve is the solve without the area term to the looser tolerance: the limit
+    # is its 80th percentile, within 0.2% of the converged solve's
+    from potflat.relax.parameters import PRESETS, SOLVER
+
+    loose = relax(flat, area=0.0, tol=PRESETS["standard"].tol * SOLVER.shape_first_tol_factor)
+    fd, fd_loose = (face_distortion(flat.mesh.vertices, res.flat.uv, F) for res in (without, loose))
     assert r.anisotropy_limit == pytest.approx(
-        weighted_percentile(fd.anisotropy, fd.area_3d, ENERGY.limit_percentile), rel=1e-9)
+        weighted_percentile(fd_loose.anisotropy, fd_loose.area_3d, ENERGY.limit_percentile), rel=1e-9)
+    assert r.anisotropy_limit == pytest.approx(
+        weighted_percentile(fd.anisotropy, fd.area_3d, ENERGY.limit_percentile), rel=2e-3)
+    assert loose.levels[0].iterations < without.levels[0].iterations
     # less area distortion (about 20% here), figures no less round
     assert r.distortion.area_mean_abs_log < 0.9 * without.distortion.area_mean_abs_log
     assert r.distortion.anisotropy_p95 <= without.distortion.anisotropy_p95

@@ -376,8 +376,10 @@ def _start(sp: SpringSystem, x: np.ndarray, V: np.ndarray, frame: _Frame, plan: 
 
 def _solve(sp: SpringSystem, x: np.ndarray, hier: GridHierarchy, frame: _Frame, V: np.ndarray,
            settings: RelaxPreset, plan: _Plan, coarse: CoarseStart | None, run: RunControl,
-           t_follow: float, notes: list[str]) -> tuple[np.ndarray, bool, list[LevelRecord], float | str | None]:
-    """Solve the full mesh from ``x`` (or only follow the coarse copy: ``preview``).
+           t_follow: float, notes: list[str], *,
+           shape_tol: float) -> tuple[np.ndarray, bool, list[LevelRecord], float | str | None]:
+    """Solve the full mesh from ``x`` (or only follow the coarse copy: ``preview``); a solve
+    without the area term that sets the anisotropy limit stops at ``shape_tol``.
 
     Returns the layout, whether it converged, the levels solved (the first solve's and the
     coarse copies' first) and the anisotropy limit used."""
@@ -397,7 +399,7 @@ def _solve(sp: SpringSystem, x: np.ndarray, hier: GridHierarchy, frame: _Frame, 
     if limit == "auto":
         # the energy without the area term first: its anisotropy sets the limit
         sp.set_area_and_limit(0.0, None)
-        x, converged, record = minimise(sp, x, hier, tol=settings.tol, run=run, notes=notes, level="fine, shape first")
+        x, converged, record = minimise(sp, x, hier, tol=shape_tol, run=run, notes=notes, level="fine, shape first")
         levels.append(record)
         limit = None if run.stopped else sp.anisotropy_percentile(np.take(V, frame.order, axis=0), x,
                                                                   ENERGY.limit_percentile)
@@ -474,7 +476,11 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
             run = RunControl((fine_iterations if capped else settings.max_iter) + len(prefix), deadline, callback,
                              report)
             run.history.extend(prefix)
-            x, converged, levels, limit = _solve(sp, x, hier, frame, V, settings, plan, coarse, run, t_follow, notes)
+            # (looser on the full mesh only: a copy's layout starts the next, and looser there it
+            # changes which copy the full mesh follows)
+            shape_tol = settings.tol * (SOLVER.shape_first_tol_factor if summaries else 1.0)
+            x, converged, levels, limit = _solve(sp, x, hier, frame, V, settings, plan, coarse, run, t_follow, notes,
+                                                 shape_tol=shape_tol)
         t_solve = time.perf_counter()
 
         # checked as solved: the turn below moves the layout rigidly, which makes or undoes no fold
