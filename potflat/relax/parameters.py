@@ -175,10 +175,11 @@ class SolverParameters:
     shape_first_tol_factor : float
         The full mesh's solve without the area term, whose anisotropy sets the limit
         (``max_anisotropy="auto"``), stops at this multiple of the preset's tolerance: a
-        percentile of the anisotropy settles long before the layout does. Plastic vase at 1M
-        (its coarse copy given up): with 1, 189 + 44 iterations, limit 1.0590; with 10, 126 + 72
-        iterations, 20% less time, limit 1.0595 and a lower final energy; with 100 the limit
-        moved to 1.0734 and the second solve took 283 iterations.
+        percentile of the anisotropy settles before the layout does. Plastic vase (its coarse
+        copy given up), iterations of that solve + the second and relax seconds with 1 and 3:
+        0.1M 93 + 37 and 77 + 38 (1.8 and 1.6 s), 0.3M 168 + 41 and 141 + 40 (6.5 and 5.5 s),
+        1M 189 + 44 and 155 + 51 (23.7 and 19.4 s), 3M 284 + 159 both; the limit within 0.02%.
+        With 10 the 3M limit moved by 0.35% and the second solve took 551 iterations.
     contrast_start_iterations : int
         Iterations the first of those relaxations spends on its mesh when it started from a
         relaxed coarse copy (the copies converge): it only has to smooth the layout the
@@ -207,7 +208,7 @@ class SolverParameters:
     min_time_budget: float = 1e-3
     contrast_start: float = 100.0
     contrast_start_iterations: int = 10
-    shape_first_tol_factor: float = 10.0
+    shape_first_tol_factor: float = 3.0
 
 
 @dataclass(frozen=True, kw_only=True)
