@@ -23,6 +23,7 @@ from _bench_meshes import (
 from potflat.errors import FoldedResultError, InvalidOptionError
 from potflat.files.relax_stage import run_relax_stage
 from potflat.mesh._kernels.topology import (
+    faces_touching,
     flagged_face_vertices,
     incident_faces,
     vertex_faces,
@@ -144,7 +145,7 @@ def test_max_face_step_near_equals_the_full_bound_after_a_local_change(bumpy):
         assert sp.max_face_step_near(x, d, verts, 1.0, 1.0) == sp.max_face_step(x, d, cap=1.0)
 
 
-def test_flagged_face_vertices_and_incident_faces_match_numpy():
+def test_flagged_face_vertices_incident_faces_and_faces_touching_match_numpy():
     rng = np.random.default_rng(3)
     F = np.array([rng.choice(40, 3, replace=False) for _ in range(200)], np.int32)
     flags = rng.random(200) < 0.1
@@ -157,6 +158,10 @@ def test_flagged_face_vertices_and_incident_faces_match_numpy():
     got = incident_faces(verts, vf_ptr, vf_tri)
     want = np.concatenate([np.nonzero((F == v).any(axis=1))[0] for v in verts])
     assert np.array_equal(np.sort(got), np.sort(want))
+    on = np.zeros(40, bool)
+    on[[3, 17]] = True
+    assert np.array_equal(faces_touching(on, F), np.flatnonzero(on[F].any(axis=1)))
+    assert len(faces_touching(np.zeros(40, bool), F)) == 0
 
 
 def test_overlap_counts_crossing_boundary():
@@ -743,6 +748,30 @@ def test_boundary_limits_are_the_constraints_holding_the_step():
     again, later = sp.boundary_limits(x, slower, 10.0, shrink)
     row = np.flatnonzero((again == trios[k]).all(axis=1))[0]
     assert later[row] == pytest.approx(2 * bounds[k], rel=1e-9)
+
+
+def test_a_local_relaxation_lists_the_whole_boundary_s_contact_pairs():
+    """A patch of the right prong lists the pairs the whole mesh lists for the same moves,
+    its vertices in its own numbering and the fixed ones outside it as -1."""
+    from potflat.relax.local import _Patch
+
+    V, F, x = _narrow_slit()
+    sp = spring_system(V, F, k=1.0, relative=True)
+    sp.guard_boundary(x)
+    d = _push_into_slit(x)
+    inside = np.flatnonzero((x[F].mean(axis=1)[:, 0] > 7.2) & (np.abs(x[F].mean(axis=1)[:, 1] - 10) < 3))
+    vertices = np.unique(F[inside]).astype(np.int64)
+    free = np.zeros(sp.n, bool)
+    free[vertices] = True
+    d[~free] = 0.0  # (the patch's fixed vertices do not move)
+    patch = _Patch(sp, V, inside, vertices, free, x.copy())
+    want, want_bounds = sp._contact_limits(x, d, 10.0, 0.8)
+    got, bounds = patch._contact_limits(np.ascontiguousarray(x[vertices]), np.ascontiguousarray(d[vertices]),
+                                        10.0, 0.8)
+    assert len(got) == len(want) > 0 and (got == -1).any() and (got >= 0).any()
+    np.testing.assert_array_equal(bounds, want_bounds)
+    np.testing.assert_array_equal(np.where(got >= 0, vertices[np.maximum(got, 0)], -1),
+                                  np.where(free[want], want, -1))
 
 
 def test_ease_scales_matches_a_shortest_path_reference():

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from potflat.mesh._kernels.topology import incident_faces, small_pieces, union_find, vertex_faces
+from potflat.mesh._kernels.topology import faces_touching, incident_faces, small_pieces, union_find, vertex_faces
 from potflat.mesh.boundary import crossing_pairs, edges_and_boundary
 from potflat.mesh.embedding import fan_edges, neighbour_rows, signed_areas
 from potflat.rollout.folds import overlapping_faces
@@ -177,7 +177,7 @@ class _KeptBorder:
         over the corners: a vertex-to-face table of the whole mesh would set the rollout's peak)."""
         at = np.zeros(len(self.excess), bool)
         at[vertices] = True
-        return np.flatnonzero(at[self.faces].any(axis=1))
+        return faces_touching(at, self.faces)
 
 
 def _crossing_region(graph: FaceGraph, faces: np.ndarray, keep: np.ndarray, uv: np.ndarray, over: np.ndarray,

@@ -638,6 +638,28 @@ def flagged_face_vertices(flags, faces, seen):
 
 
 @leaf
+def faces_touching(flags, faces):
+    """The faces with a corner at a flagged vertex, in order.
+
+    Parameters
+    ----------
+    flags : (n,) bool
+    faces : (m, 3) int32 or int64
+
+    Returns
+    -------
+    (k,) int64
+    """
+    out = np.empty(faces.shape[0], np.int64)
+    k = 0
+    for f in range(faces.shape[0]):
+        if flags[faces[f, 0]] or flags[faces[f, 1]] or flags[faces[f, 2]]:
+            out[k] = f
+            k += 1
+    return out[:k].copy()
+
+
+@leaf
 def incident_faces(verts, vf_ptr, vf_tri):
     """The faces incident to the listed vertices, concatenated per vertex (a face shared by
     several listed vertices appears once per vertex).
