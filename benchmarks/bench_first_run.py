@@ -96,11 +96,17 @@ def main(argv: list[str] | None = None) -> None:
             args.write)
     publish("bench_first_run_readme",
             f"On a {os.cpu_count()}-core machine shared with other jobs (load average {load_range('first')}), the "
-            f"first run of the sample took {min(first) / 60:.1f}-{max(first) / 60:.1f} minutes (it compiles "
+            f"first run of the sample took {_minutes(first)} minutes (it compiles "
             f"{kernels} kernels once; longer when other jobs take the cores) and later runs {g:.0f} s, {args.rounds} rounds; "
             "installing is not counted ([performance](docs/performance.md#first-run)). `potflat warmup` compiles them "
-            f"ahead (after installing, or before a batch on a cluster): {min(warmed) / 60:.1f}-{max(warmed) / 60:.1f} "
+            f"ahead (after installing, or before a batch on a cluster): {_minutes(warmed)} "
             f"minutes, after which the first run took {statistics.median(after):.0f} s.\n", args.write)
+
+def _minutes(seconds: list[float]) -> str:
+    """The range of ``seconds`` in minutes to a tenth ("0.6-0.8"; one figure when both round alike)."""
+    lo, hi = f"{min(seconds) / 60:.1f}", f"{max(seconds) / 60:.1f}"
+    return lo if lo == hi else f"{lo}-{hi}"
+
 
 if __name__ == "__main__":
     main()
