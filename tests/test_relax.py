@@ -111,7 +111,7 @@ def test_max_step_matches_reference(bumpy):
     rng = np.random.default_rng(0)
     for _ in range(5):
         d = rng.normal(size=bumpy.uv.shape)
-        got = sp.max_step(bumpy.uv, d)
+        got = sp.max_face_step(bumpy.uv, d)
         want = ref.max_step(bumpy.uv, d, F)
         assert got == pytest.approx(want, abs=1e-4)
         if np.isfinite(got):
@@ -124,7 +124,7 @@ def test_limiting_faces_are_those_whose_own_bound_is_below_the_cap(bumpy):
     x = np.ascontiguousarray(bumpy.uv)
     d = 0.5 * np.random.default_rng(1).normal(size=x.shape)
     flags = np.empty(sp.m, bool)
-    t = sp.max_step(x, d, cap=1.0, limiting=flags)
+    t = sp.max_face_step(x, d, cap=1.0, limiting=flags)
     own = np.array([max_step_of(x, d, sp.faces, np.array([f]), 1.0, 1.0) for f in range(sp.m)])
     assert 0 < flags.sum() < sp.m  # a real mix
     assert np.array_equal(flags, own < 1.0)
@@ -575,9 +575,9 @@ def test_boundary_max_step_stops_before_the_fan_wraps():
     x = np.ascontiguousarray(fan.uv)
     d = np.zeros_like(x)
     d[-1] = (0.0, 1.0)  # the last rim vertex (angle 2 pi - gap) moves up across the first one's ray
-    assert sp.max_step(x, d) == np.inf  # no face flips, nothing guarded yet
+    assert sp.boundary_step(x, d, sp.max_face_step(x, d), 1.0) == np.inf  # no face flips, nothing guarded yet
     sp.guard_boundary(x)
-    t = sp.max_step(x, d)
+    t = sp.boundary_step(x, d, sp.max_face_step(x, d), 1.0)
     assert t == pytest.approx(np.sin(gap), rel=1e-12)  # where the two boundary edges align
     assert _angle_sum(x + 0.999 * t * d, F) < 2 * np.pi < _angle_sum(x + 1.001 * t * d, F)
     assert sp.evaluate(np.ascontiguousarray(x + 1.001 * t * d))[0] == np.inf
@@ -738,7 +738,7 @@ def test_boundary_limits_are_the_constraints_holding_the_step():
         e, r = y[b] - y[a], y[v] - y[a]
         return abs(e[0] * r[1] - e[1] * r[0])
 
-    for (v, a, b), t in zip(trios, bounds):
+    for (v, a, b), t in zip(trios, bounds, strict=True):
         assert distance(x, v, a, b) < ENERGY.contact_gap * np.linalg.norm(x[b] - x[a])
         assert distance(x + 0.999 * t * d, v, a, b) > (1 - shrink) * distance(x, v, a, b) > distance(
             x + 1.001 * t * d, v, a, b)

@@ -251,18 +251,12 @@ class SpringSystem:
         importance-weighted) plus the shape term."""
         return self.evaluate(x, barrier=False)[1]
 
-    def max_step(self, x: np.ndarray, d: np.ndarray, cap: float = np.inf, shrink: float = 1.0,
-                 limiting: np.ndarray | None = None) -> float:
-        """Largest ``t`` (at most ``cap``) keeping every face of ``x + t d`` above ``1 - shrink``
-        of its area at ``x`` (``shrink = 1``: positively oriented), every guarded boundary
-        vertex's angle sum below ``2 pi`` and every boundary pair of the contact barrier above
-        ``1 - shrink`` of its distance: :meth:`boundary_step` of :meth:`max_face_step`."""
-        return self.boundary_step(x, d, self.max_face_step(x, d, cap, shrink, limiting), shrink)
-
     def max_face_step(self, x: np.ndarray, d: np.ndarray, cap: float = np.inf, shrink: float = 1.0,
                       limiting: np.ndarray | None = None) -> float:
-        """The faces' part of :meth:`max_step`. With ``limiting`` ((m,) bool) also flag the faces
-        whose own bound is below ``cap``."""
+        """Largest ``t`` (at most ``cap``) keeping every face of ``x + t d`` above ``1 - shrink``
+        of its area at ``x`` (``shrink = 1``: positively oriented); :meth:`boundary_step` adds
+        the boundary's bounds. With ``limiting`` ((m,) bool) also flag the faces whose own bound
+        is below ``cap``."""
         if self.m == 0:
             return cap
         max_step(x, d, self.faces, float(cap), float(shrink), self._blocks,
