@@ -9,7 +9,13 @@ from _bench_meshes import meshes, signed_areas
 
 from potflat.errors import FoldedResultError, NotADiskError
 from potflat.mesh._kernels.topology import edge_table, incident_faces, vertex_faces
-from potflat.mesh.embedding import boundary_loops, fan_edges, neighbour_rows, repair_folds, tutte_embedding
+from potflat.mesh.embedding import (
+    boundary_loops,
+    fan_edges,
+    neighbour_rows,
+    repair_folds,
+    tutte_embedding,
+)
 from potflat.relax import relax
 from potflat.relax import multilevel
 
@@ -44,6 +50,23 @@ def test_fan_edges_and_neighbour_rows_match_the_whole_mesh(seed):
     rows = neighbour_rows(verts, edges, n)
     np.testing.assert_array_equal(rows.toarray(), dense[verts])
     assert np.all(np.diff(rows.indptr) > 0)
+
+
+def test_signed_areas_refuses_swapped_or_out_of_range_arguments():
+    """The kernel would read outside ``uv``: arguments in the wrong order (a (n, 2) layout
+    read as faces), or a face naming a vertex the layout does not have, raise instead."""
+    from potflat.mesh.embedding import signed_areas
+
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    faces = np.array([[0, 1, 2], [1, 3, 2]])
+    np.testing.assert_allclose(signed_areas(faces, uv), [0.5, 0.5])
+    with pytest.raises(ValueError, match="got"):
+        signed_areas(uv, faces)
+    with pytest.raises(ValueError, match="outside the 4 vertices"):
+        signed_areas(faces + 1, uv)
+    with pytest.raises(ValueError, match="outside the 4 vertices"):
+        signed_areas(faces - 1, uv)
+    assert len(signed_areas(np.zeros((0, 3), np.int64), uv)) == 0
 
 
 def test_repair_folds_fixes_an_interior_fold_and_moves_nothing_far_away():

@@ -40,8 +40,18 @@ def signed_areas(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
     (m,) float64
         ``((b - a) x (c - a)) / 2`` of the corners ``a, b, c``: the relax solver's parallel
         kernel (:func:`potflat.relax._kernels.springs.face_areas`), with its face type (int32).
-    """
 
+    Raises
+    ------
+    ValueError
+        When ``faces`` is not (m, 3), ``uv`` not (n, 2), or a face names a vertex outside
+        ``uv`` (the kernel would read outside the array).
+    """
+    faces, uv = np.asarray(faces), np.asarray(uv)
+    if faces.ndim != 2 or faces.shape[1] != 3 or uv.ndim != 2 or uv.shape[1] != 2:
+        raise ValueError(f"signed_areas(faces (m, 3), uv (n, 2)): got {faces.shape} and {uv.shape}")
+    if len(faces) and (faces.min() < 0 or faces.max() >= len(uv)):
+        raise ValueError(f"signed_areas: face indices {faces.min()}..{faces.max()} outside the {len(uv)} vertices")
     out = np.empty(len(faces))
     face_areas(np.ascontiguousarray(uv, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int32), out)
     return out
