@@ -5,6 +5,7 @@ import pytest
 from _revolve import cone, cylinder, vase
 
 from potflat.mesh.boundary import edges_and_boundary, outline_turning
+from potflat.rollout import seam
 from potflat.rollout.unroll import rollout
 
 
@@ -94,3 +95,13 @@ def test_pieces_carry_colours_and_untextured_flags(tmp_path):
     np.testing.assert_array_equal(textured.flat.mesh.untextured_faces, flags[textured.face_index])
     assert textured.cut_faces > 0 and flags[textured.face_index[np.bincount(textured.face_index)[
         textured.face_index] > 1]].any()
+
+
+def test_among_is_isin_for_exact_values(monkeypatch):
+    rng = np.random.default_rng(3)
+    values = rng.choice(np.linspace(0.0, 1.0, 50), size=(1000, 3))
+    values[::7, 1] += 1e-12  # (near a member, not one)
+    members = np.unique(rng.choice(np.linspace(0.0, 1.0, 50), 20))
+    monkeypatch.setattr(seam, "_AMONG_ROWS", 64)  # (many blocks, the last one short)
+    assert np.array_equal(seam._among(values, members), np.isin(values, members))
+    assert not seam._among(values, np.zeros(0)).any()

@@ -422,24 +422,20 @@ def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarr
         parent_w = piece_of[src]
         if len(pieces_w):  # a piece of a piece: its corners as weights of the scan face's
             w = np.where((parent_w >= 0)[:, None, None], w @ pieces_w[np.maximum(parent_w, 0)], w)
-        across = np.zeros(len(T), bool)
-        across[rows] = True
-        counts = np.ones(len(T), np.int64)
-        counts[rows] = np.bincount(src, minlength=len(T))[rows]
-        pos = np.cumsum(counts) - counts
-        stay = np.flatnonzero(~across)
-        at = pos[src] + np.arange(len(src)) - np.searchsorted(src, src)
-        out_n = int(counts.sum())
-        T2, F2 = np.empty((out_n, 3)), np.empty((out_n, 3), np.int64)
-        face2, narrow2, piece2 = np.empty(out_n, np.int64), np.ones(out_n, bool), np.full(out_n, -1, np.int64)
-        T2[pos[stay]], F2[pos[stay]], face2[pos[stay]], narrow2[pos[stay]] = (
-            T[stay], row_faces[stay], rows_face[stay], rows_narrow[stay])
-        T2[at], F2[at], face2[at] = new_T, new_faces, rows_face[src]
-        kept_pieces = stay[piece_of[stay] >= 0]
-        piece2[pos[kept_pieces]] = np.arange(len(kept_pieces))
-        piece2[at] = len(kept_pieces) + np.arange(len(w))
-        pieces_w = np.concatenate([pieces_w[piece_of[kept_pieces]], w])
-        T, row_faces, rows_face, rows_narrow, piece_of = T2, F2, face2, narrow2, piece2
+        # each row across is replaced by its kept pieces, in place: the other rows are
+        # compacted (np.delete) and the pieces inserted before the row that followed theirs
+        # (one array at a time, the old one dropped at once: these are the region's largest)
+        before = src - np.searchsorted(rows, src)
+        stay_pieces = np.delete(piece_of, rows)
+        kept = np.flatnonzero(stay_pieces >= 0)
+        pieces_w = np.concatenate([pieces_w[stay_pieces[kept]], w])
+        stay_pieces[kept] = np.arange(len(kept))
+        piece_of = np.insert(stay_pieces, before, len(kept) + np.arange(len(w)))
+        del stay_pieces, kept
+        T = np.insert(np.delete(T, rows, axis=0), before, new_T, axis=0)
+        row_faces = np.insert(np.delete(row_faces, rows, axis=0), before, new_faces, axis=0)
+        rows_narrow = np.insert(np.delete(rows_narrow, rows), before, True)
+        rows_face = np.insert(np.delete(rows_face, rows), before, rows_face[src])
 
     def pts_of(ids):
         return np.concatenate([V[ids[ids < n]], added_pts[ids[ids >= n] - n]])
@@ -481,7 +477,7 @@ def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarr
             at = on_cut[row_faces]
             # and so does every vertex at its angle: copies of a vertex (a non-manifold one
             # split into fans) are not left beside it
-            at |= np.isin(T, np.unique(T[at]))
+            at |= _among(T, np.unique(T[at]))
             T[at] = values[0] + TWO_PI * np.round((T[at] - values[0]) / TWO_PI)
 
         def keep_piece(piece, src, split=split, c_row=c_row):
@@ -505,3 +501,20 @@ def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarr
     return row_faces, T, CutOrigins(face_index=rows_face, repeated=repeated, pieces=pieces[cut], weights=weights[cut],
                                     added_edges=added_edges, added_t=added_t, n=n)
 
+
+#: Rows of a (k, 3) array :func:`_among` looks up at once (its temporaries: some 100 MB).
+_AMONG_ROWS = 1 << 20
+
+
+def _among(values: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
+    """Which of ``values`` ((k, 3) float64) are exactly in ``sorted_set`` ((m,) float64,
+    sorted, unique): ``np.isin`` by binary search, a block of rows at a time (``np.isin`` of
+    a large array sorts it with the set, several copies of its size at once)."""
+    out = np.zeros(values.shape, bool)
+    if not len(sorted_set):
+        return out
+    last = len(sorted_set) - 1
+    for lo in range(0, len(values), _AMONG_ROWS):
+        block = values[lo:lo + _AMONG_ROWS]
+        out[lo:lo + _AMONG_ROWS] = sorted_set[np.minimum(np.searchsorted(sorted_set, block), last)] == block
+    return out
