@@ -30,6 +30,9 @@ class LBFGS:
     whose boundary overlaps itself is rejected like one of higher energy. The vector algebra
     runs in fused in-place passes (:mod:`potflat.relax._kernels.lbfgs`) over preallocated buffers.
 
+    The start ``x`` ((n, 2) float64) becomes the solver's first position buffer when it is
+    float64 and C-contiguous, not a copy (at 3M vertices 46 MB): the iterations overwrite it.
+
     Attributes
     ----------
     x : (n, 2) float64
@@ -47,7 +50,7 @@ class LBFGS:
         self._limiting = np.empty(sp.m, bool)  # faces holding the step below the natural one
         self._seen = np.zeros(sp.n, bool)  # work space of the smoothing
         size = 2 * sp.n
-        self.x = np.array(x, dtype=np.float64, order="C")
+        self.x = np.asarray(x, dtype=np.float64, order="C")  # (taken over: see the class)
         self.trial = np.empty_like(self.x)
         self.grads = [np.empty_like(self.x), np.empty_like(self.x)]
         # one slot per pair kept (at 3M vertices each pair is 96 MB)
@@ -57,7 +60,6 @@ class LBFGS:
         self.yhy = np.zeros(SOLVER.lbfgs_memory)
         self.slots: list[int] = []  # oldest first
         self.q = np.empty(size)
-        self._tmp = np.empty(size) if precond is not None else None
         self._part = np.empty(max(1, -(-size // kl.BLOCK)))
         self._part2 = np.empty_like(self._part)
         self.cur = 0  # index of grads holding the current gradient
@@ -84,8 +86,10 @@ class LBFGS:
 
     def _direction(self) -> float:
         """Set ``q`` to the L-BFGS direction (two-loop recursion); return ``g . q``."""
-        q, g, tmp, S, Y, rho = self.q, self.g, self._tmp, self.S, self.Y, self.rho
-        tmp = q if tmp is None else tmp  # without a preconditioner H0 is applied in place
+        q, g, S, Y, rho = self.q, self.g, self.S, self.Y, self.rho
+        # the recursion's first vector: without a preconditioner H0 is applied to it in place;
+        # with one it lives in ``trial`` (free until the line search; at 3M vertices 46 MB)
+        tmp = q if self.precond is None else self.trial.reshape(-1)
         order = self.slots[::-1]  # newest first
         preconditioned = self.precond is not None
         if not order:
@@ -264,7 +268,8 @@ class LBFGS:
 def minimise(sp: SpringSystem, x: np.ndarray, hier: GridHierarchy, *, tol: float, run: RunControl,
              notes: list[str], level: str = "fine") -> tuple[np.ndarray, bool, LevelRecord]:
     """The fold-free solve: preconditioned L-BFGS on the whole mesh from ``x`` (n, 2) until the
-    relative energy change falls below ``tol`` or ``run`` stops it.
+    relative energy change falls below ``tol`` or ``run`` stops it. ``x`` is overwritten (the
+    solver works in it: :class:`LBFGS`).
 
     When the start's boundary does not overlap itself, no accepted step lets it: a trial
     point whose boundary segments cross is treated like one of higher energy (the step is
@@ -282,7 +287,7 @@ def minimise(sp: SpringSystem, x: np.ndarray, hier: GridHierarchy, *, tol: float
     run.level = level
     precond = MultilevelPreconditioner(hier, theta=SOLVER.precond_theta) if hier.levels else None
     solver = LBFGS(sp, x, precond, guard_overlap=sp.overlap(x) == 0)
-    del x  # the solver holds its own copy (peak memory)
+    del x  # (the solver's first buffer now)
     conv, its = solver.run(run, max_iter=run.max_iter, tol=tol, hist=[solver.E])
     contacts, smoothed, eased = solver.contacts, solver.smoothed, solver.eased
     if contacts:

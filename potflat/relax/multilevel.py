@@ -379,7 +379,8 @@ def _solve(sp: SpringSystem, x: np.ndarray, hier: GridHierarchy, frame: _Frame, 
            t_follow: float, notes: list[str], *,
            shape_tol: float) -> tuple[np.ndarray, bool, list[LevelRecord], float | str | None]:
     """Solve the full mesh from ``x`` (or only follow the coarse copy: ``preview``); a solve
-    without the area term that sets the anisotropy limit stops at ``shape_tol``.
+    without the area term that sets the anisotropy limit stops at ``shape_tol``. ``x`` may be
+    overwritten (:func:`potflat.relax.lbfgs.minimise`).
 
     Returns the layout, whether it converged, the levels solved (the first solve's and the
     coarse copies' first) and the anisotropy limit used."""
