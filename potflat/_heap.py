@@ -97,8 +97,9 @@ def reuse_freed_memory():
     served from glibc's heap and freed memory kept there for reuse, when the application opted
     in (:func:`heap_tuning`); else it just runs.
 
-    Blocks may nest and overlap across threads: the first to start tunes the heap, the last to
-    end puts the settings back and returns the free memory to the system (also on error).
+    Blocks may nest and overlap across threads: the first to start returns the heap's free
+    memory to the system and tunes the heap, the last to end puts the settings back and
+    returns the free memory again (also on error).
     The block's peak resident memory grows by what the heap cannot reuse: a trade of memory
     for time (the 3M-vertex benchmark amphora's rollout stage: 2.88 GiB and a whole run of
     79 s untuned, 3.14 GiB and 56 s tuned).
@@ -106,9 +107,12 @@ def reuse_freed_memory():
     global _tuned
     libc = _glibc()
     with _lock:
+        first = _tuned == 0
         tuned = _allowed > 0 and libc is not None and (_tuned > 0 or _tune(libc))
         if tuned:
             _tuned += 1
+            if first:  # what an earlier stage left free goes back first, not under this block's peak
+                release_free_memory()
     try:
         yield
     finally:

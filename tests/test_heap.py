@@ -115,3 +115,28 @@ def test_without_glibc_the_block_just_runs(monkeypatch):
     with _heap.heap_tuning(), _heap.reuse_freed_memory():
         ran.append(True)
     assert ran == [True]
+
+
+def test_the_first_block_hands_back_what_was_free_before_it(monkeypatch):
+    calls = []
+
+    class _Libc:
+        def mallopt(self, param, value):
+            calls.append(("mallopt", param))
+            return 1
+
+        def malloc_trim(self, pad):
+            calls.append(("trim", pad))
+            return 1
+
+    libc = _Libc()
+    monkeypatch.setattr(_heap, "_glibc", lambda: libc)
+    monkeypatch.setattr(_heap, "user_settings", lambda: False)
+    with _heap.heap_tuning():
+        with _heap.reuse_freed_memory():
+            assert calls[-1] == ("trim", 0)  # after the tuning, before the block's own work
+            calls.clear()
+            with _heap.reuse_freed_memory():  # (nested: the heap is the outer block's)
+                pass
+            assert calls == []
+    assert calls[-1] == ("trim", 0)  # the last block's end
