@@ -41,15 +41,17 @@ def test_morton_codes_interleave_the_quantised_coordinates():
         assert code == ref
 
 
-def test_restrict_with_a_dirty_work_space_is_unchanged(hier):
+def test_restrict_with_kept_fractions_and_dirty_work_space_is_unchanged(hier):
     rng = np.random.default_rng(6)
     level = hier.levels[-1]
     g = rng.normal(size=(len(hier.un), 2))
     start = hier.cell_start(level)
     fresh = hier.restrict(level, start, g)
     work = rng.normal(size=(1 << (2 * level), 4, 2))  # garbage from an earlier call
-    kept = hier.restrict(level, start, g, corners=work)
+    kept = hier.restrict(level, start, g, frac=hier.fractions(level), corners=work)
     assert np.array_equal(fresh, kept)
+    frac = hier.fractions(level)
+    assert frac.min() >= 0.0 and frac.max() <= 1.0
 
 
 def test_grid_transfers_are_nested_and_transposed(hier):

@@ -87,16 +87,23 @@ class GridHierarchy:
         relax_grid.prolong(self.un, level, np.ascontiguousarray(c), out)
         return out
 
+    def fractions(self, level: int) -> np.ndarray:
+        """Each (sorted) vertex's position within its cell of ``level``, (n, 2) in ``[0, 1]``."""
+        out = np.empty_like(self.un)
+        relax_grid.cell_fractions(self.un, level, out)
+        return out
+
     def restrict(self, level: int, cell_start: np.ndarray, g: np.ndarray, *,
-                 corners: np.ndarray | None = None) -> np.ndarray:
+                 frac: np.ndarray | None = None, corners: np.ndarray | None = None) -> np.ndarray:
         """Transpose of :meth:`prolong` applied to per-vertex values ``g`` (n, k) -> (nodes, k).
 
-        A caller restricting often keeps the work space ``corners`` ((4^level, 4, k) float64);
-        None: made here."""
+        A caller restricting often keeps ``frac`` (:meth:`fractions` of ``level``) and the
+        work space ``corners`` ((4^level, 4, k) float64); None: made here."""
+        frac = self.fractions(level) if frac is None else frac
         if corners is None:
             corners = np.empty((1 << (2 * level), 4, g.shape[1]))
         out = np.empty((self.n_nodes(level), g.shape[1]))
-        relax_grid.restrict(self.un, level, cell_start, np.ascontiguousarray(g), corners, out)
+        relax_grid.restrict(frac, level, cell_start, np.ascontiguousarray(g), corners, out)
         return out
 
 
@@ -126,6 +133,7 @@ class MultilevelPreconditioner:
         self.levels = hier.levels  # consecutive, coarse to fine
         self.finest = self.levels[-1]
         self.cell_start = hier.cell_start(self.finest)
+        self.frac = hier.fractions(self.finest)
         self._corners: dict[int, np.ndarray] = {}  # restriction work space per column count
         n = len(hier.un)
         self.weight_sums = self._down(self.restrict(np.ones((n, 1))))
@@ -140,7 +148,7 @@ class MultilevelPreconditioner:
         k = g.shape[1]
         if k not in self._corners:
             self._corners[k] = np.empty((1 << (2 * self.finest), 4, k))
-        return self.hier.restrict(self.finest, self.cell_start, g, corners=self._corners[k])
+        return self.hier.restrict(self.finest, self.cell_start, g, frac=self.frac, corners=self._corners[k])
 
     def _down(self, finest: np.ndarray) -> list[np.ndarray]:
         """Node values of every level (coarse to fine) from the finest level's by restriction."""

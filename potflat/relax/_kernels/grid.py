@@ -88,7 +88,24 @@ def prolong(un, level, c, out):
 
 
 @parallel
-def restrict(un, level, cell_start, g, corners, out):
+def cell_fractions(un, level, out):
+    """Position of every vertex within its cell of ``level``, each coordinate in ``[0, 1]``
+    (the bilinear weights of :func:`prolong` and :func:`restrict`).
+
+    Parameters
+    ----------
+    un : (n, 2) float64
+        Reference positions in ``[0, 1]``.
+    level : int
+    out : (n, 2) float64
+    """
+    for i in prange(un.shape[0]):
+        for d in range(2):
+            _, out[i, d] = _cell_and_frac(un[i, d], level)
+
+
+@parallel
+def restrict(frac, level, cell_start, g, corners, out):
     """Transpose of :func:`prolong`: ``out[node] = sum_i w_node(i) g[i]``, column by column.
 
     Two race-free passes: each cell sums its vertices' weighted values per corner (one read
@@ -96,9 +113,9 @@ def restrict(un, level, cell_start, g, corners, out):
 
     Parameters
     ----------
-    un : (n, 2) float64
-        Reference positions in ``[0, 1]``, rows sorted by Morton code (each vertex's weights
-        from its position in its cell, as in :func:`prolong`).
+    frac : (n, 2) float64
+        Each vertex's position in its cell of ``level`` (:func:`cell_fractions`), rows sorted
+        by Morton code.
     level : int
     cell_start : (4^level + 1,) int64
         First vertex of each cell (in Morton order of the cells).
@@ -119,8 +136,8 @@ def restrict(un, level, cell_start, g, corners, out):
             s01 = 0.0
             s11 = 0.0
             for i in range(np.uint64(lo), np.uint64(hi)):
-                _, fx = _cell_and_frac(un[i, 0], level)
-                _, fy = _cell_and_frac(un[i, 1], level)
+                fx = frac[i, 0]
+                fy = frac[i, 1]
                 v = g[i, c]
                 s00 += (1.0 - fx) * (1.0 - fy) * v
                 s10 += fx * (1.0 - fy) * v
