@@ -102,6 +102,7 @@ def main(argv: list[str] | None = None) -> None:
             f"ahead (after installing, or before a batch on a cluster): {_minutes(warmed)} "
             f"minutes, after which the first run took {statistics.median(after):.0f} s.\n", args.write)
 
+
 def _minutes(seconds: list[float]) -> str:
     """The range of ``seconds`` in minutes to a tenth ("0.6-0.8"; one figure when both round alike)."""
     lo, hi = f"{min(seconds) / 60:.1f}", f"{max(seconds) / 60:.1f}"
