@@ -159,6 +159,34 @@ def test_deterministic():
     assert np.array_equal(w1.labels, w2.labels) and np.array_equal(w1.face_mask, w2.face_mask)
 
 
+@pytest.mark.parametrize("tolerance", [0.3, 0.7])
+def test_flat_faces_take_the_side_of_the_nearest_seed(monkeypatch, tolerance):
+    """Faces whose smoothed radial normal is under the tolerance take the side of the nearest
+    clear face along the surface: the same as a Dijkstra over the whole face graph from every
+    clear face (the labelling searches only the steps touching a flat face)."""
+    from scipy.sparse.csgraph import dijkstra
+
+    from potflat.rollout import walls
+
+    V, F, _, _ = vm.cup(foot_ring=True, n_theta=48)
+    V = V + np.random.default_rng(3).normal(scale=0.3, size=V.shape)
+    mesh, p, a = _posed(V, F, seed=4)
+    fr = walls.face_frame(mesh, p, a)
+    monkeypatch.setattr(walls, "_refine_border", lambda fr, labels, *rest: labels)
+    monkeypatch.setattr(walls, "_clean_regions", lambda fr, labels, sign: labels)
+    got = walls._label_once(fr, tolerance, 1.0)
+    s = walls._smooth(fr.n_radial, fr.area, fr.graph, walls._SMOOTH_ITERATIONS)
+    seed = np.abs(s) >= tolerance
+    adj = fr.adjacency
+    assert 0.05 < 1 - seed.mean() < 0.95
+    step = np.linalg.norm(fr.centroid[adj[:, 0]] - fr.centroid[adj[:, 1]], axis=1)
+    _, _, nearest = dijkstra(fr.graph.matrix(step), directed=False, indices=np.flatnonzero(seed),
+                             return_predecessors=True, min_only=True)
+    flat = ~seed & (nearest >= 0)
+    assert flat.sum() > 50
+    assert np.array_equal(got[flat], np.where(s >= 0, OUTER, INNER)[nearest[flat]])
+
+
 def test_largest_component():
     V, F, is_handle = vm.cylinder_with_handle()
     mesh = Mesh(V, F)

@@ -636,11 +636,18 @@ def _label_once(fr: FaceFrame, flat_tolerance: float, sign: float) -> np.ndarray
     flat = ~seed
     if flat.any():
         # nearest seed along the surface (centroid-to-centroid steps, kept strictly positive
-        # so the sparse graph keeps every edge)
-        step = np.linalg.norm(fr.centroid[adj[:, 0]] - fr.centroid[adj[:, 1]], axis=1)
-        step = np.maximum(step, ROUNDING * max(float(step.max(initial=0.0)), 1e-300))
+        # so the sparse graph keeps every edge). A shortest path's last seed is next to a flat
+        # face, so the graph of the steps touching a flat face, from the seeds beside one,
+        # gives the same distances as the whole surface's at the cost of the flat part
+        touch = flat[adj[:, 0]] | flat[adj[:, 1]]
+        step = np.zeros(len(adj))
+        step[touch] = np.linalg.norm(fr.centroid[adj[touch, 0]] - fr.centroid[adj[touch, 1]], axis=1)
+        step[touch] = np.maximum(step[touch], ROUNDING * max(float(step.max(initial=0.0)), 1e-300))
+        sources = np.zeros(m, bool)
+        sources[adj[touch].ravel()] = True
+        sources &= seed
         G = fr.graph.matrix(step)
-        _, _, src = dijkstra(G, directed=False, indices=np.flatnonzero(seed),
+        _, _, src = dijkstra(G, directed=False, indices=np.flatnonzero(sources),
                              return_predecessors=True, min_only=True)
         reach = flat & (src >= 0)
         labels[reach] = labels[src[reach]]
