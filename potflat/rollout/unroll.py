@@ -49,6 +49,7 @@ from potflat.rollout.base import (
 )
 from potflat.rollout.border import (
     TRIM_ROUNDS,
+    UNROLL_AGAIN_FRACTION,
     border_folds,
     crossing_segments,
     untangle,
@@ -430,11 +431,13 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
             break
         trimmed[un.face_index[fold]] = True
         graph = None
-        if rnd < TRIM_ROUNDS - 1:
+        if rnd < TRIM_ROUNDS - 1 and un.face_area[fold].sum() > UNROLL_AGAIN_FRACTION * un.face_area.sum():
             seam = (un.seam, un.seam_method)
             del un, fold
             un = _unroll(mesh, axis, options, allowed & ~trimmed, band, h_c, theta_c, theta_v, area,
                          seam=seam, landmark=landmark, floor=floor)
+        elif rnd < TRIM_ROUNDS - 1:
+            un = _refitted(_without(un, ~fold), axis, len(V), inner=options.side == "inner")
         else:
             un = _without(un, ~fold)
     clock.lap("unroll")
@@ -465,7 +468,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     overlap = len(crossing_segments(uv, un.table[1])[0])
     turning = outline_turning(un.flat.mesh.faces, uv, segments=un.table[1])
     distortion = un.distortion
-    if n_untangled:
+    if n_untangled or distortion is None:
         distortion = summarize(un.flat.mesh.vertices, uv, un.flat.mesh.faces, edges=un.table[0])
     if options.keep_attachments or not attachments.n_faces:
         roots = np.zeros(0, np.int64)
@@ -522,7 +525,8 @@ class _Unrolled:
 
     flat: FlatMesh
     proxy: _proxy.Proxy
-    distortion: DistortionSummary
+    #: the development's distortion figures (None: not found yet, after faces were cut from it)
+    distortion: DistortionSummary | None
     face_index: np.ndarray
     #: the scan vertex of each vertex (``>= origins.n``: added by the cut)
     vertex_index: np.ndarray
@@ -613,12 +617,27 @@ def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
                        vertex_colors=None if mesh.vertex_colors is None else mesh.vertex_colors[used])
     uv = un.flat.uv[used]
     vertex_index = un.vertex_index[used]
-    copies = len(used) - len(np.unique(vertex_index))
+    copies = len(used) - np.count_nonzero(np.bincount(vertex_index))
     seam = min(un.seam_vertices, copies)
     table = edges_and_boundary(cut.faces, len(used))
-    return _Unrolled(FlatMesh(cut, uv), un.proxy, summarize(cut.vertices, uv, cut.faces, edges=table[0]),
+    return _Unrolled(FlatMesh(cut, uv), un.proxy, None,
                      un.face_index[keep], vertex_index, un.theta[used], un.seam, un.seam_method, seam, copies - seam,
                      un.origin, table, un.origins.subset(keep), un.face_area[keep])
+
+
+def _refitted(un: _Unrolled, axis: AxisFit, n_scan: int, *, inner: bool) -> _Unrolled:
+    """The development ``un`` on its proxy (of the same kind) fitted again to its own faces
+    (as :func:`_unroll` fits it; ``n_scan``: the scan's vertex count, the cut's added
+    vertices come after)."""
+    if un.proxy.kind == "ortho":
+        return un
+    mesh = un.flat.mesh
+    h, r, _ = axis.cylindrical(mesh.vertices)
+    vert_area = np.bincount(mesh.faces.ravel(), np.repeat(un.face_area / 3.0, 3), len(mesh.vertices))
+    vert_area[un.vertex_index >= n_scan] = 0.0
+    theta = -un.theta if inner else un.theta
+    prox = dataclasses.replace(un.proxy, params=_proxy.fit(un.proxy.kind, h, r, theta, vert_area).params)
+    return dataclasses.replace(un, flat=un.flat.replace(uv=_proxy.develop(prox, h, r, theta)), proxy=prox)
 
 
 #: Seam methods of a seam placed by the user (an angle, a point, a landmark), not chosen here.
