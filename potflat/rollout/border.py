@@ -23,8 +23,8 @@ EDGE_ON_RATIO = 0.05
 
 #: Rounds of trimming folded border faces. All but the last fit the proxy again to the faces
 #: kept: by unrolling them again (the proxy's kind chosen again) when the trimmed faces hold
-#: more than :data:`UNROLL_AGAIN_FRACTION` of the development's 3D area, else on the
-#: development as it is, cut; the last cuts them from the development as it is.
+#: more than :data:`UNROLL_AGAIN_FRACTION` of the development's 3D area, else by cutting
+#: them from the development and refitting its proxy; the last only cuts them from it.
 TRIM_ROUNDS = 3
 #: Trimmed faces holding up to this fraction of the development's 3D area (a rim's edge-on
 #: strip, a few folded faces at a hole) change the proxy's parameters, not which kind fits
