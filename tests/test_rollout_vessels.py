@@ -20,7 +20,7 @@ from potflat.io.flat_ply import read_flat_ply
 from potflat.mesh.boundary import edges_and_boundary
 from potflat.mesh.distortion import edge_length_error
 from potflat.mesh.embedding import signed_areas
-from potflat.rollout.border import UNROLL_AGAIN_FRACTION, border_folds, crossing_segments, untangle
+from potflat.rollout.border import border_folds, crossing_segments, untangle
 from potflat.rollout.folds import overlapping_faces
 from potflat.rollout.unroll import RolloutOptions, rollout
 from potflat.rollout.walls import OUTER
@@ -148,33 +148,31 @@ def test_rim_top_is_trimmed_exactly():
     _check_clean(res)
 
 
-@pytest.mark.parametrize("rim_width, unrollings", [(0.1, 1), (4.0, 2)])
-def test_only_a_wide_trimmed_strip_is_unrolled_again(monkeypatch, rim_width, unrollings):
-    """A trimmed strip holding more than UNROLL_AGAIN_FRACTION of the development's area is
-    unrolled again without it; a narrower one is cut from the development, whose proxy is
-    fitted again: the same development as unrolling again. Either way exactly the rim is
-    trimmed and the start is clean."""
+@pytest.mark.parametrize("rim_width, proxy", [(0.1, "cylinder"), (4.0, "cylinder"), (0.1, "auto")])
+def test_a_trimmed_strip_leaves_the_development_of_the_surface_without_it(monkeypatch, rim_width, proxy):
+    """Trimming cuts the strip from the development and develops the rest again on its proxy
+    fitted (or chosen) without it, in one unrolling: the development of the surface without
+    the strip, and exactly the strip trimmed."""
     import potflat.rollout.unroll as unroll_module
 
     r = [30.0, 30.0, 30.0, 30.0 - rim_width / 2, 30.0 - rim_width]
     h = [0.0, 20.0, 40.0, 40.0, 40.0]
     V, F, labels, _ = revolve(r, h, 48, labels=["wall", "wall", "rim", "rim"], jitter=0.3)
     rim = labels == "rim"
-    area = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
-    assert (area[rim].sum() > UNROLL_AGAIN_FRACTION * area.sum()) == (unrollings == 2)
     calls = []
     real = unroll_module._unroll
     monkeypatch.setattr(unroll_module, "_unroll", lambda *a, **k: calls.append(1) or real(*a, **k))
-    res = rollout(Mesh(V, F), proxy="cylinder", axis=(0, 0, 0, 0, 0, 1))
-    assert len(calls) == unrollings
+    res = rollout(Mesh(V, F), proxy=proxy, axis=(0, 0, 0, 0, 0, 1))
+    assert len(calls) == 1
     assert set(labels[res.trimmed]) == {"rim"} and len(res.trimmed) == np.count_nonzero(rim)
     assert set(labels[res.face_index]) == {"wall"}
     _check_clean(res)
-    monkeypatch.setattr(unroll_module, "UNROLL_AGAIN_FRACTION", 0.0)
-    again = rollout(Mesh(V, F), proxy="cylinder", axis=(0, 0, 0, 0, 0, 1))
-    assert len(calls) == unrollings + 2 and again.proxy.params == pytest.approx(res.proxy.params)
-    assert np.array_equal(again.flat.mesh.faces, res.flat.mesh.faces)
-    assert np.allclose(again.flat.uv, res.flat.uv, rtol=0.0, atol=1e-9 * np.ptp(res.flat.uv))
+    without = rollout(Mesh(V, F), proxy=proxy, axis=(0, 0, 0, 0, 0, 1), face_mask=~rim)
+    assert len(without.trimmed) == 0 and without.proxy.kind == res.proxy.kind
+    assert without.proxy.params == pytest.approx(res.proxy.params, rel=1e-12)
+    assert np.array_equal(without.face_index, res.face_index)
+    assert np.array_equal(without.flat.mesh.faces, res.flat.mesh.faces)
+    assert np.allclose(without.flat.uv, res.flat.uv, rtol=0.0, atol=1e-9 * np.ptp(res.flat.uv))
 
 
 def test_border_folds_keeps_enclosed_folds_and_untangle_fixes_them():

@@ -21,16 +21,9 @@ UNTANGLE_ROUNDS, UNTANGLE_WIDEN = 200, 20
 EDGE_ON_RATIO = 0.05
 
 
-#: Rounds of trimming folded border faces. All but the last fit the proxy again to the faces
-#: kept: by unrolling them again (the proxy's kind chosen again) when the trimmed faces hold
-#: more than :data:`UNROLL_AGAIN_FRACTION` of the development's 3D area, else by cutting
-#: them from the development and refitting its proxy; the last only cuts them from it.
+#: Rounds of trimming folded border faces: each cuts them from the development, and all but
+#: the last develop what is kept again on its proxy, fitted (or chosen) again without them.
 TRIM_ROUNDS = 3
-#: Trimmed faces holding up to this fraction of the development's 3D area (a rim's edge-on
-#: strip, a few folded faces at a hole) change the proxy's parameters, not which kind fits
-#: best: they are cut from the development and the proxy refitted, without unrolling again
-#: (a whole unrolling, the rollout's largest step).
-UNROLL_AGAIN_FRACTION = 0.01
 
 
 #: Passes of :func:`border_folds` over one development (each peels what the last exposed).

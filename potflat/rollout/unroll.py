@@ -49,7 +49,6 @@ from potflat.rollout.base import (
 )
 from potflat.rollout.border import (
     TRIM_ROUNDS,
-    UNROLL_AGAIN_FRACTION,
     border_folds,
     crossing_segments,
     untangle,
@@ -431,15 +430,9 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
             break
         trimmed[un.face_index[fold]] = True
         graph = None
-        if rnd < TRIM_ROUNDS - 1 and un.face_area[fold].sum() > UNROLL_AGAIN_FRACTION * un.face_area.sum():
-            seam = (un.seam, un.seam_method)
-            del un, fold
-            un = _unroll(mesh, axis, options, allowed & ~trimmed, band, h_c, theta_c, theta_v, area,
-                         seam=seam, landmark=landmark, floor=floor)
-        elif rnd < TRIM_ROUNDS - 1:
-            un = _refitted(_without(un, ~fold), axis, len(V), inner=options.side == "inner")
-        else:
-            un = _without(un, ~fold)
+        un = _without(un, ~fold)
+        if rnd < TRIM_ROUNDS - 1:
+            un = _developed_again(un, axis, len(V), options)
     clock.lap("unroll")
     # where the scan folds in 3D, judged on the development before untangling, kept per scan face
     facing_in, overlapping = (np.zeros(len(F), bool) for _ in range(2))
@@ -580,8 +573,7 @@ def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndar
     if len(origins.pieces):
         face_area[origins.pieces] = face_areas(cut_mesh.vertices, new_faces[origins.pieces])
     h, r, _ = axis.cylindrical(cut_mesh.vertices)
-    vert_area = np.bincount(new_faces.ravel(), np.repeat(face_area / 3.0, 3), len(vertex_index))
-    vert_area[vertex_index >= len(V)] = 0.0  # the proxy is fitted to the scan's vertices (not the cut's, on chords)
+    vert_area = _fit_weights(new_faces, face_area, vertex_index, len(V))
     # the inner side is seen from the axis: u runs clockwise (seen from above), which is the
     # development of -theta (an exact mirror of u for every proxy)
     dev_theta = -theta_new if inner else theta_new
@@ -595,13 +587,8 @@ def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndar
         prox = _proxy.Proxy(prox.kind, prox.params, reason="requested (orthographic projection)")
         uv = _proxy.project_ortho(prox, cut_mesh.vertices, axis.point)
         summary = summarize(cut_mesh.vertices, uv, new_faces, edges=table[0])
-    elif options.proxy == "auto":
-        prox, uv, summary = _proxy.choose(cut_mesh.vertices, new_faces, h, r, dev_theta, vert_area, edges=table[0])
     else:
-        prox = _proxy.fit(options.proxy, h, r, dev_theta, vert_area)
-        prox = _proxy.Proxy(prox.kind, prox.params, reason="requested")
-        uv = _proxy.develop(prox, h, r, dev_theta)
-        summary = summarize(cut_mesh.vertices, uv, new_faces, edges=table[0])
+        prox, uv, summary = _on_proxy(cut_mesh.vertices, new_faces, h, r, dev_theta, vert_area, table[0], options.proxy)
     return _Unrolled(FlatMesh(cut_mesh, uv), prox, summary, face_index, vertex_index, theta_new, seam,
                      seam_method, n_seam, n_split, origin, table, origins, face_area)
 
@@ -625,19 +612,43 @@ def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
                      un.origin, table, un.origins.subset(keep), un.face_area[keep])
 
 
-def _refitted(un: _Unrolled, axis: AxisFit, n_scan: int, *, inner: bool) -> _Unrolled:
-    """The development ``un`` on its proxy (of the same kind) fitted again to its own faces
-    (as :func:`_unroll` fits it; ``n_scan``: the scan's vertex count, the cut's added
-    vertices come after)."""
-    if un.proxy.kind == "ortho":
+def _fit_weights(faces: np.ndarray, face_area: np.ndarray, vertex_index: np.ndarray, n_scan: int) -> np.ndarray:
+    """The proxy fit's weight of each vertex of a cut region ((k,) float64): a third of its
+    faces' 3D area, 0 for the vertices the cut added (``vertex_index >= n_scan``: the proxy
+    is fitted to the scan's vertices, not to the cut's, which lie on chords)."""
+    weights = np.bincount(faces.ravel(), np.repeat(face_area / 3.0, 3), len(vertex_index))
+    weights[vertex_index >= n_scan] = 0.0
+    return weights
+
+
+def _on_proxy(vertices: np.ndarray, faces: np.ndarray, h: np.ndarray, r: np.ndarray, theta: np.ndarray,
+              vert_area: np.ndarray, edges: np.ndarray, kind: str
+              ) -> tuple[_proxy.Proxy, np.ndarray, DistortionSummary]:
+    """A cut region's development on the proxy of ``kind`` fitted to it (``"auto"``: the
+    least distorting, :func:`potflat.rollout.proxy.choose`): the proxy, ``uv`` (k, 2) and its
+    distortion figures (``h, r, theta``: the vertices' cylindrical coordinates, ``theta``
+    unwrapped and signed as developed; ``vert_area``: the fit's weights; ``edges``: the
+    faces' undirected edges)."""
+    if kind == "auto":
+        return _proxy.choose(vertices, faces, h, r, theta, vert_area, edges=edges)
+    prox = _proxy.fit(kind, h, r, theta, vert_area)
+    prox = _proxy.Proxy(prox.kind, prox.params, reason="requested")
+    uv = _proxy.develop(prox, h, r, theta)
+    return prox, uv, summarize(vertices, uv, faces, edges=edges)
+
+
+def _developed_again(un: _Unrolled, axis: AxisFit, n_scan: int, options: RolloutOptions) -> _Unrolled:
+    """The development ``un`` on its proxy fitted (or chosen, as ``options.proxy`` says) again
+    to its own faces, as :func:`_unroll` develops a cut region (``n_scan``: the scan's vertex
+    count; the cut's added vertices come after and carry no weight in the fit)."""
+    if options.proxy == "ortho":
         return un
     mesh = un.flat.mesh
     h, r, _ = axis.cylindrical(mesh.vertices)
-    vert_area = np.bincount(mesh.faces.ravel(), np.repeat(un.face_area / 3.0, 3), len(mesh.vertices))
-    vert_area[un.vertex_index >= n_scan] = 0.0
-    theta = -un.theta if inner else un.theta
-    prox = dataclasses.replace(un.proxy, params=_proxy.fit(un.proxy.kind, h, r, theta, vert_area).params)
-    return dataclasses.replace(un, flat=un.flat.replace(uv=_proxy.develop(prox, h, r, theta)), proxy=prox)
+    vert_area = _fit_weights(mesh.faces, un.face_area, un.vertex_index, n_scan)
+    theta = -un.theta if options.side == "inner" else un.theta
+    prox, uv, summary = _on_proxy(mesh.vertices, mesh.faces, h, r, theta, vert_area, un.table[0], options.proxy)
+    return dataclasses.replace(un, flat=un.flat.replace(uv=uv), proxy=prox, distortion=summary)
 
 
 #: Seam methods of a seam placed by the user (an angle, a point, a landmark), not chosen here.
