@@ -612,11 +612,17 @@ def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
                      un.origin, table, un.origins.subset(keep), un.face_area[keep])
 
 
+def _vertex_areas(faces: np.ndarray, face_area: np.ndarray, n: int) -> np.ndarray:
+    """Each of ``n`` vertices' share of the surface ((n,) float64): a third of its faces'
+    areas ``face_area`` ((m,) float64 of ``faces`` (m, 3))."""
+    return np.bincount(faces.ravel(), np.repeat(face_area / 3.0, 3), n)
+
+
 def _fit_weights(faces: np.ndarray, face_area: np.ndarray, vertex_index: np.ndarray, n_scan: int) -> np.ndarray:
-    """The proxy fit's weight of each vertex of a cut region ((k,) float64): a third of its
-    faces' 3D area, 0 for the vertices the cut added (``vertex_index >= n_scan``: the proxy
-    is fitted to the scan's vertices, not to the cut's, which lie on chords)."""
-    weights = np.bincount(faces.ravel(), np.repeat(face_area / 3.0, 3), len(vertex_index))
+    """The proxy fit's weight of each vertex of a cut region ((k,) float64): its share of the
+    3D surface, 0 for the vertices the cut added (``vertex_index >= n_scan``: the proxy is
+    fitted to the scan's vertices, not to the cut's, which lie on chords)."""
+    weights = _vertex_areas(faces, face_area, len(vertex_index))
     weights[vertex_index >= n_scan] = 0.0
     return weights
 
@@ -684,7 +690,7 @@ def _painted_zone_centre(mesh: Mesh, axis: AxisFit, options: RolloutOptions, fac
     importance = _find_importance(flat, options, axis, np.degrees(un.theta))
     if importance.values is None:
         return None, importance.reason
-    vertex_area = np.bincount(flat.mesh.faces.ravel(), np.repeat(un.face_area / 3.0, 3), len(flat.uv))
+    vertex_area = _vertex_areas(flat.mesh.faces, un.face_area, len(flat.uv))
     angle, length = zone_centre(axis.cylindrical(flat.mesh.vertices)[2], importance.values * vertex_area)
     if angle is None:
         return None, f"the importance zone goes round evenly (resultant {length:.3f})"
