@@ -118,6 +118,23 @@ def test_a_tetrahedron_is_no_vessel(tmp_path):
         rollout(load_scan(scan).mesh)
 
 
+def test_a_flat_disc_is_no_vessel(tmp_path):
+    """A flat disc (every face facing along the axis found): refused in one line naming the
+    file, before any output is written."""
+    import math
+
+    ring = [f"v {40 * math.cos(2 * math.pi * k / 32):.6f} {40 * math.sin(2 * math.pi * k / 32):.6f} 0" for k in range(32)]
+    scan = tmp_path / "disc.obj"
+    scan.write_text("\n".join(ring + ["v 0 0 0"] + [f"f 33 {k + 1} {(k + 1) % 32 + 1}" for k in range(32)]) + "\n")
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["run", str(scan), "-o", str(out)], env={"COLUMNS": "300"})
+    assert result.exit_code == 2, result.output
+    error = [line for line in result.stderr.splitlines() if line.startswith("error:")]
+    assert len(error) == 1 and "disc.obj: no part of it faces away from the axis found" in error[0], result.stderr
+    assert "--axis px,py,pz,dx,dy,dz" in error[0] and "Traceback" not in result.stderr
+    assert not out.exists() or not any(out.iterdir())
+
+
 @pytest.mark.parametrize("nodes,roots,words", [
     ([{"mesh": 0, "children": [0]}], [0], "node 0 is its own child"),
     ([{"children": [1]}, {"mesh": 0, "children": [0]}], [0], "among its own descendants"),

@@ -300,6 +300,32 @@ def test_a_gltf_buffer_declaring_more_than_its_data_is_refused(tmp_path, monkeyp
         load_scan(_gltf(tmp_path / "pot.gltf", 1000, declared=1 << 40))
 
 
+def test_a_glb_whose_json_chunk_runs_past_the_file_is_refused_as_corrupt(tmp_path):
+    """A GLB header declaring a JSON chunk longer than the file (random bytes after the magic
+    word): one line saying the file is corrupt, not a size limit."""
+    import struct
+
+    from potflat.io.scan import load_scan
+
+    path = tmp_path / "pot.glb"
+    path.write_bytes(b"glTF" + struct.pack("<III", 2, 4000, 900_000_000) + b"JSON" + b"\0" * 4000)
+    with pytest.raises(InvalidInputError, match=r"pot.glb is not a valid GLB file \(its JSON chunk declares "
+                                                r"900000000 bytes, the file holds 4020") as e:
+        load_scan(path)
+    assert "\n" not in str(e.value)
+
+
+def test_a_gltf_whose_buffer_file_is_missing_is_refused_naming_it(tmp_path):
+    """A .gltf whose buffer is an external ``.bin`` that is not there: the file is named."""
+    from potflat.io.scan import load_scan
+
+    doc = json.loads(_gltf(tmp_path / "pot.gltf", 100).read_text())
+    doc["buffers"][0]["uri"] = "pot.bin"
+    (tmp_path / "pot.gltf").write_text(json.dumps(doc))
+    with pytest.raises(InvalidInputError, match="its buffer file pot.bin is not there; put it beside the glTF"):
+        load_scan(tmp_path / "pot.gltf")
+
+
 # ---------------------------------------------------------------------------------------
 # a rerun never mixes old and new
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from potflat import __version__
 from potflat._heap import reuse_freed_memory
-from potflat.errors import InvalidOptionError
+from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.files.names import STAGES_FROM
 from potflat.files.outputs import superseding
 from potflat.files.provenance import provenance
@@ -114,6 +114,11 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
             check(result.flat)
         del mesh
         profile = result.profile
+        if not np.isfinite(profile.outer_radius).any():  # (its drawing, and every later stage, needs an outer wall)
+            raise InvalidInputError(
+                f"{scan_path}: no part of it faces away from the axis found, so it has no outer wall to unroll (a flat "
+                "piece such as a tile or a plate's floor, or a vessel's inside alone); give the scan of a vessel or a "
+                "sherd, or its axis with --axis px,py,pz,dx,dy,dz")
         record = {"stage": "rollout", "name": name, "input": str(scan_path), **rollout_record(result),
                   "profile": profile.summary(),
                   "cleaning": cleaning,

@@ -105,6 +105,9 @@ def _gltf_json(path: Path) -> tuple[dict, int]:
             if len(head) < 20:
                 raise InvalidInputError(f"{path} is not a valid GLB file (cut short); export the scan again")
             length = struct.unpack_from("<I", head, 12)[0]
+            if 20 + length > size:  # (random bytes after the magic word declare any length)
+                raise InvalidInputError(f"{path} is not a valid GLB file (its JSON chunk declares {length} bytes, "
+                                        f"the file holds {size}: cut short or corrupt); export the scan again")
         else:
             length = size
         if length > most:
@@ -165,7 +168,10 @@ def _check_gltf_sizes(path: Path, doc: dict, bin_length: int) -> None:
             held, where = len(uri.split(",", 1)[-1]) * 3 // 4, "its base64 text"
         else:
             source = _find_file(str(uri), path.parent)
-            held, where = (source.stat().st_size if source.is_file() else 0), f"the file {uri}"
+            if not source.is_file():
+                raise InvalidInputError(f"{path}: its buffer file {uri} is not there; put it beside the glTF "
+                                        "(or export the scan as one GLB)")
+            held, where = source.stat().st_size, f"the file {uri}"
         if declared > held:
             raise broken(f"buffer {k} declares {declared} bytes but {where} holds {held}")
         if budget is not None and declared > budget:
