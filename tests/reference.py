@@ -503,3 +503,47 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, points:
             break
         keep[idx[drop]] = False
     return ~keep
+
+
+
+def untangle(faces: np.ndarray, uv: np.ndarray, rounds: int, widen: int) -> tuple[np.ndarray, int, int]:
+    """:func:`potflat.rollout.border.untangle` by its definition: each round the region's
+    movable vertices (not on the boundary) move to the plain mean of their edge neighbours,
+    the region (the vertices of flipped faces) growing by the vertices of every face around it
+    still flipped and, every ``widen`` rounds, by the vertices of every face touching it; its
+    vertices and faces found from scratch every round."""
+    import scipy.sparse as sp
+
+    n = len(uv)
+    pairs = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    edges, count = np.unique(pairs, axis=0, return_counts=True)
+    movable = np.ones(n, bool)
+    movable[edges[count == 1].ravel()] = False
+    both = np.concatenate([edges, edges[:, ::-1]])
+    neighbours = sp.coo_matrix((np.ones(len(both)), (both[:, 0], both[:, 1])), shape=(n, n)).tocsr()
+    neighbours.sort_indices()
+
+    def flipped(x):
+        e1, e2 = x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]]
+        return e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0
+
+    bad = flipped(uv)
+    if not bad.any():
+        return uv, 0, 0
+    x = uv.copy()
+    region = np.zeros(n, bool)
+    region[faces[bad].ravel()] = True
+    for r in range(rounds):
+        if r % widen == widen - 1:
+            region[faces[region[faces].any(axis=1)].ravel()] = True
+        region &= movable
+        idx = np.flatnonzero(region)
+        if len(idx) == 0:
+            break
+        rows = neighbours[idx]
+        x[idx] = (rows @ x) / np.maximum(np.diff(rows.indptr), 1)[:, None]
+        still = region[faces].any(axis=1) & flipped(x)
+        if not still.any():
+            break
+        region[faces[still].ravel()] = True
+    return x, int(bad.sum()), int(np.count_nonzero(np.any(x != uv, axis=1)))

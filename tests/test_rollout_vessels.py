@@ -203,6 +203,34 @@ def test_border_folds_keeps_enclosed_folds_and_untangle_fixes_them():
     assert (n_again, moved_again) == (n_bad, moved)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_untangle_against_its_definition_on_a_noisy_development(seed):
+    """Patches of noise on a grid, some at its border (a noisy scan's development: the region
+    grows in most rounds and widens, through boundary vertices too) untangled as the plain
+    definition does it (tests/reference.py), to the last bit: the region's rows and faces kept
+    up as it grows are the ones it has."""
+    import reference
+
+    from potflat.rollout.border import UNTANGLE_ROUNDS, UNTANGLE_WIDEN
+
+    rng = np.random.default_rng(seed)
+    nx, ny = 40, 30
+    x, y = np.meshgrid(np.arange(nx + 1.0), np.arange(ny + 1.0))
+    uv = np.column_stack([x.ravel(), y.ravel()])
+    q = np.arange(len(uv)).reshape(ny + 1, nx + 1)
+    a, b, c, d = q[:-1, :-1].ravel(), q[:-1, 1:].ravel(), q[1:, 1:].ravel(), q[1:, :-1].ravel()
+    faces = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    centres = rng.uniform([0, 0], [nx, ny], (4, 2))
+    centres[0, 1] = 0.0  # one patch at the border
+    near = (np.linalg.norm(uv[:, None] - centres[None], axis=2) < 5).any(axis=1)
+    uv[near] += rng.normal(0.0, 0.5 + 0.1 * seed, (near.sum(), 2))
+    assert (signed_areas(faces, uv) <= 0).sum() >= 20
+    got = untangle(faces, uv)
+    want = reference.untangle(faces, uv, UNTANGLE_ROUNDS, UNTANGLE_WIDEN)
+    np.testing.assert_array_equal(got[0], want[0])
+    assert got[1:] == want[1:] and got[2] < 0.9 * len(uv)  # (the region does not take the whole grid)
+
+
 def test_crossing_segments_against_brute_force():
     rng = np.random.default_rng(3)
     uv = rng.uniform(0, 10, (60, 2))

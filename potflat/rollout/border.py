@@ -6,7 +6,7 @@ import numpy as np
 
 from potflat.mesh._kernels.topology import faces_touching, incident_faces, small_pieces, union_find, vertex_faces
 from potflat.mesh.boundary import crossing_pairs, edges_and_boundary
-from potflat.mesh.embedding import fan_edges, neighbour_rows, signed_areas
+from potflat.mesh.embedding import neighbour_rows, signed_areas
 from potflat.rollout.folds import overlapping_faces
 from potflat.rollout.seam import cut_open
 from potflat.rollout.walls import (
@@ -347,26 +347,36 @@ def untangle(faces: np.ndarray, uv: np.ndarray, *, table: tuple | None = None) -
     if n_bad == 0:
         return uv, 0, 0
     n = len(uv)
-    seg = (table if table is not None else edges_and_boundary(faces, n))[1]
+    edges, seg = (table if table is not None else edges_and_boundary(faces, n))[:2]
     movable = np.ones(n, bool)
     movable[seg.ravel()] = False
-    # the faces of each vertex: the edges and faces around the moved vertices only are looked at
     vf_ptr, vf_tri = vertex_faces(n, np.ascontiguousarray(faces, dtype=np.int64))
+    # every vertex's edge neighbours (rows sorted), from which the region's rows are sliced, and
+    # the faces around the region as a mask that grows with it: a noisy scan's region grows in
+    # most rounds, and a round costs what its new vertices touch, not the whole region
+    adjacency = neighbour_rows(np.arange(n), edges, n)
     x = uv.copy()
     region = np.zeros(n, bool)
     region[faces[bad].ravel()] = True
+    in_region = np.zeros(n, bool)  # the region's vertices whose faces are in ``around``
+    around = np.zeros(len(faces), bool)
     idx = rows = degree = near = None  # (the region's vertices, neighbour rows, degrees and faces while it stays)
     for r in range(UNTANGLE_ROUNDS):
         if r % UNTANGLE_WIDEN == UNTANGLE_WIDEN - 1:  # widen the region around persistent tangles
-            region[faces[np.unique(incident_faces(np.flatnonzero(region), vf_ptr, vf_tri))].ravel()] = True
+            widened = around.copy()
+            widened[incident_faces(np.flatnonzero(region & ~in_region), vf_ptr, vf_tri)] = True
+            region[faces[widened].ravel()] = True
         region &= movable
         grown = np.flatnonzero(region)
         if len(grown) == 0:
             break
         if idx is None or not np.array_equal(grown, idx):
             idx = grown
-            near = np.unique(incident_faces(idx, vf_ptr, vf_tri))
-            rows = neighbour_rows(idx, fan_edges(near, faces)[0], n)
+            new = idx[~in_region[idx]]  # (the region only grows)
+            in_region[new] = True
+            around[incident_faces(new, vf_ptr, vf_tri)] = True
+            near = np.flatnonzero(around)
+            rows = adjacency[idx]
             degree = np.maximum(np.diff(rows.indptr), 1)[:, None].astype(np.float64)
         x[idx] = (rows @ x) / degree
         still = near[signed_areas(faces[near], x) <= 0]
