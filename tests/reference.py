@@ -510,9 +510,11 @@ def untangle(faces: np.ndarray, uv: np.ndarray, rounds: int, widen: int) -> tupl
     """:func:`potflat.rollout.border.untangle` by its definition: each round the region's
     movable vertices (not on the boundary) move to the plain mean of their edge neighbours,
     the region (the vertices of flipped faces) growing by the vertices of every face around it
-    still flipped and, every ``widen`` rounds, by the vertices of every face touching it; its
-    vertices and faces found from scratch every round."""
+    still flipped and, every ``widen`` rounds, each of its connected parts (through mesh edges)
+    holding a vertex of such a face by the vertices of every face touching it; its vertices,
+    faces and parts found from scratch every round."""
     import scipy.sparse as sp
+    import scipy.sparse.csgraph as csg
 
     n = len(uv)
     pairs = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
@@ -533,9 +535,15 @@ def untangle(faces: np.ndarray, uv: np.ndarray, rounds: int, widen: int) -> tupl
     x = uv.copy()
     region = np.zeros(n, bool)
     region[faces[bad].ravel()] = True
+    still = bad
     for r in range(rounds):
         if r % widen == widen - 1:
-            region[faces[region[faces].any(axis=1)].ravel()] = True
+            verts = np.flatnonzero(region)
+            _, label = csg.connected_components(neighbours[verts][:, verts], directed=False)
+            part = np.full(n, -1)
+            part[verts] = label
+            tangled = np.isin(part, part[faces[still].ravel()]) & region
+            region[faces[tangled[faces].any(axis=1)].ravel()] = True
         region &= movable
         idx = np.flatnonzero(region)
         if len(idx) == 0:

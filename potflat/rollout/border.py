@@ -317,13 +317,30 @@ def _edge_on_strips(faces: np.ndarray, keep: np.ndarray, flat: np.ndarray, edge_
     return out
 
 
+def _tangled_parts(region: np.ndarray, adjacency, tangled: np.ndarray) -> np.ndarray:
+    """The vertices of the connected parts of ``region`` ((n,) bool; parts joined by the edges
+    of ``adjacency``, (n, n) sparse) that hold a vertex of the faces ``tangled`` ((k, 3)), (p,) int64."""
+    import scipy.sparse.csgraph as csg
+
+    verts = np.flatnonzero(region)
+    _, label = csg.connected_components(adjacency[verts][:, verts], directed=False)
+    local = np.full(len(region), -1, np.int64)
+    local[verts] = np.arange(len(verts))
+    hit = np.zeros(int(label.max()) + 1 if len(label) else 0, bool)
+    hit[label[local[tangled.ravel()]]] = True
+    return verts[hit[label]]
+
+
 def untangle(faces: np.ndarray, uv: np.ndarray, *, table: tuple | None = None) -> tuple[np.ndarray, int, int]:
     """Unfold folds inside a development by moving their vertices to their neighbours' mean.
 
     The vertices of flipped faces (signed area <= 0) move to the mean of their edge
-    neighbours (Jacobi steps), the region widening by one ring every
-    :data:`UNTANGLE_WIDEN` rounds, for up to :data:`UNTANGLE_ROUNDS` rounds; boundary
-    vertices stay. Such folds come from the scan (a crease, a sliver, a spike), not from
+    neighbours (Jacobi steps), for up to :data:`UNTANGLE_ROUNDS` rounds; boundary vertices
+    stay. The region takes the vertices of every face still flipped after a round, and every
+    :data:`UNTANGLE_WIDEN` rounds its connected parts that still hold one grow by a ring: a
+    tangle that averaging has not undone gets more room, the parts already untangled stay
+    as they are (on a scan with vertex noise, widening every part would spread the averaging
+    over most of the development, each widening making new flips). Such folds come from the scan (a crease, a sliver, a spike), not from
     the development; the relax stage then restores the lengths around them.
 
     Parameters
@@ -360,12 +377,11 @@ def untangle(faces: np.ndarray, uv: np.ndarray, *, table: tuple | None = None) -
     region[faces[bad].ravel()] = True
     in_region = np.zeros(n, bool)  # the region's vertices whose faces are in ``around``
     around = np.zeros(len(faces), bool)
+    still = np.flatnonzero(bad)  # (faces flipped after the last round)
     idx = rows = degree = near = None  # (the region's vertices, neighbour rows, degrees and faces while it stays)
     for r in range(UNTANGLE_ROUNDS):
-        if r % UNTANGLE_WIDEN == UNTANGLE_WIDEN - 1:  # widen the region around persistent tangles
-            widened = around.copy()
-            widened[incident_faces(np.flatnonzero(region & ~in_region), vf_ptr, vf_tri)] = True
-            region[faces[widened].ravel()] = True
+        if r % UNTANGLE_WIDEN == UNTANGLE_WIDEN - 1:  # widen the parts of the region around persistent tangles
+            region[faces[incident_faces(_tangled_parts(region, adjacency, faces[still]), vf_ptr, vf_tri)].ravel()] = True
         region &= movable
         grown = np.flatnonzero(region)
         if len(grown) == 0:
