@@ -6,7 +6,7 @@ import numpy as np
 
 from potflat.mesh._kernels.topology import faces_touching, incident_faces, small_pieces, union_find, vertex_faces
 from potflat.mesh.boundary import crossing_pairs, edges_and_boundary
-from potflat.mesh.embedding import neighbour_rows, signed_areas
+from potflat.mesh.embedding import fan_edges, neighbour_rows, signed_areas
 from potflat.rollout.folds import overlapping_faces
 from potflat.rollout.seam import cut_open
 from potflat.rollout.walls import (
@@ -317,15 +317,21 @@ def _edge_on_strips(faces: np.ndarray, keep: np.ndarray, flat: np.ndarray, edge_
     return out
 
 
-def _tangled_parts(region: np.ndarray, adjacency, tangled: np.ndarray) -> np.ndarray:
-    """The vertices of the connected parts of ``region`` ((n,) bool; parts joined by the edges
-    of ``adjacency``, (n, n) sparse) that hold a vertex of the faces ``tangled`` ((k, 3)), (p,) int64."""
+def _tangled_parts(region: np.ndarray, faces: np.ndarray, vf_ptr: np.ndarray, vf_tri: np.ndarray,
+                   tangled: np.ndarray) -> np.ndarray:
+    """The vertices of the connected parts of ``region`` ((n,) bool; parts joined by the mesh's
+    edges between region vertices) that hold a vertex of the faces ``tangled`` ((k, 3)), (p,)
+    int64. The edges are found among the faces around the region only."""
+    import scipy.sparse as sp
     import scipy.sparse.csgraph as csg
 
     verts = np.flatnonzero(region)
-    _, label = csg.connected_components(adjacency[verts][:, verts], directed=False)
+    edges = fan_edges(np.unique(incident_faces(verts, vf_ptr, vf_tri)), faces)[0]
+    edges = edges[region[edges].all(axis=1)]
     local = np.full(len(region), -1, np.int64)
     local[verts] = np.arange(len(verts))
+    graph = sp.coo_matrix((np.ones(len(edges)), (local[edges[:, 0]], local[edges[:, 1]])), shape=(len(verts),) * 2)
+    _, label = csg.connected_components(graph, directed=False)
     hit = np.zeros(int(label.max()) + 1 if len(label) else 0, bool)
     hit[label[local[tangled.ravel()]]] = True
     return verts[hit[label]]
@@ -359,41 +365,44 @@ def untangle(faces: np.ndarray, uv: np.ndarray, *, table: tuple | None = None) -
     moved : int
         Vertices moved.
     """
+    import scipy.sparse as sp
+
     bad = signed_areas(faces, uv) <= 0
     n_bad = int(bad.sum())
     if n_bad == 0:
         return uv, 0, 0
     n = len(uv)
-    edges, seg = (table if table is not None else edges_and_boundary(faces, n))[:2]
+    seg = (table if table is not None else edges_and_boundary(faces, n))[1]
     movable = np.ones(n, bool)
     movable[seg.ravel()] = False
     vf_ptr, vf_tri = vertex_faces(n, np.ascontiguousarray(faces, dtype=np.int64))
-    # every vertex's edge neighbours (rows sorted), from which the region's rows are sliced, and
-    # the faces around the region as a mask that grows with it: a noisy scan's region grows in
-    # most rounds, and a round costs what its new vertices touch, not the whole region
-    adjacency = neighbour_rows(np.arange(n), edges, n)
     x = uv.copy()
     region = np.zeros(n, bool)
     region[faces[bad].ravel()] = True
-    in_region = np.zeros(n, bool)  # the region's vertices whose faces are in ``around``
+    # the region's vertices in the order they joined it (``idx``), their neighbour rows (each
+    # row's columns sorted) and the faces around them, all extended as the region grows: a
+    # noisy scan's region grows in most rounds, and a round costs what its new vertices touch
+    in_region = np.zeros(n, bool)
     around = np.zeros(len(faces), bool)
+    idx, rows, near = np.zeros(0, np.int64), None, None
     still = np.flatnonzero(bad)  # (faces flipped after the last round)
-    idx = rows = degree = near = None  # (the region's vertices, neighbour rows, degrees and faces while it stays)
     for r in range(UNTANGLE_ROUNDS):
         if r % UNTANGLE_WIDEN == UNTANGLE_WIDEN - 1:  # widen the parts of the region around persistent tangles
-            region[faces[incident_faces(_tangled_parts(region, adjacency, faces[still]), vf_ptr, vf_tri)].ravel()] = True
+            grow = _tangled_parts(region, faces, vf_ptr, vf_tri, faces[still])
+            region[faces[incident_faces(grow, vf_ptr, vf_tri)].ravel()] = True
         region &= movable
-        grown = np.flatnonzero(region)
-        if len(grown) == 0:
-            break
-        if idx is None or not np.array_equal(grown, idx):
-            idx = grown
-            new = idx[~in_region[idx]]  # (the region only grows)
+        new = np.flatnonzero(region & ~in_region)  # (the region only grows)
+        if len(new):
             in_region[new] = True
-            around[incident_faces(new, vf_ptr, vf_tri)] = True
+            new_faces = np.unique(incident_faces(new, vf_ptr, vf_tri))
+            around[new_faces] = True
             near = np.flatnonzero(around)
-            rows = adjacency[idx]
+            new_rows = neighbour_rows(new, fan_edges(new_faces, faces)[0], n)
+            idx = np.concatenate([idx, new])
+            rows = new_rows if rows is None else sp.vstack([rows, new_rows], format="csr")
             degree = np.maximum(np.diff(rows.indptr), 1)[:, None].astype(np.float64)
+        if not len(idx):
+            break
         x[idx] = (rows @ x) / degree
         still = near[signed_areas(faces[near], x) <= 0]
         if len(still) == 0:
