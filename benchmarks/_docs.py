@@ -27,9 +27,11 @@ BLOCKS = {
     "bench_figures": PERFORMANCE_MD,
     "bench_figures_knobs": PERFORMANCE_MD,
     "bench_starts": ROBUSTNESS_MD,
+    "defect_corpus": ROBUSTNESS_MD,
     "bench_view": PERFORMANCE_MD,
     "bench_relief": PERFORMANCE_MD,
     "real_scans": PERFORMANCE_MD,
+    "relax_spread": PERFORMANCE_MD,
 }
 
 

@@ -10,11 +10,12 @@ a spike two long edges, a trimmed flap or sheet removes a tongue), so the relaxa
 that much length to spread over its neighbourhood; the figures compared are
 
 * the edge RMS of the faces more than :data:`AWAY_MM` (4 edge lengths) from every defect,
-  within :data:`AWAY_RMS_REL` of the clean cup's over the same faces (measured: +23% for a
-  crease across the painted belt, whose extra arc is taken up by the whole belt ring; at
-  most 18% either way for everything else);
+  within :data:`AWAY_RMS_REL` of the clean cup's over the same faces (the largest, a crease
+  across the painted belt, whose extra arc the whole belt ring takes up);
 * the median length error in the painted zone, within :data:`ZONE_MEDIAN_PP` percentage
-  points of the clean cup's (measured: at most +0.66, noise with a crease and spikes in the zone).
+  points of the clean cup's.
+
+The measured figures are in docs/robustness.md (``benchmarks/defect_corpus.py``).
 
 The figures over the whole surface include the defect's own faces (a spike's edges are
 3 edge lengths long in 3D and a few in the image) and are not compared.

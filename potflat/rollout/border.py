@@ -346,8 +346,9 @@ def untangle(faces: np.ndarray, uv: np.ndarray, *, table: tuple | None = None) -
     :data:`UNTANGLE_WIDEN` rounds its connected parts that still hold one grow by a ring: a
     tangle that averaging has not undone gets more room, the parts already untangled stay
     as they are (on a scan with vertex noise, widening every part would spread the averaging
-    over most of the development, each widening making new flips). Such folds come from the scan (a crease, a sliver, a spike), not from
-    the development; the relax stage then restores the lengths around them.
+    over most of the development, each widening making new flips). Such folds come from the
+    scan (a crease, a sliver, a spike, vertex noise), not from the development; the relax
+    stage then restores the lengths around them.
 
     Parameters
     ----------
