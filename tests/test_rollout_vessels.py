@@ -175,13 +175,19 @@ def test_a_trimmed_strip_leaves_the_development_of_the_surface_without_it(monkey
     assert np.allclose(without.flat.uv, res.flat.uv, rtol=0.0, atol=1e-9 * np.ptp(res.flat.uv))
 
 
+def _grid(nx: int, ny: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A flat grid of ``nx`` x ``ny`` unit squares, each cut into two triangles: the layout
+    (n, 2), the vertex numbers by row and column (ny + 1, nx + 1) and the faces (m, 3)."""
+    x, y = np.meshgrid(np.arange(nx + 1.0), np.arange(ny + 1.0))
+    uv = np.column_stack([x.ravel(), y.ravel()])
+    q = np.arange(len(uv)).reshape(ny + 1, nx + 1)
+    a, b, c, d = q[:-1, :-1].ravel(), q[:-1, 1:].ravel(), q[1:, 1:].ravel(), q[1:, :-1].ravel()
+    return uv, q, np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+
+
 def test_border_folds_keeps_enclosed_folds_and_untangle_fixes_them():
     # a 6 x 6 vertex grid with one interior vertex pushed across its neighbours
-    x, y = np.meshgrid(np.arange(6.0), np.arange(6.0))
-    uv = np.column_stack([x.ravel(), y.ravel()])
-    q = np.arange(36).reshape(6, 6)
-    a, b, c, d = q[:-1, :-1].ravel(), q[:-1, 1:].ravel(), q[1:, 1:].ravel(), q[1:, :-1].ravel()
-    faces = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    uv, q, faces = _grid(5, 5)
     area = np.full(len(faces), 0.5)
     folded = uv.copy()
     folded[q[2, 2]] += [1.6, 1.3]
@@ -215,11 +221,7 @@ def test_untangle_against_its_definition_on_a_noisy_development(seed):
 
     rng = np.random.default_rng(seed)
     nx, ny = 40, 30
-    x, y = np.meshgrid(np.arange(nx + 1.0), np.arange(ny + 1.0))
-    uv = np.column_stack([x.ravel(), y.ravel()])
-    q = np.arange(len(uv)).reshape(ny + 1, nx + 1)
-    a, b, c, d = q[:-1, :-1].ravel(), q[:-1, 1:].ravel(), q[1:, 1:].ravel(), q[1:, :-1].ravel()
-    faces = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    uv, q, faces = _grid(nx, ny)
     centres = rng.uniform([0, 0], [nx, ny], (4, 2))
     centres[0, 1] = 0.0  # one patch at the border
     near = (np.linalg.norm(uv[:, None] - centres[None], axis=2) < 5).any(axis=1)
@@ -348,11 +350,7 @@ def test_border_folds_trims_the_piece_beyond_an_edge_on_band():
     under at a foot): trimming that band cuts the first row off the wall, and the cut-off
     row, which lies over the wall, goes with it; nothing of the wall is peeled."""
     nx, ny = 10, 20
-    x, y = np.meshgrid(np.arange(nx + 1.0), np.arange(ny + 1.0))
-    uv = np.column_stack([x.ravel(), y.ravel()])
-    q = np.arange(len(uv)).reshape(ny + 1, nx + 1)
-    a, b, c, d = q[:-1, :-1].ravel(), q[:-1, 1:].ravel(), q[1:, 1:].ravel(), q[1:, :-1].ravel()
-    faces = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    uv, q, faces = _grid(nx, ny)
     row = np.concatenate([np.repeat(np.arange(ny), nx)] * 2)
     area = np.full(len(faces), 0.5)
     uv[q[2]] = uv[q[2]] - [0.0, 1.2]  # the band of row 1 folds: row 2's lower edge dips below row 0's top
@@ -370,11 +368,7 @@ def test_border_folds_peeling_in_place_equals_rebuilding_every_pass(seed):
 
     rng = np.random.default_rng(seed)
     nx, ny = 14, 18
-    x, y = np.meshgrid(np.arange(nx + 1.0), np.arange(ny + 1.0))
-    uv = np.column_stack([x.ravel(), y.ravel()])
-    q = np.arange(len(uv)).reshape(ny + 1, nx + 1)
-    a, b, c, d = q[:-1, :-1].ravel(), q[:-1, 1:].ravel(), q[1:, 1:].ravel(), q[1:, :-1].ravel()
-    faces = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    uv, q, faces = _grid(nx, ny)
     uv[q[2]] -= [0.0, 1.2 + 0.3 * seed / 5]  # a folded band near the foot
     uv[q[-1, 1:-1:2], 1] -= rng.uniform(0.8, 2.2, len(q[-1, 1:-1:2]))  # a ragged rim
     uv[q[ny // 2, -3:]] += [-2.5 - seed % 3, 0.4]  # a flap folded back over the wall
@@ -397,11 +391,7 @@ def test_border_folds_reads_every_pass_off_one_edge_table(monkeypatch):
     from potflat.rollout import walls
 
     nx, ny = 12, 20
-    x, y = np.meshgrid(np.arange(nx + 1.0), np.arange(ny + 1.0))
-    uv = np.column_stack([x.ravel(), y.ravel()])
-    q = np.arange(len(uv)).reshape(ny + 1, nx + 1)
-    a, b, c, d = q[:-1, :-1].ravel(), q[:-1, 1:].ravel(), q[1:, 1:].ravel(), q[1:, :-1].ravel()
-    faces = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    uv, q, faces = _grid(nx, ny)
     # a ragged rim: every other top vertex pushed down across its neighbours' edge, so the
     # overlapping border is peeled a few faces a pass
     top = q[-1, 1:-1:2]
