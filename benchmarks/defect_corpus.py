@@ -59,6 +59,8 @@ def away_rms(result, points: np.ndarray) -> tuple[float, int]:
 
 
 def what_the_rollout_did(record: dict) -> str:
+    """The faces a rollout (its JSON ``record``) found folded in 3D, trimmed off its border and
+    left out with a piece the cleaning split off, in a few words."""
     folded, trimmed, walls = record["folded"], record["trimmed"], record["walls"]
     parts = []
     if folded["faces"]:
@@ -71,6 +73,7 @@ def what_the_rollout_did(record: dict) -> str:
 
 
 def corpus_rows(work: Path) -> list[str]:
+    """The corpus' table rows, its runs written under ``work``."""
     from potflat_synthetic.defects import add_defects
     from potflat_synthetic.vessels import make_vessel, write_ply_colored
 
@@ -97,6 +100,7 @@ def corpus_rows(work: Path) -> list[str]:
 
 
 def real_rows(work: Path, data: Path) -> list[str]:
+    """The real scans' table rows (both sides each), their runs written under ``work``."""
     rows = []
     for name, units in REAL:
         for side in SIDES:
@@ -111,6 +115,7 @@ def real_rows(work: Path, data: Path) -> list[str]:
 
 
 def table(corpus: list[str], real: list[str], command: str) -> str:
+    """The block of docs/robustness.md: the corpus' table, then the real scans'."""
     return "\n".join([
         f"`{command}` ({machine()}):", "",
         "| defect | outer: edge RMS away, against clean | inner | outer: zone median length error % (defective / clean) "
