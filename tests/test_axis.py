@@ -107,7 +107,7 @@ def test_manual_axis_and_its_residuals():
     assert _line_distance(shift, fit) < 1e-9
     assert fit.profile_deviation < 1e-12
     tilted = axis_residuals(mesh, shift, R[:, 2] + 0.05 * R[:, 0])
-    assert tilted[0] > fit.rms_angle_deg and tilted[3] > 0.005
+    assert tilted[0] > fit.rms_angle_deg and tilted[3] > fit.misfit_angle_deg and tilted[4] > 0.005
     assert manual_axis(mesh, shift, R[:, 2], flip=True).direction @ R[:, 2] < 0
 
 
@@ -211,3 +211,38 @@ def test_profile_deviation_matches_the_sorting_reference(seed):
     want = float(np.median(np.abs(rr - np.interp(hh, mean_h, med))) / float(np.median(rr)))
     assert not have.all() and want > 0
     assert _profile_deviation(points, point, direction) == want
+
+
+@pytest.mark.parametrize("share", [0.02, 0.1])
+def test_misfit_angle_of_an_off_centre_axis_on_a_cylinder(share):
+    """An axis off a cylinder's centre by a share s of its radius: a normal at angle theta from
+    the offset leans -s sin(theta) / sqrt(1 - 2 s cos(theta) + s^2) out of its meridian plane,
+    whose part turning once around is -s sin(theta) to first order: s / sqrt(2) RMS."""
+    mesh, R, shift, _ = cylinder(R=30.0, seed=4, n_theta=180, jitter=0.0)
+    exact = manual_axis(mesh, shift, R[:, 2])
+    assert exact.misfit_angle_deg < 0.05  # (the faceting's random diagonals lean vertex normals a little)
+    off = manual_axis(mesh, shift + share * 30.0 * R[:, 0], R[:, 2])
+    expected = np.degrees(np.arcsin(share / np.sqrt(2)))
+    assert off.misfit_angle_deg == pytest.approx(expected, abs=0.01)
+
+
+def test_misfit_angle_tells_a_tilted_axis_from_relief(real_scans):
+    """The shared real scans' relief, flutes and uneven hand-made wall lean their normals out of
+    the meridian planes whatever the axis (``rms_angle_deg`` up to 14 deg on the fluted vase):
+    their fitted axes stay under the warning's threshold, and the same axes tilted by 2
+    degrees go over it."""
+    from potflat.io.scan import load_scan
+    from potflat.rollout.notes import WARN_AXIS_MISFIT_DEG
+
+    assert f"Above {WARN_AXIS_MISFIT_DEG:g} the rollout warns" in (Path(__file__).parents[1] / "docs" /
+                                                                  "formats.md").read_text()
+    fluted = 0.0
+    for name in ("dragon-jar.glb", "colonoware-pot.glb", "plastic-vase.ply", "sea-vase.ply", "goblet.stl"):
+        mesh = load_scan(real_scans / name, units=None if name.endswith(".glb") else "mm").mesh
+        fit = estimate_axis(mesh)
+        assert fit.misfit_angle_deg < WARN_AXIS_MISFIT_DEG, (name, fit)
+        fluted = max(fluted, fit.rms_angle_deg)
+        tilt = np.radians(2.0)
+        tilted = manual_axis(mesh, fit.point, np.cos(tilt) * fit.direction + np.sin(tilt) * fit.reference)
+        assert tilted.misfit_angle_deg > WARN_AXIS_MISFIT_DEG, (name, tilted)
+    assert fluted > 10.0

@@ -13,6 +13,12 @@ Quality figures (reported, never hidden):
   vertex normal and the plane that contains the axis and the vertex (0 for an exact
   surface of revolution whatever the scan's size; the faceting of a coarse mesh alone gives
   about 1 degree, noisy or fluted scans up to about 10);
+* ``misfit_angle_deg``: the part of that angle, on the outer wall, that leans to one side
+  and turns once around the axis within each height slice (its first harmonic in the
+  angle around the axis), area-weighted RMS: what a tilted or off-centre axis leaves (an
+  axis off a cylinder's centre by a share s of its radius: s / sqrt(2) radians), and what
+  relief, flutes or an irregular hand-made wall, which raise ``rms_angle_deg``, do not; the
+  rollout warns above :data:`potflat.rollout.notes.WARN_AXIS_MISFIT_DEG`;
 * ``rms_distance``: area-weighted RMS distance between each vertex normal line and the axis,
   in scan units, over the vertices whose normal is at least 10 degrees away from the axis
   direction (the distance is undefined for normals parallel to the axis);
@@ -142,6 +148,9 @@ class AxisFit:
         Area-weighted RMS and median angle between normals and meridian planes, degrees.
     rms_distance : float
         Area-weighted RMS distance of normal lines to the axis, scan units.
+    misfit_angle_deg : float
+        Area-weighted RMS of the outer wall's normal-to-meridian angle that turns once around
+        the axis within height slices (a tilted or off-centre axis), degrees.
     profile_deviation : float
         Median of ``|r - profile(h)|`` over the outer wall's vertices, divided by their
         median radius (0 for a surface of revolution; a box gives about 0.1).
@@ -158,6 +167,7 @@ class AxisFit:
     rms_angle_deg: float
     median_angle_deg: float
     rms_distance: float
+    misfit_angle_deg: float
     profile_deviation: float
     note: str = ""
 
@@ -188,6 +198,7 @@ class AxisFit:
             "rms_angle_deg": float(self.rms_angle_deg),
             "median_angle_deg": float(self.median_angle_deg),
             "rms_distance": float(self.rms_distance),
+            "misfit_angle_deg": float(self.misfit_angle_deg),
             "profile_deviation": float(self.profile_deviation),
             "note": self.note,
         }
@@ -282,7 +293,7 @@ def _meridian_residuals(c, n, point, direction):
     return det, r
 
 
-def axis_residuals(mesh: Mesh, point, direction, *, lines=None) -> tuple[float, float, float, float]:
+def axis_residuals(mesh: Mesh, point, direction, *, lines=None) -> tuple[float, float, float, float, float]:
     """Fit-quality figures of an axis on ``mesh`` (see module docs).
 
     Parameters
@@ -295,7 +306,7 @@ def axis_residuals(mesh: Mesh, point, direction, *, lines=None) -> tuple[float, 
 
     Returns
     -------
-    rms_angle_deg, median_angle_deg, rms_distance, profile_deviation : float
+    rms_angle_deg, median_angle_deg, rms_distance, misfit_angle_deg, profile_deviation : float
     """
     c, n, area = normal_lines(mesh) if lines is None else lines
     direction = np.asarray(direction, float) / np.linalg.norm(direction)
@@ -316,8 +327,46 @@ def axis_residuals(mesh: Mesh, point, direction, *, lines=None) -> tuple[float, 
     hc = (c - point) @ direction
     radial = c - point - hc[:, None] * direction
     outer = np.einsum("ij,ij->i", n, radial) > 0.3 * np.linalg.norm(radial, axis=1)
-    prof = _profile_deviation(np.take(c, np.flatnonzero(outer), axis=0) if outer.sum() >= 20 else c, point, direction)
-    return float(np.sqrt(np.sum(w * ang**2))), weighted_percentile(ang, w, 50.0), rms_dist, prof
+    wall = np.flatnonzero(outer) if outer.sum() >= 20 else np.arange(len(c))
+    prof = _profile_deviation(np.take(c, wall, axis=0), point, direction)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        lean = np.where(r > 0, det / r, 0.0)
+    misfit = _once_around(np.clip(lean[wall], -1.0, 1.0), hc[wall], np.take(radial, wall, axis=0), area[wall],
+                          direction)
+    return float(np.sqrt(np.sum(w * ang**2))), weighted_percentile(ang, w, 50.0), rms_dist, misfit, prof
+
+
+def _once_around(lean: np.ndarray, h: np.ndarray, radial: np.ndarray, area: np.ndarray, direction,
+                 *, slices: int = 32) -> float:
+    """Area-weighted RMS, in degrees, of the part of the signed lean ``lean`` (k,) (sine of the
+    normal-to-meridian angle) that turns once around the axis: in each of ``slices`` height
+    slices of ``h`` (k,), the weighted least-squares fit ``a + b cos(theta) + c sin(theta)``
+    of ``lean`` over the points' angles ``theta`` (from their ``radial`` (k, 3) offsets),
+    taken without ``a``. A slice whose angles do not determine the fit (fewer than 10
+    points, or all on one side) adds nothing."""
+    if len(lean) == 0:
+        return 0.0
+    ref = reference_direction(direction)
+    theta = np.arctan2(radial @ np.cross(direction, ref), radial @ ref)
+    cos, sin = np.cos(theta), np.sin(theta)
+    lo, hi = float(h.min()), float(h.max())
+    idx = np.clip(((h - lo) / max(hi - lo, 1e-300) * slices).astype(np.int64), 0, slices - 1)
+    basis = (np.ones_like(cos), cos, sin)
+    normal = np.empty((slices, 3, 3))
+    rhs = np.empty((slices, 3))
+    for i in range(3):
+        rhs[:, i] = np.bincount(idx, area * basis[i] * lean, slices)
+        for j in range(i, 3):
+            normal[:, i, j] = normal[:, j, i] = np.bincount(idx, area * basis[i] * basis[j], slices)
+    count = np.bincount(idx, minlength=slices)
+    coef = np.zeros((slices, 3))
+    for k in np.flatnonzero(count >= 10):
+        # (a slice with all its points on one side leaves the harmonic undetermined)
+        if np.linalg.cond(normal[k]) < 1e8:
+            coef[k] = np.linalg.solve(normal[k], rhs[k])
+    part = coef[idx, 1] * cos + coef[idx, 2] * sin
+    rms = float(np.sqrt(np.sum(area * part * part) / max(float(area.sum()), 1e-300)))
+    return float(np.degrees(np.arcsin(min(rms, 1.0))))
 
 
 def _profile_deviation(points: np.ndarray, point, direction, *, slices: int = 32) -> float:
@@ -506,7 +555,7 @@ def orient(mesh: Mesh, point, direction, *, lines=None) -> tuple[np.ndarray, str
 
 
 def _finish(mesh, point, direction, *, method, orientation, flip, note="", lines=None,
-            residuals: tuple[float, float, float, float] | None = None) -> AxisFit:
+            residuals: tuple[float, float, float, float, float] | None = None) -> AxisFit:
     """The :class:`AxisFit` of an axis line; ``residuals``: its :func:`axis_residuals` when the
     caller has them (they do not depend on the point along the line or the direction's sign)."""
     direction = np.asarray(direction, float)
@@ -516,12 +565,12 @@ def _finish(mesh, point, direction, *, method, orientation, flip, note="", lines
         orientation += "; flipped on request"
     h = (mesh.vertices[_used(mesh)] - point) @ direction
     foot = np.asarray(point, float) + h.min() * direction
-    rms_angle, median_angle, rms_dist, prof = (axis_residuals(mesh, foot, direction, lines=lines)
-                                               if residuals is None else residuals)
+    rms_angle, median_angle, rms_dist, misfit, prof = (axis_residuals(mesh, foot, direction, lines=lines)
+                                                       if residuals is None else residuals)
     return AxisFit(point=foot, direction=direction, reference=reference_direction(direction),
                    height=float(h.max() - h.min()), method=method, orientation=orientation,
                    rms_angle_deg=rms_angle, median_angle_deg=median_angle, rms_distance=rms_dist,
-                   profile_deviation=prof, note=note)
+                   misfit_angle_deg=misfit, profile_deviation=prof, note=note)
 
 
 def manual_axis(mesh: Mesh, point, direction, *, flip: bool = False) -> AxisFit:
@@ -631,11 +680,11 @@ def estimate_axis(mesh: Mesh, *, flip: bool = False, profile: bool = True,
     point = centre + size * point
     _check_support(mesh, lines[0], point, direction)
     residuals = axis_residuals(mesh, point, direction, lines=lines)
-    rms_angle, median_angle, _, prof = residuals
+    rms_angle, median_angle, _, _, prof = residuals
     if _unsymmetric(median_angle, prof, max_median_angle_deg):
         pc, pdir = _pca_axis(mesh.vertices[_used(mesh)])
         pca_residuals = axis_residuals(mesh, pc, pdir, lines=lines)
-        _, p_median, _, p_prof = pca_residuals
+        _, p_median, _, _, p_prof = pca_residuals
         if not _unsymmetric(p_median, p_prof, max_median_angle_deg):
             point, direction, method, residuals = pc, pdir, "pca", pca_residuals
         else:
