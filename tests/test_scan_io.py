@@ -423,6 +423,48 @@ def test_glb_mesh_without_texcoords_is_flagged_untextured(tmp_path):
     assert any(w.startswith(f"{len(F)} faces (meshes without TEXCOORD_0)") for w in scan.report.warnings)
 
 
+def test_glb_with_a_texture_per_material_is_packed_into_one_atlas(tmp_path):
+    """A GLB with a material per texture image (as photogrammetry exports a large scan): each
+    mesh samples its own image in the packed atlas; a mesh whose image has the same pixels as
+    another's shares its cell; a mesh whose material has no image is flagged untextured."""
+    import trimesh
+    from PIL import Image
+
+    V, F = _grid()
+    Vs, Fs = V[F].reshape(-1, 3), np.arange(3 * len(F)).reshape(-1, 3)
+    colours, sizes = [(200, 30, 20), (20, 40, 220), (200, 30, 20)], [(16, 8), (16, 16), (16, 8)]
+    parts = [trimesh.Trimesh(Vs + [0.0, 0.0, 3.0 * k], Fs, process=False, visual=trimesh.visual.TextureVisuals(
+        uv=_uv_of(Vs), image=Image.new("RGB", size, colour))) for k, (colour, size) in enumerate(zip(colours, sizes))]
+    bare = trimesh.visual.TextureVisuals(uv=_uv_of(Vs), material=trimesh.visual.material.PBRMaterial())
+    parts.append(trimesh.Trimesh(Vs + [0.0, 0.0, 9.0], Fs, process=False, visual=bare))
+    trimesh.Scene(parts).export(tmp_path / "multi.glb")
+    scan = load_scan(tmp_path / "multi.glb")
+    mesh = scan.mesh
+    assert any(w.startswith("2 texture images") and "packed into one 32 x 16 atlas" in w
+               for w in scan.report.warnings), scan.report.warnings
+    atlas = Image.open(mesh.texture_path).convert("RGB")
+    level = (mesh.vertices[mesh.faces].mean(axis=1)[:, 2] // 3.0).astype(int)  # the part: 0-3
+    np.testing.assert_array_equal(mesh.untextured_faces, level == 3)
+    for f in np.flatnonzero(level < 3):
+        centre = mesh.texcoords[f].mean(axis=0)
+        assert _sample(atlas, centre) == colours[level[f]], (f, level[f])
+
+
+def test_glb_texture_of_a_material_over_the_pixel_limit_is_refused(tmp_path):
+    import trimesh
+    from PIL import Image
+
+    V, F = _grid()
+    Vs, Fs = V[F].reshape(-1, 3), np.arange(3 * len(F)).reshape(-1, 3)
+    parts = [trimesh.Trimesh(Vs + [0.0, 0.0, 3.0 * k], Fs, process=False, visual=trimesh.visual.TextureVisuals(
+        uv=_uv_of(Vs), image=Image.new("RGB", (64, 64), (50 * k, 0, 0)))) for k in range(2)]
+    trimesh.Scene(parts).export(tmp_path / "multi.glb")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "multi.glb", max_texture_pixels=1000)
+    _one_line(e, "multi.glb")
+    assert "64 x 64 pixels, over the limit of 1000" in str(e.value)
+
+
 def test_off(tmp_path):
     V, F = _grid()
     lines = ["OFF", f"{len(V)} {len(F)} 0"] + [f"{x} {y} {z}" for x, y, z in V] + [f"3 {a} {b} {c}" for a, b, c in F]

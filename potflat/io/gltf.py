@@ -10,11 +10,12 @@ from pathlib import Path
 import numpy as np
 
 from potflat.errors import InvalidInputError
-from potflat.io.atomic import write_bytes_atomic
+from potflat.io.atomic import atomic_path, write_bytes_atomic
 from potflat.io.raw import (
     _IGNORE_HINT,
     _find_file,
     _flag_untextured,
+    _merge_textures,
     _Raw,
     _read_bytes,
     _texture_cache,
@@ -61,17 +62,76 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
     if texture == "ignore" or all(u is None for u in uvs):
         return raw
     images = _gltf_images(path)
-    if len(images) > 1:
-        raise InvalidInputError(f"{path} holds {len(images)} texture images; potflat supports one texture "
-                                f"atlas: re-export with a single texture {_IGNORE_HINT}")
     if not images:
         raw.warnings.append("texture coordinates but no texture image; loaded untextured")
         return raw
-    raw.texcoords = np.concatenate([u if u is not None else np.zeros((len(f), 3, 2)) for u, f in zip(uvs, faces)])
-    _flag_untextured(raw, np.concatenate([np.full(len(f), u is None) for u, f in zip(uvs, faces)]),
-                     "(meshes without TEXCOORD_0) have no texture coordinates")
-    raw.texture = images[0]
+    if len(images) == 1:  # the image as the file holds it
+        raw.texcoords = np.concatenate([u if u is not None else np.zeros((len(f), 3, 2))
+                                        for u, f in zip(uvs, faces)])
+        _flag_untextured(raw, np.concatenate([np.full(len(f), u is None) for u, f in zip(uvs, faces)]),
+                         "(meshes without TEXCOORD_0) have no texture coordinates")
+        raw.texture = images[0]
+        return raw
+    # several images (a material per texture atlas, as photogrammetry exports a large scan):
+    # each mesh's own, by its material, packed into one atlas
+    files, names, which = [], [], []
+    for g, uv, f in zip(geoms, uvs, faces):
+        image = _base_colour_image(g.visual.material) if uv is not None else None
+        k = -1
+        if image is not None:
+            saved = _saved_image(image, path, max_pixels)
+            if saved not in files:
+                files.append(saved)
+                names.append(f"material {getattr(g.visual.material, 'name', None) or len(files)}")
+            k = files.index(saved)
+        which.append(np.full(len(f), k, np.int64))
+    which = np.concatenate(which)
+    uv = np.concatenate([u if u is not None else np.zeros((len(f), 3, 2)) for u, f in zip(uvs, faces)])
+    if not files:
+        raw.warnings.append("texture coordinates but no texture image; loaded untextured")
+        return raw
+    if len(files) == 1:
+        raw.texture, raw.texcoords = files[0], uv
+    else:
+        raw.texture, raw.texcoords, note = _merge_textures(files, which, uv, path, max_pixels, names=names)
+        raw.warnings.append(note)
+    _flag_untextured(raw, which < 0, "(meshes without TEXCOORD_0 or a base-colour texture) have no texture")
     return raw
+
+
+def _base_colour_image(material):
+    """The base-colour image (a Pillow image) of a mesh's trimesh material, or None."""
+    image = getattr(material, "baseColorTexture", None)
+    return image if image is not None else getattr(material, "image", None)
+
+
+def _saved_image(image, source: Path, max_pixels: int) -> Path:
+    """A texture image that loading ``source`` decoded (a Pillow image, its pixels not yet
+    read) as a PNG file in the private :func:`_texture_cache`, named by its pixels: the same
+    image used by several meshes is one file. Its size is checked against ``max_pixels``
+    before its pixels are decoded."""
+    from PIL import Image
+
+    w, h = image.size
+    if w <= 0 or h <= 0 or w * h > max_pixels:
+        raise InvalidInputError(f"{source}: a texture image declares {w} x {h} pixels, over the limit of {max_pixels} "
+                                f"(a corrupt file or decompression bomb); restore a sane image {_IGNORE_HINT}")
+    old = Image.MAX_IMAGE_PIXELS
+    try:
+        Image.MAX_IMAGE_PIXELS = None  # (checked above)
+        pixels = image.convert("RGBA" if "A" in image.getbands() else "RGB")
+    except Exception as exc:  # noqa: BLE001 - Pillow raises many types for corrupt images
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InvalidInputError(f"{source}: a texture image cannot be decoded ({msg}); export the scan again "
+                                f"{_IGNORE_HINT}") from None
+    finally:
+        Image.MAX_IMAGE_PIXELS = old
+    digest = hashlib.sha256(f"{pixels.mode} {w} {h} ".encode() + pixels.tobytes()).hexdigest()[:32]
+    target = _texture_cache() / f"{digest}.png"
+    if not target.exists():  # the private cache holds only what this process wrote
+        with atomic_path(target) as tmp:
+            pixels.save(tmp, format="PNG", compress_level=1)
+    return target
 
 
 #: Most data a glTF may embed as base64 text (``data:`` URIs), decoded: decoding takes about five

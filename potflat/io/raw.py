@@ -189,7 +189,7 @@ def _texture_cache() -> Path:
 
 
 def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source: Path,
-                    max_pixels: int) -> tuple[Path, np.ndarray, str]:
+                    max_pixels: int, *, names: list[str] | None = None) -> tuple[Path, np.ndarray, str]:
     """Pack several texture images into one atlas (a grid) and remap the texture coordinates.
 
     Parameters
@@ -200,6 +200,8 @@ def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source
         Image of each face, -1 for none (those keep their coordinates).
     uv : (m, 3, 2) float64
         Texture coordinates in each face's own image (OBJ convention, v up).
+    names : list of str, optional
+        What the report line calls the images (default: their file names).
 
     Returns
     -------
@@ -259,8 +261,9 @@ def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source
     clipped = int(np.count_nonzero((t != uv[sel]).any(axis=(1, 2))))
     out[sel, :, 0] = (c[:, None] * cw + t[..., 0] * w[:, None]) / W
     out[sel, :, 1] = 1.0 - (r[:, None] * ch + (1.0 - t[..., 1]) * h[:, None]) / H
-    note = (f"{len(paths)} texture images ({', '.join(p.name for p in paths[:4])}"
-            f"{', ...' if len(paths) > 4 else ''}) packed into one {W} x {H} atlas {target}")
+    names = [p.name for p in paths] if names is None else names
+    note = (f"{len(paths)} texture images ({', '.join(names[:4])}{', ...' if len(paths) > 4 else ''}) packed into "
+            f"one {W} x {H} atlas")
     if clipped:
         note += f"; {clipped} faces had texture coordinates outside their image (clipped)"
     return target, out, note

@@ -10,8 +10,8 @@ OBJ and PLY are read by potflat's own parsers (OBJ by a Numba tokenizer: trimesh
 loader splits vertices at seams and is slow on multi-million-vertex scans); STL, OFF and
 GLB/glTF go through trimesh.
 
-Several texture images (OBJ materials with different ``map_Kd``, PLY ``texnumber``) are
-packed into one atlas image (a PNG in a temporary folder private to the process, removed at its
+Several texture images (OBJ materials with different ``map_Kd``, PLY ``texnumber``, glTF
+materials with different base-colour textures) are packed into one atlas image (a PNG in a temporary folder private to the process, removed at its
 end) with the texture coordinates remapped, since a :class:`Mesh` has one texture.
 
 Units: positions are never rescaled. ``units=None`` takes the unit the file declares (a PLY
