@@ -465,6 +465,143 @@ def test_glb_texture_of_a_material_over_the_pixel_limit_is_refused(tmp_path):
     assert "64 x 64 pixels, over the limit of 1000" in str(e.value)
 
 
+def _write_glb(path: Path, doc: dict, blob: bytes) -> None:
+    """A GLB of the glTF JSON ``doc`` and the binary chunk ``blob`` (its buffer 0)."""
+    import json
+
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    blob += b"\0" * (-len(blob) % 4)
+    body = struct.pack("<II", len(text), 0x4E4F534A) + text + struct.pack("<II", len(blob), 0x004E4942) + blob
+    path.write_bytes(struct.pack("<III", 0x46546C67, 2, 12 + len(body)) + body)
+
+
+def _quantized_glb(path: Path, *, transform: bool, extensions: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The test grid as gltfpack and gltf-transform store a scan: positions as normalized
+    shorts dequantized by the node's scale and translation, texture coordinates as normalized
+    unsigned shorts (with ``transform`` in a quarter of their range, dequantized by the
+    texture's KHR_texture_transform); returns the grid's positions and texture coordinates
+    (glTF's v down) as stored, dequantized."""
+    from PIL import Image
+    import io
+
+    V, F = _grid()
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    centre, half = (lo + hi) / 2, float((hi - lo).max()) / 2
+    pos = np.rint((V - centre) / half * 32767).astype("<i2")
+    tc = _uv_of(V) * [0.5, 0.5] + [0.5, 0.25]  # within [0, 1]
+    offset, scale = np.array([0.125, 0.0625]), np.array([4.0, 4.0])
+    stored = (tc - offset) / scale if transform else tc
+    quant = np.rint(stored * 65535).astype("<u2")
+    png = io.BytesIO()
+    Image.new("RGB", (8, 8), (10, 20, 30)).save(png, format="PNG")
+    parts = [np.ascontiguousarray(np.hstack([pos, np.zeros((len(V), 1), "<i2")])).tobytes(),  # 8-byte stride
+             quant.tobytes(), F.astype("<u4").tobytes(), png.getvalue()]
+    offsets = np.cumsum([0] + [len(b) + (-len(b) % 4) for b in parts])
+    blob = b"".join(b + b"\0" * (-len(b) % 4) for b in parts)
+    texture = {"index": 0}
+    if transform:
+        texture["extensions"] = {"KHR_texture_transform": {"offset": list(offset), "scale": list(scale)}}
+    doc = {
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0, "translation": list(centre), "scale": [half] * 3}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2, "material": 0}]}],
+        "materials": [{"pbrMetallicRoughness": {"baseColorTexture": texture}}],
+        "textures": [{"source": 0}], "images": [{"bufferView": 3, "mimeType": "image/png"}],
+        "buffers": [{"byteLength": len(blob)}],
+        "bufferViews": [{"buffer": 0, "byteOffset": int(offsets[0]), "byteLength": len(parts[0]), "byteStride": 8},
+                        {"buffer": 0, "byteOffset": int(offsets[1]), "byteLength": len(parts[1])},
+                        {"buffer": 0, "byteOffset": int(offsets[2]), "byteLength": len(parts[2])},
+                        {"buffer": 0, "byteOffset": int(offsets[3]), "byteLength": len(parts[3])}],
+        "accessors": [{"bufferView": 0, "componentType": 5122, "normalized": True, "count": len(V), "type": "VEC3"},
+                      {"bufferView": 1, "componentType": 5123, "normalized": True, "count": len(V), "type": "VEC2"},
+                      {"bufferView": 2, "componentType": 5125, "count": F.size, "type": "SCALAR"}],
+        "extensionsUsed": ["KHR_mesh_quantization"] + (["KHR_texture_transform"] if transform else []),
+        "extensionsRequired": ["KHR_mesh_quantization"],
+    }
+    doc.update(extensions or {})
+    _write_glb(path, doc, blob)
+    return np.maximum(pos / 32767, -1) * half + centre, quant / 65535 * (scale if transform else 1) + (
+        offset if transform else 0)
+
+
+@pytest.mark.parametrize("transform", [False, True], ids=["normalized", "normalized+transform"])
+def test_quantized_glb_is_read_at_its_true_size_and_texture_place(tmp_path, transform):
+    """trimesh reads normalized integers as the integers (positions 32767 times too large,
+    texture coordinates wrapped around) and leaves texture transforms out: the scan, its size
+    and its texture coordinates come out as the file means them."""
+    xyz, tc = _quantized_glb(tmp_path / "q.glb", transform=transform)
+    mesh = load_scan(tmp_path / "q.glb").mesh
+    assert len(mesh.vertices) == len(xyz)
+    k = [int(np.argmin(np.linalg.norm(xyz - v, axis=1))) for v in mesh.vertices]
+    np.testing.assert_allclose(mesh.vertices, xyz[k], atol=1e-12)
+    np.testing.assert_allclose(np.ptp(mesh.vertices, axis=0), np.ptp(_grid()[0], axis=0), atol=1e-4)
+    want = np.column_stack([tc[k][:, 0], 1.0 - tc[k][:, 1]])[mesh.faces]  # (v up, as potflat keeps them)
+    np.testing.assert_allclose(mesh.texcoords, want, atol=1e-12)
+
+
+def _edit_glb(path: Path, edit) -> None:
+    """Rewrite the JSON of the GLB ``path`` by ``edit(doc)``."""
+    import json
+
+    data = path.read_bytes()
+    (length,) = struct.unpack_from("<I", data, 12)
+    doc = json.loads(data[20:20 + length])
+    edit(doc)
+    _write_glb(path, doc, data[28 + length:])
+
+
+@pytest.mark.parametrize("edit, needles", [
+    (lambda d: d["accessors"][1].update(sparse={"count": 1}), ["accessor 1 cannot be read", "without quantization"]),
+    (lambda d: d["meshes"][0]["primitives"].append(dict(d["meshes"][0]["primitives"][0], mode=6)),
+     ["cannot be matched", "without quantization"]),
+    (lambda d: d["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"]["KHR_texture_transform"]
+     .update(offset=["a", 0]), ["texture transform", "not numbers"]),
+    (lambda d: d["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"]["KHR_texture_transform"]
+     .update(scale=[float("inf"), 1.0]), ["texture transform", "not finite"]),
+], ids=["sparse", "unmatched", "words", "infinite"])
+def test_quantized_glb_that_cannot_be_read_is_refused_in_one_line(tmp_path, edit, needles):
+    _quantized_glb(tmp_path / "q.glb", transform=True)
+    _edit_glb(tmp_path / "q.glb", edit)
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "q.glb")
+    _one_line(e, "q.glb", *needles)
+
+
+def test_meshopt_compressed_glb_is_refused_in_one_line(tmp_path):
+    _quantized_glb(tmp_path / "m.glb", transform=False,
+                   extensions={"extensionsRequired": ["KHR_mesh_quantization", "EXT_meshopt_compression"]})
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "m.glb")
+    _one_line(e, "m.glb", "EXT_meshopt_compression", "cannot decode", "Draco")
+
+
+def test_glb_with_ktx2_textures_is_refused_unless_loaded_untextured(tmp_path):
+    _quantized_glb(tmp_path / "k.glb", transform=False,
+                   extensions={"extensionsRequired": ["KHR_mesh_quantization", "KHR_texture_basisu"]})
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "k.glb")
+    _one_line(e, "k.glb", "KTX2", "PNG or JPEG", "--no-texture")
+    assert load_scan(tmp_path / "k.glb", texture="ignore").mesh.texcoords is None
+
+
+def test_glb_with_a_webp_texture_is_read(tmp_path):
+    """A WebP texture (EXT_texture_webp, as gltf-transform writes web scans) is the texture."""
+    import trimesh
+    from PIL import Image
+
+    V, F = _grid()
+    Vs, Fs = V[F].reshape(-1, 3), np.arange(3 * len(F)).reshape(-1, 3)
+    tm = trimesh.Trimesh(Vs, Fs, process=False, visual=trimesh.visual.TextureVisuals(
+        uv=_uv_of(Vs), image=Image.new("RGB", (16, 16), (40, 90, 160))))
+    tm.export(tmp_path / "w.glb", extension_webp=True)
+    scan = load_scan(tmp_path / "w.glb")
+    assert not scan.report.warnings
+    with Image.open(scan.mesh.texture_path) as im:
+        assert im.format == "WEBP" and im.size == (16, 16)
+    np.testing.assert_allclose(scan.mesh.texcoords, _uv_of(scan.mesh.vertices[scan.mesh.faces]), atol=1e-6)
+
+
 def test_off(tmp_path):
     V, F = _grid()
     lines = ["OFF", f"{len(V)} {len(F)} 0"] + [f"{x} {y} {z}" for x, y, z in V] + [f"3 {a} {b} {c}" for a, b, c in F]

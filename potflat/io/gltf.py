@@ -36,7 +36,18 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
         except ImportError:
             raise InvalidInputError(f"{path} is Draco-compressed (KHR_draco_mesh_compression) and its decoder is "
                                     "missing: pip install DracoPy") from None
+    required = doc.get("extensionsRequired")
+    required = required if isinstance(required, list) else []
+    if "EXT_meshopt_compression" in required:
+        raise InvalidInputError(f"{path} is compressed with meshoptimizer (EXT_meshopt_compression), which potflat "
+                                "cannot decode; export it without that compression (gltfpack without -c, "
+                                "gltf-transform without meshopt) or with Draco")
+    if "KHR_texture_basisu" in required and texture != "ignore":
+        raise InvalidInputError(f"{path} has KTX2 textures (KHR_texture_basisu), which potflat cannot decode; "
+                                f"export it with PNG or JPEG textures {_IGNORE_HINT}")
     scene = _trimesh_load(path, force="scene")
+    if isinstance(scene, trimesh.Scene):
+        _dequantize(path, doc, scene)
     try:  # trimesh decodes embedded images lazily, here
         geoms = [g for g in (scene.dump() if isinstance(scene, trimesh.Scene) else [scene])
                  if isinstance(g, trimesh.Trimesh) and len(g.faces)]
@@ -97,6 +108,125 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
         raw.warnings.append(note)
     _flag_untextured(raw, which < 0, "(meshes without TEXCOORD_0 or a base-colour texture) have no texture")
     return raw
+
+
+#: Largest value of each integer component type of glTF: a ``normalized`` accessor's values
+#: divided by it (signed ones no lower than -1).
+_NORMALIZED = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
+#: NumPy type of each component type of glTF.
+_COMPONENT_DTYPES = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
+
+
+def _dequantize(path: Path, doc: dict, scene) -> None:
+    """Apply, in place on the meshes of ``scene`` (trimesh's reading of ``doc``), what trimesh
+    leaves out: positions and texture coordinates stored as ``normalized`` integers
+    (KHR_mesh_quantization, as gltfpack and gltf-transform write them), which it reads as the
+    integers (texture coordinates wrapped around), read here from the file; and the
+    base-colour texture's KHR_texture_transform (with which gltfpack dequantizes texture
+    coordinates). trimesh keeps a mesh per primitive, in the document's order; each is
+    matched to its primitive by its vertex count."""
+    accessors = doc.get("accessors") or []
+
+    def normalized(index) -> int | None:
+        ok = isinstance(index, int) and not isinstance(index, bool) and 0 <= index < len(accessors)
+        return index if ok and isinstance(accessors[index], dict) and accessors[index].get("normalized") is True else None
+
+    primitives = [p for m in doc.get("meshes") or [] if isinstance(m, dict)
+                  for p in (m.get("primitives") or []) if isinstance(p, dict)]
+    jobs = []
+    for p in primitives:
+        attributes = p.get("attributes") if isinstance(p.get("attributes"), dict) else {}
+        jobs.append((attributes.get("POSITION"), normalized(attributes.get("POSITION")),
+                     normalized(attributes.get("TEXCOORD_0")),
+                     _texture_transform(path, doc.get("materials") or [], p.get("material"))))
+    if all(pos is None and tex is None and move is None for _, pos, tex, move in jobs):
+        return
+    geoms = list(scene.geometry.values())
+    counts = [accessors[k].get("count") if isinstance(k, int) and 0 <= k < len(accessors) else None
+              for k, *_ in jobs]
+    if len(geoms) != len(jobs) or any(len(getattr(g, "vertices", ())) != c for g, c in zip(geoms, counts)):
+        raise InvalidInputError(f"{path}: its quantized meshes (KHR_mesh_quantization) or texture transforms "
+                                "(KHR_texture_transform) cannot be matched to the meshes read; export the scan "
+                                "without quantization")
+    buffers = _gltf_buffers(path, doc) if any(pos is not None or tex is not None for _, pos, tex, _ in jobs) else []
+    for g, (_, pos, tex, move) in zip(geoms, jobs):
+        if pos is not None:
+            g.vertices = _accessor_values(path, doc, buffers, pos)
+        uv = getattr(g.visual, "uv", None)
+        if uv is not None and (tex is not None or move is not None):
+            # glTF's texture coordinates (v down; trimesh turns v up)
+            flat = (_accessor_values(path, doc, buffers, tex) if tex is not None
+                    else np.column_stack([uv[:, 0], 1.0 - uv[:, 1]]))
+            if move is not None:
+                flat = flat @ move[:, :2].T + move[:, 2]
+            g.visual.uv = np.column_stack([flat[:, 0], 1.0 - flat[:, 1]])
+
+
+def _gltf_buffers(path: Path, doc: dict) -> list[bytes]:
+    """The data of every buffer of a glTF/GLB (a GLB's own: its binary chunk; others: their
+    ``.bin`` file or ``data:`` URI), sizes checked by :func:`_check_gltf_sizes`."""
+    _, bin_chunk = _gltf_document(path)
+    out = []
+    for buffer in doc.get("buffers") or []:
+        uri = buffer.get("uri")
+        if uri is None:
+            out.append(bin_chunk)
+        elif uri.startswith("data:"):
+            out.append(base64.b64decode(uri.split(",", 1)[1]))
+        else:
+            out.append(_read_bytes(_find_file(uri, path.parent)))
+    return out
+
+
+def _accessor_values(path: Path, doc: dict, buffers: list[bytes], index: int) -> np.ndarray:
+    """The values of accessor ``index`` as (count, components) float64, ``normalized``
+    integers divided to [-1, 1] or [0, 1]."""
+    a = doc["accessors"][index]
+    broken = InvalidInputError(f"{path}: accessor {index} cannot be read (sparse, compressed or past its data); "
+                               "export the scan without quantization")
+    if "sparse" in a or "bufferView" not in a or a.get("componentType") not in _COMPONENT_DTYPES:
+        raise broken
+    view = doc["bufferViews"][a["bufferView"]]
+    dtype = np.dtype(_COMPONENT_DTYPES[a["componentType"]])
+    width = _TYPE_COMPONENTS.get(a.get("type"), 0)
+    stride = view.get("byteStride") or width * dtype.itemsize
+    start = view.get("byteOffset", 0) + a.get("byteOffset", 0)
+    count = a["count"]
+    data = buffers[view.get("buffer", 0)]
+    if width == 0 or count == 0 or start + (count - 1) * stride + width * dtype.itemsize > len(data):
+        raise broken
+    values = np.ndarray((count, width), dtype=dtype, buffer=data, offset=start,
+                        strides=(stride, dtype.itemsize)).astype(np.float64)
+    if a.get("normalized") is True and a["componentType"] in _NORMALIZED:
+        values = np.maximum(values / _NORMALIZED[a["componentType"]], -1.0)
+    return values
+
+
+def _texture_transform(path: Path, materials: list, index) -> np.ndarray | None:
+    """The KHR_texture_transform of material ``index``'s base-colour texture as a (2, 3)
+    affine map of glTF texture coordinates (translation, rotation, scale, in that order of
+    the extension), or None without one."""
+    ok = isinstance(index, int) and not isinstance(index, bool) and 0 <= index < len(materials)
+    material = materials[index] if ok and isinstance(materials[index], dict) else {}
+    refs = [(material.get("pbrMetallicRoughness") or {}).get("baseColorTexture"),
+            ((material.get("extensions") or {}).get("KHR_materials_pbrSpecularGlossiness") or {}).get("diffuseTexture")]
+    for ref in refs:
+        move = ((ref.get("extensions") or {}).get("KHR_texture_transform") if isinstance(ref, dict) else None)
+        if not isinstance(move, dict):
+            continue
+        try:
+            ox, oy = (float(x) for x in move.get("offset", (0.0, 0.0)))
+            sx, sy = (float(x) for x in move.get("scale", (1.0, 1.0)))
+            angle = float(move.get("rotation", 0.0))
+        except (TypeError, ValueError):
+            raise InvalidInputError(f"{path}: a texture transform (KHR_texture_transform) is not numbers; the file "
+                                    "is corrupt: export the scan again") from None
+        if not np.isfinite([ox, oy, sx, sy, angle]).all():
+            raise InvalidInputError(f"{path}: a texture transform (KHR_texture_transform) is not finite; the file "
+                                    "is corrupt: export the scan again")
+        c, s = np.cos(angle), np.sin(angle)
+        return np.array([[c * sx, s * sy, ox], [-s * sx, c * sy, oy]])
+    return None
 
 
 def _base_colour_image(material):
@@ -351,8 +481,13 @@ def _gltf_image_files(path: Path) -> list[Path]:
         for ref in ((mat.get("pbrMetallicRoughness") or {}).get("baseColorTexture"),
                     ((mat.get("extensions") or {}).get("KHR_materials_pbrSpecularGlossiness") or {})
                     .get("diffuseTexture")):
-            if ref and 0 <= ref.get("index", -1) < len(textures) and "source" in textures[ref["index"]]:
-                base.add(textures[ref["index"]]["source"])
+            if ref and 0 <= ref.get("index", -1) < len(textures):
+                tex = textures[ref["index"]]
+                source = tex.get("source")
+                if source is None:  # a WebP image (with no PNG or JPEG fallback)
+                    source = ((tex.get("extensions") or {}).get("EXT_texture_webp") or {}).get("source")
+                if source is not None:
+                    base.add(source)
     out = []
     for k, img in enumerate(images):
         if k not in base:
@@ -369,7 +504,7 @@ def _gltf_image_files(path: Path) -> list[Path]:
             start = bv.get("byteOffset", 0)
             blob = bin_chunk[start:start + bv["byteLength"]]
         if blob:
-            ext = {"image/png": ".png", "image/jpeg": ".jpg"}.get(img.get("mimeType", ""), ".png")
+            ext = {"image/png": ".png", "image/jpeg": ".jpg", "image/webp": ".webp"}.get(img.get("mimeType", ""), ".png")
             target = _texture_cache() / (hashlib.sha256(blob).hexdigest()[:32] + ext)
             if not target.exists():  # the private cache holds only what this process wrote
                 write_bytes_atomic(target, blob)
