@@ -272,6 +272,12 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
         clock.lap("tiff")
         figures = comp.figures()
         clock.lap("figures")
+        # the painting's renderer (its texture and mip levels: gigabytes for a scan with several
+        # large texture images) is let go before the base's renderer reads its own
+        textured, band, scales = r.texture is not None, comp.band, comp.scales
+        repeated, folded, bar_mm, on_image, scale_band = (comp.repeated, comp.folded, comp.layer.bar_mm, comp.on_image,
+                                                          comp.scale_band)
+        del r, comp, relief
         base_files, base_ply = None, None
         if flat_ply.name.endswith(".relaxed.ply"):
             base_ply = base_ply_beside(flat_ply)
@@ -283,22 +289,21 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
                 paths.update({f"base_{k}": p for k, p in base_files.paths.items()})
             clock.lap("base")
         if options.obj:
-            paths["obj"] = _write_flat_obj(out_dir / f"{name}.flat.obj", flat, g, comp.band, paths["png"].name)
+            paths["obj"] = _write_flat_obj(out_dir / f"{name}.flat.obj", flat, g, band, paths["png"].name)
             paths["mtl"] = paths["obj"].with_suffix(".mtl")
         if rollout_ply is not None:
             paths["sheet"] = _write_comparison_sheet(out_dir / f"{name}.sheet.png", read_flat_ply(rollout_ply), flat,
                                                      title=name)
         clock.lap("obj_sheet")
-        inputs = ([flat_ply] + ([flat.mesh.texture_path] if r.texture is not None else [])
+        inputs = ([flat_ply] + ([flat.mesh.texture_path] if textured else [])
                   + ([rollout_ply] if rollout_ply else []) + ([rollout_json] if rollout_json else [])
                   + ([base_ply] if base_files is not None else []))
-        scales = comp.scales
         record = {
             **figures,
-            "overlap": None if not len(comp.repeated) else {
-                "deg": marks.overlap_deg, "repeated_faces": int(comp.repeated.sum()),
+            "overlap": None if not len(repeated) else {
+                "deg": marks.overlap_deg, "repeated_faces": int(repeated.sum()),
                 "mark": f"dashed line {REPEAT_COLOUR[:3]} where the repeat past 360 degrees starts"},
-            "folded": None if not len(comp.folded) else {
+            "folded": None if not len(folded) else {
                 "faces": int(len(marks.folded_faces)), "area_mm2": marks.folded_area_mm2,
                 "percent_of_surface": marks.folded_percent, "regions_total": marks.folded_regions,
                 "mark": f"outlined and hatched {FOLDED_COLOUR[:3]} on the distortion maps and the overlay: where the scan "
@@ -308,10 +313,10 @@ def run_bake_stage(flat_ply: str | os.PathLike, out_dir: str | os.PathLike, opti
                         f"{base_files.paths['json'].name}",
                 "files": base_files.record["files"], "image_mm": base_files.record["image_mm"],
                 "lengths": base_files.record.get("lengths")},
-            "scale_bar_mm": comp.layer.bar_mm,
-            "scale_on_image": None if comp.on_image is None else {
-                "bar_mm": comp.on_image.bar_mm, "at_px": list(comp.on_image.at), "box_px": list(comp.on_image.box_size),
-                "band_below_px": comp.scale_band, "grid": options.grid},
+            "scale_bar_mm": bar_mm,
+            "scale_on_image": None if on_image is None else {
+                "bar_mm": on_image.bar_mm, "at_px": list(on_image.at), "box_px": list(on_image.box_size),
+                "band_below_px": scale_band, "grid": options.grid},
             "maps": {m: {"range": [scales[m].lo, scales[m].hi], "label": scales[m].label} for m in options.maps},
             "files": {k: p.name for k, p in paths.items()},
             "provenance": provenance(stage="bake", inputs=inputs,

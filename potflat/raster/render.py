@@ -80,18 +80,17 @@ def _chart_mask(texcoords: np.ndarray, height: int, width: int) -> np.ndarray:
     return cv2.dilate(mask, np.ones((3, 3), np.uint8)).view(bool)  # (0 and 1: valid as bool, no copy)
 
 
-def _halve_masked(img: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """2 x 2 box average over the valid texels only.
+def _halve_masked(img: np.ndarray, valid: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """2 x 2 box average over the valid texels only, written into ``out``.
 
-    img : (H, W, C) uint8/uint16, valid : (H, W) bool -> ((H+1)//2, (W+1)//2, C) same dtype, and its
-    validity (any valid texel in the block).
+    img : (H, W, C) uint8/uint16, valid : (H, W) bool, out : ((H+1)//2, (W+1)//2, C) same dtype,
+    C-contiguous; returns the validity of ``out`` (any valid texel in the block).
     """
 
-    h, w = (img.shape[0] + 1) // 2, (img.shape[1] + 1) // 2
-    out = np.empty((h, w, img.shape[2]), img.dtype)
+    h, w = out.shape[:2]
     out_valid = np.empty((h, w), bool)
     halve_masked(img, np.ascontiguousarray(valid), out, out_valid)
-    return out, out_valid
+    return out_valid
 
 
 def _pull_fill(levels: list, valids: list) -> None:
@@ -284,23 +283,29 @@ class Renderer:
         """
         lod = np.log2(np.maximum(self.texels_per_pixel / self.n, 1.0))
         top = math.ceil(min(np.max(lod), math.log2(max(min(self.texture.shape[:2]), 1))))
-        levels, valids = [], []
+        shapes = [self.texture.shape[:2]]
+        for _ in range(top):
+            shapes.append(((shapes[-1][0] + 1) // 2, (shapes[-1][1] + 1) // 2))
+        channels = self.texture.shape[2]
+        sizes = [h * w * channels for h, w in shapes[1:]]
+        # the levels are made in place in one buffer, the kernel's (no copy of them at the peak)
+        mips = np.empty(max(1, sum(sizes)), self.texture.dtype)
+        starts = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        levels = [mips[a:a + n].reshape(h, w, channels) for a, n, (h, w) in zip(starts, sizes, shapes[1:])]
         if top > 0:
             tc = self.flat.mesh.texcoords
             cur, valid = self.texture, _chart_mask(tc[~self._untextured] if self.has_untextured else tc,
                                                    *self.texture.shape[:2])
-            for _ in range(top):
-                cur, valid = _halve_masked(cur, valid)
-                levels.append(cur)
+            valids = []
+            for level in levels:
+                valid = _halve_masked(cur, valid, level)
+                cur = level
                 valids.append(valid)
             _pull_fill(levels, valids)
-        shapes = [self.texture.shape[:2]] + [lv.shape[:2] for lv in levels]
-        sizes = [0] + [lv.size for lv in levels]
         self.mip_levels = top
         self._mip_shapes = np.array(shapes, np.int64).reshape(-1, 2)
-        self._mip_offsets = np.concatenate([[0], np.cumsum(sizes[:-1])]).astype(np.int64)
-        self._mips = (np.concatenate([lv.ravel() for lv in levels]) if levels
-                      else np.zeros(1, self.texture.dtype))
+        self._mip_offsets = np.concatenate([[0], starts[:-1]]).astype(np.int64)
+        self._mips = mips
         self.lod = np.ascontiguousarray(lod)
 
     # -- strips --------------------------------------------------------------------
