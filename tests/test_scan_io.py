@@ -450,6 +450,24 @@ def test_glb_with_a_texture_per_material_is_packed_into_one_atlas(tmp_path):
         assert _sample(atlas, centre) == colours[level[f]], (f, level[f])
 
 
+def test_glb_with_a_corrupt_texture_among_several_is_refused_in_one_line(tmp_path):
+    import trimesh
+    from PIL import Image
+
+    V, F = _grid()
+    Vs, Fs = V[F].reshape(-1, 3), np.arange(3 * len(F)).reshape(-1, 3)
+    parts = [trimesh.Trimesh(Vs + [0.0, 0.0, 3.0 * k], Fs, process=False, visual=trimesh.visual.TextureVisuals(
+        uv=_uv_of(Vs), image=Image.new("RGB", (16, 16), (90 * k, 0, 0)))) for k in range(2)]
+    trimesh.Scene(parts).export(tmp_path / "multi.glb")
+    data = bytearray((tmp_path / "multi.glb").read_bytes())
+    second = data.index(b"\x89PNG", data.index(b"\x89PNG") + 1)
+    data[second + 16:second + 24] = b"\xff" * 8  # the second image's size: past any limit
+    (tmp_path / "multi.glb").write_bytes(bytes(data))
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "multi.glb")
+    _one_line(e, "multi.glb", "texture", "--no-texture")
+
+
 def test_glb_texture_of_a_material_over_the_pixel_limit_is_refused(tmp_path):
     import trimesh
     from PIL import Image

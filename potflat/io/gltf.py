@@ -13,6 +13,7 @@ from potflat.errors import InvalidInputError
 from potflat.io.atomic import atomic_path, write_bytes_atomic
 from potflat.io.raw import (
     _IGNORE_HINT,
+    _check_texture,
     _find_file,
     _flag_untextured,
     _merge_textures,
@@ -84,7 +85,10 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
         raw.texture = images[0]
         return raw
     # several images (a material per texture atlas, as photogrammetry exports a large scan):
-    # each mesh's own, by its material, packed into one atlas
+    # each mesh's own, by its material, packed into one atlas; an image that cannot be read is
+    # refused here (trimesh leaves its material without an image)
+    for image in images:
+        _check_texture(image, path, max_pixels)
     files, names, which = [], [], []
     for g, uv, f in zip(geoms, uvs, faces):
         image = _base_colour_image(g.visual.material) if uv is not None else None
