@@ -117,6 +117,8 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
 #: Largest value of each integer component type of glTF: a ``normalized`` accessor's values
 #: divided by it (signed ones no lower than -1).
 _NORMALIZED = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
+#: File suffix of each image type a glTF embeds.
+_IMAGE_SUFFIXES = {"image/png": ".png", "image/jpeg": ".jpg", "image/webp": ".webp"}
 #: NumPy type of each component type of glTF.
 _COMPONENT_DTYPES = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
 
@@ -133,7 +135,8 @@ def _dequantize(path: Path, doc: dict, scene) -> None:
 
     def normalized(index) -> int | None:
         ok = isinstance(index, int) and not isinstance(index, bool) and 0 <= index < len(accessors)
-        return index if ok and isinstance(accessors[index], dict) and accessors[index].get("normalized") is True else None
+        ok = ok and isinstance(accessors[index], dict) and accessors[index].get("normalized") is True
+        return index if ok else None
 
     primitives = [p for m in doc.get("meshes") or [] if isinstance(m, dict)
                   for p in (m.get("primitives") or []) if isinstance(p, dict)]
@@ -175,10 +178,10 @@ def _gltf_buffers(path: Path, doc: dict) -> list[bytes]:
         uri = buffer.get("uri")
         if uri is None:
             out.append(bin_chunk)
-        elif uri.startswith("data:"):
+        elif isinstance(uri, str) and uri.startswith("data:"):
             out.append(base64.b64decode(uri.split(",", 1)[1]))
         else:
-            out.append(_read_bytes(_find_file(uri, path.parent)))
+            out.append(_read_bytes(_find_file(str(uri), path.parent)))
     return out
 
 
@@ -197,7 +200,8 @@ def _accessor_values(path: Path, doc: dict, buffers: list[bytes], index: int) ->
     start = view.get("byteOffset", 0) + a.get("byteOffset", 0)
     count = a["count"]
     data = buffers[view.get("buffer", 0)]
-    if width == 0 or count == 0 or start + (count - 1) * stride + width * dtype.itemsize > len(data):
+    if (width == 0 or count == 0 or not isinstance(stride, int) or stride < width * dtype.itemsize
+            or start + (count - 1) * stride + width * dtype.itemsize > len(data)):
         raise broken
     values = np.ndarray((count, width), dtype=dtype, buffer=data, offset=start,
                         strides=(stride, dtype.itemsize)).astype(np.float64)
@@ -508,7 +512,7 @@ def _gltf_image_files(path: Path) -> list[Path]:
             start = bv.get("byteOffset", 0)
             blob = bin_chunk[start:start + bv["byteLength"]]
         if blob:
-            ext = {"image/png": ".png", "image/jpeg": ".jpg", "image/webp": ".webp"}.get(img.get("mimeType", ""), ".png")
+            ext = _IMAGE_SUFFIXES.get(img.get("mimeType", ""), ".png")
             target = _texture_cache() / (hashlib.sha256(blob).hexdigest()[:32] + ext)
             if not target.exists():  # the private cache holds only what this process wrote
                 write_bytes_atomic(target, blob)
