@@ -14,7 +14,9 @@ from potflat.io.atomic import atomic_path, write_bytes_atomic
 from potflat.io.raw import (
     _IGNORE_HINT,
     _check_texture,
+    _decoding,
     _find_file,
+    _first_line,
     _flag_untextured,
     _merge_textures,
     _Raw,
@@ -54,7 +56,7 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
                  if isinstance(g, trimesh.Trimesh) and len(g.faces)]
         kinds = [g.visual.kind for g in geoms]
     except Exception as exc:  # noqa: BLE001 - corrupt embedded data: many exception types
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        msg = _first_line(exc)
         raise InvalidInputError(f"{path} cannot be read as {path.suffix[1:].upper()} ({msg[:120]}); "
                                 "export the scan again") from None
     if not geoms:
@@ -248,22 +250,13 @@ def _saved_image(image, source: Path, max_pixels: int) -> Path:
     read) as a PNG file in the private :func:`_texture_cache`, named by its pixels: the same
     image used by several meshes is one file. Its size is checked against ``max_pixels``
     before its pixels are decoded."""
-    from PIL import Image
-
     w, h = image.size
     if w <= 0 or h <= 0 or w * h > max_pixels:
         raise InvalidInputError(f"{source}: a texture image declares {w} x {h} pixels, over the limit of {max_pixels} "
                                 f"(a corrupt file or decompression bomb); restore a sane image {_IGNORE_HINT}")
-    old = Image.MAX_IMAGE_PIXELS
-    try:
-        Image.MAX_IMAGE_PIXELS = None  # (checked above)
+    with _decoding(lambda why: f"{source}: a texture image cannot be decoded ({why}); export the scan again "
+                               f"{_IGNORE_HINT}"):
         pixels = image.convert("RGBA" if "A" in image.getbands() else "RGB")
-    except Exception as exc:  # noqa: BLE001 - Pillow raises many types for corrupt images
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise InvalidInputError(f"{source}: a texture image cannot be decoded ({msg}); export the scan again "
-                                f"{_IGNORE_HINT}") from None
-    finally:
-        Image.MAX_IMAGE_PIXELS = old
     digest = hashlib.sha256(f"{pixels.mode} {w} {h} ".encode() + pixels.tobytes()).hexdigest()[:32]
     target = _texture_cache() / f"{digest}.png"
     if not target.exists():  # the private cache holds only what this process wrote

@@ -6,6 +6,8 @@ import hashlib
 import json
 import tempfile
 import warnings as _warnings
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -154,6 +156,32 @@ def _find_file(name: str, *dirs: Path) -> Path:
     return tried[0]
 
 
+def _first_line(exc: BaseException) -> str:
+    """What a reader's exception says, in one line (its type when it says nothing): the
+    libraries potflat reads with raise many types, with messages of any length."""
+    text = str(exc)
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+@contextmanager
+def _decoding(failure: Callable[[str], str]) -> Iterator[None]:
+    """Decode images with Pillow without its own pixel limit (the caller has checked its
+    limit), what Pillow raises for a corrupt image turned into :class:`InvalidInputError`
+    with the message ``failure(reason)``."""
+    from PIL import Image
+
+    old = Image.MAX_IMAGE_PIXELS
+    Image.MAX_IMAGE_PIXELS = None
+    try:
+        yield
+    except InvalidInputError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - Pillow raises many types for corrupt images
+        raise InvalidInputError(failure(_first_line(exc))) from None
+    finally:
+        Image.MAX_IMAGE_PIXELS = old
+
+
 def _flag_untextured(raw: _Raw, untextured: np.ndarray, why: str) -> None:
     """Record the faces ``untextured`` ((m,) bool) of a textured scan that have no texture
     coordinates (their coordinates are zeros that mean nothing), with the load warning."""
@@ -227,10 +255,9 @@ def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source
                                 f"the limit of {max_pixels} pixels; re-export with one texture {_IGNORE_HINT}")
     key = json.dumps([[str(p), p.stat().st_size, p.stat().st_mtime_ns] for p in paths]).encode()
     target = _texture_cache() / (hashlib.sha256(key).hexdigest()[:32] + ".png")
-    if not target.exists():
-        old = Image.MAX_IMAGE_PIXELS
-        try:
-            Image.MAX_IMAGE_PIXELS = None  # sizes were checked against max_pixels above
+    if not target.exists():  # (sizes were checked against max_pixels above)
+        with _decoding(lambda why: f"{source}: its texture images cannot be decoded ({why}); restore them "
+                                   f"{_IGNORE_HINT}"):
             modes = []
             for p in paths:
                 with Image.open(p) as im:
@@ -243,14 +270,6 @@ def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source
                     atlas.paste(im.convert(mode), (c * cw, r * ch))
             with atomic_path(target) as tmp:
                 atlas.save(tmp, format="PNG", compress_level=1)
-        except InvalidInputError:
-            raise
-        except Exception as exc:  # noqa: BLE001 - Pillow raises many types for corrupt images
-            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            raise InvalidInputError(f"{source}: its texture images cannot be decoded ({msg}); restore them "
-                                    f"{_IGNORE_HINT}") from None
-        finally:
-            Image.MAX_IMAGE_PIXELS = old
     out = uv.copy()
     sel = which >= 0
     k = which[sel]
@@ -302,7 +321,7 @@ def _check_texture(tex: Path, source: Path, max_pixels: int) -> tuple[Path, tupl
     except InvalidInputError:
         raise
     except Exception as exc:  # noqa: BLE001 - Pillow raises many types for corrupt images
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        msg = _first_line(exc)
         raise InvalidInputError(f"{source}: texture {tex.name} is not a readable image ({msg}); "
                                 f"restore the file {_IGNORE_HINT}") from None
     finally:

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from potflat.errors import InvalidInputError, out_of_memory
-from potflat.io.raw import _check_fits_memory, _Raw, _truncated
+from potflat.io.raw import _check_fits_memory, _first_line, _Raw, _truncated
 from potflat.types import canonical_units
 
 
@@ -26,7 +26,7 @@ def _trimesh_load(path: Path, **kwargs):
     except MemoryError:
         raise out_of_memory(path) from None
     except Exception as exc:  # noqa: BLE001 - trimesh raises many types for corrupt files
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        msg = _first_line(exc)
         raise InvalidInputError(f"{path} cannot be read as {path.suffix[1:].upper()} ({msg[:120]}); "
                                 "export the scan again") from None
 
