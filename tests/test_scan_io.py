@@ -583,6 +583,27 @@ def test_quantized_glb_that_cannot_be_read_is_refused_in_one_line(tmp_path, edit
     _one_line(e, "q.glb", *needles)
 
 
+@pytest.mark.parametrize("seed, edit, needles", [
+    ("quantized", lambda d: d["accessors"][0].update(componentType=[1]), ["accessor 0", "corrupt"]),
+    ("quantized", lambda d: d.update(scenes=1.5), ["cannot be read as GLB"]),
+    ("quantized", lambda d: d["accessors"][1].update(type="VEC3"), ["accessor 1", "corrupt"]),
+    ("plain", lambda d: d["accessors"][1].update(type="VEC2"), ["positions are not 3D points"]),
+], ids=["component-type-a-list", "scenes-a-number", "texture-coordinates-3d", "positions-2d"])
+def test_gltf_values_of_the_wrong_type_are_refused_in_one_line(tmp_path, seed, edit, needles):
+    """Values where glTF has another type (from a hostile or broken exporter) give one line,
+    not a Python error."""
+    from PIL import Image
+
+    if seed == "quantized":
+        _quantized_glb(tmp_path / "h.glb", transform=True)
+    else:  # (its accessor 1: the positions)
+        _glb_of_materials(tmp_path / "h.glb", [Image.new("RGB", (8, 8), (1, 2, 3))])
+    _edit_glb(tmp_path / "h.glb", edit)
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "h.glb")
+    _one_line(e, "h.glb", *needles)
+
+
 @pytest.mark.parametrize("extension, needles", [
     ("EXT_meshopt_compression", ["EXT_meshopt_compression", "cannot decode", "Draco"]),
     ("KHR_texture_basisu", ["KTX2", "PNG or JPEG", "--no-texture"]),
@@ -1082,6 +1103,62 @@ def test_fuzz_loaders_never_crash(tmp_path_factory):
         path.write_bytes(bytes(data))
         try:
             load_scan(path)
+        except PotflatError as exc:
+            assert "\n" not in str(exc)
+
+    run()
+
+
+@pytest.mark.fuzz
+def test_fuzz_gltf_values_never_crash(tmp_path_factory):
+    """Values of any JSON type put anywhere in a quantized GLB and a GLB with a texture per
+    material: load_scan succeeds or raises a PotflatError of one line."""
+    import copy
+    import json
+
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+    from PIL import Image
+
+    from potflat.errors import PotflatError
+
+    tmp = tmp_path_factory.mktemp("fuzz_gltf")
+    _quantized_glb(tmp / "q.glb", transform=True)
+    _glb_of_materials(tmp / "m.glb", [Image.new("RGB", (16, 8), (200, 30, 20)), Image.new("RGB", (8, 8), (9, 9, 9)),
+                                      None])
+    seeds = {}
+    for name in ("q.glb", "m.glb"):
+        data = (tmp / name).read_bytes()
+        (length,) = struct.unpack_from("<I", data, 12)
+        seeds[name] = (json.loads(data[20:20 + length]), data[28 + length:])
+
+    def places(node, at=()):
+        if at:
+            yield at
+        items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
+        for key, value in items:
+            yield from places(value, at + (key,))
+
+    values = st.sampled_from([None, -1, 0, 1, 3, 0.5, 2 ** 40, float("inf"), "x", "VEC2", True, [], {}, [1, 2],
+                              ["a"], {"a": 1}, 5120, 5126])
+
+    @settings(max_examples=int(os.environ.get("POTFLAT_FUZZ_EXAMPLES", "300")), deadline=None,
+              derandomize="POTFLAT_FUZZ_RANDOM" not in os.environ)
+    @given(st.sampled_from(sorted(seeds)), st.lists(st.tuples(st.floats(0, 1), values), min_size=1, max_size=3))
+    def run(name, edits):
+        doc, blob = json.loads(json.dumps(seeds[name][0])), seeds[name][1]
+        for where, value in edits:
+            at = list(places(doc))
+            if not at:
+                break
+            *parents, key = at[int(where * (len(at) - 1))]
+            node = doc
+            for parent in parents:
+                node = node[parent]
+            node[key] = copy.deepcopy(value)  # (a list or object put twice would hold itself)
+        _write_glb(tmp / "case.glb", doc, blob)
+        try:
+            load_scan(tmp / "case.glb")
         except PotflatError as exc:
             assert "\n" not in str(exc)
 

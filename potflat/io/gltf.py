@@ -65,10 +65,13 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
     for g, kind in zip(geoms, kinds):
         if np.asarray(g.faces).min() < 0 or np.asarray(g.faces).max() >= len(g.vertices):
             raise InvalidInputError(f"{path}: faces point at missing vertices; the file is corrupt: export it again")
+        if np.asarray(g.vertices).ndim != 2 or np.asarray(g.vertices).shape[1] != 3:
+            raise InvalidInputError(f"{path}: its positions are not 3D points; the file is corrupt: export it again")
         verts.append(np.asarray(g.vertices, np.float64))
         faces.append(np.asarray(g.faces, np.int64) + offset)
         uv = getattr(g.visual, "uv", None) if kind == "texture" else None
-        uvs.append(None if uv is None or len(uv) != len(g.vertices) else np.asarray(uv, np.float64)[g.faces])
+        uv = None if uv is None else np.asarray(uv, np.float64)
+        uvs.append(None if uv is None or uv.shape != (len(g.vertices), 2) else uv[g.faces])
         offset += len(g.vertices)
     raw = _Raw(vertices=np.concatenate(verts), faces=np.concatenate(faces), units="m")
     if all(kind == "vertex" for kind in kinds):
@@ -140,14 +143,15 @@ def _dequantize(path: Path, doc: dict, scene) -> None:
         ok = ok and isinstance(accessors[index], dict) and accessors[index].get("normalized") is True
         return index if ok else None
 
-    primitives = [p for m in doc.get("meshes") or [] if isinstance(m, dict)
-                  for p in (m.get("primitives") or []) if isinstance(p, dict)]
+    meshes, materials = (doc.get(key) if isinstance(doc.get(key), list) else [] for key in ("meshes", "materials"))
+    primitives = [p for m in meshes if isinstance(m, dict)
+                  for p in (m.get("primitives") if isinstance(m.get("primitives"), list) else []) if isinstance(p, dict)]
     jobs = []
     for p in primitives:
         attributes = p.get("attributes") if isinstance(p.get("attributes"), dict) else {}
         jobs.append((attributes.get("POSITION"), normalized(attributes.get("POSITION")),
                      normalized(attributes.get("TEXCOORD_0")),
-                     _texture_transform(path, doc.get("materials") or [], p.get("material"))))
+                     _texture_transform(path, materials, p.get("material"))))
     if all(pos is None and tex is None and move is None for _, pos, tex, move in jobs):
         return
     geoms = list(scene.geometry.values())
@@ -160,11 +164,13 @@ def _dequantize(path: Path, doc: dict, scene) -> None:
     buffers = _gltf_buffers(path, doc) if any(pos is not None or tex is not None for _, pos, tex, _ in jobs) else []
     for g, (_, pos, tex, move) in zip(geoms, jobs):
         if pos is not None:
-            g.vertices = _accessor_values(path, doc, buffers, pos)
+            g.vertices = _accessor_values(path, doc, buffers, pos, width=3)
         uv = getattr(g.visual, "uv", None)
         if uv is not None and (tex is not None or move is not None):
             # glTF's texture coordinates (v down; trimesh turns v up)
-            flat = (_accessor_values(path, doc, buffers, tex) if tex is not None
+            if tex is None and np.shape(uv)[1:] != (2,):
+                continue  # (not texture coordinates: the mesh is read untextured)
+            flat = (_accessor_values(path, doc, buffers, tex, width=2) if tex is not None
                     else np.column_stack([uv[:, 0], 1.0 - uv[:, 1]]))
             if move is not None:
                 flat = flat @ move[:, :2].T + move[:, 2]
@@ -187,28 +193,29 @@ def _gltf_buffers(path: Path, doc: dict) -> list[bytes]:
     return out
 
 
-def _accessor_values(path: Path, doc: dict, buffers: list[bytes], index: int) -> np.ndarray:
-    """The values of accessor ``index`` as (count, components) float64, ``normalized``
-    integers divided to [-1, 1] or [0, 1]."""
+def _accessor_values(path: Path, doc: dict, buffers: list[bytes], index: int, *, width: int) -> np.ndarray:
+    """The values of accessor ``index``, of ``width`` components, as (count, width) float64,
+    ``normalized`` integers divided to [-1, 1] or [0, 1]."""
     a = doc["accessors"][index]
-    broken = InvalidInputError(f"{path}: accessor {index} cannot be read (sparse, compressed or past its data); "
-                               "export the scan without quantization")
-    if "sparse" in a or "bufferView" not in a or a.get("componentType") not in _COMPONENT_DTYPES:
+    broken = InvalidInputError(f"{path}: accessor {index} cannot be read (sparse, compressed, of another type or "
+                               "past its data); export the scan without quantization")
+    kind = a.get("componentType")
+    if ("sparse" in a or "bufferView" not in a or not isinstance(kind, int) or kind not in _COMPONENT_DTYPES
+            or a.get("type") != ("VEC3" if width == 3 else "VEC2")):
         raise broken
     view = doc["bufferViews"][a["bufferView"]]
-    dtype = np.dtype(_COMPONENT_DTYPES[a["componentType"]])
-    width = _TYPE_COMPONENTS.get(a.get("type"), 0)
+    dtype = np.dtype(_COMPONENT_DTYPES[kind])
     stride = view.get("byteStride") or width * dtype.itemsize
     start = view.get("byteOffset", 0) + a.get("byteOffset", 0)
     count = a["count"]
     data = buffers[view.get("buffer", 0)]
-    if (width == 0 or count == 0 or not isinstance(stride, int) or stride < width * dtype.itemsize
+    if (count == 0 or not isinstance(stride, int) or stride < width * dtype.itemsize
             or start + (count - 1) * stride + width * dtype.itemsize > len(data)):
         raise broken
     values = np.ndarray((count, width), dtype=dtype, buffer=data, offset=start,
                         strides=(stride, dtype.itemsize)).astype(np.float64)
-    if a.get("normalized") is True and a["componentType"] in _NORMALIZED:
-        values = np.maximum(values / _NORMALIZED[a["componentType"]], -1.0)
+    if a.get("normalized") is True and kind in _NORMALIZED:
+        values = np.maximum(values / _NORMALIZED[kind], -1.0)
     return values
 
 
@@ -221,7 +228,8 @@ def _texture_transform(path: Path, materials: list, index) -> np.ndarray | None:
     refs = [(material.get("pbrMetallicRoughness") or {}).get("baseColorTexture"),
             ((material.get("extensions") or {}).get("KHR_materials_pbrSpecularGlossiness") or {}).get("diffuseTexture")]
     for ref in refs:
-        move = ((ref.get("extensions") or {}).get("KHR_texture_transform") if isinstance(ref, dict) else None)
+        extensions = ref.get("extensions") if isinstance(ref, dict) else None
+        move = extensions.get("KHR_texture_transform") if isinstance(extensions, dict) else None
         if not isinstance(move, dict):
             continue
         try:
@@ -377,8 +385,9 @@ def _check_gltf_sizes(path: Path, doc: dict, bin_length: int) -> None:
         views.append(length)
     for k, accessor in enumerate(items("accessors")):
         count = number(accessor, "count")
-        element = (_COMPONENT_BYTES.get(accessor.get("componentType"), 4)
-                   * _TYPE_COMPONENTS.get(accessor.get("type"), 16))
+        kind, width = accessor.get("componentType"), accessor.get("type")
+        element = (_COMPONENT_BYTES.get(kind, 4) if isinstance(kind, int) else 4) * (
+            _TYPE_COMPONENTS.get(width, 16) if isinstance(width, str) else 16)
         if "bufferView" in accessor:
             view = number(accessor, "bufferView")
             if view >= len(views) or number(accessor, "byteOffset", 0) + count * element > views[view]:
@@ -416,7 +425,8 @@ def _check_gltf_nodes(path: Path, doc: dict) -> None:
                                         "nodes are no tree of objects; the file is corrupt: export the scan again")
             seen.add(at)
             at = parent[at]
-    for scene in doc.get("scenes") or []:
+    scenes = doc.get("scenes")
+    for scene in scenes if isinstance(scenes, list) else []:
         roots = scene.get("nodes") or [] if isinstance(scene, dict) else []
         listed = [r for r in roots if isinstance(r, int) and r in parent] if isinstance(roots, list) else []
         if listed:
