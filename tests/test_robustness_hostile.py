@@ -701,7 +701,7 @@ def test_large_trims_and_poor_axis_fits_are_warned_with_the_option():
     result = SimpleNamespace(landmark_notes=(), region=SimpleNamespace(repeated_from=None),
                              distortion=SimpleNamespace(flipped=0), boundary_overlap=0, folds=None,
                              other_objects_faces=0, disk_cut_faces=np.zeros(0, np.int64),
-                             walls=SimpleNamespace(side="outer", outer_area=50.0, inner_area=0.0),
+                             walls=SimpleNamespace(side="outer", outer_area=50.0, inner_area=0.0, apart_area=0.0),
                              trimmed_area=20.0, flat=flat, proxy=SimpleNamespace(kind="cylinder"),
                              axis=SimpleNamespace(misfit_angle_deg=3.2, direction=np.array([0.0, 1.0, 0.0])))
     notes = " ".join(_notes(result))
@@ -722,6 +722,29 @@ def test_a_foot_unrolled_into_a_flange_is_warned_with_the_option():
     assert any("faces along the axis" in note and "--band" in note for note in _notes(kylix))
     hydria = rollout(make_vessel("hydria", n_vertices=4000, seed=1).mesh, importance="none")
     assert not any("faces along the axis" in note for note in _notes(hydria))
+
+
+def test_a_lid_scanned_with_the_vessel_is_left_out_with_a_note():
+    """A lid (or a stand) scanned with the vessel is a piece apart from its wall: left out of
+    the image, and the rollout says how much and what to do."""
+    import trimesh
+    from potflat_synthetic.vessels import make_vessel
+
+    from potflat.rollout import rollout
+    from potflat.rollout.notes import rollout_notes as _notes
+    from potflat.types import Mesh
+
+    jar = make_vessel("hydria", n_vertices=4000, seed=1, pose=False).mesh
+    top = jar.vertices[:, 2].max()
+    dome = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    lid = dome.vertices * [110.0, 110.0, 48.0] + [*jar.vertices[:, :2].mean(axis=0), top + 24.0]
+    with_lid = Mesh(np.vstack([jar.vertices, lid]), np.vstack([jar.faces, dome.faces + len(jar.vertices)]))
+    result = rollout(with_lid, importance="none")
+    apart = [n for n in _notes(result) if "pieces apart from the vessel's wall" in n]
+    assert len(apart) == 1 and "split the file" in apart[0], _notes(result)
+    lid_area = trimesh.Trimesh(lid, dome.faces, process=False).area
+    assert 0.05 * result.walls.outer_area < result.walls.apart_area <= lid_area  # (its faces facing away from the axis)
+    assert not any("pieces apart" in n for n in _notes(rollout(jar, importance="none")))
 
 
 def test_compile_note_on_a_first_run(tmp_path, monkeypatch):

@@ -25,6 +25,11 @@ WARN_SIDE_FRACTION = 0.2
 WARN_AXIS_MISFIT_DEG = 1.5
 
 
+#: Warn when more than this share of the unrolled side's area lies in pieces apart from the
+#: vessel's wall (a lid, a stand or turntable, a fragment scanned with it), left out.
+WARN_APART_FRACTION = 0.05
+
+
 #: Warn when more than this share of the unrolled area faces along the axis (normal within
 #: :data:`FLANGE_ANGLE_DEG` of it: a foot's top, a base, a flat shoulder): a cylinder, cone or
 #: sphere develops such a ring into a wide, lobed flange.
@@ -66,6 +71,11 @@ def rollout_notes(result) -> list[str]:
     if result.boundary_overlap:
         notes.append(f"the border overlaps itself at {result.boundary_overlap} places; the relax stage unfolds it "
                      "(and refuses a result that still overlaps)")
+    own = walls.outer_area if walls.side == "outer" else walls.inner_area
+    if own > 0 and walls.apart_area > WARN_APART_FRACTION * own:
+        notes.append(f"{100 * walls.apart_area / own:.0f} % of the {walls.side} surface lies in pieces apart from the "
+                     "vessel's wall (a lid, a stand or turntable, a fragment scanned with it) and is left out of the "
+                     "image; if such a piece is painted, unroll it on its own (split the file)")
     if result.other_objects_faces:
         notes.append(f"{result.other_objects_faces} faces of separate objects that do not share the vessel's axis "
                      "(another vessel or fragment in the same file) were left out; split the file or give --axis")

@@ -471,6 +471,9 @@ class WallSelection:
         Faces in ``face_mask``.
     n_dropped : int
         Faces of the chosen side left out: excluded, or not connected to its largest region.
+    apart_area : float
+        Area of the chosen side's faces, not excluded, apart from its largest region (other
+        pieces: a lid, a stand, a fragment scanned with the vessel), scan units squared.
     rim_faces : (k,) int64
         Selected faces that share an edge with the other wall (the split line).
     two_walled : bool
@@ -490,6 +493,7 @@ class WallSelection:
     inner_area: float
     n_selected: int
     n_dropped: int
+    apart_area: float
     rim_faces: np.ndarray
     two_walled: bool
     normals_inverted: bool
@@ -504,6 +508,7 @@ class WallSelection:
             "faces_inner": self.n_inner,
             "faces_selected": self.n_selected,
             "faces_dropped_disconnected": self.n_dropped,
+            "area_apart": self.apart_area,
             "rim_faces": len(self.rim_faces),
             "normals_inverted": self.normals_inverted,
             "method": self.method,
@@ -601,6 +606,7 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         inner_area=inner_area,
         n_selected=int(mask.sum()),
         n_dropped=int(chosen.sum() - mask.sum()),
+        apart_area=float(fr.area[candidates & ~mask].sum()),
         rim_faces=rim.astype(np.int64),
         two_walled=bool(two_walled),
         normals_inverted=bool(inverted),
