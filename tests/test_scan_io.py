@@ -457,6 +457,28 @@ def test_glb_with_a_texture_per_material_is_packed_into_one_atlas(tmp_path):
         assert _sample(atlas, centre) == colours[level[f]], (f, level[f])
 
 
+def test_glb_with_specular_glossiness_materials_packs_their_diffuse_images(tmp_path):
+    """Materials of the older specular-glossiness kind (KHR_materials_pbrSpecularGlossiness, as
+    older Sketchfab exports have them), one image each: each mesh samples its diffuse image as
+    the file holds it (trimesh's conversion to a base colour made them white)."""
+    from PIL import Image
+
+    colours = [(200, 10, 10), (10, 10, 200)]
+    _glb_of_materials(tmp_path / "sg.glb", [Image.new("RGB", (8, 8), c) for c in colours])
+
+    def to_gloss(doc):
+        for material in doc["materials"]:
+            texture = material.pop("pbrMetallicRoughness")["baseColorTexture"]
+            material["extensions"] = {"KHR_materials_pbrSpecularGlossiness": {"diffuseTexture": texture}}
+
+    _edit_glb(tmp_path / "sg.glb", to_gloss)
+    mesh = load_scan(tmp_path / "sg.glb").mesh
+    atlas = Image.open(mesh.texture_path).convert("RGB")
+    level = (mesh.vertices[mesh.faces].mean(axis=1)[:, 2] // 3.0).astype(int)
+    for f in range(len(mesh.faces)):
+        assert _sample(atlas, mesh.texcoords[f].mean(axis=0)) == colours[level[f]], (f, level[f])
+
+
 def test_glb_with_a_corrupt_texture_among_several_is_refused_in_one_line(tmp_path):
     from PIL import Image
 

@@ -10,11 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from potflat.errors import InvalidInputError
-from potflat.io.atomic import atomic_path, write_bytes_atomic
+from potflat.io.atomic import write_bytes_atomic
 from potflat.io.raw import (
     _IGNORE_HINT,
-    _check_texture,
-    _decoding,
     _find_file,
     _first_line,
     _flag_untextured,
@@ -87,24 +85,25 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
                                         for u, f in zip(uvs, faces)])
         _flag_untextured(raw, np.concatenate([np.full(len(f), u is None) for u, f in zip(uvs, faces)]),
                          "(meshes without TEXCOORD_0) have no texture coordinates")
-        raw.texture = images[0]
+        raw.texture = next(iter(images.values()))
         return raw
     # several images (a material per texture atlas, as photogrammetry exports a large scan):
-    # each mesh's own, by its material, packed into one atlas; an image that cannot be read is
-    # refused here (trimesh leaves its material without an image)
-    for image in images:
-        _check_texture(image, path, max_pixels)
+    # each mesh's own, by its primitive's material, as the file holds it, packed into one atlas
+    primitives = _primitives(doc)
+    if not _matched(doc, scene, primitives):
+        raise InvalidInputError(f"{path}: its meshes cannot be matched to the materials of its {len(images)} "
+                                f"texture images; re-export the scan with one texture {_IGNORE_HINT}")
+    primitive_of = {name: primitives[k] for k, name in enumerate(scene.geometry)}
+    materials = doc.get("materials") if isinstance(doc.get("materials"), list) else []
     files, names, which = [], [], []
     for g, uv, f in zip(geoms, uvs, faces):
-        image = _base_colour_image(g.visual.material) if uv is not None else None
-        k = -1
-        if image is not None:
-            saved = _saved_image(image, path, max_pixels)
-            if saved not in files:
-                files.append(saved)
-                names.append(f"material {getattr(g.visual.material, 'name', None) or len(files)}")
-            k = files.index(saved)
-        which.append(np.full(len(f), k, np.int64))
+        material = (primitive_of.get(g.metadata.get("name")) or {}).get("material")
+        image = images.get(_material_image(doc, material)) if uv is not None else None
+        if image is not None and image not in files:
+            files.append(image)
+            named = materials[material].get("name") if isinstance(materials[material], dict) else None
+            names.append(f"material {named if isinstance(named, str) and named else material}")
+        which.append(np.full(len(f), files.index(image) if image is not None else -1, np.int64))
     which = np.concatenate(which)
     uv = np.concatenate([u if u is not None else np.zeros((len(f), 3, 2)) for u, f in zip(uvs, faces)])
     if not files:
@@ -117,6 +116,59 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
         raw.warnings.append(note)
     _flag_untextured(raw, which < 0, "(meshes without TEXCOORD_0 or a base-colour texture) have no texture")
     return raw
+
+
+def _primitives(doc: dict) -> list[dict]:
+    """The primitives of a glTF's meshes, in the document's order (trimesh's order of meshes)."""
+    meshes = doc.get("meshes") if isinstance(doc.get("meshes"), list) else []
+    return [p for m in meshes if isinstance(m, dict)
+            for p in (m.get("primitives") if isinstance(m.get("primitives"), list) else []) if isinstance(p, dict)]
+
+
+def _matched(doc: dict, scene, primitives: list[dict]) -> bool:
+    """Whether trimesh's meshes of ``scene`` are ``primitives`` one by one, in order: as many,
+    each with its primitive's POSITION count of vertices."""
+    accessors = doc.get("accessors") if isinstance(doc.get("accessors"), list) else []
+    geoms = list(scene.geometry.values())
+    if len(geoms) != len(primitives):
+        return False
+    for g, p in zip(geoms, primitives):
+        k = (p.get("attributes") if isinstance(p.get("attributes"), dict) else {}).get("POSITION")
+        ok = isinstance(k, int) and not isinstance(k, bool) and 0 <= k < len(accessors)
+        if not ok or not isinstance(accessors[k], dict) or len(getattr(g, "vertices", ())) != accessors[k].get("count"):
+            return False
+    return True
+
+
+def _base_colour_ref(doc: dict, material) -> dict | None:
+    """The base-colour texture reference (``{"index": ...}``) of material index ``material``:
+    its metallic-roughness base colour, or the specular-glossiness diffuse texture."""
+    materials = doc.get("materials") if isinstance(doc.get("materials"), list) else []
+    ok = isinstance(material, int) and not isinstance(material, bool) and 0 <= material < len(materials)
+    m = materials[material] if ok and isinstance(materials[material], dict) else {}
+    pbr = m.get("pbrMetallicRoughness") if isinstance(m.get("pbrMetallicRoughness"), dict) else {}
+    extensions = m.get("extensions") if isinstance(m.get("extensions"), dict) else {}
+    gloss = extensions.get("KHR_materials_pbrSpecularGlossiness")
+    for ref in (pbr.get("baseColorTexture"), gloss.get("diffuseTexture") if isinstance(gloss, dict) else None):
+        if isinstance(ref, dict):
+            return ref
+    return None
+
+
+def _material_image(doc: dict, material) -> int | None:
+    """The image index of material index ``material``'s base-colour texture (its source, or its
+    EXT_texture_webp source), or None."""
+    ref = _base_colour_ref(doc, material)
+    textures = doc.get("textures") if isinstance(doc.get("textures"), list) else []
+    index = ref.get("index") if ref is not None else None
+    ok = isinstance(index, int) and not isinstance(index, bool) and 0 <= index < len(textures)
+    texture = textures[index] if ok and isinstance(textures[index], dict) else {}
+    source = texture.get("source")
+    if source is None:  # a WebP image (with no PNG or JPEG fallback)
+        extensions = texture.get("extensions") if isinstance(texture.get("extensions"), dict) else {}
+        webp = extensions.get("EXT_texture_webp")
+        source = webp.get("source") if isinstance(webp, dict) else None
+    return source if isinstance(source, int) and not isinstance(source, bool) else None
 
 
 #: Largest value of each integer component type of glTF: a ``normalized`` accessor's values
@@ -143,26 +195,20 @@ def _dequantize(path: Path, doc: dict, scene) -> None:
         ok = ok and isinstance(accessors[index], dict) and accessors[index].get("normalized") is True
         return index if ok else None
 
-    meshes, materials = (doc.get(key) if isinstance(doc.get(key), list) else [] for key in ("meshes", "materials"))
-    primitives = [p for m in meshes if isinstance(m, dict)
-                  for p in (m.get("primitives") if isinstance(m.get("primitives"), list) else []) if isinstance(p, dict)]
+    primitives = _primitives(doc)
     jobs = []
     for p in primitives:
         attributes = p.get("attributes") if isinstance(p.get("attributes"), dict) else {}
-        jobs.append((attributes.get("POSITION"), normalized(attributes.get("POSITION")),
-                     normalized(attributes.get("TEXCOORD_0")),
-                     _texture_transform(path, materials, p.get("material"))))
-    if all(pos is None and tex is None and move is None for _, pos, tex, move in jobs):
+        jobs.append((normalized(attributes.get("POSITION")), normalized(attributes.get("TEXCOORD_0")),
+                     _texture_transform(path, doc, p.get("material"))))
+    if all(pos is None and tex is None and move is None for pos, tex, move in jobs):
         return
-    geoms = list(scene.geometry.values())
-    counts = [accessors[k].get("count") if isinstance(k, int) and 0 <= k < len(accessors) else None
-              for k, *_ in jobs]
-    if len(geoms) != len(jobs) or any(len(getattr(g, "vertices", ())) != c for g, c in zip(geoms, counts)):
+    if not _matched(doc, scene, primitives):
         raise InvalidInputError(f"{path}: its quantized meshes (KHR_mesh_quantization) or texture transforms "
                                 "(KHR_texture_transform) cannot be matched to the meshes read; export the scan "
                                 "without quantization")
-    buffers = _gltf_buffers(path, doc) if any(pos is not None or tex is not None for _, pos, tex, _ in jobs) else []
-    for g, (_, pos, tex, move) in zip(geoms, jobs):
+    buffers = _gltf_buffers(path, doc) if any(pos is not None or tex is not None for pos, tex, _ in jobs) else []
+    for g, (pos, tex, move) in zip(scene.geometry.values(), jobs):
         if pos is not None:
             g.vertices = _accessor_values(path, doc, buffers, pos, width=3)
         uv = getattr(g.visual, "uv", None)
@@ -219,58 +265,27 @@ def _accessor_values(path: Path, doc: dict, buffers: list[bytes], index: int, *,
     return values
 
 
-def _texture_transform(path: Path, materials: list, index) -> np.ndarray | None:
-    """The KHR_texture_transform of material ``index``'s base-colour texture as a (2, 3)
-    affine map of glTF texture coordinates (translation, rotation, scale, in that order of
-    the extension), or None without one."""
-    ok = isinstance(index, int) and not isinstance(index, bool) and 0 <= index < len(materials)
-    material = materials[index] if ok and isinstance(materials[index], dict) else {}
-    refs = [(material.get("pbrMetallicRoughness") or {}).get("baseColorTexture"),
-            ((material.get("extensions") or {}).get("KHR_materials_pbrSpecularGlossiness") or {}).get("diffuseTexture")]
-    for ref in refs:
-        extensions = ref.get("extensions") if isinstance(ref, dict) else None
-        move = extensions.get("KHR_texture_transform") if isinstance(extensions, dict) else None
-        if not isinstance(move, dict):
-            continue
-        try:
-            ox, oy = (float(x) for x in move.get("offset", (0.0, 0.0)))
-            sx, sy = (float(x) for x in move.get("scale", (1.0, 1.0)))
-            angle = float(move.get("rotation", 0.0))
-        except (TypeError, ValueError):
-            raise InvalidInputError(f"{path}: a texture transform (KHR_texture_transform) is not numbers; the file "
-                                    "is corrupt: export the scan again") from None
-        if not np.isfinite([ox, oy, sx, sy, angle]).all():
-            raise InvalidInputError(f"{path}: a texture transform (KHR_texture_transform) is not finite; the file "
-                                    "is corrupt: export the scan again")
-        c, s = np.cos(angle), np.sin(angle)
-        return np.array([[c * sx, s * sy, ox], [-s * sx, c * sy, oy]])
-    return None
-
-
-def _base_colour_image(material):
-    """The base-colour image (a Pillow image) of a mesh's trimesh material, or None."""
-    image = getattr(material, "baseColorTexture", None)
-    return image if image is not None else getattr(material, "image", None)
-
-
-def _saved_image(image, source: Path, max_pixels: int) -> Path:
-    """A texture image that loading ``source`` decoded (a Pillow image, its pixels not yet
-    read) as a PNG file in the private :func:`_texture_cache`, named by its pixels: the same
-    image used by several meshes is one file. Its size is checked against ``max_pixels``
-    before its pixels are decoded."""
-    w, h = image.size
-    if w <= 0 or h <= 0 or w * h > max_pixels:
-        raise InvalidInputError(f"{source}: a texture image declares {w} x {h} pixels, over the limit of {max_pixels} "
-                                f"(a corrupt file or decompression bomb); restore a sane image {_IGNORE_HINT}")
-    with _decoding(lambda why: f"{source}: a texture image cannot be decoded ({why}); export the scan again "
-                               f"{_IGNORE_HINT}"):
-        pixels = image.convert("RGBA" if "A" in image.getbands() else "RGB")
-    digest = hashlib.sha256(f"{pixels.mode} {w} {h} ".encode() + pixels.tobytes()).hexdigest()[:32]
-    target = _texture_cache() / f"{digest}.png"
-    if not target.exists():  # the private cache holds only what this process wrote
-        with atomic_path(target) as tmp:
-            pixels.save(tmp, format="PNG", compress_level=1)
-    return target
+def _texture_transform(path: Path, doc: dict, material) -> np.ndarray | None:
+    """The KHR_texture_transform of material index ``material``'s base-colour texture as a
+    (2, 3) affine map of glTF texture coordinates (translation, rotation, scale, in that order
+    of the extension), or None without one."""
+    ref = _base_colour_ref(doc, material)
+    extensions = ref.get("extensions") if ref is not None else None
+    move = extensions.get("KHR_texture_transform") if isinstance(extensions, dict) else None
+    if not isinstance(move, dict):
+        return None
+    try:
+        ox, oy = (float(x) for x in move.get("offset", (0.0, 0.0)))
+        sx, sy = (float(x) for x in move.get("scale", (1.0, 1.0)))
+        angle = float(move.get("rotation", 0.0))
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"{path}: a texture transform (KHR_texture_transform) is not numbers; the file "
+                                "is corrupt: export the scan again") from None
+    if not np.isfinite([ox, oy, sx, sy, angle]).all():
+        raise InvalidInputError(f"{path}: a texture transform (KHR_texture_transform) is not finite; the file "
+                                "is corrupt: export the scan again")
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c * sx, s * sy, ox], [-s * sx, c * sy, oy]])
 
 
 #: Most data a glTF may embed as base64 text (``data:`` URIs), decoded: decoding takes about five
@@ -448,9 +463,10 @@ def _gltf_inputs(path: Path) -> list[Path]:
     return [p for p in found if p.is_file()]
 
 
-def _gltf_images(path: Path) -> list[Path]:
-    """Base-colour texture images of a glTF/GLB as files: external ones as they are, embedded ones
-    extracted (content-addressed, atomically) into the private :func:`_texture_cache`."""
+def _gltf_images(path: Path) -> dict[int, Path]:
+    """Base-colour texture images of a glTF/GLB as files, by image index: external ones as they
+    are, embedded ones extracted (content-addressed, atomically) into the private
+    :func:`_texture_cache`."""
     try:
         return _gltf_image_files(path)
     except (KeyError, IndexError, TypeError, ValueError, AttributeError, struct.error):
@@ -483,30 +499,20 @@ def _gltf_document(path: Path) -> tuple[dict, bytes]:
     return doc, bin_chunk
 
 
-def _gltf_image_files(path: Path) -> list[Path]:
+def _gltf_image_files(path: Path) -> dict[int, Path]:
     doc, bin_chunk = _gltf_document(path)
     images = doc.get("images", [])
-    textures = doc.get("textures", [])
-    base = set()  # images used as base colour (not normal or roughness maps)
-    for mat in doc.get("materials", []):
-        for ref in ((mat.get("pbrMetallicRoughness") or {}).get("baseColorTexture"),
-                    ((mat.get("extensions") or {}).get("KHR_materials_pbrSpecularGlossiness") or {})
-                    .get("diffuseTexture")):
-            if ref and 0 <= ref.get("index", -1) < len(textures):
-                tex = textures[ref["index"]]
-                source = tex.get("source")
-                if source is None:  # a WebP image (with no PNG or JPEG fallback)
-                    source = ((tex.get("extensions") or {}).get("EXT_texture_webp") or {}).get("source")
-                if source is not None:
-                    base.add(source)
-    out = []
+    # images used as base colour (not normal or roughness maps)
+    materials = doc.get("materials") if isinstance(doc.get("materials"), list) else []
+    base = {_material_image(doc, k) for k in range(len(materials))}
+    out = {}
     for k, img in enumerate(images):
         if k not in base:
             continue
         uri = img.get("uri")
         blob = None
         if uri is not None and not uri.startswith("data:"):
-            out.append(_find_file(uri, path.parent))
+            out[k] = _find_file(uri, path.parent)
             continue
         if uri is not None:
             blob = base64.b64decode(uri.split(",", 1)[1])
@@ -519,5 +525,5 @@ def _gltf_image_files(path: Path) -> list[Path]:
             target = _texture_cache() / (hashlib.sha256(blob).hexdigest()[:32] + ext)
             if not target.exists():  # the private cache holds only what this process wrote
                 write_bytes_atomic(target, blob)
-            out.append(target)
+            out[k] = target
     return out
