@@ -246,3 +246,19 @@ def test_misfit_angle_tells_a_tilted_axis_from_relief(real_scans):
         tilted = manual_axis(mesh, fit.point, np.cos(tilt) * fit.direction + np.sin(tilt) * fit.reference)
         assert tilted.misfit_angle_deg > WARN_AXIS_MISFIT_DEG, (name, tilted)
     assert fluted > 10.0
+
+
+def test_misfit_angle_leaves_out_slices_that_do_not_determine_it():
+    """A height slice whose points all lie at one angle around the axis (a narrow strip of
+    a sherd) cannot tell a lean to one side from one all round: it adds nothing (its normal
+    equations are singular), without an error or a warning."""
+    import warnings
+
+    from potflat.rollout.axis import _once_around
+
+    k = 32 * 20  # (20 points in each of the 32 slices)
+    radial = np.tile([1.0, 0.0, 0.0], (k, 1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert _once_around(np.full(k, 0.1), np.linspace(0.0, 1.0, k), radial, np.ones(k),
+                            np.array([0.0, 0.0, 1.0])) == 0.0

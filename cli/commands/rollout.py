@@ -53,8 +53,8 @@ def _rollout(scan: Path, output: Path | None, options, *, name: str | None, quie
     out.print(f"[bold]{result.paths['ply']}[/] and {result.paths['json'].name}")
     out.print(f"axis ({ax['method']}): point {fmt(f'{x:.4g}' for x in ax['point'])}, direction "
               f"{fmt(f'{x:.4f}' for x in ax['direction'])}; residual {ax['rms_angle_deg']:.2f} deg RMS "
-              f"(median {ax['median_angle_deg']:.2f}, misfit {ax['misfit_angle_deg']:.2f}), {ax['rms_distance']:.3g} {u} RMS; "
-              f"{ax['orientation']}")
+              f"(median {ax['median_angle_deg']:.2f}, misfit {ax['misfit_angle_deg']:.2f}), "
+              f"{ax['rms_distance']:.3g} {u} RMS; {ax['orientation']}")
     if ax["note"]:
         out.print(f"[yellow]note:[/] {ax['note']}")
     params = ", ".join(f"{k} {v:.4g}" for k, v in px["params"].items() if isinstance(v, float))
