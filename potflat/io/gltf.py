@@ -94,14 +94,13 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
         raise InvalidInputError(f"{path}: its meshes cannot be matched to the materials of its {len(images)} "
                                 f"texture images; re-export the scan with one texture {_IGNORE_HINT}")
     primitive_of = {name: primitives[k] for k, name in enumerate(scene.geometry)}
-    materials = doc.get("materials") if isinstance(doc.get("materials"), list) else []
     files, names, which = [], [], []
     for g, uv, f in zip(geoms, uvs, faces):
         material = (primitive_of.get(g.metadata.get("name")) or {}).get("material")
         image = images.get(_material_image(doc, material)) if uv is not None else None
         if image is not None and image not in files:
             files.append(image)
-            named = materials[material].get("name") if isinstance(materials[material], dict) else None
+            named = _item(doc.get("materials"), material).get("name")  # (a material of an image: an object)
             names.append(f"material {named if isinstance(named, str) and named else material}")
         which.append(np.full(len(f), files.index(image) if image is not None else -1, np.int64))
     which = np.concatenate(which)
@@ -118,6 +117,13 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
     return raw
 
 
+def _item(items, index):
+    """``items[index]`` when ``items`` is a list and ``index`` an int (not a bool) within it, else
+    None: a glTF's references, whatever a broken file puts there."""
+    ok = isinstance(items, list) and isinstance(index, int) and not isinstance(index, bool)
+    return items[index] if ok and 0 <= index < len(items) else None
+
+
 def _primitives(doc: dict) -> list[dict]:
     """The primitives of a glTF's meshes, in the document's order (trimesh's order of meshes)."""
     meshes = doc.get("meshes") if isinstance(doc.get("meshes"), list) else []
@@ -128,14 +134,13 @@ def _primitives(doc: dict) -> list[dict]:
 def _matched(doc: dict, scene, primitives: list[dict]) -> bool:
     """Whether trimesh's meshes of ``scene`` are ``primitives`` one by one, in order: as many,
     each with its primitive's POSITION count of vertices."""
-    accessors = doc.get("accessors") if isinstance(doc.get("accessors"), list) else []
     geoms = list(scene.geometry.values())
     if len(geoms) != len(primitives):
         return False
     for g, p in zip(geoms, primitives):
-        k = (p.get("attributes") if isinstance(p.get("attributes"), dict) else {}).get("POSITION")
-        ok = isinstance(k, int) and not isinstance(k, bool) and 0 <= k < len(accessors)
-        if not ok or not isinstance(accessors[k], dict) or len(getattr(g, "vertices", ())) != accessors[k].get("count"):
+        attributes = p.get("attributes") if isinstance(p.get("attributes"), dict) else {}
+        accessor = _item(doc.get("accessors"), attributes.get("POSITION"))
+        if not isinstance(accessor, dict) or len(getattr(g, "vertices", ())) != accessor.get("count"):
             return False
     return True
 
@@ -143,9 +148,8 @@ def _matched(doc: dict, scene, primitives: list[dict]) -> bool:
 def _base_colour_ref(doc: dict, material) -> dict | None:
     """The base-colour texture reference (``{"index": ...}``) of material index ``material``:
     its metallic-roughness base colour, or the specular-glossiness diffuse texture."""
-    materials = doc.get("materials") if isinstance(doc.get("materials"), list) else []
-    ok = isinstance(material, int) and not isinstance(material, bool) and 0 <= material < len(materials)
-    m = materials[material] if ok and isinstance(materials[material], dict) else {}
+    m = _item(doc.get("materials"), material)
+    m = m if isinstance(m, dict) else {}
     pbr = m.get("pbrMetallicRoughness") if isinstance(m.get("pbrMetallicRoughness"), dict) else {}
     extensions = m.get("extensions") if isinstance(m.get("extensions"), dict) else {}
     gloss = extensions.get("KHR_materials_pbrSpecularGlossiness")
@@ -159,10 +163,8 @@ def _material_image(doc: dict, material) -> int | None:
     """The image index of material index ``material``'s base-colour texture (its source, or its
     EXT_texture_webp source), or None."""
     ref = _base_colour_ref(doc, material)
-    textures = doc.get("textures") if isinstance(doc.get("textures"), list) else []
-    index = ref.get("index") if ref is not None else None
-    ok = isinstance(index, int) and not isinstance(index, bool) and 0 <= index < len(textures)
-    texture = textures[index] if ok and isinstance(textures[index], dict) else {}
+    texture = _item(doc.get("textures"), ref.get("index")) if ref is not None else None
+    texture = texture if isinstance(texture, dict) else {}
     source = texture.get("source")
     if source is None:  # a WebP image (with no PNG or JPEG fallback)
         extensions = texture.get("extensions") if isinstance(texture.get("extensions"), dict) else {}
@@ -188,12 +190,9 @@ def _dequantize(path: Path, doc: dict, scene) -> None:
     base-colour texture's KHR_texture_transform (with which gltfpack dequantizes texture
     coordinates). trimesh keeps a mesh per primitive, in the document's order; each is
     matched to its primitive by its vertex count."""
-    accessors = doc.get("accessors") or []
-
     def normalized(index) -> int | None:
-        ok = isinstance(index, int) and not isinstance(index, bool) and 0 <= index < len(accessors)
-        ok = ok and isinstance(accessors[index], dict) and accessors[index].get("normalized") is True
-        return index if ok else None
+        accessor = _item(doc.get("accessors"), index)
+        return index if isinstance(accessor, dict) and accessor.get("normalized") is True else None
 
     primitives = _primitives(doc)
     jobs = []
