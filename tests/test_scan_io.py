@@ -906,6 +906,16 @@ def test_missing_texture_file(tmp_path):
     assert scan.mesh.texcoords is None and len(scan.mesh.vertices) == 20
 
 
+def test_texture_name_with_a_nul_character_is_refused_in_one_line(tmp_path):
+    """A corrupt MTL whose map_Kd names a file with a NUL character (no file can have it)."""
+    obj, _, _ = _write_seam_obj(tmp_path)
+    mtl = tmp_path / "seam.mtl"
+    mtl.write_bytes(mtl.read_bytes().replace(b"atlas.png", b"at\x00las.png"))
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(obj)
+    _one_line(e, "seam.obj", "no file name", "--no-texture")
+
+
 def test_missing_material_library(tmp_path):
     obj, _, _ = _write_seam_obj(tmp_path, texture=False)
     with pytest.raises(InvalidInputError) as e:

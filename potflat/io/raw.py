@@ -298,6 +298,9 @@ def _check_texture(tex: Path, source: Path, max_pixels: int) -> tuple[Path, tupl
     except RuntimeError:  # a symlink loop (Python < 3.13 raises it here)
         raise InvalidInputError(f"{source}: texture {tex} is a symbolic link loop; restore the file "
                                 f"{_IGNORE_HINT}") from None
+    except ValueError:  # a name with a NUL character (a corrupt file)
+        raise InvalidInputError(f"{source}: its texture's name {str(tex)!r} is no file name (the file is corrupt); "
+                                f"export the scan again {_IGNORE_HINT}") from None
     if not tex.is_file():
         raise InvalidInputError(f"{source}: texture {tex} not found; restore the file {_IGNORE_HINT}")
     old = Image.MAX_IMAGE_PIXELS
