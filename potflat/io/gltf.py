@@ -5,6 +5,7 @@ import base64
 import hashlib
 import json
 import struct
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -49,10 +50,12 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
     scene = _trimesh_load(path, force="scene")
     if isinstance(scene, trimesh.Scene):
         _dequantize(path, doc, scene)
-    try:  # trimesh decodes embedded images lazily, here
-        geoms = [g for g in (scene.dump() if isinstance(scene, trimesh.Scene) else [scene])
-                 if isinstance(g, trimesh.Trimesh) and len(g.faces)]
-        kinds = [g.visual.kind for g in geoms]
+    try:  # trimesh decodes embedded images lazily, here, and applies the nodes' transforms
+        with warnings.catch_warnings():  # (a broken transform's NaN: the positions are checked later)
+            warnings.simplefilter("ignore")
+            geoms = [g for g in (scene.dump() if isinstance(scene, trimesh.Scene) else [scene])
+                     if isinstance(g, trimesh.Trimesh) and len(g.faces)]
+            kinds = [g.visual.kind for g in geoms]
     except Exception as exc:  # noqa: BLE001 - corrupt embedded data: many exception types
         msg = _first_line(exc)
         raise InvalidInputError(f"{path} cannot be read as {path.suffix[1:].upper()} ({msg[:120]}); "
