@@ -303,32 +303,23 @@ def _check_texture(tex: Path, source: Path, max_pixels: int) -> tuple[Path, tupl
                                 f"export the scan again {_IGNORE_HINT}") from None
     if not tex.is_file():
         raise InvalidInputError(f"{source}: texture {tex} not found; restore the file {_IGNORE_HINT}")
-    old = Image.MAX_IMAGE_PIXELS
-    try:
-        Image.MAX_IMAGE_PIXELS = None  # our own limit below, without Pillow's lower default
-        with _warnings.catch_warnings():
-            _warnings.simplefilter("ignore", Image.DecompressionBombWarning)
-            with Image.open(tex) as im:
-                w, h = im.size
-                if w <= 0 or h <= 0 or w * h > max_pixels:
-                    raise InvalidInputError(
-                        f"{source}: texture {tex.name} declares {w} x {h} pixels, over the limit of "
-                        f"{max_pixels} (a corrupt file or decompression bomb); restore a sane image "
-                        f"{_IGNORE_HINT}")
-                try:
-                    check_texture_budget(tex, w, h, im.mode)
-                except InvalidInputError as exc:
-                    raise InvalidInputError(f"{source}: {exc}, {_IGNORE_HINT}") from None
-                if im.format == "PNG":
-                    im.verify()  # chunk CRCs, without decoding pixels
-    except InvalidInputError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - Pillow raises many types for corrupt images
-        msg = _first_line(exc)
-        raise InvalidInputError(f"{source}: texture {tex.name} is not a readable image ({msg}); "
-                                f"restore the file {_IGNORE_HINT}") from None
-    finally:
-        Image.MAX_IMAGE_PIXELS = old
+    # (our own limit below, without Pillow's lower default)
+    with _decoding(lambda why: f"{source}: texture {tex.name} is not a readable image ({why}); restore the file "
+                               f"{_IGNORE_HINT}"), _warnings.catch_warnings():
+        _warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+        with Image.open(tex) as im:
+            w, h = im.size
+            if w <= 0 or h <= 0 or w * h > max_pixels:
+                raise InvalidInputError(
+                    f"{source}: texture {tex.name} declares {w} x {h} pixels, over the limit of "
+                    f"{max_pixels} (a corrupt file or decompression bomb); restore a sane image "
+                    f"{_IGNORE_HINT}")
+            try:
+                check_texture_budget(tex, w, h, im.mode)
+            except InvalidInputError as exc:
+                raise InvalidInputError(f"{source}: {exc}, {_IGNORE_HINT}") from None
+            if im.format == "PNG":
+                im.verify()  # chunk CRCs, without decoding pixels
     return tex, (w, h)
 
 

@@ -11,8 +11,9 @@ loader splits vertices at seams and is slow on multi-million-vertex scans); STL,
 GLB/glTF go through trimesh.
 
 Several texture images (OBJ materials with different ``map_Kd``, PLY ``texnumber``, glTF
-materials with different base-colour textures) are packed into one atlas image (a PNG in a temporary folder private to the process, removed at its
-end) with the texture coordinates remapped, since a :class:`Mesh` has one texture.
+materials with different base-colour textures) are packed into one atlas image (a PNG in a
+temporary folder private to the process, removed at its end) with the texture coordinates
+remapped, since a :class:`Mesh` has one texture.
 
 Units: positions are never rescaled. ``units=None`` takes the unit the file declares (a PLY
 ``comment units X``, an STL ``UNITS=`` header, glTF's metres) and millimetres otherwise.

@@ -21,7 +21,7 @@ import numpy as np
 
 from potflat.mesh.distortion import bounds
 from potflat.mesh._kernels.geometry import signed_areas_2d as face_areas
-from potflat.mesh._kernels.topology import edge_table, incident_faces, vertex_faces
+from potflat.mesh._kernels.topology import edge_table, incident_faces, union_find, vertex_faces
 
 #: Rings by which a folded cluster is grown at most before giving up on local repair.
 REPAIR_MAX_RINGS = 12
@@ -127,7 +127,6 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
         Faces still flipped (0: fold-free).
     """
     import scipy.sparse as sp
-    import scipy.sparse.csgraph as csg
 
     n = len(uv)
     uv = np.ascontiguousarray(uv, dtype=np.float64).copy()
@@ -140,15 +139,8 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     vf_ptr, vf_tri = vertex_faces(n, faces)
     # clusters: flipped faces joined through shared vertices
-    touched = np.zeros(n, bool)
-    touched[faces[flipped].ravel()] = True
-    verts = np.flatnonzero(touched)
-    edges, _ = fan_edges(np.unique(incident_faces(verts, vf_ptr, vf_tri)), faces)
-    edges = edges[touched[edges].all(axis=1)]
-    local = np.full(n, -1, np.int64)
-    local[verts] = np.arange(len(verts))
-    _, label = csg.connected_components(sp.coo_matrix((np.ones(len(edges)), (local[edges[:, 0]], local[edges[:, 1]])),
-                                                      shape=(len(verts), len(verts))), directed=False)
+    verts = np.unique(faces[flipped].ravel())
+    label = vertex_clusters(verts, faces, vf_ptr, vf_tri)
     for c in range(label.max() + 1 if len(label) else 0):
         region = verts[label == c]
         for _ in range(max_rings):
@@ -169,6 +161,34 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
             region = np.union1d(region, edges.ravel())  # (the vertices of the faces around it)
     left = int((signed_areas(faces, uv) <= 0).sum())
     return uv, start - left, left
+
+
+def vertex_clusters(verts: np.ndarray, faces: np.ndarray, vf_ptr: np.ndarray, vf_tri: np.ndarray) -> np.ndarray:
+    """The connected parts of a set of vertices, joined by the mesh's edges between two of them.
+
+    Only the faces around the set are looked at (not the whole mesh's edges).
+
+    Parameters
+    ----------
+    verts : (p,) int64
+        The vertices, sorted, without repeats.
+    faces : (m, 3) int64
+    vf_ptr, vf_tri : (n + 1,), (3 m,) int64
+        The faces of each vertex (:func:`potflat.mesh._kernels.topology.vertex_faces`).
+
+    Returns
+    -------
+    (p,) int64
+        The part of each vertex, numbered in order of each part's lowest vertex.
+    """
+    n = len(vf_ptr) - 1
+    inside = np.zeros(n, bool)
+    inside[verts] = True
+    edges = fan_edges(np.unique(incident_faces(verts, vf_ptr, vf_tri)), faces)[0]
+    edges = edges[inside[edges].all(axis=1)]
+    local = np.full(n, -1, np.int64)
+    local[verts] = np.arange(len(verts))
+    return union_find(len(verts), local[edges[:, 0]], local[edges[:, 1]])[0]
 
 
 def fan_edges(around: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -6,7 +6,7 @@ import numpy as np
 
 from potflat.mesh._kernels.topology import faces_touching, incident_faces, small_pieces, union_find, vertex_faces
 from potflat.mesh.boundary import crossing_pairs, edges_and_boundary
-from potflat.mesh.embedding import fan_edges, neighbour_rows, signed_areas
+from potflat.mesh.embedding import fan_edges, neighbour_rows, signed_areas, vertex_clusters
 from potflat.rollout.folds import overlapping_faces
 from potflat.rollout.seam import cut_open
 from potflat.rollout.walls import (
@@ -321,19 +321,12 @@ def _tangled_parts(region: np.ndarray, faces: np.ndarray, vf_ptr: np.ndarray, vf
                    tangled: np.ndarray) -> np.ndarray:
     """The vertices of the connected parts of ``region`` ((n,) bool; parts joined by the mesh's
     edges between region vertices) that hold a vertex of the faces ``tangled`` ((k, 3)), (p,)
-    int64. The edges are found among the faces around the region only."""
-    import scipy.sparse as sp
-    import scipy.sparse.csgraph as csg
-
+    int64."""
     verts = np.flatnonzero(region)
-    edges = fan_edges(np.unique(incident_faces(verts, vf_ptr, vf_tri)), faces)[0]
-    edges = edges[region[edges].all(axis=1)]
-    local = np.full(len(region), -1, np.int64)
-    local[verts] = np.arange(len(verts))
-    graph = sp.coo_matrix((np.ones(len(edges)), (local[edges[:, 0]], local[edges[:, 1]])), shape=(len(verts),) * 2)
-    _, label = csg.connected_components(graph, directed=False)
+    label = vertex_clusters(verts, faces, vf_ptr, vf_tri)
     hit = np.zeros(int(label.max()) + 1 if len(label) else 0, bool)
-    hit[label[local[tangled.ravel()]]] = True
+    held = tangled.ravel()
+    hit[label[np.searchsorted(verts, held[region[held]])]] = True  # (a boundary vertex is in no part)
     return verts[hit[label]]
 
 

@@ -42,7 +42,8 @@ def rollout_notes(result) -> list[str]:
     notes = list(result.landmark_notes)
     walls = result.walls
     total = walls.outer_area + walls.inner_area
-    share = (walls.outer_area if walls.side == "outer" else walls.inner_area) / total if total > 0 else 1.0
+    own = walls.outer_area if walls.side == "outer" else walls.inner_area  # (the side unrolled)
+    share = own / total if total > 0 else 1.0
     if share < WARN_SIDE_FRACTION:
         other = "inner" if walls.side == "outer" else "outer"
         notes.append(f"the {walls.side} wall unrolled here is only {100 * share:.0f} % of the scan's surface (the "
@@ -71,7 +72,6 @@ def rollout_notes(result) -> list[str]:
     if result.boundary_overlap:
         notes.append(f"the border overlaps itself at {result.boundary_overlap} places; the relax stage unfolds it "
                      "(and refuses a result that still overlaps)")
-    own = walls.outer_area if walls.side == "outer" else walls.inner_area
     if own > 0 and walls.apart_area > WARN_APART_FRACTION * own:
         notes.append(f"{100 * walls.apart_area / own:.0f} % of the {walls.side} surface lies in pieces apart from the "
                      "vessel's wall (a lid, a stand or turntable, a fragment scanned with it) and is left out of the "
