@@ -423,6 +423,36 @@ def test_glb_mesh_without_texcoords_is_flagged_untextured(tmp_path):
     assert any(w.startswith(f"{len(F)} faces (meshes without TEXCOORD_0)") for w in scan.report.warnings)
 
 
+def test_gltf_files_named_with_percent_encoded_uris_are_found(tmp_path):
+    """glTF URIs are percent-encoded (Blender writes ``my scan.bin`` as ``my%20scan.bin``):
+    a .gltf whose buffers and texture image have spaces in their names, named encoded, loads
+    with its texture, as one naming them as they are."""
+    import json
+
+    import trimesh
+    from PIL import Image
+
+    V, F = _grid()
+    Vs, Fs = V[F].reshape(-1, 3), np.arange(3 * len(F)).reshape(-1, 3)
+    visual = trimesh.visual.TextureVisuals(uv=_uv_of(Vs), image=Image.new("RGB", (16, 16), (200, 30, 20)))
+    files = trimesh.Scene([trimesh.Trimesh(Vs, Fs, process=False, visual=visual)]).export(file_type="gltf")
+    doc = json.loads(files.pop("model.gltf"))
+    for k, buffer in enumerate(doc["buffers"]):
+        (tmp_path / f"my scan {k}.bin").write_bytes(files[buffer["uri"]])
+    image = doc["images"][0]
+    view = doc["bufferViews"][image.pop("bufferView")]
+    blob = files[doc["buffers"][view["buffer"]]["uri"]]
+    (tmp_path / "my colours.png").write_bytes(blob[view.get("byteOffset", 0):][:view["byteLength"]])
+    for encoded in (True, False):
+        for k, buffer in enumerate(doc["buffers"]):
+            buffer["uri"] = f"my%20scan%20{k}.bin" if encoded else f"my scan {k}.bin"
+        image["uri"] = "my%20colours.png" if encoded else "my colours.png"
+        (tmp_path / "pot.gltf").write_text(json.dumps(doc))
+        mesh = load_scan(tmp_path / "pot.gltf").mesh
+        assert len(mesh.faces) == len(F) and mesh.texcoords is not None
+        assert _sample(Image.open(mesh.texture_path).convert("RGB"), mesh.texcoords[0].mean(axis=0)) == (200, 30, 20)
+
+
 def _glb_of_materials(path: Path, images: list) -> None:
     """A GLB of the test grid once per image, the k-th 3 k above the first, each with its own
     material and texture image (None: a material without one)."""

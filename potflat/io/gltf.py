@@ -5,6 +5,7 @@ import base64
 import hashlib
 import json
 import struct
+import urllib.parse
 import warnings
 from pathlib import Path
 
@@ -47,7 +48,7 @@ def _read_gltf(path: Path, texture: str, max_pixels: int) -> _Raw:
     if "KHR_texture_basisu" in required and texture != "ignore":
         raise InvalidInputError(f"{path} has KTX2 textures (KHR_texture_basisu), which potflat cannot decode; "
                                 f"export it with PNG or JPEG textures {_IGNORE_HINT}")
-    scene = _trimesh_load(path, force="scene")
+    scene = _trimesh_load(path, force="scene", resolver=_resolver(path))
     if isinstance(scene, trimesh.Scene):
         _dequantize(path, doc, scene)
     try:  # trimesh decodes embedded images lazily, here, and applies the nodes' transforms
@@ -225,6 +226,31 @@ def _dequantize(path: Path, doc: dict, scene) -> None:
             g.visual.uv = np.column_stack([flat[:, 0], 1.0 - flat[:, 1]])
 
 
+def _uri_file(path: Path, uri: str) -> Path:
+    """The file that ``uri``, a relative URI in the glTF at ``path``, names: as written, else
+    percent-decoded (glTF URIs are RFC 3986 references: Blender writes a space as ``%20``,
+    other exporters leave it); what :func:`potflat.io.raw._find_file` gives when neither is
+    there."""
+    found = _find_file(uri, path.parent)
+    decoded = urllib.parse.unquote(uri)
+    if not found.is_file() and decoded != uri:
+        other = _find_file(decoded, path.parent)
+        return other if other.is_file() else found
+    return found
+
+
+def _resolver(path: Path):
+    """trimesh's resolver of the files the glTF at ``path`` names, found by :func:`_uri_file`."""
+    from trimesh.resolvers import FilePathResolver
+
+    class UriResolver(FilePathResolver):
+        def get(self, name: str) -> bytes:
+            found = _uri_file(path, name)
+            return _read_bytes(found, "a glTF's file") if found.is_file() else super().get(name)
+
+    return UriResolver(str(path))
+
+
 def _gltf_buffers(path: Path, doc: dict) -> list[bytes]:
     """The data of every buffer of a glTF/GLB (a GLB's own: its binary chunk; others: their
     ``.bin`` file or ``data:`` URI), sizes checked by :func:`_check_gltf_sizes`."""
@@ -237,7 +263,7 @@ def _gltf_buffers(path: Path, doc: dict) -> list[bytes]:
         elif isinstance(uri, str) and uri.startswith("data:"):
             out.append(base64.b64decode(uri.split(",", 1)[1]))
         else:
-            out.append(_read_bytes(_find_file(str(uri), path.parent)))
+            out.append(_read_bytes(_uri_file(path, str(uri))))
     return out
 
 
@@ -383,7 +409,7 @@ def _check_gltf_sizes(path: Path, doc: dict, bin_length: int) -> None:
         elif isinstance(uri, str) and uri.startswith("data:"):
             held, where = len(uri.split(",", 1)[-1]) * 3 // 4, "its base64 text"
         else:
-            source = _find_file(str(uri), path.parent)
+            source = _uri_file(path, str(uri))
             if not source.is_file():
                 raise InvalidInputError(f"{path}: its buffer file {uri} is not there; put it beside the glTF "
                                         "(or export the scan as one GLB)")
@@ -461,7 +487,7 @@ def _gltf_inputs(path: Path) -> list[Path]:
         return []
     uris = [item.get("uri") for key in ("buffers", "images")
             for item in (doc.get(key) or []) if isinstance(item, dict)]
-    found = (_find_file(uri, path.parent) for uri in uris if isinstance(uri, str) and not uri.startswith("data:"))
+    found = (_uri_file(path, uri) for uri in uris if isinstance(uri, str) and not uri.startswith("data:"))
     return [p for p in found if p.is_file()]
 
 
@@ -514,7 +540,7 @@ def _gltf_image_files(path: Path) -> dict[int, Path]:
         uri = img.get("uri")
         blob = None
         if uri is not None and not uri.startswith("data:"):
-            out[k] = _find_file(uri, path.parent)
+            out[k] = _uri_file(path, uri)
             continue
         if uri is not None:
             blob = base64.b64decode(uri.split(",", 1)[1])
