@@ -63,7 +63,7 @@ def bowl(request):
 
 
 def test_the_bowl_s_handle_goes_from_the_outer_into_the_inner_wall(bowl):
-    V, F = bowl.mesh.vertices, bowl.mesh.faces
+    F = bowl.mesh.faces
     handle = np.unique(F[bowl.face_part == PART_HANDLE])
     inner = np.unique(F[bowl.face_part == PART_INNER])
     assert np.intersect1d(handle, inner).size > 0  # welded (or joined) into the inner wall too
