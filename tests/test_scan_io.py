@@ -607,6 +607,41 @@ def test_quantized_glb_is_read_at_its_true_size_and_texture_place(tmp_path, tran
     np.testing.assert_allclose(mesh.texcoords, want, atol=1e-12)
 
 
+def _second_set(doc: dict, *, through_transform: bool = False) -> None:
+    """The quantized grid's texture coordinates moved to TEXCOORD_1, which its base-colour
+    texture names (``texCoord``, or its KHR_texture_transform's), and TEXCOORD_0 made other
+    coordinates (the positions' x and y, as a lightmap's would be)."""
+    attributes = doc["meshes"][0]["primitives"][0]["attributes"]
+    doc["accessors"].append(dict(doc["accessors"][0], type="VEC2"))
+    attributes["TEXCOORD_0"], attributes["TEXCOORD_1"] = len(doc["accessors"]) - 1, attributes["TEXCOORD_0"]
+    texture = doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]
+    if through_transform:
+        texture["extensions"] = {"KHR_texture_transform": {"texCoord": 1}}
+        doc["extensionsUsed"].append("KHR_texture_transform")
+    else:
+        texture["texCoord"] = 1
+
+
+@pytest.mark.parametrize("through_transform", [False, True], ids=["texCoord", "transform"])
+def test_glb_texture_on_its_second_texture_coordinates_is_read_from_them(tmp_path, through_transform):
+    """trimesh reads TEXCOORD_0 whichever set the base-colour texture names: the set it names is read."""
+    xyz, tc = _quantized_glb(tmp_path / "q.glb", transform=False)
+    _edit_glb(tmp_path / "q.glb", lambda d: _second_set(d, through_transform=through_transform))
+    mesh = load_scan(tmp_path / "q.glb").mesh
+    k = [int(np.argmin(np.linalg.norm(xyz - v, axis=1))) for v in mesh.vertices]
+    want = np.column_stack([tc[k][:, 0], 1.0 - tc[k][:, 1]])[mesh.faces]
+    np.testing.assert_allclose(mesh.texcoords, want, atol=1e-12)
+
+
+def test_glb_texture_on_texture_coordinates_its_mesh_lacks_is_refused_in_one_line(tmp_path):
+    _quantized_glb(tmp_path / "q.glb", transform=False)
+    _edit_glb(tmp_path / "q.glb", lambda d: d["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"].update(
+        texCoord=2))
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(tmp_path / "q.glb")
+    _one_line(e, "q.glb", "TEXCOORD_2", "export the scan again")
+
+
 def _edit_glb(path: Path, edit) -> None:
     """Rewrite the JSON of the GLB ``path`` by ``edit(doc)``."""
     import json

@@ -192,8 +192,11 @@ def _dequantize(path: Path, doc: dict, scene) -> None:
     (KHR_mesh_quantization, as gltfpack and gltf-transform write them), which it reads as the
     integers (texture coordinates wrapped around), read here from the file; and the
     base-colour texture's KHR_texture_transform (with which gltfpack dequantizes texture
-    coordinates). trimesh keeps a mesh per primitive, in the document's order; each is
-    matched to its primitive by its vertex count."""
+    coordinates) and its set of texture coordinates (``texCoord``: trimesh reads TEXCOORD_0
+    whichever the texture uses). trimesh keeps a mesh per primitive, in the document's order;
+    each is matched to its primitive by its vertex count."""
+    import trimesh
+
     def normalized(index) -> int | None:
         accessor = _item(doc.get("accessors"), index)
         return index if isinstance(accessor, dict) and accessor.get("normalized") is True else None
@@ -202,20 +205,29 @@ def _dequantize(path: Path, doc: dict, scene) -> None:
     jobs = []
     for p in primitives:
         attributes = p.get("attributes") if isinstance(p.get("attributes"), dict) else {}
-        jobs.append((normalized(attributes.get("POSITION")), normalized(attributes.get("TEXCOORD_0")),
-                     _texture_transform(path, doc, p.get("material"))))
+        which = _texcoord_set(doc, p.get("material"))
+        if which == 0:
+            tex = normalized(attributes.get("TEXCOORD_0"))
+        elif isinstance(_item(doc.get("accessors"), attributes.get(f"TEXCOORD_{which}")), dict):
+            tex = attributes[f"TEXCOORD_{which}"]
+        else:
+            raise InvalidInputError(f"{path}: a material's base-colour texture reads texture coordinates "
+                                    f"TEXCOORD_{which}, which its mesh does not have; the file is corrupt: export "
+                                    "the scan again")
+        jobs.append((normalized(attributes.get("POSITION")), tex, _texture_transform(path, doc, p.get("material"))))
     if all(pos is None and tex is None and move is None for pos, tex, move in jobs):
         return
     if not _matched(doc, scene, primitives):
-        raise InvalidInputError(f"{path}: its quantized meshes (KHR_mesh_quantization) or texture transforms "
-                                "(KHR_texture_transform) cannot be matched to the meshes read; export the scan "
-                                "without quantization")
+        raise InvalidInputError(f"{path}: its quantized meshes (KHR_mesh_quantization), texture transforms "
+                                "(KHR_texture_transform) or second texture coordinates cannot be matched to the "
+                                "meshes read; export the scan without quantization, with one set of texture "
+                                "coordinates")
     buffers = _gltf_buffers(path, doc) if any(pos is not None or tex is not None for pos, tex, _ in jobs) else []
     for g, (pos, tex, move) in zip(scene.geometry.values(), jobs):
         if pos is not None:
             g.vertices = _accessor_values(path, doc, buffers, pos, width=3)
         uv = getattr(g.visual, "uv", None)
-        if uv is not None and (tex is not None or move is not None):
+        if tex is not None or (uv is not None and move is not None):
             # glTF's texture coordinates (v down; trimesh turns v up)
             if tex is None and np.shape(uv)[1:] != (2,):
                 continue  # (not texture coordinates: the mesh is read untextured)
@@ -223,6 +235,11 @@ def _dequantize(path: Path, doc: dict, scene) -> None:
                     else np.column_stack([uv[:, 0], 1.0 - uv[:, 1]]))
             if move is not None:
                 flat = flat @ move[:, :2].T + move[:, 2]
+            if len(flat) != len(g.vertices):
+                raise InvalidInputError(f"{path}: a mesh has {len(flat)} texture coordinates for {len(g.vertices)} "
+                                        "vertices; the file is corrupt: export the scan again")
+            if uv is None:  # (texture coordinates in another set than TEXCOORD_0 alone)
+                g.visual = trimesh.visual.TextureVisuals(uv=np.zeros((len(flat), 2)))
             g.visual.uv = np.column_stack([flat[:, 0], 1.0 - flat[:, 1]])
 
 
@@ -291,6 +308,21 @@ def _accessor_values(path: Path, doc: dict, buffers: list[bytes], index: int, *,
     if a.get("normalized") is True and kind in _NORMALIZED:
         values = np.maximum(values / _NORMALIZED[kind], -1.0)
     return values
+
+
+def _texcoord_set(doc: dict, material) -> int:
+    """Which set of texture coordinates (``TEXCOORD_n``) material index ``material``'s
+    base-colour texture reads: its ``texCoord``, or its KHR_texture_transform's (0 when
+    neither says, or says something other than a count)."""
+    ref = _base_colour_ref(doc, material)
+    if ref is None:
+        return 0
+    which = ref.get("texCoord", 0)
+    extensions = ref.get("extensions")
+    move = extensions.get("KHR_texture_transform") if isinstance(extensions, dict) else None
+    if isinstance(move, dict) and "texCoord" in move:
+        which = move["texCoord"]
+    return which if isinstance(which, int) and not isinstance(which, bool) and which >= 0 else 0
 
 
 def _texture_transform(path: Path, doc: dict, material) -> np.ndarray | None:
