@@ -63,6 +63,26 @@ def test_edge_table_matches_reference():
         assert all(edge_of[h] == e for h in ref[key])
 
 
+def test_edge_table_is_the_same_for_any_thread_count():
+    """Each thread buckets its own range of lower endpoints: one thread and two or three (as
+    many as Numba has) give the same table, also with ranges of one vertex and no faces."""
+    import numba
+
+    from potflat._jit import numba_threads
+
+    rng = np.random.default_rng(1)
+    F = rng.integers(0, 300, (3000, 3))
+    with numba_threads(1):
+        want = edge_table(F, 300)
+    for threads in range(2, min(3, numba.config.NUMBA_NUM_THREADS) + 1):
+        with numba_threads(threads):
+            for got, expected in zip(edge_table(F, 300), want):
+                np.testing.assert_array_equal(got, expected)
+    with numba_threads(2):  # (two vertices, two ranges of one each; no faces at all)
+        assert [len(a) for a in edge_table(np.array([[0, 1, 1]]), 2)] == [3, 2, 2, 2]
+        assert [len(a) for a in edge_table(np.zeros((0, 3), np.int64), 0)] == [0, 0, 0, 0]
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_corner_fans_match_the_numpy_reference(seed):
     """fan_joins: the corner pairs (and so the fan labels) of the former NumPy expressions, on
