@@ -125,6 +125,14 @@ def test_bad_axis():
         detect_attachments(Mesh(V, F), [0, 0, 0], [0, 0, 0])
 
 
+@pytest.mark.parametrize("others", [np.zeros(5, bool), "all"], ids=["wrong length", "not boolean"])
+def test_bad_other_objects_mask(others):
+    V, F, _, _ = vm.open_vase(n_theta=16, n_h=5)
+    with pytest.raises(InvalidInputError, match="others must be a boolean mask"):
+        detect_attachments(Mesh(V, F), [0, 0, 0], [0, 0, 1],
+                           others=np.zeros(len(F)) if isinstance(others, str) else others)
+
+
 def test_synthetic_handles_if_available():
     from potflat_synthetic import vessels as synthetic
     v = synthetic.make_vessel("amphora", n_vertices=8000, texture_size=64, handles=True)

@@ -345,6 +345,31 @@ def test_a_separate_inner_wall_is_kept_but_a_second_vessel_is_left_out():
     assert any("separate objects" in n for n in __import__("potflat.rollout.notes").rollout.notes.rollout_notes(res2))
 
 
+@pytest.mark.parametrize("kind, handles", [("amphora", True), ("hydria", True), ("bowl", False)])
+def test_two_like_vessels_side_by_side_give_the_rollout_of_one(kind, handles):
+    """A scan file holding the vessel twice, side by side (a pair scanned together), handles as
+    separate pieces, or two walls (the bowl: the other's outer wall must not make this one's
+    inner): the other vessel and its pieces are left out of the side's labelling, the
+    attachments' measures and the unrolling, so one vessel comes out as it does alone."""
+    from potflat_synthetic.vessels import make_vessel
+
+    from potflat.rollout import rollout
+    from potflat.types import Mesh
+
+    m = make_vessel(kind, n_vertices=6000, seed=2, texture_size=64, handles=handles, pose=False).mesh
+    alone = rollout(m)
+    V = np.vstack([m.vertices, m.vertices + [3.0 * np.ptp(m.vertices[:, 0]), 0.0, 0.0]])
+    pair = rollout(Mesh(V, np.vstack([m.faces, m.faces + len(m.vertices)])))
+    assert alone.other_objects_faces == 0 and pair.other_objects_faces == len(m.faces)
+    assert pair.attachments.n_faces == alone.attachments.n_faces and (alone.attachments.n_faces > 0) == handles
+    assert len(pair.attachments.components) == len(alone.attachments.components)
+    assert pair.attachments.noise == pytest.approx(alone.attachments.noise, rel=0.01)
+    assert (pair.walls.n_selected, pair.walls.n_outer, pair.walls.n_inner) == (
+        alone.walls.n_selected, alone.walls.n_outer, alone.walls.n_inner)
+    assert len(pair.face_index) == len(alone.face_index)
+    assert pair.distortion.edge_rms == pytest.approx(alone.distortion.edge_rms, rel=0.01)
+
+
 def test_border_folds_trims_the_piece_beyond_an_edge_on_band():
     """A development whose second row of faces is edge-on and folded (the surface turning
     under at a foot): trimming that band cuts the first row off the wall, and the cut-off

@@ -149,6 +149,10 @@ def test_exclude_attachments():
         select_wall(mesh, p, a, exclude=np.zeros(5, bool))
     with pytest.raises(InvalidInputError):
         select_wall(mesh, p, a, exclude=np.zeros(len(F)))  # not boolean
+    with pytest.raises(InvalidInputError, match="others must be"):
+        select_wall(mesh, p, a, others=np.zeros(5, bool))
+    with pytest.raises(InvalidInputError, match="others must be"):
+        select_wall(mesh, p, a, others=np.zeros(len(F)))  # not boolean
 
 
 def test_deterministic():
@@ -173,8 +177,8 @@ def test_flat_faces_take_the_side_of_the_nearest_seed(monkeypatch, tolerance):
     mesh, p, a = _posed(V, F, seed=4)
     fr = walls.face_frame(mesh, p, a)
     monkeypatch.setattr(walls, "_refine_border", lambda fr, labels, *rest: labels)
-    monkeypatch.setattr(walls, "_clean_regions", lambda fr, labels, sign: labels)
-    got = walls._label_once(fr, tolerance, 1.0)
+    monkeypatch.setattr(walls, "_clean_regions", lambda fr, labels, sign, others: labels)
+    got = walls._label_once(fr, tolerance, 1.0, None)
     s = walls._smooth(fr.n_radial, fr.area, fr.graph, walls._SMOOTH_ITERATIONS)
     seed = np.abs(s) >= tolerance
     adj = fr.adjacency

@@ -188,7 +188,8 @@ def _check_positive(name: str, value, *, upper: float | None = None) -> float:
 
 
 def detect_attachments(mesh: Mesh, axis_point, axis_direction, *, tolerance: float | None = None,
-                       coverage_ratio: float = 0.3, graph: FaceGraph | None = None) -> AttachmentSelection:
+                       coverage_ratio: float = 0.3, graph: FaceGraph | None = None,
+                       others: np.ndarray | None = None) -> AttachmentSelection:
     """Detect handles, spouts, knobs and other parts off the surface of revolution.
 
     Parameters
@@ -209,6 +210,10 @@ def detect_attachments(mesh: Mesh, axis_point, axis_direction, *, tolerance: flo
         fraction (0-1) of the angles covered at the best-covered cell of its height.
     graph : FaceGraph, optional
         ``FaceGraph(mesh.faces)`` when the caller has it (built here when needed).
+    others : (m,) bool, optional
+        Faces of other objects in the scan (whole connected pieces: a second vessel beside
+        this one): neither attachments nor part of the surface's measures (edge length,
+        area, noise).
 
     Returns
     -------
@@ -228,11 +233,17 @@ def detect_attachments(mesh: Mesh, axis_point, axis_direction, *, tolerance: flo
     check_graph(graph, mesh)
     p, a = check_axis(axis_point, axis_direction)
     V, F = mesh.vertices, mesh.faces
+    if others is not None and (np.shape(others) != (len(F),) or np.asarray(others).dtype != bool):
+        raise InvalidInputError(f"others must be a boolean mask with one entry per face ({len(F)}), got "
+                                f"{np.shape(others)}")
+    # (the other objects' vertices are in no face of the vessel: no offset, no attachment)
+    vessel = F if others is None else F[~np.asarray(others)]
     h_all, r_all, _ = cylindrical(V, p, a)
-    used = np.flatnonzero(np.bincount(F.ravel(), minlength=len(V)))
+    used = np.flatnonzero(np.bincount(vessel.ravel(), minlength=len(V)))
     h0 = float(h_all[used].min())
-    med_edge = median_edge_length(V, F)
+    med_edge = median_edge_length(V, vessel)
     area = face_areas(V, F)
+    vessel_area = float(area.sum() if others is None else area[~np.asarray(others)].sum())
 
     hv = h_all[used] - h0
     rv = r_all[used]
@@ -241,7 +252,7 @@ def detect_attachments(mesh: Mesh, axis_point, axis_direction, *, tolerance: flo
         # a first pass at two edge lengths (at least the size fraction) measures the noise
         # around the revolution surface; a noisy scan needs cells of about four sigma so that
         # its surface covers them
-        cell = max(_CELL_EDGES * med_edge, _CELL_SIZE_FRACTION * math.sqrt(float(area.sum())))
+        cell = max(_CELL_EDGES * med_edge, _CELL_SIZE_FRACTION * math.sqrt(vessel_area))
         if not cell > 0:
             raise InvalidInputError("the mesh has no extent (all edges of zero length); check the scan")
         _, off1 = _coverage_pass(hv, rv, tv, cell, coverage_ratio)

@@ -39,8 +39,11 @@ def _main_object(mesh: Mesh) -> np.ndarray | None:
     Pieces (connected components) with at least :data:`SEPARATE_OBJECT_FRACTION` of the
     largest piece's area are objects; each is kept when its own axis agrees with the
     largest piece's (a separately scanned inner wall or foot does), and left out when it
-    does not (a second vessel, a fragment lying beside it). Returns ``None`` when nothing
-    would be left out, so a single-object scan is fitted as a whole.
+    does not (a second vessel, a fragment lying beside it). A smaller piece (a handle or a
+    flake the scan did not join) goes with the object nearest to it: kept when the vessel's
+    axis is nearer to its centre than every left-out object (its axis, or its centre when
+    it has none). Returns ``None`` when nothing would be left out, so a single-object scan
+    is fitted as a whole.
     """
 
     V, F = mesh.vertices, mesh.faces
@@ -62,18 +65,27 @@ def _main_object(mesh: Mesh) -> np.ndarray | None:
         ref = estimate_axis(_submesh(mesh, main))
     except AxisNotFoundError:
         return None  # the whole scan decides (and refuses honestly if it must)
+    # each piece's centre: the mean of its vertices
+    centre = np.stack([np.bincount(labels, V[:, d], n_pieces) for d in range(3)], axis=1)
+    centre /= np.maximum(np.bincount(labels, minlength=n_pieces), 1)[:, None]
     keep = main.copy()
+    near_main = ref.cylindrical(centre)[1]  # (the radius about an axis: the distance from it)
+    nearest_other = np.full(n_pieces, np.inf)
     for k in objects[1:]:
         piece = face_label == k
         try:
             own = estimate_axis(_submesh(mesh, piece))
         except AxisNotFoundError:
+            nearest_other = np.minimum(nearest_other, np.linalg.norm(centre - centre[k], axis=1))
             continue
         cos = abs(float(own.direction @ ref.direction))
-        offset = own.point - ref.point
-        distance = np.linalg.norm(offset - (offset @ ref.direction) * ref.direction)
+        distance = float(ref.cylindrical(own.point[None])[1][0])
         if cos >= math.cos(math.radians(SHARED_AXIS_DEG)) and distance <= SHARED_AXIS_OFFSET * ref.height:
             keep |= piece
-    small = ~np.isin(face_label, objects)
-    keep |= small  # small pieces are judged by the wall and attachment analysis
+        else:
+            nearest_other = np.minimum(nearest_other, own.cylindrical(centre)[1])
+    # small pieces (judged by the wall and attachment analysis) of the vessel, not of another object
+    small = ~np.isin(np.arange(n_pieces), objects) & (near_main <= nearest_other)
+    keep |= small[face_label]
     return None if keep.all() else keep
+

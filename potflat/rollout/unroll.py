@@ -348,11 +348,15 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     clock.lap("axis")
     # the face adjacency, found once for the attachments (if they need it) and the walls
     graph = FaceGraph(F, shared=True)
-    attachments = detect_attachments(mesh, axis.point, axis.direction, graph=graph)
+    attachments = detect_attachments(mesh, axis.point, axis.direction, graph=graph,
+                                     others=other_objects if other_objects.any() else None)
     clock.lap("attachments")
     frame = face_frame(mesh, *check_axis(axis.point, axis.direction), graph=graph)  # the walls' and the profile's
+    # the other objects (a second vessel beside this one) and, unless kept, the attachments
+    left_out = other_objects if options.keep_attachments else other_objects | attachments.face_mask
     walls = select_wall(mesh, axis.point, axis.direction, side=options.side,
-                        exclude=None if options.keep_attachments else attachments.face_mask, graph=graph, frame=frame)
+                        exclude=left_out if left_out.any() else None,
+                        others=other_objects if other_objects.any() else None, graph=graph, frame=frame)
     del graph
     allowed = walls.face_mask if face_mask is None else walls.face_mask & face_mask
     clock.lap("walls")
@@ -360,8 +364,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     bins = (None if options.profile_mm is None
             else max(1, math.ceil(axis.height * mesh.mm_per_unit / options.profile_mm)))
     profile = vessel_profile(mesh, axis.point, axis.direction, bins=bins, labels=walls.labels, frame=frame,
-                             face_mask=None if options.keep_attachments or not attachments.n_faces
-                             else ~attachments.face_mask)
+                             face_mask=~left_out if left_out.any() else None)
     centroid = frame.centroid  # (the faces' centroids, computed with the frame)
     n_axial = frame.n_axial
     del frame

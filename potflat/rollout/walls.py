@@ -516,7 +516,7 @@ class WallSelection:
 
 
 def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
-                exclude=None, flat_tolerance: float = 0.25, graph: FaceGraph | None = None,
+                exclude=None, others=None, flat_tolerance: float = 0.25, graph: FaceGraph | None = None,
                 frame: FaceFrame | None = None) -> WallSelection:
     """Select the outer or the inner wall of a (possibly two-walled) vessel scan.
 
@@ -534,6 +534,11 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
     exclude : (m,) bool, optional
         Faces to leave out of the selection (e.g. ``detect_attachments(...).face_mask``);
         the largest connected region is taken after removing them.
+    others : (m,) bool, optional
+        Faces of other objects in the scan (whole connected pieces: a second vessel beside
+        this one): left out of the selection, of the side counts and areas, and of what the
+        labelling decides over the whole vessel (inside-out, the outer wall's profile, its
+        largest region).
     flat_tolerance : float
         Faces whose smoothed radial normal component is below this (0-1) are treated as
         horizontal (base, floor, rim top) and take the side of the wall they connect to.
@@ -568,19 +573,19 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         raise InvalidOptionError(f"flat_tolerance must lie between 0 and 1, got {flat_tolerance!r}")
     check_mesh(mesh)
     p, a = check_axis(axis_point, axis_direction)
-    if exclude is not None:
-        exclude = np.asarray(exclude)
-        if exclude.shape != (len(mesh.faces),) or exclude.dtype != bool:
+    for name, mask in (("exclude", exclude), ("others", others)):
+        if mask is not None and (np.shape(mask) != (len(mesh.faces),) or np.asarray(mask).dtype != bool):
             raise InvalidInputError(
-                f"exclude must be a boolean mask with one entry per face ({len(mesh.faces)}), got {exclude.shape}")
+                f"{name} must be a boolean mask with one entry per face ({len(mesh.faces)}), got {np.shape(mask)}")
     check_graph(graph, mesh, shared=True)
     fr = face_frame(mesh, p, a, graph=graph) if frame is None else frame
-    labels, inverted = wall_labels(fr, flat_tolerance=float(flat_tolerance))
+    labels, inverted = wall_labels(fr, flat_tolerance=float(flat_tolerance), others=others)
     want = OUTER if side == "outer" else INNER
-    outer_area = float(fr.area[labels == OUTER].sum())
-    inner_area = float(fr.area[labels == INNER].sum())
+    vessel = np.ones(len(labels), bool) if others is None else ~np.asarray(others)
+    outer_area = float(fr.area[vessel & (labels == OUTER)].sum())
+    inner_area = float(fr.area[vessel & (labels == INNER)].sum())
     two_walled = inner_area >= 0.01 * (outer_area + inner_area)
-    chosen = labels == want
+    chosen = vessel & (labels == want)
     if not chosen.any():
         where = f" {mesh.source}" if mesh.source else ""
         other = "inner" if side == "outer" else "outer"
@@ -588,7 +593,7 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         raise InvalidInputError(
             f"the scan{where} has no {side} wall (its faces all {facing}); unroll its {other} side "
             f"(--side {other}, side='{other}')")
-    candidates = chosen if exclude is None else chosen & ~exclude
+    candidates = chosen if exclude is None else chosen & ~np.asarray(exclude)
     mask = _largest_region(candidates, fr.graph, fr.area) if candidates.any() else candidates
     adj = fr.adjacency
     cross = labels[adj[:, 0]] != labels[adj[:, 1]]
@@ -600,8 +605,8 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         face_mask=mask,
         labels=labels,
         side=side,
-        n_outer=int((labels == OUTER).sum()),
-        n_inner=int((labels == INNER).sum()),
+        n_outer=int((vessel & (labels == OUTER)).sum()),
+        n_inner=int((vessel & (labels == INNER)).sum()),
         outer_area=outer_area,
         inner_area=inner_area,
         n_selected=int(mask.sum()),
@@ -614,24 +619,28 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
     )
 
 
-def wall_labels(fr: FaceFrame, *, flat_tolerance: float = 0.25) -> tuple[np.ndarray, bool]:
+def wall_labels(fr: FaceFrame, *, flat_tolerance: float = 0.25, others: np.ndarray | None = None
+                ) -> tuple[np.ndarray, bool]:
     """Side of every face: ``(labels (m,) int8 (+1 outer, -1 inner), normals_inverted)``.
 
     See the module docstring for the steps. If the inner side comes out more than twice as
     large as the outer one, the scan is taken to be inside-out and labelled again with
-    flipped normals.
+    flipped normals. ``others`` (m,) bool: faces of other objects (whole connected pieces),
+    labelled like the rest but left out of these decisions over the whole vessel.
     """
-    labels = _label_once(fr, flat_tolerance, sign=1.0)
+    area = fr.area if others is None else np.where(others, 0.0, fr.area)
+    labels = _label_once(fr, flat_tolerance, sign=1.0, others=others)
     # inside-out: most of the area faces the axis. Not when the two sides are about equal
     # (a thick sherd: its back is as large as its face)
-    if fr.area[labels == INNER].sum() > _INSIDE_OUT_RATIO * fr.area[labels == OUTER].sum():
-        flipped = _label_once(fr, flat_tolerance, sign=-1.0)
-        if fr.area[flipped == OUTER].sum() > fr.area[labels == OUTER].sum():
+    if area[labels == INNER].sum() > _INSIDE_OUT_RATIO * area[labels == OUTER].sum():
+        flipped = _label_once(fr, flat_tolerance, sign=-1.0, others=others)
+        if area[flipped == OUTER].sum() > area[labels == OUTER].sum():
             return flipped, True
     return labels, False
 
 
-def _label_once(fr: FaceFrame, flat_tolerance: float, sign: float) -> np.ndarray:
+def _label_once(fr: FaceFrame, flat_tolerance: float, sign: float, others: np.ndarray | None) -> np.ndarray:
+    """One labelling with the normals' sign ``sign`` (``others``: as :func:`wall_labels` takes them)."""
     m = len(fr.area)
     adj = fr.adjacency
     s = _smooth(sign * fr.n_radial, fr.area, fr.graph, _SMOOTH_ITERATIONS)
@@ -659,7 +668,7 @@ def _label_once(fr: FaceFrame, flat_tolerance: float, sign: float) -> np.ndarray
         labels[reach] = labels[src[reach]]
         labels[flat & (src < 0)] = OUTER  # flat patches not connected to any wall
     labels = _refine_border(fr, labels, sign * fr.n_radial, s, flat_tolerance)
-    return _clean_regions(fr, labels, sign)
+    return _clean_regions(fr, labels, sign, others)
 
 
 def _refine_border(fr: FaceFrame, labels: np.ndarray, n_radial: np.ndarray, smoothed: np.ndarray,
@@ -710,8 +719,8 @@ def _region_stats(fr: FaceFrame, labels: np.ndarray, sign: float):
     return comp, comp_label, area, border, border_up, border_outer
 
 
-def _clean_regions(fr: FaceFrame, labels: np.ndarray, sign: float) -> np.ndarray:
-    total = float(fr.area.sum())
+def _clean_regions(fr: FaceFrame, labels: np.ndarray, sign: float, others: np.ndarray | None) -> np.ndarray:
+    total = float(fr.area.sum() if others is None else fr.area[~others].sum())
     # 1. noise islands join the side around them (an inner strip under a rim stays inner)
     for _ in range(_CLEANUP_PASSES):
         comp, comp_label, area, border, border_up, border_outer = _region_stats(fr, labels, sign)
@@ -736,13 +745,16 @@ def _clean_regions(fr: FaceFrame, labels: np.ndarray, sign: float) -> np.ndarray
     decide[foot] = OUTER
     undecided = inner_c & ~rim & ~foot
     if undecided.any():  # the profile's medians only for regions the folds leave open (most scans have none)
-        decide[undecided & _outside_body(fr, labels, comp, labels == OUTER)] = OUTER
+        outer = labels == OUTER if others is None else (labels == OUTER) & ~others
+        decide[undecided & _outside_body(fr, labels, comp, outer)] = OUTER
     labels = decide[comp]
     # 3. outward-facing regions cut off from the main outer wall and bordered mostly by the
     #    inner wall (e.g. a boss on a bowl's floor) belong to the inner wall
     comp, comp_label, area, border, border_up, border_outer = _region_stats(fr, labels, sign)
     outer_c = np.flatnonzero(comp_label == OUTER)
     if len(outer_c) > 1:
+        if others is not None:  # (an object's pieces are whole components: none is the vessel's outer wall)
+            area = np.where(np.bincount(comp, weights=others, minlength=len(area)) > 0, -1.0, area)
         main = outer_c[np.argmax(area[outer_c])]
         enclosed = (comp_label == OUTER) & (border > 0) & (border_outer < 0.5 * border)
         enclosed[main] = False
