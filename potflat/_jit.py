@@ -59,25 +59,29 @@ def kernels_cached() -> bool:
     Numba (else the first call of each compiles it: a few minutes in all, worth telling the user).
 
     Read from the spring kernels' cache index files (in the package's ``__pycache__`` folders,
-    or under ``NUMBA_CACHE_DIR``): an index counts when it was written after the source file
-    (an upgrade of potflat writes newer sources, and Numba then compiles again) and by this
-    version of Numba (the first item pickled in it).
+    or under ``NUMBA_CACHE_DIR``): an index counts when this version of Numba wrote it (the
+    first item pickled in it) for the source as it is now: its stamp, which Numba checks before
+    loading, is the source's SHA-256 (or, for a Numba that stamps by time, its modification
+    time and size), so a reinstall or checkout that rewrites an unchanged source keeps it.
     """
+    import hashlib
     import pickle
     from pathlib import Path
 
     package = Path(__file__).resolve().parent
     place = Path(numba.config.CACHE_DIR) if numba.config.CACHE_DIR else package
+    source = package / "relax" / "_kernels" / "springs.py"
     try:
-        written = (package / "relax" / "_kernels" / "springs.py").stat().st_mtime
-        indexes = list(place.rglob("springs.*.nbi")) if place.is_dir() else []
-        for index in indexes:
-            if index.stat().st_mtime < written:
-                continue
+        st = source.stat()
+        fresh = (hashlib.sha256(source.read_bytes()).digest(), (st.st_mtime, st.st_size))
+        for index in (place.rglob("springs.*.nbi") if place.is_dir() else ()):
             with open(index, "rb") as f:
-                if pickle.load(f) == numba.__version__:
-                    return True
-    except (OSError, pickle.UnpicklingError, EOFError):
+                if pickle.load(f) != numba.__version__:
+                    continue
+                stamp = pickle.loads(f.read())[0]
+            if any(stamp == s for s in fresh):
+                return True
+    except (OSError, pickle.UnpicklingError, EOFError, ValueError, TypeError, IndexError):
         return True  # cannot tell: say nothing
     return False
 

@@ -28,6 +28,33 @@ def test_the_vessel_is_a_fold_free_painted_start_with_coarse_copies(tmp_path):
     assert flat.mesh.texture_path.parent == tmp_path and flat.mesh.texture_path.is_file()
 
 
+@pytest.mark.parametrize("stamp, version, cached", [
+    ("source", "numba", True), ("time", "numba", True), ("other", "numba", False), ("source", "0.1", False)],
+    ids=["hash of the source", "time and size", "another source", "another Numba"])
+def test_kernels_count_as_cached_when_an_index_is_of_this_source_and_numba(tmp_path, monkeypatch, stamp, version,
+                                                                          cached):
+    """A spring kernel's cache index counts when its stamp is the source's (as Numba stamps it:
+    the source's SHA-256, or its time and size), whatever the files' times, and this Numba wrote it."""
+    import hashlib
+    import pickle
+    from pathlib import Path
+
+    import numba
+
+    source = Path(potflat._jit.__file__).parent / "relax" / "_kernels" / "springs.py"
+    stamps = {"source": hashlib.sha256(source.read_bytes()).digest(),
+              "time": (source.stat().st_mtime, source.stat().st_size), "other": hashlib.sha256(b"x").digest()}
+    (tmp_path / "k").mkdir()
+    index = tmp_path / "k" / "springs.energy_gradient-1.py311.nbi"
+    index.write_bytes(pickle.dumps(numba.__version__ if version == "numba" else version)
+                      + pickle.dumps((stamps[stamp], {})))
+    os.utime(index, (0, 0))  # (older than the source: the index's own time does not matter)
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path))
+    assert potflat._jit.kernels_cached() is cached
+    index.unlink()
+    assert potflat._jit.kernels_cached() is False
+
+
 def test_warm_relaxes_like_a_run(tmp_path):
     warmup.warm(tmp_path, "relax")
     relaxed = json.loads((tmp_path / "warmup.relaxed.json").read_text())
