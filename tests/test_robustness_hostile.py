@@ -748,7 +748,7 @@ def test_a_lid_scanned_with_the_vessel_is_left_out_with_a_note():
 
 
 def test_compile_note_on_a_first_run(tmp_path, monkeypatch):
-    import os
+    import hashlib
     import pickle
 
     import numba
@@ -756,20 +756,23 @@ def test_compile_note_on_a_first_run(tmp_path, monkeypatch):
 
     import potflat.relax._kernels.springs
 
+    def write_index(version: str, source: bytes) -> None:
+        with open(index, "wb") as f:  # how Numba writes an index: its version, then (stamp, overloads)
+            pickle.dump(version, f)
+            pickle.dump((hashlib.sha256(source).digest(), {}), f)
+
     monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "empty"))
     assert "first run: compiling" in with_compile_note("rolling out")
     (tmp_path / "full" / "x").mkdir(parents=True)
     index = tmp_path / "full" / "x" / "springs.f-1.py311.nbi"
-    with open(index, "wb") as f:  # how Numba starts an index: its version
-        pickle.dump(numba.__version__, f)
+    with open(potflat.relax._kernels.springs.__file__, "rb") as f:
+        source = f.read()
+    write_index(numba.__version__, source)
     monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "full"))
     assert with_compile_note("rolling out") == "rolling out"
-    # written before the source (an upgrade of potflat since): Numba compiles again
-    source = os.path.getmtime(potflat.relax._kernels.springs.__file__)
-    os.utime(index, (source - 60, source - 60))
+    write_index(numba.__version__, source + b"#")  # of another source (an upgrade of potflat since)
     assert "first run: compiling" in with_compile_note("rolling out")
-    with open(index, "wb") as f:  # written by another version of Numba
-        pickle.dump("0.0.0", f)
+    write_index("0.0.0", source)  # written by another version of Numba
     assert "first run: compiling" in with_compile_note("rolling out")
 
 
