@@ -254,6 +254,38 @@ def test_obj_texture_named_windows_style(tmp_path):
     _assert_corner_texcoords(mesh, tri_pos, expected_tc)
 
 
+@pytest.mark.parametrize("suffix", ["tga", "dds"])
+def test_obj_texture_opencv_does_not_read_is_converted_to_png(tmp_path, suffix):
+    """A texture in a format Pillow reads and OpenCV (the decoder of every stage) does not,
+    as older exports and game-engine assets have them (TGA, DDS): loaded as a PNG of its
+    pixels, which every stage decodes."""
+    from PIL import Image
+
+    from potflat.io.images import read_texture
+
+    obj, tri_pos, expected_tc = _write_seam_obj(tmp_path)
+    pixels = np.random.default_rng(3).integers(0, 256, (16, 24, 3), dtype=np.uint8)
+    Image.fromarray(pixels).save(tmp_path / f"atlas.{suffix}")
+    (tmp_path / "seam.mtl").write_text(f"newmtl paint\nmap_Kd atlas.{suffix}\n")
+    mesh = load_scan(obj).mesh
+    assert mesh.texture_path.suffix == ".png"
+    np.testing.assert_array_equal(read_texture(mesh.texture_path), pixels)
+    _assert_corner_texcoords(mesh, tri_pos, expected_tc)
+
+
+def test_obj_texture_in_a_cut_short_tga_is_refused_in_one_line(tmp_path):
+    from PIL import Image
+
+    obj, _, _ = _write_seam_obj(tmp_path)
+    Image.fromarray(np.full((64, 64, 3), 90, np.uint8)).save(tmp_path / "atlas.tga", compression=None)
+    data = (tmp_path / "atlas.tga").read_bytes()
+    (tmp_path / "atlas.tga").write_bytes(data[:len(data) // 2])
+    (tmp_path / "seam.mtl").write_text("newmtl paint\nmap_Kd atlas.tga\n")
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(obj)
+    _one_line(e, "atlas.tga", "cannot be decoded", "PNG or JPEG", "--no-texture")
+
+
 def test_obj_vertex_colours_and_untextured(tmp_path):
     V, F = _grid()
     rgb = (V[:, :1] * 0 + [0.0, 0.5, 1.0])

@@ -216,6 +216,18 @@ def _texture_cache() -> Path:
     return _PRIVATE_CACHE[0]
 
 
+def _cached_png(sources: list[Path]) -> Path:
+    """Where a PNG made from the image files ``sources`` goes in :func:`_texture_cache`: named by
+    their paths, sizes and modification times (so it is made once per process)."""
+    key = json.dumps([[str(p), p.stat().st_size, p.stat().st_mtime_ns] for p in sources]).encode()
+    return _texture_cache() / (hashlib.sha256(key).hexdigest()[:32] + ".png")
+
+
+#: Image formats (as Pillow names them) that OpenCV, which decodes the textures, reads: a
+#: texture in another format Pillow reads (TGA, DDS, PSD ...) is converted to PNG on loading.
+OPENCV_FORMATS = frozenset({"PNG", "JPEG", "MPO", "TIFF", "BMP", "WEBP", "JPEG2000", "PPM", "GIF"})
+
+
 def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source: Path,
                     max_pixels: int, *, names: list[str] | None = None) -> tuple[Path, np.ndarray, str]:
     """Pack several texture images into one atlas (a grid) and remap the texture coordinates.
@@ -253,8 +265,7 @@ def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source
     if W * H > max_pixels:
         raise InvalidInputError(f"{source}: its {len(paths)} texture images would make a {W} x {H} atlas, over "
                                 f"the limit of {max_pixels} pixels; re-export with one texture {_IGNORE_HINT}")
-    key = json.dumps([[str(p), p.stat().st_size, p.stat().st_mtime_ns] for p in paths]).encode()
-    target = _texture_cache() / (hashlib.sha256(key).hexdigest()[:32] + ".png")
+    target = _cached_png(paths)
     if not target.exists():  # (sizes were checked against max_pixels above)
         with _decoding(lambda why: f"{source}: its texture images cannot be decoded ({why}); restore them "
                                    f"{_IGNORE_HINT}"):
@@ -290,7 +301,8 @@ def _merge_textures(paths: list[Path], which: np.ndarray, uv: np.ndarray, source
 
 def _check_texture(tex: Path, source: Path, max_pixels: int) -> tuple[Path, tuple[int, int]]:
     """Check that ``tex`` is a readable image within ``max_pixels`` (header only); return
-    its absolute path and its (width, height)."""
+    its absolute path (a PNG made from it when OpenCV does not read its format,
+    :data:`OPENCV_FORMATS`) and its (width, height)."""
     from PIL import Image
 
     try:
@@ -320,6 +332,16 @@ def _check_texture(tex: Path, source: Path, max_pixels: int) -> tuple[Path, tupl
                 raise InvalidInputError(f"{source}: {exc}, {_IGNORE_HINT}") from None
             if im.format == "PNG":
                 im.verify()  # chunk CRCs, without decoding pixels
+            readable = im.format in OPENCV_FORMATS
+    if not readable:
+        target = _cached_png([tex])
+        if not target.exists():
+            with _decoding(lambda why: f"{source}: texture {tex.name} cannot be decoded ({why}); convert it to "
+                                       f"PNG or JPEG {_IGNORE_HINT}"), Image.open(tex) as im:
+                rgb = im.convert("RGBA" if "A" in im.getbands() else "RGB")
+                with atomic_path(target) as tmp:
+                    rgb.save(tmp, format="PNG", compress_level=1)
+        tex = target
     return tex, (w, h)
 
 
