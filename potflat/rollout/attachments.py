@@ -233,17 +233,18 @@ def detect_attachments(mesh: Mesh, axis_point, axis_direction, *, tolerance: flo
     check_graph(graph, mesh)
     p, a = check_axis(axis_point, axis_direction)
     V, F = mesh.vertices, mesh.faces
-    if others is not None and (np.shape(others) != (len(F),) or np.asarray(others).dtype != bool):
+    others = None if others is None else np.asarray(others)
+    if others is not None and (others.shape != (len(F),) or others.dtype != bool):
         raise InvalidInputError(f"others must be a boolean mask with one entry per face ({len(F)}), got "
-                                f"{np.shape(others)}")
+                                f"{others.shape}")
     # (the other objects' vertices are in no face of the vessel: no offset, no attachment)
-    vessel = F if others is None else F[~np.asarray(others)]
+    vessel = F if others is None else F[~others]
     h_all, r_all, _ = cylindrical(V, p, a)
     used = np.flatnonzero(np.bincount(vessel.ravel(), minlength=len(V)))
     h0 = float(h_all[used].min())
     med_edge = median_edge_length(V, vessel)
     area = face_areas(V, F)
-    vessel_area = float(area.sum() if others is None else area[~np.asarray(others)].sum())
+    vessel_area = float(area.sum() if others is None else area[~others].sum())
 
     hv = h_all[used] - h0
     rv = r_all[used]

@@ -348,19 +348,18 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     clock.lap("axis")
     # the face adjacency, found once for the attachments (if they need it) and the walls
     graph = FaceGraph(F, shared=True)
-    attachments = detect_attachments(mesh, axis.point, axis.direction, graph=graph,
-                                     others=other_objects if other_objects.any() else None)
+    others = other_objects if other_objects.any() else None  # (a second vessel beside this one)
+    attachments = detect_attachments(mesh, axis.point, axis.direction, graph=graph, others=others)
     clock.lap("attachments")
     frame = face_frame(mesh, *check_axis(axis.point, axis.direction), graph=graph)  # the walls' and the profile's
-    # the other objects (a second vessel beside this one) and, unless kept, the attachments
-    left_out = other_objects if options.keep_attachments else other_objects | attachments.face_mask
     walls = select_wall(mesh, axis.point, axis.direction, side=options.side,
-                        exclude=left_out if left_out.any() else None,
-                        others=other_objects if other_objects.any() else None, graph=graph, frame=frame)
+                        exclude=None if options.keep_attachments else attachments.face_mask, others=others,
+                        graph=graph, frame=frame)
     del graph
     allowed = walls.face_mask if face_mask is None else walls.face_mask & face_mask
     clock.lap("walls")
-    # the vessel's profile, both walls, attachments left out (docs/profile.md)
+    # the vessel's profile, both walls, attachments and other objects left out (docs/profile.md)
+    left_out = other_objects if options.keep_attachments else other_objects | attachments.face_mask
     bins = (None if options.profile_mm is None
             else max(1, math.ceil(axis.height * mesh.mm_per_unit / options.profile_mm)))
     profile = vessel_profile(mesh, axis.point, axis.direction, bins=bins, labels=walls.labels, frame=frame,

@@ -573,15 +573,16 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         raise InvalidOptionError(f"flat_tolerance must lie between 0 and 1, got {flat_tolerance!r}")
     check_mesh(mesh)
     p, a = check_axis(axis_point, axis_direction)
+    exclude, others = (None if mask is None else np.asarray(mask) for mask in (exclude, others))
     for name, mask in (("exclude", exclude), ("others", others)):
-        if mask is not None and (np.shape(mask) != (len(mesh.faces),) or np.asarray(mask).dtype != bool):
+        if mask is not None and (mask.shape != (len(mesh.faces),) or mask.dtype != bool):
             raise InvalidInputError(
-                f"{name} must be a boolean mask with one entry per face ({len(mesh.faces)}), got {np.shape(mask)}")
+                f"{name} must be a boolean mask with one entry per face ({len(mesh.faces)}), got {mask.shape}")
     check_graph(graph, mesh, shared=True)
     fr = face_frame(mesh, p, a, graph=graph) if frame is None else frame
     labels, inverted = wall_labels(fr, flat_tolerance=float(flat_tolerance), others=others)
     want = OUTER if side == "outer" else INNER
-    vessel = np.ones(len(labels), bool) if others is None else ~np.asarray(others)
+    vessel = np.ones(len(labels), bool) if others is None else ~others
     outer_area = float(fr.area[vessel & (labels == OUTER)].sum())
     inner_area = float(fr.area[vessel & (labels == INNER)].sum())
     two_walled = inner_area >= 0.01 * (outer_area + inner_area)
@@ -593,7 +594,7 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         raise InvalidInputError(
             f"the scan{where} has no {side} wall (its faces all {facing}); unroll its {other} side "
             f"(--side {other}, side='{other}')")
-    candidates = chosen if exclude is None else chosen & ~np.asarray(exclude)
+    candidates = chosen if exclude is None else chosen & ~exclude
     mask = _largest_region(candidates, fr.graph, fr.area) if candidates.any() else candidates
     adj = fr.adjacency
     cross = labels[adj[:, 0]] != labels[adj[:, 1]]
