@@ -555,3 +555,33 @@ def untangle(faces: np.ndarray, uv: np.ndarray, rounds: int, widen: int) -> tupl
             break
         region[faces[still].ravel()] = True
     return x, int(bad.sum()), int(np.count_nonzero(np.any(x != uv, axis=1)))
+
+
+def relax_untangle(sp, x: np.ndarray, rounds: int = 200) -> tuple[np.ndarray, int]:
+    """:func:`potflat.relax.start.untangle` by its definition, every face's area looked at in
+    every round: the vertices of flipped faces (and, every 20 rounds, of every face touching
+    them) join the region, whose vertices move to their edge neighbours' mean (an ear's tip
+    is mirrored about its base instead)."""
+    from potflat.relax._kernels.springs import neighbour_means
+    from potflat.relax.start import unfold_ears
+
+    bad = sp.signed_areas(x) <= 0
+    n_bad = int(bad.sum())
+    if n_bad == 0:
+        return x, 0
+    x = x.copy()
+    region = np.zeros(sp.n, bool)
+    ear_tip = np.diff(sp.vf_ptr) == 1
+    for r in range(rounds):
+        bad = sp.signed_areas(x) <= 0
+        if not bad.any():
+            break
+        region[sp.faces[bad].ravel()] = True
+        if r % 20 == 19:
+            region[sp.faces[region[sp.faces].any(axis=1)].ravel()] = True
+        verts = np.flatnonzero(region & ~ear_tip)
+        mean = np.empty((len(verts), 2))
+        neighbour_means(x, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
+        x[verts] = mean
+        unfold_ears(sp, x, np.flatnonzero(region & ear_tip))
+    return x, n_bad

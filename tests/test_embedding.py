@@ -50,6 +50,33 @@ def test_fan_edges_and_neighbour_rows_match_the_whole_mesh(seed):
     rows = neighbour_rows(verts, edges, n)
     np.testing.assert_array_equal(rows.toarray(), dense[verts])
     assert np.all(np.diff(rows.indptr) > 0)
+    shuffled = np.random.default_rng(seed).permutation(verts)  # (any order of the vertices)
+    np.testing.assert_array_equal(neighbour_rows(shuffled, edges, n).toarray(), dense[shuffled])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_solve_rows_matches_a_dense_solve(seed):
+    """The free vertices of a small layout, in any order, placed by real rows (each the mean of
+    its neighbours) and by complex ones (each face similar to its shape in a reference), as
+    a dense solve of the same equations places them; the other vertices' rows name none."""
+    from potflat.mesh.embedding import _similar_rows, _solve_rows
+
+    rng = np.random.default_rng(seed)
+    flat = meshes.vessel_rollout(300, seed=seed)
+    F = np.ascontiguousarray(flat.mesh.faces, dtype=np.int64)
+    n = len(flat.uv)
+    vf_ptr, vf_tri = vertex_faces(n, F)
+    free = rng.permutation(np.flatnonzero(rng.random(n) < 0.3))
+    uv = flat.uv + rng.normal(scale=0.05, size=flat.uv.shape)
+    edges = fan_edges(np.unique(incident_faces(free, vf_ptr, vf_tri)), F)[0]
+    for rows in (neighbour_rows(free, edges, n), _similar_rows(free, flat.uv, F, vf_ptr, vf_tri, n)):
+        w = rows.toarray()
+        w /= w.sum(axis=1, keepdims=True)
+        z = uv[:, 0] + 1j * uv[:, 1]
+        others = np.setdiff1d(np.arange(n), free)
+        want = np.linalg.solve(np.eye(len(free)) - w[:, free], w[:, others] @ z[others])
+        got = _solve_rows(uv, free, rows)
+        np.testing.assert_allclose(got[:, 0] + 1j * got[:, 1], want, rtol=0, atol=1e-9)
 
 
 def test_signed_areas_refuses_swapped_or_out_of_range_arguments():

@@ -521,6 +521,30 @@ def test_untangle_fixes_flipped_interior_vertices():
     assert 0 < len(moved) < len(uv) // 4  # only the tangled region moved
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_untangle_looks_only_around_its_region_and_matches_its_definition(seed):
+    """Untangling checks only the faces around the vertices it moves; every round ends where
+    the reference, which looks at every face in every round, ends, to the last bit, also for
+    a tangle that outlasts the widening every 20 rounds and with ears among the faces."""
+    from potflat.relax.start import untangle
+
+    flat = meshes.vessel_rollout(900, seed=seed)
+    F = flat.mesh.faces
+    uv = flat.uv.copy()
+    centre = uv[len(uv) // 2]
+    near = np.linalg.norm(uv - centre, axis=1)
+    patch = near < np.quantile(near, 0.2)
+    uv[patch, 0] = 2.0 * centre[0] - uv[patch, 0]  # mirrored: untangled after 20-40 rounds
+    sp = spring_system(flat.mesh.vertices, F, k=1.0, relative=True)
+    assert (np.diff(sp.vf_ptr) == 1).any()
+    for rounds in (1, 19, 20, 39, 200):
+        x, n_bad = untangle(sp, uv, rounds=rounds)
+        want, want_bad = ref.relax_untangle(sp, uv, rounds=rounds)
+        assert n_bad == want_bad
+        np.testing.assert_array_equal(x, want)
+    assert (sp.signed_areas(untangle(sp, uv)[0]) > 0).all()
+
+
 def _saddle_fan(K=12, flat_gap=1.0):
     """An open fan around vertex 0 whose 3D angle sum (8.67 rad) exceeds 2 pi, laid out flat
     with angle sum ``2 pi - flat_gap``: its springs pull the fan to wrap over itself."""

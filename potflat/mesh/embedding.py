@@ -154,10 +154,11 @@ def repair_folds(faces: np.ndarray, uv: np.ndarray, *, reference: np.ndarray | N
                 free = np.concatenate([inner, border])
                 rows = sp.vstack([_mean_value_rows(inner, reference, faces, vf_ptr, vf_tri, n),
                                   _similar_rows(border, reference, faces, vf_ptr, vf_tri, n)]).tocsr()
-            trial = _solve_rows(uv, free, rows)
-            if np.all(signed_areas(faces[near], trial) > 0):
-                uv = trial
+            before = uv[free]
+            uv[free] = _solve_rows(uv, free, rows)
+            if np.all(signed_areas(faces[near], uv) > 0):
                 break
+            uv[free] = before
             region = np.union1d(region, edges.ravel())  # (the vertices of the faces around it)
     left = int((signed_areas(faces, uv) <= 0).sum())
     return uv, start - left, left
@@ -208,41 +209,50 @@ def neighbour_rows(verts: np.ndarray, edges: np.ndarray, n: int):
     vertex's edges there), weight 1: a (k, n) sparse matrix."""
     import scipy.sparse as sp
 
-    row = np.full(n, -1, np.int64)
-    row[verts] = np.arange(len(verts))
     a, b = edges[:, 0], edges[:, 1]
-    ends = [(row[a], b), (row[b], a)]
+    ends = [(_rows_of(verts, a), b), (_rows_of(verts, b), a)]
     r = np.concatenate([r[r >= 0] for r, _ in ends])
     c = np.concatenate([c[r >= 0] for r, c in ends])
     return sp.coo_matrix((np.ones(len(r)), (r, c)), shape=(len(verts), n)).tocsr()
 
 
+def _rows_of(verts: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The row of each of ``v`` in ``verts`` ((k,) int, without repeats), -1 where it is not
+    there; costs what ``verts`` and ``v`` do, not the mesh."""
+    if not len(verts):
+        return np.full(len(v), -1, np.int64)
+    by_vertex = np.argsort(verts, kind="stable")
+    at = np.minimum(np.searchsorted(verts[by_vertex], v), len(verts) - 1)
+    return np.where(verts[by_vertex][at] == v, by_vertex[at], -1).astype(np.int64)
+
+
 def _solve_rows(uv: np.ndarray, free: np.ndarray, rows) -> np.ndarray:
-    """``uv`` (n, 2) with each ``free`` (k,) vertex the combination of the others given by its
-    row of ``rows`` ((k, n) sparse, real or complex: a complex weight turns and scales the
-    neighbour's position, as points of the complex plane), rows normalised to sum 1, solved
-    for all free vertices at once."""
+    """The positions (k, 2) of the ``free`` (k,) vertices of ``uv`` (n, 2) when each is the
+    combination of the others given by its row of ``rows`` ((k, n) sparse, real or complex: a
+    complex weight turns and scales the neighbour's position, as points of the complex
+    plane), rows normalised to sum 1, solved for all free vertices at once. Its cost is the
+    rows', not the mesh's."""
     import scipy.sparse as sp
     from scipy.sparse.linalg import spsolve
 
-    out = uv.copy()
-    if not len(free):
-        return out
+    k = len(free)
+    if not k:
+        return np.empty((0, 2))
+    rows = rows.tocsr()
+    names, at = np.unique(rows.indices, return_inverse=True)  # the vertices the rows name, numbered
+    rows = sp.csr_matrix((rows.data, at.ravel(), rows.indptr), shape=(k, len(names)))
     rows = sp.diags(1.0 / np.asarray(rows.sum(axis=1)).ravel()) @ rows
-    col = np.full(len(uv), -1, np.int64)
-    col[free] = np.arange(len(free))
+    col = _rows_of(free, names)
     w = rows.tocoo()
     inner = col[w.col] >= 0
-    k = len(free)
     among = sp.coo_matrix((w.data[inner], (w.row[inner], col[w.col[inner]])), shape=(k, k))
     lap = sp.eye(k, dtype=w.data.dtype) - among
-    fixed = sp.coo_matrix((w.data[~inner], (w.row[~inner], w.col[~inner])), shape=(k, len(uv))).tocsr()
+    fixed = sp.coo_matrix((w.data[~inner], (w.row[~inner], w.col[~inner])), shape=(k, len(names))).tocsr()
+    held = uv[names]
     if np.iscomplexobj(w.data):
-        z = spsolve(lap.tocsc(), fixed @ (uv[:, 0] + 1j * uv[:, 1]))
-        out[free] = np.stack([z.real, z.imag], axis=1)
-    else:
-        out[free] = np.asarray(spsolve(lap.tocsc(), fixed @ uv)).reshape(-1, 2)
-    return out
+        z = spsolve(lap.tocsc(), fixed @ (held[:, 0] + 1j * held[:, 1]))
+        return np.stack([z.real, z.imag], axis=1)
+    return np.asarray(spsolve(lap.tocsc(), fixed @ held)).reshape(-1, 2)
 
 
 def _similar_rows(verts: np.ndarray, reference: np.ndarray, faces: np.ndarray, vf_ptr: np.ndarray,
@@ -254,10 +264,10 @@ def _similar_rows(verts: np.ndarray, reference: np.ndarray, faces: np.ndarray, v
     import scipy.sparse as sp
 
     row, v, a, b = _corners(verts, faces, vf_ptr, vf_tri)
-    z = reference[:, 0] + 1j * reference[:, 1]
-    base = z[b] - z[a]
+    zv, za, zb = (reference[i, 0] + 1j * reference[i, 1] for i in (v, a, b))
+    base = zb - za
     weight = np.abs(base) ** 2
-    ratio = (z[v] - z[a]) / np.where(weight > 0, base, 1.0)
+    ratio = (zv - za) / np.where(weight > 0, base, 1.0)
     weight = np.where(weight > 0, weight, 0.0)
     return sp.coo_matrix((np.concatenate([weight * (1.0 - ratio), weight * ratio]),
                           (np.concatenate([row, row]), np.concatenate([a, b]))), shape=(len(verts), n)).tocsr()
@@ -311,7 +321,8 @@ def _disc(faces: np.ndarray, n: int, scale: float) -> np.ndarray | None:
     free = np.ones(total, bool)
     free[outer] = False
     inner = np.flatnonzero(free)
-    return _solve_rows(uv, inner, _adjacency(all_faces, total)[inner])[:n]
+    uv[inner] = _solve_rows(uv, inner, _adjacency(all_faces, total)[inner])
+    return uv[:n]
 
 
 def tutte_embedding(faces: np.ndarray, n: int, scale: float = 1.0) -> np.ndarray | None:

@@ -28,26 +28,41 @@ def untangle(sp: SpringSystem, x: np.ndarray, rounds: int = 200) -> tuple[np.nda
     instead (:func:`unfold_ears`).
     Returns the positions and the number of faces that were flipped at the start.
     """
-    bad = sp.signed_areas(x) <= 0
-    n_bad = int(bad.sum())
+    bad = np.flatnonzero(sp.signed_areas(x) <= 0)
+    n_bad = len(bad)
     if n_bad == 0:
         return x, 0
     x = x.copy()
     region = np.zeros(sp.n, bool)
+    members = np.zeros(0, np.int64)  # (region's vertices, sorted)
     ear_tip = np.diff(sp.vf_ptr) == 1
     for r in range(rounds):
-        bad = sp.signed_areas(x) <= 0
-        if not bad.any():
-            break
-        region[sp.faces[bad].ravel()] = True
+        members = _joined(region, members, sp.faces[bad])
         if r % 20 == 19:  # widen the region around persistent tangles
-            region[sp.faces[region[sp.faces].any(axis=1)].ravel()] = True
-        verts = np.nonzero(region & ~ear_tip)[0]
+            members = _joined(region, members, sp.faces[incident_faces(members, sp.vf_ptr, sp.vf_tri)])
+        tip = ear_tip[members]
+        verts = members[~tip]
         mean = np.empty((len(verts), 2))
         neighbour_means(x, verts, sp.vf_ptr, sp.vf_tri, sp.faces, mean)
         x[verts] = mean
-        unfold_ears(sp, x, np.flatnonzero(region & ear_tip))
+        unfold_ears(sp, x, members[tip])
+        # only the faces around the region's vertices moved, so only they can be flipped
+        near = incident_faces(members, sp.vf_ptr, sp.vf_tri)
+        bad = near[signed_areas(sp.faces[near], x) <= 0]
+        if not len(bad):
+            break
     return x, n_bad
+
+
+def _joined(region: np.ndarray, members: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The vertices of ``faces`` ((k, 3)) added to a region: ``region`` (n,) bool is set for them
+    in place; returns its sorted vertices ``members`` (int64) with them."""
+    new = np.unique(faces).astype(np.int64)
+    new = new[~region[new]]
+    if not len(new):
+        return members
+    region[new] = True
+    return np.union1d(members, new)
 
 
 def check_not_mirrored(sp: SpringSystem, x: np.ndarray) -> None:
