@@ -404,3 +404,33 @@ def test_cylindrical_matches_numpy_reference():
     ok = r_ref > 0
     np.testing.assert_array_equal(radial[ok], perp[ok] / r_ref[ok, None])
     assert radius[0] == 0 and (radial[0] == 0).all()
+
+
+def test_weighted_quantiles_per_group_select_as_a_sort_of_each_group_would():
+    """Each group's quantiles are its own (a full sort of the group's values of positive weight,
+    the first whose cumulative weight reaches the share; integer weights sum exactly), for
+    groups of one entry, of many thousands (several radix passes), with ties, and NaN for a
+    group that is empty or whose entries all weigh nothing; the entries in any order."""
+    from potflat.rollout.walls import weighted_quantiles
+
+    rng = np.random.default_rng(5)
+    sizes = [1, 3, 0, 40, 9000, 7, 0, 300]
+    b = np.repeat(np.arange(len(sizes)), sizes)
+    v = rng.integers(0, 50, len(b)) / 7.0
+    w = rng.integers(0, 4, len(b)).astype(float)
+    w[b == 1] = 0.0  # (a group whose entries all weigh nothing)
+    w[np.flatnonzero(b == 0)] = 2.0
+    shuffle = rng.permutation(len(b))
+    b, v, w = b[shuffle], v[shuffle], w[shuffle]
+    qs = (0.0, 0.25, 0.5, 0.9, 1.0)
+    got = weighted_quantiles(b, v, w, len(sizes) + 1, qs)
+    assert got.shape == (len(qs), len(sizes) + 1)
+    for g in range(len(sizes) + 1):
+        keep = (b == g) & (w > 0)
+        if not keep.any():
+            assert np.isnan(got[:, g]).all()
+            continue
+        order = np.argsort(v[keep], kind="stable")
+        cum = np.cumsum(w[keep][order])
+        want = [v[keep][order][min(np.searchsorted(cum, q * cum[-1]), keep.sum() - 1)] for q in qs]
+        np.testing.assert_array_equal(got[:, g], want)

@@ -36,6 +36,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.mesh._kernels.geometry import edge_lengths, face_geometry, radial_parts
+from potflat.mesh._kernels.quantiles import grouped_weighted_quantiles
 from potflat.mesh._kernels.topology import edge_table, face_pairs, pair_csr, pair_sums, union_find
 from potflat.mesh.tolerances import DEGENERATE, ROUNDING
 from potflat.rollout.options import SIDES  # the sides select_wall accepts
@@ -414,7 +415,10 @@ def binned_median(h: np.ndarray, values: np.ndarray, weights: np.ndarray, edges:
 
 
 def weighted_quantiles(b: np.ndarray, v: np.ndarray, w: np.ndarray, k: int, quantiles) -> np.ndarray:
-    """Weighted quantiles of ``v`` per group.
+    """Weighted quantiles of ``v`` per group: in each, the smallest value whose cumulative
+    weight reaches the quantile's share of the group's weight
+    (:func:`potflat.mesh._kernels.quantiles.grouped_weighted_quantiles`, a selection per
+    group, no sort).
 
     Parameters
     ----------
@@ -431,23 +435,9 @@ def weighted_quantiles(b: np.ndarray, v: np.ndarray, w: np.ndarray, k: int, quan
     (len(quantiles), k) float64
         NaN for empty groups.
     """
-    # np.lexsort((v, b)) in two stable sorts, the group's a radix sort of 16-bit keys: the
-    # same order, 1.8x as fast on 2M samples
-    order = np.argsort(v, kind="stable")
-    group = b[order]
-    order = order[np.argsort(group.astype(np.int16) if k <= np.iinfo(np.int16).max else group, kind="stable")]
-    b, v, w = b[order], v[order], w[order]
-    cw = np.concatenate([[0.0], np.cumsum(w)])
-    start = np.searchsorted(b, np.arange(k), side="left")
-    stop = np.searchsorted(b, np.arange(k), side="right")
-    total = cw[stop] - cw[start]
-    out = np.full((len(quantiles), k), np.nan)
-    has = total > 0
-    for qi, q in enumerate(quantiles):
-        target = cw[start] + q * total
-        idx = np.searchsorted(cw, target, side="left") - 1
-        idx = np.clip(idx, start, np.maximum(stop - 1, start))
-        out[qi, has] = v[idx[has]]
+    out = np.empty((len(quantiles), k))
+    grouped_weighted_quantiles(np.ascontiguousarray(b, dtype=np.int64), np.ascontiguousarray(v, dtype=np.float64),
+                               np.ascontiguousarray(w, dtype=np.float64), np.asarray(quantiles, dtype=np.float64), out)
     return out
 
 

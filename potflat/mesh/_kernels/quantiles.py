@@ -1,4 +1,5 @@
-"""Order statistics: grouped lower medians and weighted quantiles by radix selection.
+"""Order statistics: grouped lower medians and weighted quantiles by radix selection, of
+one set of values or of each group of them.
 
 Arrays in, arrays out, no I/O; deterministic for any thread count.
 """
@@ -7,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from potflat._jit import leaf
+from potflat._jit import leaf, parallel, prange
 
 
 @leaf
@@ -189,3 +190,48 @@ def select_weighted_quantiles(values, weights, fractions, out):
                 hist_w, hist_c = _radix_histogram(bits, weights, cand, shift)
             cand, below = _narrow(bits, cand, shift, hist_w, hist_c, below, target)
         out[k] = _pick_in_order(values, bits, weights, cand, below, target)
+
+
+@parallel
+def grouped_weighted_quantiles(group, values, weights, fractions, out):
+    """:func:`select_weighted_quantiles` of each group of entries, the groups in parallel.
+
+    Parameters
+    ----------
+    group : (n,) int64
+        Group of each entry, in ``[0, g)``.
+    values, weights : (n,) float64
+        As :func:`select_weighted_quantiles` takes them (weights <= 0 or NaN do not count).
+    fractions : (k,) float64
+        In [0, 1].
+    out : (k, g) float64
+        Output: NaN for a group without positive weight.
+    """
+    g = out.shape[1]
+    start = np.zeros(g + 1, np.int64)
+    for i in range(group.shape[0]):
+        if weights[i] > 0.0:
+            start[group[i] + 1] += 1
+    for j in range(g):
+        start[j + 1] += start[j]
+    order = np.empty(start[g], np.int64)  # each group's entries in index order
+    fill = start[:g].copy()
+    for i in range(group.shape[0]):
+        if weights[i] > 0.0:
+            order[fill[group[i]]] = i
+            fill[group[i]] += 1
+    for j in prange(g):
+        k = start[j + 1] - start[j]
+        if k == 0:
+            for q in range(fractions.shape[0]):
+                out[q, j] = np.nan
+            continue
+        v = np.empty(k)
+        w = np.empty(k)
+        for t in range(k):
+            v[t] = values[order[start[j] + t]]
+            w[t] = weights[order[start[j] + t]]
+        res = np.empty(fractions.shape[0])
+        select_weighted_quantiles(v, w, fractions, res)
+        for q in range(fractions.shape[0]):
+            out[q, j] = res[q]
