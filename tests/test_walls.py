@@ -434,3 +434,18 @@ def test_weighted_quantiles_per_group_select_as_a_sort_of_each_group_would():
         cum = np.cumsum(w[keep][order])
         want = [v[keep][order][min(np.searchsorted(cum, q * cum[-1]), keep.sum() - 1)] for q in qs]
         np.testing.assert_array_equal(got[:, g], want)
+
+
+@pytest.mark.parametrize("case", ["group out of range", "negative group", "lengths differ"])
+def test_weighted_quantiles_refuse_groups_outside_or_samples_of_other_lengths(case):
+    from potflat.rollout.walls import weighted_quantiles
+
+    b, v, w = np.array([0, 1, 2]), np.ones(3), np.ones(3)
+    if case == "group out of range":
+        b = np.array([0, 1, 3])
+    elif case == "negative group":
+        b = np.array([0, -1, 2])
+    else:
+        w = np.ones(2)
+    with pytest.raises(ValueError, match="groups in"):
+        weighted_quantiles(b, v, w, 3, (0.5,))

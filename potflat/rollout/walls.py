@@ -435,9 +435,13 @@ def weighted_quantiles(b: np.ndarray, v: np.ndarray, w: np.ndarray, k: int, quan
     (len(quantiles), k) float64
         NaN for empty groups.
     """
+    b = np.ascontiguousarray(b, dtype=np.int64)
+    v, w = np.ascontiguousarray(v, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64)
+    # (the kernel reads and writes by these unchecked)
+    if v.shape != b.shape or w.shape != b.shape or (len(b) and not (b.min() >= 0 and b.max() < k)):
+        raise ValueError(f"weighted_quantiles: one group, value and weight per sample, groups in [0, {k})")
     out = np.empty((len(quantiles), k))
-    grouped_weighted_quantiles(np.ascontiguousarray(b, dtype=np.int64), np.ascontiguousarray(v, dtype=np.float64),
-                               np.ascontiguousarray(w, dtype=np.float64), np.asarray(quantiles, dtype=np.float64), out)
+    grouped_weighted_quantiles(b, v, w, np.asarray(quantiles, dtype=np.float64), out)
     return out
 
 
