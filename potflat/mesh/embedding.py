@@ -222,8 +222,9 @@ def _rows_of(verts: np.ndarray, v: np.ndarray) -> np.ndarray:
     if not len(verts):
         return np.full(len(v), -1, np.int64)
     by_vertex = np.argsort(verts, kind="stable")
-    at = np.minimum(np.searchsorted(verts[by_vertex], v), len(verts) - 1)
-    return np.where(verts[by_vertex][at] == v, by_vertex[at], -1).astype(np.int64)
+    ordered = verts[by_vertex]
+    at = np.minimum(np.searchsorted(ordered, v), len(verts) - 1)
+    return np.where(ordered[at] == v, by_vertex[at], -1).astype(np.int64)
 
 
 def _solve_rows(uv: np.ndarray, free: np.ndarray, rows) -> np.ndarray:
