@@ -244,15 +244,17 @@ class CoarseParameters:
     mostly strips of slivers along the boundary (subdivided slivers of the scan), which 12
     rings did not reach across on the goblet and the plastic vase at 1M and 40 did.
     The followed layout is the full mesh's start only when its energy is at most
-    ``follow_most_energy`` times the rollout's: a copy whose cells straddle sharp creases
-    (the plastic vase's flutes, which its chords cut: its surface 1-2% short) starts the full
-    mesh above the rollout's energy, and far enough above it that start is the slower one
-    (plastic vase, ``relax()`` alone, followed start against the rollout: 0.1M, 1.20 times
-    the energy, 68 full-mesh iterations against 77 + 38, 1.2 s against 1.4; 0.3M, 1.26 times,
-    91 against 141 + 40, 3.5 s against 5.2; 1M, 1.78 times, 163 against 155 + 51, 17.2 s
-    against 19.2; 3M, 2.49 times, 964 against 284 + 159, 203 s against 96); the other shared
-    scans' followed starts are below the rollout's energy (colonoware pot 0.34 times at 1M,
-    0.25 at 3M; goblet 0.06 at 0.1M).
+    ``follow_most_energy`` times the rollout's: a followed start far above the rollout's
+    energy is the slower one (``relax()`` alone, followed start against the rollout's:
+    plastic vase at 3M, 2.44 times the energy, 1052 full-mesh iterations against 364 + 114,
+    222 s against 98; colonoware pot at 1M, 2.40 times, 154 against 53 + 53, 8.0 s against
+    5.2), one near or below it mostly the faster (plastic vase at 0.1M, 1.20 times, 78 against
+    75 + 40, 1.3 s against 1.5; at 0.3M, 1.29 times, 73 against 114 + 40, 3.2 s against 4.7).
+    The energy does not tell every case: the plastic vase's 1M start is 0.94 times the
+    rollout's, yet takes 184 iterations, 19-21 s, against 101 + 42, 14-15 s (the full mesh
+    squeezes the slivers of its flutes flat, and their faces hold most steps to 1-4 % of the
+    natural one). The other shared scans' followed starts at 1M are far below (sea vase 0.26,
+    dragon jar 0.11, goblet 0.013 times).
     Where that still leaves the followed layout folded, the full mesh instead moves from its
     start towards it in ``approach_steps`` equal shares and at most ``approach_rounds``
     rounds, each vertex as far as keeps every face around it above ``approach_floor`` of its
