@@ -55,14 +55,27 @@ def test_axis_sign_from_the_inner_wall():
     V = np.vstack([m_out.vertices, m_in.vertices])
     F = np.vstack([m_out.faces, inner_faces])
     cup = Mesh(V, F)
-    d, reason = orient(cup, np.zeros(3), np.array([0, 0, -1.0]))
-    assert d[2] > 0 and "inner wall" in reason
+    d, reason, guessed = orient(cup, np.zeros(3), np.array([0, 0, -1.0]))
+    assert d[2] > 0 and "inner wall" in reason and not guessed
 
 
 def test_wider_end_tie_break_for_a_closed_shape():
     mesh = trimesh.creation.cone(radius=20, height=50, sections=48)  # closed: base disk + apex
-    d, reason = orient(Mesh(mesh.vertices, mesh.faces), np.zeros(3), np.array([0, 0, 1.0]))
-    assert d[2] < 0 and "wider end" in reason
+    d, reason, guessed = orient(Mesh(mesh.vertices, mesh.faces), np.zeros(3), np.array([0, 0, 1.0]))
+    assert d[2] < 0 and "wider end" in reason and guessed
+
+
+def test_a_mouth_taken_at_the_wider_end_is_flagged_as_a_guess_unless_flipped():
+    """A closed cone without a cavity: only the wider end tells the mouth, a guess the fit says
+    it is (and the rollout warns of); a flip on request is the user's answer to it. An open
+    vessel's mouth is found at its rim, not guessed."""
+    solid = trimesh.creation.cone(radius=20, height=50, sections=48).subdivide().subdivide()
+    closed = Mesh(solid.vertices, solid.faces)
+    fit = estimate_axis(closed)
+    assert fit.mouth_guessed and fit.as_dict()["mouth_guessed"] is True and "wider end" in fit.orientation
+    assert not estimate_axis(closed, flip=True).mouth_guessed
+    open_cone, *_ = cone(cap=True)
+    assert not estimate_axis(open_cone).mouth_guessed
 
 
 def test_box_has_no_axis():

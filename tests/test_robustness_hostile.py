@@ -703,13 +703,17 @@ def test_large_trims_and_poor_axis_fits_are_warned_with_the_option():
                              other_objects_faces=0, disk_cut_faces=np.zeros(0, np.int64),
                              walls=SimpleNamespace(side="outer", outer_area=50.0, inner_area=0.0, apart_area=0.0),
                              trimmed_area=20.0, flat=flat, proxy=SimpleNamespace(kind="cylinder"),
-                             axis=SimpleNamespace(misfit_angle_deg=3.2, direction=np.array([0.0, 1.0, 0.0])))
+                             axis=SimpleNamespace(misfit_angle_deg=3.2, direction=np.array([0.0, 1.0, 0.0]),
+                                                  mouth_guessed=False))
     notes = " ".join(_notes(result))
+    assert "upside down" not in notes
     assert "29 % of the surface was trimmed" in notes and "--band" in notes
     assert "tilted or off-centre" in notes and "lean 3.2 deg RMS" in notes and "--axis" in notes
     assert "faces along the axis" not in notes  # the triangle faces across the axis (y)
     result.axis.direction = np.array([0.0, 0.0, 1.0])  # now the triangle faces along it: a flange
     assert "100 % of the unrolled surface faces along the axis" in " ".join(_notes(result))
+    result.axis.mouth_guessed = True  # only the wider end told the mouth
+    assert "the image may be upside down" in " ".join(_notes(result)) and "--flip" in " ".join(_notes(result))
 
 
 def test_a_foot_unrolled_into_a_flange_is_warned_with_the_option():

@@ -156,6 +156,9 @@ class AxisFit:
         median radius (0 for a surface of revolution; a box gives about 0.1).
     note : str
         Warning about the fit (e.g. undetermined axis), empty when none.
+    mouth_guessed : bool
+        The mouth was taken to be the wider end (rule 3 of the module: no inner wall or
+        open rim told the ends apart), not flipped on request: the image may be upside down.
     """
 
     point: np.ndarray
@@ -170,6 +173,7 @@ class AxisFit:
     misfit_angle_deg: float
     profile_deviation: float
     note: str = ""
+    mouth_guessed: bool = False
 
     def cylindrical(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Height, radius and angle of ``points`` about the axis.
@@ -195,6 +199,7 @@ class AxisFit:
             "height": float(self.height),
             "method": self.method,
             "orientation": self.orientation,
+            "mouth_guessed": bool(self.mouth_guessed),
             "rms_angle_deg": float(self.rms_angle_deg),
             "median_angle_deg": float(self.median_angle_deg),
             "rms_distance": float(self.rms_distance),
@@ -495,7 +500,7 @@ def _boundary_loops(mesh: Mesh) -> list[np.ndarray]:
     return [bnd[idx] for idx in np.split(order, splits)]
 
 
-def orient(mesh: Mesh, point, direction, *, lines=None) -> tuple[np.ndarray, str]:
+def orient(mesh: Mesh, point, direction, *, lines=None) -> tuple[np.ndarray, str, bool]:
     """Sign of the axis direction from foot to mouth (see module docs for the rule).
 
     Returns
@@ -504,6 +509,8 @@ def orient(mesh: Mesh, point, direction, *, lines=None) -> tuple[np.ndarray, str
         ``direction`` or its opposite.
     reason : str
         The rule that decided.
+    guessed : bool
+        Whether only the wider end decided (rule 3).
     """
     direction = np.asarray(direction, float)
     ref = reference_direction(direction)
@@ -551,11 +558,12 @@ def orient(mesh: Mesh, point, direction, *, lines=None) -> tuple[np.ndarray, str
         top, bottom = r[h >= hi - band], r[h <= lo + band]
         up = top.mean() >= bottom.mean()
         reason = "no inner wall or open rim found: mouth assumed at the wider end; use flip to reverse"
-    return (direction if up else -direction), reason
+        return (direction if up else -direction), reason, True
+    return (direction if up else -direction), reason, False
 
 
 def _finish(mesh, point, direction, *, method, orientation, flip, note="", lines=None,
-            residuals: tuple[float, float, float, float, float] | None = None) -> AxisFit:
+            residuals: tuple[float, float, float, float, float] | None = None, guessed: bool = False) -> AxisFit:
     """The :class:`AxisFit` of an axis line; ``residuals``: its :func:`axis_residuals` when the
     caller has them (they do not depend on the point along the line or the direction's sign)."""
     direction = np.asarray(direction, float)
@@ -570,7 +578,7 @@ def _finish(mesh, point, direction, *, method, orientation, flip, note="", lines
     return AxisFit(point=foot, direction=direction, reference=reference_direction(direction),
                    height=float(h.max() - h.min()), method=method, orientation=orientation,
                    rms_angle_deg=rms_angle, median_angle_deg=median_angle, rms_distance=rms_dist,
-                   misfit_angle_deg=misfit, profile_deviation=prof, note=note)
+                   misfit_angle_deg=misfit, profile_deviation=prof, note=note, mouth_guessed=guessed and not flip)
 
 
 def manual_axis(mesh: Mesh, point, direction, *, flip: bool = False) -> AxisFit:
@@ -693,9 +701,9 @@ def estimate_axis(mesh: Mesh, *, flip: bool = False, profile: bool = True,
                 f"(radius varies by {100 * prof:.1f} % within height slices, limit "
                 f"{100 * MAX_PROFILE_DEVIATION:g} %; median normal-to-meridian angle "
                 f"{median_angle:.1f} deg, RMS {rms_angle:.1f} deg); give --axis px,py,pz,dx,dy,dz")
-    direction, orientation = orient(mesh, point, direction, lines=lines)
+    direction, orientation, guessed = orient(mesh, point, direction, lines=lines)
     return _finish(mesh, point, direction, method=method, orientation=orientation, flip=flip, note=note,
-                   lines=lines, residuals=residuals)
+                   lines=lines, residuals=residuals, guessed=guessed)
 
 
 def _check_support(mesh: Mesh, points: np.ndarray, point, direction) -> None:

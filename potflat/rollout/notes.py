@@ -91,6 +91,10 @@ def rollout_notes(result) -> list[str]:
         notes.append(f"{100 * share:.0f} % of the unrolled surface faces along the axis (a foot, a base or a flat "
                      "shoulder): the proxy unrolls it as a wide, lobed flange; if the painting is elsewhere, unroll "
                      "the painted height only (--band LO HI)")
+    if result.axis.mouth_guessed:
+        notes.append("no open rim or inner wall tells the mouth from the foot (a sherd, or a closed scan without a "
+                     "cavity): the wider end is taken as the mouth, so the image may be upside down; check it, and "
+                     "roll out again with --flip if it is")
     if result.axis.misfit_angle_deg > WARN_AXIS_MISFIT_DEG:
         notes.append(f"the axis looks tilted or off-centre: the wall's normals lean {result.axis.misfit_angle_deg:.1f} "
                      "deg RMS to one side and the other as they go round it (a foot, handle or break misleads the "
