@@ -751,6 +751,35 @@ def test_a_lid_scanned_with_the_vessel_is_left_out_with_a_note():
     assert not any("pieces apart" in n for n in _notes(rollout(jar, importance="none")))
 
 
+def test_a_turntable_scanned_under_the_vessel_is_left_apart_not_unrolled():
+    """A turntable or ground plane scanned with the vessel, larger than it: a flat piece facing
+    along the axis that holds most of the scan's area. The vessel's wall is unrolled (the
+    selection is the region with the most wall, not the most area) and the plane is left
+    apart with a note."""
+    from potflat_synthetic.vessels import make_vessel
+
+    from potflat.rollout import rollout
+    from potflat.rollout.notes import rollout_notes as _notes
+    from potflat.types import Mesh
+
+    jar = make_vessel("hydria", n_vertices=4000, seed=1, pose=False).mesh
+    lo, hi = jar.vertices.min(axis=0), jar.vertices.max(axis=0)
+    k = 30
+    side = np.linspace(-1.5, 1.5, k + 1) * (hi - lo).max()
+    X, Y = np.meshgrid(side, side)
+    plane = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, lo[2] - 1.0)]) + [*(0.5 * (lo + hi))[:2], 0.0]
+    ids = np.arange((k + 1) ** 2).reshape(k + 1, k + 1)
+    quads = np.column_stack([ids[:-1, :-1].ravel(), ids[:-1, 1:].ravel(), ids[1:, 1:].ravel(), ids[1:, :-1].ravel()])
+    grid = np.vstack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]) + len(jar.vertices)
+    scan = Mesh(np.vstack([jar.vertices, plane]), np.vstack([jar.faces, grid]))
+    result = rollout(scan, importance="none")
+    assert result.walls.apart_area > result.walls.outer_area / 2  # the plane: most of the outer area
+    assert result.flat.mesh.vertices[:, 2].min() >= lo[2]  # none of its vertices unrolled
+    assert result.distortion.flipped == 0
+    apart = [n for n in _notes(result) if "pieces apart from the vessel's wall" in n]
+    assert len(apart) == 1 and "turntable" in apart[0], _notes(result)
+
+
 def test_compile_note_on_a_first_run(tmp_path, monkeypatch):
     import hashlib
     import pickle

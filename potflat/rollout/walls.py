@@ -19,7 +19,9 @@ towards it, and the rim crest is the fold where ``n_r`` changes sign.
    upward fold (a rim) or lies inside the outer wall's profile (a sherd's inner face); one
    meeting it across a downward fold (the inside of a foot ring, an overhanging lip) or
    lying outside the body (the inner side of a handle) belongs to the outer wall;
-4. the selection is the largest connected region of the side asked for.
+4. the selection is the connected region of the side asked for with the most wall (area
+   times ``|n_r|``), so a flat piece scanned with the vessel (a turntable or ground plane,
+   larger than the vessel) is left apart.
 
 Scans whose faces all point inwards (an open surface the loader could not orient) are
 detected by the inner side being more than twice as large as the outer one, and read with
@@ -363,6 +365,7 @@ def largest_component(mesh: Mesh, face_mask: np.ndarray) -> np.ndarray:
 
 
 def _largest_region(mask: np.ndarray, graph: FaceGraph, area: np.ndarray) -> np.ndarray:
+    """The edge-connected region of ``mask`` with the most ``area`` (any per-face weight)."""
     adj = graph.pairs
     comp = graph.components(mask[adj[:, 0]] & mask[adj[:, 1]])
     comp_area = np.bincount(comp[mask], weights=area[mask], minlength=comp.max() + 1)
@@ -589,7 +592,9 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
             f"the scan{where} has no {side} wall (its faces all {facing}); unroll its {other} side "
             f"(--side {other}, side='{other}')")
     candidates = chosen if exclude is None else chosen & ~exclude
-    mask = _largest_region(candidates, fr.graph, fr.area) if candidates.any() else candidates
+    # the region with the most wall (area facing away from or towards the axis), not a flat
+    # piece scanned with the vessel (a turntable or ground plane larger than the vessel)
+    mask = _largest_region(candidates, fr.graph, _wall_area(fr)) if candidates.any() else candidates
     adj = fr.adjacency
     cross = labels[adj[:, 0]] != labels[adj[:, 1]]
     touching = np.zeros(len(labels), dtype=bool)
@@ -750,12 +755,20 @@ def _clean_regions(fr: FaceFrame, labels: np.ndarray, sign: float, others: np.nd
     if len(outer_c) > 1:
         if others is not None:  # (an object's pieces are whole components: none is the vessel's outer wall)
             area = np.where(np.bincount(comp, weights=others, minlength=len(area)) > 0, -1.0, area)
-        main = outer_c[np.argmax(area[outer_c])]
+        wall = np.bincount(comp, weights=_wall_area(fr), minlength=len(area))
+        wall[area < 0] = -1.0  # (other objects)
+        main = outer_c[np.argmax(wall[outer_c])]
         enclosed = (comp_label == OUTER) & (border > 0) & (border_outer < 0.5 * border)
         enclosed[main] = False
         comp_label = np.where(enclosed, INNER, comp_label).astype(np.int8)
         labels = comp_label[comp]
     return labels.astype(np.int8)
+
+
+def _wall_area(fr: FaceFrame) -> np.ndarray:
+    """Each face's area times ``|n_r|``: its share of a wall around the axis, (m,) float64
+    (0 for a face along the axis: a flat base, a lid's top, a turntable)."""
+    return fr.area * np.abs(fr.n_radial)
 
 
 def _outside_body(fr: FaceFrame, labels: np.ndarray, comp: np.ndarray, outer_faces: np.ndarray) -> np.ndarray:
@@ -767,7 +780,7 @@ def _outside_body(fr: FaceFrame, labels: np.ndarray, comp: np.ndarray, outer_fac
     lo, hi = float(h.min()), float(h.max())
     k = int(np.clip(np.sqrt(outer_faces.sum()) / 2, 4, 400))
     edges = np.linspace(lo, hi, k + 1) if hi > lo else np.array([lo - 0.5, lo + 0.5])
-    weight = fr.area * np.abs(fr.n_radial)
+    weight = _wall_area(fr)
     (prof,), _ = binned_median(h[outer_faces], fr.radius[outer_faces], weight[outer_faces], edges)
     centres = 0.5 * (edges[:-1] + edges[1:])
     good = np.isfinite(prof)
