@@ -542,6 +542,7 @@ def orient(mesh: Mesh, point, direction, *, lines=None) -> tuple[np.ndarray, str
     for sel in (hc <= lo + band, hc >= hi - band):
         total = area[sel].sum()
         ends.append(area[sel & facing_axis].sum() / total if total > 0 else 0.0)
+    guessed = False
     if abs(ends[1] - ends[0]) >= INNER_WALL_FRACTION:
         up = ends[1] > ends[0]
         reason = (f"mouth at the end the inner wall reaches ({100 * max(ends):.0f} % of the area there "
@@ -558,8 +559,8 @@ def orient(mesh: Mesh, point, direction, *, lines=None) -> tuple[np.ndarray, str
         top, bottom = r[h >= hi - band], r[h <= lo + band]
         up = top.mean() >= bottom.mean()
         reason = "no inner wall or open rim found: mouth assumed at the wider end; use flip to reverse"
-        return (direction if up else -direction), reason, True
-    return (direction if up else -direction), reason, False
+        guessed = True
+    return (direction if up else -direction), reason, guessed
 
 
 def _finish(mesh, point, direction, *, method, orientation, flip, note="", lines=None,

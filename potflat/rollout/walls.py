@@ -133,6 +133,9 @@ class FaceFrame:
         Length of each shared edge.
     graph : FaceGraph or None
         The same adjacency as a sparse graph.
+    wall_area : (m,) float64
+        Each face's area times ``|n_radial|``: its share of a wall around the axis (0 for a
+        face along the axis: a flat base, a lid's top, a turntable); computed when first read.
     """
 
     area: np.ndarray
@@ -145,6 +148,10 @@ class FaceFrame:
     adjacency: np.ndarray
     edge_length: np.ndarray
     graph: FaceGraph | None = None
+
+    @cached_property
+    def wall_area(self) -> np.ndarray:
+        return self.area * np.abs(self.n_radial)
 
 
 class FaceGraph:
@@ -594,7 +601,7 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
     candidates = chosen if exclude is None else chosen & ~exclude
     # the region with the most wall (area facing away from or towards the axis), not a flat
     # piece scanned with the vessel (a turntable or ground plane larger than the vessel)
-    mask = _largest_region(candidates, fr.graph, _wall_area(fr)) if candidates.any() else candidates
+    mask = _largest_region(candidates, fr.graph, fr.wall_area) if candidates.any() else candidates
     adj = fr.adjacency
     cross = labels[adj[:, 0]] != labels[adj[:, 1]]
     touching = np.zeros(len(labels), dtype=bool)
@@ -753,22 +760,15 @@ def _clean_regions(fr: FaceFrame, labels: np.ndarray, sign: float, others: np.nd
     comp, comp_label, area, border, border_up, border_outer = _region_stats(fr, labels, sign)
     outer_c = np.flatnonzero(comp_label == OUTER)
     if len(outer_c) > 1:
+        wall = np.bincount(comp, weights=fr.wall_area, minlength=len(area))
         if others is not None:  # (an object's pieces are whole components: none is the vessel's outer wall)
-            area = np.where(np.bincount(comp, weights=others, minlength=len(area)) > 0, -1.0, area)
-        wall = np.bincount(comp, weights=_wall_area(fr), minlength=len(area))
-        wall[area < 0] = -1.0  # (other objects)
+            wall[np.bincount(comp, weights=others, minlength=len(area)) > 0] = -1.0
         main = outer_c[np.argmax(wall[outer_c])]
         enclosed = (comp_label == OUTER) & (border > 0) & (border_outer < 0.5 * border)
         enclosed[main] = False
         comp_label = np.where(enclosed, INNER, comp_label).astype(np.int8)
         labels = comp_label[comp]
     return labels.astype(np.int8)
-
-
-def _wall_area(fr: FaceFrame) -> np.ndarray:
-    """Each face's area times ``|n_r|``: its share of a wall around the axis, (m,) float64
-    (0 for a face along the axis: a flat base, a lid's top, a turntable)."""
-    return fr.area * np.abs(fr.n_radial)
 
 
 def _outside_body(fr: FaceFrame, labels: np.ndarray, comp: np.ndarray, outer_faces: np.ndarray) -> np.ndarray:
@@ -780,7 +780,7 @@ def _outside_body(fr: FaceFrame, labels: np.ndarray, comp: np.ndarray, outer_fac
     lo, hi = float(h.min()), float(h.max())
     k = int(np.clip(np.sqrt(outer_faces.sum()) / 2, 4, 400))
     edges = np.linspace(lo, hi, k + 1) if hi > lo else np.array([lo - 0.5, lo + 0.5])
-    weight = _wall_area(fr)
+    weight = fr.wall_area
     (prof,), _ = binned_median(h[outer_faces], fr.radius[outer_faces], weight[outer_faces], edges)
     centres = 0.5 * (edges[:-1] + edges[1:])
     good = np.isfinite(prof)
