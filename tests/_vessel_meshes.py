@@ -97,10 +97,12 @@ def arc(c, radius, a0, a1, n):
     return c[0] + radius * np.cos(t), c[1] + radius * np.sin(t)
 
 
-def cup(n_theta=72, foot_ring=False):
-    """Closed two-walled cup: base, outer wall, rounded rim, inner wall, floor.
+def cup(n_theta=72, foot_ring=False, table=0.0):
+    """Closed two-walled cup: base, outer wall, rounded rim, inner wall, floor; with
+    ``table > 0`` the base is replaced by a flat ring facing up, joined to the foot, out to
+    ``table`` times the rim's radius (a table scanned with the cup).
 
-    Labels: "base", "ring", "outer", "rim", "inner", "floor".
+    Labels: "base", "ring", "table", "outer", "rim", "inner", "floor".
     """
     R, H, t = 40.0, 60.0, 3.0
     rs, hs, lab = [], [], []
@@ -110,7 +112,9 @@ def cup(n_theta=72, foot_ring=False):
         hs.extend(np.atleast_1d(h))
         lab.extend([name] * len(np.atleast_1d(r)))
 
-    if foot_ring:
+    if table:  # the base hidden by a table out to ``table`` times the rim's radius, joined to the foot
+        add(np.linspace(table * R, 30, 13), np.zeros(13), "table")
+    elif foot_ring:
         add(np.linspace(0, 26, 9), np.full(9, 4.0), "base")
         add(np.full(3, 26.0), [3.0, 2.0, 1.0], "ring")
         add(np.linspace(26, 30, 3)[:], np.zeros(3), "ring")

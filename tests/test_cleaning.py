@@ -320,6 +320,24 @@ def test_majority_orientation_of_the_file_is_kept():
     assert r.faces_reoriented == 5 and r.components_reversed_outward == 0
 
 
+@pytest.mark.parametrize("table", [1.5, 4.0])
+def test_a_cup_standing_on_a_table_keeps_its_outward_orientation(table):
+    """A two-walled cup whose foot is joined to a table top around it (no base: the table
+    hides it). The table pulls the faces' centroid below the cup, so the faces' flux about
+    it comes out negative; closed over its open border the surface encloses the cup's body,
+    a positive volume. The file's outward orientation is kept, and an inverted file turned."""
+    import _vessel_meshes as vm
+
+    V, F, L, _ = vm.cup(table=table)
+    for faces, reversed_ in ((F, 0), (F[:, [0, 2, 1]], 1)):
+        mesh, r = clean_mesh(Mesh(V, faces))
+        assert r.components_reversed_outward == reversed_ and r.boundary_loops == 1
+        radial = _radial_outward(mesh)
+        assert (radial[L == "outer"] > 0).all() and (radial[L == "inner"] < 0).all()
+        up = np.cross(*(mesh.vertices[mesh.faces[:, k]] - mesh.vertices[mesh.faces[:, 0]] for k in (1, 2)))[:, 2]
+        assert (up[L == "table"] > 0).all()
+
+
 def test_closed_sphere_outward_and_hole_counted():
     import trimesh
 

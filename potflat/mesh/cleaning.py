@@ -13,10 +13,10 @@ each action, for the JSON sidecars:
 4. count non-manifold edges and vertices and, by default, split them (each fan of faces
    gets its own copy of the vertex; no face is removed);
 5. orient faces consistently per component (keeping the file's majority orientation) and
-   outward: the largest component's normals must point away from its centroid on average
-   (exact for closed shells, where this flux is 3x the volume, and right for open surfaces
-   of revolution, bowls and sherds); other components keep their orientation relative to
-   it (a separate inner wall keeps facing the axis);
+   outward: the components, each hole and open rim closed by a cap, must enclose a
+   positive volume (a closed shell as it is; an open vessel, bowl or sherd its body; a
+   flat piece nothing), turned over together so they keep their relative orientation (a
+   separate inner wall keeps facing the axis);
 6. count boundary loops (holes and open rims) and drop unreferenced vertices.
 """
 from __future__ import annotations
@@ -277,45 +277,54 @@ def _split_nonmanifold(mesh: Mesh, topo: _Topology, apply: bool) -> tuple[Mesh, 
     return split, nonmanifold, int(nlab - np.count_nonzero(copies))
 
 
-def _boundary_loops(F: np.ndarray, n: int, topo: _Topology, split: bool) -> tuple[int, int]:
-    """Boundary edges and loops of ``F`` (edges with one face; also the non-manifold ones
-    when those were split apart)."""
+def _open_border(F: np.ndarray, n: int, topo: _Topology, split: bool) -> tuple[np.ndarray, np.ndarray, int]:
+    """The open border of ``F``: its half-edges (b,) (edges with one face; also the
+    non-manifold ones when those were split apart), the loop of each (b,) int64 and the
+    number of loops."""
     hb = topo.odd if split else topo.odd[topo.odd_single]
     if len(hb) == 0:
-        return 0, 0
+        return hb, np.zeros(0, np.int64), 0
     flat = F.ravel()
     a, b = flat[hb], flat[hb - hb % 3 + (hb + 1) % 3]
     label, _ = union_find(n, a, b)
-    nb = len(hb) if split else int(np.count_nonzero(topo.count == 1))
-    return nb, len(np.unique(label[a]))
+    _, loop = np.unique(label[a], return_inverse=True)
+    return hb, loop.astype(np.int64), int(loop.max()) + 1
 
 
-def _outward_flips(cross: np.ndarray, area2: np.ndarray, centroid: np.ndarray, flip: np.ndarray,
-                   comp: np.ndarray) -> tuple[np.ndarray, int]:
+def _outward_flips(vertices: np.ndarray, faces: np.ndarray, cross: np.ndarray, area2: np.ndarray,
+                   centroid: np.ndarray, flip: np.ndarray, comp: np.ndarray, border: np.ndarray,
+                   loop: np.ndarray) -> tuple[np.ndarray, int]:
     """Faces to reverse for a consistent, outward orientation, and components reversed.
 
     ``flip`` (from :func:`propagate_orientation`) makes each component consistent relative
     to its first face; each component then takes the orientation of the (area) majority of
     its faces in the file, so a scanner's orientation is kept where it is consistent. The
-    largest component is turned outward when its normals point, on average, towards its
-    centroid (the flux ``sum(area * n . (x - c))``, 3x the volume for a closed shell); the
-    other components follow the same decision, so the relative orientation in the file is
-    kept (a separate inner wall keeps facing the axis).
+    components are then turned over together when they enclose a negative volume: their
+    faces and, over each loop of the open border (``border`` (b,) half-edges, ``loop`` (b,)
+    their loops), a cap of triangles to the loop's mean vertex. Closed by its caps, an open
+    vessel, bowl or sherd encloses its body and a flat piece nothing, so the sign does not
+    hang on where the area lies (a table or ground plane joined to the foot, or apart from
+    the vessel and larger than it). Turning all of them keeps the file's relative
+    orientation (a separate inner wall keeps facing the axis).
     """
     ncomp = int(comp.max()) + 1
-    weight = np.bincount(comp, weights=area2, minlength=ncomp)
     agree = np.bincount(comp, weights=np.where(flip, -area2, area2), minlength=ncomp)
     flip = flip ^ (agree < 0)[comp]
-    main = int(np.argmax(weight))
-    sel = comp == main
-    if sel.all():  # no copies in the common single-component case
-        sel = slice(None)
-    cen = centroid[sel]
-    c = (area2[sel, None] * cen).sum(axis=0) / max(weight[main], np.finfo(float).tiny)
-    d = cen - c
-    sign = np.where(flip[sel], -1.0, 1.0)
-    flux = float((sign * np.einsum("ij,ij->i", cross[sel], d)).sum())
-    scale = float((area2[sel] * np.sqrt(np.einsum("ij,ij->i", d, d))).sum())
+    sign = np.where(flip, -1.0, 1.0)
+    c = (area2[:, None] * centroid).sum(axis=0) / max(float(area2.sum()), np.finfo(float).tiny)
+    d = centroid - c
+    # six times the volume of the cones from c to the faces ...
+    flux = float((sign * np.einsum("ij,ij->i", cross, d)).sum())
+    scale = float((area2 * np.sqrt(np.einsum("ij,ij->i", d, d))).sum())
+    # ... and to the caps' triangles (b, a, apex) on each border half-edge a -> b
+    if len(border):
+        flat = faces.ravel()
+        xa = vertices[flat[border]] - c
+        xb = vertices[flat[border - border % 3 + (border + 1) % 3]] - c
+        count = np.bincount(loop)
+        apex = np.stack([np.bincount(loop, weights=xa[:, k]) for k in range(3)], axis=1) / count[:, None]
+        cap = np.einsum("ij,ij->i", np.cross(xa - xb, apex[loop] - xb), xb)
+        flux += float((sign[border // 3] * cap).sum())
     if flux < -1e-6 * scale:  # clearly inward (a flat patch stays as it is)
         return ~flip, ncomp
     return flip, 0
@@ -404,7 +413,8 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
     if n_nm_edges or nm_vertices:
         action = "split into separate fans" if split_nonmanifold else "left as they are"
         warnings.append(f"{n_nm_edges} non-manifold edges and {nm_vertices} non-manifold vertices, {action}")
-    b_edges, b_loops = _boundary_loops(mesh.faces, len(mesh.vertices), topo, split_nonmanifold)
+    border, loop, b_loops = _open_border(mesh.faces, len(mesh.vertices), topo, split_nonmanifold)
+    b_edges = len(border) if split_nonmanifold else int(np.count_nonzero(topo.count == 1))
     del topo
 
     # orientation: consistent per component, then outward
@@ -413,7 +423,8 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
     if orient:
         # the same values as at the start, face for face (splitting only renumbers vertices)
         cross, _, _, centroid = face_geometry(mesh.vertices, mesh.faces)
-        total_flip, reversed_out = _outward_flips(cross, area2, centroid, flip.astype(bool), comp)
+        total_flip, reversed_out = _outward_flips(mesh.vertices, mesh.faces, cross, area2, centroid,
+                                                  flip.astype(bool), comp, border, loop)
         del cross, centroid
         n_reoriented = int(np.count_nonzero(total_flip))
         mesh = _reverse_faces(mesh, total_flip)
