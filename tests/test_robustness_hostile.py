@@ -701,7 +701,8 @@ def test_large_trims_and_poor_axis_fits_are_warned_with_the_option():
     result = SimpleNamespace(landmark_notes=(), region=SimpleNamespace(repeated_from=None),
                              distortion=SimpleNamespace(flipped=0), boundary_overlap=0, folds=None,
                              other_objects_faces=0, disk_cut_faces=np.zeros(0, np.int64),
-                             walls=SimpleNamespace(side="outer", outer_area=50.0, inner_area=0.0, apart_area=0.0),
+                             walls=SimpleNamespace(side="outer", outer_area=50.0, inner_area=0.0, apart_area=0.0,
+                                                   ground_area=0.0),
                              trimmed_area=20.0, flat=flat, proxy=SimpleNamespace(kind="cylinder"),
                              axis=SimpleNamespace(misfit_angle_deg=3.2, direction=np.array([0.0, 1.0, 0.0]),
                                                   mouth_guessed=False))
@@ -778,6 +779,29 @@ def test_a_turntable_scanned_under_the_vessel_is_left_apart_not_unrolled():
     assert result.distortion.flipped == 0
     apart = [n for n in _notes(result) if "pieces apart from the vessel's wall" in n]
     assert len(apart) == 1 and "turntable" in apart[0], _notes(result)
+
+
+def test_a_table_joined_to_the_foot_is_left_out_with_a_note():
+    """A cup scanned standing on a table, as a photogrammetry scan that kept the ground: the
+    table's top is joined to the foot and holds most of the area. The cleaned scan keeps its
+    outward faces, the cup's outer wall is unrolled without the table, and the run says so."""
+    import _vessel_meshes as vm
+
+    from potflat.mesh.cleaning import clean_mesh
+    from potflat.rollout import rollout
+    from potflat.rollout.notes import rollout_notes as _notes
+    from potflat.types import Mesh
+
+    V, F, L, _ = vm.cup(table=3.0)
+    scan, report = clean_mesh(Mesh(V, F))
+    assert report.components_reversed_outward == 0
+    result = rollout(scan, importance="none")
+    kept = np.unique(result.face_index)
+    assert not np.isin(L[kept], ["table", "inner", "floor"]).any()
+    assert np.isin(L[kept], ["outer"]).sum() == (L == "outer").sum()
+    assert result.distortion.flipped == 0
+    table = [n for n in _notes(result) if "flat piece around the foot facing up" in n]
+    assert len(table) == 1 and "table or the ground" in table[0], _notes(result)
 
 
 def test_compile_note_on_a_first_run(tmp_path, monkeypatch):

@@ -9,6 +9,7 @@ import pytest
 
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
+from potflat.mesh.distortion import face_areas
 from potflat.rollout.walls import INNER, OUTER, FaceGraph, check_axis, largest_component, select_wall
 
 
@@ -72,6 +73,40 @@ def test_kylix_tondo_is_inner():
     outer = select_wall(mesh, p, a)
     inner = select_wall(mesh, p, a, side="inner")
     _assert_clean_split(outer, inner, L, ["outer"], ["inner"])
+
+
+@pytest.mark.parametrize("table", [1.5, 4.0])
+def test_a_table_joined_to_the_foot_is_left_out(table):
+    """A cup scanned standing on a table, the table's top joined to the foot: the table faces
+    up beyond the foot at the lowest heights and is left out; both walls split as without it."""
+    V, F, L, _ = vm.cup(table=table)
+    mesh, p, a = _posed(V, F)
+    outer = select_wall(mesh, p, a)
+    inner = select_wall(mesh, p, a, side="inner")
+    assert np.array_equal(outer.ground_mask, L == "table")
+    assert np.isclose(outer.ground_area, face_areas(mesh.vertices, mesh.faces)[L == "table"].sum())
+    _assert_clean_split(outer, inner, L, ["outer"], ["inner", "floor"])
+    assert not outer.face_mask[L == "table"].any()
+    assert outer.summary()["area_ground"] == outer.ground_area
+
+
+def test_the_top_of_a_thin_foot_is_not_taken_for_a_table():
+    """A stemmed cup on a thin disc foot: the foot's top faces up at the lowest heights but
+    lies within the foot's edge, so it stays with the outer wall."""
+    rs = [0, 30, 30, 6, 6, 40, 41.5, 41, 38, 0]
+    hs = [0, 0, 1, 1.2, 20, 58, 60, 61.5, 58, 24]
+    r, h, lab = [], [], []
+    for i in range(len(rs) - 1):
+        r += list(np.linspace(rs[i], rs[i + 1], 6, endpoint=False))
+        h += list(np.linspace(hs[i], hs[i + 1], 6, endpoint=False))
+        lab += ["foot top" if i == 2 else "outer" if i < 7 else "inner"] * 6
+    r.append(0.0)
+    h.append(24.0)
+    V, F, L, _ = vm.revolve(r, h, 72, labels=lab + [None])
+    mesh, p, a = _posed(V, F, seed=4)
+    outer = select_wall(mesh, p, a)
+    assert not outer.ground_mask.any() and outer.ground_area == 0.0
+    assert outer.face_mask[L == "foot top"].all()
 
 
 def test_single_walled_vessel_is_all_outer():

@@ -76,6 +76,10 @@ def rollout_notes(result) -> list[str]:
         notes.append(f"{100 * walls.apart_area / own:.0f} % of the {walls.side} surface lies in pieces apart from the "
                      "vessel's wall (a lid, a stand or turntable, a fragment scanned with it) and is left out of the "
                      "image; if such a piece is painted, unroll it on its own (split the file)")
+    if walls.ground_area:
+        notes.append(f"{100 * walls.ground_area / walls.outer_area:.0f} % of the outer surface "
+                     "is a flat piece around the foot facing up (a table or the ground the vessel stood on, scanned "
+                     "with it) and is left out of the image")
     if result.other_objects_faces:
         notes.append(f"{result.other_objects_faces} faces of separate objects that do not share the vessel's axis "
                      "(another vessel or fragment in the same file) were left out; split the file or give --axis")

@@ -358,8 +358,11 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     del graph
     allowed = walls.face_mask if face_mask is None else walls.face_mask & face_mask
     clock.lap("walls")
-    # the vessel's profile, both walls, attachments and other objects left out (docs/profile.md)
-    left_out = other_objects if options.keep_attachments else other_objects | attachments.face_mask
+    # the vessel's profile, both walls, attachments, other objects and a table at the foot
+    # left out (docs/profile.md)
+    left_out = other_objects | walls.ground_mask
+    if not options.keep_attachments:
+        left_out |= attachments.face_mask
     bins = (None if options.profile_mm is None
             else max(1, math.ceil(axis.height * mesh.mm_per_unit / options.profile_mm)))
     profile = vessel_profile(mesh, axis.point, axis.direction, bins=bins, labels=walls.labels, frame=frame,

@@ -19,7 +19,10 @@ towards it, and the rim crest is the fold where ``n_r`` changes sign.
    upward fold (a rim) or lies inside the outer wall's profile (a sherd's inner face); one
    meeting it across a downward fold (the inside of a foot ring, an overhanging lip) or
    lying outside the body (the inner side of a handle) belongs to the outer wall;
-4. the selection is the connected region of the side asked for with the most wall (area
+4. outer faces facing the mouth at the vessel's lowest heights, in pieces reaching out
+   beyond the foot's wall, are a table or the ground the vessel stood on, scanned with it
+   and joined to the foot: no outer surface of a vessel faces up there. They are left out;
+5. the selection is the connected region of the side asked for with the most wall (area
    times ``|n_r|``), so a flat piece scanned with the vessel (a turntable or ground plane,
    larger than the vessel) is left apart.
 
@@ -53,6 +56,9 @@ _ISLAND_AREA_FRACTION = 0.002  # same-side regions below this share of the area 
 _FOLD_COSINE = 0.5  # |mean axial normal| at a region border above this = a rim/foot fold
 _CLEANUP_PASSES = 5
 _INSIDE_OUT_RATIO = 2.0  # inner/outer area above which a scan is tried with flipped normals
+_GROUND_COSINE = 0.9  # axial normal towards the mouth above this: a surface the vessel stands on
+_GROUND_HEIGHT = 0.03  # ... within this share of the vessel's height above its lowest face
+_FOOT_QUANTILE = 0.95  # the foot's radius: this quantile of the wall's radii at those heights
 
 
 def check_axis(axis_point, axis_direction) -> tuple[np.ndarray, np.ndarray]:
@@ -478,6 +484,11 @@ class WallSelection:
     apart_area : float
         Area of the chosen side's faces, not excluded, apart from its largest region (other
         pieces: a lid, a stand, a fragment scanned with the vessel), scan units squared.
+    ground_mask : (m,) bool
+        Faces of a table or ground joined to the foot (outer faces facing the mouth at the
+        vessel's lowest heights, reaching out beyond the foot), left out of the selection.
+    ground_area : float
+        Their area, scan units squared.
     rim_faces : (k,) int64
         Selected faces that share an edge with the other wall (the split line).
     two_walled : bool
@@ -498,6 +509,8 @@ class WallSelection:
     n_selected: int
     n_dropped: int
     apart_area: float
+    ground_mask: np.ndarray
+    ground_area: float
     rim_faces: np.ndarray
     two_walled: bool
     normals_inverted: bool
@@ -513,6 +526,7 @@ class WallSelection:
             "faces_selected": self.n_selected,
             "faces_dropped_disconnected": self.n_dropped,
             "area_apart": self.apart_area,
+            "area_ground": self.ground_area,
             "rim_faces": len(self.rim_faces),
             "normals_inverted": self.normals_inverted,
             "method": self.method,
@@ -598,7 +612,8 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         raise InvalidInputError(
             f"the scan{where} has no {side} wall (its faces all {facing}); unroll its {other} side "
             f"(--side {other}, side='{other}')")
-    candidates = chosen if exclude is None else chosen & ~exclude
+    ground = _ground(fr, labels, vessel, -1.0 if inverted else 1.0, float(flat_tolerance))
+    candidates = chosen & ~ground if exclude is None else chosen & ~ground & ~exclude
     # the region with the most wall (area facing away from or towards the axis), not a flat
     # piece scanned with the vessel (a turntable or ground plane larger than the vessel)
     mask = _largest_region(candidates, fr.graph, fr.wall_area) if candidates.any() else candidates
@@ -619,6 +634,8 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         n_selected=int(mask.sum()),
         n_dropped=int(chosen.sum() - mask.sum()),
         apart_area=float(fr.area[candidates & ~mask].sum()),
+        ground_mask=ground,
+        ground_area=float(fr.area[ground].sum()),
         rim_faces=rim.astype(np.int64),
         two_walled=bool(two_walled),
         normals_inverted=bool(inverted),
@@ -769,6 +786,52 @@ def _clean_regions(fr: FaceFrame, labels: np.ndarray, sign: float, others: np.nd
         comp_label = np.where(enclosed, INNER, comp_label).astype(np.int8)
         labels = comp_label[comp]
     return labels.astype(np.int8)
+
+
+def _ground(fr: FaceFrame, labels: np.ndarray, vessel: np.ndarray, sign: float, flat_tolerance: float
+            ) -> np.ndarray:
+    """Faces of a table or ground joined to the foot, (m,) bool.
+
+    Outer faces whose normal (``sign`` times the frame's, or smoothed) faces the mouth within
+    :data:`_GROUND_HEIGHT` of the vessel's height above its lowest face, in connected pieces
+    whose area-weighted median radius lies beyond the foot (the :data:`_FOOT_QUANTILE`
+    quantile of the radii of the wall at those heights, weighted by its wall area), with the
+    faces joined to them at those heights that face up more than sideways; none unless one
+    such piece holds at least :data:`_ISLAND_AREA_FRACTION` of the vessel's area. A vessel's
+    own outer faces there face down (a base, a foot ring's underside) or away from the axis
+    (the foot's wall); the top of a kylix's foot lies within the foot's edge.
+    """
+    h = fr.height
+    lo = float(h[vessel].min())
+    low = vessel & (h <= lo + _GROUND_HEIGHT * (float(h[vessel].max()) - lo))
+    facing = sign * fr.n_axial
+    if not np.any(low & (labels == OUTER) & (facing >= _GROUND_COSINE)):  # (most scans: nothing faces up there)
+        return np.zeros_like(low)
+    # its own normal, or smoothed over a bumpy ground's facets
+    up = low & (labels == OUTER) & (np.maximum(facing, _smooth(facing, fr.area, fr.graph, _SMOOTH_ITERATIONS))
+                                    >= _GROUND_COSINE)
+    wall = low & ~up & (np.abs(fr.n_radial) >= flat_tolerance)
+    if not wall.any():
+        return np.zeros_like(up)
+    foot = float(weighted_quantiles(np.zeros(int(wall.sum()), np.int64), fr.radius[wall], fr.wall_area[wall] + 1e-300,
+                                    1, (_FOOT_QUANTILE,))[0, 0])
+    adj = fr.adjacency
+    comp = fr.graph.components(up[adj[:, 0]] & up[adj[:, 1]])
+    _, piece = np.unique(comp[up], return_inverse=True)
+    n = int(piece.max()) + 1
+    area = np.bincount(piece, weights=fr.area[up], minlength=n)
+    radius = weighted_quantiles(piece, fr.radius[up], fr.area[up] + 1e-300, n, (0.5,))[0]
+    beyond = radius > foot
+    if not np.any(beyond & (area >= _ISLAND_AREA_FRACTION * float(fr.area[vessel].sum()))):
+        return np.zeros_like(up)
+    out = np.zeros_like(up)  # (with the scraps beside a ground: strips joined at a pinched vertex)
+    out[np.flatnonzero(up)[beyond[piece]]] = True
+    # with the faces joined to it that face up more than sideways (where it meets the foot)
+    grow = out | (low & (labels == OUTER) & (facing > np.abs(fr.n_radial)))
+    comp = fr.graph.components(grow[adj[:, 0]] & grow[adj[:, 1]])
+    reached = np.zeros(int(comp.max()) + 1, bool)
+    reached[comp[out]] = True
+    return grow & reached[comp]
 
 
 def _outside_body(fr: FaceFrame, labels: np.ndarray, comp: np.ndarray, outer_faces: np.ndarray) -> np.ndarray:
