@@ -795,7 +795,8 @@ def _ground(fr: FaceFrame, labels: np.ndarray, vessel: np.ndarray, sign: float, 
     Outer faces whose normal (``sign`` times the frame's, or smoothed) faces the mouth within
     :data:`_GROUND_HEIGHT` of the vessel's height above its lowest face, in connected pieces
     whose area-weighted median radius lies beyond the foot (the :data:`_FOOT_QUANTILE`
-    quantile of the radii of the wall at those heights, weighted by its wall area), with the
+    quantile of the radii of the wall at those heights, weighted by its wall area, the faces
+    facing the mouth by their own normal left out), with the
     faces joined to them at those heights that face up more than sideways; none unless one
     such piece holds at least :data:`_ISLAND_AREA_FRACTION` of the vessel's area. A vessel's
     own outer faces there face down (a base, a foot ring's underside) or away from the axis
@@ -805,16 +806,17 @@ def _ground(fr: FaceFrame, labels: np.ndarray, vessel: np.ndarray, sign: float, 
     lo = float(h[vessel].min())
     low = vessel & (h <= lo + _GROUND_HEIGHT * (float(h[vessel].max()) - lo))
     facing = sign * fr.n_axial
-    if not np.any(low & (labels == OUTER) & (facing >= _GROUND_COSINE)):  # (most scans: nothing faces up there)
+    up = low & (labels == OUTER) & (facing >= _GROUND_COSINE)
+    wall = low & ~up & (np.abs(fr.n_radial) >= flat_tolerance)
+    if not wall.any():
+        return np.zeros_like(low)
+    foot = float(weighted_quantiles(np.zeros(int(wall.sum()), np.int64), fr.radius[wall], fr.wall_area[wall] + 1e-300,
+                                    1, (_FOOT_QUANTILE,))[0, 0])
+    if not np.any(up & (fr.radius > foot)):  # (most scans: nothing faces up beyond the foot)
         return np.zeros_like(low)
     # its own normal, or smoothed over a bumpy ground's facets
     up = low & (labels == OUTER) & (np.maximum(facing, _smooth(facing, fr.area, fr.graph, _SMOOTH_ITERATIONS))
                                     >= _GROUND_COSINE)
-    wall = low & ~up & (np.abs(fr.n_radial) >= flat_tolerance)
-    if not wall.any():
-        return np.zeros_like(up)
-    foot = float(weighted_quantiles(np.zeros(int(wall.sum()), np.int64), fr.radius[wall], fr.wall_area[wall] + 1e-300,
-                                    1, (_FOOT_QUANTILE,))[0, 0])
     adj = fr.adjacency
     comp = fr.graph.components(up[adj[:, 0]] & up[adj[:, 1]])
     _, piece = np.unique(comp[up], return_inverse=True)
