@@ -90,6 +90,26 @@ def test_a_table_joined_to_the_foot_is_left_out(table):
     assert outer.summary()["area_ground"] == outer.ground_area
 
 
+def test_a_table_tilted_against_the_axis_is_left_out_where_it_rises():
+    """The table tilted by 2 degrees (away from the foot it stays joined to): one side rises
+    out of the lowest heights (5.6 mm at its 160 mm radius, against 1.8 mm), the other
+    sinks as far below the foot. All of it is left out: the heights are measured from the
+    cup's lowest face that does not face up, and the ground grows well outside the cup's
+    profile at any height."""
+    V, F, L, _ = vm.cup(table=4.0)
+    V = V.copy()
+    on_table = np.zeros(len(V), bool)
+    on_table[F[L == "table"].ravel()] = True
+    on_table &= np.hypot(V[:, 0], V[:, 1]) > 30.0 + 1e-9  # (the ring it shares with the foot stays)
+    r = np.hypot(V[on_table, 0], V[on_table, 1])
+    V[on_table, 2] += np.tan(np.radians(2.0)) * V[on_table, 0] * (r - 30.0) / (r.max() - 30.0)
+    assert V[on_table, 2].max() > 0.05 * 60.0  # (out of the lowest 3 % of the height, and as far below)
+    mesh, p, a = _posed(V, F)
+    outer = select_wall(mesh, p, a)
+    assert np.array_equal(outer.ground_mask, L == "table")
+    assert not outer.face_mask[L == "table"].any() and outer.face_mask[L == "outer"].all()
+
+
 def test_the_top_of_a_thin_foot_is_not_taken_for_a_table():
     """A stemmed cup on a thin disc foot: the foot's top faces up at the lowest heights but
     lies within the foot's edge, so it stays with the outer wall."""

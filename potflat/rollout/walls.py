@@ -20,8 +20,9 @@ towards it, and the rim crest is the fold where ``n_r`` changes sign.
    meeting it across a downward fold (the inside of a foot ring, an overhanging lip) or
    lying outside the body (the inner side of a handle) belongs to the outer wall;
 4. outer faces facing the mouth at the vessel's lowest heights, in pieces reaching out
-   beyond the foot's wall, are a table or the ground the vessel stood on, scanned with it
-   and joined to the foot: no outer surface of a vessel faces up there. They are left out;
+   beyond the foot's wall, with what joins them facing up outside the body, are a table or
+   the ground the vessel stood on, scanned with it and joined to the foot: no outer
+   surface of a vessel faces up there. They are left out;
 5. the selection is the connected region of the side asked for with the most wall (area
    times ``|n_r|``), so a flat piece scanned with the vessel (a turntable or ground plane,
    larger than the vessel) is left apart.
@@ -59,6 +60,7 @@ _INSIDE_OUT_RATIO = 2.0  # inner/outer area above which a scan is tried with fli
 _GROUND_COSINE = 0.9  # axial normal towards the mouth above this: a surface the vessel stands on
 _GROUND_HEIGHT = 0.03  # ... within this share of the vessel's height above its lowest face
 _FOOT_QUANTILE = 0.95  # the foot's radius: this quantile of the wall's radii at those heights
+_GROUND_OUTSIDE = 0.1  # a ground grows above those heights this share of the body's radius outside its profile
 
 
 def check_axis(axis_point, axis_direction) -> tuple[np.ndarray, np.ndarray]:
@@ -792,20 +794,25 @@ def _ground(fr: FaceFrame, labels: np.ndarray, vessel: np.ndarray, sign: float, 
             ) -> np.ndarray:
     """Faces of a table or ground joined to the foot, (m,) bool.
 
-    Outer faces whose normal (``sign`` times the frame's, or smoothed) faces the mouth within
-    :data:`_GROUND_HEIGHT` of the vessel's height above its lowest face, in connected pieces
-    whose area-weighted median radius lies beyond the foot (the :data:`_FOOT_QUANTILE`
-    quantile of the radii of the wall at those heights, weighted by its wall area, the faces
-    facing the mouth by their own normal left out), with the
-    faces joined to them at those heights that face up more than sideways; none unless one
-    such piece holds at least :data:`_ISLAND_AREA_FRACTION` of the vessel's area. A vessel's
-    own outer faces there face down (a base, a foot ring's underside) or away from the axis
-    (the foot's wall); the top of a kylix's foot lies within the foot's edge.
+    Outer faces whose normal (``sign`` times the frame's, or smoothed) faces the mouth, at
+    the vessel's lowest heights (below :data:`_GROUND_HEIGHT` of its height above its
+    lowest face that does not face up), in connected pieces whose area-weighted median
+    radius lies beyond the foot (the :data:`_FOOT_QUANTILE` quantile of the radii of the
+    wall at those heights, weighted by its wall area, the faces facing the mouth by their
+    own normal left out); with the faces joined to them that face up more than sideways,
+    at those heights or :data:`_GROUND_OUTSIDE` of the body's radius outside its profile (a
+    ground tilted against the axis rises out of those heights); none unless one piece
+    holds at least :data:`_ISLAND_AREA_FRACTION` of the vessel's area. A vessel's own outer
+    faces there face down (a base, a foot ring's underside) or away from the axis (the
+    foot's wall); the top of a kylix's foot lies within the foot's edge.
     """
     h = fr.height
-    lo = float(h[vessel].min())
-    low = vessel & (h <= lo + _GROUND_HEIGHT * (float(h[vessel].max()) - lo))
     facing = sign * fr.n_axial
+    # the vessel's lowest face: of those not facing up (a ground tilted against the axis
+    # reaches below the foot), and every face up to the band's top
+    standing = vessel & (facing < _GROUND_COSINE)
+    lo = float(h[standing if standing.any() else vessel].min())
+    low = vessel & (h <= lo + _GROUND_HEIGHT * (float(h[vessel].max()) - lo))
     up = low & (labels == OUTER) & (facing >= _GROUND_COSINE)
     wall = low & ~up & (np.abs(fr.n_radial) >= flat_tolerance)
     if not wall.any():
@@ -828,19 +835,28 @@ def _ground(fr: FaceFrame, labels: np.ndarray, vessel: np.ndarray, sign: float, 
         return np.zeros_like(up)
     out = np.zeros_like(up)  # (with the scraps beside a ground: strips joined at a pinched vertex)
     out[np.flatnonzero(up)[beyond[piece]]] = True
-    # with the faces joined to it that face up more than sideways (where it meets the foot)
-    grow = out | (low & (labels == OUTER) & (facing > np.abs(fr.n_radial)))
+    # with the faces joined to it that face up more than sideways: at those heights (where
+    # it meets the foot), and well outside the body at any height (a ground tilted against
+    # the axis rises out of those heights)
+    outer = vessel & (labels == OUTER)
+    reach = low
+    found = _profile_offset(fr, outer & ~out)
+    if found is not None:
+        reach = low | (found[0] > _GROUND_OUTSIDE * found[1])
+    grow = out | (outer & reach & (facing > np.abs(fr.n_radial)))
     comp = fr.graph.components(grow[adj[:, 0]] & grow[adj[:, 1]])
     reached = np.zeros(int(comp.max()) + 1, bool)
     reached[comp[out]] = True
     return grow & reached[comp]
 
 
-def _outside_body(fr: FaceFrame, labels: np.ndarray, comp: np.ndarray, outer_faces: np.ndarray) -> np.ndarray:
-    """Per component: does it lie outside the outer wall's profile (median radial offset > 0)?"""
-    nc = int(comp.max()) + 1
+def _profile_offset(fr: FaceFrame, outer_faces: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """How far each face lies outside the outer wall's profile: ``(offset (m,), largest
+    profile radius)``, the offset its radius minus the profile's (the wall-area-weighted
+    median radius of ``outer_faces`` in its height bin) at its height; None without a
+    profile."""
     if not outer_faces.any():
-        return np.zeros(nc, dtype=bool)
+        return None
     h = fr.height
     lo, hi = float(h.min()), float(h.max())
     k = int(np.clip(np.sqrt(outer_faces.sum()) / 2, 4, 400))
@@ -850,10 +866,17 @@ def _outside_body(fr: FaceFrame, labels: np.ndarray, comp: np.ndarray, outer_fac
     centres = 0.5 * (edges[:-1] + edges[1:])
     good = np.isfinite(prof)
     if not good.any():
+        return None
+    return fr.radius - np.interp(h, centres[good], prof[good]), float(prof[good].max())
+
+
+def _outside_body(fr: FaceFrame, labels: np.ndarray, comp: np.ndarray, outer_faces: np.ndarray) -> np.ndarray:
+    """Per component: does it lie outside the outer wall's profile (median radial offset > 0)?"""
+    nc = int(comp.max()) + 1
+    found = _profile_offset(fr, outer_faces)
+    if found is None:
         return np.zeros(nc, dtype=bool)
-    ref = np.interp(h, centres[good], prof[good])
-    offset = fr.radius - ref
     # area-weighted median offset per component
-    (med,), _ = binned_median(comp.astype(np.float64), offset, fr.area + 1e-300,
+    (med,), _ = binned_median(comp.astype(np.float64), found[0], fr.area + 1e-300,
                               np.arange(nc + 1, dtype=np.float64) - 0.5)
     return np.nan_to_num(med, nan=0.0) > 0
