@@ -59,6 +59,27 @@ def test_axis_sign_from_the_inner_wall():
     assert d[2] > 0 and "inner wall" in reason and not guessed
 
 
+def test_a_jar_scanned_without_its_interior_is_not_turned_over_by_its_foot_ring():
+    """A cup with a foot ring whose inside was not scanned (its outer wall, base and foot ring
+    only, the mouth open): the foot ring's inside faces the axis at the foot's end, but its
+    base closes it across, so it is no mouth. The open rim decides. With a lid over the
+    mouth (no open rim) the wider end is taken and said to be a guess."""
+    import _vessel_meshes as vm
+
+    V, F, L, _ = vm.cup(foot_ring=True)
+    outside = np.isin(L, ["base", "ring", "outer"])
+    jar = Mesh(V, F[outside])
+    d, reason, guessed = orient(jar, np.zeros(3), np.array([0, 0, -1.0]))
+    assert d[2] > 0 and "open rim" in reason and not guessed
+    top = V[:, 2] >= V[F[outside]][:, :, 2].max() - 1e-9
+    rim = np.flatnonzero(top & np.isin(np.arange(len(V)), F[outside]))
+    rim = rim[np.argsort(np.arctan2(V[rim, 1], V[rim, 0]))]
+    lid = np.column_stack([np.roll(rim, -1), rim, np.full(len(rim), len(V))])  # (counter-clockwise seen from above)
+    closed = Mesh(np.vstack([V, [[0.0, 0.0, V[rim, 2].mean()]]]), np.vstack([F[outside], lid]))
+    d, reason, guessed = orient(closed, np.zeros(3), np.array([0, 0, -1.0]))
+    assert d[2] > 0 and "wider end" in reason and guessed
+
+
 def test_wider_end_tie_break_for_a_closed_shape():
     mesh = trimesh.creation.cone(radius=20, height=50, sections=48)  # closed: base disk + apex
     d, reason, guessed = orient(Mesh(mesh.vertices, mesh.faces), np.zeros(3), np.array([0, 0, 1.0]))
