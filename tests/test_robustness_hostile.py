@@ -754,9 +754,10 @@ def test_a_lid_scanned_with_the_vessel_is_left_out_with_a_note():
 
 def test_a_turntable_scanned_under_the_vessel_is_left_apart_not_unrolled():
     """A turntable or ground plane scanned with the vessel, larger than it: a flat piece facing
-    along the axis that holds most of the scan's area. The vessel's wall is unrolled (the
-    selection is the region with the most wall, not the most area) and the plane is left
-    apart with a note."""
+    along the axis that holds most of the scan's area. Its edge, the longest open boundary
+    around the axis, is no rim (its faces face along the axis), so the jar stays mouth up.
+    The vessel's wall is unrolled and the plane, facing up under the foot, is left out as
+    the ground the vessel stood on, with a note."""
     from potflat_synthetic.vessels import make_vessel
 
     from potflat.rollout import rollout
@@ -774,11 +775,13 @@ def test_a_turntable_scanned_under_the_vessel_is_left_apart_not_unrolled():
     grid = np.vstack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]) + len(jar.vertices)
     scan = Mesh(np.vstack([jar.vertices, plane]), np.vstack([jar.faces, grid]))
     result = rollout(scan, importance="none")
-    assert result.walls.apart_area > result.walls.outer_area / 2  # the plane: most of the outer area
+    assert result.axis.direction[2] > 0.999  # mouth up, as without the plane (its edge is no rim)
+    # the plane: most of the outer area, found facing up under the foot (a ground)
+    assert result.walls.ground_area > result.walls.outer_area / 2
     assert result.flat.mesh.vertices[:, 2].min() >= lo[2]  # none of its vertices unrolled
     assert result.distortion.flipped == 0
-    apart = [n for n in _notes(result) if "pieces apart from the vessel's wall" in n]
-    assert len(apart) == 1 and "turntable" in apart[0], _notes(result)
+    ground = [n for n in _notes(result) if "flat piece around the foot facing up" in n]
+    assert len(ground) == 1 and "table or the ground" in ground[0], _notes(result)
 
 
 def test_a_table_joined_to_the_foot_is_left_out_with_a_note():

@@ -42,7 +42,8 @@ Orientation (foot to mouth), the first rule that applies:
    is closed across by a surface facing out along the axis (a foot ring's inside over its
    base, a neck shut by a lid) counts as having none, so a jar scanned without its
    interior is not turned over by its foot ring;
-2. an open rim (a boundary loop that winds once around the axis): the mouth is the end
+2. an open rim (a boundary loop that winds once around the axis, along faces that face
+   sideways, not a turntable's edge): the mouth is the end
    nearer to the longest one (an open vessel's only rim, or the larger of two: a scan
    open at both ends with a narrow neck and a wide open foot comes out upside down, and
    says so);
@@ -129,6 +130,9 @@ INNER_WALL_FRACTION = 0.05
 #: there facing out along the axis within the inside's median radius is at least this
 #: fraction of the disc that radius spans.
 INNER_WALL_CAP = 0.5
+#: An open boundary loop is a rim when the faces along it face sideways (mean |n_r|, by
+#: edge length) at least this much; a flat piece's edge (a turntable) faces along the axis.
+RIM_WALL = 0.25
 
 
 @dataclass(frozen=True, eq=False)
@@ -484,8 +488,9 @@ def _pca_axis(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return centre, evecs[:, k]
 
 
-def _boundary_loops(mesh: Mesh) -> list[np.ndarray]:
-    """Directed boundary edges (k, 2) grouped by connected boundary component."""
+def _boundary_loops(mesh: Mesh, *, faces: bool = False) -> list:
+    """Directed boundary edges (k, 2) grouped by connected boundary component (with
+    ``faces``: pairs of those and the (k,) face of each edge)."""
     F = mesh.faces
     half = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
     n = len(mesh.vertices)
@@ -496,7 +501,8 @@ def _boundary_loops(mesh: Mesh) -> list[np.ndarray]:
     same = k[1:] == k[:-1]
     single[1:] &= ~same
     single[:-1] &= ~same
-    bnd = half[order[single]]
+    on = order[single]
+    bnd = half[on]
     if len(bnd) == 0:
         return []
     g = scipy.sparse.coo_matrix((np.ones(len(bnd)), (bnd[:, 0], bnd[:, 1])), shape=(n, n))
@@ -504,6 +510,9 @@ def _boundary_loops(mesh: Mesh) -> list[np.ndarray]:
     lab = labels[bnd[:, 0]]
     order = np.argsort(lab, kind="stable")
     splits = np.flatnonzero(np.diff(lab[order])) + 1
+    if faces:
+        face = on % len(F)
+        return [(bnd[idx], face[idx]) for idx in np.split(order, splits)]
     return [bnd[idx] for idx in np.split(order, splits)]
 
 
@@ -527,13 +536,23 @@ def orient(mesh: Mesh, point, direction, *, lines=None) -> tuple[np.ndarray, str
     lo, hi = h.min(), h.max()
     mid = 0.5 * (lo + hi)
     rims = []
-    for loop in _boundary_loops(mesh):
+    for loop, face in _boundary_loops(mesh, faces=True):
         dth = theta_all[loop[:, 1]] - theta_all[loop[:, 0]]
         dth = (dth + np.pi) % (2 * np.pi) - np.pi
         if abs(round(dth.sum() / (2 * np.pi))) < 1:
             continue
         seg = mesh.vertices[loop[:, 1]] - mesh.vertices[loop[:, 0]]
-        length = float(np.linalg.norm(seg, axis=1).sum())
+        edge = np.linalg.norm(seg, axis=1)
+        length = float(edge.sum())
+        # the edge of a flat piece across the axis (a turntable or ground plane) is no rim
+        corner = mesh.vertices[mesh.faces[face]]
+        normal = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0])
+        out = corner.mean(axis=1) - point
+        out -= (out @ direction)[:, None] * direction
+        sideways = np.abs(np.einsum("ij,ij->i", normal, out)) / np.maximum(
+            np.linalg.norm(normal, axis=1) * np.linalg.norm(out, axis=1), np.finfo(float).tiny)
+        if float(np.sum(edge * sideways)) < RIM_WALL * length:
+            continue
         h_loop = float(np.mean((mesh.vertices[loop].reshape(-1, 3) - point) @ direction))
         rims.append((length, h_loop))
     best = max(rims) if rims else None
