@@ -414,7 +414,7 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
         action = "split into separate fans" if split_nonmanifold else "left as they are"
         warnings.append(f"{n_nm_edges} non-manifold edges and {nm_vertices} non-manifold vertices, {action}")
     border, loop, b_loops = _open_border(mesh.faces, len(mesh.vertices), topo, split_nonmanifold)
-    b_edges = len(border) if split_nonmanifold else int(np.count_nonzero(topo.count == 1))
+    b_edges = len(border)  # (one half-edge per open edge)
     del topo
 
     # orientation: consistent per component, then outward

@@ -43,6 +43,7 @@ from scipy.sparse.csgraph import dijkstra
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.mesh._kernels.geometry import edge_lengths, face_geometry, radial_parts
 from potflat.mesh._kernels.quantiles import grouped_weighted_quantiles
+from potflat.mesh.distortion import weighted_percentile
 from potflat.mesh._kernels.topology import edge_table, face_pairs, pair_csr, pair_sums, union_find
 from potflat.mesh.tolerances import DEGENERATE, ROUNDING
 from potflat.rollout.options import SIDES  # the sides select_wall accepts
@@ -817,8 +818,7 @@ def _ground(fr: FaceFrame, labels: np.ndarray, vessel: np.ndarray, sign: float, 
     wall = low & ~up & (np.abs(fr.n_radial) >= flat_tolerance)
     if not wall.any():
         return np.zeros_like(low)
-    foot = float(weighted_quantiles(np.zeros(int(wall.sum()), np.int64), fr.radius[wall], fr.wall_area[wall] + 1e-300,
-                                    1, (_FOOT_QUANTILE,))[0, 0])
+    foot = weighted_percentile(fr.radius[wall], fr.wall_area[wall], 100.0 * _FOOT_QUANTILE)
     if not np.any(up & (fr.radius > foot)):  # (most scans: nothing faces up beyond the foot)
         return np.zeros_like(low)
     # its own normal, or smoothed over a bumpy ground's facets
@@ -829,7 +829,7 @@ def _ground(fr: FaceFrame, labels: np.ndarray, vessel: np.ndarray, sign: float, 
     _, piece = np.unique(comp[up], return_inverse=True)
     n = int(piece.max()) + 1
     area = np.bincount(piece, weights=fr.area[up], minlength=n)
-    radius = weighted_quantiles(piece, fr.radius[up], fr.area[up] + 1e-300, n, (0.5,))[0]
+    radius = weighted_quantiles(piece, fr.radius[up], fr.area[up], n, (0.5,))[0]
     beyond = radius > foot
     if not np.any(beyond & (area >= _ISLAND_AREA_FRACTION * float(fr.area[vessel].sum()))):
         return np.zeros_like(up)
