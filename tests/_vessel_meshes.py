@@ -132,6 +132,27 @@ def cup(n_theta=72, foot_ring=False, table=0.0):
     return revolve(rs, hs, n_theta, labels=lab[1:] + [None], jitter=0.3)
 
 
+def plate(n_theta=96, spacing=2.0, broad_rim_drop=2.5):
+    """Closed plate (mm): underside with a foot ring, a rounded rim edge, a broad rim 25 wide
+    sloping down ``broad_rim_drop`` towards the axis, the well, a flat floor.
+
+    Labels: "underside", "foot", "edge", "broad rim", "well", "floor".
+    """
+    top = 35.0
+    path = [((0.0, 3.0), None), ((66.0, 3.0), "underside"), ((68.0, 0.0), "foot"), ((76.0, 0.0), "foot"),
+            ((78.0, 4.0), "foot"), ((100.0, 14.0), "underside"), ((120.0, 28.0), "underside"),
+            ((122.0, 32.0), "edge"), ((120.0, top), "edge"), ((95.0, top - broad_rim_drop), "broad rim"),
+            ((75.0, 9.0), "well"), ((0.0, 8.0), "floor")]
+    rs, hs, lab = [path[0][0][0]], [path[0][0][1]], []
+    for ((r0, h0), _), ((r1, h1), name) in zip(path[:-1], path[1:]):
+        k = max(2, int(np.ceil(np.hypot(r1 - r0, h1 - h0) / spacing)))
+        t = np.arange(1, k + 1) / k
+        rs.extend(r0 + t * (r1 - r0))
+        hs.extend(h0 + t * (h1 - h0))
+        lab.extend([name] * k)
+    return revolve(rs, hs, n_theta, labels=lab + [None], jitter=0.3)
+
+
 def handle_tube(R=40.0, hc=50.0, loop=22.0, tube=4.0, n_path=64, n_ring=12, extend=0.0):
     """A tube along a half loop in the meridian plane y = 0 whose end rings touch radius R
     (``extend`` > 0 buries the ends inside)."""

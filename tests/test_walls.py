@@ -221,8 +221,11 @@ def test_deterministic():
 @pytest.mark.parametrize("tolerance", [0.3, 0.7])
 def test_flat_faces_take_the_side_of_the_nearest_seed(monkeypatch, tolerance):
     """Faces whose smoothed radial normal is under the tolerance take the side of the nearest
-    clear face along the surface: the same as a Dijkstra over the whole face graph from every
-    clear face (the labelling searches only the steps touching a flat face)."""
+    clear face along the surface, a climb towards it over the flat face's crest (up for a
+    face facing the mouth, down for one facing the foot) counting ``_CLIMB_WEIGHT`` times:
+    the same as a Dijkstra over the whole face graph from every clear face (the labelling
+    searches only the steps touching a flat face)."""
+    import scipy.sparse as sps
     from scipy.sparse.csgraph import dijkstra
 
     from potflat.rollout import walls
@@ -236,14 +239,61 @@ def test_flat_faces_take_the_side_of_the_nearest_seed(monkeypatch, tolerance):
     got = walls._label_once(fr, tolerance, 1.0, None)
     s = walls._smooth(fr.n_radial, fr.area, fr.graph, walls._SMOOTH_ITERATIONS)
     seed = np.abs(s) >= tolerance
-    adj = fr.adjacency
     assert 0.05 < 1 - seed.mean() < 0.95
-    step = np.linalg.norm(fr.centroid[adj[:, 0]] - fr.centroid[adj[:, 1]], axis=1)
-    _, _, nearest = dijkstra(fr.graph.matrix(step), directed=False, indices=np.flatnonzero(seed),
-                             return_predecessors=True, min_only=True)
+    # every step both ways: from face i to face j costs the distance plus the climb from j to i
+    i, j = np.concatenate([fr.adjacency, fr.adjacency[:, ::-1]]).T
+    facing = np.sign(fr.n_axial[i] + fr.n_axial[j])
+    cost = (np.linalg.norm(fr.centroid[i] - fr.centroid[j], axis=1)
+            + walls._CLIMB_WEIGHT * np.maximum(facing * (fr.height[i] - fr.height[j]), 0.0))
+    graph = sps.csr_matrix((cost, (i, j)), shape=(len(F), len(F)))
+    _, _, nearest = dijkstra(graph, directed=True, indices=np.flatnonzero(seed), return_predecessors=True,
+                             min_only=True)
     flat = ~seed & (nearest >= 0)
     assert flat.sum() > 50
     assert np.array_equal(got[flat], np.where(s >= 0, OUTER, INNER)[nearest[flat]])
+
+
+def test_face_graph_matrix_takes_a_weight_each_way():
+    from potflat.rollout.walls import FaceGraph
+
+    V, F, _, _ = vm.cup(n_theta=12)
+    graph = FaceGraph(F)
+    pairs = graph.pairs
+    w = np.random.default_rng(0).uniform(1.0, 2.0, size=(len(pairs), 2))
+    M = graph.matrix(w).toarray()
+    assert np.array_equal(M[pairs[:, 0], pairs[:, 1]], w[:, 0])
+    assert np.array_equal(M[pairs[:, 1], pairs[:, 0]], w[:, 1])
+    assert np.count_nonzero(M) == 2 * len(pairs)
+    assert np.array_equal(graph.matrix(w[:, 0]).toarray(), graph.matrix(np.stack([w[:, 0]] * 2, 1)).toarray())
+
+
+@pytest.mark.parametrize("side", ["inner", "outer"])
+def test_a_plate_s_broad_rim_goes_with_its_inside(side):
+    """A plate's broad rim, sloping gently down to the well, is nearly flat (its radial normal
+    under the tolerance), and nearer the outer wall at the rim's edge than the well over its
+    outer half: it still goes with the inside, the side it reaches without crossing its crest,
+    and the outer wall keeps none of it."""
+    V, F, labels, _ = vm.plate()
+    mesh, p, a = _posed(V, F)
+    w = select_wall(mesh, p, a, side=side)
+    radius = np.linalg.norm((V[F].mean(axis=1))[:, :2], axis=1)  # (the canonical frame: axis = z)
+    broad = (labels == "broad rim") & (radius < 118.0)  # (the ring at the crest, radius 120, may go either way)
+    assert broad.sum() > 500
+    assert (w.face_mask[broad].all() if side == "inner" else not w.face_mask[broad].any())
+    underside = labels == "underside"
+    assert (not w.face_mask[underside].any()) if side == "inner" else w.face_mask[underside].mean() > 0.9
+
+
+def test_a_level_rim_top_still_splits_at_its_middle():
+    """A level rim top, its crest all along it, splits midway between the two walls."""
+    V, F, labels, _ = vm.plate(broad_rim_drop=0.0)
+    mesh, p, a = _posed(V, F)
+    w = select_wall(mesh, p, a, side="inner")
+    broad = labels == "broad rim"
+    radius = np.linalg.norm((V[F].mean(axis=1))[:, :2], axis=1)  # (the canonical frame: axis = z)
+    inner_share = w.face_mask[broad].mean()
+    assert 0.3 < inner_share < 0.7
+    assert radius[broad & w.face_mask].max() < radius[broad & ~w.face_mask].min() + 2.0
 
 
 def test_largest_component():

@@ -12,8 +12,11 @@ towards it, and the rim crest is the fold where ``n_r`` changes sign.
 1. ``n_r`` per face, smoothed over a few rings of neighbours (noise);
 2. faces with a clear sign (``|n_r| >= flat_tolerance``) are seeds; nearly horizontal faces
    (flat base, bowl floor, rim top, ``n_r`` ~ 0) take the side of the nearest seed along the
-   surface (multi-source Dijkstra over face adjacency), so a flat rim top splits midway,
-   at its crest;
+   surface (multi-source Dijkstra over face adjacency), where a climb over the flat face's
+   crest (up for a face facing the mouth, down for one facing the foot) counts
+   :data:`_CLIMB_WEIGHT` times its height: a flat part takes the side it reaches without
+   crossing its crest, so a level rim top splits midway and a plate's broad rim, sloping
+   gently down to the well, goes with the inside;
 3. same-side regions are cleaned up: small islands (noise) join the side around them; a
    region facing the axis counts as inner wall only when it meets the outer wall across an
    upward fold (a rim) or lies inside the outer wall's profile (a sherd's inner face); one
@@ -58,6 +61,10 @@ _ISLAND_AREA_FRACTION = 0.002  # same-side regions below this share of the area 
 _FOLD_COSINE = 0.5  # |mean axial normal| at a region border above this = a rim/foot fold
 _CLEANUP_PASSES = 5
 _INSIDE_OUT_RATIO = 2.0  # inner/outer area above which a scan is tried with flipped normals
+#: A flat face's way to a seed (step 2 above): each unit climbed over its crest costs this many units
+#: walked. At 1000 the test plate's broad rim (sloping 2.5 over 25 mm) goes with the inside but for the
+#: ring of faces on its crest; at 100 the two rings nearest the crest went with the outer wall.
+_CLIMB_WEIGHT = 1000.0
 _GROUND_COSINE = 0.9  # axial normal towards the mouth above this: a surface the vessel stands on
 _GROUND_HEIGHT = 0.03  # ... within this share of the vessel's height above its lowest face
 _FOOT_QUANTILE = 0.95  # the foot's radius: this quantile of the wall's radii at those heights
@@ -227,9 +234,17 @@ class FaceGraph:
         return indptr.astype(np.int64, copy=False), indices.astype(np.int64, copy=False)
 
     def matrix(self, weights: np.ndarray) -> sp.csr_matrix:
-        """(m, m) CSR matrix with ``weights[pair]`` ((p,) float64) on both entries (zeros left out)."""
+        """(m, m) CSR matrix with ``weights[pair]`` on both entries of each pair (zeros left
+        out): ``weights`` (p,) float64 the same both ways, or (p, 2) float64 the entry from the
+        pair's first face to its second, then the one back."""
         indptr, indices, pair_of = self._csr
-        data = np.asarray(weights, np.float64)[pair_of]
+        weights = np.asarray(weights, np.float64)
+        if weights.ndim == 1:
+            data = weights[pair_of]
+        else:  # the entry (row, col) runs from the pair's second face back when its row is that face
+            rows = np.repeat(np.arange(self.m, dtype=np.int64), np.diff(indptr))
+            back = rows == np.asarray(self.pairs)[pair_of, 1]
+            data = weights[pair_of, back.astype(np.int64)]
         A = sp.csr_matrix((data, indices.copy(), indptr.copy()), shape=(self.m, self.m))
         A.eliminate_zeros()  # works in place on the index arrays, hence the copies
         return A
@@ -688,8 +703,18 @@ def _label_once(fr: FaceFrame, flat_tolerance: float, sign: float, others: np.nd
         sources = np.zeros(m, bool)
         sources[adj[touch].ravel()] = True
         sources &= seed
-        G = fr.graph.matrix(step)
-        _, _, src = dijkstra(G, directed=False, indices=np.flatnonzero(sources),
+        # a step from a seed towards a flat face that faces up (towards the mouth) and lies
+        # lower, seen from the flat face a climb towards the seed, costs _CLIMB_WEIGHT times the
+        # height climbed more (down-facing faces: the other way): a flat part takes the side
+        # it reaches without crossing its crest, so a flat rim top splits at its highest line,
+        # and a plate's broad rim, sloping down to the well, goes with the inside
+        up = np.sign(sign * (fr.n_axial[adj[touch, 0]] + fr.n_axial[adj[touch, 1]]))
+        rise = up * (fr.height[adj[touch, 1]] - fr.height[adj[touch, 0]])  # from the first face to the second
+        steps = np.stack([step, step], axis=1)
+        steps[touch, 0] += _CLIMB_WEIGHT * np.maximum(-rise, 0.0)  # first to second: the second lies lower
+        steps[touch, 1] += _CLIMB_WEIGHT * np.maximum(rise, 0.0)
+        G = fr.graph.matrix(steps)
+        _, _, src = dijkstra(G, directed=True, indices=np.flatnonzero(sources),
                              return_predecessors=True, min_only=True)
         reach = flat & (src >= 0)
         labels[reach] = labels[src[reach]]
