@@ -143,6 +143,24 @@ def plate(n_theta=96, spacing=2.0, broad_rim_drop=2.5):
             ((78.0, 4.0), "foot"), ((100.0, 14.0), "underside"), ((120.0, 28.0), "underside"),
             ((122.0, 32.0), "edge"), ((120.0, top), "edge"), ((95.0, top - broad_rim_drop), "broad rim"),
             ((75.0, 9.0), "well"), ((0.0, 8.0), "floor")]
+    return _revolve_path(path, n_theta, spacing)
+
+
+def dish(n_theta=96, spacing=1.0):
+    """The face of :func:`plate` alone, as photographed lying on a table: the rim's edge from
+    the table up, the broad rim, the well and the floor, facing up (an open sheet whose
+    concave side is the scanned one).
+
+    Labels: "edge", "broad rim", "well", "floor".
+    """
+    path = [((123.0, 30.0), None), ((122.0, 32.0), "edge"), ((120.0, 35.0), "edge"), ((95.0, 32.5), "broad rim"),
+            ((75.0, 9.0), "well"), ((0.0, 8.0), "floor")]
+    return _revolve_path(path, n_theta, spacing)
+
+
+def _revolve_path(path, n_theta, spacing):
+    """:func:`revolve` of the polyline ``path`` ``[((r, h), label of the segment ending there), ...]``
+    with points about ``spacing`` apart."""
     rs, hs, lab = [path[0][0][0]], [path[0][0][1]], []
     for ((r0, h0), _), ((r1, h1), name) in zip(path[:-1], path[1:]):
         k = max(2, int(np.ceil(np.hypot(r1 - r0, h1 - h0) / spacing)))

@@ -80,6 +80,17 @@ def test_a_jar_scanned_without_its_interior_is_not_turned_over_by_its_foot_ring(
     assert d[2] > 0 and "wider end" in reason and guessed
 
 
+def test_a_dish_face_scanned_alone_is_not_turned_over_by_its_well():
+    """The face of a plate alone, facing up as photographed lying on a table: its well faces
+    the axis at the floor's end, but the floor closes it across, so it is no mouth. The open
+    rim decides."""
+    import _vessel_meshes as vm
+
+    V, F, _, _ = vm.dish()
+    d, reason, guessed = orient(Mesh(V, F), np.zeros(3), np.array([0, 0, -1.0]))
+    assert d[2] > 0 and "open rim" in reason and not guessed
+
+
 def test_wider_end_tie_break_for_a_closed_shape():
     mesh = trimesh.creation.cone(radius=20, height=50, sections=48)  # closed: base disk + apex
     d, reason, guessed = orient(Mesh(mesh.vertices, mesh.faces), np.zeros(3), np.array([0, 0, 1.0]))

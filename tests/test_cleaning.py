@@ -372,6 +372,22 @@ def test_bowl_and_sherd_outward():
         assert (_radial_outward(mesh) > 0).all()
 
 
+def test_a_dish_face_scanned_alone_is_turned_to_its_convex_side_with_a_warning_unless_kept():
+    """The face of a plate alone, facing up as scanned: closed by a cap over its rim it encloses
+    the air above it, so it is turned to face down, the way its convex side faces, and the
+    warning names the way out; ``outward=False`` keeps it as the file gives it."""
+    import _vessel_meshes as vm
+
+    V, F, _, _ = vm.dish()
+    up = lambda mesh: np.cross(*(mesh.vertices[mesh.faces[:, 1:]] - mesh.vertices[mesh.faces[:, :1]]).transpose(1, 0, 2))[:, 2]  # noqa: E731
+    turned, r = clean_mesh(Mesh(V, F))
+    assert r.components_reversed_outward == 1 and (up(turned) < 0).all()
+    assert any("--keep-orientation" in w for w in r.warnings)
+    kept, r = clean_mesh(Mesh(V, F), outward=False)
+    assert r.faces_reoriented == 0 and (up(kept) > 0).all()
+    assert not any("--keep-orientation" in w for w in r.warnings)
+
+
 # ------------------------------------------------------------------ errors and report
 
 

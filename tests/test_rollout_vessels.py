@@ -97,6 +97,30 @@ def test_new_options_are_validated(kwargs, match):
         RolloutOptions(**kwargs)
 
 
+def test_a_dish_face_scanned_alone_is_unrolled_from_above_with_its_orientation_kept():
+    """The face of a plate alone, facing up as photographed: read as usual it is turned to
+    face down and unrolled from below (its painting mirrored, the load warns); kept as the
+    file gives it, its inner side is unrolled from above, not mirrored."""
+    import _vessel_meshes as vm
+
+    from potflat.mesh.cleaning import clean_mesh
+
+    V, F, labels, _ = vm.dish()
+
+    def unrolled(keep: bool, side: str):
+        mesh, _ = clean_mesh(Mesh(V, F, units="mm"), outward=not keep)
+        r = rollout(mesh, side=side, keep_orientation=keep, importance="none")
+        corners = r.flat.mesh.vertices[r.flat.mesh.faces]
+        normal_z = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])[:, 2]
+        return r, normal_z, signed_areas(r.flat.mesh.faces, r.flat.uv)
+
+    r, normal_z, flat = unrolled(False, "outer")
+    assert (normal_z < 0).all() and (flat > 0).all()  # from below
+    r, normal_z, flat = unrolled(True, "inner")
+    assert (normal_z > 0).all() and (flat > 0).all()  # from above
+    assert r.walls.face_mask[np.isin(labels, ["well", "broad rim"])].mean() > 0.95
+
+
 def test_handles_are_left_out_and_reported(amphora):
     res = rollout(amphora.mesh)
     att = res.attachments

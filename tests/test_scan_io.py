@@ -821,6 +821,7 @@ def test_real_scan_inverted_is_turned_outward(tmp_path, real_scans):
     trimesh.Trimesh(tm.vertices, tm.faces[:, ::-1], process=False).export(tmp_path / "inv.ply")
     a, b = load_scan(path), load_scan(tmp_path / "inv.ply")
     assert b.report.components_reversed_outward == 1
+    assert not any("--keep-orientation" in w for w in b.report.warnings)  # (a vessel, not a sheet)
     np.testing.assert_allclose(b.mesh.vertices, a.mesh.vertices)
     na = np.cross(*(a.mesh.vertices[a.mesh.faces[:, 1:]] - a.mesh.vertices[a.mesh.faces[:, :1]]).transpose(1, 0, 2))
     nb = np.cross(*(b.mesh.vertices[b.mesh.faces[:, 1:]] - b.mesh.vertices[b.mesh.faces[:, :1]]).transpose(1, 0, 2))

@@ -145,6 +145,18 @@ def test_inside_out_single_surface_is_read_flipped():
     assert w.normals_inverted and w.face_mask.all()
 
 
+def test_a_sheet_facing_the_axis_is_read_inside_out_unless_its_orientation_is_kept():
+    """The face of a dish alone, facing up as scanned: most of it faces the axis, which reads
+    as an open surface facing inwards; with ``inside_out=False`` (``keep_orientation``) its
+    well and broad rim are the inner side they are."""
+    V, F, labels, _ = vm.dish()
+    mesh, p, a = _posed(V, F)
+    assert select_wall(mesh, p, a).normals_inverted
+    inner = select_wall(mesh, p, a, side="inner", inside_out=False)
+    assert not inner.normals_inverted
+    assert inner.face_mask[np.isin(labels, ["well", "broad rim"])].mean() > 0.95
+
+
 def test_inner_wall_requested_on_single_surface_raises():
     V, F, _, _ = vm.open_vase()
     mesh, p, a = _posed(V, F)

@@ -103,7 +103,8 @@ def run_rollout_stage(scan_path, out_dir, options: RolloutOptions | None = None,
     with superseding(out_dir, name, STAGES_FROM["rollout"],
                      keep=lambda: (scan_path, *scan_inputs(scan_path), *options.input_files())):
         clock = StepClock()
-        loaded = load_scan(scan_path, units=options.units, texture="use" if options.texture else "ignore")
+        loaded = load_scan(scan_path, units=options.units, texture="use" if options.texture else "ignore",
+                           outward=not options.keep_orientation)
         check_plausible_size(loaded, scan_path)
         mesh, cleaning = loaded.mesh, loaded.report.as_dict()
         del loaded

@@ -119,7 +119,8 @@ def check_plausible_size(loaded: LoadedScan, path: str | os.PathLike) -> None:
 def load_scan(path: str | os.PathLike, *, units: str | None = None, clean: bool = True,
               texture: str = "use", min_component_fraction: float = 0.01,
               weld_tolerance: float = 0.0, split_nonmanifold: bool = True,
-              max_texture_pixels: int = MAX_TEXTURE_PIXELS, min_faces: int = 4) -> LoadedScan:
+              max_texture_pixels: int = MAX_TEXTURE_PIXELS, min_faces: int = 4,
+              outward: bool = True) -> LoadedScan:
     """Read a scan file, weld it, check its texture and clean it.
 
     Parameters
@@ -149,6 +150,10 @@ def load_scan(path: str | os.PathLike, *, units: str | None = None, clean: bool 
         decoded here).
     min_faces : int
         Fewer faces than this (after cleaning) is an error.
+    outward : bool
+        Turn the faces to face out of the body the scan encloses with its holes capped;
+        False: keep them facing as most of them do in the file (the face of a dish or bowl
+        scanned alone; :func:`potflat.mesh.cleaning.clean_mesh`).
 
     Returns
     -------
@@ -185,7 +190,7 @@ def load_scan(path: str | os.PathLike, *, units: str | None = None, clean: bool 
     if clean:
         mesh, report = clean_mesh(mesh, weld_tolerance=weld_tolerance,
                                   min_component_fraction=min_component_fraction,
-                                  split_nonmanifold=split_nonmanifold, min_faces=min_faces)
+                                  split_nonmanifold=split_nonmanifold, min_faces=min_faces, outward=outward)
     else:
         n0, m0 = len(mesh.vertices), len(mesh.faces)
         mesh, merged = weld_vertices(mesh, tolerance=weld_tolerance)

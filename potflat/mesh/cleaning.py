@@ -16,7 +16,10 @@ each action, for the JSON sidecars:
    outward: the components, each hole and open rim closed by a cap, must enclose a
    positive volume (a closed shell as it is; an open vessel, bowl or sherd its body; a
    flat piece nothing), turned over together so they keep their relative orientation (a
-   separate inner wall keeps facing the axis);
+   separate inner wall keeps facing the axis); with ``outward=False`` the file's majority
+   orientation stays (the face of a dish or bowl scanned alone, which that volume would
+   show from below: a sheet whose caps close about as much as its faces is turned over
+   with a warning);
 6. count boundary loops (holes and open rims) and drop unreferenced vertices.
 """
 from __future__ import annotations
@@ -35,6 +38,11 @@ from potflat.mesh.tolerances import DEGENERATE
 
 #: Removing more than this fraction of the total area as stray components adds a warning.
 REMOVED_AREA_WARNING = 0.05
+#: Turning an open surface over to enclose a positive volume adds a warning when its caps are
+#: more than this share of the capped surface: a sheet its caps close about as much as its
+#: faces do (a sherd, or the face of a dish or plate scanned alone: 0.46 for the test dish)
+#: encloses a body on its convex side whichever way it faces (the shared scans: at most 0.11).
+SHEET_CAP_SHARE = 0.4
 
 
 @dataclass(frozen=True)
@@ -293,8 +301,9 @@ def _open_border(F: np.ndarray, n: int, topo: _Topology, split: bool) -> tuple[n
 
 def _outward_flips(vertices: np.ndarray, faces: np.ndarray, cross: np.ndarray, area2: np.ndarray,
                    centroid: np.ndarray, flip: np.ndarray, comp: np.ndarray, border: np.ndarray,
-                   loop: np.ndarray) -> tuple[np.ndarray, int]:
-    """Faces to reverse for a consistent, outward orientation, and components reversed.
+                   loop: np.ndarray, outward: bool = True) -> tuple[np.ndarray, int, float]:
+    """Faces to reverse for a consistent, outward orientation, components reversed and the
+    caps' share of the capped surface (0 without open border).
 
     ``flip`` (from :func:`propagate_orientation`) makes each component consistent relative
     to its first face; each component then takes the orientation of the (area) majority of
@@ -305,11 +314,14 @@ def _outward_flips(vertices: np.ndarray, faces: np.ndarray, cross: np.ndarray, a
     vessel, bowl or sherd encloses its body and a flat piece nothing, so the sign does not
     hang on where the area lies (a table or ground plane joined to the foot, or apart from
     the vessel and larger than it). Turning all of them keeps the file's relative
-    orientation (a separate inner wall keeps facing the axis).
+    orientation (a separate inner wall keeps facing the axis). Without ``outward`` each
+    component keeps its majority orientation.
     """
     ncomp = int(comp.max()) + 1
     agree = np.bincount(comp, weights=np.where(flip, -area2, area2), minlength=ncomp)
     flip = flip ^ (agree < 0)[comp]
+    if not outward:
+        return flip, 0, 0.0
     sign = np.where(flip, -1.0, 1.0)
     c = (area2[:, None] * centroid).sum(axis=0) / max(float(area2.sum()), np.finfo(float).tiny)
     d = centroid - c
@@ -323,15 +335,19 @@ def _outward_flips(vertices: np.ndarray, faces: np.ndarray, cross: np.ndarray, a
         xb = vertices[flat[border - border % 3 + (border + 1) % 3]] - c
         count = np.bincount(loop)
         apex = np.stack([np.bincount(loop, weights=xa[:, k]) for k in range(3)], axis=1) / count[:, None]
-        cap = np.einsum("ij,ij->i", np.cross(xa - xb, apex[loop] - xb), xb)
-        flux += float((sign[border // 3] * cap).sum())
+        cap_cross = np.cross(xa - xb, apex[loop] - xb)
+        flux += float((sign[border // 3] * np.einsum("ij,ij->i", cap_cross, xb)).sum())
+        cap_area = float(np.linalg.norm(cap_cross, axis=1).sum())
+        cap_share = cap_area / (cap_area + float(area2.sum()))
+    else:
+        cap_share = 0.0
     if flux < -1e-6 * scale:  # clearly inward (a flat patch stays as it is)
-        return ~flip, ncomp
-    return flip, 0
+        return ~flip, ncomp, cap_share
+    return flip, 0, cap_share
 
 
 def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fraction: float = 0.01,
-               split_nonmanifold: bool = True, orient: bool = True,
+               split_nonmanifold: bool = True, orient: bool = True, outward: bool = True,
                min_faces: int = 4) -> tuple[Mesh, CleaningReport]:
     """Clean a scanned mesh without deleting painted surface, and report what was done.
 
@@ -348,6 +364,10 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
         Split non-manifold vertices and edges into separate fans (no face is removed).
     orient : bool
         Make the winding consistent per component and outward.
+    outward : bool
+        With ``orient``: turn the components over together when they do not enclose a
+        positive volume with their holes capped; False: each keeps the orientation of most
+        of its faces in the file (a scanner's, facing the side it saw).
     min_faces : int
         Fewer faces than this after cleaning is an error.
 
@@ -423,9 +443,15 @@ def clean_mesh(mesh: Mesh, *, weld_tolerance: float = 0.0, min_component_fractio
     if orient:
         # the same values as at the start, face for face (splitting only renumbers vertices)
         cross, _, _, centroid = face_geometry(mesh.vertices, mesh.faces)
-        total_flip, reversed_out = _outward_flips(mesh.vertices, mesh.faces, cross, area2, centroid,
-                                                  flip.astype(bool), comp, border, loop)
+        total_flip, reversed_out, cap_share = _outward_flips(mesh.vertices, mesh.faces, cross, area2, centroid,
+                                                             flip.astype(bool), comp, border, loop, outward)
         del cross, centroid
+        if reversed_out and cap_share > SHEET_CAP_SHARE:
+            warnings.append("the scan is an open sheet that the caps of its holes close about as much as its faces "
+                            "(a sherd, or the face of a dish or bowl scanned alone) and faces the other way in the "
+                            "file: it was turned to face out of its convex side; if it is the inside of a dish or "
+                            "bowl, keep the file's orientation (--keep-orientation) and unroll its inner side "
+                            "(--side inner), else the painting comes out mirrored")
         n_reoriented = int(np.count_nonzero(total_flip))
         mesh = _reverse_faces(mesh, total_flip)
         if conflicts:

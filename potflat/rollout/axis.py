@@ -39,9 +39,11 @@ Orientation (foot to mouth), the first rule that applies:
    inner neck) shows from the mouth down: the mouth is the end (last 10 % of the height)
    where a larger share of the area faces the axis, by at least 5 points (a two-sided
    sherd has its inner face at both ends and goes to the next rules). An end whose inside
-   is closed across by a surface facing out along the axis (a foot ring's inside over its
-   base, a neck shut by a lid) counts as having none, so a jar scanned without its
-   interior is not turned over by its foot ring;
+   is closed across by a surface facing along the axis counts as having none: facing out
+   (a foot ring's inside over its base, a neck shut by a lid), so a jar scanned without its
+   interior is not turned over by its foot ring, or facing in (the floor of a dish or plate
+   whose face alone was scanned, its well reaching the floor's end), so such a dish is not
+   turned over by its well;
 2. an open rim (a boundary loop that winds once around the axis, along faces that face
    sideways, not a turntable's edge): the mouth is the end
    nearer to the longest one (an open vessel's only rim, or the larger of two: a scan
@@ -126,9 +128,9 @@ AXIS_FIT = AxisFitTolerances()
 #: by at least INNER_WALL_FRACTION.
 INNER_WALL_END = 0.1
 INNER_WALL_FRACTION = 0.05
-#: An end's inside is closed (a foot ring's by its base, a neck's by a lid) when the area
-#: there facing out along the axis within the inside's median radius is at least this
-#: fraction of the disc that radius spans.
+#: An end's inside is closed (a foot ring's by its base, a neck's by a lid, a dish's well by
+#: its floor) when the area there facing along the axis within the inside's median radius is
+#: at least this fraction of the disc that radius spans.
 INNER_WALL_CAP = 0.5
 #: An open boundary loop is a rim when the faces along it face sideways (mean |n_r|, by
 #: edge length) at least this much; a flat piece's edge (a turntable) faces along the axis.
@@ -565,18 +567,19 @@ def orient(mesh: Mesh, point, direction, *, lines=None) -> tuple[np.ndarray, str
     n_a = n @ direction
     # the inner wall shows from the mouth down: it reaches the mouth's end of the vessel,
     # not the foot's (a two-sided sherd has it at both ends, a closed jar at neither). An
-    # inside closed across by a cap facing out along the axis (a base under a foot ring, a
-    # lid in a neck) is no open mouth: its end does not count
+    # inside closed across by a surface facing along the axis (out: a base under a foot ring,
+    # a lid in a neck; in: the floor of a dish scanned from above alone) is no open mouth:
+    # its end does not count
     band = INNER_WALL_END * (hi - lo)
     ends, closed = [], []
-    for outward, sel in ((-1.0, hc <= lo + band), (1.0, hc >= hi - band)):
+    for sel in (hc <= lo + band, hc >= hi - band):
         total = area[sel].sum()
         inside = sel & facing_axis
         share = area[inside].sum() / total if total > 0 else 0.0
         shut = False
         if share > 0:
             r_in = float(np.median(distance[inside]))
-            cap = sel & (outward * n_a > 0.5) & (distance < r_in)
+            cap = sel & (np.abs(n_a) > 0.5) & (distance < r_in)
             shut = area[cap].sum() >= INNER_WALL_CAP * np.pi * r_in ** 2
         ends.append(0.0 if shut else share)
         closed.append(shut)
@@ -585,7 +588,7 @@ def orient(mesh: Mesh, point, direction, *, lines=None) -> tuple[np.ndarray, str
         up = ends[1] > ends[0]
         reason = (f"mouth at the end the inner wall reaches ({100 * max(ends):.0f} % of the area there "
                   f"faces the axis, {100 * min(ends):.0f} % at the other end"
-                  + (", whose inside a base or lid closes)" if closed[0 if up else 1] else ")"))
+                  + (", whose inside a floor, base or lid closes)" if closed[0 if up else 1] else ")"))
     elif best is not None:
         up = best[1] >= mid
         reason = f"mouth at the longest open rim ({best[0]:.4g} units around)"

@@ -35,6 +35,13 @@ class RolloutOptions:
     texture : bool
         Use the scan's texture image; off: the geometry (and vertex colours) only, e.g. when
         the texture file is missing or corrupt. Used when reading the file.
+    keep_orientation : bool
+        Keep the scan's faces facing as most of them face in the file (the side the scanner
+        saw), and take them as they face when telling the walls apart. By default an open
+        scan is turned to face out of the body it encloses with its holes capped, which for
+        the face of a dish, plate or bowl scanned alone (a sheet open towards its concave
+        side) is its underside: with this option and ``side="inner"`` it is unrolled as the
+        inside it is, seen from within. Used when reading the file and by the walls.
     proxy : str
         ``auto``, ``cylinder``, ``cone``, ``sphere`` or ``ortho``.
     axis : tuple of 6 float or None
@@ -100,6 +107,7 @@ class RolloutOptions:
 
     units: str | None = field(default=None, metadata={"choices": tuple(UNITS_MM)})
     texture: bool = True
+    keep_orientation: bool = False
     proxy: str = field(default="auto", metadata={"choices": ("auto", *KINDS)})
     axis: tuple[float, ...] | None = field(default=None, metadata={"metavar": "px,py,pz,dx,dy,dz"})
     flip: bool = False

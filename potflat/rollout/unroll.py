@@ -354,7 +354,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     frame = face_frame(mesh, *check_axis(axis.point, axis.direction), graph=graph)  # the walls' and the profile's
     walls = select_wall(mesh, axis.point, axis.direction, side=options.side,
                         exclude=None if options.keep_attachments else attachments.face_mask, others=others,
-                        graph=graph, frame=frame)
+                        graph=graph, frame=frame, inside_out=not options.keep_orientation)
     del graph
     allowed = walls.face_mask if face_mask is None else walls.face_mask & face_mask
     clock.lap("walls")

@@ -553,7 +553,7 @@ class WallSelection:
 
 def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
                 exclude=None, others=None, flat_tolerance: float = 0.25, graph: FaceGraph | None = None,
-                frame: FaceFrame | None = None) -> WallSelection:
+                frame: FaceFrame | None = None, inside_out: bool = True) -> WallSelection:
     """Select the outer or the inner wall of a (possibly two-walled) vessel scan.
 
     Parameters
@@ -583,6 +583,10 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
     frame : FaceFrame, optional
         ``face_frame(mesh, axis_point, axis_direction)`` (with the adjacency) when the caller
         has it (computed here otherwise).
+    inside_out : bool
+        Read a scan whose inner side comes out more than twice its outer one with its normals
+        flipped (:func:`wall_labels`); False: the faces face as the scanner saw them
+        (``RolloutOptions.keep_orientation``).
 
     Returns
     -------
@@ -616,7 +620,7 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
                 f"{name} must be a boolean mask with one entry per face ({len(mesh.faces)}), got {mask.shape}")
     check_graph(graph, mesh, shared=True)
     fr = face_frame(mesh, p, a, graph=graph) if frame is None else frame
-    labels, inverted = wall_labels(fr, flat_tolerance=float(flat_tolerance), others=others)
+    labels, inverted = wall_labels(fr, flat_tolerance=float(flat_tolerance), others=others, inside_out=inside_out)
     want = OUTER if side == "outer" else INNER
     vessel = np.ones(len(labels), bool) if others is None else ~others
     outer_area = float(fr.area[vessel & (labels == OUTER)].sum())
@@ -661,20 +665,21 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
     )
 
 
-def wall_labels(fr: FaceFrame, *, flat_tolerance: float = 0.25, others: np.ndarray | None = None
-                ) -> tuple[np.ndarray, bool]:
+def wall_labels(fr: FaceFrame, *, flat_tolerance: float = 0.25, others: np.ndarray | None = None,
+                inside_out: bool = True) -> tuple[np.ndarray, bool]:
     """Side of every face: ``(labels (m,) int8 (+1 outer, -1 inner), normals_inverted)``.
 
     See the module docstring for the steps. If the inner side comes out more than twice as
     large as the outer one, the scan is taken to be inside-out and labelled again with
-    flipped normals. ``others`` (m,) bool: faces of other objects (whole connected pieces),
-    labelled like the rest but left out of these decisions over the whole vessel.
+    flipped normals (not without ``inside_out``: the faces face as the scanner saw them).
+    ``others`` (m,) bool: faces of other objects (whole connected pieces), labelled like the
+    rest but left out of these decisions over the whole vessel.
     """
     area = fr.area if others is None else np.where(others, 0.0, fr.area)
     labels = _label_once(fr, flat_tolerance, sign=1.0, others=others)
     # inside-out: most of the area faces the axis. Not when the two sides are about equal
     # (a thick sherd: its back is as large as its face)
-    if area[labels == INNER].sum() > _INSIDE_OUT_RATIO * area[labels == OUTER].sum():
+    if inside_out and area[labels == INNER].sum() > _INSIDE_OUT_RATIO * area[labels == OUTER].sum():
         flipped = _label_once(fr, flat_tolerance, sign=-1.0, others=others)
         if area[flipped == OUTER].sum() > area[labels == OUTER].sum():
             return flipped, True
