@@ -242,7 +242,10 @@ class CoarseParameters:
     rings do not all re-embed), yet on the goblet at 0.1M it is the 200 rounds' layout that
     re-embeds (20 rounds: 17 triangles left at 40 rings, and at 100); the folds left are
     mostly strips of slivers along the boundary (subdivided slivers of the scan), which 12
-    rings did not reach across on the goblet and the plastic vase at 1M and 40 did.
+    rings did not reach across on the goblet and the plastic vase at 1M and 40 did; on the
+    sea vase at 3M, 40 left 2 triangles at its boundary folded in both layouts (the copy was
+    then given up: 356 full-mesh iterations, 202 s) and 80 re-embeds them (a cluster grows
+    only as far as it needs, so a larger bound costs nothing where fewer rings do).
     The followed layout is the full mesh's start only when its energy is at most
     ``follow_most_energy`` times the rollout's: a followed start far above the rollout's
     energy is the slower one (``relax()`` alone, followed start against the rollout's:
@@ -285,7 +288,7 @@ class CoarseParameters:
     follow_repair_rounds: int = 30
     follow_repair_widen: int = 3
     follow_untangle_rounds: tuple[int, ...] = (20, 200)
-    follow_reembed_rings: int = 40
+    follow_reembed_rings: int = 80
     follow_most_energy: float = 2.0
     approach_steps: int = 30
     approach_rounds: int = 100
