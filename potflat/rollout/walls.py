@@ -241,9 +241,8 @@ class FaceGraph:
         weights = np.asarray(weights, np.float64)
         if weights.ndim == 1:
             data = weights[pair_of]
-        else:  # the entry (row, col) runs from the pair's second face back when its row is that face
-            rows = np.repeat(np.arange(self.m, dtype=np.int64), np.diff(indptr))
-            back = rows == np.asarray(self.pairs)[pair_of, 1]
+        else:  # an entry runs from the pair's second face back when its column is the first
+            back = indices == np.asarray(self.pairs)[pair_of, 0]
             data = weights[pair_of, back.astype(np.int64)]
         A = sp.csr_matrix((data, indices.copy(), indptr.copy()), shape=(self.m, self.m))
         A.eliminate_zeros()  # works in place on the index arrays, hence the copies
