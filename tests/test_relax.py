@@ -130,6 +130,12 @@ def test_limiting_faces_are_those_whose_own_bound_is_below_the_cap(bumpy):
     assert np.array_equal(flags, own < 1.0)
     assert t == own.min()
     assert max_step_of(x, d, sp.faces, np.arange(sp.m), 1.0, 1.0) == t
+    verts = np.unique(sp.faces[flags][:3])  # the faces around a few limiting ones
+    trios, bounds = sp.face_limits(x, d, verts, 1.0, 1.0)
+    around = np.flatnonzero(np.isin(sp.faces, verts).any(axis=1))
+    held = around[own[around] < 1.0]
+    assert 3 <= len(held) < len(around)
+    assert np.array_equal(trios, sp.faces[held]) and np.array_equal(bounds, own[held])
 
 
 def test_max_face_step_near_equals_the_full_bound_after_a_local_change(bumpy):
@@ -860,6 +866,45 @@ def test_easing_the_direction_frees_a_step_held_at_the_boundary(monkeypatch):
     assert sp.max_face_step(x, eased, cap=t_faces, shrink=SOLVER.step_shrink) == t_faces
     changed = np.flatnonzero((eased != d).any(axis=1))
     assert 0 < len(changed) < sp.n // 4 and (np.abs(eased[changed]) <= np.abs(d[changed])).all()
+    assert (solver._scale == 1.0).all()  # the work space is left as found
+
+
+def test_easing_the_direction_frees_a_step_held_by_a_sliver(monkeypatch):
+    """A grid with one vertex pushed up against the row above (its two faces there slivers a
+    tenth of a unit high) and a direction moving everything by a smooth shear and that vertex
+    on into the row: its slivers hold the whole step to under a tenth of the natural one;
+    eased, the direction still descends further, the step is the natural one (the vertex's
+    move scaled down with its neighbours', everything away from it unchanged) and keeps
+    every face within its bound."""
+    import dataclasses
+
+    import potflat.relax.lbfgs as rx
+    from potflat.relax.lbfgs import LBFGS
+
+    SOLVER = dataclasses.replace(rx.SOLVER, smooth_max_fraction=0.5)  # (a small mesh)
+    monkeypatch.setattr(rx, "SOLVER", SOLVER)
+    V, F, x = _grid(16)
+    tip = 8 * 16 + 8
+    x[tip, 1] += 0.9
+    sp = spring_system(V, F, k=1.0, relative=True)
+    sp.guard_boundary(x)
+    solver = LBFGS(sp, x)
+    d = np.c_[0.05 * x[:, 1], np.zeros(len(x))]
+    d[tip, 1] = 1.0
+    solver.q[:] = d.ravel()
+    solver.g = -solver.q.copy()  # (a descent direction)
+    gd = float(solver.g @ solver.q)
+    cap = 1.0 / SOLVER.step_fraction
+    t = sp.max_face_step(x, d, cap=cap, shrink=SOLVER.step_shrink, limiting=solver._limiting)
+    assert t < 0.1 * cap and 0 < solver._limiting.sum() <= 6
+    t_eased, gd_eased = solver._ease_faces(t, gd)
+    eased = solver.q.reshape(-1, 2)
+    assert t_eased == cap and solver.eased == 1 and gd_eased < 0.0 and t_eased * gd_eased < t * gd
+    assert gd_eased == pytest.approx(float(solver.g @ solver.q), rel=1e-12)
+    assert sp.max_face_step(x, eased, cap=cap, shrink=SOLVER.step_shrink) == cap
+    changed = np.flatnonzero((eased != d).any(axis=1))
+    assert tip in changed and len(changed) < sp.n // 8
+    assert (np.abs(eased[changed]) <= np.abs(d[changed])).all()
     assert (solver._scale == 1.0).all()  # the work space is left as found
 
 

@@ -32,7 +32,13 @@ from potflat.relax._kernels.springs import (
     face_terms,
     shape_coefficients,
 )
-from potflat.relax._kernels.steps import boundary_max_step, boundary_vertex_steps, max_step, max_step_of
+from potflat.relax._kernels.steps import (
+    boundary_max_step,
+    boundary_vertex_steps,
+    face_steps,
+    max_step,
+    max_step_of,
+)
 from potflat.relax.parameters import ENERGY, SOLVER
 
 
@@ -269,6 +275,17 @@ class SpringSystem:
         faces around ``verts`` are tested."""
         faces = incident_faces(verts, self.vf_ptr, self.vf_tri)
         return max_step_of(x, d, self.faces, faces, float(cap), float(shrink))
+
+    def face_limits(self, x: np.ndarray, d: np.ndarray, verts: np.ndarray, cap: float,
+                    shrink: float) -> tuple[np.ndarray, np.ndarray]:
+        """The faces around ``verts`` whose own bound of :meth:`max_face_step` along ``d`` is
+        below ``cap``: their vertices, (k, 3) int64, and their bounds, (k,) float64. Moving a
+        face's three vertices by ``s d`` instead moves its bound to ``t / s``."""
+        faces = np.unique(incident_faces(verts, self.vf_ptr, self.vf_tri))
+        own = np.empty(len(faces))
+        face_steps(x, d, self.faces, faces, float(cap), float(shrink), own)
+        held = own < cap
+        return self.faces[faces[held]].astype(np.int64), own[held]
 
     def boundary_step(self, x: np.ndarray, d: np.ndarray, t: float, shrink: float) -> float:
         """``t`` limited by the guarded boundary vertices' angle sums along ``x + t d`` and, while

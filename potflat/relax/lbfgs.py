@@ -161,31 +161,67 @@ class LBFGS:
         dx[verts] = before
         return t, gd
 
+    def _ease_faces(self, t: float, gd: float) -> tuple[float, float]:
+        """Scale the direction ``q`` down around the faces that hold its step ``t`` below the
+        natural one (those flagged by the faces' step bound), so the rest of the mesh takes
+        the natural step (:meth:`_ease`; a squeezed sliver otherwise holds every vertex's
+        step to a few percent of it). Returns the step bound and ``g . q``."""
+        sp, shrink, cap = self.sp, SOLVER.step_shrink, 1.0 / SOLVER.step_fraction
+        held = flagged_face_vertices(self._limiting, sp.faces, self._seen)
+        if sp.fixed is not None:
+            held = held[~sp.fixed[held]]
+
+        def limits(dx: np.ndarray, lowered: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return sp.face_limits(self.x, dx, np.concatenate([held, lowered]), cap, shrink)
+
+        def bound(dx: np.ndarray, lowered: np.ndarray) -> float:
+            return sp.max_face_step_near(self.x, dx, np.concatenate([held, lowered]), cap, shrink)
+
+        return self._ease(t, cap, gd, limits, bound)
+
     def _ease_boundary(self, t: float, t_faces: float, gd: float) -> tuple[float, float]:
         """Scale the direction ``q`` down around the boundary constraints that hold its step
-        ``t`` below the faces' bound ``t_faces``, so the rest of the mesh takes the faces' step.
-
-        Each holding constraint's three vertices (:meth:`SpringSystem.boundary_limits`) move by
-        the share of the step their bound allows, and the scale rises back to 1 over a ramp as
-        wide as ``SOLVER.ease_width`` times the move (:func:`ease_scales`), in up to
-        ``SOLVER.ease_rounds`` rounds (a constraint the scaling itself brings closer is eased in
-        the next). Kept when the eased direction descends further along its bound (``t g . q``
-        lower) and concerns at most ``SOLVER.smooth_max_fraction`` of the vertices.
-        Returns the step bound and ``g . q``."""
+        ``t`` below the faces' bound ``t_faces``, so the rest of the mesh takes the faces' step
+        (:meth:`_ease`). Returns the step bound and ``g . q``."""
         sp, shrink = self.sp, SOLVER.step_shrink
+
+        def limits(dx: np.ndarray, lowered: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return sp.boundary_limits(self.x, dx, t_faces, shrink)
+
+        def bound(dx: np.ndarray, lowered: np.ndarray) -> float:
+            return sp.boundary_step(self.x, dx, sp.max_face_step_near(self.x, dx, lowered, t_faces, shrink), shrink)
+
+        return self._ease(t, t_faces, gd, limits, bound)
+
+    def _ease(self, t: float, target: float, gd: float, limits, bound) -> tuple[float, float]:
+        """Scale the direction ``q`` down around the constraints that hold its step ``t`` below
+        ``target``: ``limits(dx, lowered)`` gives them (each one's three vertices, (k, 3)
+        int64, and its bound, (k,) float64; moving its vertices by ``s dx`` moves its bound to
+        ``t / s``), ``bound(dx, lowered)`` the step bound of ``dx`` changed at the vertices
+        ``lowered`` (k,) int64.
+
+        Each holding constraint's three vertices move by the share of the step their bound
+        allows, and the scale rises back to 1 over a ramp as wide as ``SOLVER.ease_width``
+        times the move (:func:`ease_scales`), in up to ``SOLVER.ease_rounds`` rounds (a
+        constraint the scaling itself brings closer is eased in the next). Kept when the
+        eased direction descends further along its bound (``t g . q`` lower) and concerns at
+        most ``SOLVER.smooth_max_fraction`` of the vertices.
+        Returns the step bound and ``g . q``."""
+        sp = self.sp
         dx = self.q.reshape(-1, 2)
         if self._scale is None:
             self._scale = np.ones(sp.n)
         scale, budget = self._scale, int(SOLVER.smooth_max_fraction * sp.n)
         lowered, before = [], []
+        verts = np.empty(0, np.int64)
         t_eased = t
         for _ in range(SOLVER.ease_rounds):
-            trios, bounds = sp.boundary_limits(self.x, dx, t_faces, shrink)
+            trios, bounds = limits(dx, verts)
             if not len(bounds):
                 break
-            values = bounds[:, None] / t_faces * scale[np.maximum(trios, 0)]
+            values = bounds[:, None] / target * scale[np.maximum(trios, 0)]
             held = trios >= 0  # (a local relaxation's fixed vertices outside it: -1)
-            new = ease_scales(self.x, dx, sp.ptr, sp.nbr, trios[held], values[held], t_faces, SOLVER.ease_width,
+            new = ease_scales(self.x, dx, sp.ptr, sp.nbr, trios[held], values[held], target, SOLVER.ease_width,
                               budget, scale)
             lowered.append(new)
             before.append(dx[new])
@@ -194,8 +230,8 @@ class LBFGS:
                 break
             verts = np.concatenate(lowered)
             dx[verts] = np.concatenate(before) * scale[verts, None]
-            t_eased = sp.boundary_step(self.x, dx, sp.max_face_step_near(self.x, dx, verts, t_faces, shrink), shrink)
-            if t_eased >= t_faces:
+            t_eased = bound(dx, verts)
+            if t_eased >= target:
                 break
         verts = np.concatenate(lowered) if lowered else np.empty(0, np.int64)
         original = np.concatenate(before) if before else np.empty((0, 2))
@@ -229,6 +265,8 @@ class LBFGS:
                                        limiting=self._limiting)
             if t_faces < 1.0 / SOLVER.step_fraction:  # faces hold the step below the natural one
                 t_faces, gd = self._smooth_limiting(t_faces, gd)
+            if t_faces < SOLVER.ease_face_step:
+                t_faces, gd = self._ease_faces(t_faces, gd)
             t = sp.boundary_step(self.x, dx, t_faces, SOLVER.step_shrink)
             if t < t_faces:  # the boundary holds it lower still
                 t, gd = self._ease_boundary(t, t_faces, gd)

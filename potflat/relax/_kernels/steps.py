@@ -107,6 +107,24 @@ def max_step_of(x, d, faces, face_list, cap, shrink):
     return best
 
 
+@parallel
+def face_steps(x, d, faces, face_list, cap, shrink, out):
+    """:func:`max_step` per listed face: ``out`` (k,) float64, each face's own bound (at most
+    ``cap``).
+
+    Parameters
+    ----------
+    x, d : (n, 2) float64
+    faces : (m, 3) int32 or int64
+    face_list : (k,) int64
+    cap, shrink : float
+    out : (k,) float64
+    """
+    for p in prange(face_list.shape[0]):
+        c0, c1, c2 = _area_polynomial(x, d, faces, np.uint64(face_list[p]), shrink)
+        out[p] = cap if _no_root_up_to(c0, c1, c2, cap) else min(cap, _first_root(c0, c1, c2))
+
+
 @leaf
 def _first_root(c0, c1, c2):
     """Smallest positive root of ``c0 + c1 t + c2 t^2`` (inf if none); 0 if ``c0 <= 0``."""
