@@ -155,12 +155,15 @@ class SolverParameters:
         its first 60 iterations (190-253 in all over starts differing in their last bits;
         eased at the faces: 105-163).
     ease_face_step : float
-        An eased direction leaves the quasi-Newton one: a 3000-vertex vessel relaxed from
-        Tutte's disc converged to a 1.1 % higher energy (area distortion 2.6 % higher) when
-        faces holding the step below 1 or 0.5 of the natural one were eased, unchanged
-        below 0.2 (no eased step kept); the plastic vase at 1M took 100-146 iterations with
-        0.3, 88-158 with 0.2, 105-163 with 0.1 (four and three starts). At 0.1 the other
-        shared scans' and the synthetic vessel's 1M relaxations do not change.
+        An eased direction leaves the quasi-Newton one, and easing more often moves the slow
+        tails of the relaxation both ways (starts differing in their last bits): with 0.3
+        the plastic vase at 3M took 202 full-mesh iterations against 308 with 0.1, but the
+        sea vase at 1M 81, 134, 108 and 82 against 81, 85, 108 and 82; at 1M the plastic
+        vase took 100-146 with 0.3, 88-158 with 0.2, 105-163 with 0.1. Easing every limiting
+        face (a bound of 1.2) made one of three 3000-vertex vessels relaxed from Tutte's disc stop
+        at a 1.1 % higher energy, the two others lower. With 0.1 the other shared scans'
+        and the synthetic vessel's 1M relaxations, and every native run but the plastic
+        vase's, do not change.
     precond_theta : float
         Weight of the multilevel preconditioner's coarse terms against its Jacobi term
         (measured: 1 needs 30-50% more iterations than 2; 4 about as many as 2 but more
