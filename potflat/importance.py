@@ -117,6 +117,8 @@ STROKE_MM = 6.0
 PAINTING_FRACTION = 0.01
 #: The sentence every "no zone" finding ends with.
 ALIKE = "the whole surface counts alike"
+#: How every finding of no painting in the colours begins (:func:`found_no_painting`).
+NO_PAINTING = "no painting found"
 
 
 @dataclass(frozen=True)
@@ -258,7 +260,7 @@ def painted_zone_image(rgba: np.ndarray, px_per_mm: float, evidence: np.ndarray 
     detail = ((deviation > threshold) & covered).astype(np.uint8)
     evidence = _evidence(covered, px_per_mm, evidence)
     if not (detail & evidence).any():
-        return None, f"no painting found (no colour detail above {threshold:.1f} CIELAB units): {ALIKE}"
+        return None, f"{NO_PAINTING} (no colour detail above {threshold:.1f} CIELAB units): {ALIKE}"
     # join detail into zones, fill enclosed plain areas, drop specks and what does not stand
     # clear of the surface's own texture, then the same on the strokes
     zone = _joined(detail, covered, px_per_mm)
@@ -267,7 +269,7 @@ def painted_zone_image(rgba: np.ndarray, px_per_mm: float, evidence: np.ndarray 
     big = stats[:, cv2.CC_STAT_AREA] >= min_area * px_per_mm ** 2
     big[0] = False
     if not big.any():
-        return None, f"no painted zone found (only specks of colour detail): {ALIKE}"
+        return None, f"{NO_PAINTING} (only specks of colour detail): {ALIKE}"
     # a zone counts where its detail stands clear of the surface's own texture; there is a
     # painting when the strokes of those zones do
     plain = evidence & (cv2.dilate(zone, _disc(DETAIL_REACH_MM * px_per_mm)) == 0)
@@ -277,7 +279,7 @@ def painted_zone_image(rgba: np.ndarray, px_per_mm: float, evidence: np.ndarray 
     strokes = _clear_strokes(lab, covered, plain, 2.0 * threshold, px_per_mm)
     share = float(keep[labels[strokes & evidence]].sum()) / float(evidence.sum())
     if share < PAINTING_FRACTION:
-        return None, ("no painting found: the colour detail is the surface's own texture and light (clay, firing "
+        return None, (f"{NO_PAINTING}: the colour detail is the surface's own texture and light (clay, firing "
                       "clouds, dirt, chips, shadows, highlights); strokes standing clear of it cover "
                       f"{100 * share:.2f}% of the surface, a painting's {100 * PAINTING_FRACTION:g}% or more: "
                       f"{ALIKE} (a painting can be marked by hand: --importance mask)")
@@ -465,6 +467,12 @@ def auto_importance(flat: FlatMesh) -> Importance:
     if zone is None:
         return Importance(None, "auto", 1.0, reason)
     return _result(flat, sample_image(zone, pixels), "auto", reason)
+
+
+def found_no_painting(importance: Importance) -> bool:
+    """Whether ``importance`` is the finding, in the scan's colours, that they show no
+    painting (not: no colours, painted all over, or another method)."""
+    return importance.method == "auto" and importance.values is None and importance.reason.startswith(NO_PAINTING)
 
 
 def _smeared(flat: FlatMesh, pixels: np.ndarray, shape: tuple[int, int], px_per_mm: float) -> np.ndarray:

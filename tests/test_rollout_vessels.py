@@ -121,6 +121,35 @@ def test_a_dish_face_scanned_alone_is_unrolled_from_above_with_its_orientation_k
     assert r.walls.face_mask[np.isin(labels, ["well", "broad rim"])].mean() > 0.95
 
 
+@pytest.mark.parametrize("case", ["plain plate", "inner side", "painted underside", "tall", "no colours"])
+def test_an_open_form_plain_outside_points_to_its_inner_side(case):
+    """A plate (35 mm high, 243 mm across its profile's widest bin) whose outer side shows no painting in its colours is
+    told to unroll its inner side, where a plate's painting usually is; not when its inner
+    side is the one unrolled, when the outer side is painted, when the vessel is taller than
+    half its width, or when the scan has no colours to look for a painting in."""
+    import _vessel_meshes as vm
+
+    from potflat.rollout.notes import rollout_notes
+
+    V, F, labels, _ = vm.plate()
+    V = V * np.array([1.0, 1.0, 4.0 if case == "tall" else 1.0])
+    rng = np.random.default_rng(0)
+    colours = np.clip(rng.normal([225, 215, 195], 1.0, (len(V), 3)), 0, 255).astype(np.uint8)
+    if case == "painted underside":
+        radius = np.hypot(V[:, 0], V[:, 1])
+        colours[(V[:, 2] < 14.0) & (np.abs(np.sin(radius / 3.0)) < 0.3)] = (40, 60, 150)
+    mesh = Mesh(V, F, units="mm", vertex_colors=None if case == "no colours" else np.c_[colours, np.full(len(V), 255,
+                                                                                                          np.uint8)])
+    r = rollout(mesh, side="inner" if case == "inner side" else "outer")
+    hint = [n for n in rollout_notes(r) if "open form" in n]
+    if case == "plain plate":
+        assert hint == ["an open form (35 mm high, 243 mm across: a plate, dish or bowl) with no painting found on "
+                        "its outer side; if its inside is painted, unroll it with --side inner"]
+    else:
+        assert not hint, hint
+    assert (r.importance.values is not None) == (case == "painted underside")
+
+
 def test_handles_are_left_out_and_reported(amphora):
     res = rollout(amphora.mesh)
     att = res.attachments

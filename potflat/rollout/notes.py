@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 
+from potflat.importance import found_no_painting
 from potflat.mesh._kernels.geometry import face_geometry
 from potflat.mesh.distortion import face_areas
 
@@ -36,6 +37,12 @@ WARN_APART_FRACTION = 0.05
 WARN_FLANGE_FRACTION, FLANGE_ANGLE_DEG = 0.08, 30.0
 
 
+#: An open form (a plate, dish, bowl or cup whose inside is its painted side as often as not):
+#: a two-walled scan at most this high for its greatest diameter. Advised to unroll its inner
+#: side when no painting was found on the outer one.
+OPEN_FORM_HEIGHT_PER_DIAMETER = 0.5
+
+
 def rollout_notes(result) -> list[str]:
     """Warnings for the rollout's JSON and summary (``result`` a
     :class:`~potflat.rollout.unroll.RolloutResult`): what the user should know before relaxing."""
@@ -49,6 +56,13 @@ def rollout_notes(result) -> list[str]:
         notes.append(f"the {walls.side} wall unrolled here is only {100 * share:.0f} % of the scan's surface (the "
                      f"{other} wall: {100 - 100 * share:.0f} %): the scan shows little of it, e.g. a neck or a mouth "
                      f"seen from within; if the painting is on the {other} side, unroll it with --side {other}")
+    elif walls.side == "outer" and _open_form(result) and result.importance is not None and \
+            found_no_painting(result.importance):
+        mm = result.profile.mm_per_unit
+        low, high = result.profile.height_range
+        notes.append(f"an open form ({(high - low) * mm:.0f} mm high, {2 * result.profile.max_radius * mm:.0f} mm "
+                     "across: a plate, dish or bowl) with no painting found on its outer side; if its inside is "
+                     "painted, unroll it with --side inner")
     if result.region.repeated_from is not None:
         notes.append(f"{len(result.flat.mesh.faces) - result.region.repeated_from} faces repeat the first "
                      f"{result.region.overlap_deg:g} degrees after the seam past 360 degrees (their distortion is "
@@ -105,6 +119,15 @@ def rollout_notes(result) -> list[str]:
                      "fit, or the axis given is off), so horizontal bands of the painting come out wavy; give the "
                      "axis (--axis px,py,pz,dx,dy,dz) or unroll the painted height only (--band LO HI)")
     return notes
+
+
+def _open_form(result) -> bool:
+    """Whether the scan is a two-walled open form (:data:`OPEN_FORM_HEIGHT_PER_DIAMETER`)."""
+    profile = result.profile
+    if profile is None or not profile.two_walled or not np.isfinite(profile.max_radius):
+        return False
+    low, high = profile.height_range
+    return high - low <= OPEN_FORM_HEIGHT_PER_DIAMETER * 2.0 * profile.max_radius
 
 
 def _facing_axis_share(result) -> float:
