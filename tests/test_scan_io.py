@@ -892,6 +892,34 @@ def test_unknown_extension(tmp_path):
     _one_line(e, "s.xyz", ".obj")
 
 
+@pytest.mark.parametrize("packing, needles", [
+    ("zip", ("a zip archive holding pot.obj", "unzip it")),
+    ("zip without a scan", ("a zip archive without a scan in it", ".obj")),
+    ("damaged zip", ("a damaged zip archive",)),
+    ("gzip", ("gzip-compressed", "gunzip")),
+])
+def test_a_packed_scan_says_how_to_unpack_it(tmp_path, packing, needles):
+    """A museum portal's download, a zip of the scan and its textures (or a gzip-compressed
+    scan), is named as what it is, with what is in it, in one line."""
+    import gzip
+    import zipfile
+
+    obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
+    path = tmp_path / ("pot.obj.gz" if packing == "gzip" else "pot.zip")
+    if packing == "gzip":
+        path.write_bytes(gzip.compress(obj.encode()))
+    else:
+        with zipfile.ZipFile(path, "w") as archive:
+            archive.writestr("textures/pot.png", b"not read")
+            if packing != "zip without a scan":
+                archive.writestr("pot.obj", obj)
+        if packing == "damaged zip":
+            path.write_bytes(path.read_bytes()[:60])
+    with pytest.raises(InvalidInputError) as e:
+        load_scan(path)
+    _one_line(e, path.name, *needles)
+
+
 @pytest.mark.parametrize("cut", [7, 200])
 def test_truncated_binary_ply(tmp_path, cut):
     V, F = _grid()

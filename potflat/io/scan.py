@@ -23,6 +23,7 @@ from __future__ import annotations
 import errno
 import os
 import stat
+import zipfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -258,12 +259,37 @@ def check_scan_file(path: str | os.PathLike) -> Path:
     if not stat.S_ISREG(st.st_mode):
         raise InvalidInputError(f"{path} is not a regular file (a device or pipe); give a scan file")
     if ext not in SCAN_EXTENSIONS:
-        raise InvalidInputError(f"{path} has an unknown extension {ext or '(none)'!r}; "
-                                f"potflat reads {' '.join(SCAN_EXTENSIONS)}: convert the scan")
+        packed = _packed(path)
+        raise InvalidInputError(f"{path} " + (packed or f"has an unknown extension {ext or '(none)'!r}; potflat reads "
+                                                        f"{' '.join(SCAN_EXTENSIONS)}: convert the scan"))
     if st.st_size == 0:
         raise InvalidInputError(f"{path} is empty (0 bytes); export or copy the scan again")
     _check_fits_memory(path)
     return path
+
+
+def _packed(path: Path) -> str | None:
+    """What to say of ``path`` when it is an archive or compressed (a museum portal's download:
+    a zip of the scan, its material and textures), from its own bytes; None otherwise."""
+    extensions = " ".join(SCAN_EXTENSIONS)
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except OSError:
+        return None
+    if head[:2] == b"\x1f\x8b":
+        return f"is gzip-compressed; decompress it (gunzip) and give the scan (potflat reads {extensions})"
+    if head != b"PK\x03\x04":
+        return None
+    try:
+        with zipfile.ZipFile(path) as archive:
+            scans = [name for name in archive.namelist() if Path(name).suffix.lower() in SCAN_EXTENSIONS]
+    except (zipfile.BadZipFile, OSError):
+        return "is a damaged zip archive; download or pack the scan again"
+    if not scans:
+        return f"is a zip archive without a scan in it ({extensions}); give the scan file itself"
+    named = ", ".join(scans[:3]) + (f" and {len(scans) - 3} more" if len(scans) > 3 else "")
+    return f"is a zip archive holding {named}; unzip it and give the scan inside (its textures stay beside it)"
 
 
 def _validate(raw: _Raw, path: Path, units: str | None, texture: str, max_pixels: int) -> Mesh:
