@@ -703,7 +703,8 @@ def test_large_trims_and_poor_axis_fits_are_warned_with_the_option():
                              other_objects_faces=0, disk_cut_faces=np.zeros(0, np.int64),
                              walls=SimpleNamespace(side="outer", outer_area=50.0, inner_area=0.0, apart_area=0.0,
                                                    ground_area=0.0),
-                             trimmed_area=20.0, flat=flat, proxy=SimpleNamespace(kind="cylinder"),
+                             trimmed_area=20.0, flat=flat, proxy=SimpleNamespace(kind="cylinder"), profile=None,
+                             importance=None,
                              axis=SimpleNamespace(misfit_angle_deg=3.2, direction=np.array([0.0, 1.0, 0.0]),
                                                   mouth_guessed=False))
     notes = " ".join(_notes(result))
