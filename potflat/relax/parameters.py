@@ -153,17 +153,16 @@ class SolverParameters:
         they hold the step below ``ease_face_step`` of the natural one. Squeezed slivers
         held the plastic vase's 1M full-mesh steps to a median 1.5 % of the natural one over
         its first 60 iterations (190-253 in all over starts differing in their last bits;
-        eased at the faces: 105-163).
+        eased at the faces: 100-146).
     ease_face_step : float
         An eased direction leaves the quasi-Newton one, and easing more often moves the slow
-        tails of the relaxation both ways (starts differing in their last bits): with 0.3
-        the plastic vase at 3M took 202 full-mesh iterations against 308 with 0.1, but the
-        sea vase at 1M 81, 134, 108 and 82 against 81, 85, 108 and 82; at 1M the plastic
-        vase took 100-146 with 0.3, 88-158 with 0.2, 105-163 with 0.1. Easing every limiting
-        face (a bound of 1.2) made one of three 3000-vertex vessels relaxed from Tutte's disc stop
-        at a 1.1 % higher energy, the two others lower. With 0.1 the other shared scans'
-        and the synthetic vessel's 1M relaxations, and every native run but the plastic
-        vase's, do not change.
+        tails of the relaxation both ways (full-mesh iterations over starts differing in their
+        last bits, 0.3 against 0.1): plastic vase at 3M 202, 259, 155 against 308, 368, 243,
+        at 1M 100, 113, 111, 146 against 118, 105, 163; sea vase at 3M 137 against 142, at 1M
+        81, 134, 108, 82 against 81, 85, 108, 82; the colonoware pot, dragon jar, goblet and
+        synthetic vessel at 1M within 3 iterations. Easing every limiting face (a bound of
+        1.2) made one of three 3000-vertex vessels relaxed from Tutte's disc stop at a 1.1 %
+        higher energy, the two others lower; 0.3 left them within 0.4 %.
     precond_theta : float
         Weight of the multilevel preconditioner's coarse terms against its Jacobi term
         (measured: 1 needs 30-50% more iterations than 2; 4 about as many as 2 but more
@@ -216,7 +215,7 @@ class SolverParameters:
     smooth_max_fraction: float = 0.01
     ease_rounds: int = 3
     ease_width: float = 4.0
-    ease_face_step: float = 0.1
+    ease_face_step: float = 0.3
     precond_theta: float = 2.0
     window_lbfgs: int = 10
     window_dynamics: int = 100
