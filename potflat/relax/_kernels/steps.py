@@ -89,6 +89,13 @@ def max_step(x, d, faces, cap, shrink, out, limiting):
 
 
 @leaf
+def _face_bound(x, d, faces, f, cap, shrink):
+    """Face ``f``'s own bound of :func:`max_step`: the largest ``t <= cap``."""
+    c0, c1, c2 = _area_polynomial(x, d, faces, f, shrink)
+    return cap if _no_root_up_to(c0, c1, c2, cap) else min(cap, _first_root(c0, c1, c2))
+
+
+@leaf
 def max_step_of(x, d, faces, face_list, cap, shrink):
     """:func:`max_step` over the listed faces only (repeats allowed): the largest ``t <= cap``.
 
@@ -101,28 +108,15 @@ def max_step_of(x, d, faces, face_list, cap, shrink):
     """
     best = cap
     for p in range(face_list.shape[0]):
-        c0, c1, c2 = _area_polynomial(x, d, faces, np.uint64(face_list[p]), shrink)
-        if not _no_root_up_to(c0, c1, c2, best):
-            best = min(best, _first_root(c0, c1, c2))
+        best = _face_bound(x, d, faces, np.uint64(face_list[p]), best, shrink)
     return best
 
 
 @parallel
 def face_steps(x, d, faces, face_list, cap, shrink, out):
-    """:func:`max_step` per listed face: ``out`` (k,) float64, each face's own bound (at most
-    ``cap``).
-
-    Parameters
-    ----------
-    x, d : (n, 2) float64
-    faces : (m, 3) int32 or int64
-    face_list : (k,) int64
-    cap, shrink : float
-    out : (k,) float64
-    """
+    """:func:`max_step_of` per listed face, into ``out`` (k,) float64: each face's own bound."""
     for p in prange(face_list.shape[0]):
-        c0, c1, c2 = _area_polynomial(x, d, faces, np.uint64(face_list[p]), shrink)
-        out[p] = cap if _no_root_up_to(c0, c1, c2, cap) else min(cap, _first_root(c0, c1, c2))
+        out[p] = _face_bound(x, d, faces, np.uint64(face_list[p]), cap, shrink)
 
 
 @leaf
