@@ -897,7 +897,7 @@ def test_easing_the_direction_frees_a_step_held_by_a_sliver(monkeypatch):
     cap = 1.0 / SOLVER.step_fraction
     t = sp.max_face_step(x, d, cap=cap, shrink=SOLVER.step_shrink, limiting=solver._limiting)
     assert t < 0.1 * cap and 0 < solver._limiting.sum() <= 6
-    t_eased, gd_eased = solver._ease_faces(t, gd)
+    t_eased, gd_eased = solver._ease_faces(t, gd, solver._limiting_vertices())
     eased = solver.q.reshape(-1, 2)
     assert t_eased == cap and solver.eased == 1 and gd_eased < 0.0 and t_eased * gd_eased < t * gd
     assert gd_eased == pytest.approx(float(solver.g @ solver.q), rel=1e-12)

@@ -260,8 +260,10 @@ def check_scan_file(path: str | os.PathLike) -> Path:
         raise InvalidInputError(f"{path} is not a regular file (a device or pipe); give a scan file")
     if ext not in SCAN_EXTENSIONS:
         packed = _packed(path)
-        raise InvalidInputError(f"{path} " + (packed or f"has an unknown extension {ext or '(none)'!r}; potflat reads "
-                                                        f"{' '.join(SCAN_EXTENSIONS)}: convert the scan"))
+        if packed:
+            raise InvalidInputError(f"{path} {packed}")
+        raise InvalidInputError(f"{path} has an unknown extension {ext or '(none)'!r}; "
+                                f"potflat reads {' '.join(SCAN_EXTENSIONS)}: convert the scan")
     if st.st_size == 0:
         raise InvalidInputError(f"{path} is empty (0 bytes); export or copy the scan again")
     _check_fits_memory(path)

@@ -134,15 +134,19 @@ class LBFGS:
             self.rho[slot], self.yhy[slot] = 1.0 / sy, yhy
             self.slots.append(slot)
 
-    def _smooth_limiting(self, t: float, gd: float) -> tuple[float, float]:
-        """Smooth the direction ``q`` at the vertices of the limiting faces (those flagged by
-        the faces' step bound ``t``, not ``sp.fixed``); kept only when it still descends and
-        the faces allow a longer step.
-        Returns the faces' step bound and ``g . q``."""
+    def _limiting_vertices(self) -> np.ndarray:
+        """The vertices of the faces flagged by the faces' step bound (:attr:`_limiting`) that
+        are not ``sp.fixed``, (k,) int64."""
         sp = self.sp
         verts = flagged_face_vertices(self._limiting, sp.faces, self._seen)
-        if sp.fixed is not None:
-            verts = verts[~sp.fixed[verts]]
+        return verts if sp.fixed is None else verts[~sp.fixed[verts]]
+
+    def _smooth_limiting(self, t: float, gd: float, verts: np.ndarray) -> tuple[float, float]:
+        """Smooth the direction ``q`` at ``verts``, the limiting faces' vertices
+        (:meth:`_limiting_vertices`); kept only when it still descends and the faces allow a
+        longer step than ``t``.
+        Returns the faces' step bound and ``g . q``."""
+        sp = self.sp
         if not 0 < len(verts) <= SOLVER.smooth_max_fraction * sp.n:
             return t, gd
         dx = self.q.reshape(-1, 2)
@@ -161,15 +165,13 @@ class LBFGS:
         dx[verts] = before
         return t, gd
 
-    def _ease_faces(self, t: float, gd: float) -> tuple[float, float]:
+    def _ease_faces(self, t: float, gd: float, held: np.ndarray) -> tuple[float, float]:
         """Scale the direction ``q`` down around the faces that hold its step ``t`` below the
-        natural one (those flagged by the faces' step bound), so the rest of the mesh takes
-        the natural step (:meth:`_ease`; a squeezed sliver otherwise holds every vertex's
-        step to a few percent of it). Returns the step bound and ``g . q``."""
+        natural one (around ``held``, the limiting faces' vertices: :meth:`_limiting_vertices`),
+        so the rest of the mesh takes the natural step (:meth:`_ease`; a squeezed sliver
+        otherwise holds every vertex's step to a few percent of it). Returns the step bound
+        and ``g . q``."""
         sp, shrink, cap = self.sp, SOLVER.step_shrink, 1.0 / SOLVER.step_fraction
-        held = flagged_face_vertices(self._limiting, sp.faces, self._seen)
-        if sp.fixed is not None:
-            held = held[~sp.fixed[held]]
 
         def limits(dx: np.ndarray, lowered: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             return sp.face_limits(self.x, dx, np.concatenate([held, lowered]), cap, shrink)
@@ -264,9 +266,10 @@ class LBFGS:
             t_faces = sp.max_face_step(self.x, dx, cap=1.0 / SOLVER.step_fraction, shrink=SOLVER.step_shrink,
                                        limiting=self._limiting)
             if t_faces < 1.0 / SOLVER.step_fraction:  # faces hold the step below the natural one
-                t_faces, gd = self._smooth_limiting(t_faces, gd)
-            if t_faces < SOLVER.ease_face_step:
-                t_faces, gd = self._ease_faces(t_faces, gd)
+                held = self._limiting_vertices()
+                t_faces, gd = self._smooth_limiting(t_faces, gd, held)
+                if t_faces < SOLVER.ease_face_step:
+                    t_faces, gd = self._ease_faces(t_faces, gd, held)
             t = sp.boundary_step(self.x, dx, t_faces, SOLVER.step_shrink)
             if t < t_faces:  # the boundary holds it lower still
                 t, gd = self._ease_boundary(t, t_faces, gd)

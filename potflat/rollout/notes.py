@@ -56,8 +56,7 @@ def rollout_notes(result) -> list[str]:
         notes.append(f"the {walls.side} wall unrolled here is only {100 * share:.0f} % of the scan's surface (the "
                      f"{other} wall: {100 - 100 * share:.0f} %): the scan shows little of it, e.g. a neck or a mouth "
                      f"seen from within; if the painting is on the {other} side, unroll it with --side {other}")
-    elif walls.side == "outer" and _open_form(result) and result.importance is not None and \
-            found_no_painting(result.importance):
+    elif walls.side == "outer" and _plain_open_form(result):
         mm = result.profile.mm_per_unit
         low, high = result.profile.height_range
         notes.append(f"an open form ({(high - low) * mm:.0f} mm high, {2 * result.profile.max_radius * mm:.0f} mm "
@@ -121,10 +120,12 @@ def rollout_notes(result) -> list[str]:
     return notes
 
 
-def _open_form(result) -> bool:
-    """Whether the scan is a two-walled open form (:data:`OPEN_FORM_HEIGHT_PER_DIAMETER`)."""
+def _plain_open_form(result) -> bool:
+    """Whether the scan is a two-walled open form (:data:`OPEN_FORM_HEIGHT_PER_DIAMETER`) whose
+    unrolled side's colours show no painting."""
     profile = result.profile
-    if profile is None or not profile.two_walled or not np.isfinite(profile.max_radius):
+    if (profile is None or not profile.two_walled or not np.isfinite(profile.max_radius)
+            or result.importance is None or not found_no_painting(result.importance)):
         return False
     low, high = profile.height_range
     return high - low <= OPEN_FORM_HEIGHT_PER_DIAMETER * 2.0 * profile.max_radius
