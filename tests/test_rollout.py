@@ -493,11 +493,14 @@ def test_real_goblet_band_rolls_out(tmp_path, real_scans):
     out = run_rollout_stage(real_scans / "goblet.stl", tmp_path)
     s = out.record
     # the goblet is a closed shell: its outer wall is unrolled, less the foot's underside (which
-    # faces along the axis: a disc of its own) and any border faces that fold over
+    # faces along the axis: a disc of its own) and any border faces that fold over, cut off the
+    # inner wall along a smoothed line (which takes some faces over from each side)
     assert s["walls"]["two_walled"] and s["walls"]["faces_inner"] > 0
     assert s["base"]["left_out"] and s["base"]["faces_in_disc"] > 0 and s["base"]["faces_in_neither"] == 0
+    line = s["walls"]["line"]
+    assert line["faces_split"] > 0
     assert (s["counts"]["input_faces_unrolled"] + s["trimmed"]["faces"] + s["base"]["faces_in_disc"]
-            == s["walls"]["faces_selected"])
+            == s["walls"]["faces_selected"] + line["faces_added"] - line["faces_dropped"])
     assert s["trimmed"]["faces"] < 0.02 * s["counts"]["faces"]
     assert s["distortion"]["flipped"] == 0 and s["boundary_overlap"] == 0
     assert s["axis"]["direction"][2] > 0.999

@@ -10,7 +10,16 @@ import pytest
 from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.types import Mesh
 from potflat.mesh.distortion import face_areas
-from potflat.rollout.walls import INNER, OUTER, FaceGraph, check_axis, largest_component, select_wall
+from potflat.mesh.split import split_faces
+from potflat.rollout.walls import (
+    INNER,
+    OUTER,
+    FaceGraph,
+    check_axis,
+    cut_between_walls,
+    largest_component,
+    select_wall,
+)
 
 
 def _posed(V, F, seed=1, units="mm"):
@@ -54,6 +63,44 @@ def test_cup_walls_with_noise():
     outer = select_wall(mesh, p, a)
     inner = select_wall(mesh, p, a, side="inner")
     _assert_clean_split(outer, inner, L, ["base", "ring", "outer"], ["inner", "floor"])
+
+
+def _rim_variation(points):
+    """How far the cup's rim line (points (k, 3) in its own frame) goes up and down its rounded
+    rim as it goes round: the total variation of the angle across the rim, in turns."""
+    across = np.arctan2(points[:, 2] - 60.0, np.hypot(points[:, 0], points[:, 1]) - 38.5)
+    ordered = across[np.argsort(np.arctan2(points[:, 1], points[:, 0]))]
+    return np.abs(np.diff(np.append(ordered, ordered[0]))).sum() / (2.0 * np.pi)
+
+
+@pytest.mark.parametrize("seed", [5, 6])
+def test_the_walls_are_cut_apart_along_a_smooth_line(seed):
+    V, F, L, _ = vm.cup(foot_ring=True, n_theta=96)
+    mesh, p, a = _posed(V + np.random.default_rng(seed).normal(scale=0.3, size=V.shape), F, seed=2)
+    outer = select_wall(mesh, p, a)
+    cut = cut_between_walls(mesh.faces, len(V), outer)
+    # the split along whole faces is a staircase up and down the noisy rim; the line through
+    # its middle goes round it once, near its crest
+    stairs = np.intersect1d(np.unique(F[outer.face_mask]), np.unique(F[outer.labels == INNER]))
+    line = np.concatenate([split_faces(V, F[cut.faces], cut.level).added(V), V[cut.level == 0.0]])
+    assert _rim_variation(line) < 0.3 * _rim_variation(V[stairs])
+    # only rim faces change sides or are cut; the rest keep their wall's whole level
+    changed = cut.face_mask != outer.face_mask
+    assert np.all(L[cut.faces] == "rim") and np.all(L[changed] == "rim")
+    assert cut.faces_added == int((cut.face_mask & ~outer.face_mask).sum()) > 0
+    assert cut.faces_dropped == int((outer.face_mask & ~cut.face_mask).sum())
+    far = ~np.isin(L, ["rim", "outer", "inner"])
+    assert np.all(np.abs(cut.level[F[far]]) == 1.0)
+    assert np.all(cut.level[F[cut.face_mask]].max(axis=1) > 0.0)
+
+
+def test_walls_split_along_a_clean_ring_or_one_wall_are_not_cut():
+    mesh, p, a = _posed(*vm.cup(foot_ring=True, n_theta=96)[:2])
+    outer = select_wall(mesh, p, a)
+    cut = cut_between_walls(mesh.faces, len(mesh.vertices), outer)
+    assert len(cut.faces) == 0 and np.array_equal(cut.face_mask, outer.face_mask)
+    mesh, p, a = _posed(*vm.open_vase()[:2])
+    assert cut_between_walls(mesh.faces, len(mesh.vertices), select_wall(mesh, p, a)) is None
 
 
 def test_kylix_tondo_is_inner():

@@ -182,7 +182,7 @@ def rollout_record(result: RolloutResult) -> dict:
         "importance": result.importance.as_dict() if result.importance is not None else None,
         "boundary_overlap": result.boundary_overlap,
         "outline_turning": result.outline_turning,
-        "walls": result.walls.summary(),
+        "walls": {**result.walls.summary(), "line": None if result.wall_cut is None else result.wall_cut.summary()},
         "attachments": _attachments_summary(result),
         "base": result.base.summary(mesh.mm_per_unit) if result.base is not None else None,
         "trimmed": _trimmed_summary(result, mesh.mm_per_unit),

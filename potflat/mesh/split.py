@@ -96,6 +96,32 @@ def plane_levels(points: np.ndarray, point: np.ndarray, normal: np.ndarray) -> n
     return (np.asarray(points, dtype=np.float64) - np.asarray(point, dtype=np.float64)) @ np.asarray(normal, float)
 
 
+def snap_to_cut(faces: np.ndarray, level: np.ndarray, *, snap: float = CUT_SNAP) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices of ``faces`` ((m, 3) int64) that :func:`split_faces` puts on the cut of
+    ``level`` ((n,) float64): level 0, or closer to the cut than ``snap`` times the level's
+    change along a crossing edge of those faces.
+
+    Returns
+    -------
+    level : (n,) float64
+        A copy, 0 at those vertices (snapping it again puts no other vertex on the cut).
+    on_cut : (s,) int64
+        Those vertices, sorted.
+    """
+    level = np.array(level, dtype=np.float64)
+    tail, head = faces, np.roll(faces, -1, axis=1)  # corner c's outgoing edge
+    lt, lh = level[tail], level[head]
+    crossing = lt * lh < 0
+    frac = np.divide(lt, lt - lh, out=np.ones_like(lt), where=crossing)
+    near = np.zeros(len(level), bool)
+    near[tail[crossing & (frac < snap)]] = True
+    near[head[crossing & (frac > 1.0 - snap)]] = True
+    near[faces[level[faces] == 0.0]] = True
+    on_cut = np.flatnonzero(near)
+    level[on_cut] = 0.0
+    return level, on_cut
+
+
 def split_faces(points: np.ndarray, faces: np.ndarray, level: np.ndarray, *, snap: float = CUT_SNAP) -> FaceSplit:
     """Cut triangles along the zero set of a level that is linear along edges.
 
@@ -132,7 +158,7 @@ def split_faces(points: np.ndarray, faces: np.ndarray, level: np.ndarray, *, sna
     """
     points = np.ascontiguousarray(points, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
-    level = np.array(level, dtype=np.float64)  # a copy: vertices on the cut are set to 0
+    level = np.asarray(level, dtype=np.float64)
     n = len(points)
     if points.ndim != 2 or points.shape[1] != 3:
         raise ValueError(f"points must be (n, 3), got {points.shape}")
@@ -144,17 +170,8 @@ def split_faces(points: np.ndarray, faces: np.ndarray, level: np.ndarray, *, sna
         raise ValueError("points and level must be finite")
     if not 0.0 <= snap < 0.5:
         raise ValueError(f"snap must be in [0, 0.5), got {snap}")
+    level, on_cut = snap_to_cut(faces, level, snap=snap)
     tail, head = faces, np.roll(faces, -1, axis=1)  # corner c's outgoing edge
-    lt, lh = level[tail], level[head]
-    crossing = lt * lh < 0
-    # vertices within snap of a crossing edge's cut are put on it
-    frac = np.divide(lt, lt - lh, out=np.ones_like(lt), where=crossing)
-    near = np.zeros(n, bool)
-    near[tail[crossing & (frac < snap)]] = True
-    near[head[crossing & (frac > 1.0 - snap)]] = True
-    near[faces[level[faces] == 0.0]] = True
-    on_cut = np.flatnonzero(near)
-    level[on_cut] = 0.0
     lt, lh = level[tail], level[head]
     crossing = lt * lh < 0
     a, b = np.minimum(tail, head)[crossing], np.maximum(tail, head)[crossing]

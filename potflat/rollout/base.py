@@ -104,10 +104,11 @@ class BaseCut:
     faces: np.ndarray
     on_cut: np.ndarray
 
-    def levels(self, vertex_height: np.ndarray, index: np.ndarray) -> np.ndarray:
-        """Signed height above the plane (k,) float64 of the scan vertices ``index`` ((k,) int64),
-        given every scan vertex's height ``vertex_height`` ((n,) float64); 0 on the cut."""
-        level = vertex_height[index] - self.height
+    def levels(self, height: np.ndarray, index: np.ndarray) -> np.ndarray:
+        """Signed height above the plane (k,) float64 of the vertices ``index`` ((k,) int64,
+        scan vertices and any others after them) at heights ``height`` ((k,) float64); 0 on
+        the cut."""
+        level = height - self.height
         level[np.isin(index, self.on_cut)] = 0.0
         return level
 
@@ -116,7 +117,7 @@ class BaseCut:
         faces, any order) on the scan vertices ``points`` ((n, 3) float64): the same pieces for
         the disc and the rollout."""
         ids, local = np.unique(faces, return_inverse=True)
-        split = split_faces(points[ids], local.reshape(-1, 3), self.levels(vertex_height, ids))
+        split = split_faces(points[ids], local.reshape(-1, 3), self.levels(vertex_height[ids], ids))
         return ids, split
 
 

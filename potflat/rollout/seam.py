@@ -327,7 +327,7 @@ class CutOrigins:
 
 
 def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarray, corner_theta: np.ndarray, *,
-               start: float, end: float, repeat_from: float | None, meridian, floor=None
+               start: float, end: float, repeat_from: float | None, meridian, floors=()
                ) -> tuple[np.ndarray, np.ndarray, CutOrigins]:
     """The region between the unwrapped angles ``start`` and ``end``, its faces cut exactly
     along the meridians there.
@@ -361,12 +361,15 @@ def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarr
     meridian : callable
         ``meridian(angle)``: a point of the axis and the unit normal of the meridian plane
         at unwrapped ``angle``, the normal pointing towards increasing angles.
-    floor : ((f,) bool, callable, callable) or None
-        A base cut off (:class:`potflat.rollout.base.BaseCut`): the scan faces it splits,
-        ``levels(ids)``, the signed height above its plane of the scan vertices ``ids``, and
-        ``angle(points)``, the angle of points (k, 3) in the region's angles (any turn); those
-        faces are cut along it first (the same pieces as the base's disc) and their pieces
-        above it kept.
+    floors : sequence of ((f,) bool, callable, callable)
+        Cuts along level sets made before the meridians', in order: the line between the
+        two walls (:class:`potflat.rollout.walls.WallCut`), a base cut off
+        (:class:`potflat.rollout.base.BaseCut`). Each is the scan faces it splits,
+        ``levels(ids, points)``, the signed level of the vertices ``ids`` (scan vertices,
+        then vertices an earlier cut added) at ``points`` (k, 3), and ``angle(points)``, the
+        angle of points (k, 3) in the region's angles (any turn); those faces (and their
+        pieces) are cut along it (the base's the same pieces as its disc) and their pieces
+        on its positive side kept.
 
     Returns
     -------
@@ -438,22 +441,24 @@ def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarr
         rows_face = np.insert(np.delete(rows_face, rows), before, rows_face[src])
 
     def pts_of(ids):
+        """Points (k, 3) of the vertices ``ids`` ((k,) int64, sorted)."""
         return np.concatenate([V[ids[ids < n]], added_pts[ids[ids >= n] - n]])
 
-    if floor is not None:  # the base cut off first: the pieces above the plane stay
-        cut_faces, levels, angle = floor
+    for cut_faces, levels, angle in floors:  # the level cuts first: the pieces on their positive side stay
         rows = np.flatnonzero(cut_faces[rows_face])
         if len(rows):
             ids, local = np.unique(row_faces[rows], return_inverse=True)
-            split = split_faces(V[ids], local.reshape(-1, 3), levels(ids))
+            pts = pts_of(ids)
+            split = split_faces(pts, local.reshape(-1, 3), levels(ids, pts))
 
-            def floor_theta(w, src):
+            def floor_theta(w, src, ids=ids, pts=pts, angle=angle):
                 # each corner's angle at its point, unwrapped next to its face's corners'
                 near = np.einsum("kij,kj->ki", w, T[src])
-                at = angle((w @ V[row_faces[src]]).reshape(-1, 3)).reshape(near.shape)
+                corners = pts[np.searchsorted(ids, row_faces[src])]
+                at = angle((w @ corners).reshape(-1, 3)).reshape(near.shape)
                 return near + (at - near + np.pi) % TWO_PI - np.pi
 
-            splice(rows, ids, split, lambda piece, src: split.side[piece] > 0, floor_theta)
+            splice(rows, ids, split, lambda piece, src, split=split: split.side[piece] > 0, floor_theta)
     for values in planes.values():
         r_lo, r_hi = T.min(axis=1), T.max(axis=1)
         across = np.zeros(len(T), bool)

@@ -40,6 +40,7 @@ from potflat.rollout import proxy as _proxy
 from potflat.rollout.attachments import AttachmentSelection, detect_attachments
 from potflat.rollout.axis import AxisFit, estimate_axis, manual_axis
 from potflat.rollout.base import (
+    BaseCut,
     BaseSplit,
     base_disc,
     cut_base,
@@ -70,8 +71,10 @@ from potflat.rollout.seam import (
 from potflat.rollout.topology import DiskCut, disk_cut
 from potflat.rollout.walls import (
     FaceGraph,
+    WallCut,
     WallSelection,
     check_axis,
+    cut_between_walls,
     face_frame,
     select_wall,
 )
@@ -208,6 +211,10 @@ class RolloutResult:
         Input faces left out to make the selection a disk.
     disk_cut_area : float
         Their 3D area, scan units squared.
+    wall_cut : WallCut or None
+        The line along which :attr:`walls` was cut off from the other wall
+        (:func:`potflat.rollout.walls.cut_between_walls`); None for a scan with one wall and
+        for the ``ortho`` proxy.
     """
 
     flat: FlatMesh
@@ -245,6 +252,7 @@ class RolloutResult:
     disk_cut: DiskCut | None = None
     disk_cut_faces: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     disk_cut_area: float = 0.0
+    wall_cut: WallCut | None = None
 
     @property
     def side(self) -> str:
@@ -356,13 +364,18 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
                         exclude=None if options.keep_attachments else attachments.face_mask, others=others,
                         graph=graph, frame=frame, inside_out=not options.keep_orientation)
     del graph
-    allowed = walls.face_mask if face_mask is None else walls.face_mask & face_mask
-    clock.lap("walls")
-    # the vessel's profile, both walls, attachments, other objects and a table at the foot
-    # left out (docs/profile.md)
+    # the two walls of a scan meet along a smooth line, the faces across it cut along it (a
+    # projection along the axis is not cut)
     left_out = other_objects | walls.ground_mask
     if not options.keep_attachments:
         left_out |= attachments.face_mask
+    wall_cut = None if options.proxy == "ortho" else cut_between_walls(F, len(V), walls, exclude=left_out)
+    allowed = walls.face_mask if wall_cut is None else wall_cut.face_mask
+    if face_mask is not None:
+        allowed = allowed & face_mask
+    clock.lap("walls")
+    # the vessel's profile, both walls, attachments, other objects and a table at the foot
+    # left out (docs/profile.md)
     bins = (None if options.profile_mm is None
             else max(1, math.ceil(axis.height * mesh.mm_per_unit / options.profile_mm)))
     profile = vessel_profile(mesh, axis.point, axis.direction, bins=bins, labels=walls.labels, frame=frame,
@@ -380,12 +393,21 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     landmark, landmark_notes = _find_landmark(mesh, axis, options, attachments, allowed, band, h_c, theta_c,
                                               theta_v, area)
     trimmed = np.zeros(len(F), bool)
-    un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area, landmark=landmark)
+    floors = ()  # the level cuts before the seam's: the line between the walls, then the base's plane
+
+    def angle_of(points):
+        return axis.cylindrical(points)[2]
+
+    if wall_cut is not None and len(wall_cut.faces):
+        across = np.zeros(len(F), bool)
+        across[wall_cut.faces] = True
+        floors = ((across, wall_cut.levels, angle_of),)
+    un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area, landmark=landmark, floors=floors)
     # the cut's temporaries (the largest of the rollout) back to the system: the base and
     # the trimming come on top of the heap otherwise (at 3M vertices some 30 MB of the peak)
     release_free_memory()
     clock.lap("unroll")
-    base, floor = None, None
+    base = None
     if options.proxy != "ortho":  # (a view along the axis shows the base as it is)
         region, first = np.unique(un.face_index, return_index=True)  # (a repeat past 360 degrees once)
         # (peak memory: the development's edge table is not held while the base is decided; it
@@ -404,13 +426,13 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
             if base_cut is not None and len(base_cut.faces):
                 cut_mask = np.zeros(len(F), bool)
                 cut_mask[base_cut.faces] = True
-                floor = (cut_mask, functools.partial(base_cut.levels, h_v), lambda p: axis.cylindrical(p)[2])
+                floors += ((cut_mask, functools.partial(_base_levels, base_cut, axis, h_v), angle_of),)
             allowed = allowed.copy()
             allowed[base.disc_faces] = allowed[base.hidden_faces] = False
             seam = (un.seam, un.seam_method)
             del un  # (peak memory: the unrolling it replaces is not held while it is made)
             un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area,
-                         seam=seam, landmark=landmark, floor=floor)
+                         seam=seam, landmark=landmark, floors=floors)
         del region, first
         if un.table is None:
             un = dataclasses.replace(un, table=edges_and_boundary(un.flat.mesh.faces, len(un.vertex_index)))
@@ -514,7 +536,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         other_objects_faces=int(other_objects.sum()), landmark=landmark,
         theta_origin=float(math.degrees(un.origin) % 360.0), landmark_notes=tuple(landmark_notes),
         timings=clock.total(), folds=folds, profile=profile, base=base, disk_cut=disk,
-        disk_cut_faces=cut_faces.astype(np.int64), disk_cut_area=float(area[cut_faces].sum()))
+        disk_cut_faces=cut_faces.astype(np.int64), disk_cut_area=float(area[cut_faces].sum()), wall_cut=wall_cut)
 
 
 @dataclass(frozen=True, eq=False)
@@ -544,14 +566,15 @@ class _Unrolled:
 
 
 def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndarray, band, h_c, theta_c,
-            theta_v, area, seam: tuple[float, str] | None = None, landmark=None, floor=None) -> _Unrolled:
+            theta_v, area, seam: tuple[float, str] | None = None, landmark=None, floors=()) -> _Unrolled:
     """Select the region within ``allowed``, cut it open and develop it on the proxy (with
     ``seam`` = (radians, method) from an earlier unrolling, or a seam chosen here; angles
-    measured from ``landmark``; ``theta_v``: the angle of every scan vertex; ``floor``: a base
-    cut off, as :func:`potflat.rollout.seam.cut_region` takes it)."""
+    measured from ``landmark``; ``theta_v``: the angle of every scan vertex; ``floors``: the
+    line between the walls and a base cut off, as :func:`potflat.rollout.seam.cut_region`
+    takes them)."""
     V = mesh.vertices
     sub_f, corner_theta, origins, seam, seam_method, origin = _select(
-        mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area, seam, landmark, floor)
+        mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area, seam, landmark, floors)
     face_index = origins.face_index
     inner = options.side == "inner"
 
@@ -609,7 +632,7 @@ def _without(un: _Unrolled, keep: np.ndarray) -> _Unrolled:
                        vertex_colors=None if mesh.vertex_colors is None else mesh.vertex_colors[used])
     uv = un.flat.uv[used]
     vertex_index = un.vertex_index[used]
-    copies = len(used) - np.count_nonzero(np.bincount(vertex_index))
+    copies = len(used) - int(np.count_nonzero(np.bincount(vertex_index)))
     seam = min(un.seam_vertices, copies)
     table = edges_and_boundary(cut.faces, len(used))
     return _Unrolled(FlatMesh(cut, uv), un.proxy, None,
@@ -708,7 +731,7 @@ def _in_band(axis: AxisFit, band, h_c) -> np.ndarray:
 
 
 def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c, theta_v, area,
-            seam_given: tuple[float, str] | None = None, landmark=None, floor=None):
+            seam_given: tuple[float, str] | None = None, landmark=None, floors=()):
     """The region's faces (:func:`potflat.rollout.seam.cut_region`: the seam and a window's
     sides cut exactly along their meridians), their corners' unwrapped angles, where they
     come from in the scan, the seam (radians, and how it was chosen) and the angle (radians)
@@ -756,17 +779,18 @@ def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band,
             rel_c -= TWO_PI * np.round(np.average(rel_c[face_index], weights=area[face_index]) / TWO_PI)
     centre = rel_c[face_index]
     repeat = bool(options.overlap) and gap is None and seam_method != "gap"
-    if exact and (gap is None or floor is not None):  # the sides cut exactly along their meridians
+    if exact and (gap is None or floors):  # the sides cut exactly along their meridians
         corners = _corner_angles(theta_v, F, face_index, centre, origin)
         start, end = lo, math.radians(options.angles[1]) if options.angles is not None else TWO_PI + (
             math.radians(options.overlap) if repeat else 0.0)
-        if gap is not None:  # no side to cut (a region with a gap): only the base's plane
+        if gap is not None:  # no side to cut (a region with a gap): only the level cuts
             start, end = float(corners.min()), float(corners.max())
         faces, corner_theta, origins = cut_region(
             mesh.vertices, F, face_index, centre, corners,
             start=start, end=end, repeat_from=TWO_PI if repeat else None,
             meridian=lambda angle: (axis.point, _meridian_normal(axis, origin + angle)),
-            floor=None if floor is None else (floor[0], floor[1], lambda p: floor[2](p) - origin))
+            floors=[(faces_cut, levels, functools.partial(_angle_from, angle, origin))
+                    for faces_cut, levels, angle in floors])
         if len(faces) == 0:
             raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
         return faces, corner_theta, origins, seam, seam_method, origin
@@ -779,6 +803,23 @@ def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band,
     corner_theta = _corner_angles(theta_v, F, face_index, centre, origin)
     return (np.take(F, face_index, axis=0), corner_theta, CutOrigins.whole(face_index, repeated, len(mesh.vertices)),
             seam, seam_method, origin)
+
+
+def _angle_from(angle, origin: float, points: np.ndarray) -> np.ndarray:
+    """``angle(points)`` (radians, (k,) float64) less ``origin``."""
+    return angle(points) - origin
+
+
+def _base_levels(cut: BaseCut, axis: AxisFit, vertex_height: np.ndarray, index: np.ndarray,
+                 points: np.ndarray) -> np.ndarray:
+    """:meth:`BaseCut.levels` of the vertices ``index`` ((k,) int64: scan vertices, whose
+    heights ``vertex_height`` (n,) float64 gives, then vertices a cut added) at ``points``
+    (k, 3) float64."""
+    height = np.empty(len(index))
+    scan = index < len(vertex_height)
+    height[scan] = vertex_height[index[scan]]
+    height[~scan] = axis.cylindrical(points[~scan])[0]
+    return cut.levels(height, index)
 
 
 def _meridian_normal(axis: AxisFit, angle: float) -> np.ndarray:

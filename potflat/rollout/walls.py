@@ -47,6 +47,8 @@ from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.mesh._kernels.geometry import edge_lengths, face_geometry, radial_parts
 from potflat.mesh._kernels.quantiles import grouped_weighted_quantiles
 from potflat.mesh.distortion import weighted_percentile
+from potflat.mesh.embedding import fan_edges, neighbour_rows
+from potflat.mesh.split import snap_to_cut
 from potflat.mesh._kernels.topology import edge_table, face_pairs, pair_csr, pair_sums, union_find
 from potflat.mesh.tolerances import DEGENERATE, ROUNDING
 from potflat.rollout.options import SIDES  # the sides select_wall accepts
@@ -69,6 +71,10 @@ _GROUND_COSINE = 0.9  # axial normal towards the mouth above this: a surface the
 _GROUND_HEIGHT = 0.03  # ... within this share of the vessel's height above its lowest face
 _FOOT_QUANTILE = 0.95  # the foot's radius: this quantile of the wall's radii at those heights
 _GROUND_OUTSIDE = 0.1  # a ground grows above those heights this share of the body's radius outside its profile
+#: Rings of vertex neighbours over which the line between the two walls is smoothed before
+#: the faces across it are cut along it (:func:`cut_between_walls`): the teeth of a split
+#: along whole faces (a noisy rim top, a photogrammetry lip) are about one face deep.
+SPLIT_SMOOTH_RINGS = 3
 
 
 def check_axis(axis_point, axis_direction) -> tuple[np.ndarray, np.ndarray]:
@@ -662,6 +668,102 @@ def select_wall(mesh: Mesh, axis_point, axis_direction, *, side: str = "outer",
         normals_inverted=bool(inverted),
         method=method,
     )
+
+
+@dataclass(frozen=True, eq=False)
+class WallCut:
+    """The selected wall cut off from the other along a smooth line, the faces across it split.
+
+    Attributes
+    ----------
+    face_mask : (m,) bool
+        Faces with a part on the selected side of the line: the selection's faces less
+        those wholly past it, and faces of the other wall reaching over it.
+    faces : (k,) int64
+        Faces across the line: cut along it (:func:`potflat.mesh.split.split_faces`), their
+        parts on the selected side kept.
+    level : (n,) float64
+        Side of every scan vertex: positive on the selected side, negative on the other;
+        the line is where it is 0 (linear along each edge).
+    faces_added, faces_dropped : int
+        Faces of the other wall with a part on the selected side, and faces of the
+        selection wholly on the other.
+    """
+
+    face_mask: np.ndarray
+    faces: np.ndarray
+    level: np.ndarray
+    faces_added: int
+    faces_dropped: int
+
+    def summary(self) -> dict:
+        """JSON-ready figures for a stage sidecar (``walls.line``)."""
+        return {"faces_split": int(len(self.faces)), "faces_added": self.faces_added,
+                "faces_dropped": self.faces_dropped, "smoothed_rings": SPLIT_SMOOTH_RINGS}
+
+    def levels(self, index: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
+        """The level (k,) float64 of the scan vertices ``index`` ((k,) int64; ``points``, their
+        positions, are not needed: the level is given at every scan vertex)."""
+        return self.level[index]
+
+
+def cut_between_walls(faces: np.ndarray, n_vertices: int, walls: WallSelection, *,
+                      exclude: np.ndarray | None = None) -> WallCut | None:
+    """The line where the selected wall meets the other, smoothed, and the faces across it.
+
+    Each face of the selection counts 1, each face of the other wall -1 (``exclude``d faces
+    and the rest nothing); every vertex takes the mean of its faces' counts, then, in the
+    band of :data:`SPLIT_SMOOTH_RINGS` rings around the line, the mean over itself and its
+    edge neighbours that many times. Its zero level is a curve through the middle of the
+    split along whole faces, without its teeth: cut exactly along it, the rim of a
+    two-walled scan is a clean edge at any resolution.
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+    n_vertices : int
+    walls : WallSelection
+        The selection (:func:`select_wall` of ``faces``).
+    exclude : (m,) bool, optional
+        Faces of the other wall that are not to be taken over the line (attachments, a
+        ground, other objects).
+
+    Returns
+    -------
+    WallCut or None
+        None when the selection does not meet the other wall.
+    """
+    F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    want = OUTER if walls.side == "outer" else INNER
+    count = np.where(walls.labels != want, -1.0, 0.0)
+    if exclude is not None:
+        count[np.asarray(exclude, dtype=bool)] = 0.0
+    count[walls.face_mask] = 1.0
+    counted = count != 0.0
+    corners = F[counted].ravel()
+    total = np.bincount(corners, np.repeat(count[counted], 3), minlength=n_vertices)
+    number = np.bincount(corners, minlength=n_vertices)
+    level = np.where(number > 0, total / np.maximum(number, 1), -1.0)
+    near = np.abs(level) < 1.0
+    if not near.any():
+        return None
+    for _ in range(SPLIT_SMOOTH_RINGS):
+        near[F[counted & near[F].any(axis=1)].ravel()] = True
+    around = np.flatnonzero(counted & near[F].any(axis=1))
+    verts = np.flatnonzero(near)
+    rows = neighbour_rows(verts, fan_edges(around, F)[0], n_vertices)
+    degree = np.asarray(rows.sum(axis=1)).ravel()
+    for _ in range(SPLIT_SMOOTH_RINGS):
+        level[verts] = (level[verts] + rows @ level) / (1.0 + degree)
+    # the vertices the cut will go through, on it already: the faces kept are those it leaves a part of
+    level = snap_to_cut(F[around], level)[0]
+    at = level[F[around]]
+    face_mask = walls.face_mask.copy()
+    face_mask[around] = at.max(axis=1) > 0.0
+    across = around[(at.min(axis=1) < 0.0) & (at.max(axis=1) > 0.0)]
+    return WallCut(face_mask=face_mask, faces=across.astype(np.int64), level=level,
+                   faces_added=int((face_mask & ~walls.face_mask).sum()),
+                   faces_dropped=int((walls.face_mask & ~face_mask).sum()))
 
 
 def wall_labels(fr: FaceFrame, *, flat_tolerance: float = 0.25, others: np.ndarray | None = None,
