@@ -442,7 +442,8 @@ def relief_rows(fields, coverage, lights, gain, curve_hi, curve_span, rgb, grey_
 def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, points: np.ndarray | None = None
                  ) -> np.ndarray:
     """:func:`potflat.rollout.border.border_folds` rebuilding everything from the kept faces at
-    every pass (edge table, face adjacency, pieces, overlapping faces)."""
+    every pass (edge table, face adjacency, pieces, overlapping faces, the teeth' trimmed
+    neighbours)."""
     from potflat.mesh.boundary import edges_and_boundary
     from potflat.mesh.embedding import signed_areas
     from potflat.rollout import border as B
@@ -456,6 +457,7 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, points:
     graph = FaceGraph(faces)
     part = graph.components()
     part_area = np.bincount(part, area_3d)
+    spiked = False
     for _ in range(B.BORDER_PASSES):
         idx = np.flatnonzero(keep)
         if len(idx) == 0:
@@ -499,6 +501,12 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, points:
                 pairs = graph.pairs
                 label = graph.components(region[pairs[:, 0]] & region[pairs[:, 1]])
                 drop = (region & np.isin(label, label[owners]))[idx]
+        if not drop.any() and not spiked and len(idx) < m:  # teeth along the trimmed border, once
+            spiked = True
+            trimmed_corner = np.isin(np.arange(n), faces[~keep])
+            for j, f in enumerate(idx):
+                around = [g for g in range(m) if not keep[g] and len(set(faces[g]) & set(faces[f])) == 2]
+                drop[j] = len(around) >= 2 or trimmed_corner[faces[f]].all()
         if not drop.any():
             break
         keep[idx[drop]] = False

@@ -440,6 +440,22 @@ def test_border_folds_trims_the_piece_beyond_an_edge_on_band():
     np.testing.assert_array_equal(drop, row <= 1)
 
 
+def test_border_folds_trims_the_teeth_left_along_a_trimmed_strip():
+    """A rim-top strip edge-on to the proxy, folded in two places, with one vertex of it
+    standing up (a noisy rim): the strip is trimmed, and so are the two faces left standing
+    at that vertex as a tooth; nothing of the wall below is."""
+    nx, ny = 10, 6
+    uv, q, faces = _grid(nx, ny)
+    row = np.concatenate([np.repeat(np.arange(ny), nx)] * 2)
+    area = np.full(len(faces), 0.5)
+    uv[q[-1], 1] = ny - 1 + 0.02  # the top row edge-on
+    uv[q[-1, [2, 8]], 1] = ny - 1 - 0.1  # folded
+    uv[q[-1, 5], 1] = ny  # a tooth
+    tooth = (row == ny - 1) & (signed_areas(faces, uv) > 0.05 * area)
+    assert tooth.sum() == 2
+    np.testing.assert_array_equal(border_folds(faces, uv, area), row == ny - 1)
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_border_folds_peeling_in_place_equals_rebuilding_every_pass(seed):
     """Updating the border around the peeled faces gives what rebuilding the kept faces' edge

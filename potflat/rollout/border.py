@@ -63,6 +63,10 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *,
       development, with less than :data:`CUT_OFF_FRACTION` of that part's area (the
       outside of a foot beyond the edge-on band where the surface turns under): left as
       it is, it lies over the wall and would be peeled a ring of faces per pass.
+    * **teeth**: once nothing else is to trim, the faces left standing along what was
+      trimmed, with two edges or all three corners on trimmed faces (a noisy rim top's
+      edge-on faces are trimmed face by face), in one pass: the trimmed border's outline
+      without its spikes, and no deeper.
 
     Folds enclosed by well-unrolled faces (scan noise, slivers) are left to :func:`untangle`.
 
@@ -99,6 +103,7 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *,
     squeezed = np.flatnonzero(flat < SQUEEZED_RATIO * area_3d)
     over = None  # faces lying over another among all faces (those among the kept are a subset)
     dropped = None
+    spiked = False
     for _ in range(BORDER_PASSES):
         if not keep.any():
             break
@@ -114,12 +119,25 @@ def border_folds(faces: np.ndarray, uv: np.ndarray, area_3d: np.ndarray, *,
                 if over is None:
                     over = np.flatnonzero(overlapping_faces(faces, uv))
                 drop = _crossing_region(graph, faces, keep, uv, over, squeezed, np.concatenate([owner[a], owner[b]]))
+        if not drop.any() and not spiked and not keep.all():
+            drop, spiked = _spikes(faces, graph, keep, len(uv)), True
         if not drop.any():
             break
         keep[drop] = False
         dropped = np.flatnonzero(drop)
         border.drop(dropped, keep)
     return ~keep
+
+
+def _spikes(faces: np.ndarray, graph: FaceGraph, keep: np.ndarray, n: int) -> np.ndarray:
+    """The teeth left standing along a trimmed border ((m,) bool): kept faces with two or
+    three edges on faces trimmed, or with all three corners on them."""
+    a, b = graph.pairs[:, 0], graph.pairs[:, 1]
+    m = len(keep)
+    count = (np.bincount(a[keep[a] & ~keep[b]], minlength=m) + np.bincount(b[keep[b] & ~keep[a]], minlength=m))
+    on_trimmed = np.zeros(n, bool)
+    on_trimmed[faces[~keep].ravel()] = True
+    return keep & ((count >= 2) | on_trimmed[faces].all(axis=1))
 
 
 class _KeptBorder:
