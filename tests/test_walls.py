@@ -103,6 +103,13 @@ def test_walls_split_along_a_clean_ring_or_one_wall_are_not_cut():
     assert cut_between_walls(mesh.faces, len(mesh.vertices), select_wall(mesh, p, a)) is None
 
 
+def test_cutting_between_walls_needs_the_faces_they_were_selected_on():
+    mesh, p, a = _posed(*vm.cup()[:2])
+    outer = select_wall(mesh, p, a)
+    with pytest.raises(InvalidInputError, match="the faces the walls were selected on"):
+        cut_between_walls(mesh.faces[:-1], len(mesh.vertices), outer)
+
+
 def test_kylix_tondo_is_inner():
     # shallow bowl on a stem: the whole interior incl. the tondo floor is the inner wall
     rs = [0, 20, 20.5, 4, 4, 30, 62, 64, 63, 61, 30, 0]

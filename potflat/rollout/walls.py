@@ -30,6 +30,10 @@ towards it, and the rim crest is the fold where ``n_r`` changes sign.
    times ``|n_r|``), so a flat piece scanned with the vessel (a turntable or ground plane,
    larger than the vessel) is left apart.
 
+:func:`cut_between_walls` then smooths the split into a line through its middle, along
+which the rollout cuts the faces across it (a split along whole faces is a staircase a face
+deep where the rim is noisy).
+
 Scans whose faces all point inwards (an open surface the loader could not orient) are
 detected by the inner side being more than twice as large as the outer one, and read with
 flipped normals.
@@ -732,8 +736,16 @@ def cut_between_walls(faces: np.ndarray, n_vertices: int, walls: WallSelection, 
     -------
     WallCut or None
         None when the selection does not meet the other wall.
+
+    Raises
+    ------
+    InvalidInputError
+        ``faces`` are not those ``walls`` was selected on.
     """
     F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    if len(F) != len(walls.labels) or (len(F) and not 0 <= F.min() <= F.max() < n_vertices):
+        raise InvalidInputError(f"cut_between_walls needs the faces the walls were selected on "
+                                f"({len(walls.labels)}, naming vertices below {n_vertices}), got {len(F)}")
     want = OUTER if walls.side == "outer" else INNER
     count = np.where(walls.labels != want, -1.0, 0.0)
     if exclude is not None:
