@@ -151,16 +151,16 @@ class SolverParameters:
         rising back to 1 over ``ease_width`` times the eased move, in up to ``ease_rounds``
         rounds (within ``smooth_max_fraction`` of the vertices). Faces are eased only when
         they hold the step below ``ease_face_step`` of the natural one. Squeezed slivers
-        held the plastic vase's 1M full-mesh steps to a median 1.5 % of the natural one over
-        its first 60 iterations (190-253 in all over starts differing in their last bits;
-        eased at the faces: 100-146).
+        held a fifth of the plastic vase's first 20 full-mesh steps at 1M below a tenth of
+        the natural one (167-242 iterations in all over starts differing in their last
+        bits; eased at the faces: 117-143).
     ease_face_step : float
         An eased direction leaves the quasi-Newton one, and easing more often moves the slow
         tails of the relaxation both ways (full-mesh iterations over starts differing in their
-        last bits, 0.3 against 0.1): plastic vase at 3M 202, 259, 155 against 308, 368, 243,
-        at 1M 100, 113, 111, 146 against 118, 105, 163; sea vase at 3M 137 against 142, at 1M
-        81, 134, 108, 82 against 81, 85, 108, 82; the colonoware pot, dragon jar, goblet and
-        synthetic vessel at 1M within 3 iterations. Easing every limiting face (a bound of
+        last bits, 0.3 against 0.1): plastic vase at 3M 346, 251, 265 against 461, 247, 298,
+        at 1M 126, 143, 130, 117 against 133, 100, 114, 129; sea vase at 3M 123 against 221,
+        at 1M 83, 111, 82, 105 against 83, 111, 82, 108; the colonoware pot, dragon jar,
+        goblet and synthetic vessel at 1M within 3 iterations. Easing every limiting face (a bound of
         1.2) made one of three 3000-vertex vessels relaxed from Tutte's disc stop at a 1.1 %
         higher energy, the two others lower; 0.3 left them within 0.4 %.
     precond_theta : float
