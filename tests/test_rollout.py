@@ -191,20 +191,34 @@ def test_upright_and_not_mirrored():
     assert res.distortion.flipped == 0
 
 
-def test_band_selects_by_centroid_and_angles_cut_exactly():
+def test_band_and_angles_cut_exactly():
     mesh, Rot, shift, local = cylinder(seed=5, n_theta=72)
-    res = rollout(mesh, band=(0.25, 0.5), angles=(-40.0, 70.0), seam=200.0, proxy="cylinder")
+    low, high = 0.27, 0.52  # (between the grid's rows of vertices)
+    res = rollout(mesh, band=(low, high), angles=(-40.0, 70.0), seam=200.0, proxy="cylinder")
     c = local[mesh.faces].mean(axis=1)
     s = np.sign(res.axis.direction @ Rot[:, 2])
     to_seam = _local_angle(res, Rot, 200.0)
     rel = (s * (np.degrees(np.arctan2(c[:, 1], c[:, 0])) - to_seam) + 40.0) % 360.0 - 40.0
     corner = s * (np.degrees(np.arctan2(local[mesh.faces][..., 1], local[mesh.faces][..., 0])) - to_seam)
     corner = rel[:, None] + (corner - rel[:, None] + 180.0) % 360.0 - 180.0
-    frac = c[:, 2] / 80.0 if s > 0 else 1 - c[:, 2] / 80.0
-    # the band by the faces' centroids, the angles by the faces' spans: cut at the window's sides
+    height = local[:, 2] / 80.0 if s > 0 else 1 - local[:, 2] / 80.0
+    frac = height[mesh.faces]
+    # the band and the angles by the faces' spans: cut along the band's planes and the window's sides
     meets = np.any([(corner.max(axis=1) + k > -40.0) & (corner.min(axis=1) + k < 70.0) for k in (-360, 0, 360)], axis=0)
-    expect = np.flatnonzero((frac >= 0.25) & (frac <= 0.5) & meets)
-    np.testing.assert_array_equal(np.unique(res.face_index), expect)
+    reach = (frac.max(axis=1) > low) & (frac.min(axis=1) < high) & meets
+    centred = (frac.mean(axis=1) >= low) & (frac.mean(axis=1) <= high) & meets
+    got = np.zeros(len(mesh.faces), bool)
+    got[res.face_index] = True
+    assert np.all(reach[got]) and np.all(got[centred]) and got.sum() > centred.sum()
+    # every vertex within the band but for those the cut goes through (within CUT_SNAP of an
+    # edge crossing a plane); the vertices it adds lie on the planes
+    at = res.flat.mesh.vertices - shift
+    flat_height = (at @ Rot[:, 2]) / 80.0
+    flat_height = flat_height if s > 0 else 1 - flat_height
+    rise = np.abs(np.diff(height[mesh.faces][:, [0, 1, 2, 0]], axis=1)).max()
+    assert flat_height.min() >= low - CUT_SNAP * rise and flat_height.max() <= high + CUT_SNAP * rise
+    for plane in (low, high):
+        assert np.count_nonzero(np.abs(flat_height - plane) < 1e-9) >= 10
     assert res.cut_faces > 0 and not res.region.cut and res.seam_vertices == 0
     lo, hi = res.region.theta_range_deg
     assert np.isclose(lo, -40.0, atol=1e-9) and np.isclose(hi, 70.0, atol=1e-9)

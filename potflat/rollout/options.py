@@ -52,7 +52,9 @@ class RolloutOptions:
         Seam angle in degrees from the landmark (``seam_at`` or ``landmark``), else from the
         axis' reference direction; chosen automatically when None.
     band : (float, float) or None
-        Height band as fractions of the axial extent, 0 = foot, 1 = mouth.
+        Height band as fractions of the axial extent, 0 = foot, 1 = mouth; the faces across
+        its planes are cut along them (with the ``ortho`` proxy, the faces whose centres lie
+        in it are taken).
     angles : (float, float) or None
         Angle range in degrees, e.g. -60 to 60, at most 360 wide: from the landmark when
         one is named, else from ``seam`` when given, else from the painted zone's centre (the

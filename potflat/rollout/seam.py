@@ -459,6 +459,11 @@ def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarr
                 return near + (at - near + np.pi) % TWO_PI - np.pi
 
             splice(rows, ids, split, lambda piece, src, split=split: split.side[piece] > 0, floor_theta)
+    if floors:  # the part a level cut keeps of a face reaching into the region can lie wholly outside it
+        inside = ~rows_narrow | ((T.max(axis=1) > start) & (T.min(axis=1) < end))
+        if not inside.all():
+            T, row_faces, rows_face, rows_narrow, piece_of = (a[inside] for a in (T, row_faces, rows_face, rows_narrow,
+                                                                                    piece_of))
     for values in planes.values():
         r_lo, r_hi = T.min(axis=1), T.max(axis=1)
         across = np.zeros(len(T), bool)

@@ -393,7 +393,8 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     landmark, landmark_notes = _find_landmark(mesh, axis, options, attachments, allowed, band, h_c, theta_c,
                                               theta_v, area)
     trimmed = np.zeros(len(F), bool)
-    floors = ()  # the level cuts before the seam's: the line between the walls, then the base's plane
+    # the level cuts before the seam's: the line between the walls, a band's planes, then the base's plane
+    floors = ()
 
     def angle_of(points):
         return axis.cylindrical(points)[2]
@@ -402,7 +403,13 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         across = np.zeros(len(F), bool)
         across[wall_cut.faces] = True
         floors = ((across, wall_cut.levels, angle_of),)
-    un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area, landmark=landmark, floors=floors)
+    centres_in = band  # the band the faces' centres are to lie in
+    if options.band is not None and options.proxy != "ortho":  # cut along its planes: every face reaching into it
+        allowed, cuts = _band_cuts(axis, band, h_v, F, allowed, angle_of)
+        floors += cuts
+        centres_in = (-np.inf, np.inf)
+    un = _unroll(mesh, axis, options, allowed, centres_in, h_c, theta_c, theta_v, area, landmark=landmark,
+                 floors=floors)
     # the cut's temporaries (the largest of the rollout) back to the system: the base and
     # the trimming come on top of the heap otherwise (at 3M vertices some 30 MB of the peak)
     release_free_memory()
@@ -431,7 +438,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
             allowed[base.disc_faces] = allowed[base.hidden_faces] = False
             seam = (un.seam, un.seam_method)
             del un  # (peak memory: the unrolling it replaces is not held while it is made)
-            un = _unroll(mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area,
+            un = _unroll(mesh, axis, options, allowed, centres_in, h_c, theta_c, theta_v, area,
                          seam=seam, landmark=landmark, floors=floors)
         del region, first
         if un.table is None:
@@ -810,16 +817,46 @@ def _angle_from(angle, origin: float, points: np.ndarray) -> np.ndarray:
     return angle(points) - origin
 
 
-def _base_levels(cut: BaseCut, axis: AxisFit, vertex_height: np.ndarray, index: np.ndarray,
-                 points: np.ndarray) -> np.ndarray:
-    """:meth:`BaseCut.levels` of the vertices ``index`` ((k,) int64: scan vertices, whose
-    heights ``vertex_height`` (n,) float64 gives, then vertices a cut added) at ``points``
-    (k, 3) float64."""
+def _heights(axis: AxisFit, vertex_height: np.ndarray, index: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Heights (k,) float64 along the axis of the vertices ``index`` ((k,) int64: scan vertices,
+    whose heights ``vertex_height`` (n,) float64 gives, then vertices a cut added) at
+    ``points`` (k, 3) float64."""
     height = np.empty(len(index))
     scan = index < len(vertex_height)
     height[scan] = vertex_height[index[scan]]
     height[~scan] = axis.cylindrical(points[~scan])[0]
-    return cut.levels(height, index)
+    return height
+
+
+def _base_levels(cut: BaseCut, axis: AxisFit, vertex_height: np.ndarray, index: np.ndarray,
+                 points: np.ndarray) -> np.ndarray:
+    """:meth:`BaseCut.levels` of the vertices ``index`` at ``points`` (as :func:`_heights`)."""
+    return cut.levels(_heights(axis, vertex_height, index, points), index)
+
+
+def _band_levels(axis: AxisFit, vertex_height: np.ndarray, height: float, sign: float, index: np.ndarray,
+                 points: np.ndarray) -> np.ndarray:
+    """``sign`` times the height above ``height`` of the vertices ``index`` at ``points`` (as
+    :func:`_heights`)."""
+    return sign * (_heights(axis, vertex_height, index, points) - height)
+
+
+def _band_cuts(axis: AxisFit, band, vertex_height: np.ndarray, faces: np.ndarray, allowed: np.ndarray, angle_of
+               ) -> tuple[np.ndarray, tuple]:
+    """The faces of ``allowed`` ((m,) bool) reaching into the height band ``band`` (fractions of
+    the axis' height), and the level cuts along its lower and upper planes (as
+    :func:`potflat.rollout.seam.cut_region` takes them), so that the band's edges are exact
+    lines at its heights, not a staircase of whole faces."""
+    low, high = (b * axis.height for b in band)
+    at = vertex_height[faces]
+    lowest, highest = at.min(axis=1), at.max(axis=1)
+    allowed = allowed & (highest > low) & (lowest < high)
+    cuts = []
+    for height, sign in ((low, 1.0), (high, -1.0)):
+        across = allowed & (lowest < height) & (highest > height)
+        if across.any():
+            cuts.append((across, functools.partial(_band_levels, axis, vertex_height, height, sign), angle_of))
+    return allowed, tuple(cuts)
 
 
 def _meridian_normal(axis: AxisFit, angle: float) -> np.ndarray:
