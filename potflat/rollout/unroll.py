@@ -390,9 +390,6 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     del centroid
     h_v, r_v, theta_v = axis.cylindrical(V)  # once for every unrolling and the seam (and the base)
     band = options.band or (0.0, 1.0)
-    landmark, landmark_notes = _find_landmark(mesh, axis, options, attachments, allowed, band, h_c, theta_c,
-                                              theta_v, area)
-    trimmed = np.zeros(len(F), bool)
     # the level cuts before the seam's: the line between the walls, a band's planes, then the base's plane
     floors = ()
 
@@ -403,13 +400,14 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         across = np.zeros(len(F), bool)
         across[wall_cut.faces] = True
         floors = ((across, wall_cut.levels, angle_of),)
-    centres_in = band  # the band the faces' centres are to lie in
     if options.band is not None and options.proxy != "ortho":  # cut along its planes: every face reaching into it
         allowed, cuts = _band_cuts(axis, band, h_v, F, allowed, angle_of)
         floors += cuts
-        centres_in = (-np.inf, np.inf)
-    un = _unroll(mesh, axis, options, allowed, centres_in, h_c, theta_c, theta_v, area, landmark=landmark,
-                 floors=floors)
+    else:  # (a projection is not cut: the faces whose centres lie in it)
+        allowed = allowed & _in_band(axis, band, h_c)
+    landmark, landmark_notes = _find_landmark(mesh, axis, options, attachments, allowed, theta_c, theta_v, area)
+    trimmed = np.zeros(len(F), bool)
+    un = _unroll(mesh, axis, options, allowed, theta_c, theta_v, area, landmark=landmark, floors=floors)
     # the cut's temporaries (the largest of the rollout) back to the system: the base and
     # the trimming come on top of the heap otherwise (at 3M vertices some 30 MB of the peak)
     release_free_memory()
@@ -438,7 +436,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
             allowed[base.disc_faces] = allowed[base.hidden_faces] = False
             seam = (un.seam, un.seam_method)
             del un  # (peak memory: the unrolling it replaces is not held while it is made)
-            un = _unroll(mesh, axis, options, allowed, centres_in, h_c, theta_c, theta_v, area,
+            un = _unroll(mesh, axis, options, allowed, theta_c, theta_v, area,
                          seam=seam, landmark=landmark, floors=floors)
         del region, first
         if un.table is None:
@@ -572,16 +570,16 @@ class _Unrolled:
     face_area: np.ndarray
 
 
-def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndarray, band, h_c, theta_c,
+def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndarray, theta_c,
             theta_v, area, seam: tuple[float, str] | None = None, landmark=None, floors=()) -> _Unrolled:
-    """Select the region within ``allowed``, cut it open and develop it on the proxy (with
+    """Select the region within ``allowed`` (the band's faces already), cut it open and develop it on the proxy (with
     ``seam`` = (radians, method) from an earlier unrolling, or a seam chosen here; angles
     measured from ``landmark``; ``theta_v``: the angle of every scan vertex; ``floors``: the
     line between the walls and a base cut off, as :func:`potflat.rollout.seam.cut_region`
     takes them)."""
     V = mesh.vertices
     sub_f, corner_theta, origins, seam, seam_method, origin = _select(
-        mesh, axis, options, allowed, band, h_c, theta_c, theta_v, area, seam, landmark, floors)
+        mesh, axis, options, allowed, theta_c, theta_v, area, seam, landmark, floors)
     face_index = origins.face_index
     inner = options.side == "inner"
 
@@ -696,29 +694,29 @@ def _developed_again(un: _Unrolled, axis: AxisFit, n_scan: int, options: Rollout
 _PLACED_SEAMS = ("user", "point", "handle", "opposite painted zone")
 
 
-def _find_landmark(mesh: Mesh, axis: AxisFit, options: RolloutOptions, attachments, face_mask, band, h_c,
-                   theta_c, theta_v, area):
+def _find_landmark(mesh: Mesh, axis: AxisFit, options: RolloutOptions, attachments, face_mask, theta_c, theta_v,
+                   area):
     """The landmark the options name (:func:`potflat.rollout.landmarks.find_landmark`), or None when
     seam and angles are measured as before (from the reference direction, angles from the seam)."""
 
     if options.seam_at is None and options.landmark is None and (options.angles is None or options.seam is not None):
         return None, []
-    keep = np.flatnonzero(_in_band(axis, band, h_c) & face_mask)
+    keep = np.flatnonzero(face_mask)
     if len(keep) == 0:
         raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
     return find_landmark(
         mesh, axis, seam_at=options.seam_at, landmark=options.landmark, attachments=attachments,
-        painted_zone=lambda: _painted_zone_centre(mesh, axis, options, face_mask, band, h_c, theta_c, theta_v, area),
+        painted_zone=lambda: _painted_zone_centre(mesh, axis, options, face_mask, theta_c, theta_v, area),
         auto_seam=lambda: _auto_seam(mesh, keep, theta_c, theta_v, area)[0])
 
 
-def _painted_zone_centre(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c,
-                         theta_v, area) -> tuple[float | None, str]:
+def _painted_zone_centre(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, theta_c, theta_v,
+                         area) -> tuple[float | None, str]:
     """Centre angle of the importance zone (:func:`_find_importance` on an all-round unrolling
     with the automatic seam), or None and why."""
 
     plain = dataclasses.replace(options, seam=None, angles=None, seam_at=None, landmark=None, overlap=0.0)
-    un = _unroll(mesh, axis, plain, face_mask, band, h_c, theta_c, theta_v, area)
+    un = _unroll(mesh, axis, plain, face_mask, theta_c, theta_v, area)
     flat = un.flat
     if mesh.texcoords is not None:
         flat = flat.replace(mesh=flat.mesh.replace(**un.origins.face_fields(mesh)))
@@ -733,11 +731,13 @@ def _painted_zone_centre(mesh: Mesh, axis: AxisFit, options: RolloutOptions, fac
 
 
 def _in_band(axis: AxisFit, band, h_c) -> np.ndarray:
+    """The faces whose centres' heights ``h_c`` ((m,) float64) lie in ``band`` (fractions of the
+    axis' height), (m,) bool."""
     frac = h_c / axis.height if axis.height > 0 else np.zeros(len(h_c))
     return (frac >= band[0]) & (frac <= band[1])
 
 
-def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band, h_c, theta_c, theta_v, area,
+def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, theta_c, theta_v, area,
             seam_given: tuple[float, str] | None = None, landmark=None, floors=()):
     """The region's faces (:func:`potflat.rollout.seam.cut_region`: the seam and a window's
     sides cut exactly along their meridians), their corners' unwrapped angles, where they
@@ -747,7 +747,7 @@ def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band,
     With an overlap the faces within ``overlap`` degrees after the seam are listed twice, the
     repeats last, their angles one turn on."""
     F = mesh.faces
-    keep = _in_band(axis, band, h_c) & face_mask
+    keep = face_mask.copy()
     placed = landmark is not None and (options.seam_at is not None or options.landmark is not None)
     if seam_given is not None:
         seam, seam_method = seam_given
@@ -761,7 +761,8 @@ def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, band,
     else:
         sel = np.flatnonzero(keep)
         if len(sel) == 0:
-            raise InvalidOptionError(f"band {band[0]:g} {band[1]:g} selects no faces; widen it")
+            low, high = options.band or (0.0, 1.0)
+            raise InvalidOptionError(f"band {low:g} {high:g} selects no faces; widen it")
         seam, seam_method = _auto_seam(mesh, sel, theta_c, theta_v, area)
     seam %= TWO_PI
     # angles are measured from the landmark, else from the seam
