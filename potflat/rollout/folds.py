@@ -13,6 +13,11 @@ scan can cause them (the development itself is one-to-one):
   centre's cell of a grid is tested): both sheets of a duplicated, misregistered pass, and
   the outer sheets of a crease.
 
+Both are judged on the development smoothed over about :data:`FOLD_MIN_MM`: a scan's noise
+turns single faces over where its wall is nearly edge-on to the proxy (a jar's shoulder), and a
+fold that narrow does not show in the image; a crease, a flap or a duplicated sheet wider than
+that stays.
+
 Such faces cannot be laid flat true to scale: the relaxation squeezes them (no image is
 refused for them) and the report says where they are, how large, and the bake marks them
 on the distortion maps.
@@ -26,7 +31,7 @@ import numpy as np
 
 from potflat.mesh._kernels.grids import centre_grid, centres_inside
 from potflat.mesh.distortion import bounds, face_areas
-from potflat.mesh.embedding import signed_areas
+from potflat.mesh.embedding import fan_edges, neighbour_means, neighbour_rows, signed_areas
 
 #: Grid cells per face of the overlap test (about one face per cell, a few per face's box).
 OVERLAP_CELLS_PER_FACE = 1.0
@@ -34,6 +39,11 @@ OVERLAP_CELLS_PER_FACE = 1.0
 #: large (long sliver triangles of a spike would otherwise cover many small cells, each
 #: visited for the centres in it).
 OVERLAP_MAX_CELLS_PER_FACE = 16
+#: Folds narrower than about this (mm, two pixels of the default image) are the scan's noise:
+#: the tests run on the development smoothed over this distance (:func:`smoothing_steps`).
+FOLD_MIN_MM = 1.0
+#: At most this many smoothing steps (a mesh with edges under about 0.1 mm is smoothed over less).
+FOLD_MAX_STEPS = 100
 #: Folded regions listed one by one in the JSON (the largest first); the rest are counted.
 MAX_REGIONS = 20
 #: A note warns when more than this share (percent) of the unrolled surface is folded.
@@ -50,6 +60,8 @@ class ScanFolds:
         Rollout faces (indices into the rollout's faces) folded in 3D.
     facing_in, overlapping : int
         How many face into the wall, and how many lie over another sheet (a face can be both).
+    smoothing_steps : int
+        The smoothing of the development they were judged on (:func:`smoothing_steps`).
     area_mm2, surface_mm2 : float
         3D area of those faces, and of the whole rollout.
     regions : list of dict
@@ -62,6 +74,7 @@ class ScanFolds:
     faces: np.ndarray
     facing_in: int
     overlapping: int
+    smoothing_steps: int
     area_mm2: float
     surface_mm2: float
     regions: list
@@ -78,9 +91,10 @@ class ScanFolds:
             "facing_in": self.facing_in, "overlapping": self.overlapping,
             "regions_total": len(self.regions), "regions": self.regions[:MAX_REGIONS],
             "face_indices": self.faces.tolist(),
-            "method": "faces facing into the wall (negative area in the proxy's development before untangling) or "
-                      "lying over another sheet of the scan (centre inside a face of the development sharing no "
-                      "vertex); potflat.rollout.folds",
+            "smoothed_mm": FOLD_MIN_MM, "smoothing_steps": self.smoothing_steps,
+            "method": "faces facing into the wall (negative area in the proxy's development before untangling, "
+                      f"smoothed over about {FOLD_MIN_MM:g} mm) or lying over another sheet of the scan (centre "
+                      "inside a face of that development sharing no vertex); potflat.rollout.folds",
         }
 
     def note(self) -> str | None:
@@ -143,24 +157,65 @@ def overlapping_faces(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
     return out
 
 
-def fold_masks(faces: np.ndarray, raw_uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Faces facing into the wall and faces lying over another sheet (see the module's docstring).
+def smoothing_steps(vertices: np.ndarray, edges: np.ndarray, mm_per_unit: float) -> int:
+    """The smoothing steps of :func:`fold_masks` that reach about :data:`FOLD_MIN_MM` on a mesh.
+
+    A step takes each vertex to the mean of itself and its edge neighbours, a move of about
+    ``sqrt(6 / 7)`` edge lengths on average over six neighbours; ``k`` steps spread it over
+    ``sqrt(6 k / 7)`` of the median edge length: 0 on a mesh whose edges are longer than about
+    1.5 mm, at most :data:`FOLD_MAX_STEPS`.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        3D positions, scan units.
+    edges : (e, 2) int64
+    mm_per_unit : float
+
+    Returns
+    -------
+    int
+    """
+    if not len(edges):
+        return 0
+    edge_mm = float(np.median(np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1))) * mm_per_unit
+    if not edge_mm > 0:
+        return 0
+    return int(min(round(7.0 / 6.0 * (FOLD_MIN_MM / edge_mm) ** 2), FOLD_MAX_STEPS))
+
+
+def fold_masks(faces: np.ndarray, raw_uv: np.ndarray, *, edges: np.ndarray | None = None,
+               steps: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Faces facing into the wall and faces lying over another sheet (see the module's
+    docstring), judged on the development smoothed ``steps`` times (:func:`smoothing_steps`).
 
     Parameters
     ----------
     faces : (m, 3) int64
     raw_uv : (n, 2) float64
         The proxy's development, before untangling.
+    edges : (e, 2) int64, optional
+        The mesh's edges, each once (found from ``faces`` when needed and not given).
+    steps : int
+        Each vertex to the mean of itself and its edge neighbours, this many times.
 
     Returns
     -------
     facing_in, overlapping : (m,) bool
     """
-    return signed_areas(faces, raw_uv) < 0, overlapping_faces(faces, raw_uv)
+    uv = raw_uv
+    if steps > 0:
+        n = len(raw_uv)
+        if edges is None:
+            edges = fan_edges(np.arange(len(faces)), faces)[0]
+        verts = np.arange(n)
+        uv = neighbour_means(raw_uv, verts, neighbour_rows(verts, edges, n), steps)
+    return signed_areas(faces, uv) < 0, overlapping_faces(faces, uv)
 
 
 def scan_folds(vertices: np.ndarray, faces: np.ndarray, facing_in: np.ndarray, overlapping: np.ndarray, *,
-               height: np.ndarray, vessel_height: float, angle_deg: np.ndarray, mm_per_unit: float) -> ScanFolds:
+               height: np.ndarray, vessel_height: float, angle_deg: np.ndarray, mm_per_unit: float,
+               steps: int = 0) -> ScanFolds:
     """Measure and locate the folded faces found by :func:`fold_masks`.
 
     Parameters
@@ -176,6 +231,8 @@ def scan_folds(vertices: np.ndarray, faces: np.ndarray, facing_in: np.ndarray, o
     angle_deg : (n,) float64
         Angle of each vertex in the rollout's angles, degrees.
     mm_per_unit : float
+    steps : int
+        The smoothing steps ``facing_in`` and ``overlapping`` were judged with.
 
     Returns
     -------
@@ -207,4 +264,5 @@ def scan_folds(vertices: np.ndarray, faces: np.ndarray, facing_in: np.ndarray, o
                             "angle_deg": [float(angle_deg[verts].min()), float(angle_deg[verts].max())],
                             "centroid": [float(x) for x in centroid]})
     return ScanFolds(faces=folded, facing_in=int(facing_in.sum()), overlapping=int(overlapping.sum()),
+                     smoothing_steps=int(steps),
                      area_mm2=float(area[folded].sum()), surface_mm2=float(area.sum()), regions=regions)

@@ -54,7 +54,7 @@ from potflat.rollout.border import (
     crossing_segments,
     untangle,
 )
-from potflat.rollout.folds import ScanFolds, fold_masks, scan_folds
+from potflat.rollout.folds import ScanFolds, fold_masks, scan_folds, smoothing_steps
 from potflat.rollout.landmarks import find_landmark, zone_centre
 from potflat.rollout.objects import _main_object, _submesh
 from potflat.rollout.options import RolloutOptions
@@ -468,7 +468,9 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     clock.lap("unroll")
     # where the scan folds in 3D, judged on the development before untangling, kept per scan face
     facing_in, overlapping = (np.zeros(len(F), bool) for _ in range(2))
-    for scan_mask, mask in zip((facing_in, overlapping), fold_masks(un.flat.mesh.faces, un.flat.uv)):
+    fold_steps = smoothing_steps(un.flat.mesh.vertices, un.table[0], mesh.mm_per_unit)
+    for scan_mask, mask in zip((facing_in, overlapping),
+                               fold_masks(un.flat.mesh.faces, un.flat.uv, edges=un.table[0], steps=fold_steps)):
         scan_mask[un.face_index[mask]] = True
     clock.lap("folds")
     uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv, table=un.table)
@@ -518,7 +520,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     clock.lap("importance")
     folds = scan_folds(cut.vertices, cut.faces, facing_in[un.face_index], overlapping[un.face_index],
                        height=axis.cylindrical(cut.vertices)[0], vessel_height=axis.height, angle_deg=theta_deg,
-                       mm_per_unit=mesh.mm_per_unit)
+                       mm_per_unit=mesh.mm_per_unit, steps=fold_steps)
     clock.lap("folds")
     if base is not None and base.left_out:
         disc, disc_proxy = base_disc(mesh, base.disc_faces, axis, view=base.view, up_angle=un.seam, cut=base.cut)
