@@ -570,7 +570,7 @@ def relax_untangle(sp, x: np.ndarray, rounds: int = 200) -> tuple[np.ndarray, in
     every round: the vertices of flipped faces (and, every 20 rounds, of every face touching
     them) join the region, whose vertices move to their edge neighbours' mean (an ear's tip
     is mirrored about its base instead)."""
-    from potflat.relax._kernels.springs import neighbour_means
+    from potflat.mesh._kernels.topology import neighbour_means
     from potflat.relax.start import unfold_ears
 
     bad = sp.signed_areas(x) <= 0

@@ -65,16 +65,18 @@ def test_a_fold_is_found_measured_and_located():
 
 
 def test_smoothing_steps_reach_the_fold_scale():
-    """k steps spread a vertex over sqrt(6 k / 7) edge lengths: about FOLD_MIN_MM, none on a coarse mesh."""
+    """k half steps to the neighbours' mean spread a vertex over sqrt(k / 2) edge lengths:
+    about FOLD_MIN_MM, none on a coarse mesh."""
     from potflat.rollout.folds import FOLD_MAX_STEPS, FOLD_MIN_MM, smoothing_steps
 
     F, uv = _grid(6, 6)
     V = np.column_stack([uv, np.zeros(len(uv))])
     edges = np.array([[0, 1], [1, 2], [0, 6]], dtype=np.int64)  # all 1 unit long
     assert FOLD_MIN_MM == 1.0
-    assert smoothing_steps(V, edges, 1.0) == 1  # 7/6
-    assert smoothing_steps(V, edges, 0.5) == 5  # 7/6 * 4 = 4.67
-    assert smoothing_steps(V, edges, 2.0) == 0  # edges of 2 mm: folds that narrow already show
+    assert smoothing_steps(V, edges, 1.0) == 2
+    assert smoothing_steps(V, edges, 0.5) == 8
+    assert smoothing_steps(V, edges, 1.5) == 1  # 0.89
+    assert smoothing_steps(V, edges, 3.0) == 0  # edges of 3 mm: folds that narrow already show
     assert smoothing_steps(V, edges, 1e-3) == FOLD_MAX_STEPS
     assert smoothing_steps(V, edges[:0], 1.0) == 0
 
@@ -95,12 +97,12 @@ def test_noise_on_an_edge_on_wall_is_not_a_fold_and_a_wide_fold_stays():
     noisy[:, 1] += rng.normal(0.0, 0.05, len(uv))
     facing, over = fold_masks(F, noisy)
     assert facing.sum() > 50  # unsmoothed, the noise is taken for folds
-    facing, over = fold_masks(F, noisy, edges=edges, steps=steps)
+    facing, over = fold_masks(F, noisy, steps=steps)
     assert not facing.any() and not over.any()
     folded = uv.copy()
     band = (uv[:, 0] > 14.5) & (uv[:, 0] < 20.5)
     folded[band, 0] = 29.0 - folded[band, 0]  # mirrored about u = 14.5: folded back
-    facing, over = fold_masks(F, folded, edges=edges, steps=steps)
+    facing, over = fold_masks(F, folded, steps=steps)
     strip = (uv[F, 0].min(axis=1) >= 15) & (uv[F, 0].max(axis=1) <= 20)
     assert facing[strip].mean() > 0.5 and over.any()
     assert not (facing & (uv[F, 0].max(axis=1) <= 13)).any()
@@ -126,3 +128,30 @@ def test_a_noisy_fine_scan_is_not_reported_as_folded(monkeypatch):
     monkeypatch.setattr(unroll, "smoothing_steps", lambda *args: 0)
     raw = unroll.rollout(noisy).folds
     assert raw.percent > 0.5 and raw.note() is not None
+
+
+def test_smoothing_around_the_folds_moves_them_as_a_smoothing_of_the_whole_layout():
+    """The folded faces' vertices after k smoothing steps within k rings equal those of k
+    steps over the whole layout (slow reference: every vertex halfway to the mean of its
+    edge neighbours); vertices beyond the region keep their place."""
+    from potflat.rollout.folds import _smoothed_around
+
+    rng = np.random.default_rng(5)
+    F, uv = _grid(14, 12)
+    uv = uv + rng.uniform(-0.45, 0.45, uv.shape)
+    folded = np.zeros(len(F), bool)
+    folded[[40, 41, 150]] = True
+    neighbours = [set() for _ in range(len(uv))]
+    for f in F:
+        for a in f:
+            neighbours[a].update(int(b) for b in f if b != a)
+    for steps in (1, 2, 4):
+        want = uv.copy()
+        for _ in range(steps):
+            want = np.array([0.5 * (want[i] + want[sorted(nb)].mean(axis=0)) for i, nb in enumerate(neighbours)])
+        got, near = _smoothed_around(F, uv, folded, steps)
+        verts = np.unique(F[folded])
+        np.testing.assert_allclose(got[verts], want[verts], rtol=0, atol=1e-12)
+        moved = np.flatnonzero((got != uv).any(axis=1))
+        assert np.isin(verts, moved).all() and len(moved) < len(uv) and np.isin(np.unique(F[near]), moved).any()
+        assert not (got != uv)[np.setdiff1d(np.arange(len(uv)), np.unique(F[near]))].any()

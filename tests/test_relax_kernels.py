@@ -125,7 +125,7 @@ def test_fused_passes_match_numpy_and_do_not_depend_on_threads():
 
 def test_neighbour_means_count_each_edge_neighbour_once():
     from potflat.mesh._kernels.topology import vertex_faces
-    from potflat.relax._kernels.springs import neighbour_means
+    from potflat.mesh._kernels.topology import neighbour_means
 
     faces = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1], [1, 4, 5]])
     x = np.random.default_rng(5).normal(size=(6, 2))

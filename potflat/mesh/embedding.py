@@ -216,19 +216,6 @@ def neighbour_rows(verts: np.ndarray, edges: np.ndarray, n: int):
     return sp.coo_matrix((np.ones(len(r)), (r, c)), shape=(len(verts), n)).tocsr()
 
 
-def neighbour_means(values: np.ndarray, verts: np.ndarray, rows, steps: int) -> np.ndarray:
-    """``values`` (n,) or (n, d) with those of ``verts`` (k,) replaced ``steps`` times by the
-    mean over themselves and their edge neighbours in ``rows`` (:func:`neighbour_rows` of
-    ``verts``); the others are left as they are. A new array."""
-    out = np.array(values, dtype=np.float64)
-    degree = 1.0 + np.asarray(rows.sum(axis=1)).ravel()
-    if out.ndim == 2:
-        degree = degree[:, None]
-    for _ in range(steps):
-        out[verts] = (out[verts] + rows @ out) / degree
-    return out
-
-
 def _rows_of(verts: np.ndarray, v: np.ndarray) -> np.ndarray:
     """The row of each of ``v`` in ``verts`` ((k,) int, without repeats), -1 where it is not
     there; costs what ``verts`` and ``v`` do, not the mesh."""

@@ -6,9 +6,8 @@ import time
 
 import numpy as np
 
-from potflat.mesh._kernels.topology import flagged_face_vertices
+from potflat.mesh._kernels.topology import flagged_face_vertices, neighbour_means
 from potflat.relax._kernels import lbfgs as kernels_lbfgs
-from potflat.relax._kernels.springs import neighbour_means
 from potflat.relax._kernels.steps import ease_scales
 from potflat.relax.control import RunControl, relative_change
 from potflat.relax.energy import SpringSystem

@@ -9,8 +9,7 @@ import numpy as np
 from potflat.errors import FoldedResultError, NotADiskError
 from potflat.mesh.boundary import crossing_pairs
 from potflat.mesh.embedding import repair_folds, signed_areas, tutte_embedding
-from potflat.mesh._kernels.topology import incident_faces
-from potflat.relax._kernels.springs import neighbour_means
+from potflat.mesh._kernels.topology import incident_faces, neighbour_means
 from potflat.relax._kernels.steps import vertex_max_steps
 from potflat.relax.energy import SpringSystem
 from potflat.relax.parameters import COARSE, ENERGY

@@ -13,10 +13,10 @@ scan can cause them (the development itself is one-to-one):
   centre's cell of a grid is tested): both sheets of a duplicated, misregistered pass, and
   the outer sheets of a crease.
 
-Both are judged on the development smoothed over about :data:`FOLD_MIN_MM`: a scan's noise
-turns single faces over where its wall is nearly edge-on to the proxy (a jar's shoulder), and a
-fold that narrow does not show in the image; a crease, a flap or a duplicated sheet wider than
-that stays.
+A face found so is judged again on the development smoothed over about :data:`FOLD_MIN_MM`
+around it, and counts only when it is still so: a scan's noise turns single faces over where
+its wall is nearly edge-on to the proxy (a jar's shoulder), and a fold that narrow does not show
+in the image; a crease, a flap or a duplicated sheet wider than that stays.
 
 Such faces cannot be laid flat true to scale: the relaxation squeezes them (no image is
 refused for them) and the report says where they are, how large, and the bake marks them
@@ -30,8 +30,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from potflat.mesh._kernels.grids import centre_grid, centres_inside
+from potflat.mesh._kernels.topology import incident_faces, neighbour_means, vertex_faces
 from potflat.mesh.distortion import bounds, face_areas
-from potflat.mesh.embedding import fan_edges, neighbour_means, neighbour_rows, signed_areas
+from potflat.mesh.embedding import signed_areas
 
 #: Grid cells per face of the overlap test (about one face per cell, a few per face's box).
 OVERLAP_CELLS_PER_FACE = 1.0
@@ -42,8 +43,10 @@ OVERLAP_MAX_CELLS_PER_FACE = 16
 #: Folds narrower than about this (mm, two pixels of the default image) are the scan's noise:
 #: the tests run on the development smoothed over this distance (:func:`smoothing_steps`).
 FOLD_MIN_MM = 1.0
-#: At most this many smoothing steps (a mesh with edges under about 0.1 mm is smoothed over less).
+#: At most this many smoothing steps (a mesh with edges under about 0.14 mm is smoothed over less).
 FOLD_MAX_STEPS = 100
+#: Edges whose median length sets the smoothing (every k-th of the mesh's).
+EDGE_SAMPLE = 100_000
 #: Folded regions listed one by one in the JSON (the largest first); the rest are counted.
 MAX_REGIONS = 20
 #: A note warns when more than this share (percent) of the unrolled surface is folded.
@@ -92,9 +95,10 @@ class ScanFolds:
             "regions_total": len(self.regions), "regions": self.regions[:MAX_REGIONS],
             "face_indices": self.faces.tolist(),
             "smoothed_mm": FOLD_MIN_MM, "smoothing_steps": self.smoothing_steps,
-            "method": "faces facing into the wall (negative area in the proxy's development before untangling, "
-                      f"smoothed over about {FOLD_MIN_MM:g} mm) or lying over another sheet of the scan (centre "
-                      "inside a face of that development sharing no vertex); potflat.rollout.folds",
+            "method": "faces facing into the wall (negative area in the proxy's development before untangling) or "
+                      "lying over another sheet of the scan (centre inside a face of that development sharing no "
+                      f"vertex), and still so with the development smoothed around them over about {FOLD_MIN_MM:g} "
+                      "mm; potflat.rollout.folds",
         }
 
     def note(self) -> str | None:
@@ -160,16 +164,17 @@ def overlapping_faces(faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
 def smoothing_steps(vertices: np.ndarray, edges: np.ndarray, mm_per_unit: float) -> int:
     """The smoothing steps of :func:`fold_masks` that reach about :data:`FOLD_MIN_MM` on a mesh.
 
-    A step takes each vertex to the mean of itself and its edge neighbours, a move of about
-    ``sqrt(6 / 7)`` edge lengths on average over six neighbours; ``k`` steps spread it over
-    ``sqrt(6 k / 7)`` of the median edge length: 0 on a mesh whose edges are longer than about
-    1.5 mm, at most :data:`FOLD_MAX_STEPS`.
+    A step takes each vertex halfway to the mean of its edge neighbours, a move of about
+    ``sqrt(1 / 2)`` edge lengths on average; ``k`` steps spread it over ``sqrt(k / 2)`` of
+    the median edge length: ``k = 2 (FOLD_MIN_MM / edge)^2`` rounded, 0 on a mesh whose edges
+    are longer than 2 mm, at most :data:`FOLD_MAX_STEPS`.
 
     Parameters
     ----------
     vertices : (n, 3) float64
         3D positions, scan units.
     edges : (e, 2) int64
+        The mesh's edges (the median length of about :data:`EDGE_SAMPLE` of them, spread over the list).
     mm_per_unit : float
 
     Returns
@@ -178,39 +183,67 @@ def smoothing_steps(vertices: np.ndarray, edges: np.ndarray, mm_per_unit: float)
     """
     if not len(edges):
         return 0
-    edge_mm = float(np.median(np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1))) * mm_per_unit
+    some = edges[::max(1, len(edges) // EDGE_SAMPLE)]  # (the median of a spread sample: no gather of every edge)
+    edge_mm = float(np.median(np.linalg.norm(vertices[some[:, 0]] - vertices[some[:, 1]], axis=1))) * mm_per_unit
     if not edge_mm > 0:
         return 0
-    return int(min(round(7.0 / 6.0 * (FOLD_MIN_MM / edge_mm) ** 2), FOLD_MAX_STEPS))
+    return int(min(round(2.0 * (FOLD_MIN_MM / edge_mm) ** 2), FOLD_MAX_STEPS))
 
 
-def fold_masks(faces: np.ndarray, raw_uv: np.ndarray, *, edges: np.ndarray | None = None,
-               steps: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def fold_masks(faces: np.ndarray, raw_uv: np.ndarray, *, steps: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Faces facing into the wall and faces lying over another sheet (see the module's
-    docstring), judged on the development smoothed ``steps`` times (:func:`smoothing_steps`).
+    docstring); with ``steps``, only those still so once the development around them is
+    smoothed ``steps`` times (:func:`smoothing_steps`, :func:`_still_folded`).
 
     Parameters
     ----------
     faces : (m, 3) int64
     raw_uv : (n, 2) float64
         The proxy's development, before untangling.
-    edges : (e, 2) int64, optional
-        The mesh's edges, each once (found from ``faces`` when needed and not given).
     steps : int
-        Each vertex to the mean of itself and its edge neighbours, this many times.
+        Each vertex halfway to the mean of its edge neighbours, this many times.
 
     Returns
     -------
     facing_in, overlapping : (m,) bool
     """
-    uv = raw_uv
-    if steps > 0:
-        n = len(raw_uv)
-        if edges is None:
-            edges = fan_edges(np.arange(len(faces)), faces)[0]
-        verts = np.arange(n)
-        uv = neighbour_means(raw_uv, verts, neighbour_rows(verts, edges, n), steps)
-    return signed_areas(faces, uv) < 0, overlapping_faces(faces, uv)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    facing, over = signed_areas(faces, raw_uv) < 0, overlapping_faces(faces, raw_uv)
+    folded = facing | over
+    if steps > 0 and folded.any():
+        uv, near = _smoothed_around(faces, raw_uv, folded, steps)
+        facing[folded] &= signed_areas(faces[folded], uv) < 0
+        over_near = np.zeros(len(faces), bool)
+        over_near[near] = overlapping_faces(faces[near], uv)
+        over &= over_near
+    return facing, over
+
+
+def _smoothed_around(faces: np.ndarray, raw_uv: np.ndarray, folded: np.ndarray,
+                     steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """The development ``raw_uv`` (n, 2) smoothed ``steps`` times within ``steps`` rings of the
+    ``folded`` (m,) faces, the rest left in place, and the faces (k,) int64 touching that
+    region. A vertex of a folded face depends on the start within ``steps`` rings only, and
+    the first wrong value (the region's edge, whose outer neighbours do not move) travels one
+    ring a step from the second step, so the folded faces move exactly as in a smoothing of
+    the whole development, at the cost of the region."""
+    n = len(raw_uv)
+    vf_ptr, vf_tri = vertex_faces(n, faces)
+    inside = np.zeros(n, bool)
+    frontier = np.unique(faces[folded])
+    inside[frontier] = True
+    for _ in range(steps):
+        reached = np.unique(faces[incident_faces(frontier, vf_ptr, vf_tri)])
+        frontier = reached[~inside[reached]]
+        inside[frontier] = True
+    region = np.flatnonzero(inside)
+    uv = np.array(raw_uv, dtype=np.float64, order="C")
+    corners = faces.astype(np.int32)  # (the relaxation's face type: one compiled kernel)
+    mean = np.empty((len(region), 2))
+    for _ in range(steps):
+        neighbour_means(uv, region, vf_ptr, vf_tri, corners, mean)
+        uv[region] = 0.5 * (uv[region] + mean)
+    return uv, np.unique(incident_faces(region, vf_ptr, vf_tri))
 
 
 def scan_folds(vertices: np.ndarray, faces: np.ndarray, facing_in: np.ndarray, overlapping: np.ndarray, *,

@@ -470,7 +470,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
     facing_in, overlapping = (np.zeros(len(F), bool) for _ in range(2))
     fold_steps = smoothing_steps(un.flat.mesh.vertices, un.table[0], mesh.mm_per_unit)
     for scan_mask, mask in zip((facing_in, overlapping),
-                               fold_masks(un.flat.mesh.faces, un.flat.uv, edges=un.table[0], steps=fold_steps)):
+                               fold_masks(un.flat.mesh.faces, un.flat.uv, steps=fold_steps)):
         scan_mask[un.face_index[mask]] = True
     clock.lap("folds")
     uv, n_untangled, moved = untangle(un.flat.mesh.faces, un.flat.uv, table=un.table)

@@ -51,7 +51,7 @@ from potflat.errors import InvalidInputError, InvalidOptionError
 from potflat.mesh._kernels.geometry import edge_lengths, face_geometry, radial_parts
 from potflat.mesh._kernels.quantiles import grouped_weighted_quantiles
 from potflat.mesh.distortion import weighted_percentile
-from potflat.mesh.embedding import fan_edges, neighbour_means, neighbour_rows
+from potflat.mesh.embedding import fan_edges, neighbour_rows
 from potflat.mesh.split import snap_to_cut
 from potflat.mesh._kernels.topology import edge_table, face_pairs, pair_csr, pair_sums, union_find
 from potflat.mesh.tolerances import DEGENERATE, ROUNDING
@@ -763,8 +763,10 @@ def cut_between_walls(faces: np.ndarray, n_vertices: int, walls: WallSelection, 
         near[F[counted & near[F].any(axis=1)].ravel()] = True
     around = np.flatnonzero(counted & near[F].any(axis=1))
     verts = np.flatnonzero(near)
-    level = neighbour_means(level, verts, neighbour_rows(verts, fan_edges(around, F)[0], n_vertices),
-                            SPLIT_SMOOTH_RINGS)
+    rows = neighbour_rows(verts, fan_edges(around, F)[0], n_vertices)
+    degree = np.asarray(rows.sum(axis=1)).ravel()
+    for _ in range(SPLIT_SMOOTH_RINGS):
+        level[verts] = (level[verts] + rows @ level) / (1.0 + degree)
     # the vertices the cut will go through, on it already: the faces kept are those it leaves a part of
     level = snap_to_cut(F[around], level)[0]
     at = level[F[around]]

@@ -1,5 +1,5 @@
-"""Mesh topology kernels: the edge table, vertex-face adjacency, union-find, face pairs,
-orientation propagation, equal rows.
+"""Mesh topology kernels: the edge table, vertex-face adjacency, neighbour means, union-find,
+face pairs, orientation propagation, equal rows.
 
 Arrays in, arrays out, no I/O; deterministic for any thread count (gather, never scatter).
 """
@@ -11,6 +11,50 @@ import numpy as np
 from potflat._jit import leaf, parallel, prange
 
 
+
+
+@parallel
+def neighbour_means(x, verts, vf_ptr, vf_tri, faces, out):
+    """Mean of ``x`` (positions, or a search direction) over each listed vertex's edge
+    neighbours (each neighbour counted once).
+
+    Parameters
+    ----------
+    x : (n, 2) float64
+    verts : (k,) int64
+    vf_ptr, vf_tri : CSR from :func:`vertex_faces`
+    faces : (m, 3) int32 or int64
+    out : (k, 2) float64
+        Output (the vertex's own value when it has no neighbour).
+    """
+    for k in prange(verts.shape[0]):
+        i = verts[k]
+        sx = 0.0
+        sy = 0.0
+        cnt = 0
+        lo = vf_ptr[i]
+        for p in range(lo, vf_ptr[i + 1]):
+            f = vf_tri[p]
+            for c in range(3):
+                j = faces[f, c]
+                if j == i:
+                    continue
+                seen = False
+                for p2 in range(lo, p):
+                    f2 = vf_tri[p2]
+                    if faces[f2, 0] == j or faces[f2, 1] == j or faces[f2, 2] == j:
+                        seen = True
+                        break
+                if not seen:
+                    sx += x[j, 0]
+                    sy += x[j, 1]
+                    cnt += 1
+        if cnt:
+            out[k, 0] = sx / cnt
+            out[k, 1] = sy / cnt
+        else:
+            out[k, 0] = x[i, 0]
+            out[k, 1] = x[i, 1]
 
 
 @leaf
