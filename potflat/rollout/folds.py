@@ -40,8 +40,9 @@ OVERLAP_CELLS_PER_FACE = 1.0
 #: large (long sliver triangles of a spike would otherwise cover many small cells, each
 #: visited for the centres in it).
 OVERLAP_MAX_CELLS_PER_FACE = 16
-#: Folds narrower than about this (mm, two pixels of the default image) are the scan's noise:
-#: the tests run on the development smoothed over this distance (:func:`smoothing_steps`).
+#: Folds narrower than about this (mm, two pixels of the default image) are the scan's noise: a
+#: face found folded counts only when it is still so on the development smoothed over this
+#: distance around it (:func:`smoothing_steps`).
 FOLD_MIN_MM = 1.0
 #: At most this many smoothing steps (a mesh with edges under about 0.14 mm is smoothed over less).
 FOLD_MAX_STEPS = 100
@@ -193,7 +194,7 @@ def smoothing_steps(vertices: np.ndarray, edges: np.ndarray, mm_per_unit: float)
 def fold_masks(faces: np.ndarray, raw_uv: np.ndarray, *, steps: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Faces facing into the wall and faces lying over another sheet (see the module's
     docstring); with ``steps``, only those still so once the development around them is
-    smoothed ``steps`` times (:func:`smoothing_steps`, :func:`_still_folded`).
+    smoothed ``steps`` times (:func:`smoothing_steps`, :func:`_smoothed_around`).
 
     Parameters
     ----------
