@@ -1370,6 +1370,23 @@ def test_a_declared_or_given_unit_that_makes_no_vessel_names_the_unit_that_fits(
     check_plausible_size(load_scan(tmp_path / "pot.glb", units="mm" if scale > 1 else "m"), tmp_path / "pot.glb")
 
 
+def test_several_units_that_fit_are_named_with_the_size_each_gives(tmp_path):
+    """A 40 cm vessel in centimetres written as glTF metres is 39.8 units across: as
+    millimetres (40 mm), centimetres (398 mm) and inches (1012 mm) it would all be a vessel;
+    centimetres, the size nearest a typical vessel's, comes first and the others with their sizes."""
+    import trimesh
+
+    from potflat.io.scan import check_plausible_size
+
+    V, F = _grid()
+    V = V / np.ptp(V, axis=0).max() * 39.84
+    trimesh.Trimesh(V, F, process=False).export(tmp_path / "pot.glb")
+    with pytest.raises(InvalidInputError) as err:
+        check_plausible_size(load_scan(tmp_path / "pot.glb"), tmp_path / "pot.glb")
+    assert "it looks like centimetres: add --units cm (398 mm across; --units in: 1012 mm, --units mm: 40 mm)" in str(
+        err.value)
+
+
 def test_draco_compressed_glb_is_decoded(real_scans):
     """The shared colonoware pot, Draco-compressed as museum portals ship it: positions
     within the accessor's bounds (not all zeros), every face, texture coordinates in the

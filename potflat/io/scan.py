@@ -21,6 +21,7 @@ Units: positions are never rescaled. ``units=None`` takes the unit the file decl
 from __future__ import annotations
 
 import errno
+import math
 import os
 import stat
 import zipfile
@@ -81,8 +82,11 @@ class LoadedScan:
 #: Size range (mm, the longest side of the bounding box) of a vessel or sherd; outside it, the
 #: unit the scan was read in is taken for a unit mistake.
 PLAUSIBLE_SIZE_MM = (10.0, 2000.0)
-#: The units tried, in this order, for a scan of implausible size.
+#: The units tried for a scan of implausible size.
 PLAUSIBLE_UNITS = ("mm", "m", "cm", "in", "um")
+#: When several units give a plausible size, the one giving the size nearest this (mm, on a
+#: log scale: a vessel of a hand's span to a storage jar) is named first.
+TYPICAL_SIZE_MM = 250.0
 
 
 def check_plausible_size(loaded: LoadedScan, path: str | os.PathLike) -> None:
@@ -95,7 +99,8 @@ def check_plausible_size(loaded: LoadedScan, path: str | os.PathLike) -> None:
     ------
     InvalidInputError
         Naming the size, the unit it most likely is and the option that says so
-        (``looks like millimetres: add --units mm``).
+        (``looks like millimetres: add --units mm``); when several units fit, the one giving
+        the size nearest :data:`TYPICAL_SIZE_MM` first, then the size each would give.
     """
     mesh = loaded.mesh
     side = 0.0
@@ -107,10 +112,15 @@ def check_plausible_size(loaded: LoadedScan, path: str | os.PathLike) -> None:
     if lo <= size_mm <= hi:
         return
     names = {"m": "metres", "cm": "centimetres", "um": "micrometres", "in": "inches", "mm": "millimetres"}
-    likely = next((u for u in PLAUSIBLE_UNITS if u != mesh.units and lo <= side * UNITS_MM[u] <= hi), None)
+    fits = sorted((u for u in PLAUSIBLE_UNITS if u != mesh.units and lo <= side * UNITS_MM[u] <= hi),
+                  key=lambda u: abs(math.log(side * UNITS_MM[u] / TYPICAL_SIZE_MM)))
     what = "small" if size_mm < lo else "large"
-    hint = (f"it looks like {names[likely]}: add --units {likely}" if likely
-            else f"give its unit with --units ({', '.join(UNITS_MM)})")
+    hint = f"give its unit with --units ({', '.join(UNITS_MM)})"
+    if fits:
+        hint = f"it looks like {names[fits[0]]}: add --units {fits[0]}"
+        if len(fits) > 1:  # the size each would give, for the user who knows the vessel
+            hint += (f" ({side * UNITS_MM[fits[0]]:.0f} mm across; "
+                     + ", ".join(f"--units {u}: {side * UNITS_MM[u]:.0f} mm" for u in fits[1:]) + ")")
     read = {"given": "as given", "file": "as the file declares", "default": "the default"}[loaded.units_from]
     escape = f", or --units {mesh.units} if the size is right" if loaded.units_from == "default" else ""
     raise InvalidInputError(f"{path} is {side:.4g} units across: in {names[mesh.units]} ({read}) a vessel too {what} "
