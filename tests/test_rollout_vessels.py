@@ -401,6 +401,28 @@ def test_a_separate_inner_wall_is_kept_but_a_second_vessel_is_left_out():
     assert any("separate objects" in n for n in __import__("potflat.rollout.notes").rollout.notes.rollout_notes(res2))
 
 
+def test_a_sherd_whose_two_faces_are_separate_pieces_keeps_both(real_scans):
+    """A sherd cut from the dragon jar's belly (90 degrees, 18 cm), both faces and no breaks:
+    two pieces. The inner face's own axis fit leans 8 degrees off the outer's (a small concave
+    patch), but its normals lie in the outer's meridian planes (median 0.9 degrees): it is
+    the same vessel's inner wall, kept, and ``side="inner"`` unrolls it."""
+    from potflat.io.scan import load_scan
+    from potflat.rollout import rollout
+
+    mesh = load_scan(real_scans / "dragon-jar.glb").mesh
+    V, F = mesh.vertices, mesh.faces
+    centre = V[F].mean(axis=1)
+    middle = 0.5 * (V.min(axis=0) + V.max(axis=0))
+    angle = np.degrees(np.arctan2(centre[:, 2] - middle[2], centre[:, 0] - middle[0])) % 360.0
+    height = centre[:, 1] - V[:, 1].min()
+    keep = (angle > 20) & (angle < 110) & (height > 0.12) & (height < 0.30)
+    sherd = mesh.replace(faces=F[keep], **mesh.face_fields(keep))
+    outer = rollout(sherd)
+    inner = rollout(sherd, side="inner")
+    assert outer.other_objects_faces == 0 and inner.other_objects_faces == 0
+    assert len(outer.face_index) + len(inner.face_index) == len(sherd.faces)
+
+
 @pytest.mark.parametrize("kind, handles", [("amphora", True), ("hydria", True), ("bowl", False)])
 def test_two_like_vessels_side_by_side_give_the_rollout_of_one(kind, handles):
     """A scan file holding the vessel twice, side by side (a pair scanned together), handles as

@@ -8,7 +8,7 @@ import numpy as np
 from potflat.errors import AxisNotFoundError
 from potflat.mesh._kernels.topology import union_find
 from potflat.mesh.distortion import face_areas
-from potflat.rollout.axis import estimate_axis
+from potflat.rollout.axis import axis_residuals, estimate_axis
 from potflat.types import Mesh
 
 #: A connected piece with at least this fraction of the largest piece's area is an object of
@@ -16,7 +16,8 @@ from potflat.types import Mesh
 SEPARATE_OBJECT_FRACTION = 0.1
 
 
-#: Two pieces share an axis when their axes differ by less than this angle (degrees) ...
+#: A piece shares the largest piece's axis when its normals lie within this angle (degrees,
+#: median) of that axis's meridian planes, or when its own axis differs by less than it ...
 SHARED_AXIS_DEG = 5.0
 
 
@@ -37,9 +38,11 @@ def _main_object(mesh: Mesh) -> np.ndarray | None:
     """Faces of the vessel when the scan holds separate objects, else ``None``.
 
     Pieces (connected components) with at least :data:`SEPARATE_OBJECT_FRACTION` of the
-    largest piece's area are objects; each is kept when its own axis agrees with the
-    largest piece's (a separately scanned inner wall or foot does), and left out when it
-    does not (a second vessel, a fragment lying beside it). A smaller piece (a handle or a
+    largest piece's area are objects; each is kept when its normals lie within
+    :data:`SHARED_AXIS_DEG` (median) of the largest piece's meridian planes or its own axis
+    agrees with the largest piece's (a separately scanned inner wall or foot does), and left
+    out when neither holds (a second vessel beside it, whose normals lean some 35 degrees
+    (median) off those planes, a fragment lying beside it). A smaller piece (a handle or a
     flake the scan did not join) goes with the object nearest to it: kept when the vessel's
     axis is nearer to its centre than every left-out object (its axis, or its centre when
     it has none). Returns ``None`` when nothing would be left out, so a single-object scan
@@ -73,8 +76,14 @@ def _main_object(mesh: Mesh) -> np.ndarray | None:
     nearest_other = np.full(n_pieces, np.inf)
     for k in objects[1:]:
         piece = face_label == k
+        part = _submesh(mesh, piece)
+        # its normals in the vessel's meridian planes: a wall or foot of this vessel, even a patch
+        # too small to fit its own axis well (a sherd's inner face, its breaks not scanned)
+        if axis_residuals(part, ref.point, ref.direction)[1] <= SHARED_AXIS_DEG:
+            keep |= piece
+            continue
         try:
-            own = estimate_axis(_submesh(mesh, piece))
+            own = estimate_axis(part)
         except AxisNotFoundError:
             nearest_other = np.minimum(nearest_other, np.linalg.norm(centre - centre[k], axis=1))
             continue
