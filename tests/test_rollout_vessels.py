@@ -423,6 +423,29 @@ def test_a_sherd_whose_two_faces_are_separate_pieces_keeps_both(real_scans):
     assert len(outer.face_index) + len(inner.face_index) == len(sherd.faces)
 
 
+def test_a_separate_ground_plate_is_left_out_and_does_not_tilt_the_axis():
+    """A flat plate under the foot, not joined to it: its normals run along the axis, so they
+    tell nothing of it (a plate lies in every meridian plane): it is not taken for a wall of
+    the vessel and stays out of the axis fit."""
+    from potflat_synthetic.vessels import make_vessel
+
+    from potflat.rollout import rollout
+    from potflat.types import Mesh
+
+    a = make_vessel("amphora", n_vertices=3000, seed=1, texture_size=64, pose=False).mesh
+    alone = rollout(Mesh(a.vertices, a.faces))
+    lo, hi = a.vertices.min(axis=0), a.vertices.max(axis=0)
+    u, v = np.meshgrid(np.linspace(-150.0, 150.0, 30), np.linspace(-150.0, 150.0, 30), indexing="ij")
+    plate = np.column_stack([u.ravel(), v.ravel(), np.full(u.size, lo[2] - 2.0)]) + [0.5 * (lo[0] + hi[0]),
+                                                                                      0.5 * (lo[1] + hi[1]), 0.0]
+    idx = np.arange(900).reshape(30, 30)
+    q = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    plate_faces = np.concatenate([np.stack([q[0], q[1], q[2]], 1), np.stack([q[0], q[2], q[3]], 1)])
+    both = rollout(Mesh(np.vstack([a.vertices, plate]), np.vstack([a.faces, plate_faces + len(a.vertices)])))
+    assert both.other_objects_faces == len(plate_faces)
+    np.testing.assert_allclose(both.axis.direction, alone.axis.direction, atol=1e-9)
+
+
 @pytest.mark.parametrize("kind, handles", [("amphora", True), ("hydria", True), ("bowl", False)])
 def test_two_like_vessels_side_by_side_give_the_rollout_of_one(kind, handles):
     """A scan file holding the vessel twice, side by side (a pair scanned together), handles as

@@ -8,7 +8,7 @@ import numpy as np
 from potflat.errors import AxisNotFoundError
 from potflat.mesh._kernels.topology import union_find
 from potflat.mesh.distortion import face_areas
-from potflat.rollout.axis import axis_residuals, estimate_axis
+from potflat.rollout.axis import axis_residuals, estimate_axis, normal_lines
 from potflat.types import Mesh
 
 #: A connected piece with at least this fraction of the largest piece's area is an object of
@@ -25,6 +25,11 @@ SHARED_AXIS_DEG = 5.0
 SHARED_AXIS_OFFSET = 0.05
 
 
+#: A face of a piece faces sideways (its normal tells of the axis) when its normal is more
+#: than this angle (degrees) from the axis; a piece is a wall when most of its area does.
+WALL_TILT_DEG = 45.0
+
+
 def _submesh(mesh: Mesh, face_mask: np.ndarray) -> Mesh:
     """The faces of ``mesh`` selected by ``face_mask`` with only the vertices they use."""
     F = np.take(mesh.faces, np.flatnonzero(face_mask), axis=0)
@@ -34,13 +39,27 @@ def _submesh(mesh: Mesh, face_mask: np.ndarray) -> Mesh:
     return Mesh(mesh.vertices[used], remap[F], units=mesh.units, source=mesh.source)
 
 
+def _wall_about(piece: Mesh, ref) -> bool:
+    """Whether ``piece`` is a wall about the axis ``ref`` (an :class:`AxisFit`): most of its
+    area faces sideways (normals more than :data:`WALL_TILT_DEG` from the axis; a ground or
+    a lid facing along it tells nothing of the axis) and those normals lie in ``ref``'s
+    meridian planes within :data:`SHARED_AXIS_DEG` (median). Such a piece is this vessel's
+    wall even when it is too small to fit its own axis well (a sherd's inner face, its
+    breaks not scanned)."""
+    c, n, area = normal_lines(piece)
+    side = np.linalg.norm(np.cross(n, ref.direction), axis=1) > math.sin(math.radians(WALL_TILT_DEG))
+    if not area[side].sum() > 0.5 * area.sum():
+        return False
+    lines = (c[side], n[side], area[side])
+    return axis_residuals(piece, ref.point, ref.direction, lines=lines)[1] <= SHARED_AXIS_DEG
+
+
 def _main_object(mesh: Mesh) -> np.ndarray | None:
     """Faces of the vessel when the scan holds separate objects, else ``None``.
 
     Pieces (connected components) with at least :data:`SEPARATE_OBJECT_FRACTION` of the
-    largest piece's area are objects; each is kept when its normals lie within
-    :data:`SHARED_AXIS_DEG` (median) of the largest piece's meridian planes or its own axis
-    agrees with the largest piece's (a separately scanned inner wall or foot does), and left
+    largest piece's area are objects; each is kept when it is a wall about the largest
+    piece's axis (:func:`_wall_about`) or its own axis agrees with the largest piece's (a separately scanned inner wall or foot does), and left
     out when neither holds (a second vessel beside it, whose normals lean some 35 degrees
     (median) off those planes, a fragment lying beside it). A smaller piece (a handle or a
     flake the scan did not join) goes with the object nearest to it: kept when the vessel's
@@ -77,9 +96,7 @@ def _main_object(mesh: Mesh) -> np.ndarray | None:
     for k in objects[1:]:
         piece = face_label == k
         part = _submesh(mesh, piece)
-        # its normals in the vessel's meridian planes: a wall or foot of this vessel, even a patch
-        # too small to fit its own axis well (a sherd's inner face, its breaks not scanned)
-        if axis_residuals(part, ref.point, ref.direction)[1] <= SHARED_AXIS_DEG:
+        if _wall_about(part, ref):
             keep |= piece
             continue
         try:
