@@ -8,7 +8,7 @@ import numpy as np
 from potflat.errors import AxisNotFoundError
 from potflat.mesh._kernels.topology import union_find
 from potflat.mesh.distortion import face_areas
-from potflat.rollout.axis import axis_residuals, estimate_axis, normal_lines
+from potflat.rollout.axis import AxisFit, axis_residuals, estimate_axis, normal_lines
 from potflat.types import Mesh
 
 #: A connected piece with at least this fraction of the largest piece's area is an object of
@@ -39,13 +39,12 @@ def _submesh(mesh: Mesh, face_mask: np.ndarray) -> Mesh:
     return Mesh(mesh.vertices[used], remap[F], units=mesh.units, source=mesh.source)
 
 
-def _wall_about(piece: Mesh, ref) -> bool:
-    """Whether ``piece`` is a wall about the axis ``ref`` (an :class:`AxisFit`): most of its
-    area faces sideways (normals more than :data:`WALL_TILT_DEG` from the axis; a ground or
-    a lid facing along it tells nothing of the axis) and those normals lie in ``ref``'s
-    meridian planes within :data:`SHARED_AXIS_DEG` (median). Such a piece is this vessel's
-    wall even when it is too small to fit its own axis well (a sherd's inner face, its
-    breaks not scanned)."""
+def _wall_about(piece: Mesh, ref: AxisFit) -> bool:
+    """Whether ``piece`` is a wall about the axis ``ref``: most of its area faces sideways
+    (normals more than :data:`WALL_TILT_DEG` from the axis; a ground or a lid facing along it
+    tells nothing of the axis) and those normals lie in ``ref``'s meridian planes within
+    :data:`SHARED_AXIS_DEG` (median). Such a piece is this vessel's wall even when it is too
+    small to fit its own axis well (a sherd's inner face, its breaks not scanned)."""
     c, n, area = normal_lines(piece)
     side = np.linalg.norm(np.cross(n, ref.direction), axis=1) > math.sin(math.radians(WALL_TILT_DEG))
     if not area[side].sum() > 0.5 * area.sum():
@@ -59,9 +58,10 @@ def _main_object(mesh: Mesh) -> np.ndarray | None:
 
     Pieces (connected components) with at least :data:`SEPARATE_OBJECT_FRACTION` of the
     largest piece's area are objects; each is kept when it is a wall about the largest
-    piece's axis (:func:`_wall_about`) or its own axis agrees with the largest piece's (a separately scanned inner wall or foot does), and left
-    out when neither holds (a second vessel beside it, whose normals lean some 35 degrees
-    (median) off those planes, a fragment lying beside it). A smaller piece (a handle or a
+    piece's axis (:func:`_wall_about`) or its own axis agrees with the largest piece's (a
+    separately scanned inner wall or foot does), and left out when neither holds (a second
+    vessel beside it, whose normals lean some 35 degrees (median) off that axis's meridian
+    planes, a fragment lying beside it). A smaller piece (a handle or a
     flake the scan did not join) goes with the object nearest to it: kept when the vessel's
     axis is nearer to its centre than every left-out object (its axis, or its centre when
     it has none). Returns ``None`` when nothing would be left out, so a single-object scan
