@@ -9,7 +9,7 @@ from PIL import Image
 
 from potflat.errors import InvalidInputError
 from potflat.io import images
-from potflat.io.images import (PngWriter, TiffWriter, read_ahead, read_texture, read_texture_grey_quarter,
+from potflat.io.images import (PngWriter, TiffWriter, read_ahead, read_texture, read_texture_grey,
                                write_png, write_tiff_rows)
 
 
@@ -158,16 +158,25 @@ def _noise_png(path, h, w, seed=0):
 
 def test_reads_inside_a_read_ahead_take_its_decodes(tmp_path):
     _noise_png(tmp_path / "t.png", 64, 48)
-    plain, grey = read_texture(tmp_path / "t.png"), read_texture_grey_quarter(tmp_path / "t.png")
-    with read_ahead(tmp_path / "t.png", grey_quarter=True, rgb=True):
+    plain, grey = read_texture(tmp_path / "t.png"), read_texture_grey(tmp_path / "t.png")
+    with read_ahead(tmp_path / "t.png", grey=True, rgb=True):
         assert len(images._AHEAD) == 2
         with read_ahead(tmp_path / "t.png", rgb=True):  # an inner block leaves the outer one's decode alone
             assert len(images._AHEAD) == 2
         assert len(images._AHEAD) == 2
-        assert np.array_equal(read_texture_grey_quarter(tmp_path / "t.png"), grey)
+        assert np.array_equal(read_texture_grey(tmp_path / "t.png"), grey)
         assert np.array_equal(read_texture(tmp_path / "t.png"), plain)
         assert not images._AHEAD  # taken: a second read decodes again
         assert np.array_equal(read_texture(tmp_path / "t.png"), plain)
+
+
+@pytest.mark.parametrize("width,reduced", [(1000, 1000), (4095, 4095), (4096, 2048), (9000, 2250), (40000, 5000)])
+def test_the_grey_texture_keeps_its_detail_up_to_a_size(tmp_path, width, reduced):
+    """The seam's grey image: whole up to twice GREY_MIN_SIDE, reduced by 2, 4 or 8 beyond."""
+    cv2.imwrite(str(tmp_path / "t.png"), np.full((8, width), 200, dtype=np.uint8))
+    grey = read_texture_grey(tmp_path / "t.png")
+    assert images.GREY_MIN_SIDE == 2048 and grey.dtype == np.uint8
+    assert grey.shape[1] == reduced and (grey == 200).all()
 
 
 def test_a_read_ahead_not_taken_is_dropped_at_the_block_end(tmp_path):

@@ -411,24 +411,88 @@ def test_cut_open_matches_the_sorting_reference(seed):
         assert np.asarray(g).dtype == np.asarray(w).dtype and np.array_equal(g, w)
 
 
-@pytest.mark.parametrize("shape", [(64, 48), (7, 5), (1, 1)])
-def test_texel_spread_matches_numpy(shape):
-    """The seam's brightness spread per face: the same bits as NumPy's std of the four
-    texels (corners and their mean, coordinates wrapped), also outside [0, 1]."""
-    from potflat.mesh._kernels.geometry import texel_spread
+def _lattice_texels(tc, faces, img, steps):
+    """Slow reference: the grey levels at each face's barycentric lattice points, (k, m)."""
+    pts = [(a, b, steps - a - b) for a in range(steps + 1) for b in range(steps + 1 - a)]
+    out = np.empty((len(faces), len(pts)), dtype=np.int64)
+    h, w = img.shape
+    for i, f in enumerate(faces):
+        for j, (a, b, c) in enumerate(pts):
+            u, v = (a * tc[f, 0] + b * tc[f, 1] + c * tc[f, 2]) / steps
+            out[i, j] = img[min(int((1.0 - v % 1.0) * h), h - 1), min(int((u % 1.0) * w), w - 1)]
+    return out
+
+
+@pytest.mark.parametrize("shape,steps", [((64, 48), 4), ((7, 5), 1), ((1, 1), 3)])
+def test_texel_histogram_and_far_share_match_a_slow_reference(shape, steps):
+    """The seam's samples per face (lattice points, coordinates wrapped, also outside [0, 1]):
+    the weighted histogram and the share far from a level, against a Python loop."""
+    from potflat.mesh._kernels.geometry import texel_far_share, texel_histogram
 
     rng = np.random.default_rng(len(shape) + shape[0])
     img = rng.integers(0, 256, size=shape, dtype=np.uint8)
-    tc = rng.uniform(-2.0, 3.0, size=(500, 3, 2))
-    tc[:50] = np.round(tc[:50])  # corners exactly on a texel border, v = 0 and 1 included
-    faces = rng.permutation(500)[:400]
-    pts = np.concatenate([tc[faces], tc[faces].mean(axis=1, keepdims=True)], axis=1) % 1.0
-    col = np.minimum((pts[..., 0] * shape[1]).astype(np.int64), shape[1] - 1)
-    row = np.minimum(((1.0 - pts[..., 1]) * shape[0]).astype(np.int64), shape[0] - 1)
-    want = img[row, col].astype(np.float64).std(axis=1)
-    got = texel_spread(tc, faces, img)
-    assert got.tobytes() == want.tobytes()
-    assert shape == (1, 1) or np.count_nonzero(want) > 300
+    tc = rng.uniform(-2.0, 3.0, size=(300, 3, 2))
+    tc[:30] = np.round(tc[:30])  # corners exactly on a texel border, v = 0 and 1 included
+    faces = rng.permutation(300)[:200]
+    weights = rng.uniform(0.5, 2.0, size=200)
+    want = _lattice_texels(tc, faces, img, steps)
+    hist = np.zeros(256)
+    for i in range(len(faces)):
+        for g in want[i]:
+            hist[g] += weights[i] / want.shape[1]
+    np.testing.assert_allclose(texel_histogram(tc, faces, img, weights, steps), hist, rtol=1e-12)
+    for level, contrast in ((128, 30), (0, 0), (255, 254)):
+        share = texel_far_share(tc, faces, img, level, contrast, steps)
+        assert share.tobytes() == (np.abs(want - level) > contrast).mean(axis=1).tobytes()
+    assert shape == (1, 1) or 0.2 < texel_far_share(tc, faces, img, 128, 30, steps).mean() < 0.9
+
+
+def test_the_least_painted_window_moves_with_the_angles_origin():
+    """The seam's window is chosen at the faces' own angles: counting the angles from another
+    origin (another pose) moves the choice by exactly that much, and a plain sector wider
+    than the window gets the seam in its middle."""
+    from potflat.rollout.seam import _least_window
+
+    rng = np.random.default_rng(5)
+    theta = rng.uniform(0.0, 2 * np.pi, 20000)
+    weight = rng.uniform(0.5, 1.5, 20000)
+    plain = np.abs((theta - 4.0 + np.pi) % (2 * np.pi) - np.pi) < np.radians(6.0)
+    weight[plain] = 0.0
+    angle = _least_window(theta, weight)
+    assert abs(angle - 4.0) < np.radians(0.1)
+    for shift in (0.3, 2.9, 5.5):
+        moved = _least_window((theta + shift) % (2 * np.pi), weight)
+        assert abs((moved - angle - shift + np.pi) % (2 * np.pi) - np.pi) < 1e-9
+    noisy = rng.uniform(0.5, 1.5, 20000)  # no plain sector: one least window among many near it
+    angle = _least_window(theta, noisy)
+    for shift in (0.3, 2.9, 5.5):
+        moved = _least_window((theta + shift) % (2 * np.pi), noisy)
+        assert abs((moved - angle - shift + np.pi) % (2 * np.pi) - np.pi) < 1e-9
+
+
+def test_the_seam_goes_between_black_figures_not_through_one(tmp_path):
+    """Black-figure painting: two solid figures wider than the plain gaps between columns of
+    thin lines. The figures' insides are as even as the plain ground, and the lines blur
+    into an even grey in a reduced texture: only the share of samples that are painted, at
+    the texture's detail, puts the seam in a plain gap."""
+    import cv2
+
+    mesh, Rot, shift, local = cylinder(seed=9, n_theta=180)
+    th = np.arctan2(local[:, 1], local[:, 0]) % (2 * np.pi)
+    tc = np.stack([th / (2 * np.pi), local[:, 2] / 80.0], axis=1)[mesh.faces]
+    tc[..., 0] = np.where(tc[..., 0].max(axis=1, keepdims=True) - tc[..., 0] > 0.5, tc[..., 0] + 1, tc[..., 0]) % 1.0
+    img = np.full((256, 1440, 3), 170, dtype=np.uint8)  # the clay ground, 4 px per degree
+    for lo in (20, 200):  # the figures, 60 degrees each
+        img[40:216, 4 * lo:4 * (lo + 60)] = 25
+    for lo in (110, 160, 290, 330):  # ornament columns, 16 degrees of thin lines
+        img[:, 4 * lo:4 * (lo + 16):8] = 25
+    tex = tmp_path / "black_figure.png"
+    cv2.imwrite(str(tex), img)
+    res = rollout(mesh.replace(texcoords=tc, texture_path=tex))
+    angle = _local_angle(res, Rot, res.seam_angle)
+    assert res.seam_method == "texture"
+    assert not any(lo - 2 < angle < lo + 62 for lo in (20, 200)), angle
+    assert any(lo + 2 < angle < hi - 2 for lo, hi in ((80, 110), (126, 160), (176, 200), (260, 290), (306, 330))), angle
 
 
 @pytest.mark.parametrize("kwargs,match", [

@@ -212,23 +212,24 @@ def test_the_command_line_says_which_faces_have_no_texture(tmp_path, small_vesse
 
 
 def test_the_seam_choice_reads_no_colour_on_untextured_faces(tmp_path):
-    """The brightness spread that steers the seam away from painting is 0 on flagged faces,
+    """The painted share that steers the seam away from painting is 0 on flagged faces,
     whatever their (meaningless) texture coordinates point at."""
     import cv2
 
-    from potflat.rollout.seam import _luminance_variation
+    from potflat.rollout.seam import _painted_share
 
     halves = np.zeros((64, 64, 3), np.uint8)
-    halves[:, 32:] = 255  # black left, white right: a face reading both halves has spread
+    halves[:, 32:] = 255  # black left, white right: a face reading both halves is part painted
     tex = tmp_path / "halves.png"
     cv2.imwrite(str(tex), halves)
     tc = np.array([[[0.1, 0.1], [0.9, 0.1], [0.9, 0.9]], [[0.1, 0.1], [0.9, 0.9], [0.1, 0.9]]])
     faces = np.arange(2)
     plain = _square(texcoords=tc, texture_path=tex)
-    spread, source = _luminance_variation(plain, faces)
-    assert source == "texture" and (spread > 0).all()
-    flagged, _ = _luminance_variation(plain.replace(untextured_faces=[False, True]), faces)
-    assert flagged[0] == spread[0] and flagged[1] == 0.0
+    area = np.full(2, 0.5)
+    share, source = _painted_share(plain, faces, area)
+    assert source == "texture" and (share > 0).all()
+    flagged, _ = _painted_share(plain.replace(untextured_faces=[False, True]), faces, area)
+    assert flagged[0] == share[0] and flagged[1] == 0.0
 
 
 # --- validation -----------------------------------------------------------------------------

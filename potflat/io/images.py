@@ -460,21 +460,45 @@ def read_mask(path: str | Path) -> np.ndarray:
     return np.clip(grey, 0.0, 1.0)
 
 
-def read_texture_grey_quarter(path: str | os.PathLike) -> np.ndarray | None:
-    """A texture in grey levels at a quarter of its size (h/4, w/4) uint8 (OpenCV's reduced
-    read), or None when it cannot be read; taken from a :func:`read_ahead` of the same file
-    when there is one."""
-    ahead = _take_ahead("grey_quarter", path)
-    return ahead.result() if ahead is not None else _decode_grey_quarter(path)
+#: The grey image of a texture read for the seam keeps at least this many pixels along its
+#: longer side: a texture up to twice as long is read whole, a longer one reduced by 2, 4 or 8
+#: (OpenCV's reduced reads, which JPEG decodes at that size directly).
+GREY_MIN_SIDE = 2048
 
 
-def _decode_grey_quarter(path: str | os.PathLike) -> np.ndarray | None:
+def read_texture_grey(path: str | os.PathLike) -> np.ndarray | None:
+    """A texture in grey levels, (h, w) uint8 reduced to keep at least :data:`GREY_MIN_SIDE`
+    pixels along its longer side, or None when it cannot be read; taken from a
+    :func:`read_ahead` of the same file when there is one."""
+    ahead = _take_ahead("grey", path)
+    return ahead.result() if ahead is not None else _decode_grey(path)
+
+
+def _decode_grey(path: str | os.PathLike) -> np.ndarray | None:
     import cv2
+    from PIL import Image
 
-    return cv2.imread(str(path), cv2.IMREAD_REDUCED_GRAYSCALE_4)
+    old = Image.MAX_IMAGE_PIXELS
+    try:
+        Image.MAX_IMAGE_PIXELS = None  # only the header is read
+        with Image.open(path) as im:
+            side = max(im.size)
+    except Exception:  # noqa: BLE001 - not an image Pillow knows: read it reduced as far as allowed
+        side = 8 * GREY_MIN_SIDE
+    finally:
+        Image.MAX_IMAGE_PIXELS = old
+    reduce = 1
+    while reduce < 8 and side // (2 * reduce) >= GREY_MIN_SIDE:
+        reduce *= 2
+    flag = {1: cv2.IMREAD_GRAYSCALE, 2: cv2.IMREAD_REDUCED_GRAYSCALE_2, 4: cv2.IMREAD_REDUCED_GRAYSCALE_4,
+            8: cv2.IMREAD_REDUCED_GRAYSCALE_8}[reduce]
+    try:
+        return cv2.imread(str(path), flag)
+    except cv2.error:  # an absurd declared size: the texture's own read says so
+        return None
 
 
-_DECODERS = {"grey_quarter": _decode_grey_quarter, "rgb": _decode_texture}
+_DECODERS = {"grey": _decode_grey, "rgb": _decode_texture}
 #: Decodes started by :func:`read_ahead` and not taken yet, by (kind, file, its mtime, its size).
 _AHEAD: dict[tuple, Future] = {}
 _AHEAD_LOCK = threading.Lock()
@@ -497,10 +521,10 @@ def _take_ahead(kind: str, path: str | os.PathLike) -> Future | None:
 
 
 @contextlib.contextmanager
-def read_ahead(path: str | os.PathLike | None, *, grey_quarter: bool = False, rgb: bool = False):
+def read_ahead(path: str | os.PathLike | None, *, grey: bool = False, rgb: bool = False):
     """Decode a texture in a background thread while the block does other work.
 
-    The block's later :func:`read_texture_grey_quarter` (``grey_quarter``) and
+    The block's later :func:`read_texture_grey` (``grey``) and
     :func:`read_texture` (``rgb``) of the same, unchanged file take the decoded images
     instead of decoding (the decoders release the GIL, so the decoding runs beside the
     block's own work on a second core). The two are decoded one after the other, in that
@@ -513,10 +537,10 @@ def read_ahead(path: str | os.PathLike | None, *, grey_quarter: bool = False, rg
     ----------
     path : path-like or None
         The texture; None: nothing is read ahead.
-    grey_quarter, rgb : bool
+    grey, rgb : bool
         Which reads to decode ahead.
     """
-    wanted = [kind for kind, want in (("grey_quarter", grey_quarter), ("rgb", rgb)) if want and path is not None]
+    wanted = [kind for kind, want in (("grey", grey), ("rgb", rgb)) if want and path is not None]
     keys = [key for key in (_ahead_key(kind, path) for kind in wanted) if key is not None]
     worker = None
     with _AHEAD_LOCK:

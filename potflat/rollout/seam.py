@@ -7,8 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from potflat.io.images import read_texture_grey_quarter
-from potflat.mesh._kernels.geometry import corner_angles, texel_spread
+from potflat.io.images import read_texture_grey
+from potflat.mesh._kernels.geometry import corner_angles, texel_far_share, texel_histogram
 from potflat.mesh._kernels.topology import corner_joins, half_edge_keys, union_find
 from potflat.mesh.split import plane_levels, split_faces
 from potflat.mesh.tolerances import ROUNDING
@@ -17,28 +17,62 @@ from potflat.types import Mesh
 TWO_PI = 2.0 * np.pi
 
 
-#: Angular bins (per turn) used to choose the seam and to find gaps in a region.
+#: Angular bins (per turn) used to find gaps in a region.
 SEAM_BINS = 360
 
 
-#: Width (bins) of the circular moving average applied to the seam cost.
-SEAM_SMOOTH = 5
+#: Width (degrees) of the window, centred on a face's angle, over which the seam's cost is
+#: summed.
+SEAM_WINDOW_DEG = 5.0
+#: The seam goes to the middle of the widest gap between face-centroid angles within this
+#: many degrees of the window chosen.
+SEAM_SNAP_DEG = 1.0
 
 
-def _luminance_variation(mesh: Mesh, faces: np.ndarray) -> tuple[np.ndarray | None, str]:
-    """Per-face spread of brightness (std of samples at its corners), and its source."""
+#: Most lattice steps along a face's edge at which the seam's cost samples the texture (15
+#: points per face, corners included); fewer on faces whose median edge spans fewer texels,
+#: down to the corners alone on faces smaller than a texel.
+INK_STEPS = 4
+#: Grey levels (of 255) by which a sample must differ from the surface's dominant grey to
+#: count as painted: blue, black or red paint on a light or red ground differs by 60 and more,
+#: the ground's own mottling and the scan's shading of it mostly by less.
+INK_CONTRAST = 30
+#: The dominant grey and the lattice's spacing are taken from at most this many of a region's
+#: faces, evenly spread through its face list.
+INK_LEVEL_FACES = 200_000
+
+_LUMA = np.array([0.299, 0.587, 0.114])
+
+
+def _painted_share(mesh: Mesh, faces: np.ndarray, area: np.ndarray) -> tuple[np.ndarray | None, str]:
+    """Per-face share of samples that are painted: whose grey level differs from the dominant
+    one (the most frequent, weighted by area: the ground, whether it is light clay, a white
+    slip or a black glaze) by more than :data:`INK_CONTRAST`; and its source. Texture:
+    samples on a lattice of about a texel's spacing (at most :data:`INK_STEPS` steps along an
+    edge); vertex colours: the face's corners. Faces without texture count as unpainted."""
     if mesh.texcoords is not None and mesh.texture_path is not None:
-        img = read_texture_grey_quarter(mesh.texture_path)
+        img = read_texture_grey(mesh.texture_path)
         if img is not None and img.size:
-            spread = texel_spread(np.ascontiguousarray(mesh.texcoords, dtype=np.float64),
-                                  np.ascontiguousarray(faces, dtype=np.int64), np.ascontiguousarray(img))
+            tc = np.ascontiguousarray(mesh.texcoords, dtype=np.float64)
+            idx = np.ascontiguousarray(faces, dtype=np.int64)
+            weight = np.ascontiguousarray(area, dtype=np.float64)
             if mesh.untextured_faces is not None:  # no colour, no painting to keep whole
-                spread[mesh.untextured_faces[faces]] = 0.0
-            return spread, "texture"
+                weight = np.where(mesh.untextured_faces[idx], 0.0, weight)
+            img = np.ascontiguousarray(img)
+            stride = max(-(-len(idx) // INK_LEVEL_FACES), 1)
+            some, some_weight = np.ascontiguousarray(idx[::stride]), np.ascontiguousarray(weight[::stride])
+            edge_texels = np.hypot(*((tc[some, 1] - tc[some, 0]) * (img.shape[1], img.shape[0])).T)
+            steps = int(np.clip(np.ceil(np.median(edge_texels)), 1, INK_STEPS)) if len(some) else 1
+            level = int(np.argmax(texel_histogram(tc, some, img, some_weight, steps)))
+            share = texel_far_share(tc, idx, img, level, INK_CONTRAST, steps)
+            if mesh.untextured_faces is not None:
+                share[mesh.untextured_faces[idx]] = 0.0
+            return share, "texture"
     if mesh.vertex_colors is not None:
-        rgb = mesh.vertex_colors[:, :3].astype(np.float64)
-        lum = rgb @ np.array([0.299, 0.587, 0.114])
-        return lum[mesh.faces[faces]].std(axis=1), "colours"
+        grey = np.clip(np.rint(mesh.vertex_colors[:, :3].astype(np.float64) @ _LUMA), 0, 255).astype(np.int64)
+        corners = grey[mesh.faces[faces]]
+        level = int(np.argmax(np.bincount(corners.ravel(), np.repeat(area / 3.0, 3), 256)))
+        return (np.abs(corners - level) > INK_CONTRAST).mean(axis=1), "colours"
     return None, "geometry"
 
 
@@ -61,16 +95,51 @@ def _longest_min_run(cost: np.ndarray) -> int:
     return round(start + best_mid) % k
 
 
+def _least_window(theta: np.ndarray, weight: np.ndarray) -> float:
+    """Angle (radians) in the middle of the widest run of faces whose window of
+    :data:`SEAM_WINDOW_DEG`, centred on the face's angle, holds the least weight.
+
+    The windows are centred on the faces themselves, so the choice depends on the surface
+    alone, not on the direction the angles are counted from (the scan's pose).
+
+    Parameters
+    ----------
+    theta : (k,) float64
+        Face-centroid angles, radians in ``[0, 2 pi)``.
+    weight : (k,) float64
+        Their costs.
+    """
+    order = np.argsort(theta, kind="stable")
+    th, w = theta[order], weight[order]
+    half = np.radians(SEAM_WINDOW_DEG) / 2.0
+    around = np.concatenate([th - TWO_PI, th, th + TWO_PI])
+    total = np.concatenate([[0.0], np.cumsum(np.tile(w, 3))])
+    cost = total[np.searchsorted(around, th + half, "right")] - total[np.searchsorted(around, th - half, "left")]
+    low = cost <= cost.min() + ROUNDING * max(cost.max(), 1e-300)
+    if low.all():
+        return float(th[0])
+    ring = (np.arange(len(th)) + int(np.argmin(low))) % len(th)  # from a face above the least: no run wraps
+    edges = np.diff(np.concatenate([[0], low[ring].astype(np.int8), [0]]))
+    first, last = th[ring[edges[:-1] == 1]], th[ring[np.flatnonzero(edges == -1) - 1]]
+    width = (last - first) % TWO_PI
+    i = int(np.argmax(width))
+    return float((first[i] + 0.5 * width[i]) % TWO_PI)
+
+
 def choose_seam(mesh: Mesh, faces: np.ndarray, theta_c: np.ndarray, area: np.ndarray,
                 covered: np.ndarray | None = None) -> tuple[float, str]:
     """Seam angle (radians from the reference) where the region is least painted.
 
-    Each face costs its area times (the spread of brightness at its corners + 10 % of the
-    mean spread) when a texture or vertex colours exist, its area otherwise; the costs are
-    summed per degree of angle, smoothed over :data:`SEAM_SMOOTH` degrees, and the seam goes
-    to the middle of the longest run of minimal cost. When the region has an empty sector
-    (no face spans it: a sherd, a scan with a gap from foot to rim) the seam goes to the
-    middle of the widest one, and nothing needs to be cut.
+    Each face costs its area times (its painted share + 10 % of the mean share) when a
+    texture or vertex colours exist, its area otherwise. The painted share is the share of
+    its samples whose grey differs from the surface's dominant grey (the ground) by more
+    than :data:`INK_CONTRAST`, so a figure costs as much where it is filled as at its
+    outline, and a painted ground (black glaze) as little as a plain one. The costs are
+    summed over a window of :data:`SEAM_WINDOW_DEG` about each face's angle, and the seam
+    goes to the middle of the widest run of faces with the least (:func:`_least_window`),
+    then to the widest gap between face angles near it (:func:`_snap_to_gap`). When the
+    region has an empty sector (no face spans it: a sherd, a scan with a gap from foot to
+    rim) the seam goes to the middle of the widest one, and nothing needs to be cut.
 
     Parameters
     ----------
@@ -93,21 +162,15 @@ def choose_seam(mesh: Mesh, faces: np.ndarray, theta_c: np.ndarray, area: np.nda
     """
     if covered is not None and (gap := _gap_middle(covered)) is not None:
         return gap, "gap"
-    var, method = _luminance_variation(mesh, faces)
-    weight = area if var is None else area * (var + 0.1 * max(float(np.average(var, weights=area)), 1e-12))
-    bins = np.minimum((theta_c / TWO_PI * SEAM_BINS).astype(np.int64), SEAM_BINS - 1)
-    cost = np.bincount(bins, weight, SEAM_BINS)
-    kernel = np.ones(SEAM_SMOOTH) / SEAM_SMOOTH
-    pad = SEAM_SMOOTH // 2
-    smooth = np.convolve(np.concatenate([cost[-pad:], cost, cost[:pad]]), kernel, mode="valid")
-    k = _longest_min_run(smooth)
-    return _snap_to_gap(theta_c, (k + 0.5) / SEAM_BINS * TWO_PI, TWO_PI / SEAM_BINS), method
+    painted, method = _painted_share(mesh, faces, area)
+    weight = area if painted is None else area * (painted + 0.1 * max(float(np.average(painted, weights=area)), 1e-12))
+    return _snap_to_gap(theta_c, _least_window(theta_c, weight), np.radians(SEAM_SNAP_DEG)), method
 
 
 def _snap_to_gap(theta_c: np.ndarray, angle: float, half_width: float) -> float:
     """Move ``angle`` to the middle of the widest gap between face-centroid angles within
-    ``half_width`` of it, so the cut lies at a place of the surface, not of the bin grid
-    (whose origin, the reference direction, depends on the scan's pose)."""
+    ``half_width`` of it, so the cut passes between the faces' middles rather than through
+    one."""
     offset = (theta_c - angle + np.pi) % TWO_PI - np.pi
     near = np.sort(offset[np.abs(offset) <= half_width])
     if len(near) < 2:

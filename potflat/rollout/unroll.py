@@ -329,10 +329,10 @@ def rollout(mesh: Mesh, *, options: RolloutOptions | None = None, face_mask: np.
             raise InvalidInputError(f"face_mask must be a bool array of shape ({len(F)},), got "
                                     f"{face_mask.dtype} {face_mask.shape}")
     texture = mesh.texture_path if mesh.texcoords is not None and mesh.texture_path is not None else None
-    # the texture's decodes run on the second core: the seam's brightness while the axis and
+    # the texture's decodes run on the second core: the seam's grey levels while the axis and
     # the attachments are found (steps that keep about one core busy), the painted zone's
     # colours once the unrolling's peak of memory is past (``later``)
-    with read_ahead(texture, grey_quarter=options.seam is None), contextlib.ExitStack() as later:
+    with read_ahead(texture, grey=options.seam is None), contextlib.ExitStack() as later:
         return _rollout_steps(mesh, options, face_mask, texture, later)
 
 

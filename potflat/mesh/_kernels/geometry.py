@@ -1,5 +1,5 @@
 """Mesh geometry kernels: face normals, areas (3D, and signed 2D of a flattening), frames
-and flat maps, corner angles, edge lengths, radial parts, the texture's spread under faces.
+and flat maps, corner angles, edge lengths, radial parts, the texture's grey levels under faces.
 
 Arrays in, arrays out, no I/O; deterministic for any thread count.
 """
@@ -12,46 +12,84 @@ from potflat._jit import leaf, parallel, prange
 
 
 @leaf
-def texel_spread(texcoords, faces, img):
-    """Spread of the grey levels under each face: the standard deviation of the texels at its
-    three corners and at their mean (nearest texel, texture coordinates wrapped into [0, 1)).
+def _lattice_texel(texcoords, f, img, a, b, steps):
+    """Grey level (nearest texel, texture coordinates wrapped into [0, 1)) at the point of
+    face ``f`` with barycentric coordinates ``(a, b, steps - a - b) / steps``."""
+    hgt, wid = img.shape
+    c = steps - a - b
+    u = (a * texcoords[f, 0, 0] + b * texcoords[f, 1, 0] + c * texcoords[f, 2, 0]) / steps
+    v = (a * texcoords[f, 0, 1] + b * texcoords[f, 1, 1] + c * texcoords[f, 2, 1]) / steps
+    col = min(int((u % 1.0) * wid), wid - 1)
+    row = min(int((1.0 - v % 1.0) * hgt), hgt - 1)
+    return img[row, col]
+
+
+@leaf
+def texel_histogram(texcoords, faces, img, weights, steps):
+    """Weighted histogram of the grey levels under faces, sampled on a triangular lattice.
+
+    Each face is sampled at the ``(steps + 1)(steps + 2) / 2`` points whose barycentric
+    coordinates are multiples of ``1 / steps`` (its corners among them); every sample adds
+    its face's weight divided by the number of samples. Serial, so the sums are the same
+    bits for any thread count.
 
     Parameters
     ----------
     texcoords : (m, 3, 2) float64
         Texture coordinates of every face's corners, OBJ convention (v up).
     faces : (k,) int64
-        The faces to measure.
+        The faces to sample.
     img : (h, w) uint8
         Grey levels, row 0 at the top.
+    weights : (k,) float64
+        Weight of each of ``faces`` (its area).
+    steps : int
+        Lattice steps along a face's edge, at least 1.
+
+    Returns
+    -------
+    (256,) float64
+    """
+    hist = np.zeros(256)
+    per = (steps + 1) * (steps + 2) // 2
+    for i in range(faces.shape[0]):
+        w = weights[i] / per
+        for a in range(steps + 1):
+            for b in range(steps + 1 - a):
+                hist[_lattice_texel(texcoords, faces[i], img, a, b, steps)] += w
+    return hist
+
+
+@parallel
+def texel_far_share(texcoords, faces, img, level, contrast, steps):
+    """Share of each face's lattice samples (as in :func:`texel_histogram`) whose grey level
+    differs from ``level`` by more than ``contrast``.
+
+    Parameters
+    ----------
+    texcoords : (m, 3, 2) float64
+    faces : (k,) int64
+    img : (h, w) uint8
+    level, contrast : int
+        Grey levels, 0-255.
+    steps : int
+        Lattice steps along a face's edge, at least 1.
 
     Returns
     -------
     (k,) float64
-        Exact for 8-bit levels: sums of at most four of them and their squared deviations
-        (multiples of 1/16) are exact in any order, so this equals NumPy's ``std``.
+        In [0, 1].
     """
     k = faces.shape[0]
-    hgt, wid = img.shape
+    per = (steps + 1) * (steps + 2) // 2
     out = np.empty(k)
-    vals = np.empty(4)
-    for i in range(k):
-        f = faces[i]
-        for c in range(4):
-            if c < 3:
-                u = texcoords[f, c, 0]
-                v = texcoords[f, c, 1]
-            else:
-                u = (texcoords[f, 0, 0] + texcoords[f, 1, 0] + texcoords[f, 2, 0]) / 3.0
-                v = (texcoords[f, 0, 1] + texcoords[f, 1, 1] + texcoords[f, 2, 1]) / 3.0
-            col = min(int((u % 1.0) * wid), wid - 1)
-            row = min(int((1.0 - v % 1.0) * hgt), hgt - 1)
-            vals[c] = img[row, col]
-        mean = (vals[0] + vals[1] + vals[2] + vals[3]) / 4.0
-        ss = 0.0
-        for c in range(4):
-            ss += (vals[c] - mean) * (vals[c] - mean)
-        out[i] = np.sqrt(ss / 4.0)
+    for i in prange(k):
+        far = 0
+        for a in range(steps + 1):
+            for b in range(steps + 1 - a):
+                if abs(np.int64(_lattice_texel(texcoords, faces[i], img, a, b, steps)) - level) > contrast:
+                    far += 1
+        out[i] = far / per
     return out
 
 
