@@ -162,14 +162,20 @@ def test_no_face_is_lost_and_the_mesh_becomes_a_disk():
     assert len(fm.vertices) == len(mesh.vertices) + res.seam_vertices + res.cut_vertices
     assert _euler(fm.faces) == 1
     assert len(_boundary_loops(fm)) == 1
-    # the two copies of a seam vertex are one turn apart
+    # the two copies of a seam vertex are one turn apart: on the cone's development (a
+    # sector of angle 2 pi sin(half angle)), at the same slant distance from the apex, the
+    # chord between the sector's two sides
     v, counts = np.unique(res.vertex_index[res.vertex_index >= 0], return_counts=True)
     twins = v[counts == 2]
-    assert len(twins) == res.seam_vertices - res.cut_vertices
-    u = res.flat.uv[:, 0]
-    for t in twins[:5]:
-        a, b = np.flatnonzero(res.vertex_index == t)
-        assert abs(abs(u[a] - u[b]) - 2 * np.pi * res.proxy.params["reference_radius"]) < 0.3 * abs(u[a] - u[b])
+    assert len(twins) == res.seam_vertices - res.cut_vertices and res.proxy.kind == "cone"
+    half = np.radians(res.proxy.params["half_angle_deg"])
+    x = mesh.vertices[twins] - res.axis.point
+    height = x @ res.axis.direction
+    radius = np.linalg.norm(x - height[:, None] * res.axis.direction, axis=1)
+    slant = (height - res.proxy.params["apex_height"]) * np.cos(half) + radius * np.sin(half)
+    copies = np.array([np.flatnonzero(res.vertex_index == t) for t in twins])
+    apart = np.linalg.norm(res.flat.uv[copies[:, 0]] - res.flat.uv[copies[:, 1]], axis=1)
+    np.testing.assert_allclose(apart, 2 * slant * np.sin(np.pi * np.sin(half)), rtol=1e-12)
 
 
 def test_upright_and_not_mirrored():
@@ -468,6 +474,23 @@ def test_the_least_painted_window_moves_with_the_angles_origin():
     for shift in (0.3, 2.9, 5.5):
         moved = _least_window((theta + shift) % (2 * np.pi), noisy)
         assert abs((moved - angle - shift + np.pi) % (2 * np.pi) - np.pi) < 1e-9
+
+
+@pytest.mark.parametrize("vertices_deg, angle_deg, want_deg", [
+    ([0.0, 10.0, 20.0], 10.2, 10.7),  # near a vertex: to the window's end, the farthest from it
+    ([9.9, 10.1, 10.3, 13.0], 10.2, 10.7),  # the wide gap beyond the close vertices
+    ([359.8, 0.1, 5.0], 0.0, 0.5),  # across 0
+    ([100.0], 0.0, 359.5),  # no vertex near: anywhere in the window, room on both sides
+])
+def test_the_seam_keeps_away_from_vertices_within_its_window(vertices_deg, angle_deg, want_deg):
+    """A seam through a vertex puts it on the cut or not by the last bits of its angle (a
+    pose's rounding): the seam moves, by at most SEAM_SNAP_DEG, to where its nearest vertex
+    angle is farthest."""
+    from potflat.rollout.seam import SEAM_SNAP_DEG, _snap_to_gap
+
+    assert SEAM_SNAP_DEG == 0.5
+    got = _snap_to_gap(np.radians(vertices_deg), np.radians(angle_deg), np.radians(SEAM_SNAP_DEG))
+    assert np.degrees(got) == pytest.approx(want_deg, abs=1e-9)
 
 
 def test_the_seam_goes_between_black_figures_not_through_one(tmp_path):

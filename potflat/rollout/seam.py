@@ -24,9 +24,9 @@ SEAM_BINS = 360
 #: Width (degrees) of the window, centred on a face's angle, over which the seam's cost is
 #: summed.
 SEAM_WINDOW_DEG = 5.0
-#: The seam goes to the middle of the widest gap between face-centroid angles within this
-#: many degrees of the window chosen.
-SEAM_SNAP_DEG = 1.0
+#: The seam goes to the angle within this many degrees of the window chosen that is farthest
+#: from every vertex's angle.
+SEAM_SNAP_DEG = 0.5
 
 
 #: Most lattice steps along a face's edge at which the seam's cost samples the texture (15
@@ -127,7 +127,7 @@ def _least_window(theta: np.ndarray, weight: np.ndarray) -> float:
 
 
 def choose_seam(mesh: Mesh, faces: np.ndarray, theta_c: np.ndarray, area: np.ndarray,
-                covered: np.ndarray | None = None) -> tuple[float, str]:
+                covered: np.ndarray | None = None, theta_v: np.ndarray | None = None) -> tuple[float, str]:
     """Seam angle (radians from the reference) where the region is least painted.
 
     Each face costs its area times (its painted share + 10 % of the mean share) when a
@@ -137,7 +137,8 @@ def choose_seam(mesh: Mesh, faces: np.ndarray, theta_c: np.ndarray, area: np.nda
     outline, and a painted ground (black glaze) as little as a plain one. The costs are
     summed over a window of :data:`SEAM_WINDOW_DEG` about each face's angle, and the seam
     goes to the middle of the widest run of faces with the least (:func:`_least_window`),
-    then to the widest gap between face angles near it (:func:`_snap_to_gap`). When the
+    then as far from every vertex's angle as it can be within :data:`SEAM_SNAP_DEG`
+    (:func:`_snap_to_gap`), so that no vertex is put on the cut by rounding. When the
     region has an empty sector (no face spans it: a sherd, a scan with a gap from foot to
     rim) the seam goes to the middle of the widest one, and nothing needs to be cut.
 
@@ -152,6 +153,9 @@ def choose_seam(mesh: Mesh, faces: np.ndarray, theta_c: np.ndarray, area: np.nda
         Their areas.
     covered : (SEAM_BINS,) bool, optional
         Angle bins (from the reference) covered by the faces' angular spans.
+    theta_v : (v,) float64, optional
+        Angles of the region's vertices (radians from the reference); without them, the
+        faces' centroids stand in.
 
     Returns
     -------
@@ -164,20 +168,23 @@ def choose_seam(mesh: Mesh, faces: np.ndarray, theta_c: np.ndarray, area: np.nda
         return gap, "gap"
     painted, method = _painted_share(mesh, faces, area)
     weight = area if painted is None else area * (painted + 0.1 * max(float(np.average(painted, weights=area)), 1e-12))
-    return _snap_to_gap(theta_c, _least_window(theta_c, weight), np.radians(SEAM_SNAP_DEG)), method
+    return _snap_to_gap(theta_c if theta_v is None else theta_v, _least_window(theta_c, weight),
+                        np.radians(SEAM_SNAP_DEG)), method
 
 
-def _snap_to_gap(theta_c: np.ndarray, angle: float, half_width: float) -> float:
-    """Move ``angle`` to the middle of the widest gap between face-centroid angles within
-    ``half_width`` of it, so the cut passes between the faces' middles rather than through
-    one."""
-    offset = (theta_c - angle + np.pi) % TWO_PI - np.pi
-    near = np.sort(offset[np.abs(offset) <= half_width])
-    if len(near) < 2:
+def _snap_to_gap(theta: np.ndarray, angle: float, half_width: float) -> float:
+    """The angle within ``half_width`` of ``angle`` farthest from all of ``theta`` (radians,
+    vertex angles): in the gap between two of them that leaves the most room on both sides."""
+    offset = np.sort((theta - angle + np.pi) % TWO_PI - np.pi)
+    if not len(offset):
         return angle
-    gaps = np.diff(near)
-    i = int(np.argmax(gaps))
-    return float((angle + 0.5 * (near[i] + near[i + 1])) % TWO_PI)
+    i, j = np.searchsorted(offset, [-half_width, half_width])
+    near = np.concatenate([offset[i - 1:j + 1] if i > 0 else np.concatenate([offset[-1:] - TWO_PI, offset[:j + 1]]),
+                           offset[:1] + TWO_PI if j >= len(offset) else []])
+    lo, hi = near[:-1], near[1:]
+    at = np.clip(0.5 * (lo + hi), -half_width, half_width)
+    room = np.minimum(at - lo, hi - at)
+    return float((angle + at[int(np.argmax(room))]) % TWO_PI)
 
 
 def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
@@ -247,7 +254,8 @@ def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, n
 
 def _auto_seam(mesh: Mesh, sel: np.ndarray, theta_c, theta_v, area) -> tuple[float, str]:
     corners = _corner_angles(theta_v, mesh.faces, sel, theta_c[sel])
-    return choose_seam(mesh, sel, theta_c[sel], area[sel], _covered(theta_c[sel], corners))
+    return choose_seam(mesh, sel, theta_c[sel], area[sel], _covered(theta_c[sel], corners),
+                       theta_v[np.unique(mesh.faces[sel])])
 
 
 def _covered(theta_c: np.ndarray, corner_theta: np.ndarray) -> np.ndarray:
