@@ -453,6 +453,21 @@ def test_texel_histogram_and_far_share_match_a_slow_reference(shape, steps):
     assert shape == (1, 1) or 0.2 < texel_far_share(tc, faces, img, 128, 30, steps).mean() < 0.9
 
 
+@pytest.mark.parametrize("half, buckets", [(np.radians(2.5), 1024), (1.2, 8), (1e-4, 64)])
+def test_angular_window_sums_match_a_slow_reference(half, buckets):
+    """The seam's window sums: every angle within half of a centre, circularly (across 0
+    and 2 pi), whatever the buckets that speed it up."""
+    from potflat.mesh._kernels.geometry import angular_window_sums
+
+    rng = np.random.default_rng(buckets)
+    theta = rng.uniform(0.0, 2 * np.pi, 2000)
+    theta[:20] = [0.0, 2 * np.pi - 1e-12] * 10
+    weight = rng.uniform(0.0, 1.0, 2000)
+    centres = np.concatenate([rng.uniform(0.0, 2 * np.pi, 300), theta[:40], [0.0, np.pi]])
+    want = [weight[np.abs((theta - c + np.pi) % (2 * np.pi) - np.pi) <= half].sum() for c in centres]
+    np.testing.assert_allclose(angular_window_sums(theta, weight, centres, half, buckets), want, rtol=1e-12, atol=1e-12)
+
+
 def test_the_least_painted_window_moves_with_the_angles_origin():
     """The seam's window is chosen at the faces' own angles: counting the angles from another
     origin (another pose) moves the choice by exactly that much, and a plain sector wider

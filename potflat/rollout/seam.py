@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from potflat.io.images import read_texture_grey
-from potflat.mesh._kernels.geometry import corner_angles, texel_far_share, texel_histogram
+from potflat.mesh._kernels.geometry import angular_window_sums, corner_angles, texel_far_share, texel_histogram
 from potflat.mesh._kernels.topology import corner_joins, half_edge_keys, union_find
 from potflat.mesh.split import plane_levels, split_faces
 from potflat.mesh.tolerances import ROUNDING
@@ -24,6 +24,9 @@ SEAM_BINS = 360
 #: Width (degrees) of the window, centred on a face's angle, over which the seam's cost is
 #: summed.
 SEAM_WINDOW_DEG = 5.0
+#: Windows the seam's cost is summed over: one centred on each face, or on this many faces
+#: evenly spread through a larger region's face list.
+SEAM_WINDOWS = 200_000
 #: The seam goes to the angle within this many degrees of the window chosen that is farthest
 #: from every vertex's angle.
 SEAM_SNAP_DEG = 0.5
@@ -99,8 +102,9 @@ def _least_window(theta: np.ndarray, weight: np.ndarray) -> float:
     """Angle (radians) in the middle of the widest run of faces whose window of
     :data:`SEAM_WINDOW_DEG`, centred on the face's angle, holds the least weight.
 
-    The windows are centred on the faces themselves, so the choice depends on the surface
-    alone, not on the direction the angles are counted from (the scan's pose).
+    The windows are centred on the faces themselves (on at most :data:`SEAM_WINDOWS` of
+    them, evenly spread through the face list), so the choice depends on the surface alone,
+    not on the direction the angles are counted from (the scan's pose).
 
     Parameters
     ----------
@@ -109,18 +113,18 @@ def _least_window(theta: np.ndarray, weight: np.ndarray) -> float:
     weight : (k,) float64
         Their costs.
     """
-    order = np.argsort(theta, kind="stable")
-    th, w = theta[order], weight[order]
-    half = np.radians(SEAM_WINDOW_DEG) / 2.0
-    around = np.concatenate([th - TWO_PI, th, th + TWO_PI])
-    total = np.concatenate([[0.0], np.cumsum(np.tile(w, 3))])
-    cost = total[np.searchsorted(around, th + half, "right")] - total[np.searchsorted(around, th - half, "left")]
+    theta = np.ascontiguousarray(theta, dtype=np.float64)
+    stride = max(-(-len(theta) // SEAM_WINDOWS), 1)
+    centres = np.sort(theta[::stride])
+    buckets = int(2 ** np.ceil(np.log2(max(len(theta) / 32.0, 1024.0))))
+    cost = angular_window_sums(theta, np.ascontiguousarray(weight, dtype=np.float64), centres,
+                               float(np.radians(SEAM_WINDOW_DEG) / 2.0), buckets)
     low = cost <= cost.min() + ROUNDING * max(cost.max(), 1e-300)
     if low.all():
-        return float(th[0])
-    ring = (np.arange(len(th)) + int(np.argmin(low))) % len(th)  # from a face above the least: no run wraps
+        return float(centres[0])
+    ring = (np.arange(len(centres)) + int(np.argmin(low))) % len(centres)  # from a window above the least: no run wraps
     edges = np.diff(np.concatenate([[0], low[ring].astype(np.int8), [0]]))
-    first, last = th[ring[edges[:-1] == 1]], th[ring[np.flatnonzero(edges == -1) - 1]]
+    first, last = centres[ring[edges[:-1] == 1]], centres[ring[np.flatnonzero(edges == -1) - 1]]
     width = (last - first) % TWO_PI
     i = int(np.argmax(width))
     return float((first[i] + 0.5 * width[i]) % TWO_PI)
@@ -175,12 +179,13 @@ def choose_seam(mesh: Mesh, faces: np.ndarray, theta_c: np.ndarray, area: np.nda
 def _snap_to_gap(theta: np.ndarray, angle: float, half_width: float) -> float:
     """The angle within ``half_width`` of ``angle`` farthest from all of ``theta`` (radians,
     vertex angles): in the gap between two of them that leaves the most room on both sides."""
-    offset = np.sort((theta - angle + np.pi) % TWO_PI - np.pi)
+    offset = (np.asarray(theta, dtype=np.float64) - angle + np.pi) % TWO_PI - np.pi
     if not len(offset):
         return angle
-    i, j = np.searchsorted(offset, [-half_width, half_width])
-    near = np.concatenate([offset[i - 1:j + 1] if i > 0 else np.concatenate([offset[-1:] - TWO_PI, offset[:j + 1]]),
-                           offset[:1] + TWO_PI if j >= len(offset) else []])
+    below, above = offset[offset < -half_width], offset[offset > half_width]
+    near = np.sort(np.concatenate([offset[np.abs(offset) <= half_width],
+                                   [below.max() if len(below) else offset.max() - TWO_PI],
+                                   [above.min() if len(above) else offset.min() + TWO_PI]]))
     lo, hi = near[:-1], near[1:]
     at = np.clip(0.5 * (lo + hi), -half_width, half_width)
     room = np.minimum(at - lo, hi - at)
@@ -254,8 +259,9 @@ def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, n
 
 def _auto_seam(mesh: Mesh, sel: np.ndarray, theta_c, theta_v, area) -> tuple[float, str]:
     corners = _corner_angles(theta_v, mesh.faces, sel, theta_c[sel])
-    return choose_seam(mesh, sel, theta_c[sel], area[sel], _covered(theta_c[sel], corners),
-                       theta_v[np.unique(mesh.faces[sel])])
+    used = np.zeros(len(theta_v), bool)
+    used[mesh.faces[sel]] = True
+    return choose_seam(mesh, sel, theta_c[sel], area[sel], _covered(theta_c[sel], corners), theta_v[used])
 
 
 def _covered(theta_c: np.ndarray, corner_theta: np.ndarray) -> np.ndarray:

@@ -470,3 +470,95 @@ def signed_areas_2d(x, faces, out):
         a2 = np.uint32(faces[t, 2])
         out[t] = 0.5 * ((x[a1, 0] - x[a0, 0]) * (x[a2, 1] - x[a0, 1])
                         - (x[a1, 1] - x[a0, 1]) * (x[a2, 0] - x[a0, 0]))
+
+
+@leaf
+def _circular_range_sum(prefix, first, count):
+    """Sum of ``count`` consecutive buckets from ``first`` (any integer, taken modulo the
+    number of buckets), from their prefix sums."""
+    buckets = prefix.shape[0] - 1
+    a = first % buckets
+    if a + count <= buckets:
+        return prefix[a + count] - prefix[a]
+    return (prefix[buckets] - prefix[a]) + prefix[a + count - buckets]
+
+
+@leaf
+def _checked_sum(theta, weight, start, centre, half, first, last):
+    """Sum of the weights of the angles (sorted by bucket) in buckets ``first`` .. ``last``
+    (taken modulo the number of buckets) that lie within ``half`` of ``centre``, circularly."""
+    two_pi = 2.0 * np.pi
+    buckets = start.shape[0] - 1
+    total = 0.0
+    for b in range(first, last + 1):
+        bb = b % buckets
+        for k in range(start[bb], start[bb + 1]):
+            d = theta[k] - centre
+            if d > np.pi:
+                d -= two_pi
+            elif d < -np.pi:
+                d += two_pi
+            if abs(d) <= half:
+                total += weight[k]
+    return total
+
+
+@parallel
+def angular_window_sums(theta, weight, centres, half, buckets):
+    """Sum of the weights of the angles within ``half`` of each centre, circularly.
+
+    The angles are sorted into ``buckets`` equal buckets (a counting sort); a window adds
+    the buckets wholly inside it from their prefix sums and checks the angles of the two
+    buckets at either end one by one, so every angle counts exactly when its circular
+    distance from the centre (``theta - centre`` brought into ``[-pi, pi]``) is at most
+    ``half``.
+
+    Parameters
+    ----------
+    theta : (n,) float64
+        Angles, radians in ``[0, 2 pi)``.
+    weight : (n,) float64
+    centres : (m,) float64
+        Window centres, radians in ``[0, 2 pi)``.
+    half : float
+        Half the window's width, radians, less than a quarter turn.
+    buckets : int
+        At least 8.
+
+    Returns
+    -------
+    (m,) float64
+    """
+    two_pi = 2.0 * np.pi
+    n = theta.shape[0]
+    width = two_pi / buckets
+    bucket = np.empty(n, np.int64)
+    start = np.zeros(buckets + 1, np.int64)
+    prefix = np.zeros(buckets + 1)
+    for i in range(n):
+        b = min(int(theta[i] / width), buckets - 1)
+        bucket[i] = b
+        start[b + 1] += 1
+        prefix[b + 1] += weight[i]
+    for b in range(buckets):
+        start[b + 1] += start[b]
+        prefix[b + 1] += prefix[b]
+    sorted_theta, sorted_weight = np.empty(n), np.empty(n)
+    fill = start[:-1].copy()
+    for i in range(n):
+        sorted_theta[fill[bucket[i]]] = theta[i]
+        sorted_weight[fill[bucket[i]]] = weight[i]
+        fill[bucket[i]] += 1
+    m = centres.shape[0]
+    out = np.empty(m)
+    for j in prange(m):
+        c = centres[j]
+        first = int(np.floor((c - half) / width)) - 1
+        last = int(np.floor((c + half) / width)) + 1
+        if last - first >= 4:  # buckets first + 2 .. last - 2 lie wholly inside
+            out[j] = (_circular_range_sum(prefix, first + 2, last - first - 3)
+                      + _checked_sum(sorted_theta, sorted_weight, start, c, half, first, first + 1)
+                      + _checked_sum(sorted_theta, sorted_weight, start, c, half, last - 1, last))
+        else:
+            out[j] = _checked_sum(sorted_theta, sorted_weight, start, c, half, first, last)
+    return out
