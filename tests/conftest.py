@@ -74,7 +74,8 @@ def pytest_sessionstart(session):
     compile the rollout's and the bake's."""
     from potflat_cli import _warmup
 
-    session.config.stash[WARMUP] = _warmup.start()
+    if not hasattr(session.config, "workerinput"):  # once per run: not in each pytest-xdist worker
+        session.config.stash[WARMUP] = _warmup.start()
 
 
 def pytest_sessionfinish(session):

@@ -61,3 +61,24 @@ def test_without_pytests_cache_the_kernel_cache_is_removed_at_the_end():
     assert folder.is_dir() and len(cleanups) == 1
     cleanups[0]()
     assert not folder.exists()
+
+
+@pytest.mark.parametrize("worker", [False, True])
+def test_the_relax_kernels_are_warmed_up_once_per_run_not_in_each_worker(monkeypatch, worker):
+    from potflat_cli import _warmup
+
+    started = []
+    monkeypatch.setattr(_warmup, "start", lambda: started.append(1) or "child")
+
+    class Config:
+        stash = pytest.Stash()
+
+    if worker:  # how pytest-xdist marks a worker's config
+        Config.workerinput = {"workerid": "gw0"}
+
+    class Session:
+        config = Config()
+
+    conftest.pytest_sessionstart(Session())
+    assert len(started) == (0 if worker else 1)
+    assert Session.config.stash.get(conftest.WARMUP, None) == (None if worker else "child")
