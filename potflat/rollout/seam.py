@@ -58,12 +58,12 @@ def _painted_share(mesh: Mesh, faces: np.ndarray, area: np.ndarray) -> tuple[np.
         if img is not None and img.size:
             tc = np.ascontiguousarray(mesh.texcoords, dtype=np.float64)
             idx = np.ascontiguousarray(faces, dtype=np.int64)
-            weight = np.ascontiguousarray(area, dtype=np.float64)
-            if mesh.untextured_faces is not None:  # no colour, no painting to keep whole
-                weight = np.where(mesh.untextured_faces[idx], 0.0, weight)
             img = np.ascontiguousarray(img)
             stride = max(-(-len(idx) // INK_LEVEL_FACES), 1)
-            some, some_weight = np.ascontiguousarray(idx[::stride]), np.ascontiguousarray(weight[::stride])
+            some = np.ascontiguousarray(idx[::stride])
+            some_weight = np.array(area[::stride], dtype=np.float64)
+            if mesh.untextured_faces is not None:  # no colour, no painting to keep whole
+                some_weight[mesh.untextured_faces[some]] = 0.0
             edge_texels = np.hypot(*((tc[some, 1] - tc[some, 0]) * (img.shape[1], img.shape[0])).T)
             steps = int(np.clip(np.ceil(np.median(edge_texels)), 1, INK_STEPS)) if len(some) else 1
             level = int(np.argmax(texel_histogram(tc, some, img, some_weight, steps)))
