@@ -432,7 +432,8 @@ def _lattice_texels(tc, faces, img, steps):
 @pytest.mark.parametrize("shape,steps", [((64, 48), 4), ((7, 5), 1), ((1, 1), 3)])
 def test_texel_histogram_and_far_share_match_a_slow_reference(shape, steps):
     """The seam's samples per face (lattice points, coordinates wrapped, also outside [0, 1]):
-    the weighted histogram and the share far from a level, against a Python loop."""
+    the weighted histogram of each group of faces and the share far from each face's level,
+    against a Python loop."""
     from potflat.mesh._kernels.geometry import texel_far_share, texel_histogram
 
     rng = np.random.default_rng(len(shape) + shape[0])
@@ -441,16 +442,37 @@ def test_texel_histogram_and_far_share_match_a_slow_reference(shape, steps):
     tc[:30] = np.round(tc[:30])  # corners exactly on a texel border, v = 0 and 1 included
     faces = rng.permutation(300)[:200]
     weights = rng.uniform(0.5, 2.0, size=200)
+    group = rng.integers(0, 3, size=200)
     want = _lattice_texels(tc, faces, img, steps)
-    hist = np.zeros(256)
+    hist = np.zeros((4, 256))  # (the last group has no face)
     for i in range(len(faces)):
         for g in want[i]:
-            hist[g] += weights[i] / want.shape[1]
-    np.testing.assert_allclose(texel_histogram(tc, faces, img, weights, steps), hist, rtol=1e-12)
+            hist[group[i], g] += weights[i] / want.shape[1]
+    np.testing.assert_allclose(texel_histogram(tc, faces, img, weights, steps, group, 4), hist, rtol=1e-12)
     for level, contrast in ((128, 30), (0, 0), (255, 254)):
-        share = texel_far_share(tc, faces, img, level, contrast, steps)
+        share = texel_far_share(tc, faces, img, np.full(len(faces), level), contrast, steps)
         assert share.tobytes() == (np.abs(want - level) > contrast).mean(axis=1).tobytes()
-    assert shape == (1, 1) or 0.2 < texel_far_share(tc, faces, img, 128, 30, steps).mean() < 0.9
+    levels = rng.integers(0, 256, size=len(faces))
+    share = texel_far_share(tc, faces, img, levels, 30, steps)
+    assert share.tobytes() == (np.abs(want - levels[:, None]) > 30).mean(axis=1).tobytes()
+    assert shape == (1, 1) or 0.2 < texel_far_share(tc, faces, img, np.full(len(faces), 128), 30, steps).mean() < 0.9
+
+
+def test_the_ground_is_the_grey_with_the_most_area_near_it_in_each_band():
+    """A light ground spread over many levels by the shading outweighs a dark paint of less
+    area on a few; a band without samples takes the whole region's ground."""
+    from potflat.rollout.seam import INK_CONTRAST, _ground_levels, _height_bands
+
+    hist = np.zeros((3, 256))
+    hist[0, 150:190] = 1.0  # 40 area over 40 levels ...
+    hist[0, 20:24] = 7.5  # ... against 30 on 4: the peak is the paint's, the ground the clay's
+    hist[1, 20:24] = 7.5  # a band of glaze alone
+    levels = _ground_levels(hist)
+    assert 150 <= levels[0] < 190 and abs(levels[1] - 21.5) <= INK_CONTRAST
+    assert levels[2] == _ground_levels(hist[:2].sum(axis=0, keepdims=True))[0]  # empty: the whole region's
+    bands = _height_bands(np.array([5.0, 5.5, 7.0, 9.0]))
+    assert bands[0] == 0 and bands[-1] == 31 and np.all(np.diff(bands) >= 0)
+    assert not _height_bands(np.full(4, 3.0)).any()  # no height: one band
 
 
 @pytest.mark.parametrize("half, buckets", [(np.radians(2.5), 1024), (1.2, 8), (1e-4, 64)])
@@ -531,6 +553,29 @@ def test_the_seam_goes_between_black_figures_not_through_one(tmp_path):
     assert res.seam_method == "texture"
     assert not any(lo - 2 < angle < lo + 62 for lo in (20, 200)), angle
     assert any(lo + 2 < angle < hi - 2 for lo, hi in ((80, 110), (126, 160), (176, 200), (260, 290), (306, 330))), angle
+
+
+def test_the_seam_goes_between_black_figures_on_a_belt_of_a_glazed_vessel(tmp_path):
+    """Black figures on a terracotta belt, black glaze above and below it (a black-figure
+    frieze): the figures are as dark as the glaze that covers most of the vessel, yet they
+    are painting on the belt's ground, so the seam goes through the terracotta between two
+    figures, not through one."""
+    import cv2
+
+    mesh, Rot, shift, local = cylinder(seed=9, n_theta=180)
+    th = np.arctan2(local[:, 1], local[:, 0]) % (2 * np.pi)
+    tc = np.stack([th / (2 * np.pi), local[:, 2] / 80.0], axis=1)[mesh.faces]
+    tc[..., 0] = np.where(tc[..., 0].max(axis=1, keepdims=True) - tc[..., 0] > 0.5, tc[..., 0] + 1, tc[..., 0]) % 1.0
+    img = np.full((256, 1440, 3), 25, dtype=np.uint8)  # the glaze, 4 px per degree
+    img[96:160] = 120  # the belt's terracotta, 30 to 50 mm up
+    for k, lo in enumerate(range(0, 360, 45)):  # figures of 25 degrees, black and cream in turn
+        img[104:152, 4 * lo:4 * (lo + 25)] = 25 if k % 2 == 0 else 215
+    tex = tmp_path / "belt.png"
+    cv2.imwrite(str(tex), img)
+    res = rollout(mesh.replace(texcoords=tc, texture_path=tex))
+    angle = _local_angle(res, Rot, res.seam_angle)
+    assert res.seam_method == "texture"
+    assert any(lo + 25 + 2 < angle < lo + 45 - 2 for lo in range(0, 360, 45)), angle
 
 
 @pytest.mark.parametrize("kwargs,match", [

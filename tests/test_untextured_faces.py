@@ -226,9 +226,9 @@ def test_the_seam_choice_reads_no_colour_on_untextured_faces(tmp_path):
     faces = np.arange(2)
     plain = _square(texcoords=tc, texture_path=tex)
     area = np.full(2, 0.5)
-    share, source = _painted_share(plain, faces, area)
+    share, source = _painted_share(plain, faces, area, np.zeros(2))
     assert source == "texture" and (share > 0).all()
-    flagged, _ = _painted_share(plain.replace(untextured_faces=[False, True]), faces, area)
+    flagged, _ = _painted_share(plain.replace(untextured_faces=[False, True]), faces, area, np.zeros(2))
     assert flagged[0] == share[0] and flagged[1] == 0.0
 
 

@@ -36,23 +36,48 @@ SEAM_SNAP_DEG = 0.5
 #: points per face, corners included); fewer on faces whose median edge spans fewer texels,
 #: down to the corners alone on faces smaller than a texel.
 INK_STEPS = 4
-#: Grey levels (of 255) by which a sample must differ from the surface's dominant grey to
-#: count as painted: blue, black or red paint on a light or red ground differs by 60 and more,
-#: the ground's own mottling and the scan's shading of it mostly by less.
+#: Grey levels (of 255) by which a sample must differ from its ground's grey to count as
+#: painted: blue, black or red paint on a light or red ground differs by 60 and more, the
+#: ground's own mottling and the scan's shading of it mostly by less.
 INK_CONTRAST = 30
-#: The dominant grey and the lattice's spacing are taken from at most this many of a region's
+#: The ground grey and the lattice's spacing are taken from at most this many of a region's
 #: faces, evenly spread through its face list.
 INK_LEVEL_FACES = 200_000
+#: Bands of equal height (of the region's) in each of which the ground grey is found on its
+#: own: decoration runs in horizontal zones, each on its own ground, so black figures on a
+#: terracotta belt of a black-glazed vessel are painting there, not the glaze.
+GROUND_BANDS = 32
 
 _LUMA = np.array([0.299, 0.587, 0.114])
 
 
-def _painted_share(mesh: Mesh, faces: np.ndarray, area: np.ndarray) -> tuple[np.ndarray | None, str]:
-    """Per-face share of samples that are painted: whose grey level differs from the dominant
-    one (the most frequent, weighted by area: the ground, whether it is light clay, a white
-    slip or a black glaze) by more than :data:`INK_CONTRAST`; and its source. Texture:
+def _painted_share(mesh: Mesh, faces: np.ndarray, area: np.ndarray,
+                   height: np.ndarray) -> tuple[np.ndarray | None, str]:
+    """Per-face share of samples that are painted: whose grey level differs from their
+    ground's by more than :data:`INK_CONTRAST`; and its source. The ground is found in each
+    of :data:`GROUND_BANDS` bands of the region's height on its own (:func:`_ground_levels`):
+    light clay, a white slip, a black glaze, or a terracotta belt on a glazed body. Texture:
     samples on a lattice of about a texel's spacing (at most :data:`INK_STEPS` steps along an
-    edge); vertex colours: the face's corners. Faces without texture count as unpainted."""
+    edge); vertex colours: the face's corners. Faces without texture count as unpainted.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    faces : (k,) int64
+        The region's faces.
+    area : (k,) float64
+        Their areas.
+    height : (k,) float64
+        Their centroids' heights along the axis.
+
+    Returns
+    -------
+    share : (k,) float64 or None
+        In [0, 1]; None without texture or vertex colours.
+    source : str
+        ``texture``, ``colours`` or ``geometry``.
+    """
+    band = _height_bands(height)
     if mesh.texcoords is not None and mesh.texture_path is not None:
         img = read_texture_grey(mesh.texture_path)
         if img is not None and img.size:
@@ -66,17 +91,41 @@ def _painted_share(mesh: Mesh, faces: np.ndarray, area: np.ndarray) -> tuple[np.
                 some_weight[mesh.untextured_faces[some]] = 0.0
             edge_texels = np.hypot(*((tc[some, 1] - tc[some, 0]) * (img.shape[1], img.shape[0])).T)
             steps = int(np.clip(np.ceil(np.median(edge_texels)), 1, INK_STEPS)) if len(some) else 1
-            level = int(np.argmax(texel_histogram(tc, some, img, some_weight, steps)))
-            share = texel_far_share(tc, idx, img, level, INK_CONTRAST, steps)
+            hist = texel_histogram(tc, some, img, some_weight, steps, np.ascontiguousarray(band[::stride]),
+                                   GROUND_BANDS)
+            share = texel_far_share(tc, idx, img, _ground_levels(hist)[band], INK_CONTRAST, steps)
             if mesh.untextured_faces is not None:
                 share[mesh.untextured_faces[idx]] = 0.0
             return share, "texture"
     if mesh.vertex_colors is not None:
         grey = np.clip(np.rint(mesh.vertex_colors[:, :3].astype(np.float64) @ _LUMA), 0, 255).astype(np.int64)
         corners = grey[mesh.faces[faces]]
-        level = int(np.argmax(np.bincount(corners.ravel(), np.repeat(area / 3.0, 3), 256)))
-        return (np.abs(corners - level) > INK_CONTRAST).mean(axis=1), "colours"
+        hist = np.bincount((band[:, None] * 256 + corners).ravel(), np.repeat(area / 3.0, 3),
+                           GROUND_BANDS * 256).reshape(GROUND_BANDS, 256)
+        return (np.abs(corners - _ground_levels(hist)[band][:, None]) > INK_CONTRAST).mean(axis=1), "colours"
     return None, "geometry"
+
+
+def _height_bands(height: np.ndarray) -> np.ndarray:
+    """The band of :data:`GROUND_BANDS` equal bands of the heights' range each height
+    ((k,) float64) lies in, (k,) int64."""
+    height = np.asarray(height, dtype=np.float64)
+    span = float(np.ptp(height)) if len(height) else 0.0
+    if span <= 0.0:
+        return np.zeros(len(height), np.int64)
+    return np.clip(((height - height.min()) / span * GROUND_BANDS).astype(np.int64), 0, GROUND_BANDS - 1)
+
+
+def _ground_levels(hist: np.ndarray) -> np.ndarray:
+    """The ground grey of each band from its histogram of grey levels weighted by area
+    ((g, 256) float64): the level with the most weight within :data:`INK_CONTRAST` of it, so a
+    light ground that the scan's shading spreads over many levels outweighs a dark paint of
+    less area packed into a few. A band without samples takes the whole region's. (g,) int64."""
+    near = np.ones(2 * INK_CONTRAST + 1)
+    whole = int(np.argmax(np.convolve(hist.sum(axis=0), near, mode="same")))
+    levels = np.array([np.argmax(np.convolve(h, near, mode="same")) for h in hist], dtype=np.int64)
+    levels[hist.sum(axis=1) <= 0.0] = whole
+    return levels
 
 
 def _longest_min_run(cost: np.ndarray) -> int:
@@ -130,15 +179,16 @@ def _least_window(theta: np.ndarray, weight: np.ndarray) -> float:
     return float((first[i] + 0.5 * width[i]) % TWO_PI)
 
 
-def choose_seam(mesh: Mesh, faces: np.ndarray, theta_c: np.ndarray, area: np.ndarray,
+def choose_seam(mesh: Mesh, faces: np.ndarray, theta_c: np.ndarray, area: np.ndarray, height: np.ndarray,
                 covered: np.ndarray | None = None, theta_v: np.ndarray | None = None) -> tuple[float, str]:
     """Seam angle (radians from the reference) where the region is least painted.
 
     Each face costs its area times (its painted share + 10 % of the mean share) when a
     texture or vertex colours exist, its area otherwise. The painted share is the share of
-    its samples whose grey differs from the surface's dominant grey (the ground) by more
-    than :data:`INK_CONTRAST`, so a figure costs as much where it is filled as at its
-    outline, and a painted ground (black glaze) as little as a plain one. The costs are
+    its samples whose grey differs from the ground's by more than :data:`INK_CONTRAST`, the
+    ground being the dominant grey of the face's band of height (:func:`_painted_share`), so
+    a figure costs as much where it is filled as at its outline, and a painted ground (black
+    glaze) as little as a plain one. The costs are
     summed over a window of :data:`SEAM_WINDOW_DEG` about each face's angle, and the seam
     goes to the middle of the widest run of faces with the least (:func:`_least_window`),
     then as far from every vertex's angle as it can be within :data:`SEAM_SNAP_DEG`
@@ -155,6 +205,8 @@ def choose_seam(mesh: Mesh, faces: np.ndarray, theta_c: np.ndarray, area: np.nda
         Angles of their centroids, radians in ``[0, 2 pi)`` from the reference.
     area : (k,) float64
         Their areas.
+    height : (k,) float64
+        Their centroids' heights along the axis.
     covered : (SEAM_BINS,) bool, optional
         Angle bins (from the reference) covered by the faces' angular spans.
     theta_v : (v,) float64, optional
@@ -170,7 +222,7 @@ def choose_seam(mesh: Mesh, faces: np.ndarray, theta_c: np.ndarray, area: np.nda
     """
     if covered is not None and (gap := _gap_middle(covered)) is not None:
         return gap, "gap"
-    painted, method = _painted_share(mesh, faces, area)
+    painted, method = _painted_share(mesh, faces, area, height)
     weight = area if painted is None else area * (painted + 0.1 * max(float(np.average(painted, weights=area)), 1e-12))
     return _snap_to_gap(theta_c if theta_v is None else theta_v, _least_window(theta_c, weight),
                         np.radians(SEAM_SNAP_DEG)), method
@@ -257,11 +309,11 @@ def cut_open(faces: np.ndarray, corner_theta: np.ndarray) -> tuple[np.ndarray, n
     return new_faces, vertex_index, theta, int(seam), int(n_comp - base - seam)
 
 
-def _auto_seam(mesh: Mesh, sel: np.ndarray, theta_c, theta_v, area) -> tuple[float, str]:
+def _auto_seam(mesh: Mesh, sel: np.ndarray, theta_c, theta_v, area, h_c) -> tuple[float, str]:
     corners = _corner_angles(theta_v, mesh.faces, sel, theta_c[sel])
     used = np.zeros(len(theta_v), bool)
     used[mesh.faces[sel]] = True
-    return choose_seam(mesh, sel, theta_c[sel], area[sel], _covered(theta_c[sel], corners), theta_v[used])
+    return choose_seam(mesh, sel, theta_c[sel], area[sel], h_c[sel], _covered(theta_c[sel], corners), theta_v[used])
 
 
 def _covered(theta_c: np.ndarray, corner_theta: np.ndarray) -> np.ndarray:

@@ -405,9 +405,10 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
         floors += cuts
     else:  # (a projection is not cut: the faces whose centres lie in it)
         allowed = allowed & _in_band(axis, band, h_c)
-    landmark, landmark_notes = _find_landmark(mesh, axis, options, attachments, allowed, theta_c, theta_v, area)
+    landmark, landmark_notes = _find_landmark(mesh, axis, options, attachments, allowed, theta_c, theta_v, area,
+                                             h_c)
     trimmed = np.zeros(len(F), bool)
-    un = _unroll(mesh, axis, options, allowed, theta_c, theta_v, area, landmark=landmark, floors=floors)
+    un = _unroll(mesh, axis, options, allowed, theta_c, theta_v, area, h_c, landmark=landmark, floors=floors)
     # the cut's temporaries (the largest of the rollout) back to the system: the base and
     # the trimming come on top of the heap otherwise (at 3M vertices some 30 MB of the peak)
     release_free_memory()
@@ -436,7 +437,7 @@ def _rollout_steps(mesh: Mesh, options: RolloutOptions, face_mask: np.ndarray | 
             allowed[base.disc_faces] = allowed[base.hidden_faces] = False
             seam = (un.seam, un.seam_method)
             del un  # (peak memory: the unrolling it replaces is not held while it is made)
-            un = _unroll(mesh, axis, options, allowed, theta_c, theta_v, area,
+            un = _unroll(mesh, axis, options, allowed, theta_c, theta_v, area, h_c,
                          seam=seam, landmark=landmark, floors=floors)
         del region, first
         if un.table is None:
@@ -573,15 +574,16 @@ class _Unrolled:
 
 
 def _unroll(mesh: Mesh, axis: AxisFit, options: RolloutOptions, allowed: np.ndarray, theta_c,
-            theta_v, area, seam: tuple[float, str] | None = None, landmark=None, floors=()) -> _Unrolled:
+            theta_v, area, h_c, seam: tuple[float, str] | None = None, landmark=None, floors=()) -> _Unrolled:
     """Select the region within ``allowed`` (the band's faces already), cut it open and develop it on the proxy (with
     ``seam`` = (radians, method) from an earlier unrolling, or a seam chosen here; angles
-    measured from ``landmark``; ``theta_v``: the angle of every scan vertex; ``floors``: the
+    measured from ``landmark``; ``theta_v``: the angle of every scan vertex; ``h_c``: the height
+    of every face's centroid; ``floors``: the
     line between the walls and a base cut off, as :func:`potflat.rollout.seam.cut_region`
     takes them)."""
     V = mesh.vertices
     sub_f, corner_theta, origins, seam, seam_method, origin = _select(
-        mesh, axis, options, allowed, theta_c, theta_v, area, seam, landmark, floors)
+        mesh, axis, options, allowed, theta_c, theta_v, area, h_c, seam, landmark, floors)
     face_index = origins.face_index
     inner = options.side == "inner"
 
@@ -697,7 +699,7 @@ _PLACED_SEAMS = ("user", "point", "handle", "opposite painted zone")
 
 
 def _find_landmark(mesh: Mesh, axis: AxisFit, options: RolloutOptions, attachments, face_mask, theta_c, theta_v,
-                   area):
+                   area, h_c):
     """The landmark the options name (:func:`potflat.rollout.landmarks.find_landmark`), or None when
     seam and angles are measured as before (from the reference direction, angles from the seam)."""
 
@@ -708,17 +710,17 @@ def _find_landmark(mesh: Mesh, axis: AxisFit, options: RolloutOptions, attachmen
         raise InvalidOptionError("the band and angle range select no faces; widen --band or --angles")
     return find_landmark(
         mesh, axis, seam_at=options.seam_at, landmark=options.landmark, attachments=attachments,
-        painted_zone=lambda: _painted_zone_centre(mesh, axis, options, face_mask, theta_c, theta_v, area),
-        auto_seam=lambda: _auto_seam(mesh, keep, theta_c, theta_v, area)[0])
+        painted_zone=lambda: _painted_zone_centre(mesh, axis, options, face_mask, theta_c, theta_v, area, h_c),
+        auto_seam=lambda: _auto_seam(mesh, keep, theta_c, theta_v, area, h_c)[0])
 
 
 def _painted_zone_centre(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, theta_c, theta_v,
-                         area) -> tuple[float | None, str]:
+                         area, h_c) -> tuple[float | None, str]:
     """Centre angle of the importance zone (:func:`_find_importance` on an all-round unrolling
     with the automatic seam), or None and why."""
 
     plain = dataclasses.replace(options, seam=None, angles=None, seam_at=None, landmark=None, overlap=0.0)
-    un = _unroll(mesh, axis, plain, face_mask, theta_c, theta_v, area)
+    un = _unroll(mesh, axis, plain, face_mask, theta_c, theta_v, area, h_c)
     flat = un.flat
     if mesh.texcoords is not None:
         flat = flat.replace(mesh=flat.mesh.replace(**un.origins.face_fields(mesh)))
@@ -739,7 +741,7 @@ def _in_band(axis: AxisFit, band, h_c) -> np.ndarray:
     return (frac >= band[0]) & (frac <= band[1])
 
 
-def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, theta_c, theta_v, area,
+def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, theta_c, theta_v, area, h_c,
             seam_given: tuple[float, str] | None = None, landmark=None, floors=()):
     """The region's faces (:func:`potflat.rollout.seam.cut_region`: the seam and a window's
     sides cut exactly along their meridians), their corners' unwrapped angles, where they
@@ -765,7 +767,7 @@ def _select(mesh: Mesh, axis: AxisFit, options: RolloutOptions, face_mask, theta
         if len(sel) == 0:
             low, high = options.band or (0.0, 1.0)
             raise InvalidOptionError(f"band {low:g} {high:g} selects no faces; widen it")
-        seam, seam_method = _auto_seam(mesh, sel, theta_c, theta_v, area)
+        seam, seam_method = _auto_seam(mesh, sel, theta_c, theta_v, area, h_c)
     seam %= TWO_PI
     # angles are measured from the landmark, else from the seam
     origin = landmark.angle if options.angles is not None and landmark is not None else seam

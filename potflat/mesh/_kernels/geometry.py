@@ -25,13 +25,14 @@ def _lattice_texel(texcoords, f, img, a, b, steps):
 
 
 @leaf
-def texel_histogram(texcoords, faces, img, weights, steps):
-    """Weighted histogram of the grey levels under faces, sampled on a triangular lattice.
+def texel_histogram(texcoords, faces, img, weights, steps, group, n_groups):
+    """Weighted histograms of the grey levels under faces, one per group of faces, sampled on
+    a triangular lattice.
 
     Each face is sampled at the ``(steps + 1)(steps + 2) / 2`` points whose barycentric
     coordinates are multiples of ``1 / steps`` (its corners among them); every sample adds
-    its face's weight divided by the number of samples. Serial, so the sums are the same
-    bits for any thread count.
+    its face's weight divided by the number of samples to its group's histogram. Serial, so
+    the sums are the same bits for any thread count.
 
     Parameters
     ----------
@@ -45,32 +46,38 @@ def texel_histogram(texcoords, faces, img, weights, steps):
         Weight of each of ``faces`` (its area).
     steps : int
         Lattice steps along a face's edge, at least 1.
+    group : (k,) int64
+        Group of each of ``faces``, in ``[0, n_groups)``.
+    n_groups : int
 
     Returns
     -------
-    (256,) float64
+    (n_groups, 256) float64
     """
-    hist = np.zeros(256)
+    hist = np.zeros((n_groups, 256))
     per = (steps + 1) * (steps + 2) // 2
     for i in range(faces.shape[0]):
         w = weights[i] / per
+        g = group[i]
         for a in range(steps + 1):
             for b in range(steps + 1 - a):
-                hist[_lattice_texel(texcoords, faces[i], img, a, b, steps)] += w
+                hist[g, _lattice_texel(texcoords, faces[i], img, a, b, steps)] += w
     return hist
 
 
 @parallel
-def texel_far_share(texcoords, faces, img, level, contrast, steps):
+def texel_far_share(texcoords, faces, img, levels, contrast, steps):
     """Share of each face's lattice samples (as in :func:`texel_histogram`) whose grey level
-    differs from ``level`` by more than ``contrast``.
+    differs from the face's level in ``levels`` by more than ``contrast``.
 
     Parameters
     ----------
     texcoords : (m, 3, 2) float64
     faces : (k,) int64
     img : (h, w) uint8
-    level, contrast : int
+    levels : (k,) int64
+        Grey level of each of ``faces``' ground, 0-255.
+    contrast : int
         Grey levels, 0-255.
     steps : int
         Lattice steps along a face's edge, at least 1.
@@ -87,7 +94,7 @@ def texel_far_share(texcoords, faces, img, level, contrast, steps):
         far = 0
         for a in range(steps + 1):
             for b in range(steps + 1 - a):
-                if abs(np.int64(_lattice_texel(texcoords, faces[i], img, a, b, steps)) - level) > contrast:
+                if abs(np.int64(_lattice_texel(texcoords, faces[i], img, a, b, steps)) - levels[i]) > contrast:
                     far += 1
         out[i] = far / per
     return out
