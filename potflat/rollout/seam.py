@@ -77,10 +77,10 @@ def _painted_share(mesh: Mesh, faces: np.ndarray, area: np.ndarray,
     source : str
         ``texture``, ``colours`` or ``geometry``.
     """
-    band = _height_bands(height)
     if mesh.texcoords is not None and mesh.texture_path is not None:
         img = read_texture_grey(mesh.texture_path)
         if img is not None and img.size:
+            band = _height_bands(height)
             tc = np.ascontiguousarray(mesh.texcoords, dtype=np.float64)
             idx = np.ascontiguousarray(faces, dtype=np.int64)
             img = np.ascontiguousarray(img)
@@ -98,6 +98,7 @@ def _painted_share(mesh: Mesh, faces: np.ndarray, area: np.ndarray,
                 share[mesh.untextured_faces[idx]] = 0.0
             return share, "texture"
     if mesh.vertex_colors is not None:
+        band = _height_bands(height)
         grey = np.clip(np.rint(mesh.vertex_colors[:, :3].astype(np.float64) @ _LUMA), 0, 255).astype(np.int64)
         corners = grey[mesh.faces[faces]]
         hist = np.bincount((band[:, None] * 256 + corners).ravel(), np.repeat(area / 3.0, 3),
