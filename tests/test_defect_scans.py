@@ -10,8 +10,9 @@ a spike two long edges, a trimmed flap or sheet removes a tongue), so the relaxa
 that much length to spread over its neighbourhood; the figures compared are
 
 * the edge RMS of the faces more than :data:`AWAY_MM` (4 edge lengths) from every defect,
-  within :data:`AWAY_RMS_REL` of the clean cup's over the same faces (the largest, a crease
-  across the painted belt, whose extra arc the whole belt ring takes up);
+  at most :data:`AWAY_RMS_REL` above the clean cup's over the same faces (the largest, a
+  crease across the painted belt, whose extra arc the whole belt ring takes up; below it
+  is no harm: each relaxation stops in its own slow tail, some further down it);
 * the median length error in the painted zone, within :data:`ZONE_MEDIAN_PP` percentage
   points of the clean cup's.
 
@@ -80,7 +81,7 @@ def test_a_defective_scan_gives_a_fold_free_image_close_to_the_clean_ones(cup, c
     rms, kept = _away_rms(result, near)
     rms_clean, kept_clean = _away_rms(clean[side], near)
     assert kept > 0.4 * kept_clean
-    assert rms == pytest.approx(rms_clean, rel=AWAY_RMS_REL)
+    assert rms <= rms_clean * (1.0 + AWAY_RMS_REL)
     zone, zone_clean = relaxed["important_zone"], base["important_zone"]
     assert abs(zone["length_error_median_pct"] - zone_clean["length_error_median_pct"]) <= ZONE_MEDIAN_PP
     assert zone["scale_median"] == pytest.approx(1.0, abs=1e-6)

@@ -4,7 +4,7 @@ import pytest
 import trimesh
 from reference import clip_faces, polygon_area
 
-from potflat.mesh.split import CUT_SNAP, plane_levels, split_faces
+from potflat.mesh.split import CUT_SNAP, cut_moves, plane_levels, plane_weights, split_faces
 
 
 def _grid(rng, n=7, jitter=0.3):
@@ -28,6 +28,45 @@ def _areas(p):
 
 def _positions(split, points):
     return np.concatenate([points, split.added(points)])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_cut_moves_matches_a_slow_reference_and_puts_each_vertex_on_the_cut(seed):
+    rng = np.random.default_rng(seed)
+    points, faces = _grid(rng)
+    normal = rng.normal(size=3)
+    normal /= np.linalg.norm(normal)
+    level = plane_levels(points, points.mean(axis=0) + rng.normal(0, 0.5, 3), normal)
+    level[rng.choice(len(level), 4, replace=False)] = 0.0  # on the cut already: not moved
+    vertices, towards, t = cut_moves(faces, level)
+    # the slow reference: every crossing edge seen from each end, the nearest kept
+    best = {}
+    for f in faces:
+        for a, b in ((f[0], f[1]), (f[1], f[2]), (f[2], f[0])):
+            for v, w in ((a, b), (b, a)):
+                if level[v] * level[w] < 0:
+                    frac = level[v] / (level[v] - level[w])
+                    if frac < CUT_SNAP and (frac, w) < best.get(v, (np.inf, -1)):
+                        best[v] = (frac, w)
+    assert len(vertices) > 0 and vertices.tolist() == sorted(best)
+    assert towards.tolist() == [best[v][1] for v in sorted(best)]
+    np.testing.assert_allclose(t, [best[v][0] for v in sorted(best)], rtol=1e-12)
+    np.testing.assert_allclose((1 - t) * level[vertices] + t * level[towards], 0.0, atol=1e-15)
+    assert np.all((t > 0) & (t < CUT_SNAP)) and not np.isin(vertices, np.flatnonzero(level == 0.0)).any()
+
+
+def test_plane_weights_are_barycentric_coordinates_of_the_projection():
+    tri = np.array([[[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 1.0, 0.0]]] * 4)
+    points = np.array([[0.5, 0.25, 0.0],   # inside
+                       [0.5, 0.25, 3.0],   # above it: its projection's
+                       [-1.0, 0.5, -2.0],  # outside: negative weights, the map extended
+                       [2.0, 0.0, 0.0]])   # a corner
+    w = plane_weights(tri, points)
+    np.testing.assert_allclose(w, [[0.5, 0.25, 0.25], [0.5, 0.25, 0.25], [1.0, -0.5, 0.5], [0.0, 1.0, 0.0]],
+                               atol=1e-15)
+    # a degenerate triangle gives its first corner
+    flat = np.array([[[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [2.0, 2.0, 2.0]]])
+    np.testing.assert_array_equal(plane_weights(flat, np.array([[5.0, 0.0, 0.0]])), [[1.0, 0.0, 0.0]])
 
 
 @pytest.mark.parametrize("seed", range(12))

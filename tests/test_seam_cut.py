@@ -75,12 +75,13 @@ def test_pieces_carry_colours_and_untextured_flags(tmp_path):
     fm = res.flat.mesh
     scan = res.vertex_index >= 0
     np.testing.assert_array_equal(fm.vertex_colors[scan], mesh.vertex_colors[res.vertex_index[scan]])
-    # an added vertex's colour lies between its edge's ends' (the faces it belongs to name them)
+    # an added vertex's colour lies between its edge's ends' (the scan faces of the faces it
+    # belongs to name them, those of a vertex moved onto the cut among them)
     added = np.flatnonzero(~scan)
     assert len(added) == 2 * res.cut_vertices > 0
     for v in added[:10]:
-        f = np.flatnonzero((fm.faces == v).any(axis=1))[0]
-        ends = mesh.vertex_colors[mesh.faces[res.face_index[f]]].astype(int)
+        f = np.flatnonzero((fm.faces == v).any(axis=1))
+        ends = mesh.vertex_colors[mesh.faces[res.face_index[f]]].reshape(-1, 4).astype(int)
         assert np.all(fm.vertex_colors[v] >= ends.min(axis=0)) and np.all(fm.vertex_colors[v] <= ends.max(axis=0))
     # flags of untextured faces follow every piece
     tc = np.zeros((len(mesh.faces), 3, 2))

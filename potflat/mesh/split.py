@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from potflat.mesh._kernels.split import split_pieces
+from potflat.mesh.tolerances import DEGENERATE
 
 #: A vertex closer to the cut than this fraction of a crossing edge (measured by the level's
 #: change along it) counts as on the cut: no piece is a sliver thinner than that.
@@ -120,6 +121,78 @@ def snap_to_cut(faces: np.ndarray, level: np.ndarray, *, snap: float = CUT_SNAP)
     on_cut = np.flatnonzero(near)
     level[on_cut] = 0.0
     return level, on_cut
+
+
+def cut_moves(faces: np.ndarray, level: np.ndarray, *, snap: float = CUT_SNAP
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where to move the vertices :func:`snap_to_cut` would put on the cut so that they lie on it.
+
+    Snapping keeps a vertex where it is, so the cut through it leaves the level's zero set
+    by up to ``snap`` of an edge: a cut along a plane zigzags about it. Moving each such
+    vertex along its nearest crossing edge to where the level is 0 keeps the cut exact and
+    still leaves no sliver (every crossing of a moved vertex's edges was at least ``snap``
+    of the edge from the vertex's new place or is gone).
+
+    Parameters
+    ----------
+    faces : (m, 3) int64
+    level : (n,) float64
+        Linear along edges (a plane's signed distance).
+    snap : float
+        As for :func:`snap_to_cut`.
+
+    Returns
+    -------
+    vertices : (s,) int64
+        The vertices to move (sorted; those at level 0 are on the cut already).
+    towards : (s,) int64
+        The other end of each one's nearest crossing edge (the lower index among equals).
+    t : (s,) float64
+        Where on that edge the level is 0: ``(1 - t) x[vertex] + t x[towards]``, ``0 < t < snap``.
+    """
+    level = np.asarray(level, dtype=np.float64)
+    tail, head = faces.ravel(), np.roll(faces, -1, axis=1).ravel()
+    lt, lh = level[tail], level[head]
+    crossing = lt * lh < 0
+    tail, head, lt, lh = tail[crossing], head[crossing], lt[crossing], lh[crossing]
+    frac = lt / (lt - lh)
+    near_tail, near_head = frac < snap, frac > 1.0 - snap
+    vertex = np.concatenate([tail[near_tail], head[near_head]])
+    towards = np.concatenate([head[near_tail], tail[near_head]])
+    t = np.concatenate([frac[near_tail], 1.0 - frac[near_head]])
+    order = np.lexsort((towards, t, vertex))  # per vertex: the nearest crossing first
+    vertex, towards, t = vertex[order], towards[order], t[order]
+    first = np.ones(len(vertex), bool)
+    first[1:] = vertex[1:] != vertex[:-1]
+    return vertex[first], towards[first], t[first]
+
+
+def plane_weights(triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Each point as weights of its triangle's corners: the barycentric coordinates of its
+    projection onto the triangle's plane (negative outside the triangle: the triangle's
+    linear map extended). A degenerate triangle gives its first corner.
+
+    Parameters
+    ----------
+    triangles : (k, 3, 3) float64
+        Corners.
+    points : (k, 3) float64
+
+    Returns
+    -------
+    (k, 3) float64
+        Rows summing to 1.
+    """
+    p0 = triangles[:, 0]
+    e1, e2, d = triangles[:, 1] - p0, triangles[:, 2] - p0, np.asarray(points, dtype=np.float64) - p0
+    g11, g12, g22 = (e1 * e1).sum(axis=1), (e1 * e2).sum(axis=1), (e2 * e2).sum(axis=1)
+    r1, r2 = (e1 * d).sum(axis=1), (e2 * d).sum(axis=1)
+    det = g11 * g22 - g12 * g12
+    ok = det > DEGENERATE * g11 * g22
+    safe = np.where(ok, det, 1.0)
+    b = np.where(ok, (g22 * r1 - g12 * r2) / safe, 0.0)
+    c = np.where(ok, (g11 * r2 - g12 * r1) / safe, 0.0)
+    return np.stack([1.0 - b - c, b, c], axis=1)
 
 
 def split_faces(points: np.ndarray, faces: np.ndarray, level: np.ndarray, *, snap: float = CUT_SNAP) -> FaceSplit:

@@ -10,7 +10,7 @@ import numpy as np
 from potflat.io.images import read_texture_grey
 from potflat.mesh._kernels.geometry import angular_window_sums, corner_angles, texel_far_share, texel_histogram
 from potflat.mesh._kernels.topology import corner_joins, half_edge_keys, union_find
-from potflat.mesh.split import plane_levels, split_faces
+from potflat.mesh.split import cut_moves, plane_levels, plane_weights, split_faces
 from potflat.mesh.tolerances import ROUNDING
 from potflat.types import Mesh
 
@@ -375,9 +375,11 @@ class CutOrigins:
     repeated : (m,) bool
         Faces that repeat the start past 360 degrees (they come last).
     pieces : (p,) int64
-        The faces that are pieces of a cut scan face.
+        The faces that are pieces of a cut scan face, or a scan face with a corner moved
+        onto a cut.
     weights : (p, 3, 3) float64
-        Their corners as weights of their scan face's corners.
+        Their corners as weights of their scan face's corners (a moved corner's: of its
+        projection onto the face's plane).
     added_edges : (j, 2) int64
         The edge each added vertex (index ``n + j``) lies on; an end may be an earlier added
         vertex.
@@ -467,9 +469,12 @@ def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarr
     ``repeat_from`` is cut along that angle's meridian half-plane
     (:func:`potflat.mesh.split.split_faces`): vertices are added where edges cross it, and
     the pieces outside the region are left out. So the region's sides are exact meridians
-    (straight in every development) at any resolution. A corner on a cut (added, or
-    closer to the meridian than :data:`potflat.mesh.split.CUT_SNAP` of its edge) gets
-    exactly the meridian's angle. Faces spanning half a turn or more (around the axis
+    (straight in every development) at any resolution. A vertex closer to a meridian than
+    :data:`potflat.mesh.split.CUT_SNAP` of a crossing edge is moved along that edge onto it
+    (:func:`potflat.mesh.split.cut_moves`): it becomes an added vertex there, and the faces
+    around it pieces whose corner has the weights their plane gives the new point
+    (:func:`potflat.mesh.split.plane_weights`). A corner on a cut gets exactly the
+    meridian's angle. Faces spanning half a turn or more (around the axis
     itself) are not cut: kept once where their centre lies in the region.
 
     Parameters
@@ -574,6 +579,36 @@ def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarr
         """Points (k, 3) of the vertices ``ids`` ((k,) int64, sorted)."""
         return np.concatenate([V[ids[ids < n]], added_pts[ids[ids >= n] - n]])
 
+    def move_onto_cut(verts, towards, t, points):
+        """Replace the vertices ``verts`` in every row by added vertices at ``points`` on their
+        edges to ``towards`` (at ``t``); the rows they are corners of become pieces."""
+        nonlocal row_faces, piece_of, pieces_w, added_edges, added_t, added_pts
+        base = n + len(added_t)
+        added_edges = np.concatenate([added_edges, np.stack([verts, towards], axis=1)])
+        added_t = np.concatenate([added_t, t])
+        added_pts = np.concatenate([added_pts, points])
+        new_id = np.full(base, -1, np.int64)
+        new_id[verts] = base + np.arange(len(verts))
+        moved = new_id[row_faces] >= 0
+        rows = np.flatnonzero(moved.any(axis=1))
+        at, hit = row_faces[rows], moved[rows]
+        scan = at < n
+        corners = np.empty(at.shape + (3,))
+        corners[scan] = V[at[scan]]
+        corners[~scan] = added_pts[at[~scan] - n]
+        # each moved corner as weights of its row's corners (the row's linear map extended)
+        b = np.broadcast_to(np.eye(3), (len(rows), 3, 3)).copy()
+        r, c = np.nonzero(hit)
+        b[r, c] = plane_weights(corners[r], added_pts[new_id[at[r, c]] - n])
+        prev = piece_of[rows]
+        old = prev >= 0
+        w = b.copy()
+        w[old] = b[old] @ pieces_w[prev[old]]
+        pieces_w = np.concatenate([pieces_w, w[~old]])
+        pieces_w[prev[old]] = w[old]
+        piece_of[rows[~old]] = len(pieces_w) - np.count_nonzero(~old) + np.arange(np.count_nonzero(~old))
+        row_faces[rows] = np.where(hit, new_id[at], at)
+
     for cut_faces, levels, angle in floors:  # the level cuts first: the pieces on their positive side stay
         rows = np.flatnonzero(cut_faces[rows_face])
         if len(rows):
@@ -606,11 +641,20 @@ def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarr
         if not len(rows):
             continue
         # the faces across it, on their own vertices
+        point, normal = meridian(values[0])
         ids, local = np.unique(row_faces[rows], return_inverse=True)
         local = local.reshape(-1, 3)
         pts = pts_of(ids)
-        point, normal = meridian(values[0])
-        split = split_faces(pts, local, plane_levels(pts, point, normal))
+        level = plane_levels(pts, point, normal)
+        near, towards, t = cut_moves(local, level)
+        if len(near):  # the vertices the cut would snap to, moved onto the meridian
+            move_onto_cut(ids[near], ids[towards], t, pts[near] + t[:, None] * (pts[towards] - pts[near]))
+            ids, local = np.unique(row_faces[rows], return_inverse=True)
+            local = local.reshape(-1, 3)
+            pts = pts_of(ids)
+            level = plane_levels(pts, point, normal)
+            level[ids >= n + len(added_t) - len(near)] = 0.0
+        split = split_faces(pts, local, level)
         on_cut = np.zeros(n + len(added_t), bool)
         on_cut[ids[split.on_cut]] = True
         if split.on_cut.size:  # a corner on the cut gets the meridian's angle, in every face

@@ -154,8 +154,8 @@ class RolloutResult:
         Vertex copies added by the cut (each seam vertex once more).
     cut_vertices, cut_faces : int
         Vertices the cut added where the seam's meridian (or a window's side) crosses an
-        input edge (each once: their copies are in ``seam_vertices``), and input faces it
-        split into pieces.
+        input edge or an input vertex near it was moved onto it (each once: their copies
+        are in ``seam_vertices``), and input faces it split into pieces or reshaped.
     split_vertices : int
         Vertex copies added where the input was not manifold (a vertex whose faces form
         separate fans becomes one vertex per fan).
