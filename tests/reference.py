@@ -199,6 +199,22 @@ def boundary_angle_barrier(x: np.ndarray, F: np.ndarray, verts, k: float, mu: fl
     return total
 
 
+def outline_energy(x: np.ndarray, V: np.ndarray, F: np.ndarray, verts, k: float, mu: float, cap: float) -> float:
+    """``sum mu k (Theta_b - min(Theta3_b, cap))^2`` over ``verts``: ``Theta_b`` the flat sum of
+    the angles at ``b`` of its faces in ``x``, ``Theta3_b`` the same on the rest positions ``V``
+    (each angle from ``acos``)."""
+    def angle_sum(P, b):
+        total = 0.0
+        for f in F:
+            if b in f:
+                j = list(f).index(b)
+                u, w = P[f[(j + 1) % 3]] - P[b], P[f[(j + 2) % 3]] - P[b]
+                total += np.arccos(np.clip(np.dot(u, w) / np.linalg.norm(u) / np.linalg.norm(w), -1, 1))
+        return total
+
+    return sum(mu * k * (angle_sum(x, b) - min(angle_sum(V, b), cap)) ** 2 for b in verts)
+
+
 def contact_energy(x: np.ndarray, seg: np.ndarray, bprev: np.ndarray, bnext: np.ndarray, dhat: float,
                    kappa: float, weight: np.ndarray | None = None) -> float:
     """Boundary contact barrier by brute force over all (vertex, segment) pairs, each pair

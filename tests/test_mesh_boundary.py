@@ -4,7 +4,13 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from potflat.mesh.boundary import crossing_pairs, edges_and_boundary, outline_turning, surface_turning
+from potflat.mesh.boundary import (
+    corner_angle_sums,
+    crossing_pairs,
+    edges_and_boundary,
+    outline_turning,
+    surface_turning,
+)
 
 
 def test_edges_and_boundary_match_a_slow_reference():
@@ -89,3 +95,21 @@ def test_surface_turning_of_a_sheet_bent_round_a_cylinder():
     tip = (uv[:, 1] == 0) & (uv[:, 0] == 4)
     V[tip, 2] = -0.5
     assert surface_turning(V, F) > 1.0 + 3 * np.arctan(0.5) / (2 * np.pi)
+
+
+def test_corner_angle_sums_of_a_flat_fan_a_pyramid_s_apex_and_a_square():
+    ring = np.c_[np.cos(np.arange(6) * np.pi / 3), np.sin(np.arange(6) * np.pi / 3), np.zeros(6)]
+    fan = np.array([[6, i, (i + 1) % 6] for i in range(6)])
+    apex = np.r_[ring, [[0.0, 0.0, 0.0]]]
+    at = np.zeros(7, bool)
+    at[[0, 6]] = True
+    sums = corner_angle_sums(apex, fan, at)
+    np.testing.assert_allclose(sums, [2 * np.pi / 3, 0, 0, 0, 0, 0, 2 * np.pi], rtol=1e-12)
+    # four equilateral triangles round the apex of a square pyramid: 4 x 60 degrees
+    base = np.array([[1.0, 0, 0], [0, 1.0, 0], [-1.0, 0, 0], [0, -1.0, 0], [0, 0, 1.0]])
+    pyramid = np.array([[4, i, (i + 1) % 4] for i in range(4)])
+    np.testing.assert_allclose(corner_angle_sums(base, pyramid, np.arange(5) == 4)[4], 4 * np.pi / 3, rtol=1e-12)
+    # flat (n, 2) positions: a square's corner
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    np.testing.assert_allclose(corner_angle_sums(square, np.array([[0, 1, 2], [0, 2, 3]]), np.ones(4, bool)),
+                               np.pi / 2, rtol=1e-12)

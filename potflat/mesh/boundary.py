@@ -148,15 +148,37 @@ def surface_turning(vertices: np.ndarray, faces: np.ndarray, *, segments: np.nda
     if len(seg) == 0:
         return 0.0
     passes = np.bincount(seg[:, 0], minlength=len(V))
-    near = F[(passes[F] > 0).any(axis=1)]
+    total = corner_angle_sums(V, F, passes > 0)
+    ends = np.flatnonzero(passes)
+    return float(np.abs(np.pi * passes[ends] - total[ends]).sum() / (2.0 * np.pi))
+
+
+def corner_angle_sums(vertices: np.ndarray, faces: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """The sum of the faces' corner angles at each vertex ``at`` selects (its fan's total angle;
+    in 3D, 2 pi less its angle defect inside the mesh).
+
+    Parameters
+    ----------
+    vertices : (n, 2) or (n, 3) float64
+    faces : (m, 3) int64
+    at : (n,) bool
+        The vertices wanted (only their faces are visited).
+
+    Returns
+    -------
+    (n,) float64
+        0 at the vertices not wanted.
+    """
+    V = np.asarray(vertices, dtype=np.float64)
+    near = faces[at[faces].any(axis=1)]
     P = V[near]
     total = np.zeros(len(V))
     for c in range(3):
         a, b = P[:, (c + 1) % 3] - P[:, c], P[:, (c + 2) % 3] - P[:, c]
-        angle = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), (a * b).sum(axis=1))
-        total += np.bincount(near[:, c], angle, minlength=len(V))
-    ends = np.flatnonzero(passes)
-    return float(np.abs(np.pi * passes[ends] - total[ends]).sum() / (2.0 * np.pi))
+        sine = (np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) if V.shape[1] == 2
+                else np.linalg.norm(np.cross(a, b), axis=1))
+        total += np.bincount(near[:, c], np.arctan2(sine, (a * b).sum(axis=1)), minlength=len(V))
+    return np.where(at, total, 0.0)
 
 
 def turning_words(turning: dict) -> str:

@@ -12,7 +12,7 @@ import numpy as np
 
 from potflat.mesh._kernels.geometry import signed_areas_2d
 from potflat.mesh._kernels.topology import edge_table, incident_faces, vertex_faces
-from potflat.mesh.boundary import crossing_pairs
+from potflat.mesh.boundary import corner_angle_sums, crossing_pairs
 from potflat.mesh.distortion import (
     face_areas,
     face_distortion,
@@ -138,6 +138,11 @@ class SpringSystem:
         self.boundary[self.boundary_segments.ravel()] = True
         self.isolated = np.diff(self.vf_ptr) == 0
         self.bprev, self.bnext = boundary_neighbours(self.boundary_segments, n)
+        # the outline term's angle sums: the surface's, short of the angle barrier's reach
+        simple = (self.bprev >= 0) & (self.bnext >= 0) & (self.bprev != self.bnext)
+        self.outline_target = np.minimum(corner_angle_sums(V, self.faces, simple),
+                                         2.0 * math.pi - ENERGY.boundary_gap)
+        self.outline_mu = ENERGY.outline_mu
         self.bguard = np.zeros(n, bool)  # set by guard_boundary()
         self.fixed: np.ndarray | None = None  # (n,) bool: vertices held in place (zero gradient); None: none
         self.contact = False  # set by guard_boundary()
@@ -214,8 +219,10 @@ class SpringSystem:
             boundary_angle_sums(x, self.bverts, self.vf_ptr, self.vf_tri, self.faces, self.theta)
         energy_gradient(x, self.ptr, self.nbr, self.rst, self.k, self.relative, ENERGY.length_floor,
                                 self.weight, self.vf_ptr, self.vf_tri, self.faces,
-                                self.rest_shape, self._coef, self.bprev, self.bnext, self.bguard, self.theta, ENERGY.boundary_mu if barrier else 0.0,
-                                ENERGY.boundary_gap, g, self._es, self._eb, self.diag)
+                                self.rest_shape, self._coef, self.bprev, self.bnext, self.bguard, self.theta,
+                                self.outline_target, ENERGY.boundary_mu if barrier else 0.0,
+                                self.outline_mu if barrier else 0.0, ENERGY.boundary_gap, g, self._es, self._eb,
+                                self.diag)
         es = float(np.sum(self._es)) + float(np.sum(self._e_face))  # (zeros without per-face terms)
         if not barrier:
             return es, es, self._held(g)

@@ -43,6 +43,7 @@ class _Patch(SpringSystem):
         self.a_ref = np.ascontiguousarray(whole.a_ref[faces])
         self.weights = whole.weights
         self.fixed = ~free[vertices]
+        self.outline_mu = 0.0  # (the patch's boundary runs through the mesh: no outline there)
         self.whole, self.vertices, self.layout = whole, vertices, layout
         # the whole boundary, its vertices numbered apart: rows of it in the patch, and their patch vertices
         on = np.flatnonzero(whole.boundary)

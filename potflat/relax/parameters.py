@@ -89,6 +89,12 @@ class EnergyParameters:
     boundary_mu, boundary_gap : float
         Boundary angle barrier: weight (times k) and activation (radians below 2 pi of a
         boundary vertex's flat interior angle sum).
+    outline_mu : float
+        Outline term: weight (times k, at every guarded boundary vertex whatever its
+        importance) of the squared difference between the vertex's flat angle sum and its
+        sum on the surface, so the outline keeps the scan boundary's own turning instead of
+        gathering the distortion in teeth (a vertex's sum off by ``d`` radians costs
+        ``mu k d^2``; a spring off its length by a fraction ``e``, ``k e^2 / 2``).
     contact_mu, contact_gap : float
         Boundary contact barrier: weight (times k) and activation distance between a
         boundary vertex and a boundary segment that is not its own (active when the start's
@@ -112,6 +118,7 @@ class EnergyParameters:
     barrier_eps: float = 0.5
     boundary_mu: float = 1.0
     boundary_gap: float = 0.5
+    outline_mu: float = 0.3
     contact_mu: float = 1.0
     contact_gap: float = 0.5
     area_floor: float = 1e-2

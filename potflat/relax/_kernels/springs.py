@@ -374,11 +374,23 @@ def _angle_barrier_slope(theta, sb, gap):
     return -sb * (1.0 - 1.0 / a) / gap, sb / (a * a * gap * gap)
 
 
+@leaf
+def _boundary_slope(theta, target, sb, so, gap):
+    """A guarded boundary vertex's angle terms at angle sum ``theta``: ``dE / dTheta`` and the
+    factor of their Hessian diagonal bound, of the barrier (weight ``sb``) and of the outline
+    term ``so (theta - target)^2`` (``so = 0``: none)."""
+    cb, h = _angle_barrier_slope(theta, sb, gap)
+    if so > 0.0:
+        cb += 2.0 * so * (theta - target)
+        h += 2.0 * so
+    return cb, h
+
+
 @parallel
 def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_tri, faces, shape, coef,
-                    bprev, bnext, bguard, theta, mu_b, gap, grad, e_spring, e_barrier, diag):
-    """Spring and boundary angle barrier energy per vertex, and the gradient of these and of
-    the per-face terms, gathered per vertex.
+                    bprev, bnext, bguard, theta, target, mu_b, mu_o, gap, grad, e_spring, e_barrier, diag):
+    """Spring, boundary angle barrier and outline energy per vertex, and the gradient of these
+    and of the per-face terms, gathered per vertex.
 
     The face barrier is added afterwards by :func:`face_barrier` (it acts on few faces).
     The per-face terms' gradient is gathered from the coefficients :func:`face_terms`
@@ -411,9 +423,14 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
         Boundary vertices whose angle sum is guarded.
     theta : (n,) float64
         Flat interior angle sums of the guarded vertices at ``x`` (:func:`boundary_angle_sums`).
-    mu_b, gap : float
-        Angle barrier weight (times ``k`` and the vertex's importance weight) and activation
-        (radians below ``2 pi``); ``mu_b = 0`` disables it.
+    target : (n,) or (0,) float64
+        The outline term's angle sum of each guarded vertex (its rest angle sum); empty
+        with ``mu_o = 0``.
+    mu_b, mu_o, gap : float
+        Angle barrier weight (times ``k`` and the vertex's importance weight), outline term
+        weight (times ``k``: ``mu_o k (Theta - target)^2`` per guarded vertex, whatever its
+        importance) and the barrier's activation (radians below ``2 pi``); a weight of 0
+        disables its term.
     grad : (n, 2) float64
         Output: dE/dx.
     e_spring, e_barrier : (n,) float64
@@ -475,17 +492,21 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
                 gy += coef[t, 0] * dgy + coef[t, 1] * agy
                 hd += coef[t, 2] * (ct_l + ct_j) + coef[t, 3] * (agx * agx + agy * agy)
         eb = 0.0
-        if mu_b > 0.0 and (bprev[i] >= 0 or bnext[i] >= 0):
+        if (mu_b > 0.0 or mu_o > 0.0) and (bprev[i] >= 0 or bnext[i] >= 0):
             sb = mu_b * k  # times the guarded vertex's importance weight
+            so = mu_o * k
             # own angle sum: depends on x_i through u = x_nxt - x_i and w = x_prv - x_i
             if bguard[i]:
                 a = (2.0 * math.pi - theta[i]) / gap
                 sw = sb * weight[i] if weighted else sb
-                if a <= 0.0:
+                to = target[i] if so > 0.0 else 0.0
+                if sw > 0.0 and a <= 0.0:
                     eb = np.inf
-                elif a < 1.0:
-                    eb += sw * (a - 1.0 - math.log(a))
-                    cb, h = _angle_barrier_slope(theta[i], sw, gap)
+                elif (sw > 0.0 and a < 1.0) or so > 0.0:
+                    if sw > 0.0 and a < 1.0:
+                        eb += sw * (a - 1.0 - math.log(a))
+                    eb += so * (theta[i] - to) * (theta[i] - to)
+                    cb, h = _boundary_slope(theta[i], to, sw, so, gap)
                     ux = x[bnext[i], 0] - xi
                     uy = x[bnext[i], 1] - yi
                     wx = x[bprev[i], 0] - xi
@@ -500,7 +521,8 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
             # as the successor of its predecessor p: Theta_p grows with arg(x_i - x_p) decreasing
             pv = bprev[i]
             if pv >= 0 and bguard[pv]:
-                cb, h = _angle_barrier_slope(theta[pv], sb * weight[pv] if weighted else sb, gap)
+                cb, h = _boundary_slope(theta[pv], target[pv] if so > 0.0 else 0.0,
+                                        sb * weight[pv] if weighted else sb, so, gap)
                 if h > 0.0:
                     ux = xi - x[pv, 0]
                     uy = yi - x[pv, 1]
@@ -513,7 +535,8 @@ def energy_gradient(x, ptr, nbr, rst, k, relative, r_floor, weight, vf_ptr, vf_t
             # as the predecessor of its successor q
             qv = bnext[i]
             if qv >= 0 and bguard[qv]:
-                cb, h = _angle_barrier_slope(theta[qv], sb * weight[qv] if weighted else sb, gap)
+                cb, h = _boundary_slope(theta[qv], target[qv] if so > 0.0 else 0.0,
+                                        sb * weight[qv] if weighted else sb, so, gap)
                 if h > 0.0:
                     wx = xi - x[qv, 0]
                     wy = yi - x[qv, 1]
