@@ -26,6 +26,14 @@ def _areas(p):
     return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=-1)
 
 
+def _grid_and_plane(rng):
+    """A grid (:func:`_grid`) and the levels of a random plane through its middle."""
+    points, faces = _grid(rng)
+    normal = rng.normal(size=3)
+    normal /= np.linalg.norm(normal)
+    return points, faces, plane_levels(points, points.mean(axis=0) + rng.normal(0, 0.5, 3), normal)
+
+
 def _positions(split, points):
     return np.concatenate([points, split.added(points)])
 
@@ -33,10 +41,7 @@ def _positions(split, points):
 @pytest.mark.parametrize("seed", range(6))
 def test_cut_moves_matches_a_slow_reference_and_puts_each_vertex_on_the_cut(seed):
     rng = np.random.default_rng(seed)
-    points, faces = _grid(rng)
-    normal = rng.normal(size=3)
-    normal /= np.linalg.norm(normal)
-    level = plane_levels(points, points.mean(axis=0) + rng.normal(0, 0.5, 3), normal)
+    points, faces, level = _grid_and_plane(rng)
     level[rng.choice(len(level), 4, replace=False)] = 0.0  # on the cut already: not moved
     vertices, towards, t = cut_moves(faces, level)
     # the slow reference: every crossing edge seen from each end, the nearest kept
@@ -72,10 +77,7 @@ def test_plane_weights_are_barycentric_coordinates_of_the_projection():
 @pytest.mark.parametrize("seed", range(12))
 def test_split_faces_matches_a_slow_reference(seed):
     rng = np.random.default_rng(seed)
-    points, faces = _grid(rng)
-    normal = rng.normal(size=3)
-    normal /= np.linalg.norm(normal)
-    level = plane_levels(points, points.mean(axis=0) + rng.normal(0, 0.5, 3), normal)
+    points, faces, level = _grid_and_plane(rng)
     if seed % 3 == 0:  # vertices on the plane, and near it
         level[rng.choice(len(level), 6, replace=False)] = 0.0
         level[rng.choice(len(level), 6, replace=False)] *= 1e-3
