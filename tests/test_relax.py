@@ -616,6 +616,7 @@ def test_boundary_angle_barrier_and_outline_term_match_reference(weighted):
     outline = ref.outline_energy(x, V, F, boundary, 0.8, ENERGY.outline_mu, 2 * np.pi - ENERGY.boundary_gap)
     assert want > 0.3 * (0.3 if weighted else 1.0) and outline > 0.01
     assert E - Es == pytest.approx(want + outline, rel=1e-10)
+    assert E - sp.evaluate(x, outline=False)[0] == pytest.approx(outline, rel=1e-8)
     num = ref.numeric_gradient(lambda y: sp.evaluate(np.ascontiguousarray(y))[0], x)
     np.testing.assert_allclose(g, num, atol=1e-6 * np.abs(num).max())
 

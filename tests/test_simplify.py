@@ -13,6 +13,7 @@ from _bench_meshes import SPRINGS_ONLY, meshes, signed_areas
 
 import potflat.relax.multilevel as relax_module
 from potflat.relax import relax
+from potflat.relax.parameters import ENERGY
 from potflat.relax.simplify import cell_side, grid_simplification, interpolate
 from potflat.types import FlatMesh, Mesh
 
@@ -109,6 +110,29 @@ def test_standard_starts_from_a_coarse_copy(vessel, monkeypatch):
         assert r.converged and r.flipped == 0 and r.boundary_overlap == 0
     assert nested.distortion.edge_rms <= plain.distortion.edge_rms + 2e-3
     assert nested.levels[-1].iterations < plain.levels[-1].iterations
+
+
+def test_only_the_image_s_own_border_holds_the_outline_term(vessel, monkeypatch):
+    """A coarse copy that is only the full mesh's start is solved without the outline term
+    (its simplified border is not the image's); preview's copy, followed as the result, and
+    the full mesh keep it."""
+    systems = []
+    build = relax_module._spring_system
+
+    def spy(V, *args):
+        out = build(V, *args)
+        systems.append((len(V), out[0]))
+        return out
+
+    monkeypatch.setattr(relax_module, "_spring_system", spy)
+    relax(vessel, preset="standard")
+    terms = {n: sp.outline_mu for n, sp in systems}
+    assert len(terms) == 2 and terms[len(vessel.uv)] == ENERGY.outline_mu > 0
+    assert terms[min(terms)] == 0.0
+    systems.clear()
+    relax(vessel, preset="preview", simplify_mm=6.0)
+    assert min(n for n, _ in systems) < len(vessel.uv)
+    assert all(sp.outline_mu == ENERGY.outline_mu for _, sp in systems)
 
 
 def test_preview_follows_a_coarse_copy_and_scales_with_units(vessel):

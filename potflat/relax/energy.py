@@ -205,11 +205,12 @@ class SpringSystem:
             boundary_angle_sums(x, cand, self.vf_ptr, self.vf_tri, self.faces, theta)
         return cand, theta[cand] < 2.0 * math.pi - SOLVER.boundary_angle_slack
 
-    def evaluate(self, x: np.ndarray, *, barrier: bool = True,
+    def evaluate(self, x: np.ndarray, *, barrier: bool = True, outline: bool = True,
                  out: np.ndarray | None = None) -> tuple[float, float, np.ndarray]:
         """Total energy, elastic energy (springs and shape term) and gradient at ``x``
         (written into ``out`` (n, 2) when given, else a fresh array; zero at the ``fixed``
-        vertices). Also sets ``diag``, the Hessian diagonal bound at ``x``."""
+        vertices). Also sets ``diag``, the Hessian diagonal bound at ``x``. The outline term
+        counts with the barriers, unless ``outline`` is False."""
         g = np.empty((self.n, 2)) if out is None else out
         w = self.weights
         face_terms(x, self.faces, self.a_ref, ENERGY.barrier_eps, self.rest_shape, w.shape, w.rigidity, w.area,
@@ -221,7 +222,7 @@ class SpringSystem:
                                 self.weight, self.vf_ptr, self.vf_tri, self.faces,
                                 self.rest_shape, self._coef, self.bprev, self.bnext, self.bguard, self.theta,
                                 self.outline_target, ENERGY.boundary_mu if barrier else 0.0,
-                                self.outline_mu if barrier else 0.0, ENERGY.boundary_gap, g, self._es, self._eb,
+                                self.outline_mu if barrier and outline else 0.0, ENERGY.boundary_gap, g, self._es, self._eb,
                                 self.diag)
         es = float(np.sum(self._es)) + float(np.sum(self._e_face))  # (zeros without per-face terms)
         if not barrier:

@@ -143,7 +143,7 @@ def coarse_start(flat: FlatMesh, options: RelaxOptions, settings: RelaxPreset, p
                               importance=importance),
                      replace(options, simplify_mm=0.0, time_budget=budget, true_scale=False,
                              tol=settings.tol if final else settings.tol * COARSE.start_tol_factor),
-                     progress, tagged, summaries=False, limit=limit)
+                     progress, tagged, summaries=False, limit=limit, outline=final)
     except FoldedResultError as exc:
         return CoarseStart(result=None, uv=None, final=False, notes=[
             f"the {len(simple.vertices)}-vertex coarse copy could not be relaxed fold-free ({exc}); "
@@ -350,11 +350,13 @@ def _start(sp: SpringSystem, x: np.ndarray, V: np.ndarray, frame: _Frame, plan: 
     followed = None
     if plan.coarse is not None:
         judged = fold_free and not plan.coarse.final  # a start for the full mesh's solve, not its result
-        energy = sp.evaluate(x)[0] if judged else math.inf
+        # (judged without the outline term: a followed border is the copy's, smooth between its
+        # vertices, while the full mesh's border keeps every bend of the scan's)
+        energy = sp.evaluate(x, outline=False)[0] if judged else math.inf
         followed = follow(sp, x, frame.into(plan.coarse.uv), notes)
         if followed is not None and fold_free:
             wrapped_x, wrapped = wrapped, sp.guard_boundary(followed)
-            if judged and not sp.evaluate(followed)[0] <= COARSE.follow_most_energy * energy:
+            if judged and not sp.evaluate(followed, outline=False)[0] <= COARSE.follow_most_energy * energy:
                 notes.append("following the coarse copy gave a start of higher energy than the rollout's; relaxed "
                              "the full mesh from the rollout")
                 followed, wrapped = None, wrapped_x
@@ -413,14 +415,17 @@ def _solve(sp: SpringSystem, x: np.ndarray, hier: GridHierarchy, frame: _Frame, 
 
 def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, summaries: bool,
            before: DistortionSummary | None = None,
-           fine_iterations: int | None = None, limit="auto", copies: bool = True) -> RelaxResult:
+           fine_iterations: int | None = None, limit="auto", copies: bool = True,
+           outline: bool = True) -> RelaxResult:
     """:func:`relax`; without ``summaries`` (a coarse copy, whose layout is all its caller
     reads) the result's distortion summaries are None and its stress is not computed;
     ``before``: the start's summary when the caller has it (with ``summaries`` only);
     ``fine_iterations``: when a coarse copy was relaxed, at most this many iterations on
     ``flat`` itself (a first solve that only smooths); ``limit``: the anisotropy limit found
     by an earlier solve (``"auto"``: from the settings); ``copies``: whether a coarse copy
-    may be relaxed first."""
+    may be relaxed first; ``outline``: whether the outline term is on (not for a coarse copy
+    that is only a start: its simplified border is not the image's, and holding its angle
+    sums bent the copy into starts the full mesh could not follow)."""
     settings = options.resolved()
     V, uv, F = _checked_arrays(flat)
     n = len(V)
@@ -437,6 +442,8 @@ def _relax(flat: FlatMesh, options: RelaxOptions, progress: bool, callback, *, s
             notes = list(plan.notes)
             start_uv = flat.uv if plan.softer is None else plan.softer.uv
             sp, hier, frame, weight = _spring_system(V, F, start_uv, flat, settings, plan, unit)
+            if not outline:
+                sp.outline_mu = 0.0
             x = frame.into(start_uv) * (settings.stretch if plan.softer is None else 1.0)
             del start_uv
             if plan.softer is not None:  # its layout is in x now (peak memory)
