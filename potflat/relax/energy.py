@@ -138,9 +138,10 @@ class SpringSystem:
         self.boundary[self.boundary_segments.ravel()] = True
         self.isolated = np.diff(self.vf_ptr) == 0
         self.bprev, self.bnext = boundary_neighbours(self.boundary_segments, n)
+        # boundary vertices on a simple boundary path (the angle terms' vertices)
+        self.simple_boundary = (self.bprev >= 0) & (self.bnext >= 0) & (self.bprev != self.bnext)
         # the outline term's angle sums: the surface's, short of the angle barrier's reach
-        simple = (self.bprev >= 0) & (self.bnext >= 0) & (self.bprev != self.bnext)
-        self.outline_target = np.minimum(corner_angle_sums(V, self.faces, simple),
+        self.outline_target = np.minimum(corner_angle_sums(V, self.faces, self.simple_boundary),
                                          2.0 * math.pi - ENERGY.boundary_gap)
         self.outline_mu = ENERGY.outline_mu
         self.bguard = np.zeros(n, bool)  # set by guard_boundary()
@@ -199,7 +200,7 @@ class SpringSystem:
     def _angle_sums_below(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The boundary vertices on a simple boundary path, (k,) int64, and whether their angle
         sum at ``x`` is below ``2 pi`` (k,) bool."""
-        cand = np.nonzero((self.bprev >= 0) & (self.bnext >= 0) & (self.bprev != self.bnext))[0]
+        cand = np.flatnonzero(self.simple_boundary)
         theta = np.zeros(self.n)
         if len(cand):
             boundary_angle_sums(x, cand, self.vf_ptr, self.vf_tri, self.faces, theta)

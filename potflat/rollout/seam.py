@@ -576,8 +576,12 @@ def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarr
         rows_face = np.insert(np.delete(rows_face, rows), before, rows_face[src])
 
     def pts_of(ids):
-        """Points (k, 3) of the vertices ``ids`` ((k,) int64, sorted)."""
-        return np.concatenate([V[ids[ids < n]], added_pts[ids[ids >= n] - n]])
+        """Points (..., 3) of the vertices ``ids`` (int64, any shape)."""
+        out = np.empty(ids.shape + (3,))
+        scan = ids < n
+        out[scan] = V[ids[scan]]
+        out[~scan] = added_pts[ids[~scan] - n]
+        return out
 
     def move_onto_cut(verts, towards, t, points):
         """Replace the vertices ``verts`` in every row by added vertices at ``points`` on their
@@ -592,10 +596,7 @@ def cut_region(V: np.ndarray, F: np.ndarray, faces: np.ndarray, centre: np.ndarr
         moved = new_id[row_faces] >= 0
         rows = np.flatnonzero(moved.any(axis=1))
         at, hit = row_faces[rows], moved[rows]
-        scan = at < n
-        corners = np.empty(at.shape + (3,))
-        corners[scan] = V[at[scan]]
-        corners[~scan] = added_pts[at[~scan] - n]
+        corners = pts_of(at)
         # each moved corner as weights of its row's corners (the row's linear map extended)
         b = np.broadcast_to(np.eye(3), (len(rows), 3, 3)).copy()
         r, c = np.nonzero(hit)
